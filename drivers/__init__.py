@@ -1,0 +1,50 @@
+"""Live sources chosen by URL, one module each (in the spirit of pyserial's URL handlers).
+
+    serial:///dev/ttyUSB0?baud=921600&format=rtseg   -> rtseg.drivers.serial_source
+    osc://0.0.0.0:39539?format=vmc                   -> rtseg.drivers.osc_source
+    file://take.amc?skeleton=86.asf&speed=1.0        -> rtseg.drivers.file_source
+    sim://synth?seed=1&script=...                    -> rtseg.drivers.sim_source
+
+``open_source(url)`` parses the URL and returns a started ``Source``.
+"""
+
+from __future__ import annotations
+
+import importlib
+from urllib.parse import parse_qs, urlsplit
+
+from rtseg.drivers.base import Source, SourceError, SourceStats
+
+SCHEMES: dict[str, str] = {
+    "serial": "rtseg.drivers.serial_source",
+    "osc": "rtseg.drivers.osc_source",
+    "file": "rtseg.drivers.file_source",
+    "sim": "rtseg.drivers.sim_source",
+}
+
+
+def parse_url(url: str) -> tuple[str, str, dict[str, str]]:
+    """Split a source URL into (scheme, location, options).
+
+    ``location`` is the path for serial:// and file:// (``file://take.amc`` is relative,
+    ``file:///abs/take.amc`` absolute), host:port for osc://, the generator name for sim://.
+    Options are the query string, last value wins.
+    """
+    parts = urlsplit(url)
+    scheme = parts.scheme.lower()
+    if scheme not in SCHEMES:
+        raise SourceError(
+            f"unknown source scheme {parts.scheme!r} in {url!r}; known: {', '.join(sorted(SCHEMES))}")
+    location = parts.netloc + parts.path
+    options = {k: v[-1] for k, v in parse_qs(parts.query, keep_blank_values=True).items()}
+    return scheme, location, options
+
+
+def open_source(url: str) -> Source:
+    """Open the source named by ``url`` (see module docstring)."""
+    scheme, location, options = parse_url(url)
+    module = importlib.import_module(SCHEMES[scheme])
+    return module.open_url(location, options)
+
+
+__all__ = ["Source", "SourceError", "SourceStats", "open_source", "parse_url", "SCHEMES"]

@@ -1,0 +1,90 @@
+"""The interface every live source implements, and its run-time counters."""
+
+from __future__ import annotations
+
+import logging
+import threading
+from dataclasses import asdict, dataclass
+from typing import Iterator
+
+from rtseg.frame import Frame
+
+log = logging.getLogger("rtseg.drivers")
+
+
+class SourceError(Exception):
+    """A source cannot be opened or is misconfigured (bad URL, missing file, bad option)."""
+
+
+@dataclass
+class SourceStats:
+    """Counters readable at run time.  All counts since the source was opened.
+
+    frames_ok: frames delivered; dropped: frames lost (sequence gaps count the frames
+    missing, plus frames refused as unusable); corrupt: byte-level damage (bad CRC,
+    bad COBS, garbage); gaps: sequence discontinuities seen; reconnects: device reopened
+    after loss; bad_values: NaN / non-unit quaternions refused; unknown_names: bone or
+    sensor names not in the profile; bad_messages: wrongly typed or short messages.
+    """
+    frames_ok: int = 0
+    dropped: int = 0
+    corrupt: int = 0
+    gaps: int = 0
+    reconnects: int = 0
+    bad_values: int = 0
+    unknown_names: int = 0
+    bad_messages: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return asdict(self)
+
+
+class Source:
+    """A live source of ``Frame`` objects.
+
+    Subclasses set ``joint_names`` (sensor/joint order of ``Frame.quats``), ``parents``
+    (-1 for roots; all -1 when the source has no hierarchy), ``space`` ("global" for IMU
+    orientations, "local" for parent-relative rotations such as VMC) and ``frame_rate``
+    (nominal Hz, or None if unknown), and implement ``read``.
+    """
+
+    joint_names: list[str]
+    parents: list[int]
+    space: str = "global"
+    frame_rate: float | None = None
+
+    def __init__(self) -> None:
+        self.stats = SourceStats()
+        self._stats_lock = threading.Lock()
+
+    def count(self, field: str, n: int = 1, message: str | None = None) -> None:
+        """Add ``n`` to counter ``field`` and log ``message`` (rate-limited by the caller)."""
+        with self._stats_lock:
+            setattr(self.stats, field, getattr(self.stats, field) + n)
+        if message:
+            log.warning("%s: %s", type(self).__name__, message)
+
+    def read(self, timeout: float | None = None) -> Frame | None:
+        """Next frame, or None if none arrived within ``timeout`` seconds.
+
+        Raises ``EOFError`` when a finite source (file replay) is exhausted.
+        """
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release the device/socket.  Safe to call twice."""
+
+    def __iter__(self) -> Iterator[Frame]:
+        while True:
+            try:
+                frame = self.read(timeout=1.0)
+            except EOFError:
+                return
+            if frame is not None:
+                yield frame
+
+    def __enter__(self) -> "Source":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,70 @@
+"""Detector interfaces: streaming ``update()`` objects beside batch ``segment()``.
+
+Frame indices are 0-based positions in the sequence of feature vectors given to the
+detector (for a take, its frame numbers; live, frames since the detector was created).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Cut:
+    """A boundary between two behaviours.
+
+    frame: first frame of the new segment (0-based).
+    method: detector name ("pca", "ppca", "gmm", ...).
+    confidence: 0..1, how far the statistic went past its threshold (method specific).
+    detected_at: index of the frame whose arrival produced the cut (== frame for batch
+        methods); ``detected_at - frame`` is the detector's own delay in frames.
+    score: the detector's raw statistic at the cut (d_i for PCA, peak-valley of H for PPCA).
+    """
+    frame: int
+    method: str
+    confidence: float = 1.0
+    detected_at: int = -1
+    score: float = float("nan")
+
+    @property
+    def delay_frames(self) -> int:
+        return max(0, self.detected_at - self.frame) if self.detected_at >= 0 else 0
+
+
+class OnlineDetector:
+    """Streaming detector: feed one feature vector at a time.
+
+    ``update(x)`` takes a 1-D float array (the pose features of one frame) and returns a
+    ``Cut`` when the arrival of this frame reveals a boundary, else None.  ``restart()``
+    forgets the current segment (used after gaps in the input, so no cut is placed across a
+    gap the detector did not see).  ``trace`` holds (frame, statistic, threshold) rows for
+    plotting when ``keep_trace`` is True.
+    """
+
+    name: str = "online"
+
+    def update(self, x: np.ndarray) -> Cut | None:
+        raise NotImplementedError
+
+    def restart(self) -> None:
+        raise NotImplementedError
+
+    def run(self, X: np.ndarray) -> list[Cut]:
+        """Feed every row of X (frames, dims) through ``update``; the cuts in order."""
+        cuts = []
+        for x in np.asarray(X, dtype=np.float64):
+            c = self.update(x)
+            if c is not None:
+                cuts.append(c)
+        return cuts
+
+
+class BatchDetector:
+    """Batch detector: ``segment(X)`` with X (frames, dims) returns the cuts in order."""
+
+    name: str = "batch"
+
+    def segment(self, X: np.ndarray) -> list[Cut]:
+        raise NotImplementedError
