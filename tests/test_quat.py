@@ -19,7 +19,7 @@ def test_from_euler_zyx_is_rz_ry_rx():
 
 
 def test_make_continuous_removes_sign_flips():
-    q = R.from_euler("z", np.linspace(0, 90, 20), degrees=True).as_quat()
+    q = R.from_euler("z", np.linspace(0, 90, 20)[:, None], degrees=True).as_quat()
     flipped = q.copy()
     flipped[5:12] *= -1
     fixed = quat.make_continuous(flipped[:, None, :])[:, 0]
