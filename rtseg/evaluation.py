@@ -1,0 +1,126 @@
+"""Precision / recall of reported cuts against labelled transition ranges.
+
+A cut at frame ``c`` (0-based, the first frame of the new segment) is a correct detection
+of transition ``t`` when ``t.lo <= c <= t.hi``.  Each transition is matched by at most one
+cut and each cut matches at most one transition; the matching used is a *maximum* one (the
+most true positives any one-to-one assignment allows), and among those the one with the
+smallest total distance ``|c - t.mid|``.  Greedy "nearest first" matching is not always
+maximal (a cut inside two overlapping ranges can steal the only cut of a neighbour).
+
+Zero-division conventions (stated, not guessed):
+  precision = tp / cuts, and 1.0 when there are no cuts (no false alarm was reported);
+  recall    = tp / transitions, and 1.0 when there are no transitions (nothing to find);
+  f1        = 2 P R / (P + R), and 0.0 when P + R == 0.
+So "no cuts, some transitions" scores P=1, R=0, F1=0 and "no cuts, no transitions" scores
+1, 1, 1.  Pooled scores sum the counts over takes first, then divide.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Iterable, Sequence
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from rtseg.labels import Transition
+
+
+@dataclass(frozen=True)
+class Score:
+    """Counts and ratios of one take (or pooled over takes).
+
+    tp: transitions matched by a cut; fp: cuts matching no transition; fn: transitions
+    matched by no cut.  cuts = tp + fp, transitions = tp + fn.
+    matches: (cut frame, transition index) pairs of the matching (empty when pooled).
+    """
+    tp: int
+    fp: int
+    fn: int
+    cuts: int
+    transitions: int
+    precision: float
+    recall: float
+    f1: float
+    matches: tuple[tuple[int, int], ...] = field(default=(), compare=False)
+
+    @classmethod
+    def from_counts(cls, tp: int, cuts: int, transitions: int,
+                    matches: Sequence[tuple[int, int]] = ()) -> "Score":
+        if not 0 <= tp <= min(cuts, transitions):
+            raise ValueError(f"inconsistent counts tp={tp} cuts={cuts} transitions={transitions}")
+        precision = tp / cuts if cuts else 1.0
+        recall = tp / transitions if transitions else 1.0
+        f1 = 2 * precision * recall / (precision + recall) if precision + recall > 0 else 0.0
+        return cls(tp=tp, fp=cuts - tp, fn=transitions - tp, cuts=cuts, transitions=transitions,
+                   precision=precision, recall=recall, f1=f1, matches=tuple(matches))
+
+    def as_dict(self) -> dict[str, float | int]:
+        """Plain numbers for JSON (matches left out)."""
+        return {"precision": self.precision, "recall": self.recall, "f1": self.f1,
+                "tp": self.tp, "fp": self.fp, "fn": self.fn,
+                "cuts": self.cuts, "transitions": self.transitions}
+
+
+def match(cut_frames: Iterable[int], transitions: Sequence[Transition]) -> list[tuple[int, int]]:
+    """Maximum one-to-one matching of cuts to transitions whose range contains them.
+
+    Returns (index into the cut list, index into ``transitions``) pairs, sorted by cut.
+    Among maximum matchings, the one with the least total ``|cut - mid|`` is returned.
+    """
+    cuts = np.asarray([int(c) for c in cut_frames], dtype=np.int64)
+    if cuts.size == 0 or len(transitions) == 0:
+        return []
+    lo = np.array([t.lo for t in transitions], dtype=np.int64)
+    hi = np.array([t.hi for t in transitions], dtype=np.int64)
+    mid = np.array([t.mid for t in transitions], dtype=np.float64)
+    inside = (cuts[:, None] >= lo[None, :]) & (cuts[:, None] <= hi[None, :])
+    if not inside.any():
+        return []
+    # Restrict to rows / columns that can match at all (keeps the matrix small).
+    rows = np.flatnonzero(inside.any(axis=1))
+    cols = np.flatnonzero(inside.any(axis=0))
+    sub = inside[np.ix_(rows, cols)]
+    dist = np.abs(cuts[rows][:, None] - mid[cols][None, :])
+    # Every allowed pair is worth more than the sum of all distances, so the assignment
+    # maximises the number of matches first and minimises distance second.
+    big = float(dist[sub].sum()) + 1.0
+    cost = np.where(sub, dist - big, 0.0)
+    r, c = linear_sum_assignment(cost)
+    pairs = [(int(rows[i]), int(cols[j])) for i, j in zip(r, c) if sub[i, j]]
+    return sorted(pairs)
+
+
+def max_matching_size(cut_frames: Iterable[int], transitions: Sequence[Transition]) -> int:
+    """Size of a maximum matching by the interval sweep (ranges by ``hi``, each takes the
+    earliest unused cut inside it) - an independent check of :func:`match`."""
+    cuts = sorted(int(c) for c in cut_frames)
+    used = [False] * len(cuts)
+    n = 0
+    import bisect
+    for t in sorted(transitions, key=lambda t: (t.hi, t.lo)):
+        k = bisect.bisect_left(cuts, t.lo)
+        while k < len(cuts) and (used[k] and cuts[k] <= t.hi):
+            k += 1
+        if k < len(cuts) and cuts[k] <= t.hi:
+            used[k] = True
+            n += 1
+    return n
+
+
+def score(cut_frames: Iterable[int], transitions: Sequence[Transition]) -> Score:
+    """Score cut frames (0-based ints, or ``Cut`` objects) against labelled transitions."""
+    frames = [int(getattr(c, "frame", c)) for c in cut_frames]
+    pairs = match(frames, transitions)
+    return Score.from_counts(len(pairs), len(frames), len(transitions),
+                             matches=[(frames[i], j) for i, j in pairs])
+
+
+def pooled(scores: Iterable[Score]) -> Score:
+    """Sum the counts of several takes, then divide."""
+    tp = cuts = transitions = 0
+    for s in scores:
+        tp += s.tp
+        cuts += s.cuts
+        transitions += s.transitions
+    return Score.from_counts(tp, cuts, transitions)
