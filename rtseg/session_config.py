@@ -1,0 +1,260 @@
+"""Live-session configuration: ``config/live.toml`` schema, validation, CLI overrides.
+
+``load_session_config(path=None, overrides=None)`` reads the shipped ``config/live.toml``
+(or ``path``), checks every key against ``SCHEMA`` and returns a ``SessionConfig``.
+Anything wrong is refused with a ``ConfigError`` whose message names the file and the
+dotted key (``live.toml: output.osc[1]: bad target 'localhost' (expected HOST:PORT)``):
+unknown sections or keys, wrong types, out-of-range values, bad target strings.
+
+Units: seconds for times, frames for frame counts, Hz for rates.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from rtseg.config import ConfigError, config_dir, load_toml
+
+CALIBRATION_MODES = ("auto", "first", "average", "none")
+KNOWN_METHODS = ("pca", "ppca")
+
+
+# --------------------------------------------------------------------------- validators
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_num(v: Any) -> bool:
+    return (isinstance(v, (int, float))) and not isinstance(v, bool)
+
+
+def parse_hostport(text: str) -> tuple[str, int]:
+    """``HOST:PORT`` -> (host, port); ValueError with the reason otherwise."""
+    if not isinstance(text, str) or ":" not in text:
+        raise ValueError(f"bad target {text!r} (expected HOST:PORT)")
+    host, _, port_s = text.rpartition(":")
+    host = host.strip("[]")
+    if not host:
+        raise ValueError(f"bad target {text!r}: empty host")
+    try:
+        port = int(port_s)
+    except ValueError:
+        raise ValueError(f"bad target {text!r}: port {port_s!r} is not a number") from None
+    if not 1 <= port <= 65535:
+        raise ValueError(f"bad target {text!r}: port {port} out of range 1..65535")
+    return host, port
+
+
+def _check_target(v: Any) -> str | None:
+    try:
+        parse_hostport(v)
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
+def _check_template(v: Any) -> str | None:
+    """A template is ``ADDRESS`` or ``ADDRESS@HOST:PORT``; ADDRESS starts with '/'."""
+    if not isinstance(v, str):
+        return f"expected a string, got {type(v).__name__}"
+    addr, _, target = v.partition("@")
+    if not addr.startswith("/"):
+        return f"bad template {v!r}: OSC address must start with '/'"
+    if target:
+        return _check_target(target)
+    return None
+
+
+@dataclass(frozen=True)
+class Key:
+    """One configuration key: expected type, default and an optional extra check."""
+    kind: str                     # "str", "int", "float", "bool", "list[str]", "table"
+    default: Any
+    check: Callable[[Any], str | None] | None = None
+    item_check: Callable[[Any], str | None] | None = None
+    doc: str = ""
+
+
+def _min(lo: float, strict: bool = False) -> Callable[[Any], str | None]:
+    def f(v: Any) -> str | None:
+        if (v <= lo) if strict else (v < lo):
+            return f"must be {'>' if strict else '>='} {lo}, got {v}"
+        return None
+    return f
+
+
+def _one_of(options: tuple[str, ...]) -> Callable[[Any], str | None]:
+    def f(v: Any) -> str | None:
+        return None if v in options else f"must be one of {', '.join(options)}; got {v!r}"
+    return f
+
+
+def _methods(v: Any) -> str | None:
+    for m in v:
+        if m not in KNOWN_METHODS:
+            return f"unknown method {m!r} (online methods: {', '.join(KNOWN_METHODS)})"
+    if not v:
+        return "needs at least one method"
+    return None
+
+
+SCHEMA: dict[str, dict[str, Key]] = {
+    "source": {
+        "suit": Key("str", "default17", doc="suit profile in config/suits.toml (serial ids -> bones)"),
+        "url": Key("str", "", doc="default source URL when none is given on the command line"),
+    },
+    "features": {
+        "profile": Key("str", "", doc="skeleton/feature profile for PoseFeatures; '' = its default"),
+    },
+    "calibration": {
+        "mode": Key("str", "auto", _one_of(CALIBRATION_MODES),
+                    doc="auto: calibrate rig-relative input (space local, e.g. VMC) only"),
+        "frames": Key("int", 30, _min(1), doc="frames averaged for mode average (and auto)"),
+    },
+    "detectors": {
+        "methods": Key("list[str]", ["pca", "ppca"], _methods),
+        "params": Key("str", "", doc="detector parameter file; '' = config/detectors.toml"),
+        "pca": Key("table", {}, doc="overrides of the pca parameters"),
+        "ppca": Key("table", {}, doc="overrides of the ppca parameters"),
+    },
+    "output": {
+        "osc": Key("list[str]", ["127.0.0.1:9123"], item_check=_check_target),
+        "osc_tcp": Key("list[str]", [], item_check=_check_target),
+        "templates": Key("list[str]", [], item_check=_check_template),
+        "jsonl": Key("str", "", doc="JSON-lines event log path, '-' for stdout, '' for none"),
+        "label": Key("str", "cut", doc="label sent with every cut (online detectors do not name behaviours)"),
+    },
+    "recording": {
+        "dir": Key("str", "", doc="folder for the session recording; '' = do not record"),
+    },
+    "status": {
+        "interval": Key("float", 1.0, _min(0.0, strict=True)),
+    },
+    "gaps": {
+        "max_frames": Key("int", 3, _min(0), doc="longest tolerated run of missing/invalid frames"),
+        "max_seconds": Key("float", 0.25, _min(0.0, strict=True),
+                           doc="longest tolerated silence between frames"),
+        "required_joints": Key("list[str]", [], doc="joints that must be valid; [] = all"),
+        "dropout_seconds": Key("float", 0.5, _min(0.0, strict=True),
+                               doc="a joint invalid (or the source silent) this long is a dropout"),
+    },
+    "buffer": {
+        "capacity": Key("int", 4096, _min(16), doc="ring buffer frames"),
+        "max_batch": Key("int", 256, _min(1), doc="frames processed per wake-up at most"),
+        "lag_warn_seconds": Key("float", 0.1, _min(0.0, strict=True),
+                                doc="warn when a frame waits longer than this before processing"),
+    },
+}
+
+
+@dataclass
+class SessionConfig:
+    """Validated live-session settings (see ``config/live.toml`` for each key's meaning)."""
+    values: dict[str, dict[str, Any]]
+    origin: str = "live.toml"
+    detector_params: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    def __getitem__(self, dotted: str) -> Any:
+        section, _, key = dotted.partition(".")
+        return self.values[section][key]
+
+    def __setitem__(self, dotted: str, value: Any) -> None:
+        section, _, key = dotted.partition(".")
+        self.values[section][key] = value
+
+    def section(self, name: str) -> dict[str, Any]:
+        return self.values[name]
+
+
+def defaults() -> dict[str, dict[str, Any]]:
+    return {s: {k: copy.deepcopy(spec.default) for k, spec in keys.items()}
+            for s, keys in SCHEMA.items()}
+
+
+def _type_ok(kind: str, v: Any) -> bool:
+    if kind == "str":
+        return isinstance(v, str)
+    if kind == "int":
+        return _is_int(v)
+    if kind == "float":
+        return _is_num(v)
+    if kind == "bool":
+        return isinstance(v, bool)
+    if kind == "list[str]":
+        return isinstance(v, list) and all(isinstance(x, str) for x in v)
+    if kind == "table":
+        return isinstance(v, dict)
+    raise AssertionError(kind)
+
+
+def validate(raw: dict[str, Any], origin: str = "live.toml") -> dict[str, dict[str, Any]]:
+    """Check ``raw`` (parsed TOML) against SCHEMA; return complete values with defaults."""
+    out = defaults()
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{origin}: expected a table at the top level")
+    for section, table in raw.items():
+        if section not in SCHEMA:
+            raise ConfigError(
+                f"{origin}: unknown section [{section}] (known: {', '.join(SCHEMA)})")
+        if not isinstance(table, dict):
+            raise ConfigError(f"{origin}: {section}: expected a table, got {type(table).__name__}")
+        for key, value in table.items():
+            name = f"{section}.{key}"
+            spec = SCHEMA[section].get(key)
+            if spec is None:
+                raise ConfigError(
+                    f"{origin}: unknown key {name} (known in [{section}]: "
+                    f"{', '.join(SCHEMA[section])})")
+            if not _type_ok(spec.kind, value):
+                raise ConfigError(
+                    f"{origin}: {name}: expected {spec.kind}, got {type(value).__name__} {value!r}")
+            if spec.kind == "float":
+                value = float(value)
+            if spec.item_check is not None:
+                for i, item in enumerate(value):
+                    problem = spec.item_check(item)
+                    if problem:
+                        raise ConfigError(f"{origin}: {name}[{i}]: {problem}")
+            if spec.check is not None:
+                problem = spec.check(value)
+                if problem:
+                    raise ConfigError(f"{origin}: {name}: {problem}")
+            out[section][key] = value
+    return out
+
+
+def load_session_config(path: str | Path | None = None,
+                        overrides: dict[str, Any] | None = None) -> SessionConfig:
+    """Read and validate the live configuration, then apply ``overrides``.
+
+    ``path`` None reads ``config/live.toml``.  ``overrides`` maps dotted keys
+    (``"output.osc"``) to values, typically from CLI flags; they are validated like file
+    values and named as ``--flag`` origins in errors.
+    """
+    p = Path(path) if path is not None else config_dir() / "live.toml"
+    raw = load_toml(p)
+    values = validate(raw, origin=p.name)
+    cfg = SessionConfig(values, origin=str(p))
+    if overrides:
+        apply_overrides(cfg, overrides)
+    return cfg
+
+
+def apply_overrides(cfg: SessionConfig, overrides: dict[str, Any], origin: str = "command line") -> None:
+    """Set dotted keys on ``cfg`` after validating them like file values."""
+    raw: dict[str, dict[str, Any]] = {}
+    for dotted, value in overrides.items():
+        section, _, key = dotted.partition(".")
+        raw.setdefault(section, {})[key] = value
+    checked = validate(raw, origin=origin)
+    for section, table in raw.items():
+        for key in table:
+            cfg.values[section][key] = checked[section][key]
+
+
+def from_dict(raw: dict[str, Any], origin: str = "<dict>") -> SessionConfig:
+    """A ``SessionConfig`` from an in-memory table (tests, embedding)."""
+    return SessionConfig(validate(raw, origin=origin), origin=origin)
