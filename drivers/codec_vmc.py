@@ -1,0 +1,787 @@
+"""VMC over OSC: a lean OSC 1.0 parser, a reference encoder and the frame assembler.
+
+VMC ("Virtual Motion Capture" protocol) sends a skeleton as OSC messages over UDP:
+
+- ``/VMC/Ext/Bone/Pos ,sfffffff`` -- HumanBodyBones name, local position x y z,
+  local rotation quaternion x y z w, in Unity's **left-handed**, Y-up frame.
+- ``/VMC/Ext/Root/Pos ,sfffffff`` (v2.1 adds 6 floats: scale, offset -- ignored) -- root pose.
+- ``/VMC/Ext/T ,f`` -- sender time in seconds.
+- ``/VMC/Ext/OK ,i`` (``iii``/``iiii``) -- loaded, calibration state, calibration mode,
+  tracking status.
+
+One skeleton is larger than one datagram (~1500 bytes), so a frame spans several
+datagrams; :class:`VmcAssembler` rebuilds frames from a stream of datagrams.
+
+Frame conventions at this boundary
+----------------------------------
+Unity (left-handed) -> rtseg (right-handed, Y-up, scalar-last x, y, z, w):
+quaternion ``(x, y, z, w) -> (-x, -y, z, w)``, position ``(x, y, z) -> (x, y, -z)``.
+The same maps convert back (they are involutions).  Positions are in the sender's units
+(metres for every VMC application known to us).
+
+Errors
+------
+:func:`parse_packet` raises :class:`OscParseError` (a ``ValueError``) on malformed bytes;
+:meth:`VmcAssembler.feed` never raises on any input: it counts and drops (``corrupt``
+for malformed OSC, ``bad_messages`` for known addresses with too few / wrongly typed
+arguments, ``unknown_names`` for bone names not in the profile, ``bad_values`` for NaN /
+non-unit quaternions and non-finite positions or times).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import struct
+import time
+from dataclasses import dataclass
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+from rtseg.drivers.base import SourceStats
+from rtseg.frame import Frame
+
+log = logging.getLogger("rtseg.drivers.vmc")
+
+BONE_ADDRESS = "/VMC/Ext/Bone/Pos"
+ROOT_ADDRESS = "/VMC/Ext/Root/Pos"
+TIME_ADDRESS = "/VMC/Ext/T"
+OK_ADDRESS = "/VMC/Ext/OK"
+
+#: Default UDP payload limit of the encoder: 1500-byte Ethernet MTU minus IPv4 (20) and
+#: UDP (8) headers, so no datagram is IP-fragmented.
+DEFAULT_MAX_DATAGRAM = 1472
+
+#: Unity ``HumanBodyBones`` names (enum order, without ``LastBone``).
+HUMAN_BODY_BONES: tuple[str, ...] = (
+    "Hips", "LeftUpperLeg", "RightUpperLeg", "LeftLowerLeg", "RightLowerLeg", "LeftFoot",
+    "RightFoot", "Spine", "Chest", "Neck", "Head", "LeftShoulder", "RightShoulder",
+    "LeftUpperArm", "RightUpperArm", "LeftLowerArm", "RightLowerArm", "LeftHand", "RightHand",
+    "LeftToes", "RightToes", "LeftEye", "RightEye", "Jaw",
+    "LeftThumbProximal", "LeftThumbIntermediate", "LeftThumbDistal",
+    "LeftIndexProximal", "LeftIndexIntermediate", "LeftIndexDistal",
+    "LeftMiddleProximal", "LeftMiddleIntermediate", "LeftMiddleDistal",
+    "LeftRingProximal", "LeftRingIntermediate", "LeftRingDistal",
+    "LeftLittleProximal", "LeftLittleIntermediate", "LeftLittleDistal",
+    "RightThumbProximal", "RightThumbIntermediate", "RightThumbDistal",
+    "RightIndexProximal", "RightIndexIntermediate", "RightIndexDistal",
+    "RightMiddleProximal", "RightMiddleIntermediate", "RightMiddleDistal",
+    "RightRingProximal", "RightRingIntermediate", "RightRingDistal",
+    "RightLittleProximal", "RightLittleIntermediate", "RightLittleDistal",
+    "UpperChest",
+)
+_HBB_LOWER = {n.lower(): n for n in HUMAN_BODY_BONES}
+
+
+def canonical_bone_name(name: str) -> str | None:
+    """The Unity spelling of a HumanBodyBones name matched case-insensitively, else None."""
+    return _HBB_LOWER.get(name.lower())
+
+
+class OscParseError(ValueError):
+    """Malformed OSC bytes (bad padding, sizes, type tags, truncated arguments)."""
+
+
+# --------------------------------------------------------------------------- OSC parsing
+
+@dataclass(slots=True)
+class OscMessage:
+    """One parsed OSC message.  ``timetag`` is the enclosing bundle's raw NTP time tag
+    (64-bit int, 1 = immediately) or None for a bare message."""
+    address: str
+    tags: str
+    args: tuple[Any, ...]
+    timetag: int | None = None
+
+
+_BUNDLE = b"#bundle\x00"
+_I32 = struct.Struct(">i")
+_U64 = struct.Struct(">Q")
+_F32 = struct.Struct(">f")
+_F64 = struct.Struct(">d")
+_I64 = struct.Struct(">q")
+_F7 = struct.Struct(">7f")
+_MAX_DEPTH = 8
+
+
+def _read_string(data: bytes, pos: int, end: int) -> tuple[bytes, int]:
+    """OSC-string at ``pos``: bytes up to the NUL, and the 4-aligned position after it."""
+    nul = data.find(b"\x00", pos, end)
+    if nul < 0:
+        raise OscParseError(f"unterminated OSC string at byte {pos}")
+    nxt = pos + ((nul - pos) & ~3) + 4
+    if nxt > end:
+        raise OscParseError(f"OSC string at byte {pos} overruns its padding")
+    return data[pos:nul], nxt
+
+
+def _decode(raw: bytes) -> str:
+    return raw.decode("utf-8", errors="replace")
+
+
+def parse_message(data: bytes, start: int = 0, end: int | None = None,
+                  timetag: int | None = None, max_args: int | None = None) -> OscMessage:
+    """Parse the OSC message in ``data[start:end]``.
+
+    Type tags understood: i f d h s S b t c r m T F N I and arrays ``[ ]``.  A message with
+    no type-tag string (OSC 1.0 allows it) has no arguments.  ``max_args`` stops after that
+    many top-level arguments (the rest are surplus and left unparsed).
+    Raises :class:`OscParseError`.
+    """
+    end = len(data) if end is None else end
+    if start < 0 or end > len(data) or (end - start) < 4 or (end - start) & 3:
+        raise OscParseError(f"OSC message length {end - start} is not a positive multiple of 4")
+    if data[start:start + 1] != b"/":
+        raise OscParseError("OSC address does not start with '/'")
+    raw_addr, pos = _read_string(data, start, end)
+    address = _decode(raw_addr)
+    if pos == end:
+        return OscMessage(address, "", (), timetag)
+    raw_tags, pos = _read_string(data, pos, end)
+    if raw_tags[:1] != b",":
+        raise OscParseError(f"{address}: type tag string does not start with ','")
+    tags = _decode(raw_tags[1:])
+    top: list[Any] = []
+    stack: list[list[Any]] = [top]
+    for tag in tags:
+        if max_args is not None and len(stack) == 1 and len(top) >= max_args:
+            break
+        if tag == "f":
+            if pos + 4 > end:
+                raise OscParseError(f"{address}: truncated float argument")
+            val = _F32.unpack_from(data, pos)[0]
+            pos += 4
+        elif tag == "i":
+            if pos + 4 > end:
+                raise OscParseError(f"{address}: truncated int argument")
+            val = _I32.unpack_from(data, pos)[0]
+            pos += 4
+        elif tag in "sS":
+            raw, pos = _read_string(data, pos, end)
+            val = _decode(raw)
+        elif tag == "d":
+            if pos + 8 > end:
+                raise OscParseError(f"{address}: truncated double argument")
+            val = _F64.unpack_from(data, pos)[0]
+            pos += 8
+        elif tag == "h":
+            if pos + 8 > end:
+                raise OscParseError(f"{address}: truncated int64 argument")
+            val = _I64.unpack_from(data, pos)[0]
+            pos += 8
+        elif tag == "t":
+            if pos + 8 > end:
+                raise OscParseError(f"{address}: truncated time tag argument")
+            val = _U64.unpack_from(data, pos)[0]
+            pos += 8
+        elif tag == "b":
+            if pos + 4 > end:
+                raise OscParseError(f"{address}: truncated blob size")
+            size = _I32.unpack_from(data, pos)[0]
+            pos += 4
+            if size < 0 or pos + size > end:
+                raise OscParseError(f"{address}: blob of {size} bytes overruns the message")
+            val = data[pos:pos + size]
+            pos += (size + 3) & ~3
+            if pos > end:
+                raise OscParseError(f"{address}: blob padding overruns the message")
+        elif tag in "crm":
+            if pos + 4 > end:
+                raise OscParseError(f"{address}: truncated {tag!r} argument")
+            val = data[pos:pos + 4] if tag != "c" else chr(_I32.unpack_from(data, pos)[0] & 0x10FFFF)
+            pos += 4
+        elif tag == "T":
+            val = True
+        elif tag == "F":
+            val = False
+        elif tag == "N":
+            val = None
+        elif tag == "I":
+            val = math.inf
+        elif tag == "[":
+            arr: list[Any] = []
+            stack[-1].append(arr)
+            stack.append(arr)
+            continue
+        elif tag == "]":
+            if len(stack) < 2:
+                raise OscParseError(f"{address}: unbalanced ']' in type tags")
+            stack.pop()
+            continue
+        else:
+            raise OscParseError(f"{address}: unknown type tag {tag!r}")
+        stack[-1].append(val)
+    else:
+        if len(stack) != 1:
+            raise OscParseError(f"{address}: unbalanced '[' in type tags")
+    return OscMessage(address, tags, tuple(top), timetag)
+
+
+def parse_packet(data: bytes) -> list[OscMessage]:
+    """All messages of an OSC packet (bare message or bundle, nested bundles flattened in
+    order).  Raises :class:`OscParseError` on malformed bytes."""
+    out: list[OscMessage] = []
+    _parse_into(bytes(data), 0, len(data), None, out, 0)
+    return out
+
+
+def _parse_into(data: bytes, start: int, end: int, timetag: int | None,
+                out: list[OscMessage], depth: int) -> None:
+    if data.startswith(_BUNDLE, start):
+        if depth >= _MAX_DEPTH:
+            raise OscParseError(f"bundles nested deeper than {_MAX_DEPTH}")
+        if end - start < 16:
+            raise OscParseError("truncated bundle header")
+        tt = _U64.unpack_from(data, start + 8)[0]
+        pos = start + 16
+        while pos < end:
+            if pos + 4 > end:
+                raise OscParseError(f"truncated bundle element size at byte {pos}")
+            size = _I32.unpack_from(data, pos)[0]
+            pos += 4
+            if size <= 0 or size & 3 or pos + size > end:
+                raise OscParseError(f"bad bundle element size {size} at byte {pos - 4}")
+            _parse_into(data, pos, pos + size, tt, out, depth + 1)
+            pos += size
+    else:
+        out.append(parse_message(data, start, end, timetag))
+
+
+# --------------------------------------------------------------------------- encoding
+
+def _pad_string(s: str | bytes) -> bytes:
+    raw = s.encode("utf-8") if isinstance(s, str) else bytes(s)
+    if b"\x00" in raw:
+        raise ValueError(f"OSC string must not contain NUL: {raw!r}")
+    return raw + b"\x00" * (4 - (len(raw) & 3))
+
+
+def encode_message(address: str, tags: str, args: Sequence[Any]) -> bytes:
+    """One OSC message.  ``tags`` without the leading comma, one of i f d h s b T F N per
+    argument.  numpy scalars are accepted (converted with ``float()``/``int()``)."""
+    if len(tags) != len(args):
+        raise ValueError(f"{address}: {len(tags)} type tags for {len(args)} arguments")
+    parts = [_pad_string(address), _pad_string("," + tags)]
+    for tag, arg in zip(tags, args):
+        if tag == "f":
+            parts.append(_F32.pack(float(arg)))
+        elif tag == "i":
+            parts.append(_I32.pack(int(arg)))
+        elif tag == "d":
+            parts.append(_F64.pack(float(arg)))
+        elif tag == "h":
+            parts.append(_I64.pack(int(arg)))
+        elif tag == "s":
+            parts.append(_pad_string(str(arg)))
+        elif tag == "b":
+            blob = bytes(arg)
+            parts.append(_I32.pack(len(blob)) + blob + b"\x00" * (-len(blob) & 3))
+        elif tag in "TFN":
+            pass
+        else:
+            raise ValueError(f"{address}: cannot encode type tag {tag!r}")
+    return b"".join(parts)
+
+
+def encode_bundle(elements: Iterable[bytes], timetag: int = 1) -> bytes:
+    """An OSC bundle of already encoded messages/bundles (time tag 1 = immediately)."""
+    parts = [_BUNDLE, _U64.pack(timetag)]
+    for el in elements:
+        parts.append(_I32.pack(len(el)))
+        parts.append(el)
+    return b"".join(parts)
+
+
+def pack_bundles(elements: Sequence[bytes], max_datagram: int = DEFAULT_MAX_DATAGRAM,
+                 timetag: int = 1) -> list[bytes]:
+    """Split messages, in order, over as few bundles of at most ``max_datagram`` bytes as
+    possible.  ValueError if one message cannot fit."""
+    out: list[bytes] = []
+    cur: list[bytes] = []
+    size = 16
+    for el in elements:
+        need = 4 + len(el)
+        if 16 + need > max_datagram:
+            raise ValueError(f"OSC message of {len(el)} bytes does not fit in {max_datagram}")
+        if size + need > max_datagram and cur:
+            out.append(encode_bundle(cur, timetag))
+            cur, size = [], 16
+        cur.append(el)
+        size += need
+    if cur:
+        out.append(encode_bundle(cur, timetag))
+    return out
+
+
+_BONE_HEAD = _pad_string(BONE_ADDRESS) + _pad_string(",sfffffff")
+_ROOT_HEAD = _pad_string(ROOT_ADDRESS) + _pad_string(",sfffffff")
+_TIME_HEAD = _pad_string(TIME_ADDRESS) + _pad_string(",f")
+_OK_HEAD4 = _pad_string(OK_ADDRESS) + _pad_string(",iiii")
+_I4 = struct.Struct(">4i")
+_ZERO3 = (0.0, 0.0, 0.0)
+
+
+def encode_pose_message(address: str, name: str, position: Sequence[float],
+                        quat: Sequence[float]) -> bytes:
+    """``address ,sfffffff`` from a position and quaternion **in rtseg's right-handed
+    frame** (scalar-last); converted here to Unity's left-handed frame."""
+    px, py, pz = (float(v) for v in position)
+    x, y, z, w = (float(v) for v in quat)
+    head = _BONE_HEAD if address == BONE_ADDRESS else (
+        _ROOT_HEAD if address == ROOT_ADDRESS else _pad_string(address) + _pad_string(",sfffffff"))
+    return head + _pad_string(name) + _F7.pack(px, py, -pz, -x, -y, z, w)
+
+
+def encode_frame(quats: np.ndarray, bone_names: Sequence[str], *,
+                 time: float | None = None,
+                 root_position: Sequence[float] | None = None,
+                 root_rotation: Sequence[float] | None = None,
+                 bone_positions: np.ndarray | None = None,
+                 ok: Sequence[int] | None = (1, 3, 0, 1),
+                 include: Sequence[bool] | None = None,
+                 max_datagram: int = DEFAULT_MAX_DATAGRAM) -> list[bytes]:
+    """One skeleton pose as VMC datagrams (bundles of at most ``max_datagram`` bytes).
+
+    ``quats``: (J, 4) local rotations, rtseg frame (right-handed, scalar-last);
+    ``bone_names``: J HumanBodyBones names as sent.  Order on the wire: Root/Pos (when
+    ``root_position`` or ``root_rotation`` is given), one Bone/Pos per bone (``include[j]``
+    False omits bone j), T (when ``time`` is given), OK (when ``ok`` is given).
+    ``bone_positions``: (J, 3) local positions (default zeros).  Values are float32 on the
+    wire.
+    """
+    q = np.asarray(quats, dtype=np.float64)
+    if q.ndim != 2 or q.shape[1] != 4 or q.shape[0] != len(bone_names):
+        raise ValueError(f"quats must be ({len(bone_names)}, 4), got {q.shape}")
+    msgs: list[bytes] = []
+    if root_position is not None or root_rotation is not None:
+        msgs.append(encode_pose_message(
+            ROOT_ADDRESS, "root", _ZERO3 if root_position is None else root_position,
+            (0.0, 0.0, 0.0, 1.0) if root_rotation is None else root_rotation))
+    qs = q.tolist()
+    pos = None if bone_positions is None else np.asarray(bone_positions, dtype=np.float64).tolist()
+    pack = _F7.pack
+    for j, name in enumerate(bone_names):
+        if include is not None and not include[j]:
+            continue
+        x, y, z, w = qs[j]
+        px, py, pz = _ZERO3 if pos is None else pos[j]
+        msgs.append(_BONE_HEAD + _pad_string(name) + pack(px, py, -pz, -x, -y, z, w))
+    if time is not None:
+        msgs.append(_TIME_HEAD + _F32.pack(float(time)))
+    if ok is not None:
+        msgs.append(encode_message(OK_ADDRESS, "i" * len(ok), [int(v) for v in ok]))
+    return pack_bundles(msgs, max_datagram)
+
+
+# --------------------------------------------------------------------------- assembling
+
+def _rotate(q: Sequence[float], v: Sequence[float]) -> tuple[float, float, float]:
+    """Vector ``v`` rotated by unit quaternion ``q`` (scalar-last)."""
+    x, y, z, w = q
+    vx, vy, vz = v
+    # t = 2 * (q_vec x v); v' = v + w t + q_vec x t
+    tx = 2.0 * (y * vz - z * vy)
+    ty = 2.0 * (z * vx - x * vz)
+    tz = 2.0 * (x * vy - y * vx)
+    return (vx + w * tx + (y * tz - z * ty),
+            vy + w * ty + (z * tx - x * tz),
+            vz + w * tz + (x * ty - y * tx))
+
+
+class VmcAssembler:
+    """Rebuild skeleton frames from a stream of VMC datagrams.
+
+    ``bone_names``: the profile's HumanBodyBones names (matched case-insensitively); frame
+    quaternions come out in this order, converted to rtseg's right-handed frame.
+
+    A frame is **closed** (emitted) when, after it has received at least one bone:
+
+    1. ``/VMC/Ext/T`` arrives with a value different from the frame's time, or
+    2. ``/VMC/Ext/Root/Pos`` arrives with a pose different from the frame's root, or
+    3. a bone arrives that this frame already holds (the sender started the next frame), or
+    4. it is complete: every profile bone received, plus T and root if the sender has been
+       seen sending them (closes with no added latency), or
+    5. :meth:`flush` is called ``quiet`` seconds or more after the last datagram.
+
+    Rules 1-2 assign T / root to the right frame whether a sender puts them before the bones
+    (T first) or after them (VirtualMotionCapture sends Root, Bones, OK, T).
+
+    Per frame: ``quats`` (J, 4) -- bones not received hold their last value (identity before
+    the first) with ``valid`` False; ``source_time`` from T; ``seq`` counts emitted frames
+    from 0; ``root_position`` = Root/Pos position + root rotation applied to the root bone's
+    local position (the world position of the hips when Root is their parent), or the root
+    bone's local position when no Root/Pos was sent, or None when neither was.
+    ``continuous``: flip each bone's quaternion sign so its dot with the previous value is
+    non-negative (q and -q are the same rotation).
+    """
+
+    def __init__(self, bone_names: Sequence[str], *, quiet: float = 0.02,
+                 unit_tolerance: float = 0.05, continuous: bool = True,
+                 stats: SourceStats | None = None) -> None:
+        if not bone_names:
+            raise ValueError("VmcAssembler needs at least one bone name")
+        lowered = [n.lower() for n in bone_names]
+        if len(set(lowered)) != len(lowered):
+            raise ValueError(f"duplicate bone names (case-insensitive) in {list(bone_names)}")
+        self.bone_names = list(bone_names)
+        self.n_bones = len(bone_names)
+        self.quiet = float(quiet)
+        self.unit_tolerance = float(unit_tolerance)
+        self.continuous = continuous
+        self.stats = stats if stats is not None else SourceStats()
+        self._index = {n: i for i, n in enumerate(lowered)}
+        self._cache: dict[bytes, int] = {}    # raw name -> index (-1 unknown)
+        self._pcache: dict[bytes, int] = {}   # padded name field -> index / -2 / -3
+        self._root_bone = self._index.get("hips", 0)
+        self._all_false = [False] * self.n_bones
+        self._q = [0.0, 0.0, 0.0, 1.0] * self.n_bones   # last value per bone, rtseg frame
+        self._got = [False] * self.n_bones
+        self._n_got = 0
+        self._t: float | None = None          # T of the open frame
+        self._root: tuple | None = None       # raw Root/Pos floats of the open frame
+        self._last_root: tuple | None = None  # last root pose (rtseg frame): pos, quat
+        self._root_bone_pos: tuple | None = None
+        self._sends_t = False
+        self._sends_root = False
+        self._last_closed_t: float | None = None
+        self._last_activity = -math.inf
+        self._seq = 0
+        self._out: list[Frame] = []
+        self._warned: dict[str, float] = {}
+        #: Last ``/VMC/Ext/OK`` arguments (loaded, calibration state, mode, tracking) or None.
+        self.ok_state: tuple[int, ...] | None = None
+        #: Last root rotation (rtseg frame, scalar-last) or None.
+        self.root_rotation: tuple[float, float, float, float] | None = None
+
+    # -- public
+
+    def feed(self, data: bytes, now: float) -> list[Frame]:
+        """Process one datagram received at ``now`` (monotonic s); return frames closed by it
+        (usually none or one).  Never raises on malformed input: it is counted and dropped."""
+        self._out = out = []
+        self._last_activity = now
+        self._now = now
+        n = len(data)
+        if n < 4 or n & 3:
+            self._corrupt(f"datagram of {n} bytes is not a positive multiple of 4")
+            return out
+        if data.startswith(_BUNDLE):
+            self._bundle(data, 0, n, 0)
+        else:
+            self._message(data, 0, n)
+        return out
+
+    def flush(self, now: float, force: bool = False) -> list[Frame]:
+        """Close the open frame if ``quiet`` seconds passed since the last datagram (or
+        ``force``); returns the frames closed (0 or 1)."""
+        self._out = out = []
+        if self._n_got and (force or now - self._last_activity >= self.quiet):
+            self._now = now
+            self._close()
+        return out
+
+    @property
+    def pending(self) -> bool:
+        """True when a frame has received bones but is not closed yet."""
+        return self._n_got > 0
+
+    # -- internals
+
+    def _warn(self, key: str, message: str) -> None:
+        t = time.monotonic()
+        if t - self._warned.get(key, -math.inf) >= 5.0:
+            self._warned[key] = t
+            log.warning("VMC: %s", message)
+
+    def _corrupt(self, message: str) -> None:
+        self.stats.corrupt += 1
+        self._warn("corrupt", f"malformed OSC dropped: {message}")
+
+    def _bad_message(self, message: str) -> None:
+        self.stats.bad_messages += 1
+        self._warn("bad_message", f"message dropped: {message}")
+
+    def _bad_value(self, message: str) -> None:
+        self.stats.bad_values += 1
+        self._warn("bad_value", f"value dropped: {message}")
+
+    def _resolve(self, raw: bytes) -> int:
+        try:
+            name = raw.decode("ascii")
+        except UnicodeDecodeError:
+            name = None
+        idx = -1 if name is None else self._index.get(name.lower(), -1)
+        if len(self._cache) < 4096:
+            self._cache[raw] = idx
+        return idx
+
+    def _resolve_padded(self, padded: bytes) -> int:
+        """Index for the padded name field of a fast-path bone message: profile index,
+        -1 unknown name, -2 not the exact ``,sfffffff`` layout (use the generic path)."""
+        nul = padded.find(b"\x00")
+        if nul < 0 or padded != padded[:nul] + b"\x00" * (len(padded) - nul) or \
+                len(padded) != (nul & ~3) + 4:
+            idx = -2
+        else:
+            idx = self._resolve(padded[:nul])
+            if idx == -1:
+                idx = -3   # unknown, counted by the caller after the layout check
+        if len(self._pcache) < 4096:
+            self._pcache[padded] = idx
+        return idx
+
+    def _bundle(self, data: bytes, start: int, end: int, depth: int) -> None:
+        if depth >= _MAX_DEPTH:
+            self._corrupt(f"bundles nested deeper than {_MAX_DEPTH}")
+            return
+        if end - start < 16:
+            self._corrupt("truncated bundle header")
+            return
+        pos = start + 16
+        unpack_i = _I32.unpack_from
+        unpack_7 = _F7.unpack_from
+        startswith = data.startswith
+        cache_get = self._pcache.get
+        got = self._got
+        q = self._q
+        tol = self.unit_tolerance
+        continuous = self.continuous
+        nb = self.n_bones
+        root_bone = self._root_bone
+        sqrt = math.sqrt
+        n_got = self._n_got
+        while pos < end:
+            if pos + 4 > end:
+                self._corrupt(f"truncated bundle element size at byte {pos}")
+                break
+            size = unpack_i(data, pos)[0]
+            pos += 4
+            stop = pos + size
+            if size <= 0 or size & 3 or stop > end:
+                self._corrupt(f"bad bundle element size {size} at byte {pos - 4}")
+                break
+            if size >= 64 and startswith(_BONE_HEAD, pos):
+                # fast path: exactly '/VMC/Ext/Bone/Pos ,sfffffff' name x y z x y z w
+                fpos = stop - 28
+                padded = data[pos + 32:fpos]
+                idx = cache_get(padded)
+                if idx is None:
+                    idx = self._resolve_padded(padded)
+                if idx >= 0:
+                    px, py, pz, x, y, z, w = unpack_7(data, fpos)
+                    n2 = x * x + y * y + z * z + w * w
+                    if abs(n2 - 1.0) <= tol:
+                        if got[idx]:
+                            self._n_got = n_got
+                            self._close()
+                            n_got = 0
+                        s = 1.0 / sqrt(n2)
+                        i4 = idx * 4
+                        x = -x * s
+                        y = -y * s
+                        z = z * s
+                        w = w * s
+                        if continuous and (x * q[i4] + y * q[i4 + 1] + z * q[i4 + 2]
+                                           + w * q[i4 + 3]) < 0.0:
+                            x = -x
+                            y = -y
+                            z = -z
+                            w = -w
+                        q[i4] = x
+                        q[i4 + 1] = y
+                        q[i4 + 2] = z
+                        q[i4 + 3] = w
+                        got[idx] = True
+                        n_got += 1
+                        if idx == root_bone:
+                            self._root_bone_pos = (px, py, -pz) if math.isfinite(
+                                px + py + pz) else self._root_bone_pos
+                        if n_got == nb:
+                            self._n_got = n_got
+                            self._maybe_complete()
+                            n_got = self._n_got
+                    else:
+                        self._bad_value(f"bone {padded!r}: quaternion norm² {n2}")
+                    pos = stop
+                    continue
+                if idx == -3:
+                    self._unknown(padded.rstrip(b"\x00"))
+                    pos = stop
+                    continue
+                # idx == -2: unusual layout, generic path below
+            self._n_got = n_got
+            if size == 20 and startswith(_TIME_HEAD, pos):
+                self._on_time(_F32.unpack_from(data, pos + 16)[0])
+            elif size >= 64 and startswith(_ROOT_HEAD, pos):
+                nul = data.find(b"\x00", pos + 32, stop - 28)
+                if nul >= 0 and pos + 32 + ((nul - pos - 32) & ~3) + 4 == stop - 28:
+                    self._on_root(unpack_7(data, stop - 28))
+                else:
+                    self._message(data, pos, stop)   # unusual layout: generic path
+            elif size == 36 and startswith(_OK_HEAD4, pos):
+                self.ok_state = _I4.unpack_from(data, pos + 20)
+            elif startswith(_BUNDLE, pos):
+                self._bundle(data, pos, stop, depth + 1)
+            else:
+                self._message(data, pos, stop)
+            n_got = self._n_got
+            pos = stop
+        self._n_got = n_got
+
+    def _unknown(self, raw: bytes) -> None:
+        self.stats.unknown_names += 1
+        key = "unknown:" + raw[:64].decode("ascii", errors="replace")
+        if key not in self._warned and len(self._warned) < 256:
+            self._warned[key] = time.monotonic()
+            log.info("VMC: bone %r not in the suit profile; ignored", raw[:64])
+
+    def _message(self, data: bytes, start: int, end: int) -> None:
+        """Generic path: any message other than a fast-path bone."""
+        if data[start:start + 1] != b"/":
+            self._corrupt("OSC address does not start with '/'")
+            return
+        nul = data.find(b"\x00", start, end)
+        if nul < 0:
+            self._corrupt("unterminated OSC address")
+            return
+        addr = data[start:nul]
+        if addr == b"/VMC/Ext/T":
+            need = 1
+        elif addr == b"/VMC/Ext/Bone/Pos" or addr == b"/VMC/Ext/Root/Pos":
+            need = 8
+        elif addr == b"/VMC/Ext/OK":
+            need = 1
+        else:
+            return  # unknown address: ignored by design
+        try:
+            msg = parse_message(data, start, end, max_args=4 if need == 1 else need)
+        except OscParseError as exc:
+            self._corrupt(str(exc))
+            return
+        args = msg.args
+        if len(args) < need:
+            self._bad_message(f"{msg.address} ,{msg.tags}: needs {need} arguments")
+            return
+        if need == 8:
+            if not isinstance(args[0], str) or not all(
+                    isinstance(a, (int, float)) and not isinstance(a, bool) for a in args[1:8]):
+                self._bad_message(f"{msg.address} ,{msg.tags}: expected ,sfffffff")
+                return
+            vals = tuple(float(a) for a in args[1:8])
+            if addr == b"/VMC/Ext/Root/Pos":
+                self._on_root(vals)
+            else:
+                self._on_bone(args[0], vals)
+        elif addr == b"/VMC/Ext/T":
+            t = args[0]
+            if not isinstance(t, (int, float)) or isinstance(t, bool):
+                self._bad_message(f"{msg.address} ,{msg.tags}: expected ,f")
+                return
+            self._on_time(float(t))
+        else:
+            ints = [a for a in args if isinstance(a, int) and not isinstance(a, bool)]
+            if len(ints) != len(args):
+                self._bad_message(f"{msg.address} ,{msg.tags}: expected integers")
+                return
+            self.ok_state = tuple(ints)
+
+    def _on_bone(self, name: str, vals: tuple) -> None:
+        raw = name.encode("utf-8", errors="replace")
+        idx = self._cache.get(raw)
+        if idx is None:
+            idx = self._resolve(raw)
+        if idx < 0:
+            self._unknown(raw)
+            return
+        px, py, pz, x, y, z, w = vals
+        n2 = x * x + y * y + z * z + w * w
+        if not abs(n2 - 1.0) <= self.unit_tolerance:
+            self._bad_value(f"bone {name!r}: quaternion norm² {n2}")
+            return
+        if self._got[idx]:
+            self._close()
+        s = 1.0 / math.sqrt(n2)
+        x, y, z, w = -x * s, -y * s, z * s, w * s
+        q = self._q
+        i4 = idx * 4
+        if self.continuous and x * q[i4] + y * q[i4 + 1] + z * q[i4 + 2] + w * q[i4 + 3] < 0.0:
+            x, y, z, w = -x, -y, -z, -w
+        q[i4:i4 + 4] = (x, y, z, w)
+        self._got[idx] = True
+        self._n_got += 1
+        if idx == self._root_bone and math.isfinite(px + py + pz):
+            self._root_bone_pos = (px, py, -pz)
+        if self._n_got == self.n_bones:
+            self._maybe_complete()
+
+    def _on_root(self, vals: tuple) -> None:
+        if not all(math.isfinite(v) for v in vals):
+            self._bad_value(f"root pose not finite: {vals}")
+            return
+        x, y, z, w = vals[3:]
+        n2 = x * x + y * y + z * z + w * w
+        if not abs(n2 - 1.0) <= self.unit_tolerance:
+            self._bad_value(f"root quaternion norm² {n2}")
+            return
+        self._sends_root = True
+        if self._root is not None and vals != self._root and self._n_got:
+            self._close()
+        self._root = vals
+        s = 1.0 / math.sqrt(n2)
+        self._last_root = ((vals[0], vals[1], -vals[2]), (-x * s, -y * s, z * s, w * s))
+        self.root_rotation = self._last_root[1]
+        if self._n_got == self.n_bones:
+            self._maybe_complete()
+
+    def _on_time(self, t: float) -> None:
+        if not math.isfinite(t):
+            self._bad_value(f"time {t} not finite")
+            return
+        self._sends_t = True
+        if self._t is None:
+            if not self._n_got and self._root is None and t == self._last_closed_t:
+                return  # a repeat of the frame just closed
+            self._t = t
+        elif t != self._t:
+            if self._n_got:
+                self._close()
+            self._t = t
+        if self._n_got == self.n_bones:
+            self._maybe_complete()
+
+    def _maybe_complete(self) -> None:
+        if (self._t is not None or not self._sends_t) and (
+                self._root is not None or not self._sends_root):
+            self._close()
+
+    def _close(self) -> None:
+        J = self.n_bones
+        quats = np.array(self._q, dtype=np.float64).reshape(J, 4)
+        valid = np.array(self._got, dtype=bool)
+        rp = None
+        if self._last_root is not None:
+            pos, rot = self._last_root
+            if self._root_bone_pos is not None:
+                off = _rotate(rot, self._root_bone_pos)
+                rp = np.array((pos[0] + off[0], pos[1] + off[1], pos[2] + off[2]))
+            else:
+                rp = np.array(pos, dtype=np.float64)
+        elif self._root_bone_pos is not None:
+            rp = np.array(self._root_bone_pos, dtype=np.float64)
+        self._out.append(Frame(recv_time=self._now, quats=quats, valid=valid,
+                               source_time=self._t, seq=self._seq, root_position=rp))
+        self._seq += 1
+        self._last_closed_t = self._t
+        self._got[:] = self._all_false   # in place: _bundle holds a reference
+        self._n_got = 0
+        self._t = None
+        self._root = None
+
+
+__all__ = [
+    "BONE_ADDRESS", "ROOT_ADDRESS", "TIME_ADDRESS", "OK_ADDRESS", "DEFAULT_MAX_DATAGRAM",
+    "HUMAN_BODY_BONES", "canonical_bone_name", "OscParseError", "OscMessage",
+    "parse_message", "parse_packet", "encode_message", "encode_bundle", "pack_bundles",
+    "encode_pose_message", "encode_frame", "VmcAssembler",
+]
