@@ -118,6 +118,9 @@ class TransitionLabels:
 
 # --------------------------------------------------------------------------- cmu86 ranges
 
+#: (file, line, policy) of slips already logged, so re-reading a file does not repeat them.
+_warned: set[tuple[str, int, str]] = set()
+
 _BLOCK_RE = re.compile(r"^\s*(\d+)\s+(\d+)\s*$")
 
 
@@ -198,7 +201,10 @@ def _block_transitions(path: Path, name: str, lines: list[tuple[int, int, str, l
         if policy == "strict":
             raise LabelError(path, lineno, f"{name} line {blockline}: {problem}")
         note = f"{where}: {problem}; {action}"
-        log.warning("label slip %s", note)
+        key = (str(path.resolve()), lineno, policy)
+        if key not in _warned:  # once per process and file line; always in ``repairs``
+            _warned.add(key)
+            log.warning("label slip %s", note)
         repairs.append(note)
 
     *segments, last = lines
@@ -472,3 +478,55 @@ def find_labelled_takes(data_dir: str | Path, groups: Iterable[str] = GROUPS, *,
             found.append(LabelledTake(name, "tsseg4d", path, None, labels))
     found.sort(key=lambda t: (GROUPS.index(t.group), t.name))
     return found
+
+
+def _looks_like_ranges(path: Path) -> bool:
+    """True when the file's first non-blank line is a ``SS TT`` block header."""
+    with open(path, encoding="utf-8-sig", errors="replace") as fh:
+        for line in fh:
+            if line.strip():
+                return bool(_BLOCK_RE.match(line))
+    return False
+
+
+def read_labels_file(path: str | Path, take_name: str, *,
+                     tolerance: int = DEFAULT_TOLERANCE) -> TransitionLabels:
+    """Labels of take ``take_name`` ("SS_TT") from a label file of any of the three formats,
+    told apart by content: a ``.csv`` is per-frame labels (5th column); a file starting
+    with an ``SS TT`` block header is a cmu86-style ranges file (the take's block is used);
+    otherwise integers per 12-frame block (mocap6)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"label file not found: {path}")
+    if path.suffix.lower() == ".csv":
+        return read_frame_labels(path, tolerance=tolerance)
+    if _looks_like_ranges(path):
+        blocks = read_cmu86_transitions(path)
+        if take_name not in blocks:
+            raise LabelError(path, None, f"no block for take {take_name} "
+                             f"(blocks: {', '.join(sorted(blocks)) or 'none'})")
+        return blocks[take_name]
+    return read_block_labels(path, tolerance=tolerance)
+
+
+def find_labels_for(motion: str | Path, *, tolerance: int = DEFAULT_TOLERANCE
+                    ) -> TransitionLabels | None:
+    """Labels of a motion file found by the ``../shared/data`` layout, or None.
+
+    Looks (in this order) for the take's block in ``<root>/labels/*transitions*.txt``, for
+    ``<root>/labels/mocap6/<take>.txt`` (root = the folder above the motion's folder, or the
+    motion's own folder), and for per-frame labels in a tsseg4d ``.csv`` motion itself.
+    """
+    motion = Path(motion)
+    name = motion.stem
+    for root in (motion.parent.parent, motion.parent):
+        for f in sorted((root / "labels").glob("*transitions*.txt")):
+            blocks = read_cmu86_transitions(f)
+            if name in blocks:
+                return blocks[name]
+        m6 = root / "labels" / "mocap6" / f"{name}.txt"
+        if m6.is_file():
+            return read_block_labels(m6, tolerance=tolerance)
+    if motion.suffix.lower() == ".csv":
+        return read_frame_labels(motion, tolerance=tolerance)
+    return None

@@ -11,10 +11,19 @@ import pytest
 
 from rtseg.labels import (
     LabelError, Transition, find_labelled_takes, labels_from_take, load_cmu86_transitions,
-    read_block_labels, read_cmu86_transitions, read_frame_labels,
+    find_labels_for, read_block_labels, read_cmu86_transitions, read_frame_labels,
+    read_labels_file,
     transitions_from_frame_labels,
 )
+from rtseg import labels as labels_module
 from rtseg.take import Take
+
+
+@pytest.fixture(autouse=True)
+def fresh_slip_log():
+    """Slips are logged once per process and file line; start each test afresh."""
+    labels_module._warned.clear()
+    yield
 
 CLEAN = """86 01
 walk 500 550 600
@@ -239,3 +248,35 @@ def test_real_layout_pairs_every_take(data_dir):
     ts = {t.name: t for t in found if t.group == "tsseg4d"}
     assert sorted(ts) == ["86_01", "86_02", "86_03", "86_07", "86_08"]
     assert all(t.labels.kind == "ranges" for t in ts.values())
+
+
+def test_slip_logged_once_per_line_but_always_recorded(tmp_path, caplog):
+    p = write(tmp_path, SLIPS)
+    with caplog.at_level(logging.WARNING, logger="rtseg.labels"):
+        first = read_cmu86_transitions(p)
+        again = read_cmu86_transitions(p)
+    assert len(caplog.records) == 3
+    assert again["86_04"].repairs == first["86_04"].repairs != []
+
+
+def test_read_labels_file_tells_formats_apart(tmp_path):
+    ranges = write(tmp_path, CLEAN, "any_name.txt")
+    assert read_labels_file(ranges, "86_02").kind == "ranges"
+    with pytest.raises(LabelError, match="no block for take 86_09"):
+        read_labels_file(ranges, "86_09")
+    blocks = write(tmp_path, "2 2 2 3 3", "x.txt")
+    assert [t.mid for t in read_labels_file(blocks, "13_01").transitions] == [36]
+    rows = write(tmp_path, "\n".join(f"0,0,0,0,{i // 100}" for i in range(200)), "y.csv")
+    assert [t.mid for t in read_labels_file(rows, "86_01").transitions] == [100]
+    with pytest.raises(FileNotFoundError):
+        read_labels_file(tmp_path / "missing.txt", "86_01")
+
+
+def test_find_labels_for_motion_in_layout(tmp_path):
+    (tmp_path / "cmu").mkdir()
+    (tmp_path / "labels" / "mocap6").mkdir(parents=True)
+    (tmp_path / "labels" / "cmu86_transitions.txt").write_text(CLEAN)
+    (tmp_path / "labels" / "mocap6" / "13_29.txt").write_text("1 2")
+    assert find_labels_for(tmp_path / "cmu" / "86_01.amc").kind == "ranges"
+    assert find_labels_for(tmp_path / "cmu" / "13_29.amc").transitions[0].mid == 12
+    assert find_labels_for(tmp_path / "cmu" / "55_01.bvh") is None
