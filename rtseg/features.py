@@ -1,0 +1,201 @@
+"""Pose features of Barbič et al. 2004: per selected joint its parent-relative quaternion.
+
+A frame's feature vector concatenates, for each joint of a skeleton profile (see
+``rtseg.profiles``), the joint's rotation relative to its parent as a unit quaternion
+(x, y, z, w), scalar-last: (frames, 4·J) float64.  Root position and orientation are left
+out, as in the paper.
+
+- ``space == "global"`` inputs (IMU sensor orientations) are made parent-relative with
+  q_parent⁻¹ ⊗ q_child using the take's FULL hierarchy (parents outside the profile count),
+  before the profile's joints are selected.  Roots keep their global rotation.
+- Optional calibration frame (rig-relative inputs such as VMC, whose local rotations include
+  the rig's rest pose): the feature of joint j is q_calib,j⁻¹ ⊗ q_j, so the calibration pose
+  maps to identity.
+- Sign continuity: q and -q are the same rotation.  The first output frame of each joint is
+  made w ≥ 0, then each later quaternion is flipped if its dot product with the previous
+  output is negative.  ``transform`` (batch) and ``step`` (one frame at a time, from reset)
+  give the same rows.
+
+1-dof bones (radius, tibia in CMU) give components that never vary; they are left in
+place: ``constant_dims`` finds them for the detectors.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from rtseg import quat as Q
+from rtseg.profiles import choose_profile, resolve_joints
+from rtseg.take import Take
+
+# Left-multiplication matrix of a quaternion a (scalar-last): (a ⊗ b) = L(a) @ b, with
+# L(a)[o, t] = SIGN[o, t] * a[GATHER[o, t]].
+_GATHER = np.array([[3, 2, 1, 0],   # x: aw bx - az by + ay bz + ax bw
+                    [2, 3, 0, 1],   # y: az bx + aw by - ax bz + ay bw
+                    [1, 0, 3, 2],   # z: -ay bx + ax by + aw bz + az bw
+                    [0, 1, 2, 3]])  # w: -ax bx - ay by - az bz + aw bw
+_SIGN = np.array([[1.0, -1.0, 1.0, 1.0],
+                  [1.0, 1.0, -1.0, 1.0],
+                  [-1.0, 1.0, 1.0, 1.0],
+                  [-1.0, -1.0, -1.0, 1.0]])
+# L(conj(a)): conj negates x, y, z of a.
+_CONJ_SIGN = _SIGN * np.where(_GATHER == 3, 1.0, -1.0)
+
+
+def left_matrices(a: np.ndarray, conjugate: bool = False) -> np.ndarray:
+    """(K, 4, 4) matrices L with L[k] @ b == a[k] ⊗ b (or conj(a[k]) ⊗ b)."""
+    a = np.asarray(a, dtype=np.float64)
+    return a[:, _GATHER] * (_CONJ_SIGN if conjugate else _SIGN)
+
+
+def constant_dims(X: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """Boolean mask of feature columns whose range over the frames is at most ``tol``."""
+    X = np.asarray(X, dtype=np.float64)
+    if X.ndim != 2:
+        raise ValueError(f"X must be (frames, dims), got {X.shape}")
+    if X.shape[0] == 0:
+        return np.ones(X.shape[1], dtype=bool)
+    return (X.max(axis=0) - X.min(axis=0)) <= tol
+
+
+class PoseFeatures:
+    """Feature extractor for one skeleton (joint names + parents + rotation space).
+
+    ``joints``: selected joint names (profile order); ``indices``: their positions in the
+    input; ``dim`` = 4·len(joints).  Raises ``KeyError`` naming the joint and profile when
+    the skeleton lacks a profile joint.
+    """
+
+    def __init__(self, joint_names: Sequence[str], parents: Sequence[int], space: str,
+                 profile: str | None = None, *, calibration: np.ndarray | None = None) -> None:
+        joint_names = list(joint_names)
+        parents = [int(p) for p in parents]
+        if len(parents) != len(joint_names):
+            raise ValueError(f"{len(parents)} parents for {len(joint_names)} joints")
+        if space not in ("local", "global"):
+            raise ValueError(f"space must be 'local' or 'global', not {space!r}")
+        for j, p in enumerate(parents):
+            if not -1 <= p < len(joint_names) or p == j:
+                raise ValueError(f"joint {joint_names[j]!r} has invalid parent index {p}")
+        self.joint_names = joint_names
+        self.parents = parents
+        self.space = space
+        self.profile = profile if profile is not None else choose_profile(joint_names)
+        self.indices = np.array(resolve_joints(self.profile, joint_names), dtype=np.intp)
+        self.joints = [joint_names[i] for i in self.indices]
+        self.dim = 4 * len(self.indices)
+        n = len(joint_names)
+        # Parent of each selected joint, roots pointing at an identity row appended at n.
+        self._parent_idx = np.array([parents[i] if parents[i] >= 0 else n for i in self.indices],
+                                    dtype=np.intp)
+        self._ext = np.zeros((n + 1, 4))
+        self._ext[n, 3] = 1.0
+        self._needs_ext = bool(np.any(self._parent_idx == n))
+        self._frame_shape = (n, 4)
+        # Flat indices into the (J[+1], 4) frame building L(conj(parent)) of each selected joint.
+        self._parent_gather = (self._parent_idx[:, None, None] * 4 + _GATHER).astype(np.intp)
+        self._calib_L: np.ndarray | None = None
+        self._prev: np.ndarray | None = None
+        if calibration is not None:
+            self.calibrate(calibration)
+
+    # -- state -------------------------------------------------------------------------
+    @property
+    def calibrated(self) -> bool:
+        return self._calib_L is not None
+
+    def reset(self) -> None:
+        """Forget the previous frame (sign continuity restarts).  Keeps the calibration."""
+        self._prev = None
+
+    def calibrate(self, quats: np.ndarray) -> None:
+        """Take this input frame (J, 4) as the reference pose: it maps to identity features.
+
+        Also resets sign continuity.  ``clear_calibration()`` undoes it.
+        """
+        local = self._local_one(self._check_frame(quats))
+        self._calib_L = left_matrices(local, conjugate=True)
+        self._prev = None
+
+    def clear_calibration(self) -> None:
+        self._calib_L = None
+        self._prev = None
+
+    # -- per frame ---------------------------------------------------------------------
+    def _check_frame(self, quats: np.ndarray) -> np.ndarray:
+        q = np.asarray(quats, dtype=np.float64)
+        if q.shape != (len(self.joint_names), 4):
+            raise ValueError(f"frame must be ({len(self.joint_names)}, 4), got {q.shape}")
+        return q
+
+    def _local_one(self, q: np.ndarray) -> np.ndarray:
+        """(K, 4) parent-relative rotations of the selected joints of one frame (no calibration)."""
+        if self.space == "local":
+            return q[self.indices]
+        if self._needs_ext:
+            src = self._ext
+            src[:-1] = q
+        else:
+            src = q
+        L = src.reshape(-1)[self._parent_gather] * _CONJ_SIGN
+        return (L @ q[self.indices][:, :, None])[:, :, 0]
+
+    def step(self, quats: np.ndarray) -> np.ndarray:
+        """Features (dim,) of one frame (J, 4); the row ``transform`` gives for it in a sequence.
+
+        Keeps the previous output for sign continuity (``reset()`` forgets it).
+        """
+        q = np.asarray(quats, dtype=np.float64)
+        if q.shape != self._frame_shape or not q.flags.c_contiguous:
+            q = np.ascontiguousarray(self._check_frame(q))
+        out = self._local_one(q)
+        if self._calib_L is not None:
+            out = (self._calib_L @ out[:, :, None])[:, :, 0]
+        elif self.space == "local":
+            out = out.copy()
+        prev = self._prev
+        if prev is None:
+            sign = np.copysign(1.0, out[:, 3] + 0.0)
+        else:
+            # dot(out_k, prev_k) per joint; +0.0 turns -0.0 into +0.0 (no flip, as make_continuous)
+            sign = np.copysign(1.0, (out[:, None, :] @ prev[:, :, None])[:, 0, 0] + 0.0)
+        out *= sign[:, None]
+        self._prev = out
+        return out.reshape(-1).copy()
+
+    # -- batch -------------------------------------------------------------------------
+    def local_quats(self, quats: np.ndarray) -> np.ndarray:
+        """(F, K, 4) parent-relative (and calibrated) rotations of the selected joints,
+        without sign processing."""
+        q = np.asarray(quats, dtype=np.float64)
+        if q.ndim != 3 or q.shape[1:] != (len(self.joint_names), 4):
+            raise ValueError(f"quats must be (frames, {len(self.joint_names)}, 4), got {q.shape}")
+        child = q[:, self.indices]
+        if self.space == "global":
+            par = np.array(self.parents)[self.indices]
+            parent = np.where((par >= 0)[:, None], q[:, np.maximum(par, 0)], Q.IDENTITY)
+            child = Q.multiply(Q.conjugate(parent), child)
+        if self._calib_L is not None:
+            child = np.einsum("kot,fkt->fko", self._calib_L, child)
+        return child
+
+    def transform(self, quats: np.ndarray) -> np.ndarray:
+        """(F, dim) features of (F, J, 4) frames.  Stateless: ignores and keeps ``step``'s state."""
+        local = np.array(self.local_quats(quats), dtype=np.float64, copy=True)
+        if local.shape[0] == 0:
+            return np.zeros((0, self.dim))
+        first = local[0]
+        first[first[:, 3] < 0] *= -1.0
+        local = Q.make_continuous(local, axis=0)
+        return local.reshape(local.shape[0], self.dim)
+
+    def __repr__(self) -> str:
+        return (f"PoseFeatures(profile={self.profile!r}, joints={len(self.joints)}, "
+                f"space={self.space!r}, calibrated={self.calibrated})")
+
+
+def take_features(take: Take, profile: str | None = None) -> np.ndarray:
+    """(frames, 4·J) float64 features of a whole take (``profile`` None: ``choose_profile``)."""
+    return PoseFeatures(take.joint_names, take.parents, take.space, profile).transform(take.quats)
