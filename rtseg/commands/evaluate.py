@@ -17,7 +17,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence, TextIO
 
-from rtseg.commands.segment import add_method_argument, methods_of, params_by_method
+from rtseg.commands.segment import (
+    add_method_argument, add_profile_argument, methods_of, params_by_method,
+)
 from rtseg.evaluation import Score, pooled, score
 from rtseg.labels import GROUPS, LabelledTake, find_labelled_takes
 from rtseg.segmentation import segment_take_methods
@@ -124,7 +126,8 @@ def select_groups(group: str) -> tuple[str, ...]:
 
 def evaluate_takes(takes: Sequence[LabelledTake], methods: Sequence[str],
                    params: dict[str, dict[str, Any]] | None = None,
-                   progress: Progress | None = None) -> EvaluationReport:
+                   progress: Progress | None = None, profile: str | None = None
+                   ) -> EvaluationReport:
     """Segment each take with every method (features computed once a take) and score it.
 
     Take keys are the bare take names, or ``group/name`` when a name occurs in two groups.
@@ -142,7 +145,7 @@ def evaluate_takes(takes: Sequence[LabelledTake], methods: Sequence[str],
             if t.labels.n_frames is not None and abs(t.labels.n_frames - take.n_frames) > 12:
                 log.warning("%s: labels say %d frames, the take has %d", key,
                             t.labels.n_frames, take.n_frames)
-            results = segment_take_methods(take, methods, params)
+            results = segment_take_methods(take, methods, params, profile=profile)
         except (OSError, ValueError, KeyError) as exc:
             log.error("%s: %s", key, exc)
             report.errors[key] = str(exc)
@@ -158,14 +161,14 @@ def evaluate_takes(takes: Sequence[LabelledTake], methods: Sequence[str],
 
 def evaluate_dir(data_dir: str | Path, methods: Sequence[str], group: str = "cmu",
                  params: dict[str, dict[str, Any]] | None = None,
-                 progress: bool = True) -> EvaluationReport:
+                 progress: bool = True, profile: str | None = None) -> EvaluationReport:
     """Find the labelled takes of ``data_dir`` in ``group`` ("cmu", "tsseg4d" or "all")
     and evaluate them."""
     takes = find_labelled_takes(data_dir, select_groups(group))
     if not takes:
         raise ValueError(f"no labelled takes of group {group!r} found in {data_dir}")
     bar = Progress(len(takes), enabled=progress)
-    return evaluate_takes(takes, methods, params, bar)
+    return evaluate_takes(takes, methods, params, bar, profile)
 
 
 def format_table(report: EvaluationReport) -> str:
@@ -204,6 +207,7 @@ def add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--params", metavar="FILE",
                    help="detector parameters, TOML or JSON: flat, or one table per method")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    add_profile_argument(p)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -218,7 +222,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     methods = methods_of(args.method)
     report = evaluate_dir(args.data_dir, methods, args.group,
-                          params_by_method(args.params, methods), progress=not args.no_progress)
+                          params_by_method(args.params, methods), progress=not args.no_progress,
+                          profile=args.profile)
     if args.json:
         sys.stdout.write(json.dumps(report.as_dict(), indent=2, allow_nan=False) + "\n")
     else:

@@ -41,7 +41,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="output format (default table)")
     p.add_argument("--params", metavar="FILE",
                    help="detector parameters, TOML or JSON: flat, or one table per method")
+    add_profile_argument(p)
     p.set_defaults(func=run)
+
+
+def add_profile_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--profile", metavar="NAME",
+                        help="skeleton profile choosing the feature joints "
+                             "(config/skeletons.toml; default: chosen from the joint names)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -49,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     methods = methods_of(args.method)
     params = params_by_method(args.params, methods)
     take = load_take(args.take, skeleton=args.skeleton)
-    results = segment_take_methods(take, methods, params)
+    results = segment_take_methods(take, methods, params, profile=args.profile)
     out = {"table": format_table, "json": format_json, "csv": format_csv}[args.format]
     sys.stdout.write(out(args.take, results))
     return 0
