@@ -1,0 +1,161 @@
+"""Events a live session emits: cuts, once-a-second status, sensor dropouts.
+
+These are the objects the live loop hands to the publishers (``rtseg.publishers``) and to
+the session recorder (``rtseg.recording``).  They are plain data; nothing here does I/O.
+
+Times and frames
+----------------
+- ``time`` fields are **seconds since session start** on the monotonic clock
+  (``time.monotonic() - session_start``); the live loop owns ``session_start`` (the
+  recorder exposes ``SessionRecorder.start_monotonic`` so both can share one origin).
+- ``wall_time`` is Unix time (``time.time()``) when the event object was made, for logs.
+- ``CutEvent.frame`` is the 0-based index of the first frame of the new segment among all
+  frames *received* this session - the same index as the row of a recorded session
+  (``read_session(dir).quats[frame]``).
+- ``CutEvent.latency_ms`` is the delay from the boundary frame's arrival to the send, in
+  milliseconds.  The live loop sets ``boundary_recv_time`` (the boundary frame's
+  ``Frame.recv_time``); :meth:`CutEvent.stamped` fills ``latency_ms`` at send time (the
+  publishers call it when ``latency_ms`` is None).  ``detector_delay_ms`` is the detector's
+  own delay (``Cut.delay_frames / frame_rate * 1000``), a part of the latency.
+
+``to_dict()`` gives a JSON-ready dict with a ``"type"`` field ("cut", "status",
+"dropout"); NaN/inf become None.  ``event_from_dict`` reverses it.
+"""
+
+from __future__ import annotations
+
+import math
+from time import monotonic as _monotonic
+from time import time as _wall_time
+from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Any, Mapping
+
+
+def _clean(v: Any) -> Any:
+    """JSON-safe value: numpy scalars to Python, non-finite floats to None, tuples to lists."""
+    if hasattr(v, "item") and not isinstance(v, (str, bytes)):
+        try:
+            v = v.item()
+        except (TypeError, ValueError):
+            pass
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    if isinstance(v, (list, tuple)):
+        return [_clean(x) for x in v]
+    return v
+
+
+@dataclass
+class CutEvent:
+    """One behaviour boundary, as sent to show control.
+
+    event: 1-based running number of cut events this session.
+    segment: index of the segment that starts at this boundary (the first segment of a
+        session is 0, so the first cut starts segment 1).
+    frame: boundary frame (first frame of the new segment), 0-based among received frames.
+    time: boundary time, seconds since session start.
+    method: detector name ("pca", "ppca", ...).
+    label: behaviour label of the new segment; the method name until recognition exists.
+    confidence: 0..1.
+    latency_ms: boundary arrival to send, ms; None until stamped (see module docstring).
+    detector_delay_ms: the detector's own delay, ms.
+    boundary_recv_time: monotonic ``recv_time`` of the boundary frame, or None.
+    detected_frame: index of the frame whose arrival produced the cut, or -1.
+    score: detector's raw statistic at the cut (NaN if none).
+    wall_time: Unix time the event was made.
+    """
+    event: int
+    segment: int
+    frame: int
+    time: float
+    method: str
+    label: str = ""
+    confidence: float = 1.0
+    latency_ms: float | None = None
+    detector_delay_ms: float = 0.0
+    boundary_recv_time: float | None = None
+    detected_frame: int = -1
+    score: float = float("nan")
+    wall_time: float = field(default_factory=_wall_time)
+
+    def __post_init__(self) -> None:
+        if not self.label:
+            self.label = self.method
+
+    def stamped(self, now: float | None = None) -> "CutEvent":
+        """A copy with ``latency_ms`` filled from ``boundary_recv_time`` (monotonic ``now``).
+
+        Returns self unchanged when latency is already set or cannot be computed.
+        """
+        if self.latency_ms is not None or self.boundary_recv_time is None:
+            return self
+        now = _monotonic() if now is None else now
+        return replace(self, latency_ms=max(0.0, (now - self.boundary_recv_time) * 1000.0))
+
+    def to_dict(self) -> dict[str, Any]:
+        d = {"type": "cut"}
+        d.update({k: _clean(v) for k, v in asdict(self).items()})
+        return d
+
+
+@dataclass
+class StatusEvent:
+    """Once-a-second health report.
+
+    alive: 1 while the session runs (0 in a final report at shutdown).
+    frame_rate: input frames per second measured over the last report interval.
+    dropped: frames lost since the session started (source counters).
+    stale_joints: joints whose sensor has not reported a valid value recently.
+    stale_names: their names (JSON output and recordings only; not sent over OSC).
+    time: seconds since session start.
+    """
+    alive: int = 1
+    frame_rate: float = 0.0
+    dropped: int = 0
+    stale_joints: int = 0
+    stale_names: tuple[str, ...] = ()
+    time: float = float("nan")
+    wall_time: float = field(default_factory=_wall_time)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = {"type": "status"}
+        d.update({k: _clean(v) for k, v in asdict(self).items()})
+        return d
+
+
+@dataclass
+class DropoutEvent:
+    """A joint's (or sensor's) data was lost (``lost=True``) or came back (``lost=False``).
+
+    time: seconds since session start.
+    """
+    name: str
+    lost: bool
+    time: float = float("nan")
+    wall_time: float = field(default_factory=_wall_time)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = {"type": "dropout"}
+        d.update({k: _clean(v) for k, v in asdict(self).items()})
+        return d
+
+
+_TYPES = {"cut": CutEvent, "status": StatusEvent, "dropout": DropoutEvent}
+
+
+def event_from_dict(d: Mapping[str, Any]) -> CutEvent | StatusEvent | DropoutEvent:
+    """Rebuild an event from ``to_dict()`` output; unknown keys are ignored.
+
+    Raises ValueError for a missing or unknown ``type``.
+    """
+    cls = _TYPES.get(str(d.get("type")))
+    if cls is None:
+        raise ValueError(f"not an rtseg event (type={d.get('type')!r})")
+    names = {f.name for f in fields(cls)}
+    kw = {k: v for k, v in d.items() if k in names}
+    for k in ("time", "score"):
+        if k in names and kw.get(k, 0.0) is None:
+            kw[k] = float("nan")
+    if "stale_names" in kw and kw["stale_names"] is not None:
+        kw["stale_names"] = tuple(kw["stale_names"])
+    return cls(**kw)

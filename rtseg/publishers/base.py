@@ -1,0 +1,191 @@
+"""Publisher interface, counters, rate-limited logging, and the standard OSC messages.
+
+Every publisher has ``publish_cut(ev)``, ``publish_status(ev)``, ``publish_dropout(ev)`` and
+``close()``; none of them blocks on the network or raises because a target is down -
+failures are counted in ``stats`` and logged at most once per ``LOG_INTERVAL_S`` per kind.
+
+Standard OSC messages (``/rtseg/...``), see ``/work/shared/design/conventions.md``:
+
+==========================  =========  ==================================================
+address                     tags       arguments
+==========================  =========  ==================================================
+``/rtseg/cut``              iiffffs    event number, new segment index, boundary time (s
+                                       since session start), confidence 0..1, latency
+                                       boundary->send (ms, -1 if unknown), detector delay
+                                       (ms), label
+``/rtseg/cut/<label>``      if         new segment index, confidence (label sanitised to
+                                       ``[A-Za-z0-9_-]``)
+``/rtseg/status``           ifii       alive, input frame rate (Hz), dropped frames, stale
+                                       joints
+``/rtseg/dropout``          si         joint/sensor name, 1 lost / 0 restored
+==========================  =========  ==================================================
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import asdict, dataclass
+from typing import Any, Callable, Sequence
+
+from rtseg.events import CutEvent, DropoutEvent, StatusEvent
+from rtseg.publishers.oscmsg import encode_message
+from rtseg.publishers.templates import AddressTemplate, cut_arg_value, sanitize_label
+
+log = logging.getLogger("rtseg.publishers")
+
+LOG_INTERVAL_S = 5.0
+
+
+@dataclass
+class PublisherStats:
+    """Counters since the publisher was made.
+
+    sent: messages handed to the OS (UDP) or written to the connection (TCP) / lines written.
+    dropped: messages known not to have reached the target (refused, queue overflow, expired,
+        send error).
+    errors: send/write failures (each also logged, rate-limited).
+    refused: UDP "port unreachable" notices (each means an earlier datagram was lost).
+    reconnects: TCP connections (re)established.
+    """
+    sent: int = 0
+    dropped: int = 0
+    errors: int = 0
+    refused: int = 0
+    reconnects: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return asdict(self)
+
+
+class RateLimitedLog:
+    """Log a recurring problem at most once per ``interval`` seconds per key, with the
+    number of occurrences suppressed in between."""
+
+    def __init__(self, logger: logging.Logger, interval: float = LOG_INTERVAL_S) -> None:
+        self.logger = logger
+        self.interval = interval
+        self._last: dict[str, float] = {}
+        self._suppressed: dict[str, int] = {}
+        self._lock = threading.Lock()
+
+    def __call__(self, key: str, msg: str, level: int = logging.WARNING) -> None:
+        now = time.monotonic()
+        with self._lock:
+            last = self._last.get(key)
+            if last is not None and now - last < self.interval:
+                self._suppressed[key] = self._suppressed.get(key, 0) + 1
+                return
+            n = self._suppressed.pop(key, 0)
+            self._last[key] = now
+        if n:
+            msg = f"{msg} ({n} similar suppressed in the last {self.interval:.0f} s)"
+        self.logger.log(level, msg)
+
+
+class Publisher:
+    """Base class.  ``target`` is a human-readable description used in logs."""
+
+    target: str = "?"
+
+    def __init__(self) -> None:
+        self.stats = PublisherStats()
+        self._ratelog = RateLimitedLog(log)
+        self._stats_lock = threading.Lock()
+
+    def count(self, name: str, n: int = 1) -> None:
+        with self._stats_lock:
+            setattr(self.stats, name, getattr(self.stats, name) + n)
+
+    def warn(self, key: str, msg: str) -> None:
+        self._ratelog(key, f"{self.target}: {msg}")
+
+    def publish_cut(self, ev: CutEvent) -> None:
+        raise NotImplementedError
+
+    def publish_status(self, ev: StatusEvent) -> None:
+        raise NotImplementedError
+
+    def publish_dropout(self, ev: DropoutEvent) -> None:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self) -> "Publisher":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.target})"
+
+
+def cut_messages(ev: CutEvent, standard: bool = True,
+                 templates: Sequence[AddressTemplate] = ()) -> list[bytes]:
+    """Encoded OSC messages for one cut: the standard pair (if ``standard``) then one per
+    template.  Raises ValueError if a template cannot render (not expected for templates
+    validated by ``AddressTemplate``)."""
+    out = []
+    if standard:
+        out.append(encode_message("/rtseg/cut", "iiffffs", [
+            ev.event, ev.segment, ev.time, ev.confidence, cut_arg_value(ev, "latency_ms"),
+            ev.detector_delay_ms, ev.label]))
+        out.append(encode_message("/rtseg/cut/" + sanitize_label(ev.label), "if",
+                                  [ev.segment, ev.confidence]))
+    for t in templates:
+        address, tags, args = t.render(ev)
+        out.append(encode_message(address, tags, args))
+    return out
+
+
+def status_message(ev: StatusEvent) -> bytes:
+    return encode_message("/rtseg/status", "ifii",
+                          [ev.alive, ev.frame_rate, ev.dropped, ev.stale_joints])
+
+
+def dropout_message(ev: DropoutEvent) -> bytes:
+    return encode_message("/rtseg/dropout", "si", [ev.name, 1 if ev.lost else 0])
+
+
+class OscPublisher(Publisher):
+    """Shared logic of the OSC publishers; subclasses implement ``_send(packet)``.
+
+    standard: send the ``/rtseg/*`` messages (False for a target that only wants its
+        templates, e.g. QLab).
+    templates: ``AddressTemplate`` objects or template strings, sent on every cut.
+    """
+
+    def __init__(self, standard: bool = True,
+                 templates: Sequence[AddressTemplate | str] = ()) -> None:
+        super().__init__()
+        self.standard = standard
+        self.templates = [t if isinstance(t, AddressTemplate) else AddressTemplate(t)
+                          for t in templates]
+
+    def _send(self, packet: bytes) -> None:
+        raise NotImplementedError
+
+    def _guarded(self, build: Callable[[], list[bytes]], what: str) -> None:
+        try:
+            packets = build()
+        except (ValueError, TypeError, AttributeError) as exc:
+            self.count("errors")
+            self.warn("encode", f"cannot encode {what}: {exc}")
+            return
+        for p in packets:
+            self._send(p)
+
+    def publish_cut(self, ev: CutEvent) -> None:
+        ev = ev.stamped()
+        self._guarded(lambda: cut_messages(ev, self.standard, self.templates), "cut event")
+
+    def publish_status(self, ev: StatusEvent) -> None:
+        if self.standard:
+            self._guarded(lambda: [status_message(ev)], "status event")
+
+    def publish_dropout(self, ev: DropoutEvent) -> None:
+        if self.standard:
+            self._guarded(lambda: [dropout_message(ev)], "dropout event")
