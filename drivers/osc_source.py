@@ -1,0 +1,244 @@
+"""Live VMC input over OSC/UDP: ``osc://HOST:PORT?format=vmc&suit=default17&quiet=0.02``.
+
+rtseg listens as a VMC receiver ("Marionette", default UDP 39539).  One reader thread
+blocks on the socket, feeds every datagram in arrival order to a
+:class:`rtseg.drivers.codec_vmc.VmcAssembler`, and queues the completed frames; ``read``
+takes them off the queue.  (No threaded OSC server: it would handle datagrams in parallel
+and could reorder the parts of a skeleton.)
+
+URL options
+-----------
+``format``   ``vmc`` (only format so far).
+``suit``     suit profile in ``config/suits.toml`` giving bone order and hierarchy
+             (default ``default17``).
+``quiet``    seconds without datagrams after which an open frame is closed (default 0.02).
+``queue``    frames held for ``read`` (default 256).  **Drop policy**: when full, the
+             *oldest* queued frame is discarded (a live segmenter wants the newest data),
+             counted in ``stats.dropped`` and logged.
+``rate``     nominal frame rate in Hz to report as ``frame_rate`` (VMC does not announce it;
+             default: unknown, None).
+``rcvbuf``   SO_RCVBUF in bytes (default: the OS default).
+``tolerance``  accepted | |q|² - 1 | for incoming quaternions (default 0.05); accepted ones
+             are renormalised.
+
+Frames: ``space = "local"`` (parent-relative rotations), joints in suit order,
+right-handed Y-up scalar-last; ``recv_time`` monotonic s when the frame closed,
+``source_time`` = ``/VMC/Ext/T`` (s, sender clock), ``seq`` = frame counter from 0,
+``valid`` False for bones absent from that frame (their last value is repeated),
+``root_position`` see ``VmcAssembler``.  Port 0 binds an ephemeral port: read ``.port``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import socket
+import threading
+import time
+from typing import Sequence
+
+from rtseg.drivers.base import Source, SourceError
+from rtseg.drivers.codec_vmc import VmcAssembler
+from rtseg.frame import Frame
+
+log = logging.getLogger("rtseg.drivers.osc")
+
+DEFAULT_PORT = 39539
+FORMATS = ("vmc",)
+OPTIONS = ("format", "suit", "quiet", "queue", "rate", "rcvbuf", "tolerance")
+
+
+def load_suit(name: str) -> tuple[list[str], list[int]]:
+    """(bone names, parent indices) of suit ``name`` in ``config/suits.toml``."""
+    try:
+        from rtseg.profiles import suit_profile
+    except ImportError:  # pragma: no cover - profiles module is part of the package
+        suit_profile = None
+    try:
+        if suit_profile is not None:
+            prof = suit_profile(name)
+            return list(prof.bones), list(prof.parents)
+        from rtseg.config import load_toml
+        spec = load_toml("suits")["suits"][name]
+        bones = [s["bone"] for s in spec["sensors"]]
+        low = [b.lower() for b in bones]
+        parents = [low.index(s["parent"].lower()) if s.get("parent") else -1
+                   for s in spec["sensors"]]
+        return bones, parents
+    except (KeyError, ValueError) as exc:
+        raise SourceError(f"suit {name!r}: {exc}") from None
+
+
+class OscVmcSource(Source):
+    """VMC receiver on a UDP socket (see module docstring).  ``.port`` is the bound port."""
+
+    space = "local"
+
+    def __init__(self, host: str = "0.0.0.0", port: int = DEFAULT_PORT, *,
+                 suit: str = "default17", bone_names: Sequence[str] | None = None,
+                 parents: Sequence[int] | None = None, quiet: float = 0.02,
+                 queue_size: int = 256, rate: float | None = None,
+                 rcvbuf: int | None = None, tolerance: float = 0.05) -> None:
+        super().__init__()
+        if bone_names is None:
+            bones, pars = load_suit(suit)
+        else:
+            bones = list(bone_names)
+            pars = list(parents) if parents is not None else [-1] * len(bones)
+        if len(pars) != len(bones):
+            raise SourceError("parents and bone_names differ in length")
+        if not quiet > 0:
+            raise SourceError(f"quiet must be positive seconds, got {quiet}")
+        if queue_size < 1:
+            raise SourceError(f"queue must hold at least 1 frame, got {queue_size}")
+        self.joint_names = bones
+        self.parents = pars
+        self.frame_rate = rate
+        self.suit = suit
+        self._asm = VmcAssembler(bones, quiet=quiet, unit_tolerance=tolerance, stats=self.stats)
+        self._queue: queue.Queue[Frame] = queue.Queue(maxsize=queue_size)
+        self._stop = threading.Event()
+        self._closed = False
+        self._last_drop_log = -math.inf
+        try:
+            infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
+            family, _, _, _, addr = infos[0]
+            self._sock = socket.socket(family, socket.SOCK_DGRAM)
+        except OSError as exc:
+            raise SourceError(f"osc://{host}:{port}: {exc}") from None
+        try:
+            if rcvbuf:
+                self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, int(rcvbuf))
+            self._sock.bind(addr)
+        except OSError as exc:
+            self._sock.close()
+            raise SourceError(f"cannot listen on UDP {host}:{port}: {exc}") from None
+        self.host = host
+        self.port: int = self._sock.getsockname()[1]
+        # wake up often enough to apply the quiet-gap rule and to notice close()
+        self._sock.settimeout(max(0.001, min(quiet / 2.0, 0.05)))
+        self._thread = threading.Thread(target=self._run, name=f"rtseg-vmc-{self.port}",
+                                        daemon=True)
+        self._thread.start()
+
+    @property
+    def assembler(self) -> VmcAssembler:
+        return self._asm
+
+    @property
+    def ok_state(self) -> tuple[int, ...] | None:
+        """Last ``/VMC/Ext/OK`` arguments (loaded, calibration state, mode, tracking)."""
+        return self._asm.ok_state
+
+    def _run(self) -> None:
+        sock = self._sock
+        asm = self._asm
+        while not self._stop.is_set():
+            try:
+                data = sock.recv(65536)
+            except (socket.timeout, BlockingIOError, InterruptedError):
+                frames = asm.flush(time.monotonic())
+            except OSError as exc:
+                if self._stop.is_set():
+                    break
+                log.warning("VMC receive error on port %d: %s", self.port, exc)
+                time.sleep(0.01)
+                continue
+            else:
+                try:
+                    frames = asm.feed(data, time.monotonic())
+                except Exception:  # a decoder bug must not kill the live loop
+                    self.count("corrupt")
+                    log.exception("VMC: datagram of %d bytes crashed the decoder; dropped",
+                                  len(data))
+                    continue
+            for frame in frames:
+                self._put(frame)
+
+    def _put(self, frame: Frame) -> None:
+        q = self._queue
+        while True:
+            try:
+                q.put_nowait(frame)
+                break
+            except queue.Full:
+                try:
+                    q.get_nowait()
+                except queue.Empty:
+                    continue
+                self.count("dropped")
+                now = time.monotonic()
+                if now - self._last_drop_log > 5.0:
+                    self._last_drop_log = now
+                    log.warning("VMC: reader too slow, dropped oldest queued frame "
+                                "(%d dropped so far)", self.stats.dropped)
+
+    def read(self, timeout: float | None = None) -> Frame | None:
+        """Next frame in arrival order, or None if none within ``timeout`` s (or closed)."""
+        if self._closed and self._queue.empty():
+            return None
+        try:
+            frame = self._queue.get(timeout=timeout)
+        except queue.Empty:
+            return None
+        self.count("frames_ok")
+        return frame
+
+    def close(self) -> None:
+        """Stop the reader thread and close the socket.  Safe to call twice."""
+        if self._closed:
+            return
+        self._closed = True
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        self._sock.close()
+
+
+def _parse_location(location: str) -> tuple[str, int]:
+    loc = location.strip("/")
+    if not loc:
+        return "0.0.0.0", DEFAULT_PORT
+    if loc.startswith("["):                       # [v6addr]:port
+        host, _, rest = loc[1:].partition("]")
+        port_s = rest[1:] if rest.startswith(":") else ""
+    else:
+        host, _, port_s = loc.rpartition(":") if ":" in loc else (loc, "", "")
+    try:
+        port = int(port_s) if port_s else DEFAULT_PORT
+    except ValueError:
+        raise SourceError(f"osc://{location}: port {port_s!r} is not a number") from None
+    if not 0 <= port <= 65535:
+        raise SourceError(f"osc://{location}: port {port} out of range 0..65535")
+    return host or "0.0.0.0", port
+
+
+def _num(options: dict[str, str], key: str, default, kind=float):
+    if key not in options or options[key] == "":
+        return default
+    try:
+        return kind(options[key])
+    except ValueError:
+        raise SourceError(f"osc:// option {key}={options[key]!r} is not a valid "
+                          f"{kind.__name__}") from None
+
+
+def open_url(location: str, options: dict[str, str]) -> OscVmcSource:
+    """Open ``osc://location?options`` (see module docstring)."""
+    unknown = sorted(set(options) - set(OPTIONS))
+    if unknown:
+        raise SourceError(f"osc:// unknown option(s) {', '.join(unknown)}; "
+                          f"known: {', '.join(OPTIONS)}")
+    fmt = options.get("format", "vmc").lower() or "vmc"
+    if fmt not in FORMATS:
+        raise SourceError(f"osc:// format {fmt!r} is not supported; supported: "
+                          f"{', '.join(FORMATS)}")
+    host, port = _parse_location(location)
+    return OscVmcSource(
+        host, port, suit=options.get("suit", "default17") or "default17",
+        quiet=_num(options, "quiet", 0.02), queue_size=_num(options, "queue", 256, int),
+        rate=_num(options, "rate", None), rcvbuf=_num(options, "rcvbuf", None, int),
+        tolerance=_num(options, "tolerance", 0.05))
+
+
+__all__ = ["OscVmcSource", "open_url", "load_suit", "DEFAULT_PORT"]
