@@ -1,0 +1,274 @@
+"""Biovision BVH reader.
+
+Conventions
+-----------
+- Every ``ROOT``/``JOINT`` becomes a take joint (parents before children, file order);
+  ``End Site`` blocks are not joints: their offsets go to ``meta["end_sites"]``.
+- Rotation channels may come in any order per joint; the joint's rotation relative to its
+  parent is the product of the elementary rotations in channel order:
+  ``Zrotation Xrotation Yrotation`` gives R = Rz·Rx·Ry (``rtseg.quat.from_euler("ZXY")``),
+  angles in degrees.  A joint without rotation channels has the identity.
+- Position channels may be on any joint and in any order.  The first root's go to
+  ``root_position`` (x, y, z, file units, ``None`` if it has none); those of other joints to
+  ``meta["joint_positions"][name]`` as (frames, 3) arrays.
+- ``Frame Time`` (seconds) gives the frame rate; ``frame_rate`` overrides it.
+
+Malformed input raises ``ReaderError`` naming the file, the line and the problem.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from rtseg import quat as Q
+from rtseg.drivers.readers.errors import ReaderError
+from rtseg.take import Take
+
+_TOKEN_RE = re.compile(r"[{}]|[^\s{}]+")
+_CHANNELS = {"xposition": "px", "yposition": "py", "zposition": "pz",
+             "xrotation": "X", "yrotation": "Y", "zrotation": "Z"}
+
+
+class _Joint:
+    __slots__ = ("name", "parent", "offset", "channels", "line")
+
+    def __init__(self, name: str, parent: int, line: int) -> None:
+        self.name = name
+        self.parent = parent
+        self.offset = np.zeros(3)
+        self.channels: list[str] = []
+        self.line = line
+
+
+def _read_text(path: Path) -> list[str]:
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise ReaderError(path, "file not found") from None
+    except IsADirectoryError:
+        raise ReaderError(path, "is a directory, not a file") from None
+    try:
+        return data.decode("utf-8").splitlines()
+    except UnicodeDecodeError:
+        return data.decode("latin-1").splitlines()
+
+
+def read_bvh(path: str | Path, frame_rate: float | None = None) -> Take:
+    """Read a BVH file into a local-space ``Take``."""
+    path = Path(path)
+    lines = _read_text(path)
+    tokens: list[tuple[str, int]] = []
+    motion_line = None
+    for lineno, raw in enumerate(lines, start=1):
+        if raw.strip().upper() == "MOTION":
+            motion_line = lineno
+            break
+        tokens.extend((t, lineno) for t in _TOKEN_RE.findall(raw))
+    if not tokens or tokens[0][0].upper() != "HIERARCHY":
+        raise ReaderError(path, "does not start with HIERARCHY (not a BVH file?)",
+                          tokens[0][1] if tokens else None)
+    if motion_line is None:
+        raise ReaderError(path, "no MOTION section")
+
+    joints: list[_Joint] = []
+    end_sites: dict[str, np.ndarray] = {}
+    stack: list[int | str] = []  # joint index, or "end" for an End Site block
+    pos = 1
+    n_tok = len(tokens)
+
+    def take_token(what: str) -> tuple[str, int]:
+        nonlocal pos
+        if pos >= n_tok:
+            raise ReaderError(path, f"hierarchy ends early, expected {what}", motion_line)
+        tok = tokens[pos]
+        pos += 1
+        return tok
+
+    def expect_brace(after: str) -> None:
+        tok, ln = take_token("'{'")
+        if tok != "{":
+            raise ReaderError(path, f"expected '{{' after {after}, got {tok!r}", ln)
+
+    pending_end_parent: int | None = None
+    names_seen: set[str] = set()
+    while pos < n_tok:
+        tok, ln = take_token("a keyword")
+        key = tok.upper()
+        if key in ("ROOT", "JOINT"):
+            name, nln = take_token("a joint name")
+            if name in "{}":
+                raise ReaderError(path, f"{tok} without a name", nln)
+            if key == "ROOT":
+                if stack:
+                    raise ReaderError(path, f"ROOT {name!r} inside another joint", ln)
+                parent = -1
+            else:
+                if not stack or stack[-1] == "end":
+                    raise ReaderError(path, f"JOINT {name!r} outside a ROOT/JOINT block", ln)
+                parent = int(stack[-1])
+            if name in names_seen:
+                raise ReaderError(path, f"joint name {name!r} used twice", ln)
+            names_seen.add(name)
+            joints.append(_Joint(name, parent, ln))
+            expect_brace(f"{tok} {name}")
+            stack.append(len(joints) - 1)
+        elif key == "END":
+            site, sln = take_token("'Site'")
+            if site.upper() != "SITE":
+                raise ReaderError(path, f"expected 'End Site', got 'End {site}'", sln)
+            if not stack or stack[-1] == "end":
+                raise ReaderError(path, "End Site outside a joint", ln)
+            pending_end_parent = int(stack[-1])
+            expect_brace("End Site")
+            stack.append("end")
+        elif key == "OFFSET":
+            vals = []
+            for _ in range(3):
+                v, vln = take_token("an OFFSET value")
+                try:
+                    vals.append(float(v))
+                except ValueError:
+                    raise ReaderError(path, f"OFFSET value {v!r} is not a number", vln) from None
+            if not stack:
+                raise ReaderError(path, "OFFSET outside a joint", ln)
+            if stack[-1] == "end":
+                assert pending_end_parent is not None
+                end_sites[joints[pending_end_parent].name] = np.array(vals)
+            else:
+                joints[int(stack[-1])].offset = np.array(vals)
+        elif key == "CHANNELS":
+            if not stack or stack[-1] == "end":
+                raise ReaderError(path, "CHANNELS outside a ROOT/JOINT block", ln)
+            cnt, cln = take_token("the channel count")
+            try:
+                n = int(cnt)
+            except ValueError:
+                raise ReaderError(path, f"CHANNELS count {cnt!r} is not an integer", cln) from None
+            if not 0 <= n <= 9:
+                raise ReaderError(path, f"CHANNELS count {n} out of range", cln)
+            chans = []
+            for _ in range(n):
+                c, chln = take_token("a channel name")
+                code = _CHANNELS.get(c.lower())
+                if code is None:
+                    raise ReaderError(path, f"unknown channel {c!r} (CHANNELS says {n} channels)", chln)
+                chans.append(code)
+            if len(set(chans)) != len(chans):
+                raise ReaderError(path, "channel listed twice", ln)
+            joints[int(stack[-1])].channels = chans
+        elif tok == "}":
+            if not stack:
+                raise ReaderError(path, "unmatched '}'", ln)
+            stack.pop()
+        else:
+            raise ReaderError(path, f"unexpected {tok!r} in HIERARCHY", ln)
+    if stack:
+        raise ReaderError(path, "HIERARCHY has an unclosed '{'", motion_line)
+    if not joints:
+        raise ReaderError(path, "HIERARCHY has no ROOT")
+
+    # MOTION header.
+    idx = motion_line  # 0-based index of the line after MOTION
+    header: dict[str, str] = {}
+    while idx < len(lines) and len(header) < 2:
+        raw = lines[idx].strip()
+        idx += 1
+        if not raw:
+            continue
+        low = raw.lower()
+        if low.startswith("frames:"):
+            header["frames"] = raw.split(":", 1)[1].strip()
+            header["frames_line"] = str(idx)
+        elif low.startswith("frame time:"):
+            header["time"] = raw.split(":", 1)[1].strip()
+            header["time_line"] = str(idx)
+        else:
+            raise ReaderError(path, f"expected 'Frames:' and 'Frame Time:' after MOTION, got {raw!r}", idx)
+    if "frames" not in header or "time" not in header:
+        raise ReaderError(path, "MOTION lacks 'Frames:' or 'Frame Time:'", idx)
+    try:
+        n_frames = int(header["frames"])
+    except ValueError:
+        raise ReaderError(path, f"Frames: {header['frames']!r} is not an integer",
+                          int(header["frames_line"])) from None
+    try:
+        frame_time = float(header["time"])
+    except ValueError:
+        raise ReaderError(path, f"Frame Time: {header['time']!r} is not a number",
+                          int(header["time_line"])) from None
+    if n_frames < 0:
+        raise ReaderError(path, f"Frames: {n_frames} is negative", int(header["frames_line"]))
+    if frame_rate is not None:
+        rate = float(frame_rate)
+        if not rate > 0:
+            raise ReaderError(path, f"frame rate must be positive, got {frame_rate}")
+    else:
+        if not frame_time > 0:
+            raise ReaderError(path, f"Frame Time {frame_time} must be positive", int(header["time_line"]))
+        rate = 1.0 / frame_time
+
+    n_ch = sum(len(j.channels) for j in joints)
+    data_rows: list[list[str]] = []
+    data_lines: list[int] = []
+    for lineno in range(idx + 1, len(lines) + 1):
+        toks = lines[lineno - 1].split()
+        if not toks:
+            continue
+        if len(toks) != n_ch:
+            raise ReaderError(path, f"frame {len(data_rows) + 1} has {len(toks)} values, expected {n_ch}", lineno)
+        data_rows.append(toks)
+        data_lines.append(lineno)
+    if len(data_rows) != n_frames:
+        raise ReaderError(path, f"'Frames: {n_frames}' but {len(data_rows)} frame lines follow",
+                          int(header["frames_line"]))
+    try:
+        data = np.array(data_rows, dtype=np.float64).reshape(n_frames, n_ch)
+    except ValueError:
+        for row, ln in zip(data_rows, data_lines):
+            for t in row:
+                try:
+                    float(t)
+                except ValueError:
+                    raise ReaderError(path, f"value {t!r} is not a number", ln) from None
+        raise
+    if not np.all(np.isfinite(data)):
+        r = int(np.argwhere(~np.isfinite(data))[0][0])
+        raise ReaderError(path, "non-finite value", data_lines[r])
+
+    # Rotations and positions.
+    quats = np.empty((n_frames, len(joints), 4))
+    root_position = None
+    joint_positions: dict[str, np.ndarray] = {}
+    col = 0
+    for j, jt in enumerate(joints):
+        cols = {c: col + k for k, c in enumerate(jt.channels)}
+        col += len(jt.channels)
+        rot = [c for c in jt.channels if c in ("X", "Y", "Z")]
+        if rot:
+            quats[:, j] = Q.from_euler("".join(rot), data[:, [cols[c] for c in rot]], degrees=True)
+        else:
+            quats[:, j] = Q.IDENTITY
+        if any(c in cols for c in ("px", "py", "pz")):
+            p = np.zeros((n_frames, 3))
+            for a, c in enumerate(("px", "py", "pz")):
+                if c in cols:
+                    p[:, a] = data[:, cols[c]]
+            if jt.parent < 0 and root_position is None:
+                root_position = p
+            else:
+                joint_positions[jt.name] = p
+    meta = {
+        "format": "bvh",
+        "frame_time": frame_time,
+        "channels": {jt.name: list(jt.channels) for jt in joints},
+        "offsets": np.array([jt.offset for jt in joints]),
+        "end_sites": end_sites,
+        "joint_positions": joint_positions,
+    }
+    return Take(joint_names=[jt.name for jt in joints], parents=[jt.parent for jt in joints],
+                frame_rate=rate, quats=quats, root_position=root_position, space="local",
+                length_unit="bvh units (unspecified by the format; often cm)",
+                source=str(path), meta=meta)
