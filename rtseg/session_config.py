@@ -57,14 +57,23 @@ def _check_target(v: Any) -> str | None:
 
 
 def _check_template(v: Any) -> str | None:
-    """A template is ``ADDRESS`` or ``ADDRESS@HOST:PORT``; ADDRESS starts with '/'."""
+    """A template as ``rtseg.publishers.templates.AddressTemplate`` parses it."""
     if not isinstance(v, str):
         return f"expected a string, got {type(v).__name__}"
-    addr, _, target = v.partition("@")
-    if not addr.startswith("/"):
-        return f"bad template {v!r}: OSC address must start with '/'"
-    if target:
-        return _check_target(target)
+    from rtseg.publishers.templates import AddressTemplate
+    try:
+        AddressTemplate(v)
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
+def _check_spec(v: Any) -> str | None:
+    """A full output target spec (``udp:HOST:PORT[,options]``, ``tcp:...``, ``jsonl:PATH``)
+    is checked by ``rtseg.publishers.parse_target`` when the session starts; here only its
+    shape."""
+    if not isinstance(v, str) or not v.strip():
+        return f"bad output target {v!r}: empty"
     return None
 
 
@@ -123,9 +132,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "output": {
         "osc": Key("list[str]", ["127.0.0.1:9123"], item_check=_check_target),
         "osc_tcp": Key("list[str]", [], item_check=_check_target),
-        "templates": Key("list[str]", [], item_check=_check_template),
+        "templates": Key("list[str]", [], item_check=_check_template,
+                         doc="address templates sent to every OSC target on each cut"),
+        "targets": Key("list[str]", [], item_check=_check_spec,
+                       doc="full target specs of rtseg.publishers.parse_target"),
         "jsonl": Key("str", "", doc="JSON-lines event log path, '-' for stdout, '' for none"),
-        "label": Key("str", "cut", doc="label sent with every cut (online detectors do not name behaviours)"),
     },
     "recording": {
         "dir": Key("str", "", doc="folder for the session recording; '' = do not record"),

@@ -1,0 +1,785 @@
+"""The live session: source -> ring buffer -> pose features -> online detectors -> cut events.
+
+Threads and data flow
+---------------------
+``LiveSession.run()`` starts one **reader thread** that only does
+``source.read()`` -> sanity check -> ``recorder`` (every frame received is recorded) ->
+``RingBuffer.append`` (raw quaternions, valid flags, receive time, source time/seq).  The
+**calling thread** is the processing loop: it sleeps on the ring until frames arrive, takes
+them in order through a ``Cursor`` (at most ``buffer.max_batch`` per wake-up) and hands each
+to the ``Pipeline`` (calibration, gap handling, ``PoseFeatures.step``, every online detector's
+``update``).  Cuts become ``CutEvent``s that are published at once (OSC/JSON lines) and
+recorded.  Once per ``status.interval`` a ``StatusEvent`` goes out; sensor dropouts produce
+``DropoutEvent``s.
+
+Keeping up
+----------
+The reader never blocks on processing: if the processing loop falls behind, the ring
+overwrites its oldest frames (see ``rtseg.ringbuffer``) and the loop notices by absolute
+index: the lost frames are counted as dropped (``LiveStats.overruns``) and treated as a gap
+(detectors restart).  ``LiveStats.lag_s`` (age of the frame being processed) and
+``backlog`` (frames waiting) measure how far behind the loop is; a lag above
+``buffer.lag_warn_seconds`` is logged (rate-limited) and reported in the summary.
+
+Gaps
+----
+No cut is placed across a gap the detectors did not see (``Pipeline``): a sequence gap of
+more than ``gaps.max_frames`` missing frames, more than ``gaps.max_seconds`` without frames,
+or more than ``gaps.max_frames`` consecutive frames with an invalid required joint restart
+the detectors (``OnlineDetector.restart()``) and the feature state; a cut whose boundary
+lies before the restart is discarded (counted).  Shorter runs of invalid joints are fed with
+the last good values (what ``Frame`` rows hold).
+
+Frame indices
+-------------
+``CutEvent.frame`` is the 0-based index of the boundary frame among all frames received
+this session (= the row of the recorded session).  ``CutEvent.time`` is that frame's
+receive time minus the session start, in seconds.  Processing latency (frame arrival ->
+datagram sent) is measured for every frame that revealed a cut (``LiveStats.cut_latency_ms``)
+and, for benchmarking, the arrival -> end-of-processing time of every frame
+(``LiveStats.frame_latency_ms``).
+
+Shutdown
+--------
+SIGINT / SIGTERM (when ``run()`` is called from the main thread) only set a stop flag; the
+loop then drains nothing further, closes the source, publishers and recorder, sends a final
+status with alive=0 and returns a ``SessionSummary``.  Nothing the source delivers can crash
+the loop: malformed frames are counted (``LiveStats.bad_frames``) and logged.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import signal
+import threading
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any, Callable, Iterable
+
+import numpy as np
+
+from rtseg.config import ConfigError
+from rtseg.detectors.base import Cut, OnlineDetector
+from rtseg.events import CutEvent, DropoutEvent, StatusEvent
+from rtseg.ringbuffer import RingBuffer
+from rtseg.session_config import SessionConfig, load_session_config
+
+log = logging.getLogger("rtseg.live")
+
+Event = CutEvent | StatusEvent | DropoutEvent
+DEFAULT_FRAME_RATE = 120.0
+
+
+# ============================================================================ pipeline
+@dataclass
+class PipelineCut:
+    """A cut in session frame indices: ``boundary`` and ``detected`` are absolute indices
+    of received frames; ``cut`` is the detector's own ``Cut``."""
+    cut: Cut
+    boundary: int
+    detected: int
+
+
+@dataclass
+class PipelineStats:
+    frames: int = 0            # frames given to process()
+    fed: int = 0               # frames fed to the detectors
+    calibration_frames: int = 0
+    restarts: int = 0          # detector restarts caused by gaps
+    gap_frames: int = 0        # frames known missing (sequence gaps + ring overruns)
+    invalid_frames: int = 0    # frames with an invalid required joint
+    skipped_invalid: int = 0   # of those, frames not fed (run longer than the limit)
+    bad_values: int = 0        # non-finite / zero quaternions replaced by the last good ones
+    discarded_cuts: int = 0    # cuts whose boundary preceded a restart
+
+
+def _average_quats(q: np.ndarray) -> np.ndarray:
+    """Mean rotation of (n, J, 4) quaternions close to each other: sign-align to the first
+    frame, average, normalise (the first-order approximation of the quaternion mean)."""
+    ref = q[0]
+    signs = np.where(np.sum(q * ref, axis=-1, keepdims=True) < 0, -1.0, 1.0)
+    m = np.mean(q * signs, axis=0)
+    n = np.linalg.norm(m, axis=-1, keepdims=True)
+    return np.where(n > 1e-9, m / np.where(n > 1e-9, n, 1.0), ref)
+
+
+def _resolve_joints(names: Iterable[str], joint_names: list[str], key: str) -> np.ndarray:
+    lower = {n.lower(): i for i, n in enumerate(joint_names)}
+    idx = []
+    for n in names:
+        if n.lower() not in lower:
+            raise ConfigError(f"{key}: joint {n!r} not among the source's joints "
+                              f"({', '.join(joint_names)})")
+        idx.append(lower[n.lower()])
+    return np.asarray(idx, dtype=np.intp)
+
+
+class Pipeline:
+    """Frame-by-frame core shared by the live loop and offline replay of a recording.
+
+    ``process(index, quats, valid, seq, recv_time, lost)`` takes one received frame
+    (``quats`` (J, 4) scalar-last, ``valid`` (J,) bool, ``index`` its 0-based session
+    index, ``recv_time`` monotonic seconds, ``lost`` frames known lost just before it) and
+    returns the cuts its arrival revealed, in session frame indices.  Deterministic: the
+    same frames give the same cuts, which is how live output is checked against a recording.
+    """
+
+    def __init__(self, joint_names: list[str], parents: list[int], space: str,
+                 frame_rate: float | None, config: SessionConfig,
+                 features: Any = None, detectors: dict[str, OnlineDetector] | None = None) -> None:
+        self.joint_names = list(joint_names)
+        self.parents = list(parents)
+        self.space = space
+        self.frame_rate = float(frame_rate or DEFAULT_FRAME_RATE)
+        self.config = config
+        self.n_joints = len(self.joint_names)
+        if features is None:
+            from rtseg.features import PoseFeatures
+            profile = config["features.profile"] or None
+            features = PoseFeatures(self.joint_names, self.parents, space, profile=profile)
+        self.features = features
+        if detectors is None:
+            detectors = make_detectors(config, self.frame_rate)
+        self.detectors = detectors
+        req = config["gaps.required_joints"]
+        self.required = (_resolve_joints(req, self.joint_names, "gaps.required_joints")
+                         if req else np.arange(self.n_joints))
+        self.max_gap_frames = int(config["gaps.max_frames"])
+        self.max_gap_seconds = float(config["gaps.max_seconds"])
+        mode = config["calibration.mode"]
+        if mode == "auto":
+            mode = "average" if space == "local" else "none"
+        self.calibration_mode = mode
+        self.calibration_needed = 1 if mode == "first" else int(config["calibration.frames"])
+        self._calib: list[np.ndarray] = []
+        self.calibrated = mode == "none"
+        self.stats = PipelineStats()
+        self._prev_seq: int | None = None
+        self._prev_recv: float | None = None
+        self._bad_run = 0
+        self._last_good = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (self.n_joints, 1))
+        # Per detector: session index of the first frame fed since the last (re)start and
+        # the detector's own frame count at that moment.
+        self._seg_start = {m: -1 for m in self.detectors}
+        self._fed = {m: 0 for m in self.detectors}
+        self._fed_at_start = {m: 0 for m in self.detectors}
+        self._fed_since_restart = 0
+
+    # ---------------------------------------------------------------- gap logic
+    def _seq_missing(self, seq: int | None) -> int:
+        """Frames missing between the previous sequence number and ``seq``.
+
+        A backwards jump (device restart) counts as a gap beyond any limit; a jump back by
+        more than half of 16 bits from near the top is taken as a u16 wrap.
+        """
+        prev = self._prev_seq
+        if seq is None or prev is None:
+            return 0
+        d = seq - prev
+        if d <= 0 and prev < 65536 and seq < 65536 and prev - seq > 32768:
+            d += 65536
+        if d <= 0:
+            return self.max_gap_frames + 1 if d < 0 else 0
+        return d - 1
+
+    def restart(self, index: int, reason: str) -> None:
+        """Forget the current segment in every detector (and the feature state)."""
+        if self._fed_since_restart:
+            self.stats.restarts += 1
+            log.info("detectors restarted at frame %d: %s", index, reason)
+        for m, det in self.detectors.items():
+            det.restart()
+            self._seg_start[m] = -1
+        if hasattr(self.features, "reset"):
+            # keep the calibration pose: reset() only clears the streaming state
+            self.features.reset()
+        self._fed_since_restart = 0
+
+    # ---------------------------------------------------------------- main step
+    def process(self, index: int, quats: np.ndarray, valid: np.ndarray,
+                seq: int | None = None, recv_time: float | None = None,
+                lost: int = 0) -> list[PipelineCut]:
+        st = self.stats
+        st.frames += 1
+        # --- gaps in the input (sequence numbers, silence, frames lost in the ring)
+        missing = self._seq_missing(seq) + max(0, int(lost))
+        st.gap_frames += missing
+        silence = (recv_time - self._prev_recv
+                   if recv_time is not None and self._prev_recv is not None else 0.0)
+        if seq is not None:
+            self._prev_seq = int(seq)
+        if recv_time is not None:
+            self._prev_recv = float(recv_time)
+        if missing > self.max_gap_frames:
+            self.restart(index, f"{missing} frames missing")
+        elif silence > self.max_gap_seconds:
+            self.restart(index, f"no frame for {silence:.3f} s")
+        # --- sanitise values: non-finite or zero quaternions are invalid
+        q = np.asarray(quats, dtype=np.float64)
+        v = np.asarray(valid, dtype=bool)
+        norms = np.einsum("ij,ij->i", q, q)
+        bad = ~np.isfinite(norms) | (norms < 1e-12)
+        if bad.any():
+            st.bad_values += int(bad.sum())
+            v = v & ~bad
+            q = np.where(bad[:, None], self._last_good, q)
+        if not v.all():
+            q = np.where(v[:, None], q, self._last_good)
+        self._last_good = q
+        # --- invalid required joints
+        if not v[self.required].all():
+            st.invalid_frames += 1
+            self._bad_run += 1
+            if self._bad_run > self.max_gap_frames:
+                if self._bad_run == self.max_gap_frames + 1:
+                    self.restart(index, f"required joints invalid for {self._bad_run} frames")
+                st.skipped_invalid += 1
+                return []
+        else:
+            self._bad_run = 0
+        # --- calibration pose (rig-relative input)
+        if not self.calibrated:
+            if v.all():
+                self._calib.append(q.copy())
+                st.calibration_frames += 1
+                if len(self._calib) >= self.calibration_needed:
+                    pose = _average_quats(np.stack(self._calib))
+                    self.features.calibrate(pose)
+                    self.calibrated = True
+                    self._calib = []
+                    log.info("calibrated on %d frame(s) ending at frame %d",
+                             self.calibration_needed, index)
+            return []
+        # --- features and detectors
+        x = self.features.step(q)
+        st.fed += 1
+        self._fed_since_restart += 1
+        out: list[PipelineCut] = []
+        for m, det in self.detectors.items():
+            if self._seg_start[m] < 0:
+                self._seg_start[m] = index
+                self._fed_at_start[m] = self._fed[m]
+            self._fed[m] += 1
+            cut = det.update(x)
+            if cut is None:
+                continue
+            out_cut = self._to_session(m, cut, index)
+            if out_cut is not None:
+                out.append(out_cut)
+        return out
+
+    def _to_session(self, method: str, cut: Cut, index: int) -> PipelineCut | None:
+        """Map the detector's frame numbers to session indices.
+
+        Detectors number frames either from their creation or from their last restart
+        (``frame_origin`` attribute "creation"/"restart"; default: decided by whether the
+        number fits the current segment).  Within a segment every frame is fed, so the map
+        is linear.
+        """
+        seg0 = self._seg_start[method]
+        fed_in_seg = self._fed[method] - self._fed_at_start[method]   # frames fed this segment
+        origin = getattr(self.detectors[method], "frame_origin", None)
+        if origin == "creation" or (origin is None and self._fed_at_start[method] > 0
+                                    and cut.frame >= self._fed_at_start[method]
+                                    and cut.frame - self._fed_at_start[method] < fed_in_seg
+                                    and cut.frame >= fed_in_seg):
+            rel = cut.frame - self._fed_at_start[method]
+            rel_det = (cut.detected_at - self._fed_at_start[method]) if cut.detected_at >= 0 else fed_in_seg - 1
+        else:
+            rel = cut.frame
+            rel_det = cut.detected_at if cut.detected_at >= 0 else fed_in_seg - 1
+        boundary = seg0 + rel
+        detected = seg0 + rel_det
+        if rel < 0 or boundary < seg0:
+            self.stats.discarded_cuts += 1
+            log.info("%s cut at frame %d discarded: it precedes the restart at frame %d",
+                     method, boundary, seg0)
+            return None
+        return PipelineCut(cut, boundary, min(detected, index))
+
+
+def make_detectors(config: SessionConfig, frame_rate: float) -> dict[str, OnlineDetector]:
+    """The configured online detectors (``detectors.methods``), parameters from the
+    detector file plus the per-method overrides of the session config."""
+    from rtseg import detectors as det_mod
+    params_file = config["detectors.params"] or None
+    try:
+        all_params = det_mod.load_params(params_file) if params_file else det_mod.load_params()
+    except TypeError:
+        all_params = det_mod.load_params()
+    out: dict[str, OnlineDetector] = {}
+    for m in config["detectors.methods"]:
+        p = dict((all_params or {}).get(m, {})) if isinstance(all_params, dict) else {}
+        p.update(config[f"detectors.{m}"])
+        try:
+            out[m] = det_mod.make_online(m, frame_rate, p or None)
+        except (TypeError, ValueError, KeyError) as exc:
+            raise ConfigError(f"detectors.{m}: {exc}") from None
+    return out
+
+
+def build_publishers(config: SessionConfig) -> Any:
+    """A ``rtseg.publishers.PublisherSet`` for the config's ``output`` section.
+
+    A bad target is refused with a ``ConfigError`` naming the key (``output.osc[0]``)."""
+    from rtseg.publishers import PublisherSet, parse_target
+    templates = list(config["output.templates"])
+    specs: list[tuple[str, str, bool]] = []
+    specs += [(f"output.osc[{i}]", f"udp:{t}", True) for i, t in enumerate(config["output.osc"])]
+    specs += [(f"output.osc_tcp[{i}]", f"tcp:{t}", True)
+              for i, t in enumerate(config["output.osc_tcp"])]
+    specs += [(f"output.targets[{i}]", t, not (t.strip() == "-" or t.strip().startswith("jsonl:")))
+              for i, t in enumerate(config["output.targets"])]
+    if config["output.jsonl"]:
+        specs.append(("output.jsonl", "-" if config["output.jsonl"] == "-"
+                      else f"jsonl:{config['output.jsonl']}", False))
+    pubs = PublisherSet()
+    try:
+        for key, spec, is_osc in specs:
+            try:
+                pubs.add(parse_target(spec, templates if is_osc else None))
+            except (ValueError, OSError) as exc:
+                raise ConfigError(f"{key}: {exc}") from None
+    except BaseException:
+        pubs.close()
+        raise
+    return pubs
+
+
+# ============================================================================ live session
+@dataclass
+class LiveStats:
+    """Run-time counters of a live session (all since start)."""
+    frames_received: int = 0
+    frames_processed: int = 0
+    bad_frames: int = 0          # frames refused by the reader (wrong shape / type)
+    source_errors: int = 0       # exceptions raised by source.read (logged, retried)
+    overruns: int = 0            # frames overwritten in the ring before processing
+    record_errors: int = 0
+    publish_errors: int = 0
+    cuts: int = 0
+    cuts_by_method: dict[str, int] = field(default_factory=dict)
+    dropouts: int = 0
+    lag_s: float = 0.0           # age of the last frame processed, s
+    max_lag_s: float = 0.0
+    backlog: int = 0
+    max_backlog: int = 0
+    lag_warnings: int = 0
+    last_cut: CutEvent | None = None
+    cut_latency_ms: collections.deque = field(default_factory=lambda: collections.deque(maxlen=100_000))
+    frame_latency_ms: collections.deque = field(default_factory=lambda: collections.deque(maxlen=200_000))
+
+
+@dataclass
+class SessionSummary:
+    """What ``LiveSession.run()`` returns (also logged and printed by the CLI)."""
+    duration_s: float
+    frames_received: int
+    frames_processed: int
+    frame_rate: float
+    cuts: int
+    cuts_by_method: dict[str, int]
+    dropped: int
+    source_stats: dict[str, int]
+    pipeline: dict[str, int]
+    overruns: int
+    bad_frames: int
+    max_lag_ms: float
+    cut_latency_ms_p50: float | None
+    cut_latency_ms_p99: float | None
+    recording: str | None
+    stop_reason: str
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    def text(self) -> str:
+        lat = ("-" if self.cut_latency_ms_p50 is None else
+               f"{self.cut_latency_ms_p50:.2f}/{self.cut_latency_ms_p99:.2f} ms (p50/p99)")
+        methods = ", ".join(f"{k} {v}" for k, v in self.cut_latency_items()) or "none"
+        return (f"session ended ({self.stop_reason}) after {self.duration_s:.1f} s: "
+                f"{self.frames_received} frames received ({self.frame_rate:.1f}/s), "
+                f"{self.frames_processed} processed, {self.dropped} dropped, "
+                f"{self.cuts} cuts ({methods}), processing latency {lat}, "
+                f"max lag {self.max_lag_ms:.1f} ms"
+                + (f", recording {self.recording}" if self.recording else ""))
+
+    def cut_latency_items(self) -> list[tuple[str, int]]:
+        return sorted(self.cuts_by_method.items())
+
+
+def _percentile(values: Iterable[float], p: float) -> float | None:
+    a = np.fromiter(values, dtype=np.float64)
+    return float(np.percentile(a, p)) if a.size else None
+
+
+class LiveSession:
+    """One live segmentation session.
+
+    source: a URL for ``rtseg.drivers.open_source`` or an opened ``Source``.
+    config: a ``SessionConfig`` (default: ``config/live.toml``).
+    publishers: object with ``publish(event)`` and ``close()`` (default: built from the
+        config's output section with ``rtseg.publishers``); recorder: object with
+        ``write_frame(frame)``, ``write_event(event)``, ``close()`` (default: a
+        ``rtseg.recording.SessionRecorder`` when ``recording.dir`` is set).
+    listeners: callables given every event after it is published (the CLI prints them).
+    duration: stop after this many seconds (None: until the source ends or a signal).
+    """
+
+    def __init__(self, source: Any, config: SessionConfig | None = None, *,
+                 publishers: Any = None, recorder: Any = None,
+                 listeners: Iterable[Callable[[Event], None]] = (),
+                 duration: float | None = None, handle_signals: bool = True) -> None:
+        self.config = config if config is not None else load_session_config()
+        self._source_arg = source
+        self.source: Any = None
+        self.publishers = publishers
+        self.recorder = recorder
+        self.listeners = list(listeners)
+        self.duration = duration
+        self.handle_signals = handle_signals
+        self.stats = LiveStats()
+        self.pipeline: Pipeline | None = None
+        self.ring: RingBuffer | None = None
+        self.session_start = 0.0
+        self._stop = threading.Event()
+        self._eof = threading.Event()
+        self._reader_error: BaseException | None = None
+        self._rec_lock = threading.Lock()
+        self._event_no = 0
+        self._segment: dict[str, int] = {}
+        self.stop_reason = "running"
+        self._warn_at: dict[str, float] = {}
+
+    # ---------------------------------------------------------------- control
+    def stop(self, reason: str = "stopped") -> None:
+        """Ask the loop to end (thread-safe, signal-safe)."""
+        if not self._stop.is_set():
+            self.stop_reason = reason
+        self._stop.set()
+        if self.ring is not None:
+            self.ring.notify()
+
+    def _warn(self, key: str, msg: str, *args: Any, every: float = 5.0) -> None:
+        now = time.monotonic()
+        if now - self._warn_at.get(key, -1e9) >= every:
+            self._warn_at[key] = now
+            log.warning(msg, *args)
+
+    # ---------------------------------------------------------------- setup
+    def _open(self) -> None:
+        if isinstance(self._source_arg, str):
+            from rtseg.drivers import open_source
+            self.source = open_source(self._source_arg)
+        else:
+            self.source = self._source_arg
+        src = self.source
+        names = list(src.joint_names)
+        parents = list(getattr(src, "parents", [-1] * len(names)))
+        space = getattr(src, "space", "global")
+        rate = getattr(src, "frame_rate", None)
+        if not rate:
+            log.warning("source has no nominal frame rate; assuming %.0f Hz", DEFAULT_FRAME_RATE)
+        self.frame_rate = float(rate or DEFAULT_FRAME_RATE)
+        self.pipeline = Pipeline(names, parents, space, self.frame_rate, self.config)
+        J = len(names)
+        self.ring = RingBuffer(int(self.config["buffer.capacity"]), J * 4, valid_width=J)
+        if self.publishers is None:
+            self.publishers = build_publishers(self.config)
+        if self.recorder is None and self.config["recording.dir"]:
+            from rtseg.recording import SessionRecorder
+            self.recorder = SessionRecorder(
+                self.config["recording.dir"], joint_names=names, parents=parents, space=space,
+                frame_rate=self.frame_rate, source=str(self._source_arg)
+                if isinstance(self._source_arg, str) else type(src).__name__)
+
+    # ---------------------------------------------------------------- reader thread
+    def _reader(self) -> None:
+        src, ring = self.source, self.ring
+        assert ring is not None
+        J = ring.valid_width
+        try:
+            while not self._stop.is_set():
+                try:
+                    frame = src.read(timeout=0.1)
+                except EOFError:
+                    self._eof.set()
+                    ring.notify()
+                    return
+                except Exception as exc:  # a driver bug or device error must not end the session
+                    self.stats.source_errors += 1
+                    self._warn("source", "source read failed (%s: %s); retrying",
+                               type(exc).__name__, exc)
+                    self._stop.wait(0.05)
+                    continue
+                if frame is None:
+                    continue
+                try:
+                    q = np.asarray(frame.quats, dtype=np.float64).reshape(J, 4)
+                    v = np.asarray(frame.valid, dtype=bool).reshape(J)
+                    recv = float(frame.recv_time)
+                    seq = None if frame.seq is None else int(frame.seq)
+                    stime = None if frame.source_time is None else float(frame.source_time)
+                except (TypeError, ValueError, AttributeError) as exc:
+                    self.stats.bad_frames += 1
+                    self._warn("badframe", "malformed frame dropped (%s)", exc)
+                    continue
+                if self.recorder is not None:
+                    with self._rec_lock:
+                        try:
+                            self.recorder.write_frame(frame)
+                        except Exception as exc:
+                            self.stats.record_errors += 1
+                            self._warn("record", "recording a frame failed: %s", exc)
+                ring.append(q, recv, stime, seq, v)
+                self.stats.frames_received += 1
+        except BaseException as exc:  # pragma: no cover - defensive
+            self._reader_error = exc
+            log.exception("reader thread failed")
+            ring.notify()
+
+    # ---------------------------------------------------------------- events
+    def _now(self) -> float:
+        return time.monotonic() - self.session_start
+
+    def _emit(self, ev: Event) -> Event:
+        """Publish, record and show one event; returns it as sent (cuts: latency stamped)."""
+        try:
+            if isinstance(ev, CutEvent):
+                ev = self.publishers.publish_cut(ev) or ev.stamped()
+            elif isinstance(ev, StatusEvent):
+                self.publishers.publish_status(ev)
+            else:
+                self.publishers.publish_dropout(ev)
+        except Exception as exc:
+            self.stats.publish_errors += 1
+            self._warn("publish", "publishing %s failed: %s", type(ev).__name__, exc)
+        if self.recorder is not None:
+            with self._rec_lock:
+                try:
+                    self.recorder.write_event(ev)
+                except Exception as exc:
+                    self.stats.record_errors += 1
+                    self._warn("record_ev", "recording an event failed: %s", exc)
+        for fn in self.listeners:
+            try:
+                fn(ev)
+            except Exception as exc:
+                self._warn("listener", "event listener failed: %s", exc)
+        return ev
+
+    def _cut_event(self, pc: PipelineCut, detected_recv: float) -> CutEvent:
+        ring = self.ring
+        m = pc.cut.method
+        seg = self._segment.get(m, 0) + 1
+        self._segment[m] = seg
+        self._event_no += 1
+        b_recv = ring.recv_time_at(pc.boundary) if ring is not None else None
+        if b_recv is None:
+            b_recv = detected_recv - (pc.detected - pc.boundary) / self.frame_rate
+        return CutEvent(
+            event=self._event_no, segment=seg, frame=int(pc.boundary),
+            time=float(b_recv - self.session_start), method=m,
+            label=m,
+            confidence=float(np.clip(pc.cut.confidence, 0.0, 1.0)),
+            detector_delay_ms=float(max(0, pc.detected - pc.boundary) / self.frame_rate * 1000.0),
+            boundary_recv_time=float(b_recv), detected_frame=int(pc.detected),
+            score=float(pc.cut.score))
+
+    # ---------------------------------------------------------------- processing
+    def _process_window(self, w) -> None:
+        pipe = self.pipeline
+        st = self.stats
+        J = self.ring.valid_width
+        if w.lost:
+            st.overruns += w.lost
+            self._warn("overrun", "processing fell behind: %d frames overwritten before use "
+                       "(treated as a gap)", w.lost)
+        for i in range(len(w)):
+            index = w.start + i
+            recv = float(w.recv_time[i])
+            seq = int(w.seq[i])
+            valid = w.valid[i]
+            try:
+                cuts = pipe.process(index, w.data[i].reshape(J, 4), valid,
+                                    None if seq < 0 else seq, recv, w.lost if i == 0 else 0)
+            except Exception as exc:  # never let one frame end the session
+                st.bad_frames += 1
+                self._warn("process", "frame %d could not be processed (%s: %s); dropped",
+                           index, type(exc).__name__, exc)
+                continue
+            st.frames_processed += 1
+            self._track_dropouts(valid, recv)
+            for pc in cuts:
+                ev = self._emit(self._cut_event(pc, recv))
+                st.cuts += 1
+                st.cuts_by_method[ev.method] = st.cuts_by_method.get(ev.method, 0) + 1
+                st.last_cut = ev
+                st.cut_latency_ms.append((time.monotonic() - recv) * 1000.0)
+            st.frame_latency_ms.append((time.monotonic() - recv) * 1000.0)
+        if len(w):
+            now = time.monotonic()
+            st.lag_s = now - float(w.recv_time[-1])
+            st.max_lag_s = max(st.max_lag_s, st.lag_s)
+            self._last_recv = float(w.recv_time[-1])
+
+    def _track_dropouts(self, valid: np.ndarray, recv: float) -> None:
+        lim = float(self.config["gaps.dropout_seconds"])
+        self._last_valid = np.where(valid, recv, self._last_valid)
+        if self._source_lost:
+            self._source_lost = False
+            self._emit(DropoutEvent("source", False, self._now()))
+        lost_now = (recv - self._last_valid) >= lim
+        changed = lost_now != self._joint_lost
+        if changed.any():
+            names = self.pipeline.joint_names
+            for j in np.flatnonzero(changed):
+                self._joint_lost[j] = lost_now[j]
+                if lost_now[j]:
+                    self.stats.dropouts += 1
+                    log.warning("dropout: %s lost", names[j])
+                else:
+                    log.info("dropout: %s restored", names[j])
+                self._emit(DropoutEvent(names[j], bool(lost_now[j]), self._now()))
+
+    def _check_silence(self, now: float) -> None:
+        lim = float(self.config["gaps.dropout_seconds"])
+        last = self._last_recv if self._last_recv is not None else self.session_start
+        if not self._source_lost and now - last >= lim:
+            self._source_lost = True
+            self.stats.dropouts += 1
+            log.warning("dropout: no frames from the source for %.2f s", now - last)
+            self._emit(DropoutEvent("source", True, now - self.session_start))
+
+    def dropped(self) -> int:
+        """Frames lost since start: the source's counters plus frames the session dropped."""
+        s = getattr(self.source, "stats", None)
+        src = int(getattr(s, "dropped", 0)) if s is not None else 0
+        return src + self.stats.bad_frames + self.stats.overruns
+
+    def _status(self, now: float, alive: int = 1) -> StatusEvent:
+        dt = max(1e-9, now - self._status_t)
+        rate = (self.stats.frames_received - self._status_frames) / dt
+        self._status_t, self._status_frames = now, self.stats.frames_received
+        stale = int(self._joint_lost.sum()) if not self._source_lost else len(self._joint_lost)
+        names = tuple(n for n, l in zip(self.pipeline.joint_names, self._joint_lost) if l)
+        if self._source_lost:
+            names = tuple(self.pipeline.joint_names)
+        self._last_rate = rate
+        return StatusEvent(alive=alive, frame_rate=float(rate), dropped=self.dropped(),
+                           stale_joints=stale, stale_names=names, time=now - self.session_start)
+
+    # ---------------------------------------------------------------- run
+    def run(self) -> SessionSummary:
+        """Run until the duration elapses, the source ends, or stop()/a signal; then shut
+        everything down and return the summary."""
+        old_handlers = {}
+        if self.handle_signals and threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                old_handlers[sig] = signal.signal(
+                    sig, lambda signum, _f: self.stop(signal.Signals(signum).name))
+        reader = None
+        try:
+            self._open()
+            J = len(self.pipeline.joint_names)
+            self.session_start = getattr(self.recorder, "start_monotonic", None) or time.monotonic()
+            self._last_valid = np.full(J, self.session_start)
+            self._joint_lost = np.zeros(J, dtype=bool)
+            self._source_lost = False
+            self._last_recv: float | None = None
+            self._status_t = time.monotonic()
+            self._status_frames = 0
+            self._last_rate = 0.0
+            interval = float(self.config["status.interval"])
+            next_status = self._status_t + interval
+            lag_warn = float(self.config["buffer.lag_warn_seconds"])
+            max_batch = int(self.config["buffer.max_batch"])
+            deadline = None if self.duration is None else time.monotonic() + self.duration
+            cursor = self.ring.cursor(0)
+            reader = threading.Thread(target=self._reader, name="rtseg-reader", daemon=True)
+            reader.start()
+            while not self._stop.is_set():
+                now = time.monotonic()
+                timeout = max(0.0, min(0.05, next_status - now))
+                if deadline is not None:
+                    timeout = min(timeout, max(0.0, deadline - now))
+                self.ring.wait(cursor.position, timeout)
+                w = cursor.read(max_batch)
+                if len(w) or w.lost:
+                    self._process_window(w)
+                self.stats.backlog = cursor.backlog
+                self.stats.max_backlog = max(self.stats.max_backlog, self.stats.backlog)
+                now = time.monotonic()
+                if len(w) and self.stats.lag_s > lag_warn:
+                    self.stats.lag_warnings += 1
+                    self._warn("lag", "falling behind the source: frames wait %.0f ms "
+                               "(%d frames queued)", self.stats.lag_s * 1000, cursor.backlog)
+                if not len(w):
+                    self._check_silence(now)
+                if now >= next_status:
+                    self._emit(self._status(now))
+                    next_status = max(next_status + interval, now + interval / 2)
+                if deadline is not None and now >= deadline:
+                    self.stop("duration reached")
+                elif self._eof.is_set() and cursor.backlog == 0:
+                    self.stop("end of source")
+                elif self._reader_error is not None:
+                    self.stop(f"reader failed: {self._reader_error}")
+        finally:
+            self._stop.set()
+            if reader is not None:
+                reader.join(timeout=5.0)
+            summary = self._shutdown()
+            for sig, h in old_handlers.items():
+                signal.signal(sig, h)
+        return summary
+
+    def _shutdown(self) -> SessionSummary:
+        now = time.monotonic()
+        if self.pipeline is not None and self.publishers is not None:
+            try:
+                self._emit(self._status(now, alive=0))
+            except Exception as exc:  # pragma: no cover - defensive
+                log.warning("final status failed: %s", exc)
+        for name, obj in (("source", self.source), ("publishers", self.publishers),
+                          ("recorder", self.recorder)):
+            if obj is None:
+                continue
+            try:
+                obj.close()
+            except Exception as exc:
+                log.warning("closing %s failed: %s", name, exc)
+        st = self.stats
+        dur = now - self.session_start if self.session_start else 0.0
+        src_stats = self.source.stats.as_dict() if getattr(self.source, "stats", None) else {}
+        rec = getattr(self.recorder, "path", None) or (self.config["recording.dir"] or None)
+        summary = SessionSummary(
+            duration_s=dur, frames_received=st.frames_received,
+            frames_processed=st.frames_processed,
+            frame_rate=st.frames_received / dur if dur > 0 else 0.0,
+            cuts=st.cuts, cuts_by_method=dict(st.cuts_by_method),
+            dropped=self.dropped() if self.pipeline is not None else 0,
+            source_stats=src_stats,
+            pipeline=asdict(self.pipeline.stats) if self.pipeline else {},
+            overruns=st.overruns, bad_frames=st.bad_frames, max_lag_ms=st.max_lag_s * 1000.0,
+            cut_latency_ms_p50=_percentile(st.cut_latency_ms, 50),
+            cut_latency_ms_p99=_percentile(st.cut_latency_ms, 99),
+            recording=str(rec) if rec else None,
+            stop_reason=self.stop_reason)
+        log.info("%s", summary.text())
+        return summary
+
+
+# ============================================================================ offline replay
+def replay_frames(frames: Iterable[tuple[np.ndarray, np.ndarray, int | None, float | None]],
+                  joint_names: list[str], parents: list[int], space: str,
+                  frame_rate: float | None, config: SessionConfig | None = None) -> list[PipelineCut]:
+    """Run recorded frames ``(quats (J,4), valid (J,), seq, recv_time)`` through the same
+    ``Pipeline`` as the live loop; the cuts in order (session frame indices)."""
+    cfg = config if config is not None else load_session_config()
+    pipe = Pipeline(joint_names, parents, space, frame_rate, cfg)
+    cuts: list[PipelineCut] = []
+    for i, (q, v, seq, t) in enumerate(frames):
+        cuts.extend(pipe.process(i, q, v, seq, t))
+    return cuts

@@ -1,0 +1,366 @@
+"""Live loop logic with small fakes: gaps restart the detectors (no cut across a gap),
+calibration, bad input counted not fatal, dropouts, ring overruns, config validation."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from rtseg.config import ConfigError
+from rtseg.detectors.base import Cut, OnlineDetector
+from rtseg.drivers.base import Source
+from rtseg.events import CutEvent, DropoutEvent, StatusEvent
+from rtseg.features import PoseFeatures
+from rtseg.frame import Frame
+from rtseg.live import LiveSession, Pipeline
+from rtseg.quat import from_euler
+from rtseg.session_config import from_dict, load_session_config
+from rtseg.simulators.synth import JOINT_NAMES, PARENTS
+
+J = len(JOINT_NAMES)
+ARM = JOINT_NAMES.index("LeftUpperArm")
+RAISED = from_euler("X", np.array([90.0]))
+
+
+class StepDetector(OnlineDetector):
+    """Cuts where the features jump: 3 consecutive frames far from the segment's first
+    frame -> Cut(frame = first of them, detected_at = third).  Frames counted from restart."""
+    name = "step"
+    frame_origin = "restart"
+
+    def __init__(self, delay: float = 0.0) -> None:
+        self.delay = delay
+        self.restart()
+        self.restarts = 0
+
+    def restart(self) -> None:
+        self.i = -1
+        self.ref = None
+        self.run = 0
+        self.restarts = getattr(self, "restarts", -1) + 1
+
+    def update(self, x):
+        if self.delay:
+            time.sleep(self.delay)
+        self.i += 1
+        if self.ref is None:
+            self.ref = x.copy()
+            return None
+        if np.linalg.norm(x - self.ref) > 0.5:
+            self.run += 1
+            if self.run == 3:
+                self.ref = x.copy()
+                self.run = 0
+                return Cut(self.i - 2, self.name, 0.9, self.i, 1.0)
+        else:
+            self.run = 0
+        return None
+
+
+def frames(n: int, change_at: int, *, seq_jump_at: int | None = None, jump: int = 10,
+           invalid: range = range(0)) -> list[tuple[np.ndarray, np.ndarray, int, float]]:
+    """n frames: identity pose, left upper arm raised from frame ``change_at`` on."""
+    out = []
+    seq = 0
+    for i in range(n):
+        q = np.tile([0.0, 0.0, 0.0, 1.0], (J, 1))
+        if i >= change_at:
+            q[ARM] = RAISED
+        v = np.ones(J, dtype=bool)
+        if i in invalid:
+            v[ARM] = False
+        if seq_jump_at is not None and i == seq_jump_at:
+            seq += jump
+        out.append((q, v, seq, i / 120.0))
+        seq += 1
+    return out
+
+
+def pipeline(cfg: dict | None = None, space: str = "global", det: OnlineDetector | None = None
+             ) -> Pipeline:
+    config = from_dict(cfg or {"calibration": {"mode": "none"}})
+    return Pipeline(JOINT_NAMES, PARENTS, space, 120.0, config,
+                    detectors={"step": det or StepDetector()})
+
+
+def run(pipe: Pipeline, fr) -> list:
+    cuts = []
+    for i, (q, v, seq, t) in enumerate(fr):
+        cuts.extend(pipe.process(i, q, v, seq, t))
+    return cuts
+
+
+def test_cut_found_without_gap():
+    cuts = run(pipeline(), frames(400, 200))
+    assert [(c.boundary, c.detected) for c in cuts] == [(200, 202)]
+    assert cuts[0].cut.method == "step"
+
+
+def test_sequence_gap_restarts_and_no_cut_across_it():
+    pipe = pipeline()
+    cuts = run(pipe, frames(400, 200, seq_jump_at=200, jump=10))
+    assert cuts == []
+    assert pipe.stats.restarts == 1 and pipe.stats.gap_frames == 10
+    # a gap within the limit (3 frames) is bridged: the cut is found
+    pipe = pipeline()
+    cuts = run(pipe, frames(400, 200, seq_jump_at=200, jump=3))
+    assert [c.boundary for c in cuts] == [200] and pipe.stats.restarts == 0
+
+
+def test_silence_restarts():
+    fr = frames(400, 200)
+    fr = [(q, v, None, t + (1.0 if i >= 200 else 0.0)) for i, (q, v, s, t) in enumerate(fr)]
+    pipe = pipeline()
+    assert run(pipe, fr) == [] and pipe.stats.restarts == 1
+
+
+def test_u16_sequence_wrap_is_not_a_gap():
+    fr = frames(300, 1000)
+    fr = [(q, v, (65500 + s) % 65536, t) for q, v, s, t in fr]
+    pipe = pipeline()
+    run(pipe, fr)
+    assert pipe.stats.restarts == 0 and pipe.stats.gap_frames == 0
+
+
+def test_invalid_required_joints_restart_only_past_the_limit():
+    pipe = pipeline()
+    cuts = run(pipe, frames(400, 200, invalid=range(195, 210)))
+    assert cuts == [] and pipe.stats.restarts == 1
+    assert pipe.stats.skipped_invalid == 15 - 3
+    # two invalid frames: fed with the last good value, no restart, cut where the arm moves
+    pipe = pipeline()
+    cuts = run(pipe, frames(400, 200, invalid=range(200, 202)))
+    assert [c.boundary for c in cuts] == [202] and pipe.stats.restarts == 0
+    # a joint outside required_joints may be invalid for long
+    pipe = pipeline({"calibration": {"mode": "none"}, "gaps": {"required_joints": ["Head"]}})
+    cuts = run(pipe, frames(400, 200, invalid=range(100, 150)))
+    assert [c.boundary for c in cuts] == [200] and pipe.stats.restarts == 0
+
+
+def test_non_finite_values_are_replaced_and_counted():
+    fr = frames(300, 1000)
+    fr[50][0][3] = np.nan
+    fr[51][0][4] = 0.0
+    pipe = pipeline()
+    assert run(pipe, fr) == []
+    assert pipe.stats.bad_values == 2 and pipe.stats.restarts == 0
+
+
+def test_cut_boundary_before_restart_is_discarded():
+    class Late(StepDetector):
+        frame_origin = "creation"
+
+        def update(self, x):
+            self.i += 1
+            self.n = getattr(self, "n", -1) + 1
+            if self.n == 150:                     # refers to a frame before the restart
+                return Cut(90, "late", 0.5, 150)
+            return None
+
+    det = Late()
+    pipe = pipeline(det=det)
+    cuts = run(pipe, frames(200, 1000, seq_jump_at=100, jump=20))
+    assert cuts == [] and pipe.stats.discarded_cuts == 1
+
+
+def test_calibration_pose_averaged_for_local_input():
+    seen = []
+
+    class Rec(StepDetector):
+        def update(self, x):
+            seen.append(x.copy())
+            return super().update(x)
+
+    pipe = pipeline({"calibration": {"mode": "auto", "frames": 5}}, space="local", det=Rec())
+    rig = from_euler("XYZ", np.array([20.0, -10.0, 5.0]))
+    fr = []
+    for i in range(50):
+        q = np.tile(rig, (J, 1))
+        fr.append((q, np.ones(J, bool), i, i / 120))
+    run(pipe, fr)
+    assert pipe.stats.calibration_frames == 5 and pipe.stats.fed == 45
+    ident = np.tile([0.0, 0.0, 0.0, 1.0], len(seen[0]) // 4)
+    np.testing.assert_allclose(seen[0], ident, atol=1e-9)
+    # global input in auto mode is not calibrated
+    pipe = pipeline({"calibration": {"mode": "auto"}})
+    run(pipe, fr)
+    assert pipe.stats.calibration_frames == 0 and pipe.stats.fed == 50
+
+
+# ------------------------------------------------------------------------ live session
+class FakeSource(Source):
+    """Replays frames; ``bad`` indices yield malformed frames, ``errors`` indices raise."""
+    space = "global"
+    frame_rate = 120.0
+
+    def __init__(self, fr, bad=(), errors=(), pace: float = 0.0, invalid_tail: bool = False):
+        super().__init__()
+        self.joint_names = list(JOINT_NAMES)
+        self.parents = list(PARENTS)
+        self.fr = fr
+        self.i = 0
+        self.bad = set(bad)
+        self.errors = set(errors)
+        self.pace = pace
+        self.closed = False
+
+    def read(self, timeout=None):
+        if self.i >= len(self.fr):
+            raise EOFError
+        i = self.i
+        self.i += 1
+        if i in self.errors:
+            self.errors.discard(i)
+            self.i -= 1
+            raise OSError("device hiccup")
+        if self.pace:
+            time.sleep(self.pace)
+        q, v, seq, _ = self.fr[i]
+        if i in self.bad:
+            return Frame(time.monotonic(), q[:5], v, None, seq)
+        self.stats.frames_ok += 1
+        return Frame(time.monotonic(), q, v, None, seq)
+
+    def close(self):
+        self.closed = True
+
+
+class FakePublishers:
+    def __init__(self):
+        self.events = []
+        self.closed = False
+
+    def publish_cut(self, ev):
+        ev = ev.stamped()
+        self.events.append(ev)
+        return ev
+
+    def publish_status(self, ev):
+        self.events.append(ev)
+
+    def publish_dropout(self, ev):
+        self.events.append(ev)
+
+    def close(self):
+        self.closed = True
+
+
+class FakeRecorder:
+    def __init__(self):
+        self.frames = []
+        self.events = []
+        self.closed = False
+
+    def write_frame(self, f):
+        self.frames.append(f)
+
+    def write_event(self, ev):
+        self.events.append(ev)
+
+    def close(self):
+        self.closed = True
+
+
+def session(src, cfg=None, det=None, **kw):
+    config = from_dict(cfg or {"calibration": {"mode": "none"}, "status": {"interval": 0.05}})
+    s = LiveSession(src, config, publishers=FakePublishers(), recorder=FakeRecorder(),
+                    handle_signals=False, **kw)
+    import rtseg.live as live_mod
+    orig = live_mod.make_detectors
+    live_mod.make_detectors = lambda c, r: {"step": det or StepDetector()}
+    try:
+        summary = s.run()
+    finally:
+        live_mod.make_detectors = orig
+    return s, summary
+
+
+def test_session_publishes_records_and_survives_bad_input():
+    src = FakeSource(frames(600, 300), bad={100}, errors={200}, pace=0.0005)
+    s, summary = session(src)
+    pubs, rec = s.publishers, s.recorder
+    cuts = [e for e in pubs.events if isinstance(e, CutEvent)]
+    # frame 100 was malformed and never entered the session: indices after it shift by one
+    assert [(c.frame, c.detected_frame, c.method, c.segment, c.event) for c in cuts] == \
+        [(299, 301, "step", 1, 1)]
+    assert cuts[0].latency_ms is not None and cuts[0].latency_ms >= 0
+    assert cuts[0].detector_delay_ms == pytest.approx(2 / 120 * 1000)
+    assert 0 <= cuts[0].time < summary.duration_s
+    assert summary.frames_received == 599 and summary.frames_processed == 599
+    assert s.stats.bad_frames == 1 and s.stats.source_errors == 1
+    assert len(rec.frames) == 599
+    assert [type(e) for e in rec.events].count(CutEvent) == 1
+    status = [e for e in pubs.events if isinstance(e, StatusEvent)]
+    assert status and status[-1].alive == 0 and all(e.alive == 1 for e in status[:-1])
+    assert summary.stop_reason == "end of source"
+    assert src.closed and pubs.closed and rec.closed
+    assert summary.cuts == 1 and summary.dropped == 1
+
+
+def test_session_reports_joint_dropout_and_restore():
+    invalid = range(100, 250)
+    src = FakeSource(frames(400, 10_000, invalid=invalid), pace=0.002)
+    cfg = {"calibration": {"mode": "none"}, "status": {"interval": 0.05},
+           "gaps": {"dropout_seconds": 0.1, "required_joints": ["Head"]}}
+    s, summary = session(src, cfg)
+    drops = [e for e in s.publishers.events if isinstance(e, DropoutEvent)]
+    assert [(d.name, d.lost) for d in drops] == [("LeftUpperArm", True), ("LeftUpperArm", False)]
+    status = [e for e in s.publishers.events if isinstance(e, StatusEvent)]
+    assert any(e.stale_joints == 1 and e.stale_names == ("LeftUpperArm",) for e in status)
+
+
+def test_session_counts_ring_overruns_as_dropped_and_restarts():
+    src = FakeSource(frames(400, 10_000), pace=0.0003)
+    cfg = {"calibration": {"mode": "none"}, "buffer": {"capacity": 16, "max_batch": 4}}
+    det = StepDetector(delay=0.003)
+    s, summary = session(src, cfg, det=det)
+    assert summary.frames_received == 400
+    assert s.stats.overruns > 0
+    assert summary.frames_processed + s.stats.overruns == 400
+    assert s.pipeline.stats.restarts >= 1 and det.restarts >= 1
+    assert summary.dropped >= s.stats.overruns
+    assert len(s.recorder.frames) == 400      # recording holds everything received
+
+
+def test_session_duration_and_stop():
+    src = FakeSource(frames(100_000, 10**9), pace=0.001)
+    s, summary = session(src, duration=0.3)
+    assert summary.stop_reason == "duration reached"
+    assert 0.25 < summary.duration_s < 2.0
+
+
+# ------------------------------------------------------------------------ configuration
+def test_config_errors_name_the_key(tmp_path):
+    p = tmp_path / "live.toml"
+    cases = {
+        '[output]\nosc = ["localhost"]\n': "output.osc[0]",
+        '[gaps]\nmax_frame = 3\n': "gaps.max_frame",
+        '[status]\ninterval = "1"\n': "status.interval",
+        '[calibration]\nmode = "sometimes"\n': "calibration.mode",
+        '[detectors]\nmethods = ["pca", "hmm"]\n': "detectors.methods",
+        '[output]\ntemplates = ["cue/{label}"]\n': "output.templates[0]",
+        '[nonsense]\nx = 1\n': "[nonsense]",
+        '[buffer]\ncapacity = 4\n': "buffer.capacity",
+    }
+    for text, key in cases.items():
+        p.write_text(text)
+        with pytest.raises(ConfigError, match=key.replace("[", r"\[").replace("]", r"\]")) as ei:
+            load_session_config(p)
+        assert "live.toml" in str(ei.value)
+    with pytest.raises(ConfigError, match="output.osc"):
+        load_session_config(overrides={"output.osc": ["127.0.0.1:99999"]})
+    cfg = load_session_config(overrides={"output.osc": ["127.0.0.1:9000"], "status.interval": 2})
+    assert cfg["output.osc"] == ["127.0.0.1:9000"] and cfg["status.interval"] == 2.0
+
+
+def test_unknown_required_joint_refused():
+    with pytest.raises(ConfigError, match="gaps.required_joints"):
+        pipeline({"gaps": {"required_joints": ["Tail"]}})
+
+
+def test_bad_full_target_refused_at_start():
+    from rtseg.live import build_publishers
+    with pytest.raises(ConfigError, match=r"output.targets\[0\]"):
+        build_publishers(from_dict({"output": {"targets": ["udp:127.0.0.1:9123,colour=red"]}}))
