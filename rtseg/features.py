@@ -60,16 +60,33 @@ def constant_dims(X: np.ndarray, tol: float = 1e-9) -> np.ndarray:
     return (X.max(axis=0) - X.min(axis=0)) <= tol
 
 
+def axis_frame_matrices(axis_quats: np.ndarray) -> np.ndarray:
+    """(K, 4, 4) matrices A with A[k] @ q == C_k⁻¹ ⊗ q ⊗ C_k (q re-expressed in frame C_k)."""
+    c = np.asarray(axis_quats, dtype=np.float64)
+    eye = np.eye(4)
+    # Column t of A[k] is C_k⁻¹ ⊗ e_t ⊗ C_k.
+    cols = Q.multiply(Q.multiply(Q.conjugate(c)[:, None, :], eye[None, :, :]), c[:, None, :])
+    return np.swapaxes(cols, 1, 2)
+
+
 class PoseFeatures:
     """Feature extractor for one skeleton (joint names + parents + rotation space).
 
     ``joints``: selected joint names (profile order); ``indices``: their positions in the
     input; ``dim`` = 4·len(joints).  Raises ``KeyError`` naming the joint and profile when
     the skeleton lacks a profile joint.
+
+    ``axis_quats`` (J, 4), optional: a fixed frame C_j per joint (ASF/AMC ``meta["axis_quats"]``).
+    When given, each parent-relative rotation L_j is re-expressed in that frame,
+    C_j⁻¹ ⊗ L_j ⊗ C_j; for ASF/AMC takes this is exactly the AMC dof rotation M, the
+    quantity of the paper, and 1- or 2-dof bones then have exactly zero components along their
+    missing axes (``constant_dims`` finds them).  Distances between poses are the same with
+    or without it (a fixed orthogonal map per joint).
     """
 
     def __init__(self, joint_names: Sequence[str], parents: Sequence[int], space: str,
-                 profile: str | None = None, *, calibration: np.ndarray | None = None) -> None:
+                 profile: str | None = None, *, calibration: np.ndarray | None = None,
+                 axis_quats: np.ndarray | None = None) -> None:
         joint_names = list(joint_names)
         parents = [int(p) for p in parents]
         if len(parents) != len(joint_names):
@@ -96,10 +113,29 @@ class PoseFeatures:
         self._frame_shape = (n, 4)
         # Flat indices into the (J[+1], 4) frame building L(conj(parent)) of each selected joint.
         self._parent_gather = (self._parent_idx[:, None, None] * 4 + _GATHER).astype(np.intp)
+        self.axis_quats: np.ndarray | None = None
+        self._axis_M: np.ndarray | None = None
+        if axis_quats is not None:
+            aq = np.asarray(axis_quats, dtype=np.float64)
+            if aq.shape != (n, 4):
+                raise ValueError(f"axis_quats must be ({n}, 4), got {aq.shape}")
+            self.axis_quats = aq
+            sel = aq[self.indices]
+            if not np.allclose(np.abs(sel[:, 3]), 1.0):  # all identity: nothing to do
+                self._axis_M = axis_frame_matrices(sel)
         self._calib_L: np.ndarray | None = None
+        self._post: np.ndarray | None = self._axis_M  # combined (K, 4, 4) map after L
         self._prev: np.ndarray | None = None
         if calibration is not None:
             self.calibrate(calibration)
+
+    @classmethod
+    def for_take(cls, take: Take, profile: str | None = None) -> "PoseFeatures":
+        """Extractor for ``take``'s skeleton (uses ``meta["axis_quats"]`` when present)."""
+        aq = take.meta.get("axis_quats")
+        if aq is not None and np.shape(aq) != (take.n_joints, 4):
+            aq = None
+        return cls(take.joint_names, take.parents, take.space, profile, axis_quats=aq)
 
     # -- state -------------------------------------------------------------------------
     @property
@@ -113,14 +149,19 @@ class PoseFeatures:
     def calibrate(self, quats: np.ndarray) -> None:
         """Take this input frame (J, 4) as the reference pose: it maps to identity features.
 
-        Also resets sign continuity.  ``clear_calibration()`` undoes it.
+        Features become q_calib⁻¹ ⊗ q per joint.  Also resets sign continuity.
+        ``clear_calibration()`` undoes it.
         """
-        local = self._local_one(self._check_frame(quats))
-        self._calib_L = left_matrices(local, conjugate=True)
+        ref = self._local_one(self._check_frame(quats))
+        if self._axis_M is not None:
+            ref = (self._axis_M @ ref[:, :, None])[:, :, 0]
+        self._calib_L = left_matrices(ref, conjugate=True)
+        self._post = self._calib_L if self._axis_M is None else self._calib_L @ self._axis_M
         self._prev = None
 
     def clear_calibration(self) -> None:
         self._calib_L = None
+        self._post = self._axis_M
         self._prev = None
 
     # -- per frame ---------------------------------------------------------------------
@@ -151,8 +192,8 @@ class PoseFeatures:
         if q.shape != self._frame_shape or not q.flags.c_contiguous:
             q = np.ascontiguousarray(self._check_frame(q))
         out = self._local_one(q)
-        if self._calib_L is not None:
-            out = (self._calib_L @ out[:, :, None])[:, :, 0]
+        if self._post is not None:
+            out = (self._post @ out[:, :, None])[:, :, 0]
         elif self.space == "local":
             out = out.copy()
         prev = self._prev
@@ -167,8 +208,8 @@ class PoseFeatures:
 
     # -- batch -------------------------------------------------------------------------
     def local_quats(self, quats: np.ndarray) -> np.ndarray:
-        """(F, K, 4) parent-relative (and calibrated) rotations of the selected joints,
-        without sign processing."""
+        """(F, K, 4) rotations of the selected joints (parent-relative, in the axis frames if
+        any, calibrated if calibrated), without sign processing."""
         q = np.asarray(quats, dtype=np.float64)
         if q.ndim != 3 or q.shape[1:] != (len(self.joint_names), 4):
             raise ValueError(f"quats must be (frames, {len(self.joint_names)}, 4), got {q.shape}")
@@ -177,8 +218,8 @@ class PoseFeatures:
             par = np.array(self.parents)[self.indices]
             parent = np.where((par >= 0)[:, None], q[:, np.maximum(par, 0)], Q.IDENTITY)
             child = Q.multiply(Q.conjugate(parent), child)
-        if self._calib_L is not None:
-            child = np.einsum("kot,fkt->fko", self._calib_L, child)
+        if self._post is not None:
+            child = np.einsum("kot,fkt->fko", self._post, child)
         return child
 
     def transform(self, quats: np.ndarray) -> np.ndarray:
@@ -197,5 +238,8 @@ class PoseFeatures:
 
 
 def take_features(take: Take, profile: str | None = None) -> np.ndarray:
-    """(frames, 4·J) float64 features of a whole take (``profile`` None: ``choose_profile``)."""
-    return PoseFeatures(take.joint_names, take.parents, take.space, profile).transform(take.quats)
+    """(frames, 4·J) float64 features of a whole take (``profile`` None: ``choose_profile``).
+
+    Uses the take's ``meta["axis_quats"]`` (ASF/AMC) so features are the AMC dof rotations.
+    """
+    return PoseFeatures.for_take(take, profile).transform(take.quats)
