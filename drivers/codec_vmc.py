@@ -401,7 +401,8 @@ class VmcAssembler:
     2. ``/VMC/Ext/Root/Pos`` arrives with a pose different from the frame's root, or
     3. a bone arrives that this frame already holds (the sender started the next frame), or
     4. it is complete: every profile bone received, plus T and root if the sender has been
-       seen sending them (closes with no added latency), or
+       seen sending them (closes with no added latency; enabled once rules 1-3 have closed
+       one frame, so the sender's message order is known), or
     5. :meth:`flush` is called ``quiet`` seconds or more after the last datagram.
 
     Rules 1-2 assign T / root to the right frame whether a sender puts them before the bones
@@ -445,6 +446,7 @@ class VmcAssembler:
         self._sends_t = False
         self._sends_root = False
         self._last_closed_t: float | None = None
+        self._learned = False                 # a frame closed by a change rule was seen
         self._last_activity = -math.inf
         self._seq = 0
         self._out: list[Frame] = []
@@ -574,6 +576,7 @@ class VmcAssembler:
                     if abs(n2 - 1.0) <= tol:
                         if got[idx]:
                             self._n_got = n_got
+                            self._learned = True
                             self._close()
                             n_got = 0
                         s = 1.0 / sqrt(n2)
@@ -700,6 +703,7 @@ class VmcAssembler:
             self._bad_value(f"bone {name!r}: quaternion norm² {n2}")
             return
         if self._got[idx]:
+            self._learned = True
             self._close()
         s = 1.0 / math.sqrt(n2)
         x, y, z, w = -x * s, -y * s, z * s, w * s
@@ -726,6 +730,7 @@ class VmcAssembler:
             return
         self._sends_root = True
         if self._root is not None and vals != self._root and self._n_got:
+            self._learned = True
             self._close()
         self._root = vals
         s = 1.0 / math.sqrt(n2)
@@ -745,13 +750,16 @@ class VmcAssembler:
             self._t = t
         elif t != self._t:
             if self._n_got:
+                self._learned = True
                 self._close()
             self._t = t
         if self._n_got == self.n_bones:
             self._maybe_complete()
 
     def _maybe_complete(self) -> None:
-        if (self._t is not None or not self._sends_t) and (
+        # Only once a frame boundary has been seen (rules 1-3): until then we do not know
+        # whether T / root come before or after the bones.
+        if self._learned and (self._t is not None or not self._sends_t) and (
                 self._root is not None or not self._sends_root):
             self._close()
 

@@ -16,9 +16,12 @@ parent-relative rotations.  Joint names are matched case-insensitively against U
 seconds after start and carries T = ``k / rate``.  Frames where ``take.valid`` is False
 omit that bone.
 
-Faults: ``faults`` is a :class:`rtseg.simulators.faults.FaultConfig` (or an injector built
-from one) -- drop whole frames, send-time jitter, per-sensor dropouts (bones omitted),
-corrupted bytes; see :mod:`rtseg.simulators.faults`.  Every frame slot is recorded in
+Faults: ``faults`` is a :class:`rtseg.simulators.faults.FaultConfig`, a ``FaultInjector``
+or a CLI spec (``"drop=0.05,jitter=0.002,dropout=LeftHand:1:0.5,corrupt=0.001"``).  One
+injector *message* is one frame slot (index = slot, time = slot / rate): ``drop`` drops
+all datagrams of the frame, ``corrupt`` flips bytes anywhere in them, ``jitter`` delays
+the frame, ``dropout`` omits the bone (sensor = HumanBodyBones name, or index into
+``bone_names``), ``unplug`` stops sending during its windows (recorded as lost).  Every frame slot is recorded in
 ``.sent_log`` (:class:`SentFrame`), including dropped ones, so tests can compare what
 was sent with what arrived.
 """
@@ -30,7 +33,7 @@ import logging
 import socket
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -75,7 +78,7 @@ class VmcSender:
                  rate: float | None = None, faults: Any = None, loop: bool = False, *,
                  max_datagram: int = DEFAULT_MAX_DATAGRAM,
                  ok: tuple[int, ...] | None = (1, 3, 0, 1), send_time: bool = True,
-                 send_root: bool = True, seed: int = 0) -> None:
+                 send_root: bool = True) -> None:
         self.take = take
         self.host = host
         self.port = int(port)
@@ -114,7 +117,8 @@ class VmcSender:
         if send_root and take.root_position is not None:
             scale = UNIT_SCALE.get(take.length_unit.lower(), 1.0)
             self._root = take.root_position * scale
-        self._faults = _make_injector(faults, seed)
+        #: The FaultInjector in use (its ``record`` says what was damaged), or None.
+        self.injector = _make_injector(faults)
         self.sent_log: list[SentFrame] = []
         self.send_errors = 0
         self._stop = threading.Event()
@@ -175,29 +179,54 @@ class VmcSender:
 
     # -- thread
 
+    def _silent_bones(self, t: float) -> frozenset[int]:
+        silent = self.injector.silent_sensors(t) if self.injector else ()
+        out = set()
+        for sensor in silent:
+            if isinstance(sensor, int):
+                if 0 <= sensor < len(self.bone_names):
+                    out.add(sensor)
+            else:
+                bone = canonical_bone_name(str(sensor))
+                if bone in self.bone_names:
+                    out.add(self.bone_names.index(bone))
+        return frozenset(out)
+
     def _run(self) -> None:
         n = self._quats.shape[0]
         period = 1.0 / self.rate
+        inj = self.injector
         t0 = time.monotonic()
         slot = 0
         try:
             while not self._stop.is_set():
-                index = slot % n
                 if slot >= n and not self.loop:
                     break
+                index = slot % n
                 t_sched = slot * period
-                plan = self._faults.plan(slot, len(self.bone_names)) if self._faults else _NO_FAULT
-                delay = t0 + t_sched + plan.jitter - time.monotonic()
+                jitter = inj.jitter() if inj else 0.0
+                delay = t0 + t_sched + jitter - time.monotonic()
                 if delay > 0 and self._stop.wait(delay):
                     break
-                if plan.drop:
+                if inj and inj.unplugged(t_sched):
+                    inj.mark_lost(slot, "unplugged")
                     self.sent_log.append(SentFrame(slot, index, t_sched, None, 0, dropped=True))
                     slot += 1
                     continue
-                dgrams, omitted = self.encode(index, t_sched, plan.omit)
+                dgrams, omitted = self.encode(index, t_sched, self._silent_bones(t_sched))
                 corrupted = False
-                if self._faults:
-                    dgrams, corrupted = self._faults.corrupt(dgrams)
+                if inj:
+                    # one fault-injector message = one frame (all its datagrams)
+                    lengths = [len(d) for d in dgrams]
+                    joined = inj.process(slot, b"".join(dgrams))
+                    if joined is None:
+                        self.sent_log.append(SentFrame(slot, index, t_sched, None, 0,
+                                                       dropped=True, omitted=omitted))
+                        slot += 1
+                        continue
+                    corrupted = slot in inj.record.corrupted
+                    cuts = np.cumsum([0] + lengths)
+                    dgrams = [joined[a:b] for a, b in zip(cuts[:-1], cuts[1:])]
                 sent_at = time.monotonic()
                 for d in dgrams:
                     try:
@@ -216,73 +245,17 @@ class VmcSender:
 
 # --------------------------------------------------------------------------- faults
 
-@dataclass(slots=True)
-class FramePlan:
-    """What the fault injector does to one frame slot."""
-    drop: bool = False
-    jitter: float = 0.0
-    omit: frozenset[int] = field(default_factory=frozenset)
-
-
-_NO_FAULT = FramePlan()
-
-
-class _FaultAdapter:
-    """Applies a FaultConfig / FaultInjector to VMC frames (bone dropouts instead of sensor
-    dropouts, byte corruption on datagrams)."""
-
-    def __init__(self, faults: Any, seed: int) -> None:
-        self.faults = faults
-        self.rng = np.random.default_rng(getattr(faults, "seed", seed))
-        cfg = getattr(faults, "config", faults)
-        self.drop = float(_first(cfg, ("drop_rate", "drop_frames", "drop", "p_drop"), 0.0))
-        self.jitter = float(_first(cfg, ("jitter_s", "jitter", "jitter_sd"), 0.0))
-        self.dropout = float(_first(cfg, ("dropout_rate", "sensor_dropout", "dropout", "p_dropout"), 0.0))
-        self.dropout_frames = int(_first(cfg, ("dropout_frames", "dropout_len", "dropout_length"), 30))
-        self.corrupt_rate = float(_first(cfg, ("corrupt_rate", "corrupt_bytes", "corrupt", "p_corrupt"), 0.0))
-        self._out: dict[int, int] = {}   # bone -> last slot of its dropout
-
-    def __bool__(self) -> bool:
-        return bool(self.drop or self.jitter or self.dropout or self.corrupt_rate)
-
-    def plan(self, slot: int, n_bones: int) -> FramePlan:
-        rng = self.rng
-        if self.dropout > 0:
-            for b in np.nonzero(rng.random(n_bones) < self.dropout)[0]:
-                self._out.setdefault(int(b), slot + self.dropout_frames - 1)
-        omit = frozenset(b for b, end in self._out.items() if end >= slot)
-        self._out = {b: end for b, end in self._out.items() if end > slot}
-        jitter = abs(float(rng.normal(0.0, self.jitter))) if self.jitter > 0 else 0.0
-        return FramePlan(drop=bool(self.drop > 0 and rng.random() < self.drop),
-                         jitter=jitter, omit=omit)
-
-    def corrupt(self, dgrams: list[bytes]) -> tuple[list[bytes], bool]:
-        if not self.corrupt_rate:
-            return dgrams, False
-        out, hit = [], False
-        for d in dgrams:
-            if self.rng.random() < self.corrupt_rate:
-                b = bytearray(d)
-                for _ in range(int(self.rng.integers(1, 4))):
-                    b[int(self.rng.integers(len(b)))] = int(self.rng.integers(256))
-                d, hit = bytes(b), True
-            out.append(d)
-        return out, hit
-
-
-def _first(obj: Any, names: tuple[str, ...], default: float) -> float:
-    for n in names:
-        v = obj.get(n) if isinstance(obj, dict) else getattr(obj, n, None)
-        if v is not None and not callable(v):
-            return v
-    return default
-
-
-def _make_injector(faults: Any, seed: int) -> _FaultAdapter | None:
+def _make_injector(faults: Any):
+    """A FaultInjector from a FaultInjector, FaultConfig, CLI spec string, or None."""
     if faults is None:
         return None
-    adapter = _FaultAdapter(faults, seed)
-    return adapter if adapter else None
+    from rtseg.simulators.faults import FaultConfig, FaultInjector
+    if isinstance(faults, FaultInjector):
+        return faults
+    if isinstance(faults, (FaultConfig, str)):
+        inj = FaultInjector(faults)
+        return inj if inj.config.enabled else None
+    raise TypeError(f"faults must be a FaultConfig, FaultInjector or spec string, not {type(faults)!r}")
 
 
 # --------------------------------------------------------------------------- command line
@@ -300,7 +273,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--port", type=int, default=39539)
     p.add_argument("--rate", type=float, help="frames per second (default: the take's)")
     p.add_argument("--loop", action="store_true", help="repeat forever")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="synthesiser seed")
+    p.add_argument("--faults", help="fault spec, e.g. drop=0.02,jitter=0.002,dropout=LeftHand:2:1")
     args = p.parse_args(argv)
     if args.take:
         from rtseg.take import load_take
@@ -308,7 +282,8 @@ def main(argv: list[str] | None = None) -> int:
     else:
         from rtseg.simulators.synth import synthesize
         take = synthesize(args.script, seed=args.seed).take
-    with VmcSender(take, args.host, args.port, rate=args.rate, loop=args.loop) as sender:
+    with VmcSender(take, args.host, args.port, rate=args.rate, faults=args.faults,
+                   loop=args.loop) as sender:
         try:
             while not sender.wait(0.5):
                 pass
