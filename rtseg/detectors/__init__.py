@@ -1,0 +1,185 @@
+"""The three detectors of Barbič et al. 2004 and their parameters.
+
+- ``pca``  (online): cut where the PCA projection error of the current segment starts to grow
+  faster than before (``rtseg.detectors.pca``).
+- ``ppca`` (online, plus backward passes offline): cut at a peak of the mean Mahalanobis
+  distance of the next T frames to a probabilistic-PCA model of the segment so far
+  (``rtseg.detectors.ppca``).
+- ``gmm``  (batch): cut where consecutive frames change Gaussian-mixture cluster
+  (``rtseg.detectors.gmm``).
+
+Parameters live in ``config/detectors.toml`` (sections ``[pca]``, ``[ppca]``, ``[gmm]``).
+Windows are given in seconds and converted to frames with the frame rate of the take or
+stream (``frames(seconds, frame_rate)``).  Frame numbers in cuts are 0-based indices of the
+feature rows given to the detector; ``Cut.frame`` is the first frame of the new segment.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from rtseg.config import ConfigError, config_dir, load_toml
+from rtseg.detectors.base import BatchDetector, Cut, OnlineDetector
+
+METHODS: tuple[str, ...] = ("pca", "ppca", "gmm")
+
+# key -> (type(s), check, description); checks return True when the value is acceptable.
+_pos = (lambda v: v > 0, "> 0")
+_unit = (lambda v: 0 < v < 1, "in (0, 1)")
+_nonneg = (lambda v: v >= 0, ">= 0")
+_posint = (lambda v: v >= 1, ">= 1")
+
+SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
+    "pca": {
+        "window_s": ((int, float), _pos),
+        "lag_s": ((int, float), _pos),
+        "test_after_s": ((int, float), _pos),
+        "energy": ((int, float), _unit),
+        "k_sigma": ((int, float), _pos),
+        "refresh_frames": ((int,), _posint),
+    },
+    "ppca": {
+        "window_s": ((int, float), _pos),
+        "step_s": ((int, float), _pos),
+        "energy": ((int, float), _unit),
+        "peak_threshold": ((int, float), _pos),
+        "distance": ((str,), (lambda v: v in ("mean", "mean_sq"), "'mean' or 'mean_sq'")),
+        "noise_floor": ((int, float), _nonneg),
+        "null_rel": ((int, float), (lambda v: 0 <= v < 1e-3, "in [0, 1e-3)")),
+        "max_passes": ((int,), _posint),
+    },
+    "gmm": {
+        "energy": ((int, float), _unit),
+        "n_components": ((int,), _posint),
+        "min_segment_s": ((int, float), _nonneg),
+        "init": ((str,), (lambda v: v in ("consecutive", "random", "kmeans"),
+                          "'consecutive', 'random' or 'kmeans'")),
+        "covariance": ((str,), (lambda v: v in ("full", "diag", "tied", "spherical"),
+                                "'full', 'diag', 'tied' or 'spherical'")),
+        "random_state": ((int,), _nonneg),
+        "max_iter": ((int,), _posint),
+    },
+}
+
+
+def frames(seconds: float, frame_rate: float) -> int:
+    """A duration in seconds as a whole number of frames (nearest, at least 1)."""
+    if frame_rate <= 0:
+        raise ValueError(f"frame_rate must be positive, got {frame_rate}")
+    return max(1, int(round(float(seconds) * float(frame_rate))))
+
+
+def validate(method: str, params: Mapping[str, Any], where: str = "") -> dict[str, Any]:
+    """Check one method's parameters; ConfigError naming the key (and file) on any problem."""
+    if method not in SCHEMA:
+        raise ConfigError(f"{where}unknown detector method {method!r} (known: {', '.join(METHODS)})")
+    if not isinstance(params, Mapping):
+        raise ConfigError(f"{where}[{method}] must be a table of parameters")
+    out: dict[str, Any] = {}
+    for key, value in params.items():
+        if key not in SCHEMA[method]:
+            raise ConfigError(f"{where}[{method}] unknown key {key!r} "
+                              f"(known: {', '.join(SCHEMA[method])})")
+        types, (check, what) = SCHEMA[method][key]
+        if isinstance(value, bool) or not isinstance(value, types):
+            raise ConfigError(f"{where}[{method}] {key} = {value!r}: expected "
+                              f"{' or '.join(t.__name__ for t in types)}")
+        if not check(value):
+            raise ConfigError(f"{where}[{method}] {key} = {value!r}: must be {what}")
+        out[key] = value
+    return out
+
+
+def load_params(path: str | Path | None = None) -> dict[str, dict[str, Any]]:
+    """Parameters of every method: ``config/detectors.toml`` (or ``path``), validated.
+
+    Returns ``{"pca": {...}, "ppca": {...}, "gmm": {...}}``.  A file may give only some
+    sections or keys; the rest come from the shipped defaults.  Unknown sections or keys and
+    bad values raise ``rtseg.config.ConfigError`` naming the file and key.
+    """
+    default_path = config_dir() / "detectors.toml"
+    defaults = load_toml(default_path)
+    out = {m: validate(m, defaults.get(m, {}), f"{default_path}: ") for m in METHODS}
+    for m in METHODS:
+        missing = set(SCHEMA[m]) - set(out[m])
+        if missing:
+            raise ConfigError(f"{default_path}: [{m}] misses {', '.join(sorted(missing))}")
+    if path is not None:
+        user = load_toml(path)
+        for section, table in user.items():
+            if section not in SCHEMA:
+                raise ConfigError(f"{path}: unknown section [{section}] "
+                                  f"(known: {', '.join(METHODS)})")
+            out[section].update(validate(section, table, f"{path}: "))
+    return out
+
+
+def method_params(method: str, params: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The defaults of ``method`` overridden by ``params`` (validated)."""
+    if method not in METHODS:
+        raise ConfigError(f"unknown detector method {method!r} (known: {', '.join(METHODS)})")
+    merged = dict(load_params()[method])
+    if params:
+        # accept a full load_params() dict too
+        if method in params and isinstance(params[method], Mapping):
+            params = params[method]
+        merged.update(validate(method, params))
+    return merged
+
+
+def make_online(method: str, frame_rate: float, params: Mapping[str, Any] | None = None,
+                keep_trace: bool = False) -> OnlineDetector:
+    """A streaming detector ("pca" or "ppca") for features arriving at ``frame_rate`` Hz."""
+    p = method_params(method, params)
+    if method == "pca":
+        from rtseg.detectors.pca import PCADetector
+        return PCADetector.from_params(p, frame_rate, keep_trace=keep_trace)
+    if method == "ppca":
+        from rtseg.detectors.ppca import PPCADetector
+        return PPCADetector.from_params(p, frame_rate, keep_trace=keep_trace)
+    raise ConfigError(f"method {method!r} has no online detector (online: pca, ppca)")
+
+
+def segment_features(X: np.ndarray, method: str, frame_rate: float,
+                     params: Mapping[str, Any] | None = None,
+                     keep_trace: bool = False) -> list[Cut]:
+    """Cuts of a whole feature matrix X (frames, dims), sorted by frame.
+
+    pca: the online detector run over X; ppca: a forward pass then alternating backward
+    passes until no new cut appears (paper 3.2); gmm: batch clustering.  With
+    ``keep_trace`` the detector's statistic is kept on the returned list's ``trace``
+    attribute (a list subclass), as (frame, statistic, threshold) rows.
+    """
+    X = np.asarray(X, dtype=np.float64)
+    if X.ndim != 2:
+        raise ValueError(f"X must be (frames, dims), got shape {X.shape}")
+    if not np.all(np.isfinite(X)):
+        bad = np.argwhere(~np.isfinite(X))[0]
+        raise ValueError(f"X has a non-finite value at frame {bad[0]}, dim {bad[1]}")
+    p = method_params(method, params)
+    if method == "pca":
+        from rtseg.detectors.pca import PCADetector
+        det = PCADetector.from_params(p, frame_rate, keep_trace=keep_trace)
+        cuts, trace = det.run(X), det.trace
+    elif method == "ppca":
+        from rtseg.detectors.ppca import segment_ppca
+        cuts, trace = segment_ppca(X, p, frame_rate, keep_trace=keep_trace)
+    else:
+        from rtseg.detectors.gmm import GMMDetector
+        det = GMMDetector.from_params(p, frame_rate, keep_trace=keep_trace)
+        cuts, trace = det.segment(X), det.trace
+    out = CutList(sorted(cuts, key=lambda c: c.frame))
+    out.trace = trace if keep_trace else []
+    return out
+
+
+class CutList(list):
+    """A list of cuts carrying the detector's ``trace`` (empty unless asked for)."""
+    trace: list
+
+
+__all__ = ["METHODS", "Cut", "OnlineDetector", "BatchDetector", "load_params", "make_online",
+           "segment_features", "frames", "validate", "method_params", "SCHEMA"]

@@ -1,0 +1,43 @@
+"""Small linear-algebra helpers shared by the PCA and PPCA detectors.
+
+Scatter matrices here are *centred* sums of outer products, S = sum_t (x_t - m)(x_t - m)^T
+(not divided by the number of frames).  Eigenvalues of S are the squared singular values
+sigma_j^2 of the centred data matrix of the paper's Eq. 4.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def rank_for_energy(lam: np.ndarray, total: float, tau: float) -> int:
+    """Smallest r with sum(lam[:r]) / total > tau (lam sorted descending, Eq. 6).
+
+    Returns len(lam) + 1 when the given eigenvalues do not reach tau (caller must look at
+    more of the spectrum), and 1 when total is 0 (a constant segment).
+    """
+    if total <= 0.0:
+        return 1
+    c = np.cumsum(lam) / total
+    idx = int(np.searchsorted(c, tau, side="right"))
+    return idx + 1 if idx < len(lam) else len(lam) + 1
+
+
+def full_eigh(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """All eigenpairs of a symmetric matrix, eigenvalues descending and clipped at 0."""
+    lam, V = np.linalg.eigh(S)
+    return np.maximum(lam[::-1], 0.0), V[:, ::-1]
+
+
+def subspace_step(S: np.ndarray, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One step of warm-started subspace iteration with Rayleigh-Ritz.
+
+    V (d, p) orthonormal, close to the top-p eigenvectors of S.  Returns the Ritz values
+    (descending) and vectors of S on span(S V).  Because S changes little between calls
+    (a few frames added), one step keeps the leading Ritz values within rounding error of
+    the true eigenvalues; callers re-run ``full_eigh`` now and then as a safeguard.
+    """
+    Q, _ = np.linalg.qr(S @ V)
+    T = Q.T @ S @ Q
+    w, U = np.linalg.eigh((T + T.T) * 0.5)
+    return np.maximum(w[::-1], 0.0), Q @ U[:, ::-1]

@@ -1,0 +1,250 @@
+"""Probabilistic-PCA detector (Barbič et al. 2004, section 3.2).
+
+Forward pass (online, ``PPCADetector``): the first K frames of the current segment are
+modelled by a Gaussian with mean m and PPCA covariance C (Eqs. 7-9): the top-r eigen
+directions of their covariance keep their variance, r from E_r > tau; every other direction
+gets sigma^2, the mean of the discarded eigenvalues.  H is the average Mahalanobis distance
+of the next T frames K..K+T-1 to that model (Eq. 10).  K starts at T and grows by Delta.
+A cut is declared at the K of a peak of H once H falls after it and the peak exceeds the
+preceding valley by at least R; the detector then restarts at the cut frame.
+
+H is the mean of the Mahalanobis *distance* sqrt((x-m)^T C^-1 (x-m)) (``distance="mean"``).
+The paper's Figure 6 supports this reading: its diagonal (a behaviour against itself) is 7,
+about sqrt(56), the expected distance in 56 dimensions, whereas the mean squared distance
+would be about 56; R = 15 is calibrated on that scale.  ``distance="mean_sq"`` gives Eq. 10
+literally.
+
+Zero-variance dimensions.  Real CMU data has 8 of 56 feature dimensions that never vary
+(1-dof bones: the quaternion components along their missing axes are exactly 0).  With the
+paper's sigma^2 = sum of discarded eigenvalues / (56 - r) those 8 zero eigenvalues dilute
+sigma^2, and when a segment barely moves (standing still, or 4-channel inputs where most
+dims are constant) sigma^2 approaches 0 and H explodes on the smallest deviation.  Here:
+
+- the structural null space is found from the eigenvalues (below ``null_rel`` x trace; basis
+  independent, so it also works when the constant components are rotated into a mix of
+  columns, e.g. by the ASF ``axis`` conjugation) and left out of the count: sigma^2 = sum of
+  the discarded non-null eigenvalues / (d - nullity - r);
+- sigma^2 and the kept variances are floored at ``noise_floor`` (variance per dimension in
+  feature units; 1e-6 = a quaternion-component jitter of 0.001, about 0.1 degree), the
+  measurement noise below which no variation is meaningful.  A direction that was null in
+  the model and starts to move is then scored in units of that floor, so the change is seen
+  (H rises) without dividing by zero.
+
+Incremental cost: the model's raw sums grow by Delta frames per step (one small BLAS call);
+its top eigenvectors are tracked by one warm-started subspace-iteration step per K, with a
+full 56x56 eigen-decomposition at each segment start and every 8 steps.  H costs one
+(T x d) @ (d x r) product per step.
+
+Frames are numbered from the detector's creation.  ``Cut.frame`` = first frame of the new
+segment (the K of the peak), ``detected_at`` = the frame whose arrival confirmed the peak,
+so the delay is T + (a few) Delta frames; ``score`` = peak - valley; ``confidence`` =
+1 - R / (peak - valley).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+
+from rtseg.detectors._linalg import full_eigh, rank_for_energy, subspace_step
+from rtseg.detectors.base import Cut, OnlineDetector
+
+_FULL_EVERY = 8
+
+
+class PPCADetector(OnlineDetector):
+    """Online PPCA forward pass.  T, delta in frames; R in units of H."""
+
+    name = "ppca"
+    frame_origin = "creation"
+
+    def __init__(self, T: int = 150, delta: int = 10, tau: float = 0.95, R: float = 15.0,
+                 distance: str = "mean", noise_floor: float = 1e-6, null_rel: float = 1e-9,
+                 keep_trace: bool = False) -> None:
+        if T < 2 or delta < 1:
+            raise ValueError(f"PPCA windows must be positive (T={T}, delta={delta})")
+        if distance not in ("mean", "mean_sq"):
+            raise ValueError(f"distance must be 'mean' or 'mean_sq', not {distance!r}")
+        self.T, self.delta, self.tau, self.R = int(T), int(delta), float(tau), float(R)
+        self.distance, self.noise_floor, self.null_rel = distance, float(noise_floor), float(null_rel)
+        self.keep_trace = keep_trace
+        self.trace: list[tuple[int, float, float]] = []
+        self._t = 0
+        self._dim: int | None = None
+        self._buf: np.ndarray | None = None
+        self.restart()
+
+    @classmethod
+    def from_params(cls, p: Mapping[str, Any], frame_rate: float,
+                    keep_trace: bool = False) -> "PPCADetector":
+        from rtseg.detectors import frames
+        return cls(T=frames(p["window_s"], frame_rate), delta=frames(p["step_s"], frame_rate),
+                   tau=p["energy"], R=p["peak_threshold"], distance=p["distance"],
+                   noise_floor=p["noise_floor"], null_rel=p["null_rel"], keep_trace=keep_trace)
+
+    # ------------------------------------------------------------------ state
+    def restart(self) -> None:
+        """Forget the current segment; the next frame starts a new one."""
+        self._start = self._t
+        self._n = 0
+        if self._dim is not None:
+            self._reset_model()
+
+    def _reset_model(self) -> None:
+        d = self._dim
+        self._K = self.T
+        self._S1 = np.zeros(d)
+        self._S2 = np.zeros((d, d))
+        self._sum_n = 0
+        self._V: np.ndarray | None = None
+        self._nullity = 0
+        self._steps = 0
+        self._valley = math.inf
+        self._peak = -math.inf
+        self._peak_K = -1
+        self.last_model: dict[str, Any] | None = None
+
+    @property
+    def segment_start(self) -> int:
+        return self._start
+
+    # ------------------------------------------------------------------ model
+    def _model(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """(mean, V_r, kept variances, sigma^2) of the first K frames of the segment."""
+        K = self._K
+        if self._sum_n < K:
+            B = self._buf[self._sum_n:K]
+            self._S1 += B.sum(axis=0)
+            self._S2 += B.T @ B
+            self._sum_n = K
+        m = self._S1 / K
+        S = self._S2 - np.outer(self._S1, m)
+        trace = float(np.trace(S))
+        full = self._V is None or self._steps % _FULL_EVERY == 0
+        if not full:
+            lam, V = subspace_step(S, self._V)
+            r = rank_for_energy(lam, trace, self.tau)
+            if r > len(lam) - 2:       # spectrum beyond the tracked columns is needed
+                full = True
+        if full:
+            lam, V = full_eigh(S)
+            self._nullity = int(np.count_nonzero(lam <= self.null_rel * max(trace, 1e-300)))
+            r = rank_for_energy(lam, trace, self.tau)
+        d = S.shape[0]
+        r = max(1, min(r, d - self._nullity, len(lam)))
+        self._V = V[:, :min(V.shape[1], r + 4)]
+        self._steps += 1
+        free = d - self._nullity - r
+        kept = float(lam[:r].sum())
+        var = 1.0 / (K - 1)
+        s2 = (trace - kept) * var / free if free > 0 else 0.0
+        s2 = max(s2, self.noise_floor, 1e-300)
+        lam_r = np.maximum(lam[:r] * var, s2)
+        return m, V[:, :r], lam_r, s2
+
+    def _score(self) -> float:
+        """H for the current K (model frames [0, K), window [K, K+T) of the segment)."""
+        m, Vr, lam_r, s2 = self._model()
+        Z = self._buf[self._K:self._K + self.T] - m
+        P = Z @ Vr
+        P2 = P * P
+        q = (P2 / lam_r).sum(axis=1) + (np.einsum("ij,ij->i", Z, Z) - P2.sum(axis=1)) / s2
+        np.maximum(q, 0.0, out=q)
+        self.last_model = {"rank": Vr.shape[1], "sigma2": s2, "nullity": self._nullity}
+        return float(np.sqrt(q).mean() if self.distance == "mean" else q.mean())
+
+    # ------------------------------------------------------------------ streaming
+    def update(self, x: np.ndarray) -> Cut | None:
+        """Feed one frame; a Cut when a peak of H at least R above its valley is confirmed."""
+        x = np.asarray(x, dtype=np.float64)
+        if x.ndim != 1:
+            raise ValueError(f"update() takes one frame (1-D), got shape {x.shape}")
+        if self._dim is None:
+            self._dim = x.shape[0]
+            self._buf = np.empty((4 * self.T + 64, self._dim))
+            self._reset_model()
+        elif x.shape[0] != self._dim:
+            raise ValueError(f"frame has {x.shape[0]} dims, detector has {self._dim}")
+        t = self._t
+        self._t += 1
+        n = self._n
+        if n == self._buf.shape[0]:
+            nb = np.empty((2 * n, self._dim))
+            nb[:n] = self._buf[:n]
+            self._buf = nb
+        self._buf[n] = x
+        self._n = n + 1
+        cut = None
+        while cut is None and self._n >= self._K + self.T:
+            cut = self._step(t)
+        return cut
+
+    def _step(self, t: int) -> Cut | None:
+        H = self._score()
+        K = self._K
+        if self.keep_trace:
+            self.trace.append((self._start + K, H, self._valley + self.R))
+        if self._peak_K >= 0 and H < self._peak and self._peak - self._valley >= self.R:
+            rise = self._peak - self._valley
+            frame = self._start + self._peak_K
+            cut = Cut(frame=frame, method=self.name,
+                      confidence=float(min(max(1.0 - self.R / rise, 0.0), 1.0)),
+                      detected_at=t, score=float(rise))
+            self._cut_restart(self._peak_K)
+            return cut
+        if H < self._valley:
+            self._valley, self._peak, self._peak_K = H, -math.inf, -1
+        elif H > self._peak:
+            self._peak, self._peak_K = H, K
+        self._K = K + self.delta
+        return None
+
+    def _cut_restart(self, k: int) -> None:
+        """New segment starting k frames into the current one; keep the frames after it."""
+        rest = self._buf[k:self._n].copy()
+        self._start += k
+        self._n = len(rest)
+        self._buf[:self._n] = rest
+        self._reset_model()
+
+
+def _pass(X: np.ndarray, det_args: dict[str, Any]) -> list[Cut]:
+    return PPCADetector(**det_args).run(X)
+
+
+def segment_ppca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
+                 keep_trace: bool = False) -> tuple[list[Cut], list]:
+    """Offline PPCA: forward pass, then backward, forward, ... within the segments found so
+    far, until a pass adds no cut (at most ``max_passes``; paper 3.2).
+
+    Cuts of the first (forward) pass keep their online ``detected_at``; cuts added by later
+    passes are batch results (``detected_at == frame``).  The trace is the first pass's.
+    """
+    from rtseg.detectors import frames
+    args = dict(T=frames(p["window_s"], frame_rate), delta=frames(p["step_s"], frame_rate),
+                tau=p["energy"], R=p["peak_threshold"], distance=p["distance"],
+                noise_floor=p["noise_floor"], null_rel=p["null_rel"])
+    X = np.asarray(X, dtype=np.float64)
+    n = len(X)
+    first = PPCADetector(keep_trace=keep_trace, **args)
+    cuts: dict[int, Cut] = {c.frame: c for c in first.run(X)}
+    backward = True
+    for _ in range(int(p["max_passes"]) - 1):
+        bounds = [0] + sorted(cuts) + [n]
+        new: list[Cut] = []
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            if b - a < 2 * args["T"] + args["delta"]:
+                continue
+            seg = X[a:b][::-1] if backward else X[a:b]
+            for c in _pass(seg, args):
+                f = b - c.frame if backward else a + c.frame
+                new.append(Cut(frame=f, method="ppca", confidence=c.confidence,
+                               detected_at=f, score=c.score))
+        if not new:
+            break
+        for c in new:
+            cuts.setdefault(c.frame, c)
+        backward = not backward
+    return sorted(cuts.values(), key=lambda c: c.frame), first.trace
