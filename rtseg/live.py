@@ -272,26 +272,19 @@ class Pipeline:
     def _to_session(self, method: str, cut: Cut, index: int) -> PipelineCut | None:
         """Map the detector's frame numbers to session indices.
 
-        Detectors number frames either from their creation or from their last restart
-        (``frame_origin`` attribute "creation"/"restart"; default: decided by whether the
-        number fits the current segment).  Within a segment every frame is fed, so the map
-        is linear.
+        Detectors number frames from their creation (the default, ``frame_origin =
+        "creation"``) or from their last restart (``frame_origin = "restart"``).  Within a
+        segment every frame is fed, so the map is linear from the segment's first frame.
         """
         seg0 = self._seg_start[method]
-        fed_in_seg = self._fed[method] - self._fed_at_start[method]   # frames fed this segment
-        origin = getattr(self.detectors[method], "frame_origin", None)
-        if origin == "creation" or (origin is None and self._fed_at_start[method] > 0
-                                    and cut.frame >= self._fed_at_start[method]
-                                    and cut.frame - self._fed_at_start[method] < fed_in_seg
-                                    and cut.frame >= fed_in_seg):
-            rel = cut.frame - self._fed_at_start[method]
-            rel_det = (cut.detected_at - self._fed_at_start[method]) if cut.detected_at >= 0 else fed_in_seg - 1
-        else:
-            rel = cut.frame
-            rel_det = cut.detected_at if cut.detected_at >= 0 else fed_in_seg - 1
+        fed_in_seg = self._fed[method] - self._fed_at_start[method]
+        origin = getattr(self.detectors[method], "frame_origin", "creation")
+        base = self._fed_at_start[method] if origin == "creation" else 0
+        rel = cut.frame - base
+        rel_det = (cut.detected_at - base) if cut.detected_at >= 0 else fed_in_seg - 1
         boundary = seg0 + rel
-        detected = seg0 + rel_det
-        if rel < 0 or boundary < seg0:
+        detected = seg0 + max(rel, rel_det)
+        if rel < 0:
             self.stats.discarded_cuts += 1
             log.info("%s cut at frame %d discarded: it precedes the restart at frame %d",
                      method, boundary, seg0)
@@ -419,9 +412,10 @@ class LiveSession:
 
     source: a URL for ``rtseg.drivers.open_source`` or an opened ``Source``.
     config: a ``SessionConfig`` (default: ``config/live.toml``).
-    publishers: object with ``publish(event)`` and ``close()`` (default: built from the
-        config's output section with ``rtseg.publishers``); recorder: object with
-        ``write_frame(frame)``, ``write_event(event)``, ``close()`` (default: a
+    publishers: object with ``publish_cut(ev) -> ev``, ``publish_status(ev)``,
+        ``publish_dropout(ev)`` and ``close()`` (default: ``build_publishers(config)``, a
+        ``rtseg.publishers.PublisherSet``); recorder: object with ``record_frame(frame)``,
+        ``record_cut(ev)``, ``record_event(ev)``, ``close()`` (default: a
         ``rtseg.recording.SessionRecorder`` when ``recording.dir`` is set).
     listeners: callables given every event after it is published (the CLI prints them).
     duration: stop after this many seconds (None: until the source ends or a signal).
@@ -489,10 +483,13 @@ class LiveSession:
             self.publishers = build_publishers(self.config)
         if self.recorder is None and self.config["recording.dir"]:
             from rtseg.recording import SessionRecorder
+            url = (self._source_arg if isinstance(self._source_arg, str)
+                   else getattr(src, "url", type(src).__name__))
             self.recorder = SessionRecorder(
-                self.config["recording.dir"], joint_names=names, parents=parents, space=space,
-                frame_rate=self.frame_rate, source=str(self._source_arg)
-                if isinstance(self._source_arg, str) else type(src).__name__)
+                self.config["recording.dir"], names, parents, space=space,
+                frame_rate=self.frame_rate,
+                meta={"source": url, "config": self.config.origin,
+                      "methods": list(self.pipeline.detectors)})
 
     # ---------------------------------------------------------------- reader thread
     def _reader(self) -> None:
@@ -528,7 +525,7 @@ class LiveSession:
                 if self.recorder is not None:
                     with self._rec_lock:
                         try:
-                            self.recorder.write_frame(frame)
+                            self.recorder.record_frame(frame)
                         except Exception as exc:
                             self.stats.record_errors += 1
                             self._warn("record", "recording a frame failed: %s", exc)
@@ -558,7 +555,10 @@ class LiveSession:
         if self.recorder is not None:
             with self._rec_lock:
                 try:
-                    self.recorder.write_event(ev)
+                    if isinstance(ev, CutEvent):
+                        self.recorder.record_cut(ev)
+                    else:
+                        self.recorder.record_event(ev)
                 except Exception as exc:
                     self.stats.record_errors += 1
                     self._warn("record_ev", "recording an event failed: %s", exc)
@@ -717,6 +717,9 @@ class LiveSession:
                                "(%d frames queued)", self.stats.lag_s * 1000, cursor.backlog)
                 if not len(w):
                     self._check_silence(now)
+                    if self.recorder is not None and hasattr(self.recorder, "poll"):
+                        with self._rec_lock:
+                            self.recorder.poll()
                 if now >= next_status:
                     self._emit(self._status(now))
                     next_status = max(next_status + interval, now + interval / 2)
@@ -753,7 +756,7 @@ class LiveSession:
         st = self.stats
         dur = now - self.session_start if self.session_start else 0.0
         src_stats = self.source.stats.as_dict() if getattr(self.source, "stats", None) else {}
-        rec = getattr(self.recorder, "path", None) or (self.config["recording.dir"] or None)
+        rec = getattr(self.recorder, "dir", None) or (self.config["recording.dir"] or None)
         summary = SessionSummary(
             duration_s=dur, frames_received=st.frames_received,
             frames_processed=st.frames_processed,

@@ -253,10 +253,13 @@ class FakeRecorder:
         self.events = []
         self.closed = False
 
-    def write_frame(self, f):
+    def record_frame(self, f):
         self.frames.append(f)
 
-    def write_event(self, ev):
+    def record_cut(self, ev):
+        self.events.append(ev)
+
+    def record_event(self, ev):
         self.events.append(ev)
 
     def close(self):

@@ -1,0 +1,186 @@
+"""``rtseg live SOURCE_URL``: segment a live stream and send each cut over OSC.
+
+Cuts are printed on stdout as they happen (one line each); a one-line status (input frame
+rate, drops, stale joints, lag, last cut) goes to stderr - rewritten in place with ``\\r``
+when stderr is a terminal, otherwise printed as a plain line every few seconds.  Ctrl-C or
+SIGTERM ends the session cleanly (source, publishers and recording closed, summary printed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from typing import Any, Callable, TextIO
+
+from rtseg.config import ConfigError
+from rtseg.events import CutEvent, DropoutEvent, StatusEvent
+from rtseg.session_config import SessionConfig, load_session_config
+
+#: seconds between plain status lines when stderr is not a terminal
+PLAIN_STATUS_EVERY = 5.0
+
+
+def add_session_arguments(p: argparse.ArgumentParser, osc_default_note: str = "") -> None:
+    """Options shared by ``rtseg live`` and ``rtseg demo``."""
+    p.add_argument("--osc", action="append", metavar="HOST:PORT",
+                   help="OSC/UDP target for cut, status and dropout messages (repeatable; "
+                        "replaces the config's output.osc; default 127.0.0.1:9123)"
+                   + osc_default_note)
+    p.add_argument("--osc-tcp", action="append", metavar="HOST:PORT",
+                   help="OSC 1.1 over TCP (SLIP) target, e.g. QLab (repeatable)")
+    p.add_argument("--no-osc", action="store_true", help="send no OSC over UDP")
+    p.add_argument("--template", action="append", metavar="ADDR",
+                   help="extra OSC address template sent on each cut to every OSC target, "
+                        "e.g. '/cue/{label}/start' (repeatable)")
+    p.add_argument("--target", action="append", metavar="SPEC",
+                   help="full target spec, e.g. 'udp:127.0.0.1:53000,standard=off,"
+                        "template=/cue/{label}/start' (repeatable)")
+    p.add_argument("--jsonl", metavar="PATH|-", help="also write events as JSON lines ('-': stdout)")
+    p.add_argument("--record", metavar="DIR", help="record the session (frames + events) to DIR")
+    p.add_argument("--config", metavar="FILE", help="session configuration (default config/live.toml)")
+    p.add_argument("--methods", metavar="LIST", help="online detectors, comma separated (pca,ppca)")
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument("--quiet", action="store_true", help="no status line on stderr")
+
+
+def config_from_args(args: argparse.Namespace) -> SessionConfig:
+    """The session configuration: file (``--config``) then command-line overrides.
+    Errors name the key or the flag."""
+    over: dict[str, Any] = {}
+    if args.osc:
+        over["output.osc"] = list(args.osc)
+    if getattr(args, "no_osc", False):
+        over["output.osc"] = []
+    if args.osc_tcp:
+        over["output.osc_tcp"] = list(args.osc_tcp)
+    if args.template:
+        over["output.templates"] = list(args.template)
+    if args.target:
+        over["output.targets"] = list(args.target)
+    if args.jsonl:
+        over["output.jsonl"] = args.jsonl
+    if args.record:
+        over["recording.dir"] = args.record
+    if args.methods:
+        over["detectors.methods"] = [m.strip() for m in args.methods.split(",") if m.strip()]
+    cfg = load_session_config(args.config)
+    if over:
+        from rtseg.session_config import apply_overrides
+        apply_overrides(cfg, over, origin="command line")
+    return cfg
+
+
+def format_cut(ev: CutEvent) -> str:
+    lat = "-" if ev.latency_ms is None else f"{ev.latency_ms:.1f}"
+    return (f"cut #{ev.event:<3d} {ev.method:<5s} segment {ev.segment:<3d} "
+            f"frame {ev.frame:<7d} t={ev.time:9.3f} s  confidence {ev.confidence:.2f}  "
+            f"detector delay {ev.detector_delay_ms:.0f} ms  latency {lat} ms")
+
+
+class Console:
+    """Prints cuts on ``out`` and the status line on ``err`` (an event listener)."""
+
+    def __init__(self, out: TextIO = sys.stdout, err: TextIO = sys.stderr,
+                 print_cuts: bool = True, status: bool = True,
+                 session_stats: Callable[[], Any] | None = None) -> None:
+        self.out, self.err = out, err
+        self.print_cuts = print_cuts
+        self.status = status
+        self.tty = bool(getattr(err, "isatty", lambda: False)())
+        self.last_cut: CutEvent | None = None
+        self.session_stats = session_stats
+        self._line_shown = False
+        self._last_plain = 0.0
+
+    def _clear(self) -> None:
+        if self.tty and self._line_shown:
+            self.err.write("\r\033[K")
+            self.err.flush()
+            self._line_shown = False
+
+    def __call__(self, ev: Any) -> None:
+        if isinstance(ev, CutEvent):
+            self.last_cut = ev
+            if self.print_cuts:
+                self._clear()
+                print(format_cut(ev), file=self.out, flush=True)
+        elif isinstance(ev, DropoutEvent):
+            self._clear()
+            print(f"rtseg: dropout: {ev.name} {'lost' if ev.lost else 'restored'} "
+                  f"at t={ev.time:.2f} s", file=self.err, flush=True)
+        elif isinstance(ev, StatusEvent) and self.status and ev.alive:
+            self.show_status(ev)
+
+    def show_status(self, ev: StatusEvent) -> None:
+        lag = ""
+        if self.session_stats is not None:
+            st = self.session_stats()
+            lag = f" | lag {st.lag_s * 1000:.0f} ms"
+        last = "-"
+        if self.last_cut is not None:
+            c = self.last_cut
+            last = f"{c.method} #{c.event} at {c.time:.2f} s"
+        line = (f"rtseg live: {ev.time:7.1f} s | {ev.frame_rate:6.1f} fps | "
+                f"{ev.dropped} dropped | {ev.stale_joints} stale{lag} | last cut: {last}")
+        if self.tty:
+            self.err.write("\r\033[K" + line)
+            self.err.flush()
+            self._line_shown = True
+        else:
+            now = time.monotonic()
+            if now - self._last_plain >= PLAIN_STATUS_EVERY:
+                self._last_plain = now
+                print(line, file=self.err, flush=True)
+
+    def finish(self) -> None:
+        self._clear()
+
+
+def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: bool,
+                before_run: Callable[[], None] | None = None) -> int:
+    """Run a live session with console output; returns the exit status."""
+    from rtseg.live import LiveSession
+    console = Console(print_cuts=cfg["output.jsonl"] != "-", status=not quiet)
+    session = LiveSession(source, cfg, listeners=[console], duration=duration)
+    console.session_stats = lambda: session.stats
+    try:
+        if before_run is not None:
+            before_run()
+        summary = session.run()
+    finally:
+        console.finish()
+    print(summary.text(), file=sys.stderr, flush=True)
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        cfg = config_from_args(args)
+    except ConfigError as exc:
+        print(f"rtseg live: configuration error: {exc}", file=sys.stderr)
+        return 2
+    url = args.source or cfg["source.url"]
+    if not url:
+        print("rtseg live: no source: give SOURCE_URL or set source.url in the configuration",
+              file=sys.stderr)
+        return 2
+    from rtseg.drivers import SourceError
+    try:
+        return run_session(url, cfg, args.duration, args.quiet)
+    except (ConfigError, SourceError) as exc:
+        print(f"rtseg live: {exc}", file=sys.stderr)
+        return 2
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "live", help="segment a live stream and send cuts over OSC",
+        description="Segment a live motion stream into behaviours and send each cut over OSC "
+                    "as it happens.  Sources: serial:///dev/ttyUSB0?baud=921600, "
+                    "osc://0.0.0.0:39539?format=vmc, file://take.amc?skeleton=86.asf, "
+                    "sim://synth.")
+    p.add_argument("source", nargs="?", metavar="SOURCE_URL",
+                   help="where frames come from (default: source.url of the configuration)")
+    add_session_arguments(p)
+    p.set_defaults(func=run)
