@@ -173,7 +173,7 @@ def read_bvh(path: str | Path, frame_rate: float | None = None) -> Take:
     # MOTION header.
     idx = motion_line  # 0-based index of the line after MOTION
     header: dict[str, str] = {}
-    while idx < len(lines) and len(header) < 2:
+    while idx < len(lines) and not ("frames" in header and "time" in header):
         raw = lines[idx].strip()
         idx += 1
         if not raw:
