@@ -180,11 +180,17 @@ def cobs_encode(data: bytes | bytearray) -> bytes:
     """COBS-encode ``data``: the result contains no zero byte and is at most
     ``len(data) + len(data) // 254 + 1`` bytes long."""
     out = bytearray()
-    for block in bytes(data).split(b"\x00"):
+    chunks = bytes(data).split(b"\x00")
+    last = len(chunks) - 1
+    for k, block in enumerate(chunks):
+        full = False
         while len(block) >= 254:
             out.append(0xFF)
             out += block[:254]
             block = block[254:]
+            full = True
+        if k == last and full and not block:
+            break  # canonical COBS: no empty block after a final 0xFF block
         out.append(len(block) + 1)
         out += block
     return bytes(out)
