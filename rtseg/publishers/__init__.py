@@ -108,7 +108,8 @@ def parse_target(spec: str, templates: Sequence[str] | None = None) -> Publisher
             proto, head = p, head[len(prefix):].rstrip("/")
             break
     else:
-        if re.match(r"^[a-z][a-z0-9.+-]*:(?!\d)", head) and not head.startswith("["):
+        if not head.startswith("[") and (
+                head.count(":") >= 2 or re.match(r"^[A-Za-z][\w.+-]*:(?!\d+$)", head)):
             raise ValueError(f"bad output target {spec!r}: unknown scheme "
                              f"(use udp:, tcp:, jsonl: or -)")
     host, port = _split_hostport(spec, head)
