@@ -79,8 +79,8 @@ class PoseFeatures:
     ``axis_quats`` (J, 4), optional: a fixed frame C_j per joint (ASF/AMC ``meta["axis_quats"]``).
     When given, each parent-relative rotation L_j is re-expressed in that frame,
     C_j⁻¹ ⊗ L_j ⊗ C_j; for ASF/AMC takes this is exactly the AMC dof rotation M, the
-    quantity of the paper, and 1- or 2-dof bones then have exactly zero components along their
-    missing axes (``constant_dims`` finds them).  Distances between poses are the same with
+    quantity of the paper, and 1- or 2-dof bones then have zero components (up to ~1e-16
+    rounding) along their missing axes (``constant_dims`` finds them).  Distances between poses are the same with
     or without it (a fixed orthogonal map per joint).
     """
 
