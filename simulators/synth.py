@@ -714,7 +714,10 @@ def synthesize(script: str | list[tuple[str, float]] = DEFAULT_SCRIPT, frame_rat
         meta={"synth_script": script_text, "synth_seed": int(seed),
               "segments": [[s.name, s.start, s.stop] for s in segments],
               "transitions": [[t.lo, t.mid, t.hi, t.before, t.after] for t in transitions]})
-    return SynthResult(take=take, segments=segments, transitions=transitions, script=items)
+    result = SynthResult(take=take, segments=segments, transitions=transitions, script=items)
+    # Per-frame segment index: lets rtseg.labels.labels_from_take score a saved synthetic take.
+    take.meta["frame_labels"] = result.frame_labels()
+    return result
 
 
 __all__ = ["synthesize", "parse_script", "SynthResult", "Segment", "Behaviour", "BEHAVIOURS",
