@@ -323,6 +323,22 @@ def read_asf(path: str | Path) -> AsfSkeleton:
     return sk
 
 
+def _euler_quats(axes: str, angles_deg: np.ndarray) -> np.ndarray:
+    """R = R_axes[0]·R_axes[1]·... of (F, k) angles in degrees (same as
+    ``rtseg.quat.from_euler(axes, angles)``, composed directly: faster for long takes)."""
+    angles_deg = np.atleast_2d(np.asarray(angles_deg, dtype=np.float64))
+    half = np.radians(angles_deg) * 0.5
+    out = None
+    for k, a in enumerate(axes.upper()):
+        q = np.zeros((angles_deg.shape[0], 4))
+        q[:, "XYZ".index(a)] = np.sin(half[:, k])
+        q[:, 3] = np.cos(half[:, k])
+        out = q if out is None else Q.multiply(out, q)
+    if out is None:
+        return np.broadcast_to(Q.IDENTITY, (angles_deg.shape[0], 4)).copy()
+    return out
+
+
 def _axis_quat(angles_xyz_deg: np.ndarray, order: str) -> np.ndarray:
     """Quaternion of an ASF ``axis``: rotations about the axes applied in ``order``.
 
@@ -331,7 +347,7 @@ def _axis_quat(angles_xyz_deg: np.ndarray, order: str) -> np.ndarray:
     """
     idx = {"X": 0, "Y": 1, "Z": 2}
     rev = order[::-1]
-    return Q.from_euler(rev, np.array([angles_xyz_deg[idx[a]] for a in rev]), degrees=True)
+    return _euler_quats(rev, np.array([[angles_xyz_deg[idx[a]] for a in rev]]))[0]
 
 
 def _motion_quats(values_deg: np.ndarray, rot_dofs: list[str]) -> np.ndarray:
@@ -339,7 +355,7 @@ def _motion_quats(values_deg: np.ndarray, rot_dofs: list[str]) -> np.ndarray:
     if not rot_dofs:
         return np.broadcast_to(Q.IDENTITY, (values_deg.shape[0], 4)).copy()
     axes = "".join(d[1].upper() for d in reversed(rot_dofs))
-    return Q.from_euler(axes, values_deg[:, ::-1], degrees=True)
+    return _euler_quats(axes, values_deg[:, ::-1])
 
 
 def _conjugated(c: np.ndarray, m: np.ndarray) -> np.ndarray:
@@ -378,24 +394,45 @@ def read_amc(path: str | Path, skeleton: AsfSkeleton | str | Path,
     frame_lines: list[int] = []
     row: list[float] | None = None
     seen: set[str] = set()
+    n_seen_required = 0
     fully_specified = False
+    layout_get = layout.get
 
     def close_frame(at_line: int) -> None:
-        if row is None:
+        if row is None or n_seen_required == n_required:
             return
-        if len(seen.intersection(must_appear)) != n_required:
-            missing = [n for n in must_appear if n not in seen]
-            raise ReaderError(
-                path, f"frame {frame_numbers[-1]} (line {frame_lines[-1]}) has no line for bone "
-                f"{missing[0]!r}" + (f" and {len(missing) - 1} more" if len(missing) > 1 else ""),
-                at_line)
+        missing = [n for n in must_appear if n not in seen]
+        raise ReaderError(
+            path, f"frame {frame_numbers[-1]} (line {frame_lines[-1]}) has no line for bone "
+            f"{missing[0]!r}" + (f" and {len(missing) - 1} more" if len(missing) > 1 else ""),
+            at_line)
 
     for lineno, raw in enumerate(lines, start=1):
         tokens = raw.split()
-        if not tokens or tokens[0].startswith("#"):
+        if not tokens:
             continue
         head = tokens[0]
-        if head.startswith(":"):
+        spec = layout_get(head)
+        if spec is not None and row is not None:  # the common case: one bone's values
+            if head in seen:
+                raise ReaderError(path, f"bone {head!r} given twice in frame {frame_numbers[-1]}", lineno)
+            seen.add(head)
+            start, k = spec
+            if len(tokens) - 1 != k:
+                dofs = " ".join(sk.root_order if head == "root" else sk.bones[head].dof) or "none"
+                raise ReaderError(
+                    path, f"bone {head!r} has {len(tokens) - 1} values, expected {k} ({dofs})", lineno)
+            if k:
+                n_seen_required += 1
+                try:
+                    row[start:start + k] = map(float, tokens[1:])
+                except ValueError:
+                    bad = next(t for t in tokens[1:] if not _is_number(t))
+                    raise ReaderError(path, f"bone {head!r}: value {bad!r} is not a number", lineno) from None
+            continue
+        if head[0] == "#":
+            continue
+        if head[0] == ":":
             if row is not None:
                 raise ReaderError(path, f"header keyword {head!r} after motion data", lineno)
             kw = head.upper()
@@ -422,27 +459,13 @@ def read_amc(path: str | Path, skeleton: AsfSkeleton | str | Path,
             row = [0.0] * n_cols
             rows.append(row)
             seen = set()
+            n_seen_required = 0
             continue
         if row is None:
-            if head in layout:
+            if spec is not None:
                 raise ReaderError(path, f"bone line before the first frame number: {raw.strip()!r}", lineno)
             raise ReaderError(path, f"unexpected text before the first frame number: {raw.strip()!r}", lineno)
-        spec = layout.get(head)
-        if spec is None:
-            raise ReaderError(path, f"unknown bone {head!r} (not in skeleton {sk.path})", lineno)
-        if head in seen:
-            raise ReaderError(path, f"bone {head!r} given twice in frame {frame_numbers[-1]}", lineno)
-        seen.add(head)
-        start, k = spec
-        if len(tokens) - 1 != k:
-            dofs = " ".join(sk.root_order if head == "root" else sk.bones[head].dof) or "none"
-            raise ReaderError(
-                path, f"bone {head!r} has {len(tokens) - 1} values, expected {k} ({dofs})", lineno)
-        try:
-            row[start:start + k] = [float(t) for t in tokens[1:]]
-        except ValueError:
-            bad = next(t for t in tokens[1:] if not _is_number(t))
-            raise ReaderError(path, f"bone {head!r}: value {bad!r} is not a number", lineno) from None
+        raise ReaderError(path, f"unknown bone {head!r} (not in skeleton {sk.path})", lineno)
     close_frame(len(lines))
     if not rows:
         raise ReaderError(path, "no motion frames (no frame number lines)")
