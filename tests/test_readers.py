@@ -573,3 +573,10 @@ def test_directory_without_session_support_is_a_clear_error(tmp_path, monkeypatc
     monkeypatch.setitem(sys.modules, "rtseg.recording", None)  # import raises ImportError
     with pytest.raises(ReaderError, match="session reading is unavailable"):
         read_take(tmp_path)
+
+
+def test_directory_that_is_not_a_session(tmp_path):
+    pytest.importorskip("rtseg.recording")
+    with pytest.raises(ReaderError) as ei:
+        read_take(tmp_path)
+    assert str(ei.value).startswith(f"{tmp_path}: ") and "session" in str(ei.value)

@@ -33,7 +33,12 @@ def read_take(path: str | Path, skeleton: str | Path | None = None,
             from rtseg.recording import read_session
         except ImportError as exc:
             raise ReaderError(path, f"is a directory, and session reading is unavailable ({exc})") from None
-        take = read_session(path)
+        try:
+            take = read_session(path)
+        except ReaderError:
+            raise
+        except ValueError as exc:  # session errors already name their file
+            raise ReaderError(path, str(exc)) from exc
         if frame_rate is not None:
             take.frame_rate = float(frame_rate)
         return take
