@@ -402,6 +402,17 @@ class SessionSummary:
         return sorted(self.cuts_by_method.items())
 
 
+def _blas_limit(n: int) -> Any:
+    """Limit BLAS threads to ``n`` (0: no change); the limiter, or None."""
+    if n <= 0:
+        return None
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn
+        return None
+    return threadpool_limits(n, user_api="blas")
+
+
 def _percentile(values: Iterable[float], p: float) -> float | None:
     a = np.fromiter(values, dtype=np.float64)
     return float(np.percentile(a, p)) if a.size else None
@@ -680,6 +691,7 @@ class LiveSession:
                 old_handlers[sig] = signal.signal(
                     sig, lambda signum, _f: self.stop(signal.Signals(signum).name))
         reader = None
+        blas = _blas_limit(int(self.config["buffer.blas_threads"]))
         try:
             self._open()
             J = len(self.pipeline.joint_names)
@@ -736,6 +748,8 @@ class LiveSession:
             summary = self._shutdown()
             for sig, h in old_handlers.items():
                 signal.signal(sig, h)
+            if blas is not None:
+                blas.restore_original_limits()
         return summary
 
     def _shutdown(self) -> SessionSummary:
@@ -783,6 +797,11 @@ def replay_frames(frames: Iterable[tuple[np.ndarray, np.ndarray, int | None, flo
     cfg = config if config is not None else load_session_config()
     pipe = Pipeline(joint_names, parents, space, frame_rate, cfg)
     cuts: list[PipelineCut] = []
-    for i, (q, v, seq, t) in enumerate(frames):
-        cuts.extend(pipe.process(i, q, v, seq, t))
+    blas = _blas_limit(int(cfg["buffer.blas_threads"]))
+    try:
+        for i, (q, v, seq, t) in enumerate(frames):
+            cuts.extend(pipe.process(i, q, v, seq, t))
+    finally:
+        if blas is not None:
+            blas.restore_original_limits()
     return cuts

@@ -157,6 +157,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "max_batch": Key("int", 256, _min(1), doc="frames processed per wake-up at most"),
         "lag_warn_seconds": Key("float", 0.1, _min(0.0, strict=True),
                                 doc="warn when a frame waits longer than this before processing"),
+        "blas_threads": Key("int", 1, _min(0),
+                            doc="BLAS threads while the session runs (0 = leave as is)"),
     },
 }
 
