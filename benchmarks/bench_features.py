@@ -55,6 +55,9 @@ def main() -> None:
         ("suit17 local+calibration (VMC)  ", PoseFeatures(suit.bones, suit.parents, "local"), frames, True),
         ("suit17 global  all 17 joints    ", PoseFeatures(suit.bones, suit.parents, "global", "all"), frames, False),
         ("cmu31 local    (cmu14)          ", PoseFeatures(cmu_names, cmu_parents, "local"), cmu_frames, False),
+        ("cmu31 global   (cmu14, axis fr.)", PoseFeatures(cmu_names, cmu_parents, "global",
+                                                          axis_quats=Rotation.random(31, random_state=2).as_quat()),
+         cmu_frames, False),
     ]
     print(f"{args.frames} frames per case")
     for name, pf, fr, cal in cases:

@@ -580,3 +580,15 @@ def test_directory_that_is_not_a_session(tmp_path):
     with pytest.raises(ReaderError) as ei:
         read_take(tmp_path)
     assert str(ei.value).startswith(f"{tmp_path}: ") and "session" in str(ei.value)
+
+
+@pytest.mark.parametrize("order,axis_of_rotation", [("XYZ", [0, 1, 0]), ("ZYX", [0, 0, 1])])
+def test_axis_order_and_translation_dofs(tmp_path, order, axis_of_rotation):
+    """axis 90 0 90: XYZ means C = Rz·Rx (x -> y), ZYX means C = Rx·Rz (x -> z).  A bone
+    with dof "tx rx" takes its rotation from the second column."""
+    asf = ASF.replace("     axis 0 0 90 XYZ\n     dof rx\n     limits (-180.0 180.0)\n",
+                      f"     axis 90 0 90 {order}\n     dof tx rx\n     limits (0 1)\n            (-180 180)\n")
+    amc = AMC.replace("a 90\n", "a 5 90\n").replace("a 0\n", "a 0 0\n")
+    take = read_amc(_write(tmp_path, "T_01.amc", amc), _write(tmp_path, "T.asf", asf))
+    np.testing.assert_allclose(take.quats[0, 1], [*(S * np.array(axis_of_rotation)), S], atol=1e-12)
+    assert take.meta["dof"]["a"] == ["tx", "rx"]
