@@ -9,6 +9,7 @@ on a local-space rig with a calibration frame, and the CMU skeleton (31 joints, 
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numpy as np
@@ -18,14 +19,15 @@ from rtseg.features import PoseFeatures
 from rtseg.profiles import suit_profile
 
 
-def bench_step(pf: PoseFeatures, frames: np.ndarray, calibrate: bool) -> float:
+def bench_step(pf: PoseFeatures, frames: np.ndarray, calibrate: bool) -> tuple[float, float]:
+    """(frames per wall second, frames per CPU second of this process)."""
     if calibrate:
         pf.calibrate(frames[0])
     pf.reset()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for f in frames:
         pf.step(f)
-    return len(frames) / (time.perf_counter() - t0)
+    return len(frames) / (time.perf_counter() - t0), len(frames) / (time.process_time() - c0)
 
 
 def bench_transform(pf: PoseFeatures, frames: np.ndarray) -> float:
@@ -59,11 +61,11 @@ def main() -> None:
                                                           axis_quats=Rotation.random(31, random_state=2).as_quat()),
          cmu_frames, False),
     ]
-    print(f"{args.frames} frames per case")
+    print(f"{args.frames} frames per case; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cpus")
     for name, pf, fr, cal in cases:
-        s = bench_step(pf, fr, cal)
+        s, sc = bench_step(pf, fr, cal)
         b = bench_transform(pf, fr)
-        print(f"{name}  step {s:10.0f} frames/s   transform {b:12.0f} frames/s")
+        print(f"{name}  step {s:8.0f} frames/s (cpu {sc:8.0f})   transform {b:10.0f} frames/s")
 
 
 if __name__ == "__main__":
