@@ -580,3 +580,18 @@ def test_publisher_set_adds_templates_to_osc_targets_only(tmp_path):
 def test_slip_encode_escapes():
     assert slip_encode(b"a\xc0b\xdbc") == b"\xc0a\xdb\xdcb\xdb\xddc\xc0"
     assert slip_frames(slip_encode(b"\xc0\xdb\xdb\xc0")) == [b"\xc0\xdb\xdb\xc0"]
+
+
+def test_slip_decoder_and_message_decoder_on_chunked_stream():
+    from rtseg.publishers.oscmsg import SlipDecoder, decode_message
+    pkts = [encode_message("/rtseg/cut", "iiffffs", [192, 219, -2.0, 0.5, 1.0, 2.0, "kick"]),
+            encode_message("/rtseg/dropout", "si", ["Head", 1])]
+    stream = b"".join(slip_encode(p) for p in pkts)
+    dec, got = SlipDecoder(), []
+    for i in range(0, len(stream), 3):           # arbitrary chunk boundaries
+        got += dec.feed(stream[i:i + 3])
+    assert got == pkts and dec.errors == 0
+    assert decode_message(got[0]) == ("/rtseg/cut", "iiffffs", [192, 219, -2.0, 0.5, 1.0, 2.0, "kick"])
+    assert decode_message(got[1]) == ("/rtseg/dropout", "si", ["Head", 1])
+    with pytest.raises(ValueError):
+        decode_message(got[0][:-6])
