@@ -592,3 +592,22 @@ def test_axis_order_and_translation_dofs(tmp_path, order, axis_of_rotation):
     take = read_amc(_write(tmp_path, "T_01.amc", amc), _write(tmp_path, "T.asf", asf))
     np.testing.assert_allclose(take.quats[0, 1], [*(S * np.array(axis_of_rotation)), S], atol=1e-12)
     assert take.meta["dof"]["a"] == ["tx", "rx"]
+
+
+from hypothesis import given, settings, strategies as st  # noqa: E402
+
+
+@settings(max_examples=40, deadline=None)
+@given(order=st.permutations(["Xrotation", "Yrotation", "Zrotation"]),
+       angles=st.lists(st.floats(-180, 180, allow_nan=False), min_size=3, max_size=3))
+def test_bvh_any_channel_order_is_matrix_product(tmp_path_factory, order, angles):
+    text = ("HIERARCHY\nROOT r\n{\n OFFSET 0 0 0\n CHANNELS 3 " + " ".join(order)
+            + "\n End Site\n {\n  OFFSET 0 1 0\n }\n}\nMOTION\nFrames: 1\nFrame Time: 0.01\n"
+            + " ".join(repr(a) for a in angles) + "\n")
+    p = tmp_path_factory.mktemp("bvh") / "h.bvh"
+    p.write_text(text)
+    take = read_bvh(p)
+    expected = np.eye(3)
+    for name, a in zip(order, angles):
+        expected = expected @ Rotation.from_euler(name[0].lower(), a, degrees=True).as_matrix()
+    np.testing.assert_allclose(Rotation.from_quat(take.quats[0, 0]).as_matrix(), expected, atol=1e-12)
