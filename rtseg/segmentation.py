@@ -61,7 +61,9 @@ class SegmentationResult:
     """Cuts of one method on one take and the segments between them.
 
     cuts: sorted by frame, each strictly inside (0, n_frames).
-    trace: the detector's trace (statistics for plotting) when ``keep_trace`` was asked.
+    trace: the detector's trace when ``keep_trace`` was asked: (frame, statistic,
+        threshold) rows - PCA d_i and mean + k_sigma std; PPCA H at K and valley + R;
+        GMM cluster label and confidence per frame.
     elapsed_s: wall time of features + detector.
     """
     method: str
@@ -168,13 +170,7 @@ def segment_features_result(X: np.ndarray, method: str, frame_rate: float,
     t0 = time.perf_counter()
     out = segment_features(X, method, frame_rate, dict(params or {}), keep_trace)
     elapsed = time.perf_counter() - t0
-    trace = None
-    if isinstance(out, tuple):
-        raw, trace = out[0], (out[1] if len(out) > 1 else None)
-    elif hasattr(out, "cuts"):
-        raw, trace = out.cuts, getattr(out, "trace", None)
-    else:
-        raw = out
+    raw, trace = out, getattr(out, "trace", None)   # a list of Cut carrying ``trace``
     n = int(np.asarray(X).shape[0])
     cuts = _clean_cuts(list(raw), method, n)
     return SegmentationResult(method=method, cuts=cuts,
