@@ -292,7 +292,7 @@ class SerialSource(Source):
                 if self._stop.is_set():
                     break
                 self.disconnects += 1
-                self._log("lost", logging.WARNING, "serial %s: device lost (%s); reconnecting",
+                self._log("unplug", logging.WARNING, "serial %s: device lost (%s); reconnecting",
                           self.path, exc)
                 self._close_port()
                 continue
@@ -384,6 +384,8 @@ class SerialSource(Source):
                 self._lost[back] = False
                 for k in back.tolist():
                     self._event(k, False, now)
+                log.info("serial %s: sensor(s) restored: %s", self.path,
+                         ", ".join(self.joint_names[k] for k in back.tolist()))
         frame = Frame(recv_time=now, quats=self._state.copy(), valid=valid,
                       source_time=self._time_acc / 1e6 if m.time_us is not None else None,
                       seq=m.seq)
@@ -401,17 +403,16 @@ class SerialSource(Source):
         newly = (now - self._last_valid > self.stale) & ~self._lost
         if newly.any():
             self._lost |= newly
-            for k in np.flatnonzero(newly).tolist():
+            ks = np.flatnonzero(newly).tolist()
+            for k in ks:
                 self._event(k, True, now)
+            self._log("lost", logging.WARNING, "serial %s: sensor(s) lost (no valid value for "
+                      "%.2f s): %s", self.path, self.stale,
+                      ", ".join(self.joint_names[k] for k in ks))
 
     def _event(self, k: int, lost: bool, now: float) -> None:
         ev = SensorEvent(self.joint_names[k], int(self.suit.sensor_ids[k]), lost, now)
         self._events.append(ev)
-        if lost:
-            self._log(f"lost{k}", logging.WARNING, "serial %s: sensor %s (id %d) lost",
-                      self.path, ev.name, ev.sensor_id)
-        else:
-            log.info("serial %s: sensor %s (id %d) restored", self.path, ev.name, ev.sensor_id)
         if self.on_dropout is not None:
             try:
                 self.on_dropout(ev)

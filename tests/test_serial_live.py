@@ -283,3 +283,36 @@ def test_wait_for_absent_device(tmp_path):
     finally:
         src.close()
         suit.stop()
+
+
+def test_scheduled_unplugs_from_fault_string(rig):
+    take = make_take(120)
+    suit, src = rig(take, "stale=0.1", rate=200.0, loop=True, faults="unplug=0.4:0.15")
+    suit.begin()
+    frames = collect(src, lambda fr, idle: len(suit.unplug_log) >= 2 and any(
+        f.recv_time > suit.unplug_log[1][1] for f in fr), timeout=5.0)
+    assert frames[-1].recv_time - suit.unplug_log[1][1] < 1.0
+    rec = suit.injector.snapshot()
+    assert len(rec.unplugs) >= 2
+    for start, end in rec.unplugs[:2]:
+        assert start % 0.4 < 1e-6 or 0.4 - start % 0.4 < 1e-6  # on schedule (device time)
+        assert 0.145 < end - start < 0.2
+    assert src.stats.reconnects >= 2 and src.disconnects >= 2
+    assert all(m.fate == "unplugged" for m in suit.sent_log
+               if m.frame >= 0 and suit.injector.unplugged(m.frame / 200.0))
+
+
+def test_take_mapping_cmu_names_and_joint_map():
+    from rtseg.simulators.serial_device import suit_orientations
+    names = ["root", "lowerback", "upperback", "lhumerus", "mystery"]
+    q = np.tile([0.0, 0.0, np.sin(0.25), np.cos(0.25)], (3, 5, 1))
+    take = Take(names, [-1, 0, 1, 2, 0], 120.0, q, space="local")
+    quats, present, valid = suit_orientations(take, SUIT)
+    assert [SUIT.bones[k] for k in np.flatnonzero(present)] == ["Hips", "Spine", "Chest", "LeftUpperArm"]
+    g = global_from_local(q, take.parents)
+    np.testing.assert_allclose(quats[:, SUIT.bones.index("LeftUpperArm")], g[:, 3])
+    assert not valid[:, SUIT.bones.index("Head")].any()
+    quats, present, _ = suit_orientations(take, SUIT, joint_map={"mystery": "Head"})
+    assert present[SUIT.bones.index("Head")]
+    with pytest.raises(ValueError, match="none of suit"):
+        suit_orientations(Take(["a"], [-1], 120.0, q[:, :1]), SUIT)
