@@ -397,16 +397,26 @@ class VmcAssembler:
 
     A frame is **closed** (emitted) when, after it has received at least one bone:
 
-    1. ``/VMC/Ext/T`` arrives with a value different from the frame's time, or
-    2. ``/VMC/Ext/Root/Pos`` arrives with a pose different from the frame's root, or
-    3. a bone arrives that this frame already holds (the sender started the next frame), or
+    1. ``/VMC/Ext/Root/Pos`` arrives with a pose different from the frame's root, or -- if
+       the frame has no root yet -- more than ``burst`` seconds after the frame's first bone
+       (the root *leads* each frame in VMC; within one burst of datagrams a late root still
+       joins its frame, so datagrams reordered within a frame are fine), or
+    2. a bone arrives that this frame already holds (the sender started the next frame), or
+    3. ``time_order="first"`` only: ``/VMC/Ext/T`` arrives with a value different from the
+       frame's time, or
     4. it is complete: every profile bone received, plus T and root if the sender has been
        seen sending them (closes with no added latency; enabled once rules 1-3 have closed
        one frame, so the sender's message order is known), or
-    5. :meth:`flush` is called ``quiet`` seconds or more after the last datagram.
+    5. :meth:`flush` is called ``quiet`` seconds or more after the last datagram (a T or
+       root left without bones is then forgotten).
 
-    Rules 1-2 assign T / root to the right frame whether a sender puts them before the bones
-    (T first) or after them (VirtualMotionCapture sends Root, Bones, OK, T).
+    ``time_order``: where a sender puts ``/VMC/Ext/T`` relative to the bones it stamps.
+    ``"last"`` (default; VirtualMotionCapture and its followers send Root, Bones, Blend, OK,
+    T): a T always sets the open frame's time, overwriting an orphan T left by a frame whose
+    bones were lost, and never closes a frame.  ``"first"``: T opens each frame (rule 3).
+    Which one is meant cannot be told from message order alone once a datagram is lost, so
+    it is a setting, not a guess.  With ``"last"``, T-first senders still decode right when
+    they send every profile bone in each frame (rule 4 closes the frame before the next T).
 
     Per frame: ``quats`` (J, 4) -- bones not received hold their last value (identity before
     the first) with ``valid`` False; ``source_time`` from T; ``seq`` counts emitted frames
@@ -419,6 +429,7 @@ class VmcAssembler:
 
     def __init__(self, bone_names: Sequence[str], *, quiet: float = 0.02,
                  unit_tolerance: float = 0.05, continuous: bool = True,
+                 time_order: str = "last", burst: float = 0.002,
                  stats: SourceStats | None = None) -> None:
         if not bone_names:
             raise ValueError("VmcAssembler needs at least one bone name")
@@ -430,6 +441,14 @@ class VmcAssembler:
         self.quiet = float(quiet)
         self.unit_tolerance = float(unit_tolerance)
         self.continuous = continuous
+        if time_order not in ("last", "first"):
+            raise ValueError(f"time_order must be 'last' or 'first', not {time_order!r}")
+        self.time_order = time_order
+        self.t_last = time_order == "last"
+        self.burst = float(burst)
+        self._frame_start = -math.inf          # arrival time of the open frame's first bone
+        self._t_time = -math.inf               # arrival time of the open frame's T
+        self._now = 0.0
         self.stats = stats if stats is not None else SourceStats()
         self._index = {n: i for i, n in enumerate(lowered)}
         self._cache: dict[bytes, int] = {}    # raw name -> index (-1 unknown)
@@ -478,9 +497,13 @@ class VmcAssembler:
         """Close the open frame if ``quiet`` seconds passed since the last datagram (or
         ``force``); returns the frames closed (0 or 1)."""
         self._out = out = []
-        if self._n_got and (force or now - self._last_activity >= self.quiet):
-            self._now = now
-            self._close()
+        if force or now - self._last_activity >= self.quiet:
+            if self._n_got:
+                self._now = now
+                self._close()
+            else:   # a T / root with no bones after it: stale, forget it
+                self._t = None
+                self._root = None
         return out
 
     @property
@@ -596,6 +619,8 @@ class VmcAssembler:
                         q[i4 + 2] = z
                         q[i4 + 3] = w
                         got[idx] = True
+                        if not n_got:
+                            self._frame_start = self._now
                         n_got += 1
                         if idx == root_bone:
                             self._root_bone_pos = (px, py, -pz) if math.isfinite(
@@ -713,6 +738,8 @@ class VmcAssembler:
             x, y, z, w = -x, -y, -z, -w
         q[i4:i4 + 4] = (x, y, z, w)
         self._got[idx] = True
+        if not self._n_got:
+            self._frame_start = self._now
         self._n_got += 1
         if idx == self._root_bone and math.isfinite(px + py + pz):
             self._root_bone_pos = (px, py, -pz)
@@ -728,8 +755,11 @@ class VmcAssembler:
         if not abs(n2 - 1.0) <= self.unit_tolerance:
             self._bad_value(f"root quaternion norm² {n2}")
             return
-        self._sends_root = True
-        if self._root is not None and vals != self._root and self._n_got:
+        if not self._sends_root:
+            self._sends_root = True
+            self._learned = False
+        if self._n_got and ((self._root is not None and vals != self._root) or (
+                self._root is None and self._now - self._frame_start > self.burst)):
             self._learned = True
             self._close()
         self._root = vals
@@ -743,8 +773,16 @@ class VmcAssembler:
         if not math.isfinite(t):
             self._bad_value(f"time {t} not finite")
             return
-        self._sends_t = True
-        if self._t is None:
+        if not self._sends_t:
+            self._sends_t = True
+            self._learned = False    # frames so far closed without T: re-learn the order
+        self._t_time = self._now
+        if self.t_last:
+            # T belongs to the bones before it: it sets (or corrects) the open frame's time
+            if not self._n_got and self._root is None and t == self._last_closed_t:
+                return  # a repeat of the frame just closed
+            self._t = t
+        elif self._t is None:
             if not self._n_got and self._root is None and t == self._last_closed_t:
                 return  # a repeat of the frame just closed
             self._t = t
@@ -759,7 +797,10 @@ class VmcAssembler:
     def _maybe_complete(self) -> None:
         # Only once a frame boundary has been seen (rules 1-3): until then we do not know
         # whether T / root come before or after the bones.
-        if self._learned and (self._t is not None or not self._sends_t) and (
+        # With time_order="last" a T counts only if it came after the frame's first bone or
+        # in the same burst (an orphan T from a frame whose bones were lost does not).
+        if self._learned and (not self._sends_t or (self._t is not None and (
+                not self.t_last or self._t_time >= self._frame_start - self.burst))) and (
                 self._root is not None or not self._sends_root):
             self._close()
 

@@ -195,7 +195,7 @@ def test_message_order_within_frame_does_not_matter(order):
         if order == "shuffled":
             rng.shuffle(dgrams)
         stream += dgrams
-    asm = VmcAssembler(BONES)
+    asm = VmcAssembler(BONES, time_order="first" if order == "t_first" else "last")
     frames = feed_all(asm, stream) + asm.flush(0.0, force=True)
     assert len(frames) == n
     assert same_rotation(np.array([f.quats for f in frames]), q)
@@ -208,7 +208,7 @@ def _bone(name: str, quat=(0.0, 0.0, 0.0, 1.0), pos=(0.0, 0.0, 0.0)) -> bytes:
 
 
 def test_partial_frames_close_on_time_change_and_hold_last_values():
-    asm = VmcAssembler(BONES)
+    asm = VmcAssembler(BONES, time_order="first")
     r = Rotation.from_euler("y", 30, degrees=True).as_quat()
     out = asm.feed(encode_bundle([encode_message("/VMC/Ext/T", "f", [1.0]), _bone("Hips", r),
                                   _bone("Spine", r)]), 0.0)
@@ -322,3 +322,42 @@ def test_sign_continuity_per_bone():
     off.feed(_bone("Hips", -q), 0)
     (g,) = off.flush(1.0)
     assert np.allclose(g.quats[0], -q, atol=1e-7)
+
+
+def _vmc_frame(i: int, q: np.ndarray, max_datagram: int = 1472) -> list[bytes]:
+    """VirtualMotionCapture order: Root, Bones, OK, T; the last datagram holds only OK + T."""
+    root = encode_pose_message(ROOT_ADDRESS, "root", (0, 1, 0.1 * i), (0, 0, 0, 1))
+    bones = [encode_pose_message(BONE_ADDRESS, b, (0, 0, 0), q[j]) for j, b in enumerate(BONES)]
+    tail = [encode_message("/VMC/Ext/OK", "i", [1]), encode_message("/VMC/Ext/T", "f", [i * 0.25])]
+    return pack_bundles([root, *bones], max_datagram) + [encode_bundle(tail)]
+
+
+@pytest.mark.parametrize("lost", ["all_bones", "first_datagram"])
+def test_lost_datagrams_do_not_shift_or_merge_later_frames(lost):
+    """A frame whose bone datagrams are lost leaves an orphan T (or a frame without root);
+    the frames after it must still get their own T, root and bones."""
+    n = 10
+    q = rand_quats(n, len(BONES), 9)
+    asm = VmcAssembler(BONES)
+    frames = []
+    for i in range(n):
+        dgrams = _vmc_frame(i, q[i], max_datagram=600)
+        if i == 4:
+            dgrams = dgrams[-1:] if lost == "all_bones" else dgrams[1:]
+        for k, d in enumerate(dgrams):
+            frames += asm.feed(d, i / 60.0 + k * 1e-5)     # bursts 1/60 s apart
+    frames += asm.flush(1.0)
+    by_t = {round(f.source_time / 0.25): f for f in frames}
+    assert len(by_t) == len(frames)                        # every T used once
+    for i in range(n):
+        if i == 4:
+            continue
+        f = by_t[i]
+        assert f.valid.all() and same_rotation(f.quats, q[i])
+        assert f.root_position[2] == pytest.approx(0.1 * i, abs=1e-6)
+    if lost == "first_datagram":
+        part = by_t[4]
+        assert 0 < part.valid.sum() < len(BONES)
+        assert same_rotation(part.quats[part.valid], q[4][part.valid])
+    else:
+        assert 4 not in by_t

@@ -186,8 +186,8 @@ def test_queue_overflow_drops_oldest_and_counts(udp_out):
     try:
         addr = ("127.0.0.1", src.port)
         for i in range(10):
-            udp_out.sendto(encode_message("/VMC/Ext/T", "f", [float(i)]), addr)
             udp_out.sendto(encode_pose_message(BONE_ADDRESS, "Hips", (0, 0, 0), (0, 0, 0, 1)), addr)
+            udp_out.sendto(encode_message("/VMC/Ext/T", "f", [float(i)]), addr)
         deadline = time.monotonic() + 5
         while src.stats.dropped < 5 and time.monotonic() < deadline:
             time.sleep(0.01)
@@ -264,9 +264,9 @@ def test_oscsend_skeleton_decoded():
         oscsend(src.port, BONE_ADDRESS, "sfffffff", "NotABone", 0, 0, 0, 0, 0, 0, 1)
         oscsend(src.port, "/VMC/Ext/T", "f", 12.5)
         oscsend(src.port, "/VMC/Ext/OK", "iiii", 1, 3, 0, 1)
-        # next frame: new T closes the first one
-        oscsend(src.port, "/VMC/Ext/T", "f", 12.6)
+        # next frame: Hips again closes the first one; its T follows its bones
         oscsend(src.port, BONE_ADDRESS, "sfffffff", "Hips", 0, 0.9, 0, 0, 0, 0, 1)
+        oscsend(src.port, "/VMC/Ext/T", "f", 12.6)
         f1 = src.read(timeout=5.0)
         f2 = src.read(timeout=5.0)
     finally:
