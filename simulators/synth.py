@@ -320,8 +320,8 @@ def _jump(phi, t, rng):
         d[:, J[side + "UpperLeg"], FLEX] = 65.0 * c + 45.0 * ld + 25.0 * fl
         d[:, J[side + "LowerLeg"], FLEX] = 80.0 * c + 60.0 * ld + 30.0 * fl
         d[:, J[side + "Foot"], FLEX] = 25.0 * c + 18.0 * ld - 30.0 * fl
-        d[:, J[side + "UpperArm"], FLEX] = (-40.0 * _vm(phi, _JUMP_PREP, 6.0)
-                                            + 150.0 * _vm(phi, 2 * np.pi * 0.45, 10.0) - 20.0 * ld)
+        d[:, J[side + "UpperArm"], FLEX] = (-35.0 * _vm(phi, 2 * np.pi * 0.22, 5.0)
+                                            + 135.0 * _vm(phi, 2 * np.pi * 0.47, 4.0) - 20.0 * ld)
         d[:, J[side + "UpperArm"], SIDE] = 15.0 * fl
         d[:, J[side + "LowerArm"], FLEX] = 15.0 * c
     d[:, J["Hips"], FLEX] = 28.0 * c + 18.0 * ld
@@ -502,7 +502,8 @@ BEHAVIOURS: dict[str, Behaviour] = {b.name: b for b in [
     Behaviour("wave", 0.55, _wave, "waving one hand above the shoulder", sided=True),
     Behaviour("squat", 2.6, _squat, "squats with arms forward", amp_jitter=0.08),
     Behaviour("arm_circles", 1.0, _arm_circles, "arms out to the sides, circling"),
-    Behaviour("side_bend", 4.0, _side_bend, "lateral trunk bends, opposite arm overhead"),
+    Behaviour("side_bend", 3.0, _side_bend, "lateral trunk bends, opposite arm overhead",
+              amp_jitter=0.05),
     Behaviour("jumping_jacks", 1.0, _jumping_jacks, "jumping jacks", lift=_jacks_lift),
 ]}
 

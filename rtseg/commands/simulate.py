@@ -1,0 +1,218 @@
+"""``rtseg simulate serial|vmc``: a simulated suit, so everything runs without hardware.
+
+    rtseg simulate serial [--synth SCRIPT | --take FILE [--skeleton ASF]] [--link PATH]
+                          [--format rtseg|text] [--faults SPEC] [--loop] [--duration S]
+    rtseg simulate vmc    [--synth SCRIPT | --take FILE] [--host H] [--port P] ...
+
+``serial`` serves the take on a pseudo-terminal (``rtseg.simulators.serial_device.SerialSuit``)
+and prints its device path - read it with ``rtseg live --source serial://PATH``.
+``vmc`` sends it as VMC over OSC/UDP (``rtseg.simulators.vmc_sender.VmcSender``) to
+``--host``:``--port`` (default 127.0.0.1:39539, the VMC receiver port).
+
+Without ``--take`` the built-in synthesiser performs ``--synth`` (default: its default
+script) with ``--seed``; the exact transition frame ranges (the blend spans) are printed so
+cuts can be checked by eye or by script (``--save take.npz`` keeps take and ground truth).
+Runs until the take ends (never with ``--loop``), ``--duration`` seconds pass, or Ctrl-C /
+SIGTERM, then prints what was sent.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import time
+from typing import Any, Callable
+
+from rtseg.take import Take
+
+DEVICES = ("serial", "vmc")
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "simulate", help="run a simulated suit (serial pty or VMC sender) from a take or the synthesiser",
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("device", choices=DEVICES, help="serial: pty speaking rtseg's serial format; "
+                   "vmc: VMC over OSC/UDP")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--take", metavar="FILE", help="take to replay (.amc, .bvh, .npz, .csv, "
+                     "or a recorded session folder)")
+    src.add_argument("--synth", metavar="SCRIPT", help="synthesiser script behaviour:seconds,... "
+                     "(default: the synthesiser's default script)")
+    p.add_argument("--skeleton", metavar="ASF", help="skeleton of an .amc take "
+                   "(default SS.asf beside SS_TT.amc)")
+    p.add_argument("--seed", type=int, default=0, help="synthesiser seed (default 0)")
+    p.add_argument("--rate", type=float, help="frames per second: the synthesiser's rate, or a "
+                   "take's rate (default: the take's own, 120 for the synthesiser)")
+    p.add_argument("--faults", default="", metavar="SPEC", help="fault injection, e.g. "
+                   "corrupt=0.001,drop=0.01,jitter=0.002,dropout=5:2:1,unplug=10:0.5,seed=1")
+    p.add_argument("--loop", action="store_true", help="repeat the take until stopped")
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument("--save", metavar="NPZ", help="also write the take (with the synthesiser's "
+                   "ground truth in its meta) to this .npz")
+    g = p.add_argument_group("serial")
+    g.add_argument("--link", metavar="PATH", help="stable device path (symlink to the pty) "
+                   "(default: a fresh temporary path)")
+    g.add_argument("--format", choices=("rtseg", "text"), default="rtseg",
+                   help="wire format (default rtseg binary frames)")
+    g.add_argument("--suit", default="default17", help="suit profile (config/suits.toml)")
+    g.add_argument("--linger", type=float, default=0.5, metavar="S",
+                   help="keep the device open S seconds after the last frame (default 0.5)")
+    g = p.add_argument_group("vmc")
+    g.add_argument("--host", default="127.0.0.1", help="receiver address (default 127.0.0.1)")
+    g.add_argument("--port", type=int, default=39539, help="receiver UDP port (default 39539)")
+    p.set_defaults(func=run)
+
+
+def _out(text: str = "") -> None:
+    print(text, flush=True)
+
+
+def load(args: argparse.Namespace):
+    """(take, SynthResult or None) chosen by the arguments."""
+    if args.rate is not None and not args.rate > 0:
+        raise ValueError(f"--rate must be positive, got {args.rate}")
+    if args.duration is not None and not args.duration > 0:
+        raise ValueError(f"--duration must be positive, got {args.duration}")
+    if args.take:
+        from rtseg.drivers.readers import read_take
+        return read_take(args.take, skeleton=args.skeleton, frame_rate=args.rate), None
+    if args.skeleton:
+        raise ValueError("--skeleton goes with --take")
+    from rtseg.simulators.synth import DEFAULT_SCRIPT, synthesize
+    result = synthesize(args.synth or DEFAULT_SCRIPT, frame_rate=args.rate or 120.0, seed=args.seed)
+    return result.take, result
+
+
+def describe(take: Take, result) -> None:
+    """Print the take and, for a synthetic one, its exact transitions."""
+    _out(f"take: {take.source or '<memory>'}: {take.n_frames} frames at {take.frame_rate:g} Hz "
+         f"({take.duration:.2f} s), {take.n_joints} joints, {take.space} rotations")
+    if result is None:
+        return
+    rate = take.frame_rate
+    _out(f"script: {take.meta.get('synth_script')}  seed: {take.meta.get('synth_seed')}")
+    for s in result.segments:
+        _out(f"  segment {s.name:<14s} frames {s.start:6d}-{s.stop - 1:<6d} "
+             f"({s.start / rate:7.3f}-{s.stop / rate:7.3f} s)")
+    _out(f"transitions ({len(result.transitions)}; frames lo-hi inclusive = blend span, "
+         f"mid = scripted boundary):")
+    for k, t in enumerate(result.transitions, 1):
+        _out(f"  {k:2d} frames {t.lo:6d}-{t.hi:<6d} mid {t.mid:6d} "
+             f"({t.lo / rate:7.3f}-{t.hi / rate:7.3f} s)  {t.before} -> {t.after}")
+
+
+def _run_until(done: Callable[[float], bool], duration: float | None) -> str:
+    """Wait until ``done(timeout)`` is True or ``duration`` passes; the reason."""
+    deadline = None if duration is None else time.monotonic() + duration
+    while True:
+        step = 0.1
+        if deadline is not None:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return "duration"
+            step = min(step, left)
+        if done(step):
+            return "end of take"
+
+
+def _serve_serial(args, take: Take) -> tuple[str, list[str]]:
+    from rtseg.simulators.faults import FaultConfig
+    from rtseg.simulators.serial_device import SerialSuit
+
+    suit = SerialSuit(take, faults=FaultConfig.parse(args.faults), link=args.link,
+                      fmt=args.format, loop=args.loop, suit=args.suit)
+    path = suit.start()
+    _out(f"serial device: {path}")
+    _out(f"  read it with: rtseg live --source serial://{path}"
+         + ("?format=text&baud=115200" if args.format == "text" else ""))
+    t0 = time.monotonic()
+    reason = "interrupted"
+    try:
+        reason = _run_until(suit.wait_done, args.duration)
+        if reason == "end of take" and args.linger > 0:
+            time.sleep(args.linger)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        suit.stop()
+    elapsed = time.monotonic() - t0
+    log = list(suit.sent_log)
+    frames = [m for m in log if m.frame >= 0]
+    fates: dict[str, int] = {}
+    for m in frames:
+        fates[m.fate] = fates.get(m.fate, 0) + 1
+    lines = [f"sent {len(frames)} frame messages in {elapsed:.2f} s "
+             f"({', '.join(f'{v} {k}' for k, v in sorted(fates.items())) or 'none'}); "
+             f"{len(log) - len(frames)} device-info messages; {len(suit.unplug_log)} unplug(s)"]
+    if frames:
+        lines.append(f"take frames {frames[0].frame}..{frames[-1].frame} "
+                     f"({len({m.frame for m in frames})} distinct), last seq {frames[-1].seq}")
+    return reason, lines
+
+
+def _serve_vmc(args, take: Take) -> tuple[str, list[str]]:
+    from rtseg.simulators.vmc_sender import VmcSender
+
+    if not 0 < args.port < 65536:
+        raise ValueError(f"--port must be 1..65535, got {args.port}")
+    sender = VmcSender(take, args.host, args.port, faults=args.faults or None, loop=args.loop)
+    _out(f"VMC sender: {len(sender.bone_names)} bones to udp {args.host}:{args.port} "
+         f"at {sender.rate:g} Hz")
+    if sender.skipped_joints:
+        _out(f"  not sent (no HumanBodyBones name): {', '.join(sender.skipped_joints)}")
+    _out(f"  receive it with: rtseg live --source osc://0.0.0.0:{args.port}")
+    t0 = time.monotonic()
+    reason = "interrupted"
+    sender.start()
+    try:
+        reason = _run_until(sender.wait, args.duration)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        sender.stop()
+    elapsed = time.monotonic() - t0
+    log = list(sender.sent_log)
+    sent = [f for f in log if not f.dropped]
+    lines = [f"sent {len(sent)} frames ({sum(f.datagrams for f in sent)} datagrams) in "
+             f"{elapsed:.2f} s; {len(log) - len(sent)} dropped by faults, "
+             f"{sum(1 for f in sent if f.corrupted)} corrupted, "
+             f"{sum(1 for f in sent if f.omitted)} with bones omitted, "
+             f"{sender.send_errors} send errors"]
+    if sent:
+        lines.append(f"take frames {sent[0].index}..{sent[-1].index}, last T {sent[-1].source_time:.3f} s")
+    return reason, lines
+
+
+def run(args: argparse.Namespace) -> int:
+    take, result = load(args)
+    describe(take, result)
+    if args.save:
+        from rtseg.drivers.readers import write_take
+        _out(f"saved take to {write_take(args.save, take)}")
+    # SIGTERM ends the run like Ctrl-C (device closed, summary printed).
+    old = None
+    try:
+        old = signal.signal(signal.SIGTERM, _raise_interrupt)
+    except ValueError:  # not the main thread
+        pass
+    try:
+        serve = _serve_serial if args.device == "serial" else _serve_vmc
+        reason, lines = serve(args, take)
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGTERM, old)
+    _out(f"stopped: {reason}")
+    for line in lines:
+        _out(line)
+    return 0
+
+
+def _raise_interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
+if __name__ == "__main__":  # pragma: no cover
+    from rtseg.cli import main
+    sys.exit(main(["simulate", *sys.argv[1:]]))
