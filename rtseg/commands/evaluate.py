@@ -228,4 +228,6 @@ def run(args: argparse.Namespace) -> int:
         sys.stdout.write(json.dumps(report.as_dict(), indent=2, allow_nan=False) + "\n")
     else:
         sys.stdout.write(format_table(report))
+    for key, msg in report.errors.items():
+        print(f"rtseg evaluate: {key} not scored: {msg}", file=sys.stderr)
     return 1 if report.errors else 0

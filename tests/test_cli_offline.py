@@ -1,0 +1,294 @@
+"""Offline commands end to end: ``rtseg segment``, ``rtseg evaluate``, ``rtseg plot`` and
+``benchmarks/accuracy.py`` through ``rtseg.cli.main`` (one call through the installed
+console script), on synthetic takes written to a data folder laid out like ../shared/data,
+and on real 86_01 (skipped without the data)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rtseg.cli import main
+from rtseg.drivers.readers import write_take
+from rtseg.evaluation import score
+from rtseg.labels import read_cmu86_transitions
+from rtseg.simulators.synth import synthesize
+
+REPO = Path(__file__).resolve().parent.parent
+SCRIPT_A = "idle:4,walk:6,punch:6,squat:5"
+SCRIPT_B = "walk:5,jumping_jacks:5,arm_circles:5"
+
+
+def _cmu86_block(name: str, result) -> str:
+    """A cmu86_transitions.txt block for a synthetic take (1-based, behaviour lo mid hi)."""
+    ss, tt = name.split("_")
+    lines = [f"{ss} {tt}"]
+    for t in result.transitions:
+        lines.append(f"{t.before} {t.lo + 1} {t.mid + 1} {t.hi + 1}")
+    n = result.take.n_frames
+    lines.append(f"{result.segments[-1].name} {n} {n} {n}")
+    return "\n".join(lines) + "\n"
+
+
+@pytest.fixture(scope="module")
+def synth_dir(tmp_path_factory) -> dict:
+    """cmu/90_01.npz (labels: cmu86-style ranges), cmu/91_01.npz (labels: mocap6 blocks),
+    tsseg4d/90_05.csv (4 channels + per-frame labels)."""
+    root = tmp_path_factory.mktemp("data")
+    (root / "cmu").mkdir()
+    (root / "labels" / "mocap6").mkdir(parents=True)
+    (root / "tsseg4d").mkdir()
+    a = synthesize(SCRIPT_A, seed=1)
+    b = synthesize(SCRIPT_B, seed=2)
+    write_take(root / "cmu" / "90_01.npz", a.take)
+    write_take(root / "cmu" / "91_01.npz", b.take)
+    (root / "labels" / "cmu86_transitions.txt").write_text(_cmu86_block("90_01", a))
+    blocks = b.frame_labels()[::12] + 1
+    (root / "labels" / "mocap6" / "91_01.txt").write_text(" ".join(map(str, blocks)))
+    # four channels: x-angles of upper arms and legs, different rhythm per segment
+    rng = np.random.default_rng(3)
+    n = 1800
+    lab = np.repeat([0, 1, 2], n // 3)
+    t = np.arange(n) / 120.0
+    freq = np.array([0.5, 1.5, 0.8])[lab]
+    amp = np.array([[10, 10, 5, 5], [40, 40, 30, 30], [60, 5, 5, 60]])[lab]
+    ang = amp * np.sin(2 * np.pi * freq[:, None] * t[:, None] + np.array([0, np.pi, np.pi, 0]))
+    ang += rng.normal(0, 0.5, ang.shape)
+    with open(root / "tsseg4d" / "90_05.csv", "w") as fh:
+        for row, l in zip(ang, lab):
+            fh.write(",".join(f"{v:.4f}" for v in row) + f",{l}\n")
+    return {"root": root, "a": a, "b": b}
+
+
+def run_cli(capsys, *argv: str) -> tuple[int, str, str]:
+    rc = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+# ------------------------------------------------------------------------ segment
+
+def test_segment_json_all_methods(synth_dir, capsys):
+    take = synth_dir["root"] / "cmu" / "90_01.npz"
+    rc, out, _ = run_cli(capsys, "segment", take, "--format", "json")
+    assert rc == 0
+    doc = json.loads(out)
+    n = synth_dir["a"].take.n_frames
+    assert doc["n_frames"] == n and doc["frame_rate"] == 120.0
+    assert sorted(doc["methods"]) == ["gmm", "pca", "ppca"]
+    for m, r in doc["methods"].items():
+        frames = [c["frame"] for c in r["cuts"]]
+        assert frames == sorted(set(frames)) and all(0 < f < n for f in frames)
+        segs = r["segments"]
+        # segments tile the take and start exactly at the cuts
+        assert segs[0]["start"] == 0 and segs[-1]["end"] == n
+        assert [s["start"] for s in segs[1:]] == frames
+        assert all(s["end"] == nxt["start"] for s, nxt in zip(segs, segs[1:]))
+        for s in segs:
+            assert s["duration"] == pytest.approx((s["end"] - s["start"]) / 120.0, abs=1e-5)
+        for c in r["cuts"]:
+            assert c["time"] == pytest.approx(c["frame"] / 120.0, abs=1e-5)
+
+
+def test_segment_table_and_csv(synth_dir, capsys):
+    take = synth_dir["root"] / "cmu" / "90_01.npz"
+    rc, table, _ = run_cli(capsys, "segment", take, "--method", "gmm")
+    assert rc == 0
+    assert "2520 frames at 120 fps" in table and "gmm:" in table and "ppca:" not in table
+    rc, out, _ = run_cli(capsys, "segment", take, "--method", "gmm", "--format", "csv")
+    assert rc == 0
+    rows = list(csv.DictReader(io.StringIO(out)))
+    assert rows and {r["method"] for r in rows} == {"gmm"}
+    assert rows[0]["start_frame"] == "0" and rows[0]["cut_confidence"] == ""
+    assert rows[-1]["end_frame"] == "2520"
+    # the table lists the same segments as the CSV
+    for r in rows:
+        assert f"{int(r['start_frame']):>7} {int(r['end_frame']):>7}" in table
+
+
+def test_segment_params_file_changes_the_result(synth_dir, capsys, tmp_path):
+    take = synth_dir["root"] / "cmu" / "90_01.npz"
+    strict = tmp_path / "p.toml"
+    strict.write_text("[pca]\nk_sigma = 1000.0\n")
+    rc, out, _ = run_cli(capsys, "segment", take, "--method", "pca", "--format", "json",
+                         "--params", strict)
+    assert rc == 0 and json.loads(out)["methods"]["pca"]["cuts"] == []
+    flat = tmp_path / "flat.json"
+    flat.write_text(json.dumps({"k_sigma": 1000.0}))
+    rc, out, _ = run_cli(capsys, "segment", take, "--method", "pca", "--format", "json",
+                         "--params", flat)
+    assert rc == 0 and json.loads(out)["methods"]["pca"]["cuts"] == []
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[pca]\nno_such_knob = 1\n")
+    rc, _, err = run_cli(capsys, "segment", take, "--method", "pca", "--params", bad)
+    assert rc == 1 and "no_such_knob" in err
+
+
+def test_segment_bad_input_is_a_clear_error(tmp_path, capsys):
+    rc, out, err = run_cli(capsys, "segment", tmp_path / "missing.npz")
+    assert rc == 1 and out == "" and "missing.npz" in err
+    junk = tmp_path / "junk.bvh"
+    junk.write_text("this is not a BVH file\n")
+    rc, _, err = run_cli(capsys, "segment", junk)
+    assert rc == 1 and "junk.bvh" in err
+
+
+# ------------------------------------------------------------------------ evaluate
+
+def test_evaluate_json_synthetic(synth_dir, capsys):
+    root = synth_dir["root"]
+    rc, out, err = run_cli(capsys, "evaluate", root, "--json")
+    assert rc == 0
+    doc = json.loads(out)
+    assert sorted(doc) == ["gmm", "pca", "ppca"]
+    truth = read_cmu86_transitions(root / "labels" / "cmu86_transitions.txt")["90_01"]
+    for m, r in doc.items():
+        assert sorted(r["takes"]) == ["90_01", "91_01"]
+        assert set(r["pooled"]) >= {"precision", "recall", "f1", "cuts", "transitions"}
+        assert r["pooled"]["transitions"] == 3 + 2
+        assert r["pooled"]["cuts"] == sum(t["cuts"] for t in r["takes"].values())
+        tp = sum(t["tp"] for t in r["takes"].values())
+        assert r["pooled"]["precision"] == pytest.approx(tp / r["pooled"]["cuts"]
+                                                         if r["pooled"]["cuts"] else 1.0)
+        a = r["takes"]["90_01"]
+        assert a["labels"].startswith("ranges") and a["group"] == "cmu"
+        assert r["takes"]["91_01"]["labels"].startswith("points +/-60")
+        # the per-take counts are the scoring of the reported cuts against the labels
+        s = score(a["cut_frames"], truth.transitions)
+        assert (a["tp"], a["fp"], a["fn"]) == (s.tp, s.fp, s.fn)
+    assert "2/2" in err   # progress on stderr, not stdout
+
+
+def test_evaluate_table_groups_and_benchmark(synth_dir, capsys):
+    root = synth_dir["root"]
+    rc, out, _ = run_cli(capsys, "evaluate", root, "--method", "pca", "--group", "all",
+                         "--no-progress")
+    assert rc == 0
+    assert "POOLED cmu" in out and "POOLED tsseg4d" in out and "POOLED all" in out
+    assert "90_05" in out and "tsseg4d/90_05.csv column 5" in out
+    rc, out, err = run_cli(capsys, "evaluate", root, "--method", "pca", "--group", "tsseg4d",
+                           "--json")
+    assert rc == 0
+    doc = json.loads(out)
+    assert list(doc["pca"]["takes"]) == ["90_05"]
+    assert doc["pca"]["pooled"]["transitions"] == 2
+
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    try:
+        import accuracy
+    finally:
+        sys.path.remove(str(REPO / "benchmarks"))
+    rc = accuracy.main([str(root), "--method", "pca", "--json", "--no-progress"])
+    bench = json.loads(capsys.readouterr().out)
+    assert rc == 0 and bench["pca"]["pooled"] == json.loads(
+        _evaluate_json(capsys, root, "pca"))["pca"]["pooled"]
+
+
+def _evaluate_json(capsys, root, method):
+    rc, out, _ = run_cli(capsys, "evaluate", root, "--method", method, "--json", "--no-progress")
+    assert rc == 0
+    return out
+
+
+def test_evaluate_reports_unreadable_take_and_continues(synth_dir, capsys, tmp_path):
+    root = tmp_path / "d"
+    shutil.copytree(synth_dir["root"], root)
+    (root / "cmu" / "90_02.npz").write_bytes(b"not an npz")
+    with open(root / "labels" / "cmu86_transitions.txt", "a") as fh:
+        fh.write("\n90 02\nwalk 100 120 140\nrun 500 500 500\n")
+    rc, out, err = run_cli(capsys, "evaluate", root, "--method", "pca", "--json", "--no-progress")
+    assert rc == 1 and "90_02" in err
+    doc = json.loads(out)
+    assert sorted(doc["pca"]["takes"]) == ["90_01", "91_01"]
+    assert "90_02" in doc["pca"]["errors"]
+
+
+def test_evaluate_empty_folder(tmp_path, capsys):
+    rc, _, err = run_cli(capsys, "evaluate", tmp_path)
+    assert rc == 1 and "no labelled takes" in err
+    rc, _, err = run_cli(capsys, "evaluate", tmp_path / "nope")
+    assert rc == 1 and "does not exist" in err
+
+
+# ------------------------------------------------------------------------ plot
+
+def test_plot_writes_png(synth_dir, capsys, tmp_path):
+    root = synth_dir["root"]
+    out = tmp_path / "a.png"
+    rc, stdout, _ = run_cli(capsys, "plot", root / "cmu" / "90_01.npz", "-o", out)
+    assert rc == 0 and stdout.strip() == str(out)
+    data = out.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
+    # explicit label file of another format, one method
+    out2 = tmp_path / "b.png"
+    rc, _, _ = run_cli(capsys, "plot", root / "cmu" / "91_01.npz", "--method", "gmm",
+                       "--labels", root / "labels" / "mocap6" / "91_01.txt", "-o", out2)
+    assert rc == 0 and out2.read_bytes()[:4] == b"\x89PNG"
+    rc, _, err = run_cli(capsys, "plot", root / "cmu" / "91_01.npz", "--method", "gmm",
+                         "--labels", tmp_path / "nolabels.txt", "-o", out2)
+    assert rc == 1 and "nolabels.txt" in err
+
+
+def test_plot_without_matplotlib_is_a_clear_error(synth_dir, capsys, tmp_path, monkeypatch):
+    for mod in [m for m in sys.modules if m == "matplotlib" or m.startswith("matplotlib.")]:
+        monkeypatch.delitem(sys.modules, mod)
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    out = tmp_path / "x.png"
+    rc, _, err = run_cli(capsys, "plot", synth_dir["root"] / "cmu" / "90_01.npz", "-o", out)
+    assert rc == 2 and "rtseg[plot]" in err and not out.exists()
+
+
+def test_pca_band_reproduces_the_detector(synth_dir):
+    """The plot's PCA run finds the same cuts as ``rtseg segment`` and its mean/std band
+    reproduces the detector's threshold."""
+    from rtseg.commands.plot import pca_with_band
+    from rtseg.segmentation import compute_features, segment_take
+    take = synth_dir["a"].take
+    X = compute_features(take)
+    band = pca_with_band(X, take.frame_rate, None)
+    assert band.cut_frames == segment_take(take, "pca", features=X).cut_frames
+    tr = band.trace
+    assert "mean" in tr and len(tr["mean"]) == len(tr["d"]) > 0
+    assert np.allclose(tr["mean"] + 3.0 * tr["std"], tr["threshold"])
+
+
+# ------------------------------------------------------------------------ console script
+
+def test_console_script_segment_json(synth_dir):
+    exe = shutil.which("rtseg")
+    cmd = [exe] if exe else [sys.executable, "-m", "rtseg.cli"]
+    proc = subprocess.run(cmd + ["segment", str(synth_dir["root"] / "cmu" / "91_01.npz"),
+                                 "--method", "pca", "--format", "json"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads(proc.stdout)
+    assert doc["n_frames"] == synth_dir["b"].take.n_frames
+    assert list(doc["methods"]) == ["pca"]
+
+
+# ------------------------------------------------------------------------ real data
+
+@pytest.mark.realdata
+def test_real_86_01_segment_and_evaluate(data_dir, capsys):
+    rc, out, _ = run_cli(capsys, "segment", data_dir / "cmu" / "86_01.amc", "--method", "pca",
+                         "--format", "json")
+    assert rc == 0
+    doc = json.loads(out)
+    assert doc["n_frames"] == 4579
+    segs = doc["methods"]["pca"]["segments"]
+    assert segs[0]["start"] == 0 and segs[-1]["end"] == 4579
+    rc, out, _ = run_cli(capsys, "evaluate", data_dir, "--method", "pca", "--json",
+                         "--no-progress")
+    assert rc == 0
+    r = json.loads(out)["pca"]
+    assert "86_01" in r["takes"] and r["takes"]["86_01"]["transitions"] == 6
+    assert r["takes"]["86_01"]["cut_frames"] == [c["frame"] for c in doc["methods"]["pca"]["cuts"]]
+    assert r["pooled"]["transitions"] == sum(t["transitions"] for t in r["takes"].values())
