@@ -219,16 +219,18 @@ class Pipeline:
         q = np.asarray(quats, dtype=np.float64)
         v = np.asarray(valid, dtype=bool)
         norms = np.einsum("ij,ij->i", q, q)
-        bad = ~np.isfinite(norms) | (norms < 1e-12)
-        if bad.any():
+        ok = (norms > 1e-12) & (norms < 1e12)          # False for NaN too
+        all_valid = bool(v.all())
+        if not ok.all():
+            bad = ~ok
             st.bad_values += int(bad.sum())
-            v = v & ~bad
-            q = np.where(bad[:, None], self._last_good, q)
-        if not v.all():
+            v = v & ok
+            all_valid = False
+        if not all_valid:
             q = np.where(v[:, None], q, self._last_good)
-        self._last_good = q
+        np.copyto(self._last_good, q)       # q may be a ring-buffer view: keep a copy
         # --- invalid required joints
-        if not v[self.required].all():
+        if not all_valid and not v[self.required].all():
             st.invalid_frames += 1
             self._bad_run += 1
             if self._bad_run > self.max_gap_frames:
@@ -636,17 +638,21 @@ class LiveSession:
             self._last_recv = float(w.recv_time[-1])
 
     def _track_dropouts(self, valid: np.ndarray, recv: float) -> None:
-        lim = float(self.config["gaps.dropout_seconds"])
-        self._last_valid = np.where(valid, recv, self._last_valid)
         if self._source_lost:
             self._source_lost = False
             self._emit(DropoutEvent("source", False, self._now()))
+        if self._n_lost == 0 and valid.all():      # fast path: everything reporting
+            self._last_valid.fill(recv)
+            return
+        lim = self._dropout_s
+        np.copyto(self._last_valid, recv, where=valid)
         lost_now = (recv - self._last_valid) >= lim
         changed = lost_now != self._joint_lost
         if changed.any():
             names = self.pipeline.joint_names
             for j in np.flatnonzero(changed):
                 self._joint_lost[j] = lost_now[j]
+                self._n_lost += 1 if lost_now[j] else -1
                 if lost_now[j]:
                     self.stats.dropouts += 1
                     log.warning("dropout: %s lost", names[j])
@@ -698,6 +704,8 @@ class LiveSession:
             self.session_start = getattr(self.recorder, "start_monotonic", None) or time.monotonic()
             self._last_valid = np.full(J, self.session_start)
             self._joint_lost = np.zeros(J, dtype=bool)
+            self._n_lost = 0
+            self._dropout_s = float(self.config["gaps.dropout_seconds"])
             self._source_lost = False
             self._last_recv: float | None = None
             self._status_t = time.monotonic()

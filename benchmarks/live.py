@@ -1,0 +1,264 @@
+#!/usr/bin/env python3
+"""Live-session benchmark: latency, detector delay, CPU use, highest sustained input rate.
+
+    python3 benchmarks/live.py            # readable report (about 1.5 minutes)
+    python3 benchmarks/live.py --json     # {"latency_ms": {"p50", "p99"}, "detector_delay_ms":
+                                          #  {"pca", "ppca"}, "cpu_fraction", "max_rate_fps"}
+
+Everything goes through the real chain: the synthetic 17-sensor suit
+(``rtseg.simulators.serial_device``, default synthesised performance) runs in a **separate
+process** on a real pty, rtseg's binary serial format; this process runs
+``LiveSession("serial://<pty>")`` (serial driver, ring buffer, pose features, online PCA and
+PPCA) and sends cuts and status over OSC/UDP to a socket on 127.0.0.1.
+
+1. **Latency and CPU at 120 Hz** (``--seconds``, default 30 s): processing latency of
+   every frame = its arrival (``Frame.recv_time``, stamped by the serial driver when its
+   bytes were read) to the end of its processing, which includes sending the OSC datagram
+   when the frame reveals a cut (p50/p99; target p99 < 5 ms; the detector's own delay is
+   not included).  The latency of the frames that actually sent a cut is reported too.
+   CPU fraction = process CPU time (all threads of this process; the simulated suit is
+   another process) / wall time (target < 0.10 of one core).
+2. **Detector delay** per method: median of ``detected_at - frame`` over the cuts of the
+   default synthesised performance (8 behaviour changes, 62 s) replayed through the same
+   pipeline, in ms at 120 Hz.  Cuts of the live run in step 1 are included.
+3. **Highest sustained input rate**: the suit is played at rising rates (500, 1000, 2000,
+   3000, 4000, 6000, 8000 frames/s, ``--step-seconds`` each).  A rate is sustained when the
+   session receives at least 97 % of the frames the suit sends in that time, loses none
+   (no sequence gaps, no ring-buffer overruns, no queue overflow) and the p99 frame latency
+   stays under 50 ms.  Reported: the highest sustained rate (target >= 2000).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from rtseg.live import LiveSession, replay_frames  # noqa: E402
+from rtseg.session_config import from_dict  # noqa: E402
+
+RATES = (500, 1000, 2000, 3000, 4000, 6000, 8000)
+
+
+class Suit:
+    """The simulated suit in a subprocess; ``path`` is its pty."""
+
+    def __init__(self, rate: float) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "rtseg.simulators.serial_device", "--rate", f"{rate:g}"],
+            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=REPO)
+        line = self.proc.stdout.readline().strip()
+        if not line:
+            self.close()
+            raise RuntimeError("simulated suit did not start")
+        self.path = line
+        self.t_start = time.monotonic()
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(5)
+
+
+def sink() -> socket.socket:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+    return s
+
+
+def config(port: int):
+    return from_dict({"output": {"osc": [f"127.0.0.1:{port}"]},
+                      "status": {"interval": 1.0}}, origin="benchmark")
+
+
+class PacedSource:
+    """In-process 17-sensor source replaying the synthesised performance at ``rate``
+    frames/s (frame k due at t0 + k / rate; ``recv_time`` = when it is handed over).
+    Measures the session core (ring buffer, features, detectors, OSC) without a driver."""
+
+    def __new__(cls, rate: float):
+        from rtseg.drivers.base import Source
+        from rtseg.frame import Frame
+        from rtseg.quat import global_from_local
+        from rtseg.simulators.synth import JOINT_NAMES, PARENTS, synthesize
+
+        take = synthesize(frame_rate=120.0).take
+        g = global_from_local(take.quats, take.parents)
+
+        class _Paced(Source):
+            frame_rate = 120.0
+            space = "global"
+
+            def __init__(self) -> None:
+                super().__init__()
+                self.joint_names, self.parents = list(JOINT_NAMES), list(PARENTS)
+                self.k = 0
+                self.t0: float | None = None
+                self.ok = np.ones(len(JOINT_NAMES), bool)
+
+            def read(self, timeout=None):
+                now = time.monotonic()
+                if self.t0 is None:
+                    self.t0 = now
+                due = self.t0 + self.k / rate
+                if due > now:
+                    if timeout is not None and due - now > timeout:
+                        time.sleep(timeout)
+                        return None
+                    time.sleep(due - now)
+                f = Frame(time.monotonic(), g[self.k % len(g)], self.ok, None, self.k & 0xFFFF)
+                self.k += 1
+                self.stats.frames_ok += 1
+                return f
+
+        return _Paced()
+
+
+def run_session(rate: float, seconds: float, port: int, warmup: float = 1.0,
+                kind: str = "serial"):
+    """Play the suit at ``rate`` for ``warmup + seconds``; latency statistics cover the
+    last ``seconds`` only (start-up reads a burst of frames the pty buffered).
+    Returns (session, summary, cpu fraction over the measured part)."""
+    suit = Suit(rate) if kind == "serial" else None
+    try:
+        source = f"serial://{suit.path}?rate=120" if suit else PacedSource(rate)
+        session = LiveSession(source, config(port), handle_signals=False,
+                              duration=seconds + warmup)
+        marks: dict[str, float] = {}
+
+        def start_measuring() -> None:
+            session.stats.frame_latency_ms.clear()
+            session.stats.cut_latency_ms.clear()
+            marks.update(cpu=time.process_time(), wall=time.monotonic(),
+                         frames=session.stats.frames_received)
+
+        timer = threading.Timer(warmup, start_measuring)
+        timer.start()
+        summary = session.run()
+        timer.cancel()
+        cpu = (time.process_time() - marks["cpu"]) / (time.monotonic() - marks["wall"])
+        measured_fps = ((session.stats.frames_received - marks["frames"])
+                        / (time.monotonic() - marks["wall"]))
+    finally:
+        if suit is not None:
+            suit.close()
+    return session, summary, cpu, measured_fps
+
+
+def latency_and_cpu(seconds: float, port: int) -> dict:
+    session, summary, cpu, fps = run_session(120.0, seconds, port)
+    lat = np.fromiter(session.stats.frame_latency_ms, float)
+    cut_lat = np.fromiter(session.stats.cut_latency_ms, float)
+    return {
+        "frames": len(lat), "rate": fps,
+        "p50": float(np.percentile(lat, 50)), "p99": float(np.percentile(lat, 99)),
+        "max": float(lat.max()),
+        "cut_latency": [round(float(x), 3) for x in cut_lat],
+        "cpu_fraction": cpu, "dropped": summary.dropped, "cuts": summary.cuts,
+    }
+
+
+def detector_delays(extra: dict[str, list[float]]) -> dict[str, float]:
+    from rtseg.quat import global_from_local
+    from rtseg.simulators.synth import synthesize
+    take = synthesize(frame_rate=120.0).take
+    g = global_from_local(take.quats, take.parents)
+    ok = np.ones(take.n_joints, bool)
+    frames = ((g[i], ok, i, i / 120.0) for i in range(take.n_frames))
+    cuts = replay_frames(frames, take.joint_names, take.parents, "global", 120.0, config(9))
+    out: dict[str, list[float]] = {m: list(v) for m, v in extra.items()}
+    for c in cuts:
+        out.setdefault(c.cut.method, []).append((c.detected - c.boundary) / 120.0 * 1000.0)
+    return {m: float(np.median(v)) for m, v in out.items() if v}
+
+
+def max_rate(step_seconds: float, port: int, log, kind: str = "serial") -> tuple[int, list[dict]]:
+    best = 0
+    rows = []
+    for rate in RATES:
+        session, summary, cpu, fps = run_session(float(rate), step_seconds, port, kind=kind)
+        src = summary.source_stats
+        lat = np.fromiter(session.stats.frame_latency_ms, float)
+        lost = src.get("dropped", 0) + summary.overruns
+        p99 = float(np.percentile(lat, 99)) if lat.size else float("inf")
+        ok = fps >= 0.97 * rate and lost == 0 and p99 < 50.0
+        rows.append({"rate": rate, "received_fps": fps, "lost": lost,
+                     "p99_ms": p99, "cpu_fraction": cpu, "sustained": ok})
+        log(f"  {rate:5d} fps: received {fps:7.0f}/s, lost {lost}, "
+            f"p99 latency {p99:7.2f} ms, CPU {cpu:4.2f} -> "
+            f"{'sustained' if ok else 'falls behind'}")
+        if not ok:
+            break
+        best = rate
+    return best, rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--json", action="store_true", help="print only the JSON result")
+    p.add_argument("--seconds", type=float, default=30.0, help="length of the 120 Hz run")
+    p.add_argument("--step-seconds", type=float, default=4.0, help="length of each rate step")
+    p.add_argument("--skip-core", action="store_true",
+                   help="skip the rate steps of the session core without the serial driver")
+    args = p.parse_args(argv)
+    logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
+
+    def log(msg: str) -> None:
+        print(msg, file=sys.stderr if args.json else sys.stdout, flush=True)
+
+    t0 = time.monotonic()
+    s = sink()
+    port = s.getsockname()[1]
+    try:
+        log(f"1. 17-sensor suit at 120 Hz over a pty for {args.seconds:g} s ...")
+        lc = latency_and_cpu(args.seconds, port)
+        log(f"   {lc['frames']} frames measured ({lc['rate']:.1f}/s, after 1 s warm-up), "
+            f"{lc['dropped']} dropped, {lc['cuts']} cuts")
+        log(f"   processing latency per frame (arrival -> processed/sent): "
+            f"p50 {lc['p50']:.3f} ms, p99 {lc['p99']:.3f} ms, max {lc['max']:.2f} ms")
+        log(f"   latency of the frames that sent a cut: {lc['cut_latency']} ms")
+        log(f"   CPU: {lc['cpu_fraction'] * 100:.1f} % of one core")
+        log("2. detector delay (default synthesised performance, 8 changes, replayed) ...")
+        delays = detector_delays({})
+        log("   " + ", ".join(f"{m} {v:.0f} ms" for m, v in delays.items()))
+        log(f"3. highest sustained input rate, whole chain through the pty "
+            f"({args.step_seconds:g} s per step) ...")
+        best, _rows = max_rate(args.step_seconds, port, log)
+        log(f"   highest sustained: {best} frames/s")
+        if not args.skip_core:
+            log("   the session core alone (in-process paced source, no serial driver):")
+            core, _ = max_rate(args.step_seconds, port, log, kind="core")
+            log(f"   highest sustained by the core: {core} frames/s")
+    finally:
+        s.close()
+    result = {"latency_ms": {"p50": round(lc["p50"], 3), "p99": round(lc["p99"], 3)},
+              "detector_delay_ms": {"pca": round(delays.get("pca", float("nan")), 1),
+                                    "ppca": round(delays.get("ppca", float("nan")), 1)},
+              "cpu_fraction": round(lc["cpu_fraction"], 4), "max_rate_fps": best}
+    log(f"total benchmark time {time.monotonic() - t0:.0f} s")
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(json.dumps(result, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
