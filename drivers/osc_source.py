@@ -20,6 +20,9 @@ URL options
 ``rcvbuf``   SO_RCVBUF in bytes (default: the OS default).
 ``tolerance``  accepted | |q|² - 1 | for incoming quaternions (default 0.05); accepted ones
              are renormalised.
+``time_order``  ``last`` (default: ``/VMC/Ext/T`` follows the bones it stamps, as
+             VirtualMotionCapture sends it) or ``first`` (T opens each frame); see
+             ``VmcAssembler``.
 
 Frames: ``space = "local"`` (parent-relative rotations), joints in suit order,
 right-handed Y-up scalar-last; ``recv_time`` monotonic s when the frame closed,
@@ -46,7 +49,7 @@ log = logging.getLogger("rtseg.drivers.osc")
 
 DEFAULT_PORT = 39539
 FORMATS = ("vmc",)
-OPTIONS = ("format", "suit", "quiet", "queue", "rate", "rcvbuf", "tolerance")
+OPTIONS = ("format", "suit", "quiet", "queue", "rate", "rcvbuf", "tolerance", "time_order")
 
 
 def load_suit(name: str) -> tuple[list[str], list[int]]:
@@ -79,7 +82,8 @@ class OscVmcSource(Source):
                  suit: str = "default17", bone_names: Sequence[str] | None = None,
                  parents: Sequence[int] | None = None, quiet: float = 0.02,
                  queue_size: int = 256, rate: float | None = None,
-                 rcvbuf: int | None = None, tolerance: float = 0.05) -> None:
+                 rcvbuf: int | None = None, tolerance: float = 0.05,
+                 time_order: str = "last") -> None:
         super().__init__()
         if bone_names is None:
             bones, pars = load_suit(suit)
@@ -96,7 +100,10 @@ class OscVmcSource(Source):
         self.parents = pars
         self.frame_rate = rate
         self.suit = suit
-        self._asm = VmcAssembler(bones, quiet=quiet, unit_tolerance=tolerance, stats=self.stats)
+        if time_order not in ("last", "first"):
+            raise SourceError(f"time_order must be 'last' or 'first', not {time_order!r}")
+        self._asm = VmcAssembler(bones, quiet=quiet, unit_tolerance=tolerance,
+                                 time_order=time_order, stats=self.stats)
         self._queue: queue.Queue[Frame] = queue.Queue(maxsize=queue_size)
         self._stop = threading.Event()
         self._closed = False
@@ -238,7 +245,8 @@ def open_url(location: str, options: dict[str, str]) -> OscVmcSource:
         host, port, suit=options.get("suit", "default17") or "default17",
         quiet=_num(options, "quiet", 0.02), queue_size=_num(options, "queue", 256, int),
         rate=_num(options, "rate", None), rcvbuf=_num(options, "rcvbuf", None, int),
-        tolerance=_num(options, "tolerance", 0.05))
+        tolerance=_num(options, "tolerance", 0.05),
+        time_order=options.get("time_order", "last").lower() or "last")
 
 
 __all__ = ["OscVmcSource", "open_url", "load_suit", "DEFAULT_PORT"]

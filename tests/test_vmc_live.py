@@ -204,6 +204,7 @@ def test_queue_overflow_drops_oldest_and_counts(udp_out):
     ("osc://127.0.0.1:0?quiet=abc", "quiet"),
     ("osc://127.0.0.1:0?suit=nosuch", "nosuch"),
     ("osc://127.0.0.1:99999", "out of range"),
+    ("osc://127.0.0.1:0?time_order=middle", "time_order"),
 ])
 def test_bad_urls_give_clear_errors(url, message):
     with pytest.raises(SourceError, match=message):
@@ -282,3 +283,33 @@ def test_oscsend_skeleton_decoded():
     assert f2.valid.tolist() == [j == hips for j in range(len(SUIT))]
     assert np.allclose(f2.quats[hips], [0, 0, 0, 1]) and np.allclose(f2.quats[arm], f1.quats[arm])
     assert src.stats.unknown_names == 1 and src.ok_state == (1, 3, 0, 1)
+
+
+def test_time_order_first_from_url(udp_out):
+    """A T-first sender with a partial skeleton: T opens each frame."""
+    src = open_source("osc://127.0.0.1:0?time_order=first&quiet=0.3")
+    try:
+        addr = ("127.0.0.1", src.port)
+        for i in range(3):
+            udp_out.sendto(encode_message("/VMC/Ext/T", "f", [10.0 + i]), addr)
+            q = Rotation.from_euler("y", 10 * i, degrees=True).as_quat()
+            udp_out.sendto(encode_pose_message(BONE_ADDRESS, "Head", (0, 0, 0), q), addr)
+        frames = read_all(src, idle=0.6)
+    finally:
+        src.close()
+    assert [f.source_time for f in frames] == [10.0, 11.0, 12.0]
+    head = SUIT.index("Head")
+    angles = [Rotation.from_quat(f.quats[head]).magnitude() for f in frames]
+    assert np.allclose(np.degrees(angles), [0, 10, 20], atol=1e-4)
+
+
+def test_sender_command_line_streams_a_synthesised_take(source):
+    import sys
+    proc = subprocess.run(
+        [sys.executable, "-m", "rtseg.simulators.vmc_sender", "--port", str(source.port),
+         "--script", "idle:1.5,walk:1.5", "--rate", "2000"],
+        capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    frames = read_all(source)
+    assert "sent 360 frames" in proc.stdout
+    assert len(frames) == 360 and all(f.valid.all() for f in frames)
