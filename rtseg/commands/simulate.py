@@ -75,6 +75,9 @@ def load(args: argparse.Namespace):
         raise ValueError(f"--rate must be positive, got {args.rate}")
     if args.duration is not None and not args.duration > 0:
         raise ValueError(f"--duration must be positive, got {args.duration}")
+    if args.faults:
+        from rtseg.simulators.faults import FaultConfig
+        FaultConfig.parse(args.faults)          # fail before anything starts
     if args.take:
         from rtseg.drivers.readers import read_take
         return read_take(args.take, skeleton=args.skeleton, frame_rate=args.rate), None
