@@ -67,8 +67,19 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
     cfg = load_session_config(args.config)
     if over:
         from rtseg.session_config import apply_overrides
-        apply_overrides(cfg, over, origin="command line")
+        for key, value in over.items():
+            try:
+                apply_overrides(cfg, {key: value}, origin="command line")
+            except ConfigError as exc:
+                flag = FLAGS.get(key, key)
+                raise ConfigError(str(exc).replace(f"command line: {key}", flag, 1)) from None
     return cfg
+
+
+#: configuration key -> the command-line flag that sets it (for error messages)
+FLAGS = {"output.osc": "--osc", "output.osc_tcp": "--osc-tcp", "output.templates": "--template",
+         "output.targets": "--target", "output.jsonl": "--jsonl", "recording.dir": "--record",
+         "detectors.methods": "--methods"}
 
 
 def format_cut(ev: CutEvent) -> str:
