@@ -602,22 +602,17 @@ class VmcAssembler:
                             self._learned = True
                             self._close()
                             n_got = 0
+                        # Unity (x, y, z, w) -> ours (-x, -y, z, w), renormalised, with
+                        # the sign making the dot with the previous value non-negative
                         s = 1.0 / sqrt(n2)
                         i4 = idx * 4
-                        x = -x * s
-                        y = -y * s
-                        z = z * s
-                        w = w * s
-                        if continuous and (x * q[i4] + y * q[i4 + 1] + z * q[i4 + 2]
-                                           + w * q[i4 + 3]) < 0.0:
-                            x = -x
-                            y = -y
-                            z = -z
-                            w = -w
-                        q[i4] = x
-                        q[i4 + 1] = y
-                        q[i4 + 2] = z
-                        q[i4 + 3] = w
+                        if continuous and (z * q[i4 + 2] + w * q[i4 + 3]
+                                           - x * q[i4] - y * q[i4 + 1]) < 0.0:
+                            s = -s
+                        q[i4] = -x * s
+                        q[i4 + 1] = -y * s
+                        q[i4 + 2] = z * s
+                        q[i4 + 3] = w * s
                         got[idx] = True
                         if not n_got:
                             self._frame_start = self._now
@@ -811,7 +806,7 @@ class VmcAssembler:
         rp = None
         if self._last_root is not None:
             pos, rot = self._last_root
-            if self._root_bone_pos is not None:
+            if self._root_bone_pos is not None and self._root_bone_pos != (0.0, 0.0, 0.0):
                 off = _rotate(rot, self._root_bone_pos)
                 rp = np.array((pos[0] + off[0], pos[1] + off[1], pos[2] + off[2]))
             else:
