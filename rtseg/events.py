@@ -107,6 +107,9 @@ class StatusEvent:
     dropped: frames lost since the session started (source counters).
     stale_joints: joints whose sensor has not reported a valid value recently.
     stale_names: their names (JSON output and recordings only; not sent over OSC).
+    lag_ms: how long the newest processed frame waited before processing, ms, and
+    backlog: frames received but not yet processed - how far the live loop is behind
+    (JSON output and recordings only).
     time: seconds since session start.
     """
     alive: int = 1
@@ -116,6 +119,8 @@ class StatusEvent:
     stale_names: tuple[str, ...] = ()
     time: float = float("nan")
     wall_time: float = field(default_factory=_wall_time)
+    lag_ms: float = 0.0
+    backlog: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         d = {"type": "status"}

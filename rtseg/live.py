@@ -685,7 +685,9 @@ class LiveSession:
             names = tuple(self.pipeline.joint_names)
         self._last_rate = rate
         return StatusEvent(alive=alive, frame_rate=float(rate), dropped=self.dropped(),
-                           stale_joints=stale, stale_names=names, time=now - self.session_start)
+                           stale_joints=stale, stale_names=names, time=now - self.session_start,
+                           lag_ms=float(self.stats.lag_s * 1000.0),
+                           backlog=int(self.stats.backlog))
 
     # ---------------------------------------------------------------- run
     def run(self) -> SessionSummary:

@@ -312,6 +312,7 @@ def test_session_reports_joint_dropout_and_restore():
     assert [(d.name, d.lost) for d in drops] == [("LeftUpperArm", True), ("LeftUpperArm", False)]
     status = [e for e in s.publishers.events if isinstance(e, StatusEvent)]
     assert any(e.stale_joints == 1 and e.stale_names == ("LeftUpperArm",) for e in status)
+    assert all(e.lag_ms >= 0 and e.backlog >= 0 for e in status)
 
 
 def test_session_counts_ring_overruns_as_dropped_and_restarts():
@@ -367,3 +368,38 @@ def test_bad_full_target_refused_at_start():
     from rtseg.live import build_publishers
     with pytest.raises(ConfigError, match=r"output.targets\[0\]"):
         build_publishers(from_dict({"output": {"targets": ["udp:127.0.0.1:9123,colour=red"]}}))
+
+
+def test_real_detectors_place_no_cut_across_a_gap():
+    """Synthesised idle -> walk; the frames around the change (and 1 s either side) never
+    arrive (sequence gap).  With the real online PCA/PPCA detectors: without the gap the
+    change is found; with it the detectors restart and no cut lands in or right after it."""
+    from rtseg.quat import global_from_local
+    from rtseg.simulators.synth import synthesize
+
+    r = synthesize("idle:6,walk:6", frame_rate=120.0, seed=1)
+    take = r.take
+    g = global_from_local(take.quats, take.parents)
+    mid = r.transitions[0].mid
+    ok = np.ones(take.n_joints, bool)
+    cfg = from_dict({})
+    full = [(g[i], ok, i, i / 120.0) for i in range(take.n_frames)]
+    lo, hi = mid - 120, mid + 120
+    gapped = [f for i, f in enumerate(full) if not lo <= i < hi]
+
+    def cuts_of(fr):
+        pipe = Pipeline(take.joint_names, take.parents, "global", 120.0, cfg)
+        out = []
+        for i, (q, v, seq, t) in enumerate(fr):
+            out.extend(pipe.process(i, q, v, seq, t))
+        return out, pipe
+
+    base, _ = cuts_of(full)
+    assert any(abs(c.boundary - mid) <= 60 for c in base), [c.boundary for c in base]
+    cuts, pipe = cuts_of(gapped)
+    assert pipe.stats.restarts == 1 and pipe.stats.gap_frames == hi - lo
+    # session index lo is the first frame after the gap; PCA needs 2.5 s and PPCA ~1.3 s
+    # of a new segment before they can cut, so nothing within 1 s after the gap
+    assert not [c for c in cuts if lo - 120 <= c.boundary < lo + 120], \
+        [(c.cut.method, c.boundary, c.detected) for c in cuts]
+    assert all(c.boundary >= lo or c.detected < lo for c in cuts)
