@@ -35,10 +35,10 @@ from __future__ import annotations
 
 import logging
 import math
-import queue
 import socket
 import threading
 import time
+from collections import deque
 from typing import Sequence
 
 from rtseg.drivers.base import Source, SourceError
@@ -104,7 +104,9 @@ class OscVmcSource(Source):
             raise SourceError(f"time_order must be 'last' or 'first', not {time_order!r}")
         self._asm = VmcAssembler(bones, quiet=quiet, unit_tolerance=tolerance,
                                  time_order=time_order, stats=self.stats)
-        self._queue: queue.Queue[Frame] = queue.Queue(maxsize=queue_size)
+        self._queue: deque[Frame] = deque()
+        self._queue_size = int(queue_size)
+        self._cond = threading.Condition()
         self._stop = threading.Event()
         self._closed = False
         self._last_drop_log = -math.inf
@@ -164,40 +166,45 @@ class OscVmcSource(Source):
                 self._put(frame)
 
     def _put(self, frame: Frame) -> None:
-        q = self._queue
-        while True:
-            try:
-                q.put_nowait(frame)
-                break
-            except queue.Full:
-                try:
-                    q.get_nowait()
-                except queue.Empty:
-                    continue
-                self.count("dropped")
-                now = time.monotonic()
-                if now - self._last_drop_log > 5.0:
-                    self._last_drop_log = now
-                    log.warning("VMC: reader too slow, dropped oldest queued frame "
-                                "(%d dropped so far)", self.stats.dropped)
+        with self._cond:
+            if len(self._queue) >= self._queue_size:
+                self._queue.popleft()          # drop policy: the oldest frame goes
+                dropped = True
+            else:
+                dropped = False
+            self._queue.append(frame)
+            self._cond.notify()
+        if dropped:
+            self.count("dropped")
+            now = time.monotonic()
+            if now - self._last_drop_log > 5.0:
+                self._last_drop_log = now
+                log.warning("VMC: reader too slow, dropped oldest queued frame "
+                            "(%d dropped so far)", self.stats.dropped)
 
     def read(self, timeout: float | None = None) -> Frame | None:
-        """Next frame in arrival order, or None if none within ``timeout`` s (or closed)."""
-        if self._closed and self._queue.empty():
-            return None
-        try:
-            frame = self._queue.get(timeout=timeout)
-        except queue.Empty:
-            return None
+        """Next frame in arrival order, or None if none within ``timeout`` s (None: wait
+        until one arrives or the source is closed)."""
+        with self._cond:
+            if not self._queue:
+                if self._stop.is_set():
+                    return None
+                self._cond.wait_for(lambda: self._queue or self._stop.is_set(), timeout)
+            if not self._queue:
+                return None
+            frame = self._queue.popleft()
         self.count("frames_ok")
         return frame
 
     def close(self) -> None:
-        """Stop the reader thread and close the socket.  Safe to call twice."""
+        """Stop the reader thread, wake blocked readers and close the socket.  Safe to call
+        twice."""
         if self._closed:
             return
         self._closed = True
         self._stop.set()
+        with self._cond:
+            self._cond.notify_all()
         self._thread.join(timeout=2.0)
         self._sock.close()
 

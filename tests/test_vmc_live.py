@@ -313,3 +313,15 @@ def test_sender_command_line_streams_a_synthesised_take(source):
     frames = read_all(source)
     assert "sent 360 frames" in proc.stdout
     assert len(frames) == 360 and all(f.valid.all() for f in frames)
+
+
+def test_close_wakes_a_blocked_reader():
+    import threading
+    src = OscVmcSource("127.0.0.1", 0)
+    result = []
+    t = threading.Thread(target=lambda: result.append(src.read(timeout=None)))
+    t.start()
+    time.sleep(0.05)
+    src.close()
+    t.join(timeout=5.0)
+    assert not t.is_alive() and result == [None]
