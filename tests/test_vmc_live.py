@@ -325,3 +325,22 @@ def test_close_wakes_a_blocked_reader():
     src.close()
     t.join(timeout=5.0)
     assert not t.is_alive() and result == [None]
+
+
+def test_looping_sender_keeps_time_increasing_until_stopped(source):
+    take = make_take(20, seed=5)
+    sender = VmcSender(take, port=source.port, rate=500.0, loop=True).start()
+    try:
+        deadline = time.monotonic() + 10
+        while len(sender.sent_log) < 50 and time.monotonic() < deadline:
+            time.sleep(0.01)
+    finally:
+        sender.stop()
+    thread_gone = not sender._thread.is_alive()
+    frames = read_all(source)
+    assert thread_gone and len(sender.sent_log) >= 50
+    n = len(sender.sent_log)
+    assert [s.index for s in sender.sent_log] == [k % 20 for k in range(n)]
+    times = [f.source_time for f in frames]
+    assert len(frames) == n and times == sorted(times) and times[-1] == pytest.approx((n - 1) / 500.0)
+    assert same_rotation(frames[25].quats, take.quats[5])
