@@ -8,6 +8,10 @@ sigma_j^2 of the centred data matrix of the paper's Eq. 4.
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import lapack
+
+# LAPACK called directly: for 56x56 matrices numpy.linalg's wrappers cost as much as the
+# arithmetic, and these run every few frames of a live stream.
 
 
 def rank_for_energy(lam: np.ndarray, total: float, tau: float) -> int:
@@ -25,7 +29,9 @@ def rank_for_energy(lam: np.ndarray, total: float, tau: float) -> int:
 
 def full_eigh(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """All eigenpairs of a symmetric matrix, eigenvalues descending and clipped at 0."""
-    lam, V = np.linalg.eigh(S)
+    lam, V, info = lapack.dsyevd(S, compute_v=1, lower=1)
+    if info != 0:
+        lam, V = np.linalg.eigh(S)
     return np.maximum(lam[::-1], 0.0), V[:, ::-1]
 
 
@@ -37,7 +43,12 @@ def subspace_step(S: np.ndarray, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     (a few frames added), one step keeps the leading Ritz values within rounding error of
     the true eigenvalues; callers re-run ``full_eigh`` now and then as a safeguard.
     """
-    Q, _ = np.linalg.qr(S @ V)
-    T = Q.T @ S @ Q
-    w, U = np.linalg.eigh((T + T.T) * 0.5)
+    qr, tau, _, info = lapack.dgeqrf(S @ V)
+    Q, _, info2 = lapack.dorgqr(qr, tau)
+    if info or info2:
+        Q, _ = np.linalg.qr(S @ V)
+    T = Q.T @ (S @ Q)
+    w, U, info = lapack.dsyevd(T, compute_v=1, lower=1)
+    if info != 0:
+        w, U = np.linalg.eigh((T + T.T) * 0.5)
     return np.maximum(w[::-1], 0.0), Q @ U[:, ::-1]

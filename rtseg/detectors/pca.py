@@ -16,8 +16,12 @@ Incremental evaluation (no SVD of all frames so far at every frame):
   so e_n = [q - |S1|^2/n] - [sum_l (Sy2_l - Sy1_l^2 / n)] is exact for the current V: it
   equals the SVD value at refresh frames and exceeds it by a second-order amount in between.
 
-For n < k (before r is known) e_n is evaluated with the subspace of the first k frames, once
-they have arrived, so that d_j exists from j = l + 1 on (the paper's "initial value" of i).
+The paper's initial value of i is k: e_n is evaluated from n = k on, once r is known, so d_n
+exists from n = k + l.  The mean and standard deviation of d use only those values, and the
+first test needs at least l of them (consecutive d's share l - 1 frames, so fewer say little
+about the spread): cuts are tested from n = max(i0, k + 2 l) + 1, i.e. 3 s at the paper's
+values.  Using d values from before k (with r unknown, the subspace still forming) makes the
+first test fire on the start-up trend of d: measured on the 4 CMU takes, F1 0.43 -> 0.57.
 
 Frames are numbered from the detector's creation (``frame_origin = "creation"``); restart()
 does not reset that counter.  ``Cut.frame`` = first frame of the new segment = the frame at
@@ -43,7 +47,7 @@ class PCADetector(OnlineDetector):
     frame_origin = "creation"
 
     def __init__(self, k: int = 240, lag: int = 60, i0: int = 300, tau: float = 0.9,
-                 k_sigma: float = 3.0, refresh: int = 4, keep_trace: bool = False) -> None:
+                 k_sigma: float = 3.0, refresh: int = 8, keep_trace: bool = False) -> None:
         if k < 2 or lag < 1 or i0 < 1 or refresh < 1:
             raise ValueError(f"PCA windows must be positive (k={k}, lag={lag}, i0={i0})")
         if not 0.0 < tau < 1.0:
@@ -70,7 +74,7 @@ class PCADetector(OnlineDetector):
         self._start = self._t
         self._n = 0
         self._buf: np.ndarray | None = None
-        self._e: list[float] = []          # e_1 .. e_n  (index n-1)
+        self._e: list[float] = []          # e_k .. e_n  (index n-k)
         self._r = 0
         self._V: np.ndarray | None = None  # (d, p) tracked subspace, p >= r
         self._d_count = 0
@@ -134,7 +138,7 @@ class PCADetector(OnlineDetector):
         self._set_projection()
 
     def _start_model(self) -> None:
-        """At n == k: fix r, build the subspace and back-fill e_1..e_k."""
+        """At n == k: fix r from the first k frames and build the subspace (exact e_k)."""
         self._fold()
         n = self._n
         S = self._S2 - np.outer(self._S1, self._S1) / n
@@ -143,19 +147,7 @@ class PCADetector(OnlineDetector):
         p = min(len(lam), self._r + 4)
         self._V = V[:, :p]
         self._set_projection()
-        # e_j, j = 1..k, with this subspace: cumulative sums over the buffered frames
-        B = self._buf[:n]
-        j = np.arange(1, n + 1, dtype=np.float64)
-        cs1 = np.cumsum(B, axis=0)
-        tot = np.cumsum(np.einsum("ij,ij->i", B, B)) - np.einsum("ij,ij->i", cs1, cs1) / j
-        Y = B @ self._Vr
-        cy1 = np.cumsum(Y, axis=0)
-        proj = np.cumsum(Y * Y, axis=0).sum(axis=1) - np.einsum("ij,ij->i", cy1, cy1) / j
-        e = np.maximum(tot - proj, 0.0)
-        e[-1] = float(lam[self._r:].sum())       # exact at n == k
-        self._e = e.tolist()
-        for m in range(self.lag + 1, n + 1):      # d_j for j <= k (never tested: k < i0)
-            self._push_d(self._e[m - 1] - self._e[m - 1 - self.lag])
+        self._e = [float(lam[self._r:].sum())]     # e_k
 
     def _push_d(self, d: float) -> None:
         self._d_count += 1
@@ -200,10 +192,12 @@ class PCADetector(OnlineDetector):
         S1 = self._S1
         e = (self._q - float(S1 @ S1) / n) - (float(self._Sy2.sum()) - float(self._Sy1 @ self._Sy1) / n)
         e = max(e, 0.0)
-        self._e.append(e)
-        d = e - self._e[n - 1 - self.lag]
+        self._e.append(e)                       # e_n at index n - k
+        if n - self.lag < self.k:
+            return None
+        d = e - self._e[n - self.k - self.lag]
         cut = None
-        if n > self.i0 and self._d_count >= 2:
+        if n > self.i0 and self._d_count >= self.lag:
             sd = math.sqrt(self._d_m2 / self._d_count)
             thr = self._d_mean + self.k_sigma * sd
             if self.keep_trace:
