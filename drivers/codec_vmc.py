@@ -419,8 +419,10 @@ class VmcAssembler:
     they send every profile bone in each frame (rule 4 closes the frame before the next T).
 
     Per frame: ``quats`` (J, 4) -- bones not received hold their last value (identity before
-    the first) with ``valid`` False; ``source_time`` from T; ``seq`` counts emitted frames
-    from 0; ``root_position`` = Root/Pos position + root rotation applied to the root bone's
+    the first) with ``valid`` False; ``source_time`` from T; ``seq`` counts frames from 0,
+    advancing by the number of sender frames elapsed when T jumps by more than 1.75 of the
+    sender's frame period (estimated from T), so frames lost on the network show up as
+    sequence gaps (and in ``stats.gaps`` / ``stats.dropped``); ``root_position`` = Root/Pos position + root rotation applied to the root bone's
     local position (the world position of the hips when Root is their parent), or the root
     bone's local position when no Root/Pos was sent, or None when neither was.
     ``continuous``: flip each bone's quaternion sign so its dot with the previous value is
@@ -429,7 +431,7 @@ class VmcAssembler:
 
     def __init__(self, bone_names: Sequence[str], *, quiet: float = 0.02,
                  unit_tolerance: float = 0.05, continuous: bool = True,
-                 time_order: str = "last", burst: float = 0.002,
+                 time_order: str = "last", burst: float = 0.004,
                  stats: SourceStats | None = None) -> None:
         if not bone_names:
             raise ValueError("VmcAssembler needs at least one bone name")
@@ -468,6 +470,8 @@ class VmcAssembler:
         self._learned = False                 # a frame closed by a change rule was seen
         self._last_activity = -math.inf
         self._seq = 0
+        self._prev_t: float | None = None      # T of the last frame closed with one
+        self._period: float | None = None      # sender frame period estimated from T, s
         self._out: list[Frame] = []
         self._warned: dict[str, float] = {}
         #: Last ``/VMC/Ext/OK`` arguments (loaded, calibration state, mode, tracking) or None.
@@ -799,6 +803,32 @@ class VmcAssembler:
                 self._root is not None or not self._sends_root):
             self._close()
 
+    def _frames_elapsed(self, dt: float) -> int:
+        """Sender frames from the previous T to this one (1 normally; k > 1 when frames were
+        lost on the way, counted in ``gaps`` / ``dropped``).  The sender's frame period is
+        tracked from T steps: dt < 0.6 period resets it, dt < 1.75 period refines it (EMA),
+        longer steps are gaps of round(dt / period) - 1 frames."""
+        p = self._period
+        if not dt > 0:
+            return 1                    # same T repeated, or the sender's clock restarted
+        if p is None or dt < 0.6 * p:
+            self._period = dt
+            return 1
+        if dt < 1.75 * p:
+            self._period = p + 0.05 * (dt - p)
+            return 1
+        k = max(2, int(dt / p + 0.5))
+        self.stats.gaps += 1
+        self.stats.dropped += k - 1
+        self._warn("gap", f"/VMC/Ext/T jumped {dt * 1000:.1f} ms: about {k - 1} frame(s) "
+                          f"lost on the way")
+        return k
+
+    @property
+    def frame_period(self) -> float | None:
+        """The sender's frame period in seconds estimated from ``/VMC/Ext/T``, or None."""
+        return self._period
+
     def _close(self) -> None:
         J = self.n_bones
         quats = np.array(self._q, dtype=np.float64).reshape(J, 4)
@@ -813,10 +843,15 @@ class VmcAssembler:
                 rp = np.array(pos, dtype=np.float64)
         elif self._root_bone_pos is not None:
             rp = np.array(self._root_bone_pos, dtype=np.float64)
+        t = self._t
+        if t is not None:
+            if self._prev_t is not None:
+                self._seq += self._frames_elapsed(t - self._prev_t) - 1
+            self._prev_t = t
         self._out.append(Frame(recv_time=self._now, quats=quats, valid=valid,
-                               source_time=self._t, seq=self._seq, root_position=rp))
+                               source_time=t, seq=self._seq, root_position=rp))
         self._seq += 1
-        self._last_closed_t = self._t
+        self._last_closed_t = t
         self._got[:] = self._all_false   # in place: _bundle holds a reference
         self._n_got = 0
         self._t = None

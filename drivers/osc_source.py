@@ -23,6 +23,8 @@ URL options
 ``time_order``  ``last`` (default: ``/VMC/Ext/T`` follows the bones it stamps, as
              VirtualMotionCapture sends it) or ``first`` (T opens each frame); see
              ``VmcAssembler``.
+``burst``    seconds within which the datagrams of one frame arrive (default 0.004): a root
+             arriving later than this after a frame's first bone starts a new frame.
 
 Frames: ``space = "local"`` (parent-relative rotations), joints in suit order,
 right-handed Y-up scalar-last; ``recv_time`` monotonic s when the frame closed,
@@ -49,7 +51,8 @@ log = logging.getLogger("rtseg.drivers.osc")
 
 DEFAULT_PORT = 39539
 FORMATS = ("vmc",)
-OPTIONS = ("format", "suit", "quiet", "queue", "rate", "rcvbuf", "tolerance", "time_order")
+OPTIONS = ("format", "suit", "quiet", "queue", "rate", "rcvbuf", "tolerance", "time_order",
+           "burst")
 
 
 def load_suit(name: str) -> tuple[list[str], list[int]]:
@@ -83,7 +86,7 @@ class OscVmcSource(Source):
                  parents: Sequence[int] | None = None, quiet: float = 0.02,
                  queue_size: int = 256, rate: float | None = None,
                  rcvbuf: int | None = None, tolerance: float = 0.05,
-                 time_order: str = "last") -> None:
+                 time_order: str = "last", burst: float = 0.004) -> None:
         super().__init__()
         if bone_names is None:
             bones, pars = load_suit(suit)
@@ -103,7 +106,7 @@ class OscVmcSource(Source):
         if time_order not in ("last", "first"):
             raise SourceError(f"time_order must be 'last' or 'first', not {time_order!r}")
         self._asm = VmcAssembler(bones, quiet=quiet, unit_tolerance=tolerance,
-                                 time_order=time_order, stats=self.stats)
+                                 time_order=time_order, burst=burst, stats=self.stats)
         self._queue: deque[Frame] = deque()
         self._queue_size = int(queue_size)
         self._cond = threading.Condition()
@@ -253,7 +256,8 @@ def open_url(location: str, options: dict[str, str]) -> OscVmcSource:
         quiet=_num(options, "quiet", 0.02), queue_size=_num(options, "queue", 256, int),
         rate=_num(options, "rate", None), rcvbuf=_num(options, "rcvbuf", None, int),
         tolerance=_num(options, "tolerance", 0.05),
-        time_order=options.get("time_order", "last").lower() or "last")
+        time_order=options.get("time_order", "last").lower() or "last",
+        burst=_num(options, "burst", 0.004))
 
 
 __all__ = ["OscVmcSource", "open_url", "load_suit", "DEFAULT_PORT"]

@@ -361,3 +361,28 @@ def test_lost_datagrams_do_not_shift_or_merge_later_frames(lost):
         assert same_rotation(part.quats[part.valid], q[4][part.valid])
     else:
         assert 4 not in by_t
+
+
+def test_time_jumps_become_sequence_gaps():
+    asm = VmcAssembler(BONES)
+    q = rand_quats(1, len(BONES), 2)[0]
+    sent = [0, 1, 2, 3, 6, 7, 8, 12, 13]          # frames 4, 5, 9, 10, 11 lost
+    frames = []
+    for k in sent:
+        frames += feed_all(asm, encode_frame(q, BONES, time=k / 90.0, root_position=(0, 1, k)),
+                           now=k / 90.0)
+    frames += asm.flush(10.0)
+    assert [f.seq for f in frames] == sent
+    assert asm.stats.gaps == 2 and asm.stats.dropped == 5
+    assert asm.frame_period == pytest.approx(1 / 90.0, rel=1e-4)
+
+
+def test_jittery_sender_clock_is_not_a_gap():
+    asm = VmcAssembler(BONES)
+    rng = np.random.default_rng(0)
+    t = np.cumsum(1 / 60.0 * (1 + rng.uniform(-0.3, 0.3, 200)))
+    frames = []
+    for k, tk in enumerate(t):
+        frames += feed_all(asm, [encode_bundle([_bone("Hips"), encode_message("/VMC/Ext/T", "f", [tk])])],
+                           now=float(tk))
+    assert [f.seq for f in frames] == list(range(len(frames))) and asm.stats.gaps == 0

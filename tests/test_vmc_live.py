@@ -113,20 +113,24 @@ def test_reordered_datagrams_and_messages_within_frames(source, udp_out):
     rng = random.Random(1)
     addr = ("127.0.0.1", source.port)
     for i in range(30):
-        msgs = [encode_pose_message(ROOT_ADDRESS, "root", take.root_position[i], (0, 0, 0, 1))]
-        msgs += [encode_pose_message(BONE_ADDRESS, b, (0, 0, 0), take.quats[i, j])
-                 for j, b in enumerate(SUIT)]
+        # the root leads the frame (as VMC senders send it); bones, T and OK come in any
+        # order, spread over datagrams that arrive in any order
+        root = encode_pose_message(ROOT_ADDRESS, "root", take.root_position[i], (0, 0, 0, 1))
+        msgs = [encode_pose_message(BONE_ADDRESS, b, (0, 0, 0), take.quats[i, j])
+                for j, b in enumerate(SUIT)]
         msgs += [encode_message("/VMC/Ext/T", "f", [i / 60.0]),
                  encode_message("/VMC/Ext/OK", "i", [1])]
         rng.shuffle(msgs)
-        dgrams = pack_bundles(msgs, 300)
-        rng.shuffle(dgrams)
-        for d in dgrams:
+        dgrams = pack_bundles([root] + msgs, 300)
+        rest = dgrams[1:]
+        rng.shuffle(rest)
+        for d in [dgrams[0]] + rest:
             udp_out.sendto(d, addr)
         time.sleep(0.002)
     frames = read_all(source)
     assert len(frames) == 30
     assert same_rotation(np.array([f.quats for f in frames]), take.quats)
+    assert np.allclose([f.root_position for f in frames], take.root_position, atol=1e-6)
     assert np.allclose([f.source_time for f in frames], np.arange(30) / 60.0, atol=1e-6)
 
 
@@ -163,11 +167,13 @@ def test_sensor_dropout_and_dropped_frames_via_faults(source):
     hand = SUIT.index("LeftHand")
     for s, f in zip(sent, frames):
         assert f.source_time == pytest.approx(s.source_time, abs=1e-6)
+        assert f.seq == s.slot                       # lost frames are sequence gaps
         assert f.valid[hand] == ("LeftHand" not in s.omitted)
         assert f.valid.sum() == len(SUIT) - len(s.omitted)
         if "LeftHand" not in s.omitted:
             assert same_rotation(f.quats[hand], take.quats[s.index, hand])
     assert any(s.omitted for s in sent)
+    assert source.stats.dropped == 120 - len(sent) - (119 - sent[-1].slot)
 
 
 def test_close_stops_thread_and_frees_port():
@@ -307,7 +313,7 @@ def test_sender_command_line_streams_a_synthesised_take(source):
     import sys
     proc = subprocess.run(
         [sys.executable, "-m", "rtseg.simulators.vmc_sender", "--port", str(source.port),
-         "--script", "idle:1.5,walk:1.5", "--rate", "2000"],
+         "--script", "idle:1.5,walk:1.5", "--rate", "1000"],
         capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
     frames = read_all(source)
