@@ -817,7 +817,13 @@ class VmcAssembler:
         if dt < 1.75 * p:
             self._period = p + 0.05 * (dt - p)
             return 1
-        k = max(2, int(dt / p + 0.5))
+        ratio = dt / p
+        if not ratio < 1e6:             # a clock jump, not lost frames: start afresh
+            self._period = None
+            self.stats.gaps += 1
+            self._warn("gap", f"/VMC/Ext/T jumped by {dt:.3g} s; frame period re-estimated")
+            return 1
+        k = max(2, int(ratio + 0.5))
         self.stats.gaps += 1
         self.stats.dropped += k - 1
         self._warn("gap", f"/VMC/Ext/T jumped {dt * 1000:.1f} ms: about {k - 1} frame(s) "
