@@ -457,9 +457,10 @@ class SerialFrameDecoder:
 
     Speed: messages are split on 0x00 with ``bytes.split``, COBS-decoded by visiting only
     code bytes, checked with the C ``crc_hqx``, and the sensor records of all frames of one
-    ``feed`` call are converted together with one ``np.frombuffer``; >100 000 frames/s
-    of a 17-sensor suit on one core when fed a few kilobytes at a time (see
-    ``benchmarks/decode.py``).
+    ``feed`` call are converted together with one ``np.frombuffer``.  Measured for a
+    17-sensor suit on the shared 2-core build machine (``benchmarks/decode.py``): about
+    180 000 frames/s fed 4 KB at a time and 28 000 frames/s fed one frame per call when the
+    machine was quiet; 70 000 and 12 000 frames/s under a load average of 9.
     """
 
     def __init__(self, known_ids: Iterable[int] | None = None,
