@@ -16,7 +16,8 @@ from pythonosc.osc_message import OscMessage as PyOscMessage
 from scipy.spatial.transform import Rotation
 
 from rtseg.drivers.codec_vmc import (
-    OscParseError, VmcAssembler, encode_frame, encode_message, parse_message, parse_packet,
+    OscParseError, VmcAssembler, encode_bundle, encode_frame, encode_message, parse_message,
+    parse_packet,
 )
 from rtseg.frame import Frame
 
@@ -153,3 +154,38 @@ def test_encode_parse_round_trip_agrees_with_python_osc(addr, args):
             assert got == want
     ref = PyOscMessage(dgram)
     assert list(ref.params) == list(mine.args)
+
+
+# --------------------------------------------------------------------------- structured streams
+
+any_f32 = st.floats(width=32)
+vmc_msg = st.one_of(
+    st.tuples(st.just("bone"), st.sampled_from(BONES + ["hips", "Tail", ""]),
+              st.lists(any_f32, min_size=7, max_size=7)),
+    st.tuples(st.just("root"), st.just("root"), st.lists(any_f32, min_size=7, max_size=7)),
+    st.tuples(st.just("t"), st.just(""), st.lists(any_f32, min_size=1, max_size=1)),
+)
+
+
+def _encode(kind: str, name: str, vals: list[float]) -> bytes:
+    if kind == "t":
+        return encode_message("/VMC/Ext/T", "f", vals)
+    addr = "/VMC/Ext/Bone/Pos" if kind == "bone" else "/VMC/Ext/Root/Pos"
+    return encode_message(addr, "sfffffff", [name] + vals)
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.tuples(st.lists(vmc_msg, min_size=1, max_size=6),
+                          st.floats(0.0, 0.05)), min_size=1, max_size=12),
+       st.sampled_from(["last", "first"]))
+def test_structured_streams_with_extreme_values(stream, order):
+    asm = VmcAssembler(BONES, time_order=order)
+    now, seqs = 0.0, []
+    for msgs, dt in stream:
+        now += dt
+        for f in asm.feed(encode_bundle([_encode(*m) for m in msgs]), now):
+            seqs.append(f.seq)
+            assert np.all(np.isfinite(f.quats))
+            assert f.source_time is None or math.isfinite(f.source_time)
+    seqs += [f.seq for f in asm.flush(now + 1.0)]
+    assert seqs == sorted(set(seqs))
