@@ -500,7 +500,7 @@ class LiveSession:
                    else getattr(src, "url", type(src).__name__))
             self.recorder = SessionRecorder(
                 self.config["recording.dir"], names, parents, space=space,
-                frame_rate=self.frame_rate,
+                frame_rate=self.frame_rate, start_monotonic=self.session_start,
                 meta={"source": url, "config": self.config.origin,
                       "methods": list(self.pipeline.detectors)})
 
@@ -701,9 +701,13 @@ class LiveSession:
         reader = None
         blas = _blas_limit(int(self.config["buffer.blas_threads"]))
         try:
+            # the time origin precedes the source's first frame (CutEvent.time >= 0)
+            self.session_start = time.monotonic()
             self._open()
             J = len(self.pipeline.joint_names)
-            self.session_start = getattr(self.recorder, "start_monotonic", None) or time.monotonic()
+            rec_start = getattr(self.recorder, "start_monotonic", None)
+            if isinstance(rec_start, float):
+                self.session_start = rec_start
             self._last_valid = np.full(J, self.session_start)
             self._joint_lost = np.zeros(J, dtype=bool)
             self._n_lost = 0
