@@ -42,14 +42,15 @@ def run(args: argparse.Namespace) -> int:
     path = suit.start()
     try:
         url = f"serial://{path}?rate={args.rate:g}"
-        targets = ", ".join(cfg["output.osc"]) or "no UDP target"
+        targets = ", ".join(cfg["output.osc"])
+        where = (f"cuts go to OSC {targets} (try `oscdump {cfg['output.osc'][0].rsplit(':', 1)[1]}`)"
+                 if targets else "no OSC/UDP target")
         print(f"rtseg demo: simulated suit on {path} ({take.n_joints} sensors, "
               f"{args.rate * args.speed:g} Hz{', faults ' + faults.to_spec() if faults.enabled else ''})",
               file=sys.stderr)
         print(f"rtseg demo: script {script}", file=sys.stderr)
-        print(f"rtseg demo: reading {url}; cuts go to OSC {targets} "
-              f"(try `oscdump 9123`); ending after {args.duration:g} s, Ctrl-C to stop",
-              file=sys.stderr)
+        print(f"rtseg demo: reading {url}; {where}; ending after {args.duration:g} s, "
+              f"Ctrl-C to stop", file=sys.stderr)
         if args.truth:
             for tr in synth.transitions:
                 print(f"truth: {tr.before} -> {tr.after} at frame {tr.mid} "
