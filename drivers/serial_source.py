@@ -47,8 +47,8 @@ Behaviour
   raises because of the device.
 - Counters map from the decoder: corrupt messages and boot-log garbage -> ``corrupt``,
   non-unit / NaN quaternions -> ``bad_values``, ids not in the suit -> ``unknown_names``,
-  malformed text lines / unknown message types / duplicate sequence numbers ->
-  ``bad_messages``.  Warnings are logged at most once per kind per 5 s, with the count of
+  malformed text lines / unknown message types / a frame repeating the previous frame's
+  sequence number -> ``bad_messages``.  Warnings are logged at most once per kind per 5 s, with the count of
   suppressed repeats.
 - Text format: no sequence numbers or device clock (``seq``/``source_time`` None); a
   partial frame is closed after a quiet gap of a third of a frame period (see
@@ -164,6 +164,7 @@ class SerialSource(Source):
         self._last_valid = np.full(n, time.monotonic())
         self._lost = np.zeros(n, dtype=bool)
         self._last_seq: int | None = None
+        self._last_was_frame = False
         self._last_time_raw: int | None = None
         self._time_acc = 0
         self._last_data = 0.0
@@ -324,7 +325,7 @@ class SerialSource(Source):
     def _handle(self, messages: list[codec.DecodedFrame], now: float) -> None:
         self._sync_stats()
         for m in messages:
-            if m.seq is not None and not self._track(m.seq, m.time_us):
+            if m.seq is not None and not self._track(m.seq, m.time_us, m.msg_type):
                 continue
             if m.msg_type == codec.MSG_FRAME:
                 self._frame(m, now)
@@ -340,10 +341,18 @@ class SerialSource(Source):
                              ", ".join(f"{k}={v}" for k, v in m.info.items()))
                 self.device_info = dict(m.info)
 
-    def _track(self, seq: int, time_us: int) -> bool:
-        """Sequence gaps and clock unwrapping; False to drop a duplicate message."""
-        if self._last_time_raw is None:
+    def _track(self, seq: int, time_us: int, msg_type: int) -> bool:
+        """Sequence gaps and clock unwrapping; False to drop a duplicate frame.
+
+        Lenient with firmware that numbers only its frames: a status/info message may
+        repeat the sequence number of the frame before or after it without counting as a
+        duplicate or a gap.  Only frames drive the clock (firmware may stamp status/info
+        messages carelessly)."""
+        if msg_type != codec.MSG_FRAME:
+            pass
+        elif self._last_time_raw is None:
             self._time_acc = time_us
+            self._last_time_raw = time_us
         else:
             dt = (time_us - self._last_time_raw) & 0xFFFFFFFF
             if dt >= 0x80000000:  # clock went backwards: the device restarted
@@ -354,9 +363,13 @@ class SerialSource(Source):
                 self._last_seq = None
             else:
                 self._time_acc += dt
-        self._last_time_raw = time_us
+            self._last_time_raw = time_us
         if self._last_seq is not None:
             d = (seq - self._last_seq) & 0xFFFF
+            is_frame = msg_type == codec.MSG_FRAME
+            if d == 0 and not (is_frame and self._last_was_frame):
+                self._last_was_frame = is_frame
+                return True
             if d == 0:
                 self.count("bad_messages")
                 self._log("dup", logging.WARNING, "serial %s: duplicate sequence number %d",
@@ -368,6 +381,7 @@ class SerialSource(Source):
                 self._log("gap", logging.WARNING, "serial %s: %d messages missing before seq %d",
                           self.path, d - 1, seq)
         self._last_seq = seq
+        self._last_was_frame = msg_type == codec.MSG_FRAME
         return True
 
     def _frame(self, m: codec.DecodedFrame, now: float) -> None:

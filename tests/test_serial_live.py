@@ -316,3 +316,30 @@ def test_take_mapping_cmu_names_and_joint_map():
     assert present[SUIT.bones.index("Head")]
     with pytest.raises(ValueError, match="none of suit"):
         suit_orientations(Take(["a"], [-1], 120.0, q[:, :1]), SUIT)
+
+
+def test_sequence_numbering_of_info_messages_and_duplicates(raw_pty):
+    """Firmware numbering only its frames: info/status may share a frame's number; a
+    repeated frame is a duplicate; a backwards clock is a restart, not a gap."""
+    master, path = raw_pty
+    src = open_source(f"serial://{path}")
+    try:
+        q = np.tile([0.0, 0.0, 0.0, 1.0], (2, 1))
+        f = lambda seq, t: codec.encode_frame(seq, t, [0, 1], q)  # noqa: E731
+        stream = (b"\x00" + f(0, 0) + codec.encode_info(0, 0, "fw=x")     # info repeats 0
+                  + f(1, 10_000) + codec.encode_status(2, 0, [0], [7])    # status takes 2
+                  + f(2, 20_000)                                           # frame repeats 2
+                  + f(2, 20_000)                                           # duplicate frame
+                  + f(3, 30_000) + f(7, 70_000)                            # 3 missing
+                  + f(0, 500))                                             # restart
+        os.write(master, stream)
+        frames = collect(src, lambda fr, idle: len(fr) >= 6, timeout=3.0)
+        assert [fr.seq for fr in frames] == [0, 1, 2, 3, 7, 0]
+        assert src.stats.bad_messages == 1  # the duplicate
+        assert src.stats.gaps == 1 and src.stats.dropped == 3
+        assert src.restarts == 1 and src.device_info == {"fw": "x"}
+        t = [fr.source_time for fr in frames]
+        np.testing.assert_allclose(t[:5], [0, 0.01, 0.02, 0.03, 0.07])
+        assert t[5] > t[4]  # keeps increasing across the restart
+    finally:
+        src.close()
