@@ -164,6 +164,10 @@ def test_evaluate_json_synthetic(synth_dir, capsys):
         # the per-take counts are the scoring of the reported cuts against the labels
         s = score(a["cut_frames"], truth.transitions)
         assert (a["tp"], a["fp"], a["fn"]) == (s.tp, s.fp, s.fn)
+        assert len(a["matched"]) == a["tp"]
+        by_mid = {t.mid: t for t in truth.transitions}
+        for mt in a["matched"]:
+            assert by_mid[mt["mid"]].contains(mt["cut"]) and mt["cut"] in a["cut_frames"]
     assert "2/2" in err   # progress on stderr, not stdout
 
 

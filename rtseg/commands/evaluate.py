@@ -73,9 +73,15 @@ class TakeScore:
     cut_frames: list[int]
     label_source: str
     elapsed_s: float
+    mids: list[int] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
+        """Score counts and ratios, the cut frames, and per matched transition its labelled
+        ``mid`` and the matching cut (``offset`` = cut - mid, frames)."""
+        matched = [{"mid": self.mids[j], "cut": c, "offset": c - self.mids[j]}
+                   for c, j in self.score.matches] if self.mids else []
         return {**self.score.as_dict(), "group": self.group, "cut_frames": self.cut_frames,
+                "matched": sorted(matched, key=lambda m: m["mid"]),
                 "labels": self.label_source, "elapsed_s": round(self.elapsed_s, 4)}
 
 
@@ -153,7 +159,7 @@ def evaluate_takes(takes: Sequence[LabelledTake], methods: Sequence[str],
         for m, r in results.items():
             report.methods[m].takes[key] = TakeScore(
                 t.name, t.group, score(r.cut_frames, t.transitions), r.cut_frames,
-                t.label_source, r.elapsed_s)
+                t.label_source, r.elapsed_s, [tr.mid for tr in t.transitions])
     if progress:
         progress.close()
     return report
