@@ -181,7 +181,7 @@ def test_unplug_reconnects_within_one_second(rig):
 def test_sensor_dropout_and_wraps(rig):
     take = make_take(360)
     events = []
-    suit, src = rig(take, "stale=0.1", rate=300.0, faults="dropout=5:0.301:0.4",
+    suit, src = rig(take, "stale=0.2", rate=300.0, faults="dropout=5:0.301:0.4",
                     start_seq=65000, start_time_us=2**32 - 500_000)
     src.on_dropout = events.append
     suit.begin()
