@@ -8,6 +8,7 @@ segment.  Segment ``k`` covers frames ``[start, end)`` (end exclusive); times ar
 from __future__ import annotations
 
 import json
+import logging
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -20,6 +21,8 @@ from rtseg.detectors.base import Cut
 
 if TYPE_CHECKING:  # pragma: no cover
     from rtseg.take import Take
+
+log = logging.getLogger(__name__)
 
 #: The detectors of the paper, in the order they are reported.
 METHODS: tuple[str, ...] = ("pca", "ppca", "gmm")
@@ -107,11 +110,17 @@ def segments_between(cut_frames: Sequence[int], n_frames: int, frame_rate: float
 def _clean_cuts(raw: Sequence[Any], method: str, n_frames: int) -> list[Cut]:
     """Cut objects (or bare frames) sorted, de-duplicated, strictly inside the take."""
     cuts: dict[int, Cut] = {}
+    dropped = []
     for c in raw:
         if not isinstance(c, Cut):
             c = Cut(frame=int(c), method=method, detected_at=int(c))
         if 0 < c.frame < n_frames and c.frame not in cuts:
             cuts[c.frame] = c
+        else:
+            dropped.append(c.frame)
+    if dropped:
+        log.warning("%s: %d cut(s) outside (0, %d) or repeated, dropped: frames %s",
+                    method, len(dropped), n_frames, dropped[:10])
     return [cuts[f] for f in sorted(cuts)]
 
 
