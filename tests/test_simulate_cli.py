@@ -160,3 +160,25 @@ def test_simulate_bad_arguments_are_clear_errors(argv, fragment, capsys, tmp_pat
         argv = argv + ["--link", str(tmp_path / "f")]
     assert main(["simulate", *argv]) == 1
     assert fragment in capsys.readouterr().err
+
+
+def test_simulate_prints_the_transitions_saved_in_a_synthetic_take(tmp_path, capsys):
+    import socket
+
+    from rtseg.drivers.readers import write_take
+
+    truth = synthesize("idle:2,walk:2,squat:2", seed=1)
+    path = write_take(tmp_path / "synth.npz", truth.take)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    try:
+        rc = main(["simulate", "vmc", "--take", str(path), "--port", str(sock.getsockname()[1]),
+                   "--duration", "0.2"])
+        sock.settimeout(2.0)
+        assert sock.recv(65536).startswith(b"#bundle")          # something really arrived
+    finally:
+        sock.close()
+    out = capsys.readouterr().out
+    assert rc == 0
+    assert _printed_transitions(out.splitlines()) == [
+        (t.lo, t.hi, t.mid, t.before, t.after) for t in truth.transitions]

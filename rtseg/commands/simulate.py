@@ -92,9 +92,15 @@ def describe(take: Take, result) -> None:
     """Print the take and, for a synthetic one, its exact transitions."""
     _out(f"take: {take.source or '<memory>'}: {take.n_frames} frames at {take.frame_rate:g} Hz "
          f"({take.duration:.2f} s), {take.n_joints} joints, {take.space} rotations")
-    if result is None:
-        return
     rate = take.frame_rate
+    if result is None:
+        saved = take.meta.get("transitions")   # a synthetic take saved with --save
+        if saved:
+            _out(f"transitions recorded in the take ({len(saved)}; frames lo-hi inclusive):")
+            for k, (lo, mid, hi, before, after) in enumerate(saved, 1):
+                _out(f"  {k:2d} frames {lo:6d}-{hi:<6d} mid {mid:6d} "
+                     f"({lo / rate:7.3f}-{hi / rate:7.3f} s)  {before} -> {after}")
+        return
     _out(f"script: {take.meta.get('synth_script')}  seed: {take.meta.get('synth_seed')}")
     for s in result.segments:
         _out(f"  segment {s.name:<14s} frames {s.start:6d}-{s.stop - 1:<6d} "
