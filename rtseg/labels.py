@@ -470,7 +470,8 @@ def find_labelled_takes(data_dir: str | Path, groups: Iterable[str] = GROUPS, *,
                 continue
             found.append(LabelledTake(name, "cmu", path, skeleton, labels))
     if "tsseg4d" in groups and (root / "tsseg4d").is_dir():
-        for path in sorted((root / "tsseg4d").glob("*.csv")):
+        for path in sorted(p for p in (root / "tsseg4d").iterdir()
+                           if p.suffix.lower() == ".csv" and p.is_file()):
             name = _take_name(path)
             labels = ranges.get(name)
             if labels is None:
