@@ -6,9 +6,14 @@ blocks on the socket, feeds every datagram in arrival order to a
 takes them off the queue.  (No threaded OSC server: it would handle datagrams in parallel
 and could reorder the parts of a skeleton.)
 
-URL options
------------
-``format``   ``vmc`` (only format so far).
+``osc://HOST:PORT?format=vrchat`` instead reads VRChat-style OSC trackers (head + 8
+trackers, world orientations, default port 9000; options quiet, queue, rate, rcvbuf and
+``root=head|1..8``, the tracker whose position is ``Frame.root_position``); see
+:mod:`rtseg.drivers.codec_vrchat`.
+
+URL options (VMC)
+-----------------
+``format``   ``vmc`` (default) or ``vrchat``.
 ``suit``     suit profile in ``config/suits.toml`` giving bone order and hierarchy
              (default ``default17``).
 ``quiet``    seconds without datagrams after which an open frame is closed (default 0.02).
@@ -41,18 +46,22 @@ import socket
 import threading
 import time
 from collections import deque
-from typing import Sequence
+from typing import Any, Sequence
 
 from rtseg.drivers.base import Source, SourceError
 from rtseg.drivers.codec_vmc import VmcAssembler
+from rtseg.drivers.codec_vrchat import DEFAULT_PORT as VRCHAT_PORT
+from rtseg.drivers.codec_vrchat import JOINT_NAMES as VRCHAT_JOINTS
+from rtseg.drivers.codec_vrchat import VrchatAssembler
 from rtseg.frame import Frame
 
 log = logging.getLogger("rtseg.drivers.osc")
 
 DEFAULT_PORT = 39539
-FORMATS = ("vmc",)
+FORMATS = ("vmc", "vrchat")
 OPTIONS = ("format", "suit", "quiet", "queue", "rate", "rcvbuf", "tolerance", "time_order",
            "burst")
+VRCHAT_OPTIONS = ("format", "quiet", "queue", "rate", "rcvbuf", "root")
 
 
 def load_suit(name: str) -> tuple[list[str], list[int]]:
@@ -76,37 +85,17 @@ def load_suit(name: str) -> tuple[list[str], list[int]]:
         raise SourceError(f"suit {name!r}: {exc}") from None
 
 
-class OscVmcSource(Source):
-    """VMC receiver on a UDP socket (see module docstring).  ``.port`` is the bound port."""
+class OscUdpSource(Source):
+    """Shared machinery of the OSC sources: a UDP socket read by one thread that feeds an
+    assembler (``feed(data, now)`` / ``flush(now)`` returning frames) and a bounded queue
+    (drop-oldest).  ``.port`` is the bound port."""
 
-    space = "local"
+    _asm: Any
 
-    def __init__(self, host: str = "0.0.0.0", port: int = DEFAULT_PORT, *,
-                 suit: str = "default17", bone_names: Sequence[str] | None = None,
-                 parents: Sequence[int] | None = None, quiet: float = 0.02,
-                 queue_size: int = 256, rate: float | None = None,
-                 rcvbuf: int | None = None, tolerance: float = 0.05,
-                 time_order: str = "last", burst: float = 0.004) -> None:
-        super().__init__()
-        if bone_names is None:
-            bones, pars = load_suit(suit)
-        else:
-            bones = list(bone_names)
-            pars = list(parents) if parents is not None else [-1] * len(bones)
-        if len(pars) != len(bones):
-            raise SourceError("parents and bone_names differ in length")
-        if not quiet > 0:
-            raise SourceError(f"quiet must be positive seconds, got {quiet}")
+    def _start(self, host: str, port: int, quiet: float, queue_size: int,
+               rcvbuf: int | None) -> None:
         if queue_size < 1:
             raise SourceError(f"queue must hold at least 1 frame, got {queue_size}")
-        self.joint_names = bones
-        self.parents = pars
-        self.frame_rate = rate
-        self.suit = suit
-        if time_order not in ("last", "first"):
-            raise SourceError(f"time_order must be 'last' or 'first', not {time_order!r}")
-        self._asm = VmcAssembler(bones, quiet=quiet, unit_tolerance=tolerance,
-                                 time_order=time_order, burst=burst, stats=self.stats)
         self._queue: deque[Frame] = deque()
         self._queue_size = int(queue_size)
         self._cond = threading.Condition()
@@ -130,18 +119,13 @@ class OscVmcSource(Source):
         self.port: int = self._sock.getsockname()[1]
         # wake up often enough to apply the quiet-gap rule and to notice close()
         self._sock.settimeout(max(0.001, min(quiet / 2.0, 0.05)))
-        self._thread = threading.Thread(target=self._run, name=f"rtseg-vmc-{self.port}",
+        self._thread = threading.Thread(target=self._run, name=f"rtseg-osc-{self.port}",
                                         daemon=True)
         self._thread.start()
 
     @property
-    def assembler(self) -> VmcAssembler:
+    def assembler(self) -> Any:
         return self._asm
-
-    @property
-    def ok_state(self) -> tuple[int, ...] | None:
-        """Last ``/VMC/Ext/OK`` arguments (loaded, calibration state, mode, tracking)."""
-        return self._asm.ok_state
 
     def _run(self) -> None:
         sock = self._sock
@@ -212,17 +196,78 @@ class OscVmcSource(Source):
         self._sock.close()
 
 
-def _parse_location(location: str) -> tuple[str, int]:
+class OscVmcSource(OscUdpSource):
+    """VMC receiver on a UDP socket (see module docstring).  ``.port`` is the bound port."""
+
+    space = "local"
+
+    def __init__(self, host: str = "0.0.0.0", port: int = DEFAULT_PORT, *,
+                 suit: str = "default17", bone_names: Sequence[str] | None = None,
+                 parents: Sequence[int] | None = None, quiet: float = 0.02,
+                 queue_size: int = 256, rate: float | None = None,
+                 rcvbuf: int | None = None, tolerance: float = 0.05,
+                 time_order: str = "last", burst: float = 0.004) -> None:
+        super().__init__()
+        if bone_names is None:
+            bones, pars = load_suit(suit)
+        else:
+            bones = list(bone_names)
+            pars = list(parents) if parents is not None else [-1] * len(bones)
+        if len(pars) != len(bones):
+            raise SourceError("parents and bone_names differ in length")
+        if not quiet > 0:
+            raise SourceError(f"quiet must be positive seconds, got {quiet}")
+        self.joint_names = bones
+        self.parents = pars
+        self.frame_rate = rate
+        self.suit = suit
+        if time_order not in ("last", "first"):
+            raise SourceError(f"time_order must be 'last' or 'first', not {time_order!r}")
+        self._asm = VmcAssembler(bones, quiet=quiet, unit_tolerance=tolerance,
+                                 time_order=time_order, burst=burst, stats=self.stats)
+        self._start(host, port, quiet, queue_size, rcvbuf)
+
+    @property
+    def ok_state(self) -> tuple[int, ...] | None:
+        """Last ``/VMC/Ext/OK`` arguments (loaded, calibration state, mode, tracking)."""
+        return self._asm.ok_state
+
+
+class OscVrchatSource(OscUdpSource):
+    """VRChat OSC trackers receiver (``format=vrchat``, default port 9000): joints Head,
+    Tracker1..Tracker8, world orientations (``space = "global"``, no hierarchy); see
+    :mod:`rtseg.drivers.codec_vrchat`.  ``root``: tracker whose position is
+    ``Frame.root_position``."""
+
+    space = "global"
+
+    def __init__(self, host: str = "0.0.0.0", port: int = VRCHAT_PORT, *,
+                 quiet: float = 0.02, queue_size: int = 256, rate: float | None = None,
+                 rcvbuf: int | None = None, root: str | None = None) -> None:
+        super().__init__()
+        if not quiet > 0:
+            raise SourceError(f"quiet must be positive seconds, got {quiet}")
+        self.joint_names = list(VRCHAT_JOINTS)
+        self.parents = [-1] * len(VRCHAT_JOINTS)
+        self.frame_rate = rate
+        try:
+            self._asm = VrchatAssembler(quiet=quiet, root=root, stats=self.stats)
+        except ValueError as exc:
+            raise SourceError(f"osc:// format=vrchat: {exc}") from None
+        self._start(host, port, quiet, queue_size, rcvbuf)
+
+
+def _parse_location(location: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
     loc = location.strip("/")
     if not loc:
-        return "0.0.0.0", DEFAULT_PORT
+        return "0.0.0.0", default_port
     if loc.startswith("["):                       # [v6addr]:port
         host, _, rest = loc[1:].partition("]")
         port_s = rest[1:] if rest.startswith(":") else ""
     else:
         host, _, port_s = loc.rpartition(":") if ":" in loc else (loc, "", "")
     try:
-        port = int(port_s) if port_s else DEFAULT_PORT
+        port = int(port_s) if port_s else default_port
     except ValueError:
         raise SourceError(f"osc://{location}: port {port_s!r} is not a number") from None
     if not 0 <= port <= 65535:
@@ -240,16 +285,23 @@ def _num(options: dict[str, str], key: str, default, kind=float):
                           f"{kind.__name__}") from None
 
 
-def open_url(location: str, options: dict[str, str]) -> OscVmcSource:
+def open_url(location: str, options: dict[str, str]) -> OscUdpSource:
     """Open ``osc://location?options`` (see module docstring)."""
-    unknown = sorted(set(options) - set(OPTIONS))
-    if unknown:
-        raise SourceError(f"osc:// unknown option(s) {', '.join(unknown)}; "
-                          f"known: {', '.join(OPTIONS)}")
     fmt = options.get("format", "vmc").lower() or "vmc"
     if fmt not in FORMATS:
         raise SourceError(f"osc:// format {fmt!r} is not supported; supported: "
                           f"{', '.join(FORMATS)}")
+    known = OPTIONS if fmt == "vmc" else VRCHAT_OPTIONS
+    unknown = sorted(set(options) - set(known))
+    if unknown:
+        raise SourceError(f"osc:// unknown option(s) {', '.join(unknown)} for format={fmt}; "
+                          f"known: {', '.join(known)}")
+    if fmt == "vrchat":
+        host, port = _parse_location(location, VRCHAT_PORT)
+        return OscVrchatSource(
+            host, port, quiet=_num(options, "quiet", 0.02),
+            queue_size=_num(options, "queue", 256, int), rate=_num(options, "rate", None),
+            rcvbuf=_num(options, "rcvbuf", None, int), root=options.get("root") or None)
     host, port = _parse_location(location)
     return OscVmcSource(
         host, port, suit=options.get("suit", "default17") or "default17",
@@ -260,4 +312,5 @@ def open_url(location: str, options: dict[str, str]) -> OscVmcSource:
         burst=_num(options, "burst", 0.004))
 
 
-__all__ = ["OscVmcSource", "open_url", "load_suit", "DEFAULT_PORT"]
+__all__ = ["OscUdpSource", "OscVmcSource", "OscVrchatSource", "open_url", "load_suit",
+           "DEFAULT_PORT"]

@@ -205,7 +205,9 @@ def test_queue_overflow_drops_oldest_and_counts(udp_out):
 
 
 @pytest.mark.parametrize("url, message", [
-    ("osc://127.0.0.1:0?format=vrchat", "not supported"),
+    ("osc://127.0.0.1:0?format=bvh", "not supported"),
+    ("osc://127.0.0.1:0?format=vrchat&suit=default17", "unknown option"),
+    ("osc://127.0.0.1:0?format=vrchat&root=knee", "root tracker"),
     ("osc://127.0.0.1:0?bogus=1", "unknown option"),
     ("osc://127.0.0.1:0?quiet=abc", "quiet"),
     ("osc://127.0.0.1:0?suit=nosuch", "nosuch"),
