@@ -19,6 +19,7 @@ from rtseg.drivers.codec_vmc import (
     OscParseError, VmcAssembler, encode_bundle, encode_frame, encode_message, parse_message,
     parse_packet,
 )
+from rtseg.drivers.codec_vrchat import VrchatAssembler
 from rtseg.frame import Frame
 
 BONES = ["Hips", "Spine", "Chest", "Neck", "Head", "LeftUpperArm", "LeftLowerArm", "LeftHand",
@@ -74,6 +75,11 @@ def test_random_bytes(data):
     check_packet(b"#bundle\x00" + data)
     check_packet(b"/VMC/Ext/Bone/Pos\x00\x00\x00" + data)
     check_assembler([data, b"#bundle\x00" + bytes(8) + data])
+    vr = VrchatAssembler()
+    for chunk in (data, b"/tracking/trackers/1/rotation\x00\x00\x00" + data):
+        for f in vr.feed(chunk, 0.0):
+            assert np.all(np.isfinite(f.quats))
+    vr.flush(1.0)
 
 
 mutation = st.one_of(
