@@ -3,10 +3,13 @@
 1. Project the frames (centred) on the principal components keeping ``energy`` (90%) of
    the variance (structural zero-variance dimensions drop out here by themselves).
 2. Fit a k-component Gaussian mixture by EM (scikit-learn ``GaussianMixture``, fixed
-   ``random_state``).  Initial means: ``"consecutive"`` (the paper's alternative) splits
-   the take into k consecutive parts and picks one random frame of each, so the initial
-   points rarely start in the same final cluster; ``"random"`` picks k random frames (the
-   paper's default); ``"kmeans"`` is scikit-learn's default.
+   ``random_state``).  Initial means, following the paper's alternative of k consecutive
+   parts of the take (initial points then rarely start in the same final cluster):
+   ``"consecutive"`` takes the mean of each part (deterministic; default),
+   ``"consecutive_frame"`` one random frame of each part (the paper's wording);
+   ``"random"`` picks k random frames (the paper's default); ``"kmeans"`` is
+   scikit-learn's default.  Measured on the 4 CMU takes (pooled F1): part means 0.62,
+   random frame per part 0.56-0.62 and random frames 0.58-0.61 over random_state 0-2.
 3. Label every frame with its most likely component; a segment shorter than
    ``min_segment`` frames is split in two halves relabelled as the segments before and after
    (at the ends of the take: all to the one neighbour), shortest first, until none is left.
@@ -52,6 +55,9 @@ def merge_short_runs(labels: np.ndarray, min_len: int) -> np.ndarray:
             lab[mid:b] = lab[b]
 
 
+INITS = ("consecutive", "consecutive_frame", "random", "kmeans")
+
+
 class GMMDetector(BatchDetector):
     """Batch GMM segmentation; ``min_segment`` in frames."""
 
@@ -60,7 +66,7 @@ class GMMDetector(BatchDetector):
     def __init__(self, n_components: int = 4, energy: float = 0.9, min_segment: int = 120,
                  init: str = "consecutive", covariance: str = "full", random_state: int = 0,
                  max_iter: int = 200, keep_trace: bool = False) -> None:
-        if init not in ("consecutive", "random", "kmeans"):
+        if init not in INITS:
             raise ValueError(f"init must be consecutive, random or kmeans, not {init!r}")
         self.n_components, self.energy, self.min_segment = int(n_components), float(energy), int(min_segment)
         self.init, self.covariance = init, covariance
@@ -106,8 +112,9 @@ class GMMDetector(BatchDetector):
         rng = np.random.default_rng(self.random_state)
         kw: dict[str, Any] = {}
         if self.init == "consecutive":
-            parts = np.array_split(np.arange(n), k)
-            kw["means_init"] = np.stack([Y[rng.choice(p)] for p in parts])
+            kw["means_init"] = np.stack([Y[p].mean(axis=0) for p in np.array_split(np.arange(n), k)])
+        elif self.init == "consecutive_frame":
+            kw["means_init"] = np.stack([Y[rng.choice(p)] for p in np.array_split(np.arange(n), k)])
         elif self.init == "random":
             kw["means_init"] = Y[rng.choice(n, size=k, replace=False)]
         gm = GaussianMixture(n_components=k, covariance_type=self.covariance,
