@@ -63,6 +63,9 @@ class CutEvent:
     detected_frame: index of the frame whose arrival produced the cut, or -1.
     score: detector's raw statistic at the cut (NaN if none).
     wall_time: Unix time the event was made.
+    detected_recv_time: monotonic ``recv_time`` of the frame that revealed the cut, or None.
+    processing_ms: that frame's arrival to the send, ms (the latency rtseg adds, without
+        the detector's delay); filled by :meth:`stamped` with ``latency_ms``.
     """
     event: int
     segment: int
@@ -77,6 +80,8 @@ class CutEvent:
     detected_frame: int = -1
     score: float = float("nan")
     wall_time: float = field(default_factory=_wall_time)
+    detected_recv_time: float | None = None
+    processing_ms: float | None = None
 
     def __post_init__(self) -> None:
         if not self.label:
@@ -90,7 +95,11 @@ class CutEvent:
         if self.latency_ms is not None or self.boundary_recv_time is None:
             return self
         now = _monotonic() if now is None else now
-        return replace(self, latency_ms=max(0.0, (now - self.boundary_recv_time) * 1000.0))
+        proc = self.processing_ms
+        if proc is None and self.detected_recv_time is not None:
+            proc = max(0.0, (now - self.detected_recv_time) * 1000.0)
+        return replace(self, latency_ms=max(0.0, (now - self.boundary_recv_time) * 1000.0),
+                       processing_ms=proc)
 
     def to_dict(self) -> dict[str, Any]:
         d = {"type": "cut"}

@@ -598,7 +598,7 @@ class LiveSession:
             confidence=float(np.clip(pc.cut.confidence, 0.0, 1.0)),
             detector_delay_ms=float(max(0, pc.detected - pc.boundary) / self.frame_rate * 1000.0),
             boundary_recv_time=float(b_recv), detected_frame=int(pc.detected),
-            score=float(pc.cut.score))
+            score=float(pc.cut.score), detected_recv_time=float(detected_recv))
 
     # ---------------------------------------------------------------- processing
     def _process_window(self, w) -> None:

@@ -289,6 +289,10 @@ def test_session_publishes_records_and_survives_bad_input():
     assert [(c.frame, c.detected_frame, c.method, c.segment, c.event) for c in cuts] == \
         [(299, 301, "step", 1, 1)]
     assert cuts[0].latency_ms is not None and cuts[0].latency_ms >= 0
+    # processing latency: arrival of the revealing frame -> send; latency adds the
+    # detector's delay (boundary frame arrival -> revealing frame arrival)
+    assert 0 <= cuts[0].processing_ms <= cuts[0].latency_ms
+    assert cuts[0].detected_recv_time >= cuts[0].boundary_recv_time
     assert cuts[0].detector_delay_ms == pytest.approx(2 / 120 * 1000)
     assert 0 <= cuts[0].time < summary.duration_s
     assert summary.frames_received == 599 and summary.frames_processed == 599

@@ -83,10 +83,10 @@ FLAGS = {"output.osc": "--osc", "output.osc_tcp": "--osc-tcp", "output.templates
 
 
 def format_cut(ev: CutEvent) -> str:
-    lat = "-" if ev.latency_ms is None else f"{ev.latency_ms:.1f}"
+    proc = "-" if ev.processing_ms is None else f"{ev.processing_ms:.2f}"
     return (f"cut #{ev.event:<3d} {ev.method:<5s} segment {ev.segment:<3d} "
             f"frame {ev.frame:<7d} t={ev.time:9.3f} s  confidence {ev.confidence:.2f}  "
-            f"detector delay {ev.detector_delay_ms:.0f} ms  latency {lat} ms")
+            f"detector delay {ev.detector_delay_ms:4.0f} ms  processing {proc} ms")
 
 
 class Console:
