@@ -85,6 +85,24 @@ def test_sixteen_dims_with_constant_dims_runs():
     frames = [c.frame for c in segment_features(X, "ppca", FPS)]
     for t in truth:
         assert any(abs(f - t) <= 60 for f in frames)
+    det = make_online("ppca", FPS)
+    det.run(X[:600])
+    # R is stated for 48 non-null dims and scales with sqrt(d_eff): here d_eff = 8
+    assert det.last_model["nullity"] == 8
+    assert det.R_eff == pytest.approx(15.0 * math.sqrt(8 / 48))
+
+
+def test_ppca_null_space_found_in_any_basis():
+    """Constant components rotated into a mix of columns (as the ASF axis conjugation does)
+    are still recognised as a null space, and H does not change under the rotation."""
+    X, _ = synth_take(seg_lens=(600,), seed=9)
+    Q, _ = np.linalg.qr(np.random.default_rng(0).normal(size=(56, 56)))
+    a = PPCADetector(keep_trace=True)
+    b = PPCADetector(keep_trace=True)
+    a.run(X)
+    b.run(X @ Q)
+    assert a.last_model["nullity"] == b.last_model["nullity"] == 8
+    np.testing.assert_allclose([h for _, h, _ in a.trace], [h for _, h, _ in b.trace], rtol=1e-6)
 
 
 def test_online_ppca_delay_and_detected_at():

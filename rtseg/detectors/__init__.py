@@ -50,6 +50,7 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "noise_floor": ((int, float), _nonneg),
         "null_rel": ((int, float), (lambda v: 0 <= v < 1e-3, "in [0, 1e-3)")),
         "max_passes": ((int,), _posint),
+        "reference_dims": ((int,), _posint),
     },
     "gmm": {
         "energy": ((int, float), _unit),
