@@ -461,12 +461,20 @@ class LiveSession:
 
     # ---------------------------------------------------------------- control
     def stop(self, reason: str = "stopped") -> None:
-        """Ask the loop to end (thread-safe, signal-safe)."""
+        """Ask the loop to end (from any thread; signal handlers use ``_on_signal``)."""
         if not self._stop.is_set():
             self.stop_reason = reason
         self._stop.set()
         if self.ring is not None:
             self.ring.notify()
+
+    def _on_signal(self, signum: int, _frame: Any) -> None:
+        """SIGINT/SIGTERM handler.  Runs in the main thread between two bytecodes, possibly
+        while that thread holds the ring buffer's lock: it must not take that lock (no
+        ``ring.notify()``), so it only sets the flag; the loop wakes within 50 ms anyway."""
+        if not self._stop.is_set():
+            self.stop_reason = signal.Signals(signum).name
+        self._stop.set()
 
     def _warn(self, key: str, msg: str, *args: Any, every: float = 5.0) -> None:
         now = time.monotonic()
@@ -696,8 +704,7 @@ class LiveSession:
         old_handlers = {}
         if self.handle_signals and threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
-                old_handlers[sig] = signal.signal(
-                    sig, lambda signum, _f: self.stop(signal.Signals(signum).name))
+                old_handlers[sig] = signal.signal(sig, self._on_signal)
         reader = None
         blas = _blas_limit(int(self.config["buffer.blas_threads"]))
         try:

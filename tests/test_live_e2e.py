@@ -295,7 +295,12 @@ def test_sigterm_ends_rtseg_live_cleanly(tmp_path, take):
             break
         assert proc.poll() is None, proc.stderr.read()
         proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=20)
+        try:
+            out, err = proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, err = proc.communicate(timeout=10)
+            pytest.fail(f"rtseg live did not exit within 30 s of SIGTERM; stderr:\n{err}")
     finally:
         if proc is not None and proc.poll() is None:
             proc.kill()
