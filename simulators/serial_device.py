@@ -13,8 +13,10 @@ symlink at it, as udev does with ``/dev/serial/by-id/...`` links.
 
 What is sent
 ------------
-Message ``index`` k = 0, 1, 2, ... is take frame ``k % n_frames`` (``loop=True``) sent at
-``t0 + k / rate`` (+ jitter) with device time ``start_time_us + round(k * 1e6 / rate)``.
+Frame k = 0, 1, 2, ... is take frame ``k % n_frames`` (``loop=True``) sent at
+``t0 + k / rate`` (+ jitter) with device time ``start_time_us + round(k * 1e6 / rate)``;
+``t0`` is when a reader first opened the port (``wait_reader``, the default: like a board
+that starts streaming when the port is opened, no frame is lost to a late reader).
 The device's clock keeps running while unplugged: frames due then are lost (recorded) and
 the sequence number keeps counting, so a receiver sees the loss as a sequence gap.  In the
 binary format a device-info message (type 3) follows each (re)plug; it takes a sequence
@@ -32,6 +34,7 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import select
 import sys
 import tempfile
 import threading
@@ -50,6 +53,11 @@ from rtseg.simulators.faults import FaultConfig, FaultInjector
 from rtseg.take import Take
 
 log = logging.getLogger("rtseg.simulators.serial")
+
+READER_SETTLE_S = 0.05
+"""With ``wait_reader``, sending starts this long after a reader opened the port, as a
+board reset by the port's DTR line starts streaming after it boots (and so the reader's
+own input flush at open cannot swallow the first frames)."""
 
 #: CMU / Acclaim ASF segment -> HumanBodyBones bone carried by the same body part.
 CMU_TO_HUMANOID: dict[str, str] = {
@@ -125,6 +133,9 @@ class SerialSuit:
     ``fmt``: "rtseg" (binary) or "text".  ``loop``: repeat the take forever.
     ``start_seq`` / ``start_time_us``: first sequence number and device time (to exercise
     wrap-around).  ``text_blank_line``: end each text frame with a blank line.
+    ``wait_reader`` (default True): the take starts when a reader first opens the port
+    (plus :data:`READER_SETTLE_S`), so nothing is lost to a late reader; False starts the
+    clock at once.  Either way the clock then runs on, through unplugs and reader absence.
     """
 
     def __init__(self, take_or_frames: Take | np.ndarray, rate: float | None = None,
@@ -132,7 +143,7 @@ class SerialSuit:
                  link: str | os.PathLike | None = None, fmt: str = "rtseg", loop: bool = False,
                  suit: str | SuitProfile = "default17", joint_map: dict[str, str] | None = None,
                  start_seq: int = 0, start_time_us: int = 0, text_blank_line: bool = False,
-                 status: int = codec.STATUS_DEFAULT) -> None:
+                 status: int = codec.STATUS_DEFAULT, wait_reader: bool = True) -> None:
         if fmt not in ("rtseg", "text"):
             raise ValueError(f"fmt must be 'rtseg' or 'text', not {fmt!r}")
         self.suit = suit if isinstance(suit, SuitProfile) else suit_profile(suit)
@@ -164,6 +175,7 @@ class SerialSuit:
         self.start_time_us = int(start_time_us)
         self.text_blank_line = text_blank_line
         self.status = int(status)
+        self.wait_reader = wait_reader
         self._own_dir: str | None = None
         if link is None:
             self._own_dir = tempfile.mkdtemp(prefix="rtseg-serial-")
@@ -172,7 +184,7 @@ class SerialSuit:
         self.sent_log: list[SentMessage] = []
         self.unplug_log: list[tuple[float, float]] = []  # (unplugged, replugged) monotonic
         self._master: int | None = None
-        self._slave: int | None = None
+        self._poll: select.poll | None = None
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._done = threading.Event()
@@ -191,6 +203,17 @@ class SerialSuit:
     @property
     def plugged(self) -> bool:
         return self._master is not None
+
+    @property
+    def reader_connected(self) -> bool:
+        """True while some process has the device (the pty's slave end) open."""
+        poll = self._poll
+        if self._master is None or poll is None:
+            return False
+        try:
+            return not any(ev & select.POLLHUP for _, ev in poll.poll(0))
+        except (OSError, ValueError):
+            return False
 
     def start(self, send: bool = True) -> str:
         """Open the pty, create the link and start sending; returns the device path.
@@ -259,7 +282,10 @@ class SerialSuit:
             pass
         os.symlink(pts, tmp)
         os.replace(tmp, self.link)
-        self._master, self._slave = master, slave
+        os.close(slave)  # the reader opens it by path; the master sees POLLHUP until then
+        self._master = master
+        self._poll = select.poll()
+        self._poll.register(master, select.POLLHUP)
         log.info("serial suit on %s -> %s", self.link, pts)
 
     def _unplug_now(self) -> None:
@@ -267,13 +293,12 @@ class SerialSuit:
             self.link.unlink()
         except FileNotFoundError:
             pass
-        for fd in (self._master, self._slave):
-            if fd is not None:
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
-        self._master = self._slave = None
+        if self._master is not None:
+            try:
+                os.close(self._master)
+            except OSError:
+                pass
+        self._master = None
 
     def _write(self, data: bytes) -> bool:
         """Write all of ``data`` or nothing useful; False if the pty buffer is full."""
@@ -319,6 +344,10 @@ class SerialSuit:
         inj = self.injector
         n_frames = self.quats.shape[0]
         self._go.wait()
+        if self.wait_reader:
+            while not self._stop.is_set() and not self.reader_connected:
+                self._stop.wait(0.005)
+            self._stop.wait(READER_SETTLE_S)  # let the reader finish opening (input flush)
         self.t0 = t0 = time.monotonic()
         index = 0  # message number (seq = start_seq + index)
         frame = 0
