@@ -343,3 +343,26 @@ def test_sequence_numbering_of_info_messages_and_duplicates(raw_pty):
         assert t[5] > t[4]  # keeps increasing across the restart
     finally:
         src.close()
+
+
+@pytest.mark.parametrize("wait_reader", [True, False])
+def test_device_starts_streaming_when_port_opened(wait_reader):
+    take = make_take(60)
+    suit = SerialSuit(take, rate=300.0, wait_reader=wait_reader)
+    src = None
+    try:
+        suit.start()
+        time.sleep(0.3)  # nobody reading yet
+        assert not suit.reader_connected
+        src = open_source(f"serial://{suit.path}?queue=1000")
+        assert suit.reader_connected
+        frames = collect(src, lambda fr, idle: suit.wait_done(0) and idle, timeout=3.0)
+        if wait_reader:  # the take started when the port was opened: nothing lost
+            assert [f.seq for f in frames] == [m.seq for m in sent_frames(suit)]
+            assert len(frames) == 60
+        else:  # the device ran on its own: the frames before the open are gone
+            assert len(frames) < 10
+    finally:
+        if src is not None:
+            src.close()
+        suit.stop()
