@@ -314,6 +314,18 @@ def make_detectors(config: SessionConfig, frame_rate: float) -> dict[str, Online
     return out
 
 
+def with_suit(url: str, suit: str) -> str:
+    """``url`` with ``suit=<suit>`` added for the sources that take a suit profile
+    (serial://, osc://) when the URL does not name one itself."""
+    from urllib.parse import parse_qs, urlsplit
+    parts = urlsplit(url)
+    if parts.scheme.lower() not in ("serial", "osc") or not suit:
+        return url
+    if "suit" in parse_qs(parts.query, keep_blank_values=True):
+        return url
+    return url + ("&" if parts.query else "?") + f"suit={suit}"
+
+
 def build_publishers(config: SessionConfig) -> Any:
     """A ``rtseg.publishers.PublisherSet`` for the config's ``output`` section.
 
@@ -486,6 +498,7 @@ class LiveSession:
     def _open(self) -> None:
         if isinstance(self._source_arg, str):
             from rtseg.drivers import open_source
+            self._source_arg = with_suit(self._source_arg, self.config["source.suit"])
             self.source = open_source(self._source_arg)
         else:
             self.source = self._source_arg

@@ -407,3 +407,11 @@ def test_real_detectors_place_no_cut_across_a_gap():
     assert not [c for c in cuts if lo - 120 <= c.boundary < lo + 120], \
         [(c.cut.method, c.boundary, c.detected) for c in cuts]
     assert all(c.boundary >= lo or c.detected < lo for c in cuts)
+
+
+def test_suit_from_config_added_to_device_urls():
+    from rtseg.live import with_suit
+    assert with_suit("serial:///dev/ttyUSB0", "suitX") == "serial:///dev/ttyUSB0?suit=suitX"
+    assert with_suit("osc://0.0.0.0:39539?format=vmc", "s") == "osc://0.0.0.0:39539?format=vmc&suit=s"
+    assert with_suit("serial:///dev/x?suit=a", "b") == "serial:///dev/x?suit=a"
+    assert with_suit("sim://synth", "b") == "sim://synth"
