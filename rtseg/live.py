@@ -294,21 +294,34 @@ class Pipeline:
         return PipelineCut(cut, boundary, min(detected, index))
 
 
-def make_detectors(config: SessionConfig, frame_rate: float) -> dict[str, OnlineDetector]:
-    """The configured online detectors (``detectors.methods``), parameters from the
-    detector file plus the per-method overrides of the session config."""
+def detector_params(config: SessionConfig) -> dict[str, dict[str, Any]]:
+    """Validated parameters of each configured method: ``detectors.params`` (default
+    ``config/detectors.toml``) overridden by ``[detectors.<method>]``.  ConfigError names
+    the key."""
     from rtseg import detectors as det_mod
     params_file = config["detectors.params"] or None
     try:
-        all_params = det_mod.load_params(params_file) if params_file else det_mod.load_params()
-    except TypeError:
-        all_params = det_mod.load_params()
-    out: dict[str, OnlineDetector] = {}
+        all_params = det_mod.load_params(params_file)
+    except (ValueError, OSError) as exc:
+        raise ConfigError(f"detectors.params: {exc}") from None
+    out = {}
     for m in config["detectors.methods"]:
-        p = dict((all_params or {}).get(m, {})) if isinstance(all_params, dict) else {}
-        p.update(config[f"detectors.{m}"])
+        p = dict(all_params.get(m, {}))
         try:
-            out[m] = det_mod.make_online(m, frame_rate, p or None)
+            p.update(det_mod.validate(m, config[f"detectors.{m}"]))
+        except ValueError as exc:
+            raise ConfigError(f"detectors.{m}: {exc}") from None
+        out[m] = p
+    return out
+
+
+def make_detectors(config: SessionConfig, frame_rate: float) -> dict[str, OnlineDetector]:
+    """The configured online detectors (``detectors.methods``) with ``detector_params``."""
+    from rtseg import detectors as det_mod
+    out: dict[str, OnlineDetector] = {}
+    for m, p in detector_params(config).items():
+        try:
+            out[m] = det_mod.make_online(m, frame_rate, p)
         except (TypeError, ValueError, KeyError) as exc:
             raise ConfigError(f"detectors.{m}: {exc}") from None
     return out
@@ -451,6 +464,7 @@ class LiveSession:
                  listeners: Iterable[Callable[[Event], None]] = (),
                  duration: float | None = None, handle_signals: bool = True) -> None:
         self.config = config if config is not None else load_session_config()
+        detector_params(self.config)          # refuse bad detector settings before opening
         self._source_arg = source
         self.source: Any = None
         self.publishers = publishers

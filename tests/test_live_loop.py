@@ -415,3 +415,16 @@ def test_suit_from_config_added_to_device_urls():
     assert with_suit("osc://0.0.0.0:39539?format=vmc", "s") == "osc://0.0.0.0:39539?format=vmc&suit=s"
     assert with_suit("serial:///dev/x?suit=a", "b") == "serial:///dev/x?suit=a"
     assert with_suit("sim://synth", "b") == "sim://synth"
+
+
+def test_bad_detector_settings_refused_before_the_source_opens(tmp_path):
+    class Unopenable:
+        def __getattr__(self, name):
+            raise AssertionError("source touched")
+
+    with pytest.raises(ConfigError, match=r"detectors\.pca: .*foo"):
+        LiveSession(Unopenable(), from_dict({"detectors": {"pca": {"foo": 1}}}))
+    with pytest.raises(ConfigError, match=r"detectors\.params: .*nonexistent"):
+        LiveSession(Unopenable(), from_dict({"detectors": {"params": str(tmp_path / "nonexistent.toml")}}))
+    with pytest.raises(ConfigError, match=r"detectors\.ppca: .*window_s"):
+        LiveSession(Unopenable(), from_dict({"detectors": {"ppca": {"window_s": -1.0}}}))
