@@ -239,6 +239,10 @@ def test_online_trace_rows():
         det.run(X)
         assert det.trace and all(len(r) == 3 for r in det.trace)
         assert make_online(m, FPS).trace == []
+    for m in METHODS:
+        res = segment_features(X, m, FPS, keep_trace=True)
+        assert res.trace and res.cuts == list(res)
+        assert segment_features(X, m, FPS).trace == []
 
 
 def test_update_rejects_bad_frames():

@@ -178,8 +178,13 @@ def segment_features(X: np.ndarray, method: str, frame_rate: float,
 
 
 class CutList(list):
-    """A list of cuts carrying the detector's ``trace`` (empty unless asked for)."""
+    """A list of cuts carrying the detector's ``trace`` (empty unless asked for); ``.cuts``
+    is the list itself, for callers that expect a result object with cuts and trace."""
     trace: list
+
+    @property
+    def cuts(self) -> list[Cut]:
+        return list(self)
 
 
 __all__ = ["METHODS", "Cut", "OnlineDetector", "BatchDetector", "load_params", "make_online",
