@@ -12,8 +12,12 @@ only, on one core, median of ``--repeat`` runs:
 - ``serial``: ``rtseg.drivers.codec_serial.SerialFrameDecoder`` fed the binary wire
   stream (COBS + CRC, Q14) in 4096-byte chunks, as a serial read loop would deliver it.
 - ``vmc``: ``rtseg.drivers.codec_vmc.VmcAssembler`` fed one UDP datagram at a time
-  (17 Bone/Pos + Root/Pos + T + OK per frame, bundles of at most 1472 bytes), frames
-  closed and converted to rtseg's frame exactly as the live OSC source does.
+  (17 Bone/Pos + Root/Pos + T + OK per frame, bundles of at most 1472 bytes: one datagram),
+  frames closed and converted to rtseg's frame exactly as the live OSC source does (the
+  whole-frame fast path applies).
+- ``vmc_general_path``: the same with the whole-frame fast path off (message by message).
+- ``vmc_55_bones``: every HumanBodyBones name sent, as VirtualMotionCapture does (38 are
+  outside the suit and ignored), 3 datagrams per frame (message-by-message path).
 - ``python_osc_parse`` (for comparison): python-osc's ``OscPacket`` parsing the same VMC
   datagrams, without any frame assembly.
 
@@ -32,7 +36,7 @@ import time
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rtseg.drivers.codec_vmc import VmcAssembler, encode_frame as vmc_encode
+from rtseg.drivers.codec_vmc import HUMAN_BODY_BONES, VmcAssembler, encode_frame as vmc_encode
 
 BONES = ["Hips", "Spine", "Chest", "Neck", "Head", "LeftUpperArm", "LeftLowerArm", "LeftHand",
          "RightUpperArm", "RightLowerArm", "RightHand", "LeftUpperLeg", "LeftLowerLeg",
@@ -48,13 +52,22 @@ def motion(n: int, seed: int = 0) -> np.ndarray:
     return Rotation.from_rotvec(rv.reshape(-1, 3)).as_quat().reshape(n, 17, 4)
 
 
-def bench_vmc(q: np.ndarray, repeat: int) -> dict:
+def bench_vmc(q: np.ndarray, repeat: int, fast: bool = True, full: bool = False) -> dict:
+    """``full``: send all 55 HumanBodyBones (as VirtualMotionCapture does; the 38 outside the
+    suit are ignored), several datagrams per frame."""
     n = q.shape[0]
+    if full:
+        names = list(HUMAN_BODY_BONES)
+        cols = [BONES.index(b) if b in BONES else -1 for b in names]
+        ident = np.array([0.0, 0.0, 0.0, 1.0])
+        qq = np.stack([q[:, c] if c >= 0 else np.broadcast_to(ident, (n, 4)) for c in cols], 1)
+    else:
+        names, qq = BONES, q
     dgrams = [d for i in range(n) for d in vmc_encode(
-        q[i], BONES, time=i / 120.0, root_position=(0.0, 1.0, 0.01 * i))]
+        qq[i], names, time=i / 120.0, root_position=(0.0, 1.0, 0.01 * i))]
     rates = []
     for _ in range(repeat):
-        asm = VmcAssembler(BONES)
+        asm = VmcAssembler(BONES, fast=fast)
         got = 0
         t0 = time.perf_counter()
         for k, d in enumerate(dgrams):
@@ -127,6 +140,8 @@ def main(argv: list[str] | None = None) -> int:
     serial = bench_serial(q, args.repeat)
     result["serial"] = serial if serial is not None else {"frames_per_s": None}
     result["vmc"] = bench_vmc(q, args.repeat)
+    result["vmc_general_path"] = bench_vmc(q, args.repeat, fast=False)
+    result["vmc_55_bones"] = bench_vmc(q, args.repeat, full=True)
     pyosc = bench_python_osc(q[: max(10, args.frames // 5)], max(1, min(args.repeat, 3)))
     if pyosc is not None:
         result["python_osc_parse"] = pyosc
@@ -142,6 +157,10 @@ def main(argv: list[str] | None = None) -> int:
     v = result["vmc"]
     print(f"  VMC (OSC/UDP, {v['datagrams_per_frame']:.1f} datagrams, {v['bytes_per_frame']:.0f} "
           f"B/frame):    {v['frames_per_s']:>9,} frames/s")
+    g, f = result["vmc_general_path"], result["vmc_55_bones"]
+    print(f"  VMC, message-by-message path only:           {g['frames_per_s']:>9,} frames/s")
+    print(f"  VMC, 55 bones ({f['datagrams_per_frame']:.0f} datagrams, {f['bytes_per_frame']:.0f} B/frame):"
+          f"       {f['frames_per_s']:>9,} frames/s")
     if pyosc is not None:
         print(f"  python-osc parse only (comparison):          {pyosc['frames_per_s']:>9,} frames/s")
     return 0

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import logging
 import math
+import operator
 import struct
 import time
 from dataclasses import dataclass
@@ -389,6 +390,25 @@ def _rotate(q: Sequence[float], v: Sequence[float]) -> tuple[float, float, float
             vz + w * tz + (x * ty - y * tx))
 
 
+_MISSING = object()
+
+
+class _Template:
+    """Layout of a datagram that carries one whole frame: root (optional), every profile
+    bone once, T after the bones, OK and ignored messages anywhere.  Senders repeat the
+    same layout every frame with new numbers, so one precompiled ``struct`` unpack reads
+    the layout bytes (compared with the template's in one tuple comparison) and every
+    value at once."""
+
+    __slots__ = ("st", "checks", "get_checks", "bones", "root_at", "t_at", "ok_at",
+                 "hips_at", "n_unknown")
+
+    def unpack(self, data: bytes) -> tuple | None:
+        """All fields of ``data``, or None if its layout differs from the template's."""
+        tup = self.st.unpack_from(data)
+        return tup if self.get_checks(tup) == self.checks else None
+
+
 class VmcAssembler:
     """Rebuild skeleton frames from a stream of VMC datagrams.
 
@@ -427,12 +447,18 @@ class VmcAssembler:
     bone's local position when no Root/Pos was sent, or None when neither was.
     ``continuous``: flip each bone's quaternion sign so its dot with the previous value is
     non-negative (q and -q are the same rotation).
+
+    Speed: bone messages in bundles take a fast path (one ``struct`` unpack each).  A
+    datagram that holds a whole frame in a layout seen before (same bundle structure and
+    names, new numbers -- what a sender with a small skeleton sends every frame) is decoded
+    with one numpy gather (``fast=True``); the result is identical to the message-by-message
+    path, which handles everything else and any datagram with a bad value.
     """
 
     def __init__(self, bone_names: Sequence[str], *, quiet: float = 0.02,
                  unit_tolerance: float = 0.05, continuous: bool = True,
                  time_order: str = "last", burst: float = 0.004,
-                 stats: SourceStats | None = None) -> None:
+                 stats: SourceStats | None = None, fast: bool = True) -> None:
         if not bone_names:
             raise ValueError("VmcAssembler needs at least one bone name")
         lowered = [n.lower() for n in bone_names]
@@ -448,6 +474,10 @@ class VmcAssembler:
         self.time_order = time_order
         self.t_last = time_order == "last"
         self.burst = float(burst)
+        self.fast = fast
+        self._templates: dict[int, _Template | None] = {}
+        #: Frames decoded by the whole-frame fast path (diagnostics).
+        self.fast_frames = 0
         self._frame_start = -math.inf          # arrival time of the open frame's first bone
         self._t_time = -math.inf               # arrival time of the open frame's T
         self._now = 0.0
@@ -457,6 +487,7 @@ class VmcAssembler:
         self._pcache: dict[bytes, int] = {}   # padded name field -> index / -2 / -3
         self._root_bone = self._index.get("hips", 0)
         self._all_false = [False] * self.n_bones
+        self._all_true = [True] * self.n_bones
         self._q = [0.0, 0.0, 0.0, 1.0] * self.n_bones   # last value per bone, rtseg frame
         self._got = [False] * self.n_bones
         self._n_got = 0
@@ -474,6 +505,7 @@ class VmcAssembler:
         self._period: float | None = None      # sender frame period estimated from T, s
         self._out: list[Frame] = []
         self._warned: dict[str, float] = {}
+        self._unknown_seen: set[bytes] = set()
         #: Last ``/VMC/Ext/OK`` arguments (loaded, calibration state, mode, tracking) or None.
         self.ok_state: tuple[int, ...] | None = None
         #: Last root rotation (rtseg frame, scalar-last) or None.
@@ -492,6 +524,18 @@ class VmcAssembler:
             self._corrupt(f"datagram of {n} bytes is not a positive multiple of 4")
             return out
         if data.startswith(_BUNDLE):
+            if self.fast and self._n_got == 0 and self._learned and self.t_last and \
+                    self._sends_t:
+                tpl = self._templates.get(n, _MISSING)
+                tup = None
+                if tpl is not None and tpl is not _MISSING:
+                    tup = tpl.unpack(data)
+                if tup is None and (tpl is _MISSING or tpl is not None):
+                    tpl = self._build_template(data)     # new or changed layout
+                    tup = None if tpl is None else tpl.st.unpack_from(data)
+                if tup is not None and self._apply_template(tpl, tup):
+                    self.fast_frames += 1
+                    return out
             self._bundle(data, 0, n, 0)
         else:
             self._message(data, 0, n)
@@ -580,6 +624,8 @@ class VmcAssembler:
         root_bone = self._root_bone
         sqrt = math.sqrt
         n_got = self._n_got
+        stats = self.stats
+        unknown_seen = self._unknown_seen
         while pos < end:
             if pos + 4 > end:
                 self._corrupt(f"truncated bundle element size at byte {pos}")
@@ -633,7 +679,9 @@ class VmcAssembler:
                     pos = stop
                     continue
                 if idx == -3:
-                    self._unknown(padded.rstrip(b"\x00"))
+                    stats.unknown_names += 1
+                    if padded not in unknown_seen:
+                        self._unknown(padded, count=False)
                     pos = stop
                     continue
                 # idx == -2: unusual layout, generic path below
@@ -656,12 +704,15 @@ class VmcAssembler:
             pos = stop
         self._n_got = n_got
 
-    def _unknown(self, raw: bytes) -> None:
-        self.stats.unknown_names += 1
-        key = "unknown:" + raw[:64].decode("ascii", errors="replace")
-        if key not in self._warned and len(self._warned) < 256:
-            self._warned[key] = time.monotonic()
-            log.info("VMC: bone %r not in the suit profile; ignored", raw[:64])
+    def _unknown(self, raw: bytes, count: bool = True) -> None:
+        """Count a bone name outside the profile (``raw`` may carry NUL padding); log each
+        name once (up to 256 names)."""
+        if count:
+            self.stats.unknown_names += 1
+        if raw not in self._unknown_seen and len(self._unknown_seen) < 256:
+            self._unknown_seen.add(raw)
+            log.info("VMC: bone %r not in the suit profile; ignored",
+                     raw.rstrip(b"\x00")[:64])
 
     def _message(self, data: bytes, start: int, end: int) -> None:
         """Generic path: any message other than a fast-path bone."""
@@ -802,6 +853,154 @@ class VmcAssembler:
                 not self.t_last or self._t_time >= self._frame_start - self.burst))) and (
                 self._root is not None or not self._sends_root):
             self._close()
+
+    def _build_template(self, data: bytes) -> _Template | None:
+        """Layout of ``data`` if it is one whole frame in the simple form (see _Template)."""
+        n = len(data)
+        if len(self._templates) >= 64:
+            self._templates.clear()
+        self._templates[n] = None
+        fmt = [">8s8x"]            # '#bundle\0', time tag (may change per datagram: skipped)
+        nfield = 1
+        check_at = [0]
+        bones: list[tuple[int, int]] = []          # (profile index, field of first float)
+        root_at = t_at = ok_at = hips_at = None
+        n_unknown = 0
+        seen = set()
+        pos = 16
+        unpack_i = _I32.unpack_from
+        while pos < n:
+            if pos + 4 > n:
+                return None
+            size = unpack_i(data, pos)[0]
+            stop = pos + 4 + size
+            if size <= 0 or size & 3 or stop > n:
+                return None
+            m = pos + 4                               # message start
+            if size >= 64 and data.startswith(_BONE_HEAD, m):
+                padded = data[m + 32:stop - 28]
+                idx = self._pcache.get(padded)
+                if idx is None:
+                    idx = self._resolve_padded(padded)
+                if idx == -2 or (idx >= 0 and (idx in seen or t_at is not None)):
+                    return None
+                fmt.append(f"{stop - 28 - pos}s")
+                check_at.append(nfield)
+                nfield += 1
+                if idx == -3:
+                    n_unknown += 1
+                    self._unknown(padded, count=False)
+                    fmt.append("28x")
+                else:
+                    seen.add(idx)
+                    if idx == self._root_bone:
+                        hips_at = nfield
+                    bones.append((idx, nfield))
+                    fmt.append("7f")
+                    nfield += 7
+            elif size >= 64 and data.startswith(_ROOT_HEAD, m):
+                nul = data.find(b"\x00", m + 32, stop - 28)
+                if (root_at is not None or bones or nul < 0
+                        or m + 32 + ((nul - m - 32) & ~3) + 4 != stop - 28):
+                    return None
+                fmt.append(f"{stop - 28 - pos}s7f")
+                check_at.append(nfield)
+                root_at = nfield + 1
+                nfield += 8
+            elif size == 20 and data.startswith(_TIME_HEAD, m):
+                if t_at is not None:
+                    return None
+                fmt.append("20sf")
+                check_at.append(nfield)
+                t_at = nfield + 1
+                nfield += 2
+            elif size == 36 and data.startswith(_OK_HEAD4, m):
+                fmt.append("24s4i")
+                check_at.append(nfield)
+                ok_at = nfield + 1
+                nfield += 5
+            else:
+                if data[m:m + 1] != b"/":
+                    return None
+                nul = data.find(b"\x00", m, stop)
+                if nul < 0 or data[m:nul] in (b"/VMC/Ext/T", b"/VMC/Ext/Bone/Pos",
+                                              b"/VMC/Ext/Root/Pos", b"/VMC/Ext/OK"):
+                    return None           # nested bundle, malformed or unusual layout
+                head = (nul & ~3) + 4 - pos              # size word + padded address
+                if pos + head > stop:
+                    return None
+                fmt.append(f"{head}s{stop - pos - head}x")   # its arguments are ignored
+                check_at.append(nfield)
+                nfield += 1
+            pos = stop
+        if len(bones) != self.n_bones or t_at is None or (
+                root_at is None and self._sends_root):
+            return None
+        tpl = _Template()
+        tpl.st = struct.Struct("".join(fmt))
+        if tpl.st.size != n:
+            return None
+        tpl.get_checks = operator.itemgetter(*check_at)
+        tpl.checks = tpl.get_checks(tpl.st.unpack_from(data))
+        tpl.bones = bones
+        tpl.root_at, tpl.t_at, tpl.ok_at, tpl.hips_at = root_at, t_at, ok_at, hips_at
+        tpl.n_unknown = n_unknown
+        self._templates[n] = tpl
+        return tpl
+
+    def _apply_template(self, tpl: _Template, tup: tuple) -> bool:
+        """Apply a whole-frame datagram of a known layout (``tup``: its unpacked fields);
+        False, with nothing changed, if any value is bad, so the message-by-message path
+        can count it exactly."""
+        tol = self.unit_tolerance
+        t = tup[tpl.t_at]
+        if not math.isfinite(t):
+            return False
+        for _, k in tpl.bones:
+            x, y, z, w = tup[k + 3:k + 7]
+            if not abs(x * x + y * y + z * z + w * w - 1.0) <= tol:
+                return False
+        ra = tpl.root_at
+        if (ra is not None) != self._sends_root:
+            return False              # the sender changed: let the general path re-learn
+        if ra is not None:
+            root = tup[ra:ra + 7]
+            rx, ry, rz, rw = root[3:]
+            rn2 = rx * rx + ry * ry + rz * rz + rw * rw
+            if not (abs(rn2 - 1.0) <= tol and math.isfinite(root[0] + root[1] + root[2])):
+                return False
+            s = 1.0 / math.sqrt(rn2)
+            self._root = root
+            self._last_root = ((root[0], root[1], -root[2]), (-rx * s, -ry * s, rz * s, rw * s))
+            self.root_rotation = self._last_root[1]
+        # all values good: apply exactly what the message-by-message path would
+        self.stats.unknown_names += tpl.n_unknown
+        q = self._q
+        continuous = self.continuous
+        sqrt = math.sqrt
+        for idx, k in tpl.bones:
+            x, y, z, w = tup[k + 3:k + 7]
+            s = 1.0 / sqrt(x * x + y * y + z * z + w * w)
+            i4 = idx * 4
+            if continuous and (z * q[i4 + 2] + w * q[i4 + 3] - x * q[i4] - y * q[i4 + 1]) < 0.0:
+                s = -s
+            q[i4] = -x * s
+            q[i4 + 1] = -y * s
+            q[i4 + 2] = z * s
+            q[i4 + 3] = w * s
+        if tpl.hips_at is not None:
+            px, py, pz = tup[tpl.hips_at:tpl.hips_at + 3]
+            if math.isfinite(px + py + pz):
+                self._root_bone_pos = (px, py, -pz)
+        self._got[:] = self._all_true
+        self._n_got = self.n_bones
+        self._frame_start = self._now
+        self._t = t
+        self._t_time = self._now
+        self._close()
+        if tpl.ok_at is not None:
+            self.ok_state = tup[tpl.ok_at:tpl.ok_at + 4]
+        return True
 
     def _frames_elapsed(self, dt: float) -> int:
         """Sender frames from the previous T to this one (1 normally; k > 1 when frames were

@@ -386,3 +386,21 @@ def test_jittery_sender_clock_is_not_a_gap():
         frames += feed_all(asm, [encode_bundle([_bone("Hips"), encode_message("/VMC/Ext/T", "f", [tk])])],
                            now=float(tk))
     assert [f.seq for f in frames] == list(range(len(frames))) and asm.stats.gaps == 0
+
+
+def test_whole_frame_fast_path_is_used_and_agrees():
+    q, pkts = frames_of(30)
+    q[10, 3] = [0.0, 0.0, 0.0, 2.0]                 # a bad value: general path counts it
+    pkts[10] = encode_frame(q[10], BONES, time=10 / 60.0, root_position=(0.0, 1.0, 0.1))
+    out = {}
+    for fast in (True, False):
+        asm = VmcAssembler(BONES, fast=fast)
+        frames = feed_all(asm, [d for p in pkts for d in p]) + asm.flush(0.0, force=True)
+        out[fast] = (frames, asm.stats.as_dict(), asm.fast_frames)
+    (ff, fs, hits), (sf, ss, none) = out[True], out[False]
+    assert hits >= 25 and none == 0
+    assert fs == ss and fs["bad_values"] == 1
+    assert [f.seq for f in ff] == [f.seq for f in sf] == list(range(30))
+    assert all(np.array_equal(a.quats, b.quats) and np.array_equal(a.valid, b.valid)
+               for a, b in zip(ff, sf))
+    assert not ff[10].valid[3] and np.array_equal(ff[10].quats[3], ff[9].quats[3])

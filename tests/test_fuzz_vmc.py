@@ -16,8 +16,8 @@ from pythonosc.osc_message import OscMessage as PyOscMessage
 from scipy.spatial.transform import Rotation
 
 from rtseg.drivers.codec_vmc import (
-    OscParseError, VmcAssembler, encode_bundle, encode_frame, encode_message, parse_message,
-    parse_packet,
+    OscParseError, VmcAssembler, encode_bundle, encode_frame, encode_message, pack_bundles,
+    parse_message, parse_packet,
 )
 from rtseg.drivers.codec_vrchat import VrchatAssembler
 from rtseg.frame import Frame
@@ -195,3 +195,66 @@ def test_structured_streams_with_extreme_values(stream, order):
             assert f.source_time is None or math.isfinite(f.source_time)
     seqs += [f.seq for f in asm.flush(now + 1.0)]
     assert seqs == sorted(set(seqs))
+
+
+# --------------------------------------------------------------------------- fast path equivalence
+
+frame_spec = st.fixed_dictionaries({
+    "drop_bone": st.one_of(st.none(), st.integers(0, len(BONES) - 1)),
+    "bad": st.sampled_from([None, None, None, "nan", "norm", "root_nan", "t_nan"]),
+    "extra": st.lists(st.sampled_from(["blend", "thumb", "ok"]), max_size=3),
+    "root": st.booleans(),
+    "t_step": st.sampled_from([1, 1, 1, 2, 5, 0]),
+    "small": st.booleans(),
+})
+
+
+def _frame_datagrams(k: int, t: float, spec: dict, q: np.ndarray) -> list[bytes]:
+    msgs = []
+    if spec["root"]:
+        rp = (float("nan"), 0, 0) if spec["bad"] == "root_nan" else (0.1, 1.0, 0.01 * k)
+        msgs.append(encode_message("/VMC/Ext/Root/Pos", "sfffffff", ["root", *rp, 0, 0, 0, 1]))
+    for j, b in enumerate(BONES):
+        if j == spec["drop_bone"]:
+            continue
+        x, y, z, w = q[j]
+        if spec["bad"] == "nan" and j == 3:
+            x = float("nan")
+        if spec["bad"] == "norm" and j == 5:
+            w = 3.0
+        msgs.append(encode_message("/VMC/Ext/Bone/Pos", "sfffffff", [b, 0, 0.9, 0, -x, -y, z, w]))
+    for e in spec["extra"]:
+        if e == "blend":
+            msgs.append(encode_message("/VMC/Ext/Blend/Val", "sf", ["A", 0.25 * k]))
+        elif e == "thumb":
+            msgs.append(encode_message("/VMC/Ext/Bone/Pos", "sfffffff",
+                                       ["LeftThumbProximal", 0, 0, 0, 0, 0, 0, 1]))
+        else:
+            msgs.append(encode_message("/VMC/Ext/OK", "iiii", [1, 3, 0, k % 2]))
+    msgs.append(encode_message("/VMC/Ext/T", "f", [float("nan") if spec["bad"] == "t_nan" else t]))
+    return pack_bundles(msgs, 500 if spec["small"] else 1472)
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(frame_spec, min_size=1, max_size=10), st.integers(0, 2))
+def test_whole_frame_fast_path_equals_general_path(specs, seed):
+    q = Rotation.random(len(specs) * len(BONES), random_state=seed).as_quat().reshape(
+        len(specs), len(BONES), 4)
+    stream, t = [], 0.0
+    for k, spec in enumerate(specs):
+        t += spec["t_step"] / 60.0
+        for i, d in enumerate(_frame_datagrams(k, t, spec, q[k])):
+            stream.append((d, k / 60.0 + i * 1e-5))
+    results = []
+    for fast in (True, False):
+        asm = VmcAssembler(BONES, fast=fast)
+        out = [f for d, now in stream for f in asm.feed(d, now)] + asm.flush(100.0)
+        results.append((out, asm.stats.as_dict(), asm.ok_state))
+    (fo, fs, fok), (so, ss, sok) = results
+    assert fs == ss and fok == sok and len(fo) == len(so)
+    for a, b in zip(fo, so):
+        assert (a.seq, a.source_time, a.recv_time) == (b.seq, b.source_time, b.recv_time)
+        assert np.array_equal(a.valid, b.valid) and np.array_equal(a.quats, b.quats)
+        assert (a.root_position is None) == (b.root_position is None)
+        if a.root_position is not None:
+            assert np.array_equal(a.root_position, b.root_position)
