@@ -134,11 +134,15 @@ class OscUdpSource(Source):
             try:
                 data = sock.recv(65536)
             except (socket.timeout, BlockingIOError, InterruptedError):
-                frames = asm.flush(time.monotonic())
+                try:
+                    frames = asm.flush(time.monotonic())
+                except Exception:  # pragma: no cover - a decoder bug must not end the loop
+                    log.exception("OSC: flushing the open frame failed")
+                    continue
             except OSError as exc:
                 if self._stop.is_set():
                     break
-                log.warning("VMC receive error on port %d: %s", self.port, exc)
+                log.warning("OSC receive error on port %d: %s", self.port, exc)
                 time.sleep(0.01)
                 continue
             else:
@@ -146,7 +150,7 @@ class OscUdpSource(Source):
                     frames = asm.feed(data, time.monotonic())
                 except Exception:  # a decoder bug must not kill the live loop
                     self.count("corrupt")
-                    log.exception("VMC: datagram of %d bytes crashed the decoder; dropped",
+                    log.exception("OSC: datagram of %d bytes crashed the decoder; dropped",
                                   len(data))
                     continue
             for frame in frames:
