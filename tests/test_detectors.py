@@ -232,6 +232,15 @@ def test_restart_equals_fresh_detector():
     assert got == want
 
 
+@pytest.mark.parametrize("method", ["pca", "ppca"])
+def test_memory_bounded_on_a_long_segment(method):
+    """A 100 s behaviour without a cut: the frame buffers do not grow with the segment."""
+    X, _ = synth_take(seg_lens=(12000,), seed=11)
+    det = make_online(method, FPS)
+    assert det.run(X) == []
+    assert det._buf.shape[0] <= 4 * 150 + 64
+
+
 def test_online_trace_rows():
     X, _ = synth_take(seed=0)
     for m in ("pca", "ppca"):

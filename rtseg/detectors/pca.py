@@ -32,6 +32,7 @@ which d crossed the threshold, so ``detected_at == frame`` (the statistic looks 
 from __future__ import annotations
 
 import math
+from collections import deque
 from typing import Any, Mapping
 
 import numpy as np
@@ -74,7 +75,7 @@ class PCADetector(OnlineDetector):
         self._start = self._t
         self._n = 0
         self._buf: np.ndarray | None = None
-        self._e: list[float] = []          # e_k .. e_n  (index n-k)
+        self._e: deque[float] = deque(maxlen=self.lag + 1)   # e_{n-l} .. e_n
         self._r = 0
         self._V: np.ndarray | None = None  # (d, p) tracked subspace, p >= r
         self._d_count = 0
@@ -88,7 +89,9 @@ class PCADetector(OnlineDetector):
         self._q = 0.0
         self._S2 = np.zeros((dim, dim))
         self._s2_n = 0                      # frames folded into _S2
-        self._buf = np.empty((max(self.k * 2, 64), dim))
+        # frames not yet folded into _S2 (at most max(k, refresh) of them: memory does not
+        # grow with the segment)
+        self._buf = np.empty((max(self.k, self.refresh) + 1, dim))
 
     @property
     def segment_start(self) -> int:
@@ -114,7 +117,7 @@ class PCADetector(OnlineDetector):
     def _fold(self) -> None:
         """Add the frames not yet in the raw scatter sum (one BLAS call)."""
         if self._s2_n < self._n:
-            B = self._buf[self._s2_n:self._n]
+            B = self._buf[:self._n - self._s2_n]
             self._S2 += B.T @ B
             self._s2_n = self._n
 
@@ -147,7 +150,8 @@ class PCADetector(OnlineDetector):
         p = min(len(lam), self._r + 4)
         self._V = V[:, :p]
         self._set_projection()
-        self._e = [float(lam[self._r:].sum())]     # e_k
+        self._e.clear()
+        self._e.append(float(lam[self._r:].sum()))     # e_k
 
     def _push_d(self, d: float) -> None:
         self._d_count += 1
@@ -170,11 +174,11 @@ class PCADetector(OnlineDetector):
         t = self._t
         self._t += 1
         n = self._n
-        if n == self._buf.shape[0]:
-            nb = np.empty((2 * n, self._dim))
-            nb[:n] = self._buf
-            self._buf = nb
-        self._buf[n] = x
+        p = n - self._s2_n
+        if p == self._buf.shape[0]:
+            self._fold()
+            p = 0
+        self._buf[p] = x
         self._n = n = n + 1
         self._S1 += x
         self._q += float(x @ x)
@@ -192,10 +196,10 @@ class PCADetector(OnlineDetector):
         S1 = self._S1
         e = (self._q - float(S1 @ S1) / n) - (float(self._Sy2.sum()) - float(self._Sy1 @ self._Sy1) / n)
         e = max(e, 0.0)
-        self._e.append(e)                       # e_n at index n - k
+        self._e.append(e)
         if n - self.lag < self.k:
             return None
-        d = e - self._e[n - self.k - self.lag]
+        d = e - self._e[0]                      # e_n - e_{n-l}
         cut = None
         if n > self.i0 and self._d_count >= self.lag:
             sd = math.sqrt(self._d_m2 / self._d_count)

@@ -99,6 +99,7 @@ class PPCADetector(OnlineDetector):
         """Forget the current segment; the next frame starts a new one."""
         self._start = self._t
         self._n = 0
+        self._off = 0          # segment index of self._buf[0] (older frames are dropped)
         if self._dim is not None:
             self._reset_model()
 
@@ -125,7 +126,7 @@ class PPCADetector(OnlineDetector):
         """(mean, V_r, kept variances, sigma^2) of the first K frames of the segment."""
         K = self._K
         if self._sum_n < K:
-            B = self._buf[self._sum_n:K]
+            B = self._buf[self._sum_n - self._off:K - self._off]
             self._S1 += B.sum(axis=0)
             self._S2 += B.T @ B
             self._sum_n = K
@@ -163,7 +164,8 @@ class PPCADetector(OnlineDetector):
     def _score(self) -> float:
         """H for the current K (model frames [0, K), window [K, K+T) of the segment)."""
         m, Vr, lam_r, s2 = self._model()
-        Z = self._buf[self._K:self._K + self.T] - m
+        o = self._K - self._off
+        Z = self._buf[o:o + self.T] - m
         P = Z @ Vr
         P2 = P * P
         q = (P2 / lam_r).sum(axis=1) + (np.einsum("ij,ij->i", Z, Z) - P2.sum(axis=1)) / s2
@@ -187,11 +189,9 @@ class PPCADetector(OnlineDetector):
         t = self._t
         self._t += 1
         n = self._n
-        if n == self._buf.shape[0]:
-            nb = np.empty((2 * n, self._dim))
-            nb[:n] = self._buf[:n]
-            self._buf = nb
-        self._buf[n] = x
+        if n - self._off == self._buf.shape[0]:
+            self._make_room()
+        self._buf[n - self._off] = x
         self._n = n + 1
         cut = None
         while cut is None and self._n >= self._K + self.T:
@@ -218,11 +218,30 @@ class PPCADetector(OnlineDetector):
         self._K = K + self.delta
         return None
 
+    def _make_room(self) -> None:
+        """Drop frames no longer needed (already in the model sums and before any peak a
+        restart could go back to), else grow the buffer: memory stays O(T + frames since
+        the valley) however long a segment lasts."""
+        # a peak can still become a cut only if it already rose R above the valley (a
+        # lower peak can only be replaced by a later, higher one)
+        live = self._peak_K >= 0 and self._peak - self._valley >= self.R_eff
+        keep = min(self._sum_n, self._peak_K) if live else self._sum_n
+        used = self._n - self._off
+        if keep - self._off >= used // 4 and keep > self._off:
+            a = keep - self._off
+            self._buf[:used - a] = self._buf[a:used].copy()
+            self._off = keep
+            return
+        nb = np.empty((2 * self._buf.shape[0], self._dim))
+        nb[:used] = self._buf[:used]
+        self._buf = nb
+
     def _cut_restart(self, k: int) -> None:
         """New segment starting k frames into the current one; keep the frames after it."""
-        rest = self._buf[k:self._n].copy()
+        rest = self._buf[k - self._off:self._n - self._off].copy()
         self._start += k
         self._n = len(rest)
+        self._off = 0
         self._buf[:self._n] = rest
         self._reset_model()
 
