@@ -352,3 +352,26 @@ def test_looping_sender_keeps_time_increasing_until_stopped(source):
     times = [f.source_time for f in frames]
     assert len(frames) == n and times == sorted(times) and times[-1] == pytest.approx((n - 1) / 500.0)
     assert same_rotation(frames[25].quats, take.quats[5])
+
+
+def test_decoder_exception_is_counted_and_the_loop_goes_on(udp_out, caplog):
+    src = OscVmcSource("127.0.0.1", 0, quiet=0.05)
+    try:
+        real = src.assembler.feed
+        calls = []
+
+        def flaky(data, now):
+            calls.append(len(data))
+            if len(calls) == 1:
+                raise RuntimeError("decoder bug")
+            return real(data, now)
+
+        src.assembler.feed = flaky
+        msg = encode_pose_message(BONE_ADDRESS, "Hips", (0, 0, 0), (0, 0, 0, 1))
+        udp_out.sendto(msg, ("127.0.0.1", src.port))
+        udp_out.sendto(msg, ("127.0.0.1", src.port))
+        frames = read_all(src)
+    finally:
+        src.close()
+    assert len(calls) == 2 and len(frames) == 1 and src.stats.corrupt == 1
+    assert "crashed the decoder" in caplog.text
