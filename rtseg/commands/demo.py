@@ -63,7 +63,8 @@ def run(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "demo", help="live segmentation of a simulated suit on a pseudo-terminal (no hardware)",
-        description=__doc__.split("\n\n")[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+        description=__doc__.split("\n\n")[1].replace("``", "").replace("**", ""),
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--script", metavar="SCRIPT",
                    help="behaviours and seconds, e.g. 'idle:5,walk:8,punch:6' "
                         "(default: the synthesiser's default script)")
