@@ -263,6 +263,18 @@ def test_update_rejects_bad_frames():
         det.update(np.zeros((2, 56)))
 
 
+@pytest.mark.parametrize("method", ["pca", "ppca"])
+def test_online_nan_frame_is_dropped_as_a_gap(method):
+    X, truth = synth_take(seed=0)
+    X[400, 5] = np.nan
+    det = make_online(method, FPS)
+    cuts = det.run(X)          # no exception: the live loop must not crash
+    assert det.rejected_frames == 1
+    assert [c.frame for c in cuts] == pytest.approx(truth, abs=30)
+    assert all(c.frame > 400 for c in cuts)
+    assert np.isfinite([c.score for c in cuts]).all()
+
+
 def test_segment_features_rejects_nan():
     X, _ = synth_take(seg_lens=(300,), seed=0)
     X[10, 3] = np.nan

@@ -31,6 +31,7 @@ which d crossed the threshold, so ``detected_at == frame`` (the statistic looks 
 
 from __future__ import annotations
 
+import logging
 import math
 from collections import deque
 from typing import Any, Mapping
@@ -39,6 +40,8 @@ import numpy as np
 
 from rtseg.detectors._linalg import full_eigh, rank_for_energy, subspace_step
 from rtseg.detectors.base import Cut, OnlineDetector
+
+log = logging.getLogger(__name__)
 
 
 class PCADetector(OnlineDetector):
@@ -57,6 +60,7 @@ class PCADetector(OnlineDetector):
         self.tau, self.k_sigma, self.refresh = float(tau), float(k_sigma), int(refresh)
         self.keep_trace = keep_trace
         self.trace: list[tuple[int, float, float]] = []
+        self.rejected_frames = 0   # non-finite frames dropped (each restarts the segment)
         self._t = 0            # frames seen since creation
         self._dim: int | None = None
         self.restart()
@@ -160,6 +164,17 @@ class PCADetector(OnlineDetector):
         self._d_m2 += delta * (d - self._d_mean)
 
     # ------------------------------------------------------------------ streaming
+    def _reject(self, x: np.ndarray) -> None:
+        """A frame with NaN/inf: counted, logged, and treated as a gap (the segment restarts
+        after it, so no statistic is poisoned and no cut spans it).  Frame numbers advance."""
+        self.rejected_frames += 1
+        if self.rejected_frames == 1 or self.rejected_frames % 1000 == 0:
+            log.warning("%s detector: non-finite feature frame %d dropped (%d so far); "
+                        "segment restarted", self.name, self._t, self.rejected_frames)
+        self._t += 1
+        self.restart()
+        return None
+
     def update(self, x: np.ndarray) -> Cut | None:
         """Feed one frame (1-D feature vector); a Cut when d_n crosses the threshold."""
         x = np.asarray(x, dtype=np.float64)
@@ -171,6 +186,8 @@ class PCADetector(OnlineDetector):
             self._alloc(x.shape[0])
         elif x.shape[0] != self._dim:
             raise ValueError(f"frame has {x.shape[0]} dims, detector has {self._dim}")
+        if not math.isfinite(float(x.sum())):
+            return self._reject(x)
         t = self._t
         self._t += 1
         n = self._n

@@ -50,6 +50,7 @@ so the delay is T + (a few) Delta frames; ``score`` = peak - valley; ``confidenc
 
 from __future__ import annotations
 
+import logging
 import math
 from typing import Any, Mapping
 
@@ -57,6 +58,8 @@ import numpy as np
 
 from rtseg.detectors._linalg import full_eigh, rank_for_energy, subspace_step
 from rtseg.detectors.base import Cut, OnlineDetector
+
+log = logging.getLogger(__name__)
 
 _FULL_EVERY = 8
 
@@ -80,6 +83,7 @@ class PPCADetector(OnlineDetector):
         self.R_eff = self.R
         self.keep_trace = keep_trace
         self.trace: list[tuple[int, float, float]] = []
+        self.rejected_frames = 0   # non-finite frames dropped (each restarts the segment)
         self._t = 0
         self._dim: int | None = None
         self._buf: np.ndarray | None = None
@@ -175,6 +179,17 @@ class PPCADetector(OnlineDetector):
         return float(np.sqrt(q).mean() if self.distance == "mean" else q.mean())
 
     # ------------------------------------------------------------------ streaming
+    def _reject(self, x: np.ndarray) -> None:
+        """A frame with NaN/inf: counted, logged, and treated as a gap (the segment restarts
+        after it, so no statistic is poisoned and no cut spans it).  Frame numbers advance."""
+        self.rejected_frames += 1
+        if self.rejected_frames == 1 or self.rejected_frames % 1000 == 0:
+            log.warning("%s detector: non-finite feature frame %d dropped (%d so far); "
+                        "segment restarted", self.name, self._t, self.rejected_frames)
+        self._t += 1
+        self.restart()
+        return None
+
     def update(self, x: np.ndarray) -> Cut | None:
         """Feed one frame; a Cut when a peak of H at least R above its valley is confirmed."""
         x = np.asarray(x, dtype=np.float64)
@@ -186,6 +201,8 @@ class PPCADetector(OnlineDetector):
             self._reset_model()
         elif x.shape[0] != self._dim:
             raise ValueError(f"frame has {x.shape[0]} dims, detector has {self._dim}")
+        if not math.isfinite(float(x.sum())):
+            return self._reject(x)
         t = self._t
         self._t += 1
         n = self._n
