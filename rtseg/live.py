@@ -144,7 +144,7 @@ class Pipeline:
         self.detectors = detectors
         req = config["gaps.required_joints"]
         self.required = (_resolve_joints(req, self.joint_names, "gaps.required_joints")
-                         if req else np.arange(self.n_joints))
+                         if req else self._feature_joints())
         self.max_gap_frames = int(config["gaps.max_frames"])
         self.max_gap_seconds = float(config["gaps.max_seconds"])
         mode = config["calibration.mode"]
@@ -165,6 +165,17 @@ class Pipeline:
         self._fed = {m: 0 for m in self.detectors}
         self._fed_at_start = {m: 0 for m in self.detectors}
         self._fed_since_restart = 0
+
+    def _feature_joints(self) -> np.ndarray:
+        """Input joints the pose features depend on: the profile's joints and, for global
+        orientations (made parent-relative), their parents.  All joints if unknown."""
+        idx = getattr(self.features, "indices", None)
+        if idx is None:
+            return np.arange(self.n_joints)
+        need = {int(i) for i in idx}
+        if self.space == "global":
+            need |= {self.parents[i] for i in list(need) if self.parents[i] >= 0}
+        return np.array(sorted(need), dtype=np.intp)
 
     # ---------------------------------------------------------------- gap logic
     def _seq_missing(self, seq: int | None) -> int:
@@ -242,7 +253,7 @@ class Pipeline:
             self._bad_run = 0
         # --- calibration pose (rig-relative input)
         if not self.calibrated:
-            if v.all():
+            if v[self.required].all():
                 self._calib.append(q.copy())
                 st.calibration_frames += 1
                 if len(self._calib) >= self.calibration_needed:

@@ -428,3 +428,17 @@ def test_bad_detector_settings_refused_before_the_source_opens(tmp_path):
         LiveSession(Unopenable(), from_dict({"detectors": {"params": str(tmp_path / "nonexistent.toml")}}))
     with pytest.raises(ConfigError, match=r"detectors\.ppca: .*window_s"):
         LiveSession(Unopenable(), from_dict({"detectors": {"ppca": {"window_s": -1.0}}}))
+
+
+def test_joint_the_features_do_not_use_may_be_missing_for_ever():
+    """A VMC rig without hands: LeftHand never valid.  The features (unity profile) do not
+    use it, so calibration completes and the detectors are fed without restarts."""
+    hand = JOINT_NAMES.index("LeftHand")
+    fr = frames(400, 200)
+    for q, v, _, _ in fr:
+        v[hand] = False
+    pipe = pipeline({"calibration": {"mode": "auto", "frames": 5}}, space="local")
+    cuts = run(pipe, fr)
+    assert hand not in pipe.required and ARM in pipe.required
+    assert pipe.calibrated and pipe.stats.restarts == 0 and pipe.stats.fed == 395
+    assert [c.boundary for c in cuts] == [200]
