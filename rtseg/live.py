@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import collections
 import logging
+import math
 import signal
 import threading
 import time
@@ -157,6 +158,10 @@ class Pipeline:
         self.stats = PipelineStats()
         self._prev_seq: int | None = None
         self._prev_recv: float | None = None
+        self._prev_src: float | None = None
+        self._src_period: float | None = None
+        self._src_steps = 0
+        self._src_long = 0
         self._bad_run = 0
         self._last_good = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (self.n_joints, 1))
         # Per detector: session index of the first frame fed since the last (re)start and
@@ -208,13 +213,43 @@ class Pipeline:
         self._fed_since_restart = 0
 
     # ---------------------------------------------------------------- main step
+    def _time_missing(self, source_time: float | None) -> int:
+        """Frames missing according to the source's clock, for sources whose sequence
+        numbers cannot show a loss (VMC numbers the frames it assembles).
+
+        The frame period is learned from the source's own time steps (running mean of the
+        steps that are not gaps, after 16 steps), so it does not depend on the nominal
+        rate.  Returns 0 until then, for steps backwards (clock reset) and for steps below
+        2.5 periods; after 8 long steps in a row the source is taken to have slowed down
+        and the period is learned again."""
+        prev = self._prev_src
+        if source_time is None or prev is None or not math.isfinite(source_time):
+            return 0
+        d = source_time - prev
+        if d <= 0:
+            return 0
+        p = self._src_period
+        if p is None:
+            self._src_period, self._src_steps = d, 1
+            return 0
+        if d < 2.5 * p or self._src_steps < 16:
+            self._src_period = p + (d - p) / min(self._src_steps + 1, 64)
+            self._src_steps += 1
+            self._src_long = 0
+            return 0
+        self._src_long += 1
+        if self._src_long >= 8:          # the source slowed down for good: new period
+            self._src_period, self._src_steps, self._src_long = d, 1, 0
+            return 0
+        return max(0, int(round(d / p)) - 1)
+
     def process(self, index: int, quats: np.ndarray, valid: np.ndarray,
                 seq: int | None = None, recv_time: float | None = None,
-                lost: int = 0) -> list[PipelineCut]:
+                lost: int = 0, source_time: float | None = None) -> list[PipelineCut]:
         st = self.stats
         st.frames += 1
-        # --- gaps in the input (sequence numbers, silence, frames lost in the ring)
-        missing = self._seq_missing(seq) + max(0, int(lost))
+        # --- gaps in the input (sequence numbers or source clock, silence, ring overruns)
+        missing = max(self._seq_missing(seq), self._time_missing(source_time)) + max(0, int(lost))
         st.gap_frames += missing
         silence = (recv_time - self._prev_recv
                    if recv_time is not None and self._prev_recv is not None else 0.0)
@@ -222,6 +257,8 @@ class Pipeline:
             self._prev_seq = int(seq)
         if recv_time is not None:
             self._prev_recv = float(recv_time)
+        if source_time is not None and math.isfinite(source_time):
+            self._prev_src = float(source_time)
         if missing > self.max_gap_frames:
             self.restart(index, f"{missing} frames missing")
         elif silence > self.max_gap_seconds:
@@ -659,10 +696,12 @@ class LiveSession:
             index = w.start + i
             recv = float(w.recv_time[i])
             seq = int(w.seq[i])
+            stime = float(w.source_time[i])
             valid = w.valid[i]
             try:
                 cuts = pipe.process(index, w.data[i].reshape(J, 4), valid,
-                                    None if seq < 0 else seq, recv, w.lost if i == 0 else 0)
+                                    None if seq < 0 else seq, recv, w.lost if i == 0 else 0,
+                                    stime if stime == stime else None)
             except Exception as exc:  # never let one frame end the session
                 st.bad_frames += 1
                 self._warn("process", "frame %d could not be processed (%s: %s); dropped",
@@ -848,19 +887,34 @@ class LiveSession:
 
 
 # ============================================================================ offline replay
-def replay_frames(frames: Iterable[tuple[np.ndarray, np.ndarray, int | None, float | None]],
-                  joint_names: list[str], parents: list[int], space: str,
-                  frame_rate: float | None, config: SessionConfig | None = None) -> list[PipelineCut]:
-    """Run recorded frames ``(quats (J,4), valid (J,), seq, recv_time)`` through the same
-    ``Pipeline`` as the live loop; the cuts in order (session frame indices)."""
+def replay_frames(frames: Iterable[tuple], joint_names: list[str], parents: list[int],
+                  space: str, frame_rate: float | None,
+                  config: SessionConfig | None = None) -> list[PipelineCut]:
+    """Run recorded frames ``(quats (J,4), valid (J,), seq, recv_time[, source_time])``
+    through the same ``Pipeline`` as the live loop; the cuts in order (session frame
+    indices).  ``replay_session(dir)`` does this for a recorded session folder."""
     cfg = config if config is not None else load_session_config()
     pipe = Pipeline(joint_names, parents, space, frame_rate, cfg)
     cuts: list[PipelineCut] = []
     blas = _blas_limit(int(cfg["buffer.blas_threads"]))
     try:
-        for i, (q, v, seq, t) in enumerate(frames):
-            cuts.extend(pipe.process(i, q, v, seq, t))
+        for i, f in enumerate(frames):
+            stime = f[4] if len(f) > 4 else None
+            cuts.extend(pipe.process(i, f[0], f[1], f[2], f[3], 0, stime))
     finally:
         if blas is not None:
             blas.restore_original_limits()
     return cuts
+
+
+def replay_session(directory: str, config: SessionConfig | None = None) -> list[PipelineCut]:
+    """The cuts the live loop's detectors give on a recorded session folder
+    (``rtseg.recording``), offline: every recorded frame with its sequence number, receive
+    time and source time, through ``replay_frames``."""
+    from rtseg.recording import read_session
+    tk = read_session(directory)
+    m = tk.meta
+    seq, recv, src = m["seq"], m["recv_time"], m["source_time"]
+    frames = ((tk.quats[i], tk.valid[i], None if seq[i] < 0 else int(seq[i]), float(recv[i]),
+               None if not np.isfinite(src[i]) else float(src[i])) for i in range(tk.n_frames))
+    return replay_frames(frames, tk.joint_names, tk.parents, tk.space, tk.frame_rate, config)

@@ -28,7 +28,7 @@ from pythonosc.dispatcher import Dispatcher
 from pythonosc.osc_server import BlockingOSCUDPServer
 
 from rtseg.drivers import open_source
-from rtseg.live import LiveSession, replay_frames
+from rtseg.live import LiveSession, replay_frames, replay_session
 from rtseg.recording import read_session
 from rtseg.session_config import from_dict
 from rtseg.simulators.serial_device import SerialSuit
@@ -141,9 +141,14 @@ def offline_cuts(rec: Path, config) -> tuple[list, object]:
     """The recorded session through the same online detectors, offline."""
     tk = read_session(rec)
     m = tk.meta
+    st = m["source_time"]
     frames = ((tk.quats[i], tk.valid[i], None if m["seq"][i] < 0 else int(m["seq"][i]),
-               float(m["recv_time"][i])) for i in range(tk.n_frames))
+               float(m["recv_time"][i]), float(st[i]) if np.isfinite(st[i]) else None)
+              for i in range(tk.n_frames))
     cuts = replay_frames(frames, tk.joint_names, tk.parents, tk.space, tk.frame_rate, config)
+    # the library's own helper gives the same
+    assert [(c.cut.method, c.boundary) for c in replay_session(str(rec), config)] == \
+        [(c.cut.method, c.boundary) for c in cuts]
     return cuts, tk
 
 

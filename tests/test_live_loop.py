@@ -442,3 +442,38 @@ def test_joint_the_features_do_not_use_may_be_missing_for_ever():
     assert hand not in pipe.required and ARM in pipe.required
     assert pipe.calibrated and pipe.stats.restarts == 0 and pipe.stats.fed == 395
     assert [c.boundary for c in cuts] == [200]
+
+
+def test_source_clock_reveals_lost_frames_without_sequence_numbers():
+    """VMC-like input: seq counts assembled frames (no gap visible), the sender's clock
+    jumps by 10 frame periods where frames were lost -> restart, no cut across it.  The
+    period is learned from the clock (here 1/60 s, whatever the nominal rate)."""
+    fr = frames(400, 200)
+    dt = 1 / 60
+    fr_t = []
+    for i, (q, v, _, t) in enumerate(fr):
+        st = i * dt + (10 * dt if i >= 200 else 0.0)
+        fr_t.append((q, v, i, i * dt, st))
+    pipe = pipeline()
+    cuts = []
+    for i, (q, v, seq, t, st) in enumerate(fr_t):
+        cuts.extend(pipe.process(i, q, v, seq, t, 0, st))
+    assert cuts == [] and pipe.stats.restarts == 1 and pipe.stats.gap_frames == 10
+    # jittery clock, no loss: no restart
+    rng = np.random.default_rng(0)
+    pipe = pipeline()
+    cuts = []
+    for i, (q, v, seq, t, _) in enumerate(fr_t):
+        st = i * dt + rng.uniform(-0.3, 0.3) * dt
+        cuts.extend(pipe.process(i, q, v, seq, t, 0, st))
+    assert [c.boundary for c in cuts] == [200] and pipe.stats.restarts == 0
+
+
+def test_source_that_slows_down_is_not_one_long_gap():
+    fr = frames(600, 10_000)
+    pipe = pipeline()
+    st = 0.0
+    for i, (q, v, seq, t) in enumerate(fr):
+        st += 1 / 60 if i < 100 else 1 / 10          # 60 Hz, then 10 Hz for good
+        pipe.process(i, q, v, i, st, 0, st)
+    assert pipe.stats.restarts <= 8 and pipe.stats.fed > 500
