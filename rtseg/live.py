@@ -276,6 +276,9 @@ class Pipeline:
             all_valid = False
         if not all_valid:
             q = np.where(v[:, None], q, self._last_good)
+            norms = np.where(v, norms, 1.0)
+        if not (np.abs(norms - 1.0) < 1e-6).all():     # drivers normalise; be sure anyway
+            q = q / np.sqrt(np.where(norms > 1e-12, norms, 1.0))[:, None]
         np.copyto(self._last_good, q)       # q may be a ring-buffer view: keep a copy
         # --- invalid required joints
         if not all_valid and not v[self.required].all():

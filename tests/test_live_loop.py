@@ -477,3 +477,35 @@ def test_source_that_slows_down_is_not_one_long_gap():
         st += 1 / 60 if i < 100 else 1 / 10          # 60 Hz, then 10 Hz for good
         pipe.process(i, q, v, i, st, 0, st)
     assert pipe.stats.restarts <= 8 and pipe.stats.fed > 500
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as hst  # noqa: E402
+from hypothesis.extra.numpy import arrays  # noqa: E402
+
+_weird = hst.floats(allow_nan=True, allow_infinity=True, width=64)
+
+
+@settings(max_examples=40, deadline=None)
+@given(hst.lists(hst.tuples(arrays(np.float64, (J, 4), elements=_weird),
+                            arrays(bool, (J,)),
+                            hst.one_of(hst.none(), hst.integers(-2**40, 2**40)),
+                            hst.one_of(hst.none(), _weird),
+                            hst.one_of(hst.none(), _weird)), min_size=1, max_size=25))
+def test_pipeline_survives_garbage(frames_):
+    """Whatever a buggy source delivers (NaN, inf, zero quaternions, wild sequence numbers
+    and clocks), the pipeline neither raises nor feeds a non-finite feature."""
+    seen = []
+
+    class Check(StepDetector):
+        def update(self, x):
+            assert np.all(np.isfinite(x))
+            seen.append(1)
+            return super().update(x)
+
+    pipe = pipeline(det=Check())
+    for i, (q, v, seq, t, st) in enumerate(frames_):
+        pipe.process(i, q, v, seq, t, 0, st)
+        np.testing.assert_allclose(np.linalg.norm(pipe._last_good, axis=1), 1.0, rtol=1e-9)
+    assert pipe.stats.frames == len(frames_)
+    assert pipe.stats.fed == len(seen)
