@@ -119,10 +119,11 @@ def _resolve_joints(names: Iterable[str], joint_names: list[str], key: str) -> n
 class Pipeline:
     """Frame-by-frame core shared by the live loop and offline replay of a recording.
 
-    ``process(index, quats, valid, seq, recv_time, lost)`` takes one received frame
-    (``quats`` (J, 4) scalar-last, ``valid`` (J,) bool, ``index`` its 0-based session
-    index, ``recv_time`` monotonic seconds, ``lost`` frames known lost just before it) and
-    returns the cuts its arrival revealed, in session frame indices.  Deterministic: the
+    ``process(index, quats, valid, seq, recv_time, lost, source_time)`` takes one received
+    frame (``quats`` (J, 4) scalar-last, ``valid`` (J,) bool, ``index`` its 0-based session
+    index, ``seq`` the source's sequence number or None, ``recv_time`` monotonic seconds,
+    ``lost`` frames known lost just before it, ``source_time`` the source's clock in
+    seconds or None) and returns the cuts its arrival revealed, in session frame indices.  Deterministic: the
     same frames give the same cuts, which is how live output is checked against a recording.
     """
 
