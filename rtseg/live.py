@@ -531,6 +531,7 @@ class LiveSession:
         self._stop = threading.Event()
         self._eof = threading.Event()
         self._reader_error: BaseException | None = None
+        self._first_recv: float | None = None
         self._rec_lock = threading.Lock()
         self._event_no = 0
         self._segment: dict[str, int] = {}
@@ -630,6 +631,8 @@ class LiveSession:
                             self.stats.record_errors += 1
                             self._warn("record", "recording a frame failed: %s", exc)
                 ring.append(q, recv, stime, seq, v)
+                if self._first_recv is None:
+                    self._first_recv = recv
                 self.stats.frames_received += 1
         except BaseException as exc:  # pragma: no cover - defensive
             self._reader_error = exc
@@ -854,6 +857,15 @@ class LiveSession:
                 blas.restore_original_limits()
         return summary
 
+    def _input_rate(self) -> float:
+        """Frames per second between the first and the last frame received (0 if < 2)."""
+        ring = self.ring
+        if ring is None or self.stats.frames_received < 2 or self._first_recv is None:
+            return 0.0
+        w = ring.window(1)
+        span = float(w.recv_time[-1]) - self._first_recv if len(w) else 0.0
+        return (ring.head - 1) / span if span > 0 else 0.0
+
     def _shutdown(self) -> SessionSummary:
         now = time.monotonic()
         if self.pipeline is not None and self.publishers is not None:
@@ -876,7 +888,7 @@ class LiveSession:
         summary = SessionSummary(
             duration_s=dur, frames_received=st.frames_received,
             frames_processed=st.frames_processed,
-            frame_rate=st.frames_received / dur if dur > 0 else 0.0,
+            frame_rate=self._input_rate(),
             cuts=st.cuts, cuts_by_method=dict(st.cuts_by_method),
             dropped=self.dropped() if self.pipeline is not None else 0,
             source_stats=src_stats,
