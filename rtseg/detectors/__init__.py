@@ -51,6 +51,9 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "null_rel": ((int, float), (lambda v: 0 <= v < 1e-3, "in [0, 1e-3)")),
         "max_passes": ((int,), _posint),
         "reference_dims": ((int,), _posint),
+        "variant": ((str,), (lambda v: v in ("verified", "paper"), "'verified' or 'paper'")),
+        "verify_window_s": ((int, float), _pos),
+        "min_contrast": ((int, float), _nonneg),
     },
     "gmm": {
         "energy": ((int, float), _unit),

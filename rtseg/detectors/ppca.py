@@ -42,6 +42,18 @@ its top eigenvectors are tracked by one warm-started subspace-iteration step per
 full 56x56 eigen-decomposition at each segment start and every 8 steps.  H costs one
 (T x d) @ (d x r) product per step.
 
+Offline verification (``segment_ppca``, ``variant = "verified"``, not in the paper).  The
+forward/backward passes over-segment behaviours whose cycle is longer than T (alternating-
+side exercises: toe touches, knee raises): H peaks when the model of one side meets the
+other.  Each candidate cut c is therefore checked with the paper's own symmetric distance
+(Fig. 6: the larger of the two mean Mahalanobis distances between two windows, each scored
+against the other's PPCA model), on windows of W = ``verify_window_s`` (3 s, longer than
+the cycles of such exercises) before and after c, and compared with the same distance
+between consecutive W windows on either side (c-2W..c-W vs c-W..c, c..c+W vs c+W..c+2W).
+The cut is kept when the change at c is at least ``min_contrast`` (1.3) times the mean of
+those two: a behaviour boundary is a larger change than the within-behaviour drift next to
+it.  The online detector (``PPCADetector``) is the paper's forward pass, unverified.
+
 Frames are numbered from the detector's creation.  ``Cut.frame`` = first frame of the new
 segment (the K of the peak), ``detected_at`` = the frame whose arrival confirmed the peak,
 so the delay is T + (a few) Delta frames; ``score`` = peak - valley; ``confidence`` =
@@ -263,6 +275,95 @@ class PPCADetector(OnlineDetector):
         self._reset_model()
 
 
+# ---------------------------------------------------------------------- two-sided check
+def fit_ppca(X: np.ndarray, tau: float, noise_floor: float = 1e-6,
+             null_rel: float = 1e-15) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Batch PPCA model (mean, V_r, kept variances, sigma^2) of the rows of X, with the same
+    rules as the online model: r from E_r > tau, sigma^2 over the non-null discarded dims,
+    both floored at ``noise_floor`` (feature units^2)."""
+    X = np.asarray(X, dtype=np.float64)
+    if len(X) < 2:
+        raise ValueError(f"a PPCA model needs at least 2 frames, got {len(X)}")
+    m = X.mean(axis=0)
+    Z = X - m
+    S = Z.T @ Z
+    trace = float(np.trace(S))
+    lam, V = full_eigh(S)
+    d = S.shape[0]
+    nullity = int(np.count_nonzero(lam <= null_rel * max(trace, 1e-300)))
+    r = max(1, min(rank_for_energy(lam, trace, tau), d - nullity, len(lam)))
+    var = 1.0 / (len(X) - 1)
+    free = d - nullity - r
+    s2 = (trace - float(lam[:r].sum())) * var / free if free > 0 else 0.0
+    s2 = max(s2, noise_floor, 1e-300)
+    return m, V[:, :r], np.maximum(lam[:r] * var, s2), s2
+
+
+def mean_distance(model: tuple[np.ndarray, np.ndarray, np.ndarray, float], Y: np.ndarray,
+                  distance: str = "mean") -> float:
+    """H of the rows of Y under ``model`` (Eq. 10): mean Mahalanobis distance ("mean") or
+    mean squared distance ("mean_sq")."""
+    m, Vr, lam_r, s2 = model
+    Z = Y - m
+    P = Z @ Vr
+    P2 = P * P
+    q = (P2 / lam_r).sum(axis=1) + (np.einsum("ij,ij->i", Z, Z) - P2.sum(axis=1)) / s2
+    np.maximum(q, 0.0, out=q)
+    return float(np.sqrt(q).mean() if distance == "mean" else q.mean())
+
+
+def _sym_distance(A: np.ndarray, B: np.ndarray, tau: float, noise_floor: float,
+                  null_rel: float, distance: str) -> float:
+    """max(H(B | model of A), H(A | model of B)): the paper's Fig. 6 symmetric distance."""
+    ma = fit_ppca(A, tau, noise_floor, null_rel)
+    mb = fit_ppca(B, tau, noise_floor, null_rel)
+    return max(mean_distance(ma, B, distance), mean_distance(mb, A, distance))
+
+
+def cut_contrast(X: np.ndarray, c: int, W: int, tau: float, noise_floor: float = 1e-6,
+                 null_rel: float = 1e-15, distance: str = "mean") -> float:
+    """How much more the motion changes at frame c than just before and just after it.
+
+    With A = X[c-W:c], B = X[c:c+W], A0 = X[c-2W:c-W], B2 = X[c+W:c+2W] (W frames each):
+    contrast = D(A, B) / mean(D(A0, A), D(B, B2)), D the symmetric distance
+    max(H(B|A), H(A|B)).  A true behaviour change makes D(A, B) larger than the change
+    between consecutive windows of the same behaviour on either side (> 1); a cut inside a
+    behaviour whose cycle is shorter than W (alternating-side exercises) does not (~1 or
+    less).  Outer windows shorter than W/2 (take ends) are left out; when both are, the
+    contrast is +inf (the cut cannot be checked and is kept).
+    """
+    n = len(X)
+    A, B = X[max(0, c - W):c], X[c:min(n, c + W)]
+    if len(A) < 2 or len(B) < 2:
+        return math.inf
+    args = (tau, noise_floor, null_rel, distance)
+    cross = _sym_distance(A, B, *args)
+    A0, B2 = X[max(0, c - 2 * W):max(0, c - W)], X[min(n, c + W):min(n, c + 2 * W)]
+    need = max(2, W // 2)
+    inner = []
+    if len(A0) >= need:
+        inner.append(_sym_distance(A0, A, *args))
+    if len(B2) >= need:
+        inner.append(_sym_distance(B, B2, *args))
+    if not inner:
+        return math.inf
+    return cross / max(float(np.mean(inner)), 1e-300)
+
+
+def verify_cuts(X: np.ndarray, cuts: list[Cut], W: int, min_contrast: float, tau: float,
+                noise_floor: float = 1e-6, null_rel: float = 1e-15,
+                distance: str = "mean") -> list[Cut]:
+    """The cuts whose ``cut_contrast`` (windows of W frames) is at least ``min_contrast``."""
+    kept = []
+    for c in cuts:
+        k = cut_contrast(X, c.frame, W, tau, noise_floor, null_rel, distance)
+        if k >= min_contrast:
+            kept.append(c)
+        else:
+            log.debug("ppca: cut at frame %d dropped, contrast %.2f < %.2f", c.frame, k, min_contrast)
+    return kept
+
+
 def _pass(X: np.ndarray, det_args: dict[str, Any]) -> list[Cut]:
     return PPCADetector(**det_args).run(X)
 
@@ -274,6 +375,12 @@ def segment_ppca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
 
     Cuts of the first (forward) pass keep their online ``detected_at``; cuts added by later
     passes are batch results (``detected_at == frame``).  The trace is the first pass's.
+
+    ``variant = "verified"`` (default) then keeps only the cuts whose two-sided contrast
+    (``cut_contrast``, windows of ``verify_window_s``) is at least ``min_contrast``: a cut
+    must separate the motion before it from the motion after it more than consecutive
+    windows on either side are separated from each other.  ``variant = "paper"`` returns
+    the passes' cuts unchecked (Barbič et al. 2004 as published).
     """
     from rtseg.detectors import frames
     args = dict(T=frames(p["window_s"], frame_rate), delta=frames(p["step_s"], frame_rate),
@@ -301,4 +408,9 @@ def segment_ppca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
         for c in new:
             cuts.setdefault(c.frame, c)
         backward = not backward
-    return sorted(cuts.values(), key=lambda c: c.frame), first.trace
+    out = sorted(cuts.values(), key=lambda c: c.frame)
+    if p.get("variant", "verified") == "verified":
+        out = verify_cuts(X, out, frames(p["verify_window_s"], frame_rate),
+                          float(p["min_contrast"]), args["tau"], args["noise_floor"],
+                          args["null_rel"], args["distance"])
+    return out, first.trace
