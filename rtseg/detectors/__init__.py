@@ -65,6 +65,8 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
                                 "'full', 'diag', 'tied' or 'spherical'")),
         "random_state": ((int,), _nonneg),
         "max_iter": ((int,), _posint),
+        "smooth_s": ((int, float), _nonneg),
+        "refine_s": ((int, float), _nonneg),
     },
 }
 
