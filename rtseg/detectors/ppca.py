@@ -50,9 +50,9 @@ other.  Each candidate cut c is therefore checked with the paper's own symmetric
 against the other's PPCA model), on windows of W = ``verify_window_s`` (3 s, longer than
 the cycles of such exercises) before and after c, and compared with the same distance
 between consecutive W windows on either side (c-2W..c-W vs c-W..c, c..c+W vs c+W..c+2W).
-The cut is kept when the change at c is at least ``min_contrast`` (1.3) times the mean of
-those two: a behaviour boundary is a larger change than the within-behaviour drift next to
-it.  The online detector (``PPCADetector``) is the paper's forward pass, unverified.
+The cut is kept when the change at c is at least ``min_contrast`` (1.15) times the mean of
+those two (a behaviour boundary is a larger change than the within-behaviour drift next to
+it) and no stronger kept cut lies within W (whose windows would straddle it).  The online detector (``PPCADetector``) is the paper's forward pass, unverified.
 
 Frames are numbered from the detector's creation.  ``Cut.frame`` = first frame of the new
 segment (the K of the peak), ``detected_at`` = the frame whose arrival confirmed the peak,
@@ -353,15 +353,31 @@ def cut_contrast(X: np.ndarray, c: int, W: int, tau: float, noise_floor: float =
 def verify_cuts(X: np.ndarray, cuts: list[Cut], W: int, min_contrast: float, tau: float,
                 noise_floor: float = 1e-6, null_rel: float = 1e-15,
                 distance: str = "mean") -> list[Cut]:
-    """The cuts whose ``cut_contrast`` (windows of W frames) is at least ``min_contrast``."""
-    kept = []
+    """The cuts that pass the two-sided check, sorted by frame.
+
+    A cut is kept when its ``cut_contrast`` (windows of W frames) is at least
+    ``min_contrast`` and no stronger kept cut lies within W frames of it: cuts are accepted
+    in decreasing contrast, and a weaker cut closer than W to an accepted one is dropped,
+    because its windows straddle that stronger change and its test is not valid (this also
+    merges double cuts around one transition).  Behaviours shorter than W are therefore
+    not separated from their neighbours by this check.
+    """
+    scored = []
     for c in cuts:
         k = cut_contrast(X, c.frame, W, tau, noise_floor, null_rel, distance)
         if k >= min_contrast:
+            scored.append((k, c))
+        else:
+            log.debug("ppca: cut at frame %d dropped, contrast %.2f < %.2f",
+                      c.frame, k, min_contrast)
+    kept: list[Cut] = []
+    for k, c in sorted(scored, key=lambda kc: (-kc[0], kc[1].frame)):
+        if all(abs(c.frame - o.frame) >= W for o in kept):
             kept.append(c)
         else:
-            log.debug("ppca: cut at frame %d dropped, contrast %.2f < %.2f", c.frame, k, min_contrast)
-    return kept
+            log.debug("ppca: cut at frame %d dropped, within %d frames of a stronger cut",
+                      c.frame, W)
+    return sorted(kept, key=lambda c: c.frame)
 
 
 def _pass(X: np.ndarray, det_args: dict[str, Any]) -> list[Cut]:
