@@ -114,3 +114,56 @@ def test_negative_windows_rejected(key):
         method_params("gmm", {key: -0.5})
     with pytest.raises(ValueError):
         GMMDetector(**{key[:-2]: -1})
+
+
+def three_behaviours(seed: int = 0, n: int = 1200) -> tuple[np.ndarray, list[int]]:
+    """A far from B and C; B and C close to each other, so k = 2 puts them in one
+    component, but separated by 4 standard deviations along one axis."""
+    rng = np.random.default_rng(seed)
+    means = [np.array([-12.0, 0, 0, 0, 0, 0]), np.zeros(6), np.array([0, 4.0, 0, 0, 0, 0])]
+    X = np.concatenate([m + rng.normal(size=(n, 6)) for m in means])
+    return X, [n, 2 * n]
+
+
+def test_split_test_finds_two_behaviours_sharing_a_component():
+    X, truth = three_behaviours()
+    paper_like = segment_features(X, "gmm", FPS, {"n_components": 2, "split_min_s": 0.0})
+    assert [abs(c.frame - truth[0]) <= 30 for c in paper_like] == [True]   # B|C not cut
+    cuts = [c.frame for c in segment_features(X, "gmm", FPS, {"n_components": 2})]
+    assert len(cuts) == 2
+    assert all(abs(f - t) <= 30 for f, t in zip(cuts, truth))
+
+
+def cyclic(n: int, freq: float, centre: float, rng: np.random.Generator) -> np.ndarray:
+    """A periodic movement (one cycle per 1/freq s) around ``centre`` in 6 dims."""
+    t = np.arange(n) / FPS
+    phase = 2 * np.pi * freq * t
+    Y = np.zeros((n, 6))
+    Y[:, 0] = centre
+    Y[:, 1], Y[:, 2] = 3 * np.sin(phase), 3 * np.cos(phase)
+    return Y + 0.2 * rng.normal(size=(n, 6))
+
+
+def test_split_test_leaves_a_cyclic_behaviour_whole():
+    rng = np.random.default_rng(4)
+    X = np.concatenate([cyclic(1500, 0.8, 0.0, rng), cyclic(1500, 0.8, 10.0, rng)])
+    det = GMMDetector.from_params(method_params("gmm", {"n_components": 2}), FPS)
+    assert det.split_min > 0
+    cuts = [c.frame for c in det.segment(X)]
+    assert len(cuts) == 1 and abs(cuts[0] - 1500) <= 30
+    # the split test alone finds no second behaviour inside one cyclic behaviour
+    assert det.split_two(X[:1500]) is None
+
+
+def test_split_needs_frame_wise_agreement():
+    """First half pose A; second half blocks of 0.25 s drawn A or B (B 70 %): one change
+    after smoothing, but only ~85 % of the frame-wise labels agree with it."""
+    rng = np.random.default_rng(2)
+    A, B = np.zeros(6), np.array([6.0, 0, 0, 0, 0, 0])
+    blocks = [A] * 24 + [B if rng.random() < 0.7 else A for _ in range(24)]
+    X = np.concatenate([m + rng.normal(size=(30, 6)) for m in blocks])
+    strict = GMMDetector.from_params(method_params("gmm", {"split_agreement": 0.95}), FPS)
+    loose = GMMDetector.from_params(method_params("gmm", {"split_agreement": 0.6}), FPS)
+    assert strict.split_two(X) is None
+    hit = loose.split_two(X)
+    assert hit is not None and abs(hit[0] - 720) <= 60

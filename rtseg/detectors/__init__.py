@@ -67,6 +67,8 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "max_iter": ((int,), _posint),
         "smooth_s": ((int, float), _nonneg),
         "refine_s": ((int, float), _nonneg),
+        "split_min_s": ((int, float), _nonneg),
+        "split_agreement": ((int, float), (lambda v: 0 <= v <= 1, "in [0, 1]")),
     },
 }
 
