@@ -1,0 +1,112 @@
+"""PPCA offline verification (variant "verified"): the two-sided contrast check of candidate
+cuts, its non-maximum rule, the paper variant, and the parameters that select them."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rtseg.config import ConfigError
+from rtseg.detectors import method_params, segment_features
+from rtseg.detectors.base import Cut
+from rtseg.detectors.ppca import cut_contrast, fit_ppca, mean_distance, verify_cuts
+
+FPS = 120.0
+
+
+def alternating_take(seed: int, dim: int = 24, period_s: float = 4.0, la: int = 3000,
+                     lb: int = 1800, noise: float = 0.02) -> tuple[np.ndarray, int]:
+    """An alternating-side exercise (la frames) then a different behaviour (lb frames).
+
+    The exercise oscillates at 1.2 Hz along directions of its current side; the side swaps
+    every period_s / 2 seconds (2 s > T = 1.25 s: the paper's forward pass cuts at the
+    swaps).  Returns X and the true cut frame (la)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(la) / FPS
+    w = 0.5 * (1 + np.tanh(4 * np.sin(2 * np.pi * t / period_s + 0.5)))[:, None]
+    uL, uR = rng.normal(size=(2, 2, dim)) * 0.3
+    osc = np.stack([np.sin(2 * np.pi * 1.2 * t), np.cos(2 * np.pi * 1.2 * t)], 1)
+    m, off = 0.3 * rng.normal(size=dim), 0.2 * rng.normal(size=dim)
+    A = m + w * (osc @ uL) + (1 - w) * (osc @ uR + off)
+    tb = np.arange(lb) / FPS
+    v = rng.normal(size=(2, dim)) * 0.3
+    B = 0.3 * rng.normal(size=dim) + np.stack([np.sin(2 * np.pi * 0.9 * tb),
+                                               np.cos(2 * np.pi * 0.9 * tb)], 1) @ v
+    return np.concatenate([A, B]) + noise * rng.normal(size=(la + lb, dim)), la
+
+
+def test_verified_drops_cuts_inside_an_alternating_exercise_and_keeps_the_change():
+    W = int(round(method_params("ppca")["verify_window_s"] * FPS))
+    inside_paper = inside_verified = found = 0
+    for seed in range(8):
+        X, la = alternating_take(seed)
+        paper = [c.frame for c in segment_features(X, "ppca", FPS, {"variant": "paper"})]
+        ver = [c.frame for c in segment_features(X, "ppca", FPS)]
+        assert set(ver) <= set(paper)
+        if any(abs(f - la) <= 60 for f in paper):      # the change, when the passes found it
+            assert any(abs(f - la) <= 60 for f in ver), (seed, paper, ver)
+            found += 1
+        inside_paper += sum(2 * W <= f < la - 60 for f in paper)
+        inside_verified += sum(2 * W <= f < la - 60 for f in ver)
+    # the premise: the published method over-segments this exercise
+    assert inside_paper >= 40 and found >= 6
+    assert inside_verified <= 0.1 * inside_paper, (inside_verified, inside_paper)
+
+
+def stationary(rng: np.random.Generator, n: int, dim: int, mean: np.ndarray) -> np.ndarray:
+    t = np.arange(n) / FPS
+    mix = rng.normal(size=(2, dim)) * 0.2
+    return mean + np.stack([np.sin(2 * np.pi * 1.3 * t), np.cos(2 * np.pi * 0.7 * t)], 1) @ mix \
+        + 0.02 * rng.normal(size=(n, dim))
+
+
+def test_contrast_high_at_a_change_and_about_one_inside_a_behaviour():
+    rng = np.random.default_rng(3)
+    dim = 16
+    X = np.concatenate([stationary(rng, 1500, dim, np.zeros(dim)),
+                        stationary(rng, 1500, dim, 0.5 * rng.normal(size=dim))])
+    W = 360
+    at_change = cut_contrast(X, 1500, W, 0.95)
+    inside = [cut_contrast(X, c, W, 0.95) for c in (750, 2250)]
+    assert at_change > 3.0
+    assert all(k < 1.15 for k in inside), inside
+
+
+def test_contrast_at_the_take_ends_is_infinite_not_an_error():
+    X = np.random.default_rng(0).normal(size=(400, 8))
+    assert cut_contrast(X, 200, 360, 0.95) == math.inf    # no outer window on either side
+    assert cut_contrast(X, 0, 360, 0.95) == math.inf      # nothing before the cut
+
+
+def test_verify_keeps_the_stronger_of_two_close_cuts():
+    rng = np.random.default_rng(5)
+    dim = 16
+    X = np.concatenate([stationary(rng, 1500, dim, np.zeros(dim)),
+                        stationary(rng, 1500, dim, 0.5 * rng.normal(size=dim))])
+    cuts = [Cut(frame=f, method="ppca") for f in (1500, 1620)]
+    kept = verify_cuts(X, cuts, 360, 1.15, 0.95)
+    assert [c.frame for c in kept] == [1500]
+    # far apart, each is judged alone: a cut inside a behaviour still fails the test
+    kept = verify_cuts(X, [Cut(frame=700, method="ppca"), Cut(frame=1500, method="ppca")],
+                       360, 1.15, 0.95)
+    assert [c.frame for c in kept] == [1500]
+
+
+def test_fit_ppca_distance_of_own_frames_is_about_sqrt_dim():
+    rng = np.random.default_rng(1)
+    X = rng.normal(size=(5000, 12)) @ np.diag(np.linspace(0.5, 2.0, 12))
+    model = fit_ppca(X, 0.95)
+    h = mean_distance(model, X)
+    assert abs(h - math.sqrt(12)) < 0.3          # E|z| for 12 dims is about 3.4
+    assert mean_distance(model, X + 5.0) > 3 * h
+    with pytest.raises(ValueError):
+        fit_ppca(X[:1], 0.95)
+
+
+@pytest.mark.parametrize("key,value", [("variant", "bogus"), ("verify_window_s", 0.0),
+                                       ("min_contrast", -1.0), ("variant", 3)])
+def test_verification_params_validated(key, value):
+    with pytest.raises(ConfigError, match=key):
+        method_params("ppca", {key: value})
