@@ -54,6 +54,7 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "variant": ((str,), (lambda v: v in ("verified", "paper"), "'verified' or 'paper'")),
         "verify_window_s": ((int, float), _pos),
         "min_contrast": ((int, float), _nonneg),
+        "online_verify": ((bool,), (lambda v: True, "true or false")),
     },
     "gmm": {
         "energy": ((int, float), _unit),
@@ -92,7 +93,7 @@ def validate(method: str, params: Mapping[str, Any], where: str = "") -> dict[st
             raise ConfigError(f"{where}[{method}] unknown key {key!r} "
                               f"(known: {', '.join(SCHEMA[method])})")
         types, (check, what) = SCHEMA[method][key]
-        if isinstance(value, bool) or not isinstance(value, types):
+        if (isinstance(value, bool) and bool not in types) or not isinstance(value, types):
             raise ConfigError(f"{where}[{method}] {key} = {value!r}: expected "
                               f"{' or '.join(t.__name__ for t in types)}")
         if not check(value):
