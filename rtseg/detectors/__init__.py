@@ -40,6 +40,10 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "energy": ((int, float), _unit),
         "k_sigma": ((int, float), _pos),
         "refresh_frames": ((int,), _posint),
+        "variant": ((str,), (lambda v: v in ("verified", "paper"), "'verified' or 'paper'")),
+        "verify_window_s": ((int, float), _pos),
+        "min_segment_s": ((int, float), _pos),
+        "verify_ratio": ((int, float), _nonneg),
     },
     "ppca": {
         "window_s": ((int, float), _pos),
@@ -170,9 +174,8 @@ def segment_features(X: np.ndarray, method: str, frame_rate: float,
         raise ValueError(f"X has a non-finite value at frame {bad[0]}, dim {bad[1]}")
     p = method_params(method, params)
     if method == "pca":
-        from rtseg.detectors.pca import PCADetector
-        det = PCADetector.from_params(p, frame_rate, keep_trace=keep_trace)
-        cuts, trace = det.run(X), det.trace
+        from rtseg.detectors.pca import segment_pca
+        cuts, trace = segment_pca(X, p, frame_rate, keep_trace=keep_trace)
     elif method == "ppca":
         from rtseg.detectors.ppca import segment_ppca
         cuts, trace = segment_ppca(X, p, frame_rate, keep_trace=keep_trace)

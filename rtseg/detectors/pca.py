@@ -27,6 +27,23 @@ Frames are numbered from the detector's creation (``frame_origin = "creation"``)
 does not reset that counter.  ``Cut.frame`` = first frame of the new segment = the frame at
 which d crossed the threshold, so ``detected_at == frame`` (the statistic looks backwards);
 ``score`` = d_n, ``confidence`` = 1 - threshold / d_n.
+
+Offline verification (``segment_pca``, ``variant = "verified"``; not in the paper).  The
+online pass above is run unchanged; then every cut c between its neighbours p and q is
+checked two-sided with the same PCA model the detector uses: A = X[max(p, c-W):c],
+B = X[c:min(q, c+W)], each fitted with its mean and its top-r directions (E_r > tau), and
+
+    contrast(c) = min( err(B | A) / err(A | A),  err(A | B) / err(B | B) )
+
+where err(Y | Z) is the mean per-frame projection error of Y's frames off Z's model (so
+err(A | A) = e / n of A, the paper's Eq. 5 per frame).  A true behaviour change leaves each
+side badly explained by the other's hyperplane in BOTH directions; a within-behaviour swing
+of d (a forward jump, one arm circle) is explained by a model of a few seconds of the same
+behaviour, in at least one direction.  The cut with the lowest contrast is removed while it
+is below ``verify_ratio`` (its neighbours' windows then grow and are re-scored); a cut
+leaving a segment shorter than ``min_segment_s`` scores 0 (removed first, the weaker
+detector confidence first).  Only cuts the online pass found can survive: the check raises
+precision, never recall.
 """
 
 from __future__ import annotations
@@ -34,7 +51,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -244,3 +261,138 @@ class PCADetector(OnlineDetector):
         self._n = 1
         self._S1 += x
         self._q = float(x @ x)
+
+
+# ---------------------------------------------------------------------- offline verification
+def _pca_model(A: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """(mean, top-r directions (r, d), own mean per-frame projection error) of frames A,
+    r the smallest with E_r > tau (Eq. 6), as the detector fixes it."""
+    mu = A.mean(axis=0)
+    _, sv, Vt = np.linalg.svd(A - mu, full_matrices=False)
+    lam = sv * sv
+    total = float(lam.sum())
+    r = min(rank_for_energy(lam, total, tau), len(lam))
+    own = float(lam[r:].sum()) / len(A)
+    # a constant (or rank-deficient) segment: floor at rounding level of its variance
+    floor = 1e-12 * total / len(A) + 1e-300
+    return mu, Vt[:r], max(own, floor)
+
+
+def _cross_error(Y: np.ndarray, model: tuple[np.ndarray, np.ndarray, float]) -> float:
+    """Mean per-frame projection error of frames Y off ``model``, over the model's own."""
+    mu, V, own = model
+    Z = Y - mu
+    P = Z @ V.T
+    return float(np.einsum("ij,ij->", Z, Z) - np.einsum("ij,ij->", P, P)) / len(Y) / own
+
+
+def cut_contrast(X: np.ndarray, prev: int, c: int, nxt: int, W: int, tau: float,
+                 min_len: int = 2) -> float:
+    """Two-sided PCA contrast of a cut at frame c whose neighbouring cuts are prev < c < nxt
+    (0 and len(X) at the take's ends); see the module docstring.  0.0 when either side is
+    shorter than ``min_len`` frames."""
+    A = X[max(prev, c - W):c]
+    B = X[c:min(nxt, c + W)]
+    if len(A) < max(min_len, 2) or len(B) < max(min_len, 2):
+        return 0.0
+    return min(_cross_error(B, _pca_model(A, tau)), _cross_error(A, _pca_model(B, tau)))
+
+
+def verify_cuts(X: np.ndarray, cuts: Sequence[Cut], W: int, min_len: int, ratio: float,
+                tau: float) -> list[Cut]:
+    """The cuts left after removing, weakest first, those whose ``cut_contrast`` (windows of
+    at most W frames, segments of at least ``min_len`` frames) is below ``ratio``.  Sorted
+    by frame."""
+    kept = sorted(cuts, key=lambda c: c.frame)
+    n = len(X)
+    cache: dict[tuple[int, int, int], float] = {}
+    while kept:
+        scores = []
+        for i, c in enumerate(kept):
+            prev = kept[i - 1].frame if i else 0
+            nxt = kept[i + 1].frame if i + 1 < len(kept) else n
+            key = (prev, c.frame, nxt)
+            if key not in cache:
+                cache[key] = cut_contrast(X, prev, c.frame, nxt, W, tau, min_len)
+            scores.append(cache[key])
+        j = min(range(len(kept)), key=lambda i: (scores[i], kept[i].confidence))
+        if scores[j] >= ratio:
+            break
+        log.debug("pca: cut at frame %d dropped, contrast %.2f < %.2f",
+                  kept[j].frame, scores[j], ratio)
+        del kept[j]
+    return kept
+
+
+def merge_passes(forward: Sequence[Cut], backward: Sequence[Cut], tol: int) -> list[Cut]:
+    """One list from the cuts of a forward and a backward pass (frames in forward order).
+
+    The forward pass cuts where d has risen (after the change), the backward pass where
+    the reversed d has risen (before it): a forward and a backward cut within ``tol``
+    frames of each other (closest pairs first) are one change, placed at their mean frame.
+    Unpaired cuts are kept; then cuts closer than ``tol`` are merged into their mean.
+    Merged cuts are batch cuts: ``detected_at == frame``, the higher confidence.
+    """
+    F = sorted(forward, key=lambda c: c.frame)
+    B = sorted(backward, key=lambda c: c.frame)
+    pairs = sorted((abs(f.frame - b.frame), i, j) for i, f in enumerate(F)
+                   for j, b in enumerate(B) if abs(f.frame - b.frame) <= tol)
+    used_f: set[int] = set()
+    used_b: set[int] = set()
+    out: list[Cut] = []
+    for _, i, j in pairs:
+        if i in used_f or j in used_b:
+            continue
+        used_f.add(i)
+        used_b.add(j)
+        out.append(_merged([F[i], B[j]]))
+    out += [c for i, c in enumerate(F) if i not in used_f]
+    out += [c for j, c in enumerate(B) if j not in used_b]
+    out.sort(key=lambda c: c.frame)
+    merged: list[Cut] = []
+    group: list[Cut] = []
+    for c in out:
+        if group and c.frame - group[-1].frame >= tol:
+            merged.append(_merged(group))
+            group = []
+        group.append(c)
+    if group:
+        merged.append(_merged(group))
+    return merged
+
+
+def _merged(group: Sequence[Cut]) -> Cut:
+    if len(group) == 1:
+        return group[0]
+    frame = int(round(sum(c.frame for c in group) / len(group)))
+    best = max(group, key=lambda c: c.confidence)
+    return Cut(frame=frame, method=best.method, confidence=best.confidence,
+               detected_at=frame, score=best.score)
+
+
+def segment_pca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
+                keep_trace: bool = False) -> tuple[list[Cut], list]:
+    """Offline PCA segmentation of a whole feature matrix X (frames, dims).
+
+    ``variant = "paper"``: the online detector's forward pass over X, unchanged.
+    ``variant = "verified"``: the online detector run forward and on the time-reversed X
+    (backward cuts mapped to forward frames: reversed frame j -> len(X) - j), the two merged
+    (``merge_passes``, tolerance ``min_segment_s``), then ``verify_cuts`` (windows
+    ``verify_window_s``, segments >= ``min_segment_s``, contrast >= ``verify_ratio``).
+    Returns (cuts sorted by frame, the forward pass's trace).
+    """
+    from rtseg.detectors import frames
+    det = PCADetector.from_params(p, frame_rate, keep_trace=keep_trace)
+    cuts = det.run(X)
+    if p.get("variant", "paper") == "verified":
+        n = len(X)
+        back = PCADetector.from_params(p, frame_rate).run(X[::-1])
+        back = [Cut(frame=n - c.frame, method=c.method, confidence=c.confidence,
+                    detected_at=n - c.frame, score=c.score) for c in back]
+        min_len = frames(p["min_segment_s"], frame_rate)
+        cuts = merge_passes(cuts, [c for c in back if 0 < c.frame < n], min_len)
+        if cuts:
+            cuts = verify_cuts(X, cuts, W=frames(p["verify_window_s"], frame_rate),
+                               min_len=min_len, ratio=float(p["verify_ratio"]),
+                               tau=float(p["energy"]))
+    return sorted(cuts, key=lambda c: c.frame), det.trace

@@ -1,0 +1,122 @@
+"""PCA offline verification (variant "verified"): forward + backward passes merged, then the
+two-sided PCA contrast check; the paper variant and the parameters that select them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rtseg.config import ConfigError
+from rtseg.detectors import make_online, method_params, segment_features
+from rtseg.detectors.base import Cut
+from rtseg.detectors.pca import cut_contrast, merge_passes, verify_cuts
+
+FPS = 120.0
+
+
+def behaviour(rng: np.random.Generator, n: int, dim: int, freq: float = 1.0,
+              amp: float = 0.3, noise: float = 0.01) -> np.ndarray:
+    """A periodic behaviour: a 2-D oscillation along its own random directions, plus a
+    slow amplitude swing (the within-behaviour excursions of d) and sensor noise."""
+    t = np.arange(n) / FPS
+    swing = 1.0 + 0.6 * np.sin(2 * np.pi * 0.15 * t + rng.uniform(0, 6))
+    U = rng.normal(size=(2, dim)) * amp
+    osc = np.stack([np.sin(2 * np.pi * freq * t), np.cos(2 * np.pi * freq * t)], 1)
+    return 0.3 * rng.normal(size=dim) + swing[:, None] * (osc @ U) + noise * rng.normal(size=(n, dim))
+
+
+def two_behaviours(seed: int, la: int = 1500, lb: int = 1500, dim: int = 24
+                   ) -> tuple[np.ndarray, int]:
+    rng = np.random.default_rng(seed)
+    return np.concatenate([behaviour(rng, la, dim, 1.0), behaviour(rng, lb, dim, 0.8)]), la
+
+
+def test_contrast_separates_a_change_from_a_cut_inside_a_behaviour():
+    W = 480
+    for seed in range(5):
+        X, la = two_behaviours(seed)
+        change = cut_contrast(X, 0, la, len(X), W, 0.9)
+        inside = cut_contrast(X, 0, la // 2, la, W, 0.9)
+        assert change > 4.0, (seed, change)
+        assert inside < 2.0, (seed, inside)
+
+
+def test_contrast_is_zero_when_a_side_is_shorter_than_min_len():
+    X, la = two_behaviours(0)
+    assert cut_contrast(X, la - 50, la, len(X), 480, 0.9, min_len=120) == 0.0
+    assert cut_contrast(X, 0, la, la + 50, 480, 0.9, min_len=120) == 0.0
+    assert cut_contrast(X, la - 200, la, len(X), 480, 0.9, min_len=120) > 4.0
+
+
+def test_verify_drops_false_cuts_and_keeps_the_change():
+    X, la = two_behaviours(1)
+    cuts = [Cut(400, "pca", 0.5), Cut(la - 30, "pca", 0.2), Cut(la, "pca", 0.9),
+            Cut(2300, "pca", 0.4)]
+    kept = verify_cuts(X, cuts, W=480, min_len=120, ratio=4.0, tau=0.9)
+    # la - 30 leaves a 30-frame segment (removed first, lower confidence), 400 and 2300 lie
+    # inside a behaviour; the change survives
+    assert [c.frame for c in kept] == [la]
+
+
+def test_verify_keeps_every_cut_at_ratio_zero_except_too_short_segments():
+    X, la = two_behaviours(2)
+    cuts = [Cut(400, "pca"), Cut(la, "pca"), Cut(la + 40, "pca", 0.1)]
+    kept = verify_cuts(X, cuts, W=480, min_len=120, ratio=0.0, tau=0.9)
+    assert [c.frame for c in kept] == [400, la, la + 40]      # 0 >= 0: nothing removed
+    kept = verify_cuts(X, cuts, W=480, min_len=120, ratio=1e-9, tau=0.9)
+    assert [c.frame for c in kept] == [400, la]
+
+
+def test_merge_passes_pairs_forward_and_backward_cuts_at_their_mean():
+    F = [Cut(1000, "pca", 0.7, 1000), Cut(3000, "pca", 0.3, 3000)]
+    B = [Cut(940, "pca", 0.5, 940), Cut(2000, "pca", 0.6, 2000)]
+    out = merge_passes(F, B, tol=120)
+    assert [c.frame for c in out] == [970, 2000, 3000]
+    assert out[0].confidence == 0.7 and out[0].detected_at == 970
+    # cuts of one pass closer than tol are merged too
+    out = merge_passes([Cut(1000, "pca"), Cut(1050, "pca")], [], tol=120)
+    assert [c.frame for c in out] == [1025]
+
+
+def test_paper_variant_is_the_online_pass():
+    X, la = two_behaviours(3, la=1200, lb=1200)
+    rng = np.random.default_rng(9)
+    X = np.concatenate([X, behaviour(rng, 1200, X.shape[1], 1.3)])
+    paper = [c.frame for c in segment_features(X, "pca", FPS, {"variant": "paper"})]
+    online = [c.frame for c in make_online("pca", FPS).run(X)]
+    assert paper == online and paper
+
+
+def test_verified_finds_the_changes_with_fewer_false_cuts_than_the_paper():
+    n_true = hits_v = hits_p = extra_v = extra_p = 0
+    for seed in range(4):
+        rng = np.random.default_rng(100 + seed)
+        parts = [behaviour(rng, 1500, 24, f) for f in (1.0, 0.7, 1.2, 0.9)]
+        X = np.concatenate(parts)
+        truth = [1500, 3000, 4500]
+        n_true += len(truth)
+        for variant in ("paper", "verified"):
+            frames = [c.frame for c in segment_features(X, "pca", FPS, {"variant": variant})]
+            hits = sum(any(abs(f - t) <= 120 for f in frames) for t in truth)
+            extra = sum(all(abs(f - t) > 120 for t in truth) for f in frames)
+            if variant == "paper":
+                hits_p, extra_p = hits_p + hits, extra_p + extra
+            else:
+                hits_v, extra_v = hits_v + hits, extra_v + extra
+    assert extra_p >= 4, "premise: the online pass over-segments the swinging behaviours"
+    assert extra_v <= extra_p // 2, (extra_v, extra_p)
+    assert hits_v >= hits_p and hits_v >= n_true - 2, (hits_v, hits_p, n_true)
+
+
+@pytest.mark.parametrize("key,value,word", [
+    ("variant", "fancy", "variant"), ("verify_ratio", -1.0, "verify_ratio"),
+    ("verify_window_s", 0.0, "verify_window_s"), ("min_segment_s", True, "min_segment_s")])
+def test_bad_verification_params_name_the_key(key, value, word):
+    with pytest.raises(ConfigError, match=word):
+        method_params("pca", {key: value})
+
+
+def test_defaults_select_the_verified_variant():
+    p = method_params("pca")
+    assert p["variant"] == "verified" and p["verify_ratio"] > 1.0
+    assert p["min_segment_s"] < p["verify_window_s"]
