@@ -120,3 +120,15 @@ def test_defaults_select_the_verified_variant():
     p = method_params("pca")
     assert p["variant"] == "verified" and p["verify_ratio"] > 1.0
     assert p["min_segment_s"] < p["verify_window_s"]
+
+
+def test_refine_moves_a_late_cut_to_the_change():
+    from rtseg.detectors.pca import refine_cuts
+    for seed in range(3):
+        X, la = two_behaviours(seed)
+        cuts = [Cut(la + 45, "pca", 0.8, la + 45), Cut(la - 700, "pca", 0.3, la - 700)]
+        out = refine_cuts(X, cuts, W=480, min_len=120, reach=60, tau=0.9)
+        frames = [c.frame for c in out]
+        assert abs(frames[1] - la) <= 20, (seed, frames)   # was 45 frames late
+        assert abs(frames[0] - (la - 700)) <= 60          # stays within reach
+        assert out[1].detected_at == out[1].frame and out[1].confidence == 0.8
