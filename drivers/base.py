@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections import deque
 from dataclasses import asdict, dataclass
 from typing import Iterator
 
@@ -37,6 +38,53 @@ class SourceStats:
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
+
+
+class FrameQueue:
+    """Bounded hand-over of frames from a driver's reader thread to ``Source.read``.
+
+    Policy when the consumer falls behind: the OLDEST queued frame is discarded (``put``
+    returns True so the driver can count and log it); the queue never grows past
+    ``size``.  ``close()`` wakes every blocked ``get``.
+    """
+
+    def __init__(self, size: int) -> None:
+        if size < 1:
+            raise SourceError(f"queue must hold at least 1 frame, got {size}")
+        self.size = int(size)
+        self._frames: deque[Frame] = deque()
+        self._cond = threading.Condition()
+        self._closed = False
+
+    def put(self, frame: Frame) -> bool:
+        """Append a frame; True if the oldest one had to be dropped to make room."""
+        with self._cond:
+            dropped = len(self._frames) >= self.size
+            if dropped:
+                self._frames.popleft()
+            self._frames.append(frame)
+            self._cond.notify()
+        return dropped
+
+    def get(self, timeout: float | None = None) -> Frame | None:
+        """Oldest frame, or None if none within ``timeout`` s (None: until one arrives or
+        the queue is closed)."""
+        with self._cond:
+            if not self._frames:
+                if self._closed:
+                    return None
+                self._cond.wait_for(lambda: self._frames or self._closed, timeout)
+            if not self._frames:
+                return None
+            return self._frames.popleft()
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+
+    def __len__(self) -> int:
+        return len(self._frames)
 
 
 class Source:

@@ -45,10 +45,9 @@ import math
 import socket
 import threading
 import time
-from collections import deque
 from typing import Any, Sequence
 
-from rtseg.drivers.base import Source, SourceError
+from rtseg.drivers.base import FrameQueue, Source, SourceError
 from rtseg.drivers.codec_vmc import VmcAssembler
 from rtseg.drivers.codec_vrchat import DEFAULT_PORT as VRCHAT_PORT
 from rtseg.drivers.codec_vrchat import JOINT_NAMES as VRCHAT_JOINTS
@@ -94,11 +93,7 @@ class OscUdpSource(Source):
 
     def _start(self, host: str, port: int, quiet: float, queue_size: int,
                rcvbuf: int | None) -> None:
-        if queue_size < 1:
-            raise SourceError(f"queue must hold at least 1 frame, got {queue_size}")
-        self._queue: deque[Frame] = deque()
-        self._queue_size = int(queue_size)
-        self._cond = threading.Condition()
+        self._queue = FrameQueue(queue_size)   # drop policy: the oldest frame goes
         self._stop = threading.Event()
         self._closed = False
         self._last_drop_log = -math.inf
@@ -157,15 +152,7 @@ class OscUdpSource(Source):
                 self._put(frame)
 
     def _put(self, frame: Frame) -> None:
-        with self._cond:
-            if len(self._queue) >= self._queue_size:
-                self._queue.popleft()          # drop policy: the oldest frame goes
-                dropped = True
-            else:
-                dropped = False
-            self._queue.append(frame)
-            self._cond.notify()
-        if dropped:
+        if self._queue.put(frame):
             self.count("dropped")
             now = time.monotonic()
             if now - self._last_drop_log > 5.0:
@@ -176,14 +163,9 @@ class OscUdpSource(Source):
     def read(self, timeout: float | None = None) -> Frame | None:
         """Next frame in arrival order, or None if none within ``timeout`` s (None: wait
         until one arrives or the source is closed)."""
-        with self._cond:
-            if not self._queue:
-                if self._stop.is_set():
-                    return None
-                self._cond.wait_for(lambda: self._queue or self._stop.is_set(), timeout)
-            if not self._queue:
-                return None
-            frame = self._queue.popleft()
+        frame = self._queue.get(timeout)
+        if frame is None:
+            return None
         self.count("frames_ok")
         return frame
 
@@ -194,8 +176,7 @@ class OscUdpSource(Source):
             return
         self._closed = True
         self._stop.set()
-        with self._cond:
-            self._cond.notify_all()
+        self._queue.close()
         self._thread.join(timeout=2.0)
         self._sock.close()
 

@@ -68,7 +68,7 @@ import numpy as np
 import serial
 
 from rtseg.drivers import codec_serial as codec
-from rtseg.drivers.base import Source, SourceError
+from rtseg.drivers.base import FrameQueue, Source, SourceError
 from rtseg.frame import Frame
 from rtseg.profiles import SuitProfile, suit_profile
 
@@ -169,9 +169,7 @@ class SerialSource(Source):
         self._time_acc = 0
         self._last_data = 0.0
         self._events: collections.deque[SensorEvent] = collections.deque(maxlen=4096)
-        self._queue: collections.deque[Frame] = collections.deque()
-        self._queue_size = int(queue_size)
-        self._cond = threading.Condition()
+        self._queue = FrameQueue(queue_size)
         self._stop = threading.Event()
         self._log = _RateLimitedLog(log)
         self._ser: serial.SerialBase | None = None
@@ -212,22 +210,16 @@ class SerialSource(Source):
     def read(self, timeout: float | None = None) -> Frame | None:
         """Next frame, or None if none within ``timeout`` seconds (None: wait forever).
         Never raises because of the device."""
-        with self._cond:
-            if not self._queue:
-                if self._stop.is_set():
-                    return None
-                self._cond.wait_for(lambda: self._queue or self._stop.is_set(), timeout)
-            if not self._queue:
-                return None
-            frame = self._queue.popleft()
+        frame = self._queue.get(timeout)
+        if frame is None:
+            return None
         self.count("frames_ok")
         return frame
 
     def close(self) -> None:
         """Stop the reader thread and close the port.  Safe to call twice."""
         self._stop.set()
-        with self._cond:
-            self._cond.notify_all()
+        self._queue.close()
         ser = self._ser
         if ser is not None:
             try:
@@ -403,15 +395,11 @@ class SerialSource(Source):
         frame = Frame(recv_time=now, quats=self._state.copy(), valid=valid,
                       source_time=self._time_acc / 1e6 if m.time_us is not None else None,
                       seq=m.seq)
-        with self._cond:
-            if len(self._queue) >= self._queue_size:
-                self._queue.popleft()
-                self.overflow_drops += 1
-                self.count("dropped")
-                self._log("overflow", logging.WARNING,
-                          "serial %s: consumer too slow, oldest frame dropped", self.path)
-            self._queue.append(frame)
-            self._cond.notify()
+        if self._queue.put(frame):
+            self.overflow_drops += 1
+            self.count("dropped")
+            self._log("overflow", logging.WARNING,
+                      "serial %s: consumer too slow, oldest frame dropped", self.path)
 
     def _check_stale(self, now: float) -> None:
         newly = (now - self._last_valid > self.stale) & ~self._lost
