@@ -6,9 +6,12 @@ detector (for a take, its frame numbers; live, frames since the detector was cre
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
+
+log = logging.getLogger("rtseg.detectors")
 
 
 @dataclass(frozen=True)
@@ -50,6 +53,18 @@ class OnlineDetector:
 
     def restart(self) -> None:
         raise NotImplementedError
+
+    def _reject(self, x: np.ndarray) -> None:
+        """A frame with NaN/inf: counted in ``rejected_frames``, logged, and treated as a gap
+        (the segment restarts after it, so no statistic is poisoned and no cut spans it).
+        Frame numbers (``_t``, frames since creation) still advance."""
+        self.rejected_frames += 1
+        if self.rejected_frames == 1 or self.rejected_frames % 1000 == 0:
+            log.warning("%s detector: non-finite feature frame %d dropped (%d so far); "
+                        "segment restarted", self.name, self._t, self.rejected_frames)
+        self._t += 1
+        self.restart()
+        return None
 
     def run(self, X: np.ndarray) -> list[Cut]:
         """Feed every row of X (frames, dims) through ``update``; the cuts in order."""

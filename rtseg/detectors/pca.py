@@ -183,17 +183,6 @@ class PCADetector(OnlineDetector):
         self._d_m2 += delta * (d - self._d_mean)
 
     # ------------------------------------------------------------------ streaming
-    def _reject(self, x: np.ndarray) -> None:
-        """A frame with NaN/inf: counted, logged, and treated as a gap (the segment restarts
-        after it, so no statistic is poisoned and no cut spans it).  Frame numbers advance."""
-        self.rejected_frames += 1
-        if self.rejected_frames == 1 or self.rejected_frames % 1000 == 0:
-            log.warning("%s detector: non-finite feature frame %d dropped (%d so far); "
-                        "segment restarted", self.name, self._t, self.rejected_frames)
-        self._t += 1
-        self.restart()
-        return None
-
     def update(self, x: np.ndarray) -> Cut | None:
         """Feed one frame (1-D feature vector); a Cut when d_n crosses the threshold."""
         x = np.asarray(x, dtype=np.float64)

@@ -197,17 +197,6 @@ class PPCADetector(OnlineDetector):
         return float(np.sqrt(q).mean() if self.distance == "mean" else q.mean())
 
     # ------------------------------------------------------------------ streaming
-    def _reject(self, x: np.ndarray) -> None:
-        """A frame with NaN/inf: counted, logged, and treated as a gap (the segment restarts
-        after it, so no statistic is poisoned and no cut spans it).  Frame numbers advance."""
-        self.rejected_frames += 1
-        if self.rejected_frames == 1 or self.rejected_frames % 1000 == 0:
-            log.warning("%s detector: non-finite feature frame %d dropped (%d so far); "
-                        "segment restarted", self.name, self._t, self.rejected_frames)
-        self._t += 1
-        self.restart()
-        return None
-
     def update(self, x: np.ndarray) -> Cut | None:
         """Feed one frame; a Cut when a peak of H at least R above its valley is confirmed."""
         x = np.asarray(x, dtype=np.float64)
