@@ -349,6 +349,10 @@ def test_make_online_validates():
 
 # ------------------------------------------------------------------ real data
 TARGET_F1 = {"ppca": 0.90, "pca": 0.80, "gmm": 0.70}
+# Regression guard: the F1 each method reached when its current default set was adopted
+# (2026-11-22: ppca 0.837, pca 0.760, gmm 0.773), less a small margin.  Below the issue's
+# target the test xfails, but falling under this floor is a plain failure.
+FLOOR_F1 = {"ppca": 0.80, "pca": 0.72, "gmm": 0.72}
 
 
 @pytest.fixture(scope="module")
@@ -375,6 +379,8 @@ def test_real_data_pooled_f1(cmu_takes, method):
         cuts = segment_features(X, method, fps)
         scores.append(score([c.frame for c in cuts], transitions))
     P = pooled(scores)
+    assert P.f1 >= FLOOR_F1[method], (
+        f"{method}: pooled F1 {P.f1:.3f} regressed below {FLOOR_F1[method]}")
     if P.f1 < TARGET_F1[method]:
         pytest.xfail(f"{method}: pooled F1 {P.f1:.3f} (P {P.precision:.2f}, R {P.recall:.2f}) "
                      f"below the target {TARGET_F1[method]} - see the detectors report")
