@@ -280,7 +280,11 @@ class SerialSource(Source):
                 backoff = 0.0
             try:
                 ser = self._ser
-                data = ser.read(ser.in_waiting or 1)
+                # Block for the first byte (or the read timeout), then take whatever else
+                # is already waiting, so a frame is decoded in one call, not byte by byte.
+                data = ser.read(1)
+                if data and ser.in_waiting:
+                    data += ser.read(ser.in_waiting)
             except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
                 if self._stop.is_set():
                     break
