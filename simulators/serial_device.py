@@ -54,7 +54,7 @@ from rtseg.take import Take
 
 log = logging.getLogger("rtseg.simulators.serial")
 
-READER_SETTLE_S = 0.05
+READER_SETTLE_S = 0.2
 """With ``wait_reader``, sending starts this long after a reader opened the port, as a
 board reset by the port's DTR line starts streaming after it boots (and so the reader's
 own input flush at open cannot swallow the first frames)."""
