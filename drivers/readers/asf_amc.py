@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from rtseg import quat as Q
-from rtseg.drivers.readers.errors import ReaderError
+from rtseg.drivers.readers.errors import ReaderError, read_text_lines
 from rtseg.take import Take
 
 DEFAULT_FRAME_RATE = 120.0
@@ -94,20 +94,6 @@ class AsfSkeleton:
         return order
 
 
-def _lines(path: Path) -> list[str]:
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise ReaderError(path, "file not found") from None
-    except IsADirectoryError:
-        raise ReaderError(path, "is a directory, not a file") from None
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError:
-        text = data.decode("latin-1")
-    return text.splitlines()  # CRLF, CR and LF alike
-
-
 def _floats(path: Path, lineno: int, tokens: list[str], n: int, what: str) -> np.ndarray:
     if len(tokens) < n:
         raise ReaderError(path, f"{what} needs {n} numbers, got {len(tokens)}", lineno)
@@ -133,7 +119,7 @@ def _angle_to_deg(values: np.ndarray, unit: str) -> np.ndarray:
 def read_asf(path: str | Path) -> AsfSkeleton:
     """Parse an Acclaim ASF skeleton file (CRLF tolerant)."""
     path = Path(path)
-    lines = _lines(path)
+    lines = read_text_lines(path)
     sk = AsfSkeleton(path=str(path))
     section = ""
     bone: AsfBone | None = None
@@ -387,7 +373,7 @@ def read_amc(path: str | Path, skeleton: AsfSkeleton | str | Path,
     must_appear = [n for n, (_, k) in layout.items() if k > 0]
     n_required = len(must_appear)
 
-    lines = _lines(path)
+    lines = read_text_lines(path)
     angle_unit = sk.angle_unit
     rows: list[list[float]] = []
     frame_numbers: list[int] = []

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from rtseg import quat as Q
-from rtseg.drivers.readers.errors import ReaderError
+from rtseg.drivers.readers.errors import ReaderError, read_text_lines
 from rtseg.take import Take
 
 _TOKEN_RE = re.compile(r"[{}]|[^\s{}]+")
@@ -43,23 +43,10 @@ class _Joint:
         self.line = line
 
 
-def _read_text(path: Path) -> list[str]:
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise ReaderError(path, "file not found") from None
-    except IsADirectoryError:
-        raise ReaderError(path, "is a directory, not a file") from None
-    try:
-        return data.decode("utf-8").splitlines()
-    except UnicodeDecodeError:
-        return data.decode("latin-1").splitlines()
-
-
 def read_bvh(path: str | Path, frame_rate: float | None = None) -> Take:
     """Read a BVH file into a local-space ``Take``."""
     path = Path(path)
-    lines = _read_text(path)
+    lines = read_text_lines(path)
     tokens: list[tuple[str, int]] = []
     motion_line = None
     for lineno, raw in enumerate(lines, start=1):

@@ -1,4 +1,5 @@
-"""The one exception every take reader raises for malformed input."""
+"""The one exception every take reader raises for malformed input, and the text loader
+the line-oriented readers share."""
 
 from __future__ import annotations
 
@@ -19,3 +20,21 @@ class ReaderError(ValueError):
         self.problem = problem
         where = self.path if line is None else f"{self.path}:{line}"
         super().__init__(f"{where}: {problem}")
+
+
+def read_text_lines(path: Path) -> list[str]:
+    """The lines of a text take file (UTF-8, else Latin-1; CRLF, CR and LF alike).
+
+    A missing file or a directory raises ``ReaderError`` naming the path.
+    """
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise ReaderError(path, "file not found") from None
+    except IsADirectoryError:
+        raise ReaderError(path, "is a directory, not a file") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        text = data.decode("latin-1")
+    return text.splitlines()
