@@ -7,6 +7,7 @@ detector (for a take, its frame numbers; live, frames since the detector was cre
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,6 +54,22 @@ class OnlineDetector:
 
     def restart(self) -> None:
         raise NotImplementedError
+
+    def _admit(self, x: np.ndarray) -> np.ndarray | None:
+        """Validate one incoming frame: a 1-D float64 vector of the detector's width (the
+        first frame fixes the width; ``self._alloc(dim)`` is called whenever the frame
+        buffer ``_buf`` is unallocated).  A wrong shape raises
+        ValueError; a non-finite frame is rejected (``_reject``) and None returned."""
+        x = np.asarray(x, dtype=np.float64)
+        if x.ndim != 1:
+            raise ValueError(f"update() takes one frame (1-D), got shape {x.shape}")
+        if self._dim is not None and x.shape[0] != self._dim:
+            raise ValueError(f"frame has {x.shape[0]} dims, detector has {self._dim}")
+        if self._buf is None:
+            self._alloc(x.shape[0])
+        if not math.isfinite(float(x.sum())):
+            return self._reject(x)
+        return x
 
     def _reject(self, x: np.ndarray) -> None:
         """A frame with NaN/inf: counted in ``rejected_frames``, logged, and treated as a gap

@@ -185,17 +185,9 @@ class PCADetector(OnlineDetector):
     # ------------------------------------------------------------------ streaming
     def update(self, x: np.ndarray) -> Cut | None:
         """Feed one frame (1-D feature vector); a Cut when d_n crosses the threshold."""
-        x = np.asarray(x, dtype=np.float64)
-        if x.ndim != 1:
-            raise ValueError(f"update() takes one frame (1-D), got shape {x.shape}")
-        if self._dim is None or self._buf is None:
-            if self._dim is not None and x.shape[0] != self._dim:
-                raise ValueError(f"frame has {x.shape[0]} dims, detector has {self._dim}")
-            self._alloc(x.shape[0])
-        elif x.shape[0] != self._dim:
-            raise ValueError(f"frame has {x.shape[0]} dims, detector has {self._dim}")
-        if not math.isfinite(float(x.sum())):
-            return self._reject(x)
+        x = self._admit(x)
+        if x is None:
+            return None
         t = self._t
         self._t += 1
         n = self._n

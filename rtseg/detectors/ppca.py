@@ -197,19 +197,16 @@ class PPCADetector(OnlineDetector):
         return float(np.sqrt(q).mean() if self.distance == "mean" else q.mean())
 
     # ------------------------------------------------------------------ streaming
+    def _alloc(self, dim: int) -> None:
+        self._dim = dim
+        self._buf = np.empty((4 * self.T + 64, dim))
+        self._reset_model()
+
     def update(self, x: np.ndarray) -> Cut | None:
         """Feed one frame; a Cut when a peak of H at least R above its valley is confirmed."""
-        x = np.asarray(x, dtype=np.float64)
-        if x.ndim != 1:
-            raise ValueError(f"update() takes one frame (1-D), got shape {x.shape}")
-        if self._dim is None:
-            self._dim = x.shape[0]
-            self._buf = np.empty((4 * self.T + 64, self._dim))
-            self._reset_model()
-        elif x.shape[0] != self._dim:
-            raise ValueError(f"frame has {x.shape[0]} dims, detector has {self._dim}")
-        if not math.isfinite(float(x.sum())):
-            return self._reject(x)
+        x = self._admit(x)
+        if x is None:
+            return None
         t = self._t
         self._t += 1
         n = self._n
