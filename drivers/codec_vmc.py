@@ -102,6 +102,9 @@ _U64 = struct.Struct(">Q")
 _F32 = struct.Struct(">f")
 _F64 = struct.Struct(">d")
 _I64 = struct.Struct(">q")
+#: Fixed-size numeric type tags: tag -> (struct, what the error message calls it).
+_NUMERIC = {"f": (_F32, "float"), "i": (_I32, "int"), "d": (_F64, "double"),
+            "h": (_I64, "int64"), "t": (_U64, "time tag")}
 _F7 = struct.Struct(">7f")
 _MAX_DEPTH = 8
 
@@ -148,34 +151,16 @@ def parse_message(data: bytes, start: int = 0, end: int | None = None,
     for tag in tags:
         if max_args is not None and len(stack) == 1 and len(top) >= max_args:
             break
-        if tag == "f":
-            if pos + 4 > end:
-                raise OscParseError(f"{address}: truncated float argument")
-            val = _F32.unpack_from(data, pos)[0]
-            pos += 4
-        elif tag == "i":
-            if pos + 4 > end:
-                raise OscParseError(f"{address}: truncated int argument")
-            val = _I32.unpack_from(data, pos)[0]
-            pos += 4
+        numeric = _NUMERIC.get(tag)
+        if numeric is not None:
+            st, what = numeric
+            if pos + st.size > end:
+                raise OscParseError(f"{address}: truncated {what} argument")
+            val = st.unpack_from(data, pos)[0]
+            pos += st.size
         elif tag in "sS":
             raw, pos = _read_string(data, pos, end)
             val = _decode(raw)
-        elif tag == "d":
-            if pos + 8 > end:
-                raise OscParseError(f"{address}: truncated double argument")
-            val = _F64.unpack_from(data, pos)[0]
-            pos += 8
-        elif tag == "h":
-            if pos + 8 > end:
-                raise OscParseError(f"{address}: truncated int64 argument")
-            val = _I64.unpack_from(data, pos)[0]
-            pos += 8
-        elif tag == "t":
-            if pos + 8 > end:
-                raise OscParseError(f"{address}: truncated time tag argument")
-            val = _U64.unpack_from(data, pos)[0]
-            pos += 8
         elif tag == "b":
             if pos + 4 > end:
                 raise OscParseError(f"{address}: truncated blob size")
