@@ -316,7 +316,8 @@ def cut_contrast(X: np.ndarray, c: int, W: int, tau: float, noise_floor: float =
                  null_rel: float = 1e-15, distance: str = "mean") -> float:
     """How much more the motion changes at frame c than just before and just after it.
 
-    With A = X[c-W:c], B = X[c:c+W], A0 = X[c-2W:c-W], B2 = X[c+W:c+2W] (W frames each):
+    With A = X[c-W:c], B = X[c:c+W], A0 = X[c-2W:c-W], B2 = X[c+W:c+2W] (W frames each,
+    cut short by the take's ends):
     contrast = D(A, B) / mean(D(A0, A), D(B, B2)), D the symmetric distance
     max(H(B|A), H(A|B)).  A true behaviour change makes D(A, B) larger than the change
     between consecutive windows of the same behaviour on either side (> 1); a cut inside a
@@ -324,22 +325,8 @@ def cut_contrast(X: np.ndarray, c: int, W: int, tau: float, noise_floor: float =
     less).  Outer windows shorter than W/2 (take ends) are left out; when both are, the
     contrast is +inf (the cut cannot be checked and is kept).
     """
-    n = len(X)
-    A, B = X[max(0, c - W):c], X[c:min(n, c + W)]
-    if len(A) < 2 or len(B) < 2:
-        return math.inf
-    args = (tau, noise_floor, null_rel, distance)
-    cross = _sym_distance(A, B, *args)
-    A0, B2 = X[max(0, c - 2 * W):max(0, c - W)], X[min(n, c + W):min(n, c + 2 * W)]
-    need = max(2, W // 2)
-    inner = []
-    if len(A0) >= need:
-        inner.append(_sym_distance(A0, A, *args))
-    if len(B2) >= need:
-        inner.append(_sym_distance(B, B2, *args))
-    if not inner:
-        return math.inf
-    return cross / max(float(np.mean(inner)), 1e-300)
+    return _WindowModels(np.asarray(X, dtype=np.float64), tau, noise_floor, null_rel,
+                         distance).contrast(int(c), int(W))
 
 
 def verify_cuts(X: np.ndarray, cuts: list[Cut], W: int, min_contrast: float, tau: float,
@@ -472,23 +459,139 @@ class VerifiedPPCADetector(OnlineDetector):
                    score=c.score)
 
 
+class _WindowModels:
+    """PPCA fits and mean distances of windows X[lo:hi], each computed once (windows recur:
+    the "after" window of one scan position is the "before" window of the next but W)."""
+
+    def __init__(self, X: np.ndarray, tau: float, noise_floor: float, null_rel: float,
+                 distance: str) -> None:
+        self.X, self.args, self.distance = X, (tau, noise_floor, null_rel), distance
+        self._fits: dict[tuple[int, int], tuple] = {}
+        self._h: dict[tuple[int, int, int, int], float] = {}
+
+    def _fit(self, w: tuple[int, int]) -> tuple:
+        m = self._fits.get(w)
+        if m is None:
+            m = self._fits[w] = fit_ppca(self.X[w[0]:w[1]], *self.args)
+        return m
+
+    def sym(self, a: tuple[int, int], b: tuple[int, int]) -> float:
+        """D(a, b) = max(H(b | model of a), H(a | model of b)) (``_sym_distance``)."""
+        key = a + b
+        d = self._h.get(key)
+        if d is None:
+            d = self._h[key] = max(
+                mean_distance(self._fit(a), self.X[b[0]:b[1]], self.distance),
+                mean_distance(self._fit(b), self.X[a[0]:a[1]], self.distance))
+        return d
+
+    def contrast(self, c: int, W: int) -> float:
+        """``cut_contrast(X, c, W, ...)``, with the fits shared between calls."""
+        n = len(self.X)
+        A, B = (max(0, c - W), c), (c, min(n, c + W))
+        if A[1] - A[0] < 2 or B[1] - B[0] < 2:
+            return math.inf
+        cross = self.sym(A, B)
+        A0, B2 = (max(0, c - 2 * W), max(0, c - W)), (min(n, c + W), min(n, c + 2 * W))
+        need = max(2, W // 2)
+        inner = [self.sym(A0, A)] if A0[1] - A0[0] >= need else []
+        if B2[1] - B2[0] >= need:
+            inner.append(self.sym(B, B2))
+        if not inner:
+            return math.inf
+        return cross / max(float(np.mean(inner)), 1e-300)
+
+
+def contrast_profile(X: np.ndarray, W: int, step: int, tau: float, noise_floor: float = 1e-6,
+                     null_rel: float = 1e-15,
+                     distance: str = "mean") -> tuple[np.ndarray, np.ndarray]:
+    """``cut_contrast`` at every ``step``-th frame c from W to n - W/2.
+
+    The scan starts once a whole window precedes c (a window cut short by the start of the
+    take has a narrower model, which alone inflates the contrast; the forward pass likewise
+    tests nothing in its first T frames) and ends where the window after c would be shorter
+    than W/2.  Returns (frames, contrast); +inf where the check is impossible (no outer
+    window: takes shorter than about 2.5 W).  Windows fall on the grid of ``step`` frames, so each W-frame window is
+    fitted once: cost ~ (n / step) PPCA fits of W x d windows."""
+    X = np.asarray(X, dtype=np.float64)
+    h = max(2, W // 2)
+    frames_ = np.arange(W, len(X) - h + 1, max(1, int(step)))
+    models = _WindowModels(X, tau, noise_floor, null_rel, distance)
+    return frames_, np.array([models.contrast(int(c), W) for c in frames_], dtype=float)
+
+
+def scan_cuts(X: np.ndarray, W: int, step: int, min_contrast: float, tau: float,
+              noise_floor: float = 1e-6, null_rel: float = 1e-15,
+              distance: str = "mean") -> list[tuple[int, float]]:
+    """(frame, contrast) of the local maxima of ``contrast_profile`` that reach
+    ``min_contrast``, at least W frames apart (a higher maximum wins), sorted by frame.
+    Empty when no position of the take can be checked (see ``contrast_profile``)."""
+    frames_, k = contrast_profile(X, W, step, tau, noise_floor, null_rel, distance)
+    k = np.where(np.isfinite(k), k, 0.0)
+    # interior local maxima (the first sample of a flat top); a rise still going at either
+    # end of the scanned span is not a maximum
+    i = np.arange(1, len(k) - 1)
+    i = i[(k[i] > k[i - 1]) & (k[i] >= k[i + 1]) & (k[i] >= min_contrast)]
+    sep = max(1, int(math.ceil(W / max(1, step))))
+    peaks: list[int] = []
+    for j in sorted(i.tolist(), key=lambda j: (-k[j], j)):     # highest first
+        if all(abs(j - q) >= sep for q in peaks):
+            peaks.append(j)
+    peaks.sort()
+    return [(int(frames_[i]), float(k[i])) for i in peaks]
+
+
+def localise_cuts(X: np.ndarray, frames_: list[int], det_args: dict[str, Any],
+                  reach: int) -> list[int]:
+    """Each change placed at the mean of the nearest forward-pass and backward-pass peak.
+
+    For a change near frame c between its neighbours p and q (or the take's ends), the
+    paper's forward pass over X[p:q] and its backward pass over the reversed X[p:q] each
+    propose cuts; the forward peak marks where the new motion starts to differ from the
+    old behaviour's model (the start of the transition), the backward peak where the old
+    motion starts to differ from the new one's (its end), so their mean is the middle of
+    the transition, where labels put it.  Only peaks within ``reach`` frames of c count; with
+    one of the two, c moves to it; with neither, c stays.  One frame per input frame."""
+    n = len(X)
+    bounds = [0] + list(frames_) + [n]
+    out = []
+    for i, c in enumerate(frames_):
+        lo, hi = bounds[i], bounds[i + 2]
+        seg = X[lo:hi]
+        fwd = [lo + k.frame for k in _pass(seg, det_args)]
+        bwd = [hi - k.frame for k in _pass(seg[::-1], det_args)]
+        near = [min(side, key=lambda f: abs(f - c)) for side in (fwd, bwd)
+                if any(abs(f - c) <= reach for f in side)]
+        near = [f for f in near if abs(f - c) <= reach]
+        out.append(int(round(float(np.mean(near)))) if near else int(c))
+    return out
+
+
 def _pass(X: np.ndarray, det_args: dict[str, Any]) -> list[Cut]:
+    if len(X) < 2 * det_args["T"] + det_args["delta"]:
+        return []
     return PPCADetector(**det_args).run(X)
 
 
 def segment_ppca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
                  keep_trace: bool = False) -> tuple[list[Cut], list]:
-    """Offline PPCA: forward pass, then backward, forward, ... within the segments found so
-    far, until a pass adds no cut (at most ``max_passes``; paper 3.2).
+    """Offline PPCA.
 
-    Cuts of the first (forward) pass keep their online ``detected_at``; cuts added by later
-    passes are batch results (``detected_at == frame``).  The trace is the first pass's.
+    ``variant = "paper"`` (Barbič et al. 2004 as published): forward pass, then backward,
+    forward, ... within the segments found so far, until a pass adds no cut (at most
+    ``max_passes``).  Cuts of the first (forward) pass keep their online ``detected_at``;
+    cuts added by later passes are batch results (``detected_at == frame``).
 
-    ``variant = "verified"`` (default) then keeps only the cuts whose two-sided contrast
-    (``cut_contrast``, windows of ``verify_window_s``) is at least ``min_contrast``: a cut
-    must separate the motion before it from the motion after it more than consecutive
-    windows on either side are separated from each other.  ``variant = "paper"`` returns
-    the passes' cuts unchecked (Barbič et al. 2004 as published).
+    ``variant = "verified"`` (default): the changes are the local maxima of the two-sided
+    contrast (``scan_cuts``: ``cut_contrast`` with windows of ``verify_window_s`` every
+    ``step_s``, kept when >= ``min_contrast``, at least one window apart), i.e. the frames
+    where the motion before and after differ more than consecutive windows on either side
+    do; each is then placed by the paper's own passes (``localise_cuts``: the mean of the
+    nearest forward and backward peak within T).  The alternating passes are not needed
+    for it; on a take too short for any contrast (< about 2.5 windows) their cuts are
+    checked with ``verify_cuts`` instead.  ``detected_at == frame`` (batch).
+
+    The trace is the first forward pass's (H and its threshold, for plotting).
     """
     from rtseg.detectors import frames
     args = dict(T=frames(p["window_s"], frame_rate), delta=frames(p["step_s"], frame_rate),
@@ -504,8 +607,6 @@ def segment_ppca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
         bounds = [0] + sorted(cuts) + [n]
         new: list[Cut] = []
         for a, b in zip(bounds[:-1], bounds[1:]):
-            if b - a < 2 * args["T"] + args["delta"]:
-                continue
             seg = X[a:b][::-1] if backward else X[a:b]
             for c in _pass(seg, args):
                 f = b - c.frame if backward else a + c.frame
@@ -517,8 +618,23 @@ def segment_ppca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
             cuts.setdefault(c.frame, c)
         backward = not backward
     out = sorted(cuts.values(), key=lambda c: c.frame)
-    if p.get("variant", "verified") == "verified":
-        out = verify_cuts(X, out, frames(p["verify_window_s"], frame_rate),
-                          float(p["min_contrast"]), args["tau"], args["noise_floor"],
-                          args["null_rel"], args["distance"])
-    return out, first.trace
+    if p.get("variant", "verified") != "verified":
+        return out, first.trace
+    W = frames(p["verify_window_s"], frame_rate)
+    check = (args["tau"], args["noise_floor"], args["null_rel"], args["distance"])
+    found = scan_cuts(X, W, args["delta"], float(p["min_contrast"]), *check)
+    if not found:       # too short to scan: check the passes' cuts where possible
+        return verify_cuts(X, out, W, float(p["min_contrast"]), *check), first.trace
+    # each change starts from the passes' nearest cut (a peak of H) within W/2, if any:
+    # the contrast maximum only places it to within a fraction of its 3 s windows
+    starts = []
+    for f, _ in found:
+        near = [c.frame for c in out if abs(c.frame - f) <= W // 2]
+        starts.append(min(near, key=lambda g: abs(g - f)) if near else f)
+    at = localise_cuts(X, starts, args, reach=args["T"])
+    placed: dict[int, Cut] = {}
+    for f, (_, k) in zip(at, found):
+        if f not in placed or k > placed[f].score:
+            placed[f] = Cut(frame=f, method="ppca", detected_at=f, score=k,
+                            confidence=min(max(1.0 - float(p["min_contrast"]) / k, 0.0), 1.0))
+    return sorted(placed.values(), key=lambda c: c.frame), first.trace
