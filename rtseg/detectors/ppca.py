@@ -304,14 +304,6 @@ def mean_distance(model: tuple[np.ndarray, np.ndarray, np.ndarray, float], Y: np
     return float(np.sqrt(q).mean() if distance == "mean" else q.mean())
 
 
-def _sym_distance(A: np.ndarray, B: np.ndarray, tau: float, noise_floor: float,
-                  null_rel: float, distance: str) -> float:
-    """max(H(B | model of A), H(A | model of B)): the paper's Fig. 6 symmetric distance."""
-    ma = fit_ppca(A, tau, noise_floor, null_rel)
-    mb = fit_ppca(B, tau, noise_floor, null_rel)
-    return max(mean_distance(ma, B, distance), mean_distance(mb, A, distance))
-
-
 def cut_contrast(X: np.ndarray, c: int, W: int, tau: float, noise_floor: float = 1e-6,
                  null_rel: float = 1e-15, distance: str = "mean") -> float:
     """How much more the motion changes at frame c than just before and just after it.
@@ -476,7 +468,8 @@ class _WindowModels:
         return m
 
     def sym(self, a: tuple[int, int], b: tuple[int, int]) -> float:
-        """D(a, b) = max(H(b | model of a), H(a | model of b)) (``_sym_distance``)."""
+        """D(a, b) = max(H(b | model of a), H(a | model of b)): the paper's Fig. 6 symmetric
+        distance between windows a and b (``(lo, hi)`` frame ranges)."""
         key = a + b
         d = self._h.get(key)
         if d is None:
