@@ -504,8 +504,8 @@ def contrast_profile(X: np.ndarray, W: int, step: int, tau: float, noise_floor: 
     take has a narrower model, which alone inflates the contrast; the forward pass likewise
     tests nothing in its first T frames) and ends where the window after c would be shorter
     than W/2.  Returns (frames, contrast); +inf where the check is impossible (no outer
-    window: takes shorter than about 2.5 W).  Windows fall on the grid of ``step`` frames, so each W-frame window is
-    fitted once: cost ~ (n / step) PPCA fits of W x d windows."""
+    window: takes shorter than about 2.5 W).  Windows fall on the grid of ``step`` frames,
+    so each W-frame window is fitted once: cost ~ (n / step) PPCA fits of W x d windows."""
     X = np.asarray(X, dtype=np.float64)
     h = max(2, W // 2)
     frames_ = np.arange(W, len(X) - h + 1, max(1, int(step)))
@@ -515,12 +515,15 @@ def contrast_profile(X: np.ndarray, W: int, step: int, tau: float, noise_floor: 
 
 def scan_cuts(X: np.ndarray, W: int, step: int, min_contrast: float, tau: float,
               noise_floor: float = 1e-6, null_rel: float = 1e-15,
-              distance: str = "mean") -> list[tuple[int, float]]:
+              distance: str = "mean") -> list[tuple[int, float]] | None:
     """(frame, contrast) of the local maxima of ``contrast_profile`` that reach
     ``min_contrast``, at least W frames apart (a higher maximum wins), sorted by frame.
-    Empty when no position of the take can be checked (see ``contrast_profile``)."""
+    None when no position of the take can be checked (see ``contrast_profile``)."""
     frames_, k = contrast_profile(X, W, step, tau, noise_floor, null_rel, distance)
-    k = np.where(np.isfinite(k), k, 0.0)
+    finite = np.isfinite(k)
+    if not finite.any():
+        return None
+    k = np.where(finite, k, 0.0)
     # interior local maxima (the first sample of a flat top); a rise still going at either
     # end of the scanned span is not a maximum
     i = np.arange(1, len(k) - 1)
@@ -553,8 +556,7 @@ def localise_cuts(X: np.ndarray, frames_: list[int], det_args: dict[str, Any],
         seg = X[lo:hi]
         fwd = [lo + k.frame for k in _pass(seg, det_args)]
         bwd = [hi - k.frame for k in _pass(seg[::-1], det_args)]
-        near = [min(side, key=lambda f: abs(f - c)) for side in (fwd, bwd)
-                if any(abs(f - c) <= reach for f in side)]
+        near = [min(side, key=lambda f: abs(f - c)) for side in (fwd, bwd) if side]
         near = [f for f in near if abs(f - c) <= reach]
         out.append(int(round(float(np.mean(near)))) if near else int(c))
     return out
@@ -579,10 +581,11 @@ def segment_ppca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
     contrast (``scan_cuts``: ``cut_contrast`` with windows of ``verify_window_s`` every
     ``step_s``, kept when >= ``min_contrast``, at least one window apart), i.e. the frames
     where the motion before and after differ more than consecutive windows on either side
-    do; each is then placed by the paper's own passes (``localise_cuts``: the mean of the
-    nearest forward and backward peak within T).  The alternating passes are not needed
-    for it; on a take too short for any contrast (< about 2.5 windows) their cuts are
-    checked with ``verify_cuts`` instead.  ``detected_at == frame`` (batch).
+    do; each starts from the alternating passes' nearest cut within W/2 (if any) and is
+    then placed by the paper's own passes (``localise_cuts``: the mean of the nearest
+    forward and backward peak within T).  On a take too short for any contrast (< about
+    2.5 windows) the alternating passes' cuts are checked with ``verify_cuts`` instead.
+    ``detected_at == frame`` (batch).
 
     The trace is the first forward pass's (H and its threshold, for plotting).
     """
@@ -616,7 +619,7 @@ def segment_ppca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
     W = frames(p["verify_window_s"], frame_rate)
     check = (args["tau"], args["noise_floor"], args["null_rel"], args["distance"])
     found = scan_cuts(X, W, args["delta"], float(p["min_contrast"]), *check)
-    if not found:       # too short to scan: check the passes' cuts where possible
+    if found is None:   # too short to scan: check the passes' cuts where possible
         return verify_cuts(X, out, W, float(p["min_contrast"]), *check), first.trace
     # each change starts from the passes' nearest cut (a peak of H) within W/2, if any:
     # the contrast maximum only places it to within a fraction of its 3 s windows
