@@ -33,7 +33,9 @@ Behaviour
   restarted: sequence and clock tracking start afresh (logged, not counted as a gap), and
   ``source_time`` continues from its previous value plus one frame period.
 - Sensors: a sensor with no valid value for more than ``stale`` seconds is *lost*; the
-  first valid value afterwards *restores* it.  Each change is a :class:`SensorEvent`,
+  first valid value afterwards *restores* it.  The clock starts at the first frame
+  received: a port that is open but silent (a suit not yet streaming) is not a dropout
+  of every sensor (the live loop reports a silent source as such).  Each change is a :class:`SensorEvent`,
   queued for :meth:`SerialSource.dropouts` and passed to ``on_dropout`` (called on the
   reader thread; keep it short).  ``stale_joints`` lists the sensors lost now.
 - Slow consumer: the frame queue is bounded (``queue``); when full the **oldest** frame is
@@ -163,6 +165,7 @@ class SerialSource(Source):
         self._state = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (n, 1))
         self._last_valid = np.full(n, time.monotonic())
         self._lost = np.zeros(n, dtype=bool)
+        self._streaming = False   # set by the first frame: staleness counts from there
         self._last_seq: int | None = None
         self._last_was_frame = False
         self._last_time_raw: int | None = None
@@ -385,6 +388,9 @@ class SerialSource(Source):
         take = (rows >= 0) & m.valid
         j = rows[take]
         valid = np.zeros(len(self.joint_names), dtype=bool)
+        if not self._streaming:
+            self._streaming = True
+            self._last_valid[:] = now
         if len(j):
             self._state[j] = m.quats[take]
             valid[j] = True
@@ -406,6 +412,8 @@ class SerialSource(Source):
                       "serial %s: consumer too slow, oldest frame dropped", self.path)
 
     def _check_stale(self, now: float) -> None:
+        if not self._streaming:
+            return
         newly = (now - self._last_valid > self.stale) & ~self._lost
         if newly.any():
             self._lost |= newly

@@ -204,6 +204,23 @@ def test_sensor_dropout_and_wraps(rig):
     assert [(e.name, e.lost) for e in src.dropouts()] == [(name, True), (name, False)]
 
 
+def test_silent_port_before_streaming_is_not_a_dropout(rig):
+    """An open port whose suit has not started streaming yet is not every sensor lost:
+    staleness counts from the first frame (CI once saw all 17 sensors reported lost and
+    found because the suit began more than ``stale`` seconds after the port opened)."""
+    take = make_take(60)
+    suit, src = rig(take, "stale=0.1", rate=300.0)
+    time.sleep(0.35)  # silent for 3.5 x stale
+    assert src.stale_joints == [] and src.dropouts() == []
+    suit.begin()
+    frames = collect(src, lambda fr, idle: suit.wait_done(0) and len(fr) >= 60)
+    assert len(frames) == 60
+    assert src.dropouts() == []
+    # once streaming, a silence longer than ``stale`` is a dropout of every sensor
+    time.sleep(0.35)
+    assert sorted(src.stale_joints) == sorted(SUIT.bones)
+
+
 def test_slow_consumer_drops_oldest(rig):
     take = make_take(100)
     suit, src = rig(take, "queue=10", rate=1000.0)
