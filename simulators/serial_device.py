@@ -185,6 +185,9 @@ class SerialSuit:
         self.unplug_log: list[tuple[float, float]] = []  # (unplugged, replugged) monotonic
         self._master: int | None = None
         self._poll: select.poll | None = None
+        # select.poll objects refuse concurrent poll() calls (RuntimeError); the sender
+        # thread and the test thread both ask reader_connected
+        self._poll_lock = threading.Lock()
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._done = threading.Event()
@@ -211,7 +214,9 @@ class SerialSuit:
         if self._master is None or poll is None:
             return False
         try:
-            return not any(ev & select.POLLHUP for _, ev in poll.poll(0))
+            with self._poll_lock:
+                events = poll.poll(0)
+            return not any(ev & select.POLLHUP for _, ev in events)
         except (OSError, ValueError):
             return False
 

@@ -383,3 +383,28 @@ def test_device_starts_streaming_when_port_opened(wait_reader):
         if src is not None:
             src.close()
         suit.stop()
+
+
+def test_reader_connected_is_safe_from_several_threads():
+    """The sender thread polls the pty while a test (or a supervisor) asks too; a bare
+    select.poll object raises RuntimeError on concurrent poll() calls."""
+    suit = SerialSuit(make_take(60), rate=300.0, wait_reader=True)
+    errors: list[BaseException] = []
+
+    def ask() -> None:
+        try:
+            for _ in range(3000):
+                assert suit.reader_connected is False
+        except BaseException as exc:  # noqa: BLE001 - collected and re-raised below
+            errors.append(exc)
+
+    try:
+        suit.start()
+        threads = [threading.Thread(target=ask) for _ in range(4)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+    finally:
+        suit.stop()
+    assert errors == []
