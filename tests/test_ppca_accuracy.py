@@ -72,6 +72,33 @@ def test_scan_places_changes_between_the_forward_and_backward_peaks():
     assert min(f, b) <= ver[0] <= max(f, b)
 
 
+def test_localise_blends_the_passes_estimate_with_the_anchor():
+    """anchor_weight w: (1 - w) x the passes' estimate + w x the anchor; 0 is the passes
+    alone, 1 the anchor alone; a change no pass peak is near goes to its anchor."""
+    from rtseg.detectors.ppca import localise_cuts
+    rng = np.random.default_rng(5)
+    dim, la, blend = 16, 2400, 60
+    A = stationary(rng, 2 * la, dim, np.zeros(dim))
+    B = stationary(rng, 2 * la, dim, 0.5 * rng.normal(size=dim))
+    w = np.clip((np.arange(2 * la) - (la - blend // 2)) / blend, 0, 1)[:, None]
+    X = (1 - w) * A + w * B
+    args = dict(T=150, delta=10)
+    passes = localise_cuts(X, [la], args, reach=150)[0]
+    assert abs(passes - la) <= 30
+    anchor = la + 90
+    assert localise_cuts(X, [la], args, 150, anchors=[anchor], anchor_weight=0.0) == [passes]
+    assert localise_cuts(X, [la], args, 150, anchors=[anchor], anchor_weight=1.0) == [anchor]
+    third = localise_cuts(X, [la], args, 150, anchors=[anchor], anchor_weight=1 / 3)[0]
+    assert third == round(2 / 3 * passes + 1 / 3 * anchor)
+    # reach 0: no peak counts; the change goes to its anchor (w > 0) or stays (w = 0)
+    assert localise_cuts(X, [la + 7], args, 0, anchors=[anchor], anchor_weight=0.5) == [anchor]
+    assert localise_cuts(X, [la + 7], args, 0) == [la + 7]
+    with pytest.raises(ValueError, match="anchors"):
+        localise_cuts(X, [la], args, 150, anchors=[1, 2], anchor_weight=0.5)
+    with pytest.raises(ValueError, match="anchor_weight"):
+        localise_cuts(X, [la], args, 150, anchors=[la], anchor_weight=2.0)
+
+
 def test_scan_cuts_reports_local_maxima_above_the_threshold_one_window_apart():
     from rtseg.detectors.ppca import contrast_profile, scan_cuts
     rng = np.random.default_rng(4)
@@ -152,7 +179,8 @@ def test_fit_ppca_distance_of_own_frames_is_about_sqrt_dim():
 
 @pytest.mark.parametrize("key,value", [("variant", "bogus"), ("verify_window_s", 0.0),
                                        ("min_contrast", -1.0), ("variant", 3),
-                                       ("online_verify", 1)])
+                                       ("online_verify", 1), ("scan_weight", 1.5),
+                                       ("scan_weight", -0.1)])
 def test_verification_params_validated(key, value):
     with pytest.raises(ConfigError, match=key):
         method_params("ppca", {key: value})

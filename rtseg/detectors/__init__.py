@@ -58,6 +58,7 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "variant": ((str,), (lambda v: v in ("verified", "paper"), "'verified' or 'paper'")),
         "verify_window_s": ((int, float), _pos),
         "min_contrast": ((int, float), _nonneg),
+        "scan_weight": ((int, float), (lambda v: 0 <= v <= 1, "in [0, 1]")),
         "online_verify": ((bool,), (lambda v: True, "true or false")),
     },
     "gmm": {

@@ -538,8 +538,10 @@ def scan_cuts(X: np.ndarray, W: int, step: int, min_contrast: float, tau: float,
 
 
 def localise_cuts(X: np.ndarray, frames_: list[int], det_args: dict[str, Any],
-                  reach: int) -> list[int]:
-    """Each change placed at the mean of the nearest forward-pass and backward-pass peak.
+                  reach: int, anchors: list[int] | None = None,
+                  anchor_weight: float = 0.0) -> list[int]:
+    """Each change placed at the mean of the nearest forward-pass and backward-pass peak,
+    optionally blended with a second estimate of its position.
 
     For a change near frame c between its neighbours p and q (or the take's ends), the
     paper's forward pass over X[p:q] and its backward pass over the reversed X[p:q] each
@@ -547,8 +549,19 @@ def localise_cuts(X: np.ndarray, frames_: list[int], det_args: dict[str, Any],
     old behaviour's model (the start of the transition), the backward peak where the old
     motion starts to differ from the new one's (its end), so their mean is the middle of
     the transition, where labels put it.  Only peaks within ``reach`` frames of c count; with
-    one of the two, c moves to it; with neither, c stays.  One frame per input frame."""
+    one of the two, the passes' estimate is that peak; with neither, c stays (or moves to
+    its anchor when ``anchor_weight`` > 0).
+
+    ``anchors`` (one frame per change, e.g. the contrast maximum of ``scan_cuts``): the
+    result is ``(1 - anchor_weight) * passes' estimate + anchor_weight * anchor``.  Two
+    estimates with independent errors average to a smaller error than either.  One frame
+    per input frame."""
     n = len(X)
+    if anchors is not None and len(anchors) != len(frames_):
+        raise ValueError(f"{len(anchors)} anchors for {len(frames_)} changes")
+    if not 0.0 <= anchor_weight <= 1.0:
+        raise ValueError(f"anchor_weight must be in [0, 1], got {anchor_weight}")
+    w = float(anchor_weight) if anchors is not None else 0.0
     bounds = [0] + list(frames_) + [n]
     out = []
     for i, c in enumerate(frames_):
@@ -558,7 +571,10 @@ def localise_cuts(X: np.ndarray, frames_: list[int], det_args: dict[str, Any],
         bwd = [hi - k.frame for k in _pass(seg[::-1], det_args)]
         near = [min(side, key=lambda f: abs(f - c)) for side in (fwd, bwd) if side]
         near = [f for f in near if abs(f - c) <= reach]
-        out.append(int(round(float(np.mean(near)))) if near else int(c))
+        est = float(np.mean(near)) if near else float(c)
+        if w > 0.0:
+            est = (1.0 - w) * est + w * anchors[i] if near else float(anchors[i])
+        out.append(int(round(est)))
     return out
 
 
@@ -627,7 +643,8 @@ def segment_ppca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
     for f, _ in found:
         near = [c.frame for c in out if abs(c.frame - f) <= W // 2]
         starts.append(min(near, key=lambda g: abs(g - f)) if near else f)
-    at = localise_cuts(X, starts, args, reach=args["T"])
+    at = localise_cuts(X, starts, args, reach=args["T"], anchors=[f for f, _ in found],
+                       anchor_weight=float(p.get("scan_weight", 0.0)))
     placed: dict[int, Cut] = {}
     for f, (_, k) in zip(at, found):
         if f not in placed or k > placed[f].score:
