@@ -117,12 +117,12 @@ def test_segment_table_and_csv(synth_dir, capsys):
 def test_segment_params_file_changes_the_result(synth_dir, capsys, tmp_path):
     take = synth_dir["root"] / "cmu" / "90_01.npz"
     strict = tmp_path / "p.toml"
-    strict.write_text("[pca]\nk_sigma = 1000.0\n")
+    strict.write_text("[pca]\nmin_contrast = 1000.0\n")
     rc, out, _ = run_cli(capsys, "segment", take, "--method", "pca", "--format", "json",
                          "--params", strict)
     assert rc == 0 and json.loads(out)["methods"]["pca"]["cuts"] == []
     flat = tmp_path / "flat.json"
-    flat.write_text(json.dumps({"k_sigma": 1000.0}))
+    flat.write_text(json.dumps({"variant": "paper", "k_sigma": 1000.0}))
     rc, out, _ = run_cli(capsys, "segment", take, "--method", "pca", "--format", "json",
                          "--params", flat)
     assert rc == 0 and json.loads(out)["methods"]["pca"]["cuts"] == []

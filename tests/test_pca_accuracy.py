@@ -1,5 +1,6 @@
-"""PCA offline verification (variant "verified"): forward + backward passes merged, then the
-two-sided PCA contrast check; the paper variant and the parameters that select them."""
+"""PCA offline variants: "scan" (default: the two-sided PCA contrast scanned over the take),
+"verified" (forward + backward passes merged, then the two-sided PCA contrast check of their
+cuts), "paper" (the online pass), and the parameters that select them."""
 
 from __future__ import annotations
 
@@ -87,7 +88,8 @@ def test_paper_variant_is_the_online_pass():
     assert paper == online and paper
 
 
-def test_verified_finds_the_changes_with_fewer_false_cuts_than_the_paper():
+@pytest.mark.parametrize("better", ["verified", "scan"])
+def test_offline_variants_find_the_changes_with_fewer_false_cuts_than_the_paper(better):
     n_true = hits_v = hits_p = extra_v = extra_p = 0
     for seed in range(4):
         rng = np.random.default_rng(100 + seed)
@@ -95,7 +97,7 @@ def test_verified_finds_the_changes_with_fewer_false_cuts_than_the_paper():
         X = np.concatenate(parts)
         truth = [1500, 3000, 4500]
         n_true += len(truth)
-        for variant in ("paper", "verified"):
+        for variant in ("paper", better):
             frames = [c.frame for c in segment_features(X, "pca", FPS, {"variant": variant})]
             hits = sum(any(abs(f - t) <= 120 for f in frames) for t in truth)
             extra = sum(all(abs(f - t) > 120 for t in truth) for f in frames)
@@ -116,10 +118,51 @@ def test_bad_verification_params_name_the_key(key, value, word):
         method_params("pca", {key: value})
 
 
-def test_defaults_select_the_verified_variant():
+def test_defaults_select_the_scan_variant():
     p = method_params("pca")
-    assert p["variant"] == "verified" and p["verify_ratio"] > 1.0
-    assert p["min_segment_s"] < p["verify_window_s"]
+    assert p["variant"] == "scan" and p["min_contrast"] > 1.0
+    assert len(p["scan_windows_s"]) >= 1 and p["scan_step_s"] < min(p["scan_windows_s"])
+    assert p["verify_ratio"] > 1.0 and p["min_segment_s"] < p["verify_window_s"]
+
+
+@pytest.mark.parametrize("value", [[], [0.0], [2.0, -1.0], "3.0", [True], 3.0])
+def test_bad_scan_windows_are_rejected(value):
+    with pytest.raises(ConfigError, match="scan_windows_s"):
+        method_params("pca", {"scan_windows_s": value})
+
+
+def test_scan_contrast_peaks_at_the_change_and_stays_low_inside_behaviours():
+    from rtseg.detectors.pca import contrast_profile, scan_cuts
+    X, la = two_behaviours(5, la=2400, lb=2400)
+    f, k = contrast_profile(X, [300, 360, 420], 10, 0.9)
+    assert f[0] == 420 and np.all(np.diff(f) == 10)
+    at = int(np.argmax(k))
+    assert abs(f[at] - la) <= 30 and k[at] > 3.0, (f[at], k[at])
+    inside = k[(np.abs(f - la) > 900) & np.isfinite(k)]
+    assert inside.size and np.median(inside) < 1.5, np.median(inside)
+    found = scan_cuts(X, [300, 360, 420], 10, 2.0, 0.9)
+    assert [abs(c - la) <= 30 for c, _ in found] == [True]
+    # too short for any outer window: nothing can be checked
+    assert scan_cuts(X[:600], [300, 360, 420], 10, 2.0, 0.9) is None
+
+
+def test_scan_falls_back_to_the_verified_variant_on_a_short_take(monkeypatch):
+    import rtseg.detectors.pca as pca_mod
+    X, la = two_behaviours(6, la=320, lb=320)      # 640 frames: no position has an outer window
+    assert pca_mod.scan_cuts(X, [300, 360, 420], 10, 2.0, 0.9) is None
+    checked = []
+    real = pca_mod.verify_cuts
+    monkeypatch.setattr(pca_mod, "verify_cuts",
+                        lambda X, cuts, **kw: checked.append(len(cuts)) or real(X, cuts, **kw))
+    # a low k_sigma makes the passes propose cuts, so the check really runs
+    scan = [c.frame for c in segment_features(X, "pca", FPS, {"variant": "scan", "k_sigma": 1.0})]
+    assert checked and checked[0] > 0
+    ver = [c.frame for c in segment_features(X, "pca", FPS, {"variant": "verified", "k_sigma": 1.0})]
+    assert scan == ver
+    checked.clear()
+    long_X, _ = two_behaviours(6, la=1500, lb=1500)
+    segment_features(long_X, "pca", FPS, {"variant": "scan", "k_sigma": 1.0})
+    assert checked == []                            # long enough: scanned, not checked
 
 
 def test_refine_moves_a_late_cut_to_the_change():

@@ -58,6 +58,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from rtseg.detectors._linalg import full_eigh, rank_for_energy, subspace_step
+from rtseg.detectors._scan import local_maxima, window_contrast
 from rtseg.detectors.base import Cut, OnlineDetector
 
 log = logging.getLogger(__name__)
@@ -335,6 +336,73 @@ def refine_cuts(X: np.ndarray, cuts: Sequence[Cut], W: int, min_len: int, reach:
     return out
 
 
+class _WindowPCA:
+    """PCA models (``_pca_model``) and distances of windows X[lo:hi] ((lo, hi) frame
+    ranges), each computed once: the scan's windows recur from position to position."""
+
+    def __init__(self, X: np.ndarray, tau: float) -> None:
+        self.X, self.tau = X, float(tau)
+        self._models: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, float]] = {}
+        self._d: dict[tuple[int, int, int, int], float] = {}
+
+    def _model(self, w: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, float]:
+        m = self._models.get(w)
+        if m is None:
+            m = self._models[w] = _pca_model(self.X[w[0]:w[1]], self.tau)
+        return m
+
+    def distance(self, a: tuple[int, int], b: tuple[int, int]) -> float:
+        """sqrt(err(b | a) x err(a | b)): the geometric mean of the two windows' projection
+        errors off each other's mean + top-r hyperplane, each over the model's own error
+        (1 = as well explained as its own frames).  Symmetric; a change in either direction
+        raises it, a one-sided swing (the new side's hyperplane holds the old motion) less."""
+        key = a + b
+        d = self._d.get(key)
+        if d is None:
+            X = self.X
+            e1 = _cross_error(X[b[0]:b[1]], self._model(a))
+            e2 = _cross_error(X[a[0]:a[1]], self._model(b))
+            d = self._d[key] = math.sqrt(max(e1, 0.0) * max(e2, 0.0))
+        return d
+
+
+def contrast_profile(X: np.ndarray, windows: Sequence[int], step: int,
+                     tau: float) -> tuple[np.ndarray, np.ndarray]:
+    """The two-sided PCA contrast (``rtseg.detectors._scan``, D = ``_WindowPCA.distance``)
+    averaged over the window lengths ``windows`` (frames), at every ``step``-th frame c from
+    max(windows) to n - max(windows)/2.  Averaging over a few window lengths keeps the
+    maxima from depending on one length's fit to the take's behaviour durations.  Near the
+    take's ends the mean is over the lengths that can be checked there.  Returns
+    (frames, contrast); +inf where none can (no outer window: takes shorter than ~2.5
+    windows).
+    Windows fall on the grid of ``step`` frames when their lengths are multiples of it, so
+    each is fitted once."""
+    X = np.asarray(X, dtype=np.float64)
+    Ws = sorted({int(w) for w in windows})
+    if not Ws or Ws[0] < 2:
+        raise ValueError(f"scan windows must be >= 2 frames, got {list(windows)}")
+    top = Ws[-1]
+    frames_ = np.arange(top, len(X) - max(2, top // 2) + 1, max(1, int(step)))
+    cache = _WindowPCA(X, tau)
+    n = len(X)
+    k = np.array([[window_contrast(cache.distance, n, int(c), W) for c in frames_]
+                  for W in Ws], dtype=float).reshape(len(Ws), len(frames_))
+    finite = np.isfinite(k)
+    count = finite.sum(axis=0)
+    mean = np.where(finite, k, 0.0).sum(axis=0) / np.maximum(count, 1)
+    return frames_, np.where(count > 0, mean, np.inf)
+
+
+def scan_cuts(X: np.ndarray, windows: Sequence[int], step: int, min_contrast: float,
+              tau: float) -> list[tuple[int, float]] | None:
+    """(frame, contrast) of the local maxima of ``contrast_profile`` reaching
+    ``min_contrast``, at least the mean window apart, sorted by frame; None when the take is
+    too short for any position to be checked."""
+    frames_, k = contrast_profile(X, windows, step, tau)
+    sep = int(round(float(np.mean([int(w) for w in windows]))))
+    return local_maxima(frames_, k, min_contrast, sep)
+
+
 def merge_passes(forward: Sequence[Cut], backward: Sequence[Cut], tol: int) -> list[Cut]:
     """One list from the cuts of a forward and a backward pass (frames in forward order).
 
@@ -386,6 +454,11 @@ def segment_pca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
     """Offline PCA segmentation of a whole feature matrix X (frames, dims).
 
     ``variant = "paper"``: the online detector's forward pass over X, unchanged.
+    ``variant = "scan"`` (default): the changes are the local maxima of the two-sided PCA
+    contrast averaged over the window lengths ``scan_windows_s``, every ``scan_step_s``
+    (``scan_cuts``), that reach ``min_contrast``, at least the mean window apart; each cut
+    is at its maximum (``detected_at == frame``).  A take too short to scan (< ~2.5 of the
+    longest window) falls back to "verified".
     ``variant = "verified"``: the online detector run forward and on the time-reversed X
     (backward cuts mapped to forward frames: reversed frame j -> len(X) - j), the two merged
     (``merge_passes``, tolerance ``min_segment_s``), then ``verify_cuts`` (windows
@@ -396,7 +469,18 @@ def segment_pca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
     from rtseg.detectors import frames
     det = PCADetector.from_params(p, frame_rate, keep_trace=keep_trace)
     cuts = det.run(X)
-    if p.get("variant", "paper") == "verified":
+    variant = p.get("variant", "paper")
+    if variant == "scan":
+        X = np.asarray(X, dtype=np.float64)
+        windows = [frames(w, frame_rate) for w in p["scan_windows_s"]]
+        found = scan_cuts(X, windows, frames(p["scan_step_s"], frame_rate),
+                          float(p["min_contrast"]), float(p["energy"]))
+        if found is not None:
+            return [Cut(frame=f, method="pca", detected_at=f, score=k,
+                        confidence=min(max(1.0 - float(p["min_contrast"]) / k, 0.0), 1.0))
+                    for f, k in found], det.trace
+        variant = "verified"      # too short to scan: check the passes' cuts instead
+    if variant == "verified":
         n = len(X)
         back = PCADetector.from_params(p, frame_rate).run(X[::-1])
         back = [Cut(frame=n - c.frame, method=c.method, confidence=c.confidence,

@@ -69,6 +69,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from rtseg.detectors._linalg import full_eigh, rank_for_energy, subspace_step
+from rtseg.detectors._scan import local_maxima, window_contrast
 from rtseg.detectors.base import Cut, OnlineDetector
 
 log = logging.getLogger(__name__)
@@ -480,19 +481,7 @@ class _WindowModels:
 
     def contrast(self, c: int, W: int) -> float:
         """``cut_contrast(X, c, W, ...)``, with the fits shared between calls."""
-        n = len(self.X)
-        A, B = (max(0, c - W), c), (c, min(n, c + W))
-        if A[1] - A[0] < 2 or B[1] - B[0] < 2:
-            return math.inf
-        cross = self.sym(A, B)
-        A0, B2 = (max(0, c - 2 * W), max(0, c - W)), (min(n, c + W), min(n, c + 2 * W))
-        need = max(2, W // 2)
-        inner = [self.sym(A0, A)] if A0[1] - A0[0] >= need else []
-        if B2[1] - B2[0] >= need:
-            inner.append(self.sym(B, B2))
-        if not inner:
-            return math.inf
-        return cross / max(float(np.mean(inner)), 1e-300)
+        return window_contrast(self.sym, len(self.X), c, W)
 
 
 def contrast_profile(X: np.ndarray, W: int, step: int, tau: float, noise_floor: float = 1e-6,
@@ -520,21 +509,7 @@ def scan_cuts(X: np.ndarray, W: int, step: int, min_contrast: float, tau: float,
     ``min_contrast``, at least W frames apart (a higher maximum wins), sorted by frame.
     None when no position of the take can be checked (see ``contrast_profile``)."""
     frames_, k = contrast_profile(X, W, step, tau, noise_floor, null_rel, distance)
-    finite = np.isfinite(k)
-    if not finite.any():
-        return None
-    k = np.where(finite, k, 0.0)
-    # interior local maxima (the first sample of a flat top); a rise still going at either
-    # end of the scanned span is not a maximum
-    i = np.arange(1, len(k) - 1)
-    i = i[(k[i] > k[i - 1]) & (k[i] >= k[i + 1]) & (k[i] >= min_contrast)]
-    sep = max(1, int(math.ceil(W / max(1, step))))
-    peaks: list[int] = []
-    for j in sorted(i.tolist(), key=lambda j: (-k[j], j)):     # highest first
-        if all(abs(j - q) >= sep for q in peaks):
-            peaks.append(j)
-    peaks.sort()
-    return [(int(frames_[i]), float(k[i])) for i in peaks]
+    return local_maxima(frames_, k, min_contrast, W)
 
 
 def localise_cuts(X: np.ndarray, frames_: list[int], det_args: dict[str, Any],
