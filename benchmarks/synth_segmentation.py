@@ -1,10 +1,11 @@
 """F1 of the detectors on synthetic takes from ``rtseg.simulators.synth``.
 
     python3 benchmarks/synth_segmentation.py [--seeds 0 1 2] [--script SCRIPT] [--tol 0]
+                                             [--methods pca ppca] [--params FILE]
 
 Each seed synthesises the script (default: the synthesiser's default script), computes
 the pose features (``rtseg.features.take_features``), runs every detector method with its
-default parameters and scores the cuts against the exact transition ranges (the blend
+default parameters (or those of ``--params``; GMM's k = the script's behaviours) and scores the cuts against the exact transition ranges (the blend
 spans), widened by ``--tol`` seconds on each side.  Prints per-seed and pooled P/R/F1.
 """
 
@@ -13,7 +14,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from rtseg.detectors import METHODS, segment_features
+from rtseg.detectors import METHODS, load_params, segment_features
 from rtseg.evaluation import pooled, score
 from rtseg.features import take_features
 from rtseg.labels import Transition
@@ -28,8 +29,11 @@ def main() -> None:
     ap.add_argument("--methods", nargs="+", default=list(METHODS))
     ap.add_argument("--gmm-k", type=int, default=0,
                     help="GMM components (0: number of distinct behaviours in the script)")
+    ap.add_argument("--params", default=None,
+                    help="detector parameter file (TOML, as config/detectors.toml; keys override it)")
     ap.add_argument("-v", action="store_true", help="print the cuts")
     args = ap.parse_args()
+    base = load_params(args.params)
     scores: dict[str, list] = {m: [] for m in args.methods}
     for seed in args.seeds:
         res = synthesize(args.script, seed=seed)
@@ -40,10 +44,9 @@ def main() -> None:
         X = take_features(take)
         row = [f"seed {seed}:"]
         for m in args.methods:
-            params = None
+            params = dict(base[m])
             if m == "gmm":
-                k = args.gmm_k or len({s.name for s in res.segments})
-                params = {"n_components": k}
+                params["n_components"] = args.gmm_k or len({s.name for s in res.segments})
             t0 = time.perf_counter()
             cuts = segment_features(X, m, take.frame_rate, params)
             dt = time.perf_counter() - t0
