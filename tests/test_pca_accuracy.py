@@ -146,6 +146,27 @@ def test_scan_contrast_peaks_at_the_change_and_stays_low_inside_behaviours():
     assert scan_cuts(X[:600], [300, 360, 420], 10, 2.0, 0.9) is None
 
 
+@pytest.mark.parametrize("dim", [1, 2, 4, 8])
+def test_scan_on_few_noise_like_dims_has_no_false_cuts(dim):
+    """With few dims of white noise every direction is needed for 90 % of the variance; a
+    window model keeping all of them explains any frames exactly and the contrast is 0/0
+    rounding noise (before the fix: 3-6 cuts in 3000 frames of pure noise).  The model
+    leaves one varying direction out (1 dim: the mean alone)."""
+    rng = np.random.default_rng(dim)
+    for _ in range(3):
+        assert segment_features(0.01 * rng.normal(size=(3000, dim)), "pca", FPS) == []
+    step = np.vstack([np.zeros((1500, dim)), np.ones((1500, dim))])
+    cuts = [c.frame for c in segment_features(step + 0.01 * rng.normal(size=(3000, dim)),
+                                              "pca", FPS)]
+    assert any(abs(c - 1500) <= 20 for c in cuts), cuts
+    if dim == 1:
+        assert len(cuts) == 1, cuts
+    else:
+        # the one residual direction of a noise window is random, so a window holding part
+        # of the step can score high: at most one extra cut, within two windows of it
+        assert len(cuts) <= 2 and all(abs(c - 1500) <= 840 for c in cuts), cuts
+
+
 def test_scan_falls_back_to_the_verified_variant_on_a_short_take(monkeypatch):
     import rtseg.detectors.pca as pca_mod
     X, la = two_behaviours(6, la=320, lb=320)      # 640 frames: no position has an outer window

@@ -250,7 +250,8 @@ class PCADetector(OnlineDetector):
 # ---------------------------------------------------------------------- offline verification
 def _pca_model(A: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray, float]:
     """(mean, top-r directions (r, d), own mean per-frame projection error) of frames A,
-    r the smallest with E_r > tau (Eq. 6), as the detector fixes it.  From the d x d
+    r the smallest with E_r > tau (Eq. 6), as the detector fixes it, but at most the number
+    of varying directions less one.  From the d x d
     scatter's eigen-decomposition (its eigenvalues are the squared singular values of the
     centred frames; ~6x faster than their SVD for the scans' 300-420 x 56 windows)."""
     A = np.asarray(A, dtype=np.float64)
@@ -258,7 +259,12 @@ def _pca_model(A: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray, float
     Z = A - mu
     lam, V = full_eigh(Z.T @ Z)
     total = float(lam.sum())
-    r = min(rank_for_energy(lam, total, tau), len(lam), len(A))
+    # leave at least one direction out of the hyperplane: with every varying direction kept
+    # (few or noise-like dims) the projection error is 0 for any frames and the ratios of
+    # ``_cross_error`` are rounding noise over the floor below.  One varying direction:
+    # r = 0, the model is the mean (error = squared distance to it)
+    varying = int(np.count_nonzero(lam > 1e-12 * total))
+    r = max(0, min(rank_for_energy(lam, total, tau), len(A), varying - 1))
     own = float(lam[r:].sum()) / len(A)
     # a constant (or rank-deficient) segment: floor at rounding level of its variance
     floor = 1e-12 * total / len(A) + 1e-300
