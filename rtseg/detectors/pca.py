@@ -382,7 +382,7 @@ def contrast_profile(X: np.ndarray, windows: Sequence[int], step: int,
     max(windows) to n - max(windows)/2.  Averaging over a few window lengths keeps the
     maxima from depending on one length's fit to the take's behaviour durations.  Near the
     take's ends the mean is over the lengths that can be checked there.  Returns
-    (frames, contrast); +inf where none can (no outer window: takes shorter than ~2.5
+    (frames, contrast); +inf where none can (no outer window: takes shorter than 3
     windows).
     Windows fall on the grid of ``step`` frames when their lengths are multiples of it, so
     each is fitted once."""
@@ -466,7 +466,7 @@ def segment_pca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
     ``variant = "scan"`` (default): the changes are the local maxima of the two-sided PCA
     contrast averaged over the window lengths ``scan_windows_s``, every ``scan_step_s``
     (``scan_cuts``), that reach ``min_contrast``, at least the mean window apart; each cut
-    is at its maximum (``detected_at == frame``).  A take too short to scan (< ~2.5 of the
+    is at its maximum (``detected_at == frame``).  A take too short to scan (< 3 of the
     longest window) falls back to "verified".
     ``variant = "verified"``: the online detector run forward and on the time-reversed X
     (backward cuts mapped to forward frames: reversed frame j -> len(X) - j), the two merged

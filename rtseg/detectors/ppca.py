@@ -315,7 +315,7 @@ def cut_contrast(X: np.ndarray, c: int, W: int, tau: float, noise_floor: float =
     max(H(B|A), H(A|B)).  A true behaviour change makes D(A, B) larger than the change
     between consecutive windows of the same behaviour on either side (> 1); a cut inside a
     behaviour whose cycle is shorter than W (alternating-side exercises) does not (~1 or
-    less).  Outer windows shorter than W/2 (take ends) are left out; when both are, the
+    less).  Outer windows shorter than W (take ends) are left out; when both are, the
     contrast is +inf (the cut cannot be checked and is kept).
     """
     return _WindowModels(np.asarray(X, dtype=np.float64), tau, noise_floor, null_rel,
@@ -493,7 +493,7 @@ def contrast_profile(X: np.ndarray, W: int, step: int, tau: float, noise_floor: 
     take has a narrower model, which alone inflates the contrast; the forward pass likewise
     tests nothing in its first T frames) and ends where the window after c would be shorter
     than W/2.  Returns (frames, contrast); +inf where the check is impossible (no outer
-    window: takes shorter than about 2.5 W).  Windows fall on the grid of ``step`` frames,
+    window: takes shorter than 3 W).  Windows fall on the grid of ``step`` frames,
     so each W-frame window is fitted once: cost ~ (n / step) PPCA fits of W x d windows."""
     X = np.asarray(X, dtype=np.float64)
     h = max(2, W // 2)
@@ -575,7 +575,7 @@ def segment_ppca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
     do; each starts from the alternating passes' nearest cut within W/2 (if any) and is
     then placed by the paper's own passes (``localise_cuts``: the mean of the nearest
     forward and backward peak within T).  On a take too short for any contrast (< about
-    2.5 windows) the alternating passes' cuts are checked with ``verify_cuts`` instead.
+    3 windows) the alternating passes' cuts are checked with ``verify_cuts`` instead.
     ``detected_at == frame`` (batch).
 
     The trace is the first forward pass's (H and its threshold, for plotting).
