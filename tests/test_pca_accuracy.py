@@ -135,7 +135,7 @@ def test_scan_contrast_peaks_at_the_change_and_stays_low_inside_behaviours():
     from rtseg.detectors.pca import contrast_profile, scan_cuts
     X, la = two_behaviours(5, la=2400, lb=2400)
     f, k = contrast_profile(X, [300, 360, 420], 10, 0.9)
-    assert f[0] == 420 and np.all(np.diff(f) == 10)
+    assert f[0] == 300 and np.all(np.diff(f) == 10)      # from the shortest window
     at = int(np.argmax(k))
     assert abs(f[at] - la) <= 30 and k[at] > 3.0, (f[at], k[at])
     inside = k[(np.abs(f - la) > 900) & np.isfinite(k)]

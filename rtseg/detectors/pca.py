@@ -379,23 +379,27 @@ def contrast_profile(X: np.ndarray, windows: Sequence[int], step: int,
                      tau: float) -> tuple[np.ndarray, np.ndarray]:
     """The two-sided PCA contrast (``rtseg.detectors._scan``, D = ``_WindowPCA.distance``)
     averaged over the window lengths ``windows`` (frames), at every ``step``-th frame c from
-    max(windows) to n - max(windows)/2.  Averaging over a few window lengths keeps the
-    maxima from depending on one length's fit to the take's behaviour durations.  Near the
-    take's ends the mean is over the lengths that can be checked there.  Returns
-    (frames, contrast); +inf where none can (no outer window: takes shorter than 3
-    windows).
+    min(windows) to n - min(windows)/2.  Averaging over a few window lengths keeps the
+    maxima from depending on one length's fit to the take's behaviour durations.  A length
+    W counts at c only where its window before c is whole (c >= W; a window cut short by
+    the take's start has a narrower model, which alone inflates the contrast) and the one
+    after c holds at least W/2 frames, and where it has a whole outer window; the mean is
+    over the lengths that count there (near the take's ends, fewer).  Returns
+    (frames, contrast); +inf where none counts (takes shorter than about 3 windows).
     Windows fall on the grid of ``step`` frames when their lengths are multiples of it, so
     each is fitted once."""
     X = np.asarray(X, dtype=np.float64)
     Ws = sorted({int(w) for w in windows})
     if not Ws or Ws[0] < 2:
         raise ValueError(f"scan windows must be >= 2 frames, got {list(windows)}")
-    top = Ws[-1]
-    frames_ = np.arange(top, len(X) - max(2, top // 2) + 1, max(1, int(step)))
-    cache = _WindowPCA(X, tau)
     n = len(X)
-    k = np.array([[window_contrast(cache.distance, n, int(c), W) for c in frames_]
-                  for W in Ws], dtype=float).reshape(len(Ws), len(frames_))
+    frames_ = np.arange(Ws[0], n - max(2, Ws[0] // 2) + 1, max(1, int(step)))
+    cache = _WindowPCA(X, tau)
+    k = np.full((len(Ws), len(frames_)), np.inf)
+    for i, W in enumerate(Ws):
+        for j, c in enumerate(frames_):
+            if W <= c <= n - max(2, W // 2):
+                k[i, j] = window_contrast(cache.distance, n, int(c), W)
     finite = np.isfinite(k)
     count = finite.sum(axis=0)
     mean = np.where(finite, k, 0.0).sum(axis=0) / np.maximum(count, 1)
