@@ -267,6 +267,32 @@ def test_pca_band_reproduces_the_detector(synth_dir):
     assert np.allclose(tr["mean"] + 3.0 * tr["std"], tr["threshold"])
 
 
+def test_scan_profiles_are_the_ones_the_offline_cuts_come_from(synth_dir):
+    """The plot's scan panel draws the contrast whose maxima are the offline PCA cuts
+    (and PPCA's changes before placement); paper variants have no scan."""
+    from rtseg.commands.plot import scan_profiles
+    from rtseg.detectors import method_params
+    from rtseg.detectors._scan import local_maxima
+    from rtseg.segmentation import compute_features, segment_take
+    take = synth_dir["a"].take
+    X = compute_features(take)
+    prof = scan_profiles(X, take.frame_rate, {"pca": None, "ppca": None})
+    assert set(prof) == {"pca", "ppca"}
+    p = prof["pca"]
+    assert p["threshold"] == method_params("pca")["min_contrast"]
+    assert len(p["frame"]) == len(p["contrast"]) > 10
+    sep = round(take.frame_rate * sum(method_params("pca")["scan_windows_s"]) / 3)
+    maxima = [f for f, _ in local_maxima(p["frame"], p["contrast"], p["threshold"], sep)]
+    cuts = segment_take(take, "pca", None, features=X).cut_frames
+    assert maxima == cuts and cuts
+    q = prof["ppca"]
+    ppca_cuts = segment_take(take, "ppca", None, features=X).cut_frames
+    big = [f for f, k in zip(q["frame"], q["contrast"]) if np.isfinite(k) and k >= q["threshold"]]
+    assert all(any(abs(c - f) <= 180 for f in big) for c in ppca_cuts)
+    assert scan_profiles(X, take.frame_rate, {"pca": {"variant": "paper"},
+                                              "ppca": {"variant": "paper"}}) == {}
+
+
 # ------------------------------------------------------------------------ console script
 
 def test_console_script_segment_json(synth_dir):

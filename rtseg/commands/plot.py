@@ -7,8 +7,13 @@ Panels (shared x axis = take frame, 0-based):
   2. PPCA: the Mahalanobis statistic H against K, with its valleys and peaks (Figure 2),
      and the PPCA cuts (solid: found online by the forward pass, at a traced peak; dashed:
      added by the offline backward/forward passes, which are not traced);
-  3. a strip with the cuts of every method (green: inside a labelled range and matched,
+  3. the offline scans (not in the paper): the two-sided contrast profiles of PCA and PPCA
+     whose local maxima above ``min_contrast`` are the offline changes (docs/detectors.md);
+  4. a strip with the cuts of every method (green: inside a labelled range and matched,
      red: false alarm) against the labelled transition ranges (shaded), as in Figure 7.
+
+The PCA panel draws the online pass (d_i, its band and threshold; its cuts dashed) and the
+offline cuts (solid), the ones ``rtseg segment`` and ``rtseg evaluate`` report.
 
 matplotlib is an optional extra: ``pip install 'rtseg[plot]'``.
 """
@@ -150,10 +155,15 @@ def _shade_labels(ax, labels: TransitionLabels | None) -> None:
         ax.axvspan(t.lo, t.hi, color="tab:blue", alpha=0.12, lw=0)
 
 
-def _panel_pca(ax, res: SegmentationResult | None, labels: TransitionLabels | None) -> None:
-    ax.set_title("PCA: derivative of projection error d_i (Figure 1)", fontsize=9, loc="left")
+def _panel_pca(ax, res: SegmentationResult | None, labels: TransitionLabels | None,
+               band: SegmentationResult | None = None) -> None:
+    """d_i of the online pass (``band``, from ``pca_with_band``; its cuts dashed) and the
+    cuts of ``res`` (solid)."""
+    ax.set_title("PCA: derivative of projection error d_i of the online pass (Figure 1); "
+                 "online cuts dashed, offline solid", fontsize=9, loc="left")
     _shade_labels(ax, labels)
-    cols = trace_columns(res.trace if res else None)
+    src = band if band is not None else res
+    cols = trace_columns(src.trace if src else None)
     x = _pick(cols, _FRAME_KEYS)
     d = _pick(cols, ("d", "statistic", "stat", "value"))
     if x is None or d is None:
@@ -175,6 +185,9 @@ def _panel_pca(ax, res: SegmentationResult | None, labels: TransitionLabels | No
             pad = 0.2 * (hi - lo + 1e-12)
             ax.set_ylim(min(lo, 0) - pad, hi + pad)
         ax.legend(loc="upper right", fontsize=7, ncol=4)
+    if band is not None and band is not res:
+        for c in band.cut_frames:
+            ax.axvline(c, color="tab:orange", lw=1.0, ls="--", alpha=0.8)
     _cut_lines(ax, res, "tab:red")
     ax.set_ylabel("d_i")
 
@@ -235,6 +248,62 @@ def _panel_ppca(ax, res: SegmentationResult | None, labels: TransitionLabels | N
     ax.set_ylabel("H")
 
 
+def scan_profiles(X: np.ndarray, frame_rate: float,
+                  params: Mapping[str, Mapping[str, Any] | None]) -> dict[str, dict[str, Any]]:
+    """The contrast profiles of the offline scans, for the methods in ``params`` whose
+    variant scans (PCA "scan", PPCA "verified"): ``{method: {"frame": frames, "contrast":
+    values (inf where nothing can be checked), "threshold": min_contrast}}``."""
+    from rtseg.detectors import frames, method_params
+    from rtseg.detectors import pca as pca_mod
+    from rtseg.detectors import ppca as ppca_mod
+    X = np.asarray(X, dtype=np.float64)
+    out: dict[str, dict[str, Any]] = {}
+    if "pca" in params:
+        p = method_params("pca", params["pca"])
+        if p["variant"] == "scan":
+            f, k = pca_mod.contrast_profile(X, [frames(w, frame_rate) for w in p["scan_windows_s"]],
+                                            frames(p["scan_step_s"], frame_rate), p["energy"])
+            out["pca"] = {"frame": f, "contrast": k, "threshold": float(p["min_contrast"])}
+    if "ppca" in params:
+        p = method_params("ppca", params["ppca"])
+        if p["variant"] == "verified":
+            f, k = ppca_mod.contrast_profile(X, frames(p["verify_window_s"], frame_rate),
+                                             frames(p["step_s"], frame_rate), p["energy"],
+                                             p["noise_floor"], p["null_rel"], p["distance"])
+            out["ppca"] = {"frame": f, "contrast": k, "threshold": float(p["min_contrast"])}
+    return out
+
+
+def _panel_scans(ax, profiles: Mapping[str, Mapping[str, Any]],
+                 results: Mapping[str, SegmentationResult],
+                 labels: TransitionLabels | None) -> None:
+    ax.set_title("offline scans: two-sided contrast (changes = maxima above min_contrast)",
+                 fontsize=9, loc="left")
+    _shade_labels(ax, labels)
+    colors = {"pca": "tab:purple", "ppca": "tab:green"}
+    top = 1.0
+    for m, prof in profiles.items():
+        x, k = np.asarray(prof["frame"]), np.asarray(prof["contrast"], dtype=float)
+        ok = np.isfinite(k)
+        if not ok.any():
+            continue
+        c = colors.get(m, "k")
+        ax.plot(*_broken(x[ok], k[ok]), color=c, lw=0.8, label=f"{m} contrast")
+        ax.axhline(prof["threshold"], color=c, ls="--", lw=0.8, label=f"{m} min_contrast")
+        top = max(top, float(np.percentile(k[ok], 99.5)), prof["threshold"])
+        res = results.get(m)
+        if res is not None:
+            for f in res.cut_frames:
+                ax.axvline(f, color=c, lw=1.0, alpha=0.6)
+    if not profiles:
+        ax.text(0.5, 0.5, "no scan (paper variants or GMM only)", transform=ax.transAxes,
+                ha="center", va="center")
+    else:
+        ax.set_ylim(0, 1.1 * top)
+        ax.legend(loc="upper right", fontsize=7, ncol=4)
+    ax.set_ylabel("contrast")
+
+
 def _panel_strip(ax, results: Mapping[str, SegmentationResult],
                  labels: TransitionLabels | None) -> None:
     ax.set_title("cuts of each method against the labelled transition ranges (Figure 7)",
@@ -264,15 +333,19 @@ def _panel_strip(ax, results: Mapping[str, SegmentationResult],
 
 
 def render(path: str | Path, take_name: str, n_frames: int, frame_rate: float,
-           results: Mapping[str, SegmentationResult], labels: TransitionLabels | None) -> Path:
-    """Write the figure to ``path`` (format from its suffix, PNG by default)."""
+           results: Mapping[str, SegmentationResult], labels: TransitionLabels | None,
+           pca_band: SegmentationResult | None = None,
+           profiles: Mapping[str, Mapping[str, Any]] | None = None) -> Path:
+    """Write the figure to ``path`` (format from its suffix, PNG by default).  ``pca_band``:
+    the online PCA pass with its band (``pca_with_band``); ``profiles``: ``scan_profiles``."""
     plt = _pyplot()
-    fig, axes = plt.subplots(3, 1, figsize=(12, 8), sharex=True,
-                             gridspec_kw={"height_ratios": [3, 3, 1.6]})
-    _panel_pca(axes[0], results.get("pca"), labels)
+    fig, axes = plt.subplots(4, 1, figsize=(12, 10), sharex=True,
+                             gridspec_kw={"height_ratios": [3, 3, 2.2, 1.6]})
+    _panel_pca(axes[0], results.get("pca"), labels, pca_band)
     _panel_ppca(axes[1], results.get("ppca"), labels)
-    _panel_strip(axes[2], results, labels)
-    axes[2].set_xlim(0, n_frames)
+    _panel_scans(axes[2], profiles or {}, results, labels)
+    _panel_strip(axes[3], results, labels)
+    axes[3].set_xlim(0, n_frames)
     sub = f"{n_frames} frames at {frame_rate:g} fps"
     if labels is not None:
         sub += f"; labels: {labels.description}"
@@ -333,13 +406,13 @@ def run(args: argparse.Namespace) -> int:
     methods = list(METHODS) if args.method == "all" else [args.method]
     params = params_by_method(args.params, methods)
     X = compute_features(take, args.profile)
-    results = {}
-    for m in methods:
-        if m == "pca":
-            results[m] = pca_with_band(X, take.frame_rate, params.get(m), take.source)
-        else:
-            results[m] = segment_take(take, m, params.get(m), keep_trace=True, features=X)
+    results = {m: segment_take(take, m, params.get(m), keep_trace=True, features=X)
+               for m in methods}
+    band = pca_with_band(X, take.frame_rate, params.get("pca"), take.source) \
+        if "pca" in methods else None
+    profiles = scan_profiles(X, take.frame_rate,
+                             {m: params.get(m) for m in methods if m in ("pca", "ppca")})
     out = Path(args.output) if args.output else Path(f"{name}.png")
-    render(out, name, take.n_frames, take.frame_rate, results, labels)
+    render(out, name, take.n_frames, take.frame_rate, results, labels, band, profiles)
     print(out)
     return 0
