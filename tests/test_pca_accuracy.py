@@ -196,3 +196,17 @@ def test_refine_moves_a_late_cut_to_the_change():
         assert abs(frames[1] - la) <= 20, (seed, frames)   # was 45 frames late
         assert abs(frames[0] - (la - 700)) <= 60          # stays within reach
         assert out[1].detected_at == out[1].frame and out[1].confidence == 0.8
+
+
+def test_scan_windows_are_put_on_the_step_grid():
+    """Window lengths are rounded to whole steps so the scan's windows recur (fitted once);
+    at 120 fps the defaults are already whole steps, at 100 fps 3 s = 300 -> 304 frames."""
+    from rtseg.detectors._scan import on_grid
+    assert on_grid(360, 10) == 360 and on_grid(300, 8) == 304 and on_grid(250, 8) == 248
+    assert on_grid(3, 8) == 8 and on_grid(5, 1) == 5
+    # the offline result at 100 fps equals a run whose windows are given on the grid
+    X, la = two_behaviours(7, la=1500, lb=1500)
+    on = [c.frame for c in segment_features(X, "pca", 100.0)]
+    given = [c.frame for c in segment_features(
+        X, "pca", 100.0, {"scan_windows_s": [2.48, 3.04, 3.52]})]
+    assert on == given and any(abs(c - la) <= 30 for c in on)

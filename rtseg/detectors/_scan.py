@@ -24,6 +24,14 @@ import numpy as np
 Window = tuple[int, int]
 
 
+def on_grid(W: int, step: int) -> int:
+    """W rounded to the nearest multiple of ``step`` (at least one step): windows on the
+    scan's grid recur from position to position and are fitted once (e.g. 3 s at 100 Hz
+    with a step of 8 frames: 300 -> 304 frames; about 2x faster)."""
+    step = max(1, int(step))
+    return step * max(1, int(round(W / step)))
+
+
 def window_contrast(distance: Callable[[Window, Window], float], n: int, c: int,
                     W: int) -> float:
     """contrast(c) for a take of n frames (see the module docstring).

@@ -58,7 +58,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from rtseg.detectors._linalg import full_eigh, rank_for_energy, subspace_step
-from rtseg.detectors._scan import local_maxima, window_contrast
+from rtseg.detectors._scan import local_maxima, on_grid, window_contrast
 from rtseg.detectors.base import Cut, OnlineDetector
 
 log = logging.getLogger(__name__)
@@ -484,9 +484,9 @@ def segment_pca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
     variant = p.get("variant", "paper")
     if variant == "scan":
         X = np.asarray(X, dtype=np.float64)
-        windows = [frames(w, frame_rate) for w in p["scan_windows_s"]]
-        found = scan_cuts(X, windows, frames(p["scan_step_s"], frame_rate),
-                          float(p["min_contrast"]), float(p["energy"]))
+        step = frames(p["scan_step_s"], frame_rate)
+        windows = [on_grid(frames(w, frame_rate), step) for w in p["scan_windows_s"]]
+        found = scan_cuts(X, windows, step, float(p["min_contrast"]), float(p["energy"]))
         if found is not None:
             if keep_trace:          # the forward pass's d and threshold, for plotting
                 det.run(X)

@@ -69,7 +69,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from rtseg.detectors._linalg import full_eigh, rank_for_energy, subspace_step
-from rtseg.detectors._scan import local_maxima, window_contrast
+from rtseg.detectors._scan import local_maxima, on_grid, window_contrast
 from rtseg.detectors.base import Cut, OnlineDetector
 
 log = logging.getLogger(__name__)
@@ -607,7 +607,7 @@ def segment_ppca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
     out = sorted(cuts.values(), key=lambda c: c.frame)
     if p.get("variant", "verified") != "verified":
         return out, first.trace
-    W = frames(p["verify_window_s"], frame_rate)
+    W = on_grid(frames(p["verify_window_s"], frame_rate), args["delta"])
     check = (args["tau"], args["noise_floor"], args["null_rel"], args["distance"])
     found = scan_cuts(X, W, args["delta"], float(p["min_contrast"]), *check)
     if found is None:   # too short to scan: check the passes' cuts where possible
