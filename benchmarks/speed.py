@@ -5,9 +5,9 @@
 
 PCA and PPCA run ONLINE: one ``update()`` call per frame through ``make_online`` (the
 live path), PCA fed the whole take; PCA and PPCA also offline (``pca_offline``,
-``ppca_offline``: ``segment_features`` with the default variants, the contrast scans).  GMM runs batch (``segment_features``).  File reading and feature
-computation are not timed.  Each figure is the median of ``--repeat`` runs.  Without the
-data folder a synthetic 8000-frame, 56-dim input (3 behaviours + 8 constant dims) is used,
+``ppca_offline``: ``segment_features`` with the default variants, the contrast scans).
+GMM runs batch (``segment_features``).  File reading and feature computation are not
+timed.  Each figure is the median of ``--repeat`` runs.  Without the data folder a synthetic 8000-frame, 56-dim input (3 behaviours + 8 constant dims) is used,
 and the output says so.  Targets: PCA and PPCA online >= 20 000 frames/s on one core
 (8000 frames < 0.4 s); GMM < 2 s for 8000 frames.
 """

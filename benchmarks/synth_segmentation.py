@@ -5,8 +5,8 @@
 
 Each seed synthesises the script (default: the synthesiser's default script), computes
 the pose features (``rtseg.features.take_features``), runs every detector method with its
-default parameters (or those of ``--params``; GMM's k = the script's behaviours) and scores the cuts against the exact transition ranges (the blend
-spans), widened by ``--tol`` seconds on each side.  Prints per-seed and pooled P/R/F1.
+default parameters (or those of ``--params``; GMM's k = the script's behaviours) and
+scores the cuts against the exact transition ranges (the blend spans), widened by ``--tol`` seconds on each side.  Prints per-seed and pooled P/R/F1.
 """
 
 from __future__ import annotations

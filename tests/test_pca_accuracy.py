@@ -210,3 +210,12 @@ def test_scan_windows_are_put_on_the_step_grid():
     given = [c.frame for c in segment_features(
         X, "pca", 100.0, {"scan_windows_s": [2.48, 3.04, 3.52]})]
     assert on == given and any(abs(c - la) <= 30 for c in on)
+
+
+def test_scan_windows_shorter_than_two_frames_are_a_clear_error():
+    from rtseg.detectors.pca import contrast_profile
+    X, _ = two_behaviours(8, la=600, lb=600)
+    with pytest.raises(ValueError, match="scan windows must be >= 2 frames"):
+        contrast_profile(X, [1, 300], 10, 0.9)
+    with pytest.raises(ValueError, match="scan windows must be >= 2 frames"):
+        segment_features(X, "pca", FPS, {"scan_windows_s": [0.001], "scan_step_s": 0.001})

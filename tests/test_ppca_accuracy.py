@@ -53,16 +53,22 @@ def test_verified_drops_cuts_inside_an_alternating_exercise_and_keeps_the_change
     assert inside_verified <= 0.05 * inside_paper, (inside_verified, inside_paper)
 
 
+def blended_take(seed: int, dim: int = 16, la: int = 2400, blend: int = 60
+                 ) -> tuple[np.ndarray, int]:
+    """Two stationary behaviours of 2 * la frames each, cross-faded over ``blend`` frames
+    centred on frame la; returns X and la."""
+    rng = np.random.default_rng(seed)
+    A = stationary(rng, 2 * la, dim, np.zeros(dim))
+    B = stationary(rng, 2 * la, dim, 0.5 * rng.normal(size=dim))
+    w = np.clip((np.arange(2 * la) - (la - blend // 2)) / blend, 0, 1)[:, None]
+    return (1 - w) * A + w * B, la
+
+
 def test_scan_places_changes_between_the_forward_and_backward_peaks():
     """A gradual change (blend over 0.5 s): the forward pass peaks early, the backward pass
     late; the verified cut lies between them, nearer the middle of the blend than either."""
     from rtseg.detectors.ppca import PPCADetector
-    rng = np.random.default_rng(11)
-    dim, la, blend = 16, 2400, 60
-    A = stationary(rng, 2 * la, dim, np.zeros(dim))
-    B = stationary(rng, 2 * la, dim, 0.5 * rng.normal(size=dim))
-    w = np.clip((np.arange(2 * la) - (la - blend // 2)) / blend, 0, 1)[:, None]
-    X = (1 - w) * A + w * B
+    X, la = blended_take(11)
     ver = [c.frame for c in segment_features(X, "ppca", FPS)]
     assert len(ver) == 1 and abs(ver[0] - la) <= 15, ver
     fwd = [c.frame for c in PPCADetector(T=150, delta=10).run(X)]
@@ -76,12 +82,7 @@ def test_localise_blends_the_passes_estimate_with_the_anchor():
     """anchor_weight w: (1 - w) x the passes' estimate + w x the anchor; 0 is the passes
     alone, 1 the anchor alone; a change no pass peak is near goes to its anchor."""
     from rtseg.detectors.ppca import localise_cuts
-    rng = np.random.default_rng(5)
-    dim, la, blend = 16, 2400, 60
-    A = stationary(rng, 2 * la, dim, np.zeros(dim))
-    B = stationary(rng, 2 * la, dim, 0.5 * rng.normal(size=dim))
-    w = np.clip((np.arange(2 * la) - (la - blend // 2)) / blend, 0, 1)[:, None]
-    X = (1 - w) * A + w * B
+    X, la = blended_take(5)
     args = dict(T=150, delta=10)
     passes = localise_cuts(X, [la], args, reach=150)[0]
     assert abs(passes - la) <= 30

@@ -502,6 +502,14 @@ def contrast_profile(X: np.ndarray, W: int, step: int, tau: float, noise_floor: 
     return frames_, np.array([models.contrast(int(c), W) for c in frames_], dtype=float)
 
 
+def scan_window(p: Mapping[str, Any], frame_rate: float) -> tuple[int, int]:
+    """(W, step) of the offline scan in frames for parameters ``p`` (``verify_window_s``,
+    ``step_s`` = Delta), W rounded to whole steps."""
+    from rtseg.detectors import frames
+    step = frames(p["step_s"], frame_rate)
+    return on_grid(frames(p["verify_window_s"], frame_rate), step), step
+
+
 def scan_cuts(X: np.ndarray, W: int, step: int, min_contrast: float, tau: float,
               noise_floor: float = 1e-6, null_rel: float = 1e-15,
               distance: str = "mean") -> list[tuple[int, float]] | None:
@@ -607,7 +615,7 @@ def segment_ppca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
     out = sorted(cuts.values(), key=lambda c: c.frame)
     if p.get("variant", "verified") != "verified":
         return out, first.trace
-    W = on_grid(frames(p["verify_window_s"], frame_rate), args["delta"])
+    W = scan_window(p, frame_rate)[0]
     check = (args["tau"], args["noise_floor"], args["null_rel"], args["distance"])
     found = scan_cuts(X, W, args["delta"], float(p["min_contrast"]), *check)
     if found is None:   # too short to scan: check the passes' cuts where possible
