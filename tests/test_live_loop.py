@@ -270,13 +270,13 @@ def session(src, cfg=None, det=None, **kw):
     config = from_dict(cfg or {"calibration": {"mode": "none"}, "status": {"interval": 0.05}})
     s = LiveSession(src, config, publishers=FakePublishers(), recorder=FakeRecorder(),
                     handle_signals=False, **kw)
-    import rtseg.live as live_mod
-    orig = live_mod.make_detectors
-    live_mod.make_detectors = lambda c, r: {"step": det or StepDetector()}
+    import rtseg.pipeline as pipe_mod
+    orig = pipe_mod.make_detectors
+    pipe_mod.make_detectors = lambda c, r: {"step": det or StepDetector()}
     try:
         summary = s.run()
     finally:
-        live_mod.make_detectors = orig
+        pipe_mod.make_detectors = orig
     return s, summary
 
 

@@ -1,0 +1,389 @@
+"""The per-frame pipeline shared by the live loop and offline replay of a recording.
+
+``Pipeline.process()`` takes one received frame and returns the cuts its arrival revealed:
+gap handling (sequence/clock gaps, silence, runs of invalid required joints restart the
+detectors), value sanitising, calibration, ``PoseFeatures.step`` and every online
+detector's ``update``.  It does no I/O and no threading: ``rtseg.live.LiveSession`` runs it
+on frames from a ring buffer, ``replay_frames`` / ``replay_session`` run it on recorded
+frames, so live output can be checked against a recording.
+
+Gaps
+----
+No cut is placed across a gap the detectors did not see: a sequence gap of more than
+``gaps.max_frames`` missing frames, more than ``gaps.max_seconds`` without frames, or more
+than ``gaps.max_frames`` consecutive frames with an invalid required joint restart the
+detectors (``OnlineDetector.restart()``) and the feature state; a cut whose boundary lies
+before the restart is discarded (counted).  Shorter runs of invalid joints are fed with the
+last good values (what ``Frame`` rows hold).
+
+Frame indices
+-------------
+``PipelineCut.boundary`` / ``detected`` are 0-based indices among all frames received this
+session (= the rows of the recorded session).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Any, Iterable
+
+import numpy as np
+
+from rtseg.config import ConfigError
+from rtseg.detectors.base import Cut, OnlineDetector
+from rtseg.session_config import SessionConfig, load_session_config
+
+log = logging.getLogger("rtseg.live")
+
+DEFAULT_FRAME_RATE = 120.0
+
+@dataclass
+class PipelineCut:
+    """A cut in session frame indices: ``boundary`` and ``detected`` are absolute indices
+    of received frames; ``cut`` is the detector's own ``Cut``."""
+    cut: Cut
+    boundary: int
+    detected: int
+
+
+@dataclass
+class PipelineStats:
+    frames: int = 0            # frames given to process()
+    fed: int = 0               # frames fed to the detectors
+    calibration_frames: int = 0
+    restarts: int = 0          # detector restarts caused by gaps
+    gap_frames: int = 0        # frames known missing (sequence gaps + ring overruns)
+    invalid_frames: int = 0    # frames with an invalid required joint
+    skipped_invalid: int = 0   # of those, frames not fed (run longer than the limit)
+    bad_values: int = 0        # non-finite / zero quaternions replaced by the last good ones
+    discarded_cuts: int = 0    # cuts whose boundary preceded a restart
+
+
+def _average_quats(q: np.ndarray) -> np.ndarray:
+    """Mean rotation of (n, J, 4) quaternions close to each other: sign-align to the first
+    frame, average, normalise (the first-order approximation of the quaternion mean)."""
+    ref = q[0]
+    signs = np.where(np.sum(q * ref, axis=-1, keepdims=True) < 0, -1.0, 1.0)
+    m = np.mean(q * signs, axis=0)
+    n = np.linalg.norm(m, axis=-1, keepdims=True)
+    return np.where(n > 1e-9, m / np.where(n > 1e-9, n, 1.0), ref)
+
+
+def _resolve_joints(names: Iterable[str], joint_names: list[str], key: str) -> np.ndarray:
+    lower = {n.lower(): i for i, n in enumerate(joint_names)}
+    idx = []
+    for n in names:
+        if n.lower() not in lower:
+            raise ConfigError(f"{key}: joint {n!r} not among the source's joints "
+                              f"({', '.join(joint_names)})")
+        idx.append(lower[n.lower()])
+    return np.asarray(idx, dtype=np.intp)
+
+
+class Pipeline:
+    """Frame-by-frame core shared by the live loop and offline replay of a recording.
+
+    ``process(index, quats, valid, seq, recv_time, lost, source_time)`` takes one received
+    frame (``quats`` (J, 4) scalar-last, ``valid`` (J,) bool, ``index`` its 0-based session
+    index, ``seq`` the source's sequence number or None, ``recv_time`` monotonic seconds,
+    ``lost`` frames known lost just before it, ``source_time`` the source's clock in
+    seconds or None) and returns the cuts its arrival revealed, in session frame indices.  Deterministic: the
+    same frames give the same cuts, which is how live output is checked against a recording.
+    """
+
+    def __init__(self, joint_names: list[str], parents: list[int], space: str,
+                 frame_rate: float | None, config: SessionConfig,
+                 features: Any = None, detectors: dict[str, OnlineDetector] | None = None) -> None:
+        self.joint_names = list(joint_names)
+        self.parents = list(parents)
+        self.space = space
+        self.frame_rate = float(frame_rate or DEFAULT_FRAME_RATE)
+        self.config = config
+        self.n_joints = len(self.joint_names)
+        if features is None:
+            from rtseg.features import PoseFeatures
+            profile = config["features.profile"] or None
+            features = PoseFeatures(self.joint_names, self.parents, space, profile=profile)
+        self.features = features
+        if detectors is None:
+            detectors = make_detectors(config, self.frame_rate)
+        self.detectors = detectors
+        req = config["gaps.required_joints"]
+        self.required = (_resolve_joints(req, self.joint_names, "gaps.required_joints")
+                         if req else self._feature_joints())
+        self.max_gap_frames = int(config["gaps.max_frames"])
+        self.max_gap_seconds = float(config["gaps.max_seconds"])
+        mode = config["calibration.mode"]
+        if mode == "auto":
+            mode = "average" if space == "local" else "none"
+        self.calibration_mode = mode
+        self.calibration_needed = 1 if mode == "first" else int(config["calibration.frames"])
+        self._calib: list[np.ndarray] = []
+        self.calibrated = mode == "none"
+        self.stats = PipelineStats()
+        self._prev_seq: int | None = None
+        self._prev_recv: float | None = None
+        self._prev_src: float | None = None
+        self._src_period: float | None = None
+        self._src_steps = 0
+        self._src_long = 0
+        self._bad_run = 0
+        self._last_good = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (self.n_joints, 1))
+        # Per detector: session index of the first frame fed since the last (re)start and
+        # the detector's own frame count at that moment.
+        self._seg_start = {m: -1 for m in self.detectors}
+        self._fed = {m: 0 for m in self.detectors}
+        self._fed_at_start = {m: 0 for m in self.detectors}
+        self._fed_since_restart = 0
+
+    def _feature_joints(self) -> np.ndarray:
+        """Input joints the pose features depend on: the profile's joints and, for global
+        orientations (made parent-relative), their parents.  All joints if unknown."""
+        idx = getattr(self.features, "indices", None)
+        if idx is None:
+            return np.arange(self.n_joints)
+        need = {int(i) for i in idx}
+        if self.space == "global":
+            need |= {self.parents[i] for i in list(need) if self.parents[i] >= 0}
+        return np.array(sorted(need), dtype=np.intp)
+
+    # ---------------------------------------------------------------- gap logic
+    def _seq_missing(self, seq: int | None) -> int:
+        """Frames missing between the previous sequence number and ``seq``.
+
+        A backwards jump (device restart) counts as a gap beyond any limit; a jump back by
+        more than half of 16 bits from near the top is taken as a u16 wrap.
+        """
+        prev = self._prev_seq
+        if seq is None or prev is None:
+            return 0
+        d = seq - prev
+        if d <= 0 and prev < 65536 and seq < 65536 and prev - seq > 32768:
+            d += 65536
+        if d <= 0:
+            return self.max_gap_frames + 1 if d < 0 else 0
+        return d - 1
+
+    def restart(self, index: int, reason: str) -> None:
+        """Forget the current segment in every detector (and the feature state)."""
+        if self._fed_since_restart:
+            self.stats.restarts += 1
+            log.info("detectors restarted at frame %d: %s", index, reason)
+        for m, det in self.detectors.items():
+            det.restart()
+            self._seg_start[m] = -1
+        if hasattr(self.features, "reset"):
+            # keep the calibration pose: reset() only clears the streaming state
+            self.features.reset()
+        self._fed_since_restart = 0
+
+    # ---------------------------------------------------------------- main step
+    def _time_missing(self, source_time: float | None) -> int:
+        """Frames missing according to the source's clock, for sources whose sequence
+        numbers cannot show a loss (VMC numbers the frames it assembles).
+
+        The frame period is learned from the source's own time steps (running mean of the
+        steps that are not gaps, after 16 steps), so it does not depend on the nominal
+        rate.  Returns 0 until then, for steps backwards (clock reset) and for steps below
+        2.5 periods; after 8 long steps in a row the source is taken to have slowed down
+        and the period is learned again."""
+        prev = self._prev_src
+        if source_time is None or prev is None or not math.isfinite(source_time):
+            return 0
+        d = source_time - prev
+        if d <= 0:
+            return 0
+        p = self._src_period
+        if p is None:
+            self._src_period, self._src_steps = d, 1
+            return 0
+        if d < 2.5 * p or self._src_steps < 16:
+            self._src_period = p + (d - p) / min(self._src_steps + 1, 64)
+            self._src_steps += 1
+            self._src_long = 0
+            return 0
+        self._src_long += 1
+        if self._src_long >= 8:          # the source slowed down for good: new period
+            self._src_period, self._src_steps, self._src_long = d, 1, 0
+            return 0
+        return max(0, int(round(d / p)) - 1)
+
+    def process(self, index: int, quats: np.ndarray, valid: np.ndarray,
+                seq: int | None = None, recv_time: float | None = None,
+                lost: int = 0, source_time: float | None = None) -> list[PipelineCut]:
+        st = self.stats
+        st.frames += 1
+        # --- gaps in the input (sequence numbers or source clock, silence, ring overruns)
+        missing = max(self._seq_missing(seq), self._time_missing(source_time)) + max(0, int(lost))
+        st.gap_frames += missing
+        silence = (recv_time - self._prev_recv
+                   if recv_time is not None and self._prev_recv is not None else 0.0)
+        if seq is not None:
+            self._prev_seq = int(seq)
+        if recv_time is not None:
+            self._prev_recv = float(recv_time)
+        if source_time is not None and math.isfinite(source_time):
+            self._prev_src = float(source_time)
+        if missing > self.max_gap_frames:
+            self.restart(index, f"{missing} frames missing")
+        elif silence > self.max_gap_seconds:
+            self.restart(index, f"no frame for {silence:.3f} s")
+        # --- sanitise values: non-finite or zero quaternions are invalid
+        q = np.asarray(quats, dtype=np.float64)
+        v = np.asarray(valid, dtype=bool)
+        norms = np.einsum("ij,ij->i", q, q)
+        ok = (norms > 1e-12) & (norms < 1e12)          # False for NaN too
+        all_valid = bool(v.all())
+        if not ok.all():
+            bad = ~ok
+            st.bad_values += int(bad.sum())
+            v = v & ok
+            all_valid = False
+        if not all_valid:
+            q = np.where(v[:, None], q, self._last_good)
+            norms = np.where(v, norms, 1.0)
+        if not (np.abs(norms - 1.0) < 1e-6).all():     # drivers normalise; be sure anyway
+            q = q / np.sqrt(np.where(norms > 1e-12, norms, 1.0))[:, None]
+        np.copyto(self._last_good, q)       # q may be a ring-buffer view: keep a copy
+        # --- invalid required joints
+        if not all_valid and not v[self.required].all():
+            st.invalid_frames += 1
+            self._bad_run += 1
+            if self._bad_run > self.max_gap_frames:
+                if self._bad_run == self.max_gap_frames + 1:
+                    self.restart(index, f"required joints invalid for {self._bad_run} frames")
+                st.skipped_invalid += 1
+                return []
+        else:
+            self._bad_run = 0
+        # --- calibration pose (rig-relative input)
+        if not self.calibrated:
+            if v[self.required].all():
+                self._calib.append(q.copy())
+                st.calibration_frames += 1
+                if len(self._calib) >= self.calibration_needed:
+                    pose = _average_quats(np.stack(self._calib))
+                    self.features.calibrate(pose)
+                    self.calibrated = True
+                    self._calib = []
+                    log.info("calibrated on %d frame(s) ending at frame %d",
+                             self.calibration_needed, index)
+            return []
+        # --- features and detectors
+        x = self.features.step(q)
+        st.fed += 1
+        self._fed_since_restart += 1
+        out: list[PipelineCut] = []
+        for m, det in self.detectors.items():
+            if self._seg_start[m] < 0:
+                self._seg_start[m] = index
+                self._fed_at_start[m] = self._fed[m]
+            self._fed[m] += 1
+            cut = det.update(x)
+            if cut is None:
+                continue
+            out_cut = self._to_session(m, cut, index)
+            if out_cut is not None:
+                out.append(out_cut)
+        return out
+
+    def _to_session(self, method: str, cut: Cut, index: int) -> PipelineCut | None:
+        """Map the detector's frame numbers to session indices.
+
+        Detectors number frames from their creation (the default, ``frame_origin =
+        "creation"``) or from their last restart (``frame_origin = "restart"``).  Within a
+        segment every frame is fed, so the map is linear from the segment's first frame.
+        """
+        seg0 = self._seg_start[method]
+        fed_in_seg = self._fed[method] - self._fed_at_start[method]
+        origin = getattr(self.detectors[method], "frame_origin", "creation")
+        base = self._fed_at_start[method] if origin == "creation" else 0
+        rel = cut.frame - base
+        rel_det = (cut.detected_at - base) if cut.detected_at >= 0 else fed_in_seg - 1
+        boundary = seg0 + rel
+        detected = seg0 + max(rel, rel_det)
+        if rel < 0:
+            self.stats.discarded_cuts += 1
+            log.info("%s cut at frame %d discarded: it precedes the restart at frame %d",
+                     method, boundary, seg0)
+            return None
+        return PipelineCut(cut, boundary, min(detected, index))
+
+
+def detector_params(config: SessionConfig) -> dict[str, dict[str, Any]]:
+    """Validated parameters of each configured method: ``detectors.params`` (default
+    ``config/detectors.toml``) overridden by ``[detectors.<method>]``.  ConfigError names
+    the key."""
+    from rtseg import detectors as det_mod
+    params_file = config["detectors.params"] or None
+    try:
+        all_params = det_mod.load_params(params_file)
+    except (ValueError, OSError) as exc:
+        raise ConfigError(f"detectors.params: {exc}") from None
+    out = {}
+    for m in config["detectors.methods"]:
+        p = dict(all_params.get(m, {}))
+        try:
+            p.update(det_mod.validate(m, config[f"detectors.{m}"]))
+        except ValueError as exc:
+            raise ConfigError(f"detectors.{m}: {exc}") from None
+        out[m] = p
+    return out
+
+
+def make_detectors(config: SessionConfig, frame_rate: float) -> dict[str, OnlineDetector]:
+    """The configured online detectors (``detectors.methods``) with ``detector_params``."""
+    from rtseg import detectors as det_mod
+    out: dict[str, OnlineDetector] = {}
+    for m, p in detector_params(config).items():
+        try:
+            out[m] = det_mod.make_online(m, frame_rate, p)
+        except (TypeError, ValueError, KeyError) as exc:
+            raise ConfigError(f"detectors.{m}: {exc}") from None
+    return out
+
+
+def _blas_limit(n: int) -> Any:
+    """Limit BLAS threads to ``n`` (0: no change); the limiter, or None."""
+    if n <= 0:
+        return None
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn
+        return None
+    return threadpool_limits(n, user_api="blas")
+
+
+def replay_frames(frames: Iterable[tuple], joint_names: list[str], parents: list[int],
+                  space: str, frame_rate: float | None,
+                  config: SessionConfig | None = None) -> list[PipelineCut]:
+    """Run recorded frames ``(quats (J,4), valid (J,), seq, recv_time[, source_time])``
+    through the same ``Pipeline`` as the live loop; the cuts in order (session frame
+    indices).  ``replay_session(dir)`` does this for a recorded session folder."""
+    cfg = config if config is not None else load_session_config()
+    pipe = Pipeline(joint_names, parents, space, frame_rate, cfg)
+    cuts: list[PipelineCut] = []
+    blas = _blas_limit(int(cfg["buffer.blas_threads"]))
+    try:
+        for i, f in enumerate(frames):
+            stime = f[4] if len(f) > 4 else None
+            cuts.extend(pipe.process(i, f[0], f[1], f[2], f[3], 0, stime))
+    finally:
+        if blas is not None:
+            blas.restore_original_limits()
+    return cuts
+
+
+def replay_session(directory: str, config: SessionConfig | None = None) -> list[PipelineCut]:
+    """The cuts the live loop's detectors give on a recorded session folder
+    (``rtseg.recording``), offline: every recorded frame with its sequence number, receive
+    time and source time, through ``replay_frames``."""
+    from rtseg.recording import read_session
+    tk = read_session(directory)
+    m = tk.meta
+    seq, recv, src = m["seq"], m["recv_time"], m["source_time"]
+    frames = ((tk.quats[i], tk.valid[i], None if seq[i] < 0 else int(seq[i]), float(recv[i]),
+               None if not np.isfinite(src[i]) else float(src[i])) for i in range(tk.n_frames))
+    return replay_frames(frames, tk.joint_names, tk.parents, tk.space, tk.frame_rate, config)
