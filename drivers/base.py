@@ -23,9 +23,10 @@ class SourceStats:
 
     frames_ok: frames delivered; dropped: frames lost (sequence gaps count the frames
     missing, plus frames refused as unusable); corrupt: byte-level damage (bad CRC,
-    bad COBS, garbage); gaps: sequence discontinuities seen; reconnects: device reopened
-    after loss; bad_values: NaN / non-unit quaternions refused; unknown_names: bone or
-    sensor names not in the profile; bad_messages: wrongly typed or short messages.
+    bad COBS, garbage); crc_failures: of those, messages whose CRC did not match (serial);
+    gaps: sequence discontinuities seen; reconnects: device reopened after loss;
+    bad_values: NaN / non-unit quaternions refused; unknown_names: bone or sensor names not
+    in the profile; bad_messages: wrongly typed or short messages.
     """
     frames_ok: int = 0
     dropped: int = 0
@@ -35,6 +36,7 @@ class SourceStats:
     bad_values: int = 0
     unknown_names: int = 0
     bad_messages: int = 0
+    crc_failures: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)

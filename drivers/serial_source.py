@@ -114,7 +114,7 @@ class _RateLimitedLog:
 
 _STAT_MAP = {  # decoder counter -> SourceStats field
     "corrupt": "corrupt", "garbage_lines": "corrupt", "bad_values": "bad_values",
-    "unknown_ids": "unknown_names", "bad_messages": "bad_messages",
+    "unknown_ids": "unknown_names", "bad_messages": "bad_messages", "bad_crc": "crc_failures",
 }
 
 
