@@ -1,33 +1,67 @@
-"""Configuration files: TOML in the repository's ``config/`` folder, overridable by the user.
+"""Configuration files: the shipped TOML defaults, overridable by the user.
 
-``config_dir()`` is the folder shipped with rtseg; ``load_toml(name_or_path)`` reads
-``config/<name>.toml`` or any path.  Validation of live-session configuration lives in
-``rtseg.session_config``; detector parameters are read by ``rtseg.detectors``.
+The defaults are the files of the repository's top-level ``config/`` folder (the single
+source).  The build maps that folder into the package as ``rtseg.defaults`` (see
+``[tool.setuptools]`` in ``pyproject.toml``), so a wheel install reads them from
+``site-packages/rtseg/defaults`` through ``importlib.resources``; a checkout without that
+mapping (an older editable install) reads ``config/`` directly.  Users copy a file from
+there and point ``--config`` (or ``--params``) at the copy.
+
+``config_dir()`` is the folder of the shipped defaults; ``load_toml(name_or_path)`` reads
+``<config_dir>/<name>.toml`` or any path.  Validation of live-session configuration lives
+in ``rtseg.session_config``; detector parameters are read by ``rtseg.detectors``.
 """
 
 from __future__ import annotations
 
+import importlib.resources
 import tomllib
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
+
+#: the package holding the shipped defaults (built from the top-level ``config/`` folder)
+DEFAULTS_PACKAGE = "rtseg.defaults"
+#: the top-level ``config/`` folder of a checkout
+REPO_CONFIG = Path(__file__).resolve().parent.parent / "config"
 
 
 class ConfigError(ValueError):
     """Invalid configuration; the message names the file and key."""
 
 
+@lru_cache(maxsize=1)
 def config_dir() -> Path:
-    return Path(__file__).resolve().parent.parent / "config"
+    """Folder of the shipped default configuration files (``live.toml``, ``suits.toml``,
+    ``skeletons.toml``, ``detectors.toml``)."""
+    try:
+        root = importlib.resources.files(DEFAULTS_PACKAGE)
+    except ModuleNotFoundError:
+        return REPO_CONFIG
+    # a namespace package (config/ has no __init__.py) gives a MultiplexedPath; a file in
+    # it is a real path on disk (wheels are installed unpacked)
+    return Path(str(root.joinpath("live.toml"))).parent
 
 
 def load_toml(name_or_path: str | Path) -> dict[str, Any]:
+    """Parsed TOML of ``name_or_path``: a bare name (no suffix) is a shipped default
+    (``"suits"`` -> ``<config_dir>/suits.toml``), anything else a path.  Errors are
+    ``ConfigError`` naming the file."""
     p = Path(name_or_path)
-    if not p.suffix:
+    if isinstance(name_or_path, str) and not p.suffix and len(p.parts) == 1 and not p.exists():
         p = config_dir() / f"{name_or_path}.toml"
+    if p.is_dir():
+        raise ConfigError(f"{p} is a folder, not a configuration file")
     try:
         with open(p, "rb") as fh:
             return tomllib.load(fh)
     except FileNotFoundError:
         raise ConfigError(f"configuration file not found: {p}") from None
+    except PermissionError:
+        raise ConfigError(f"configuration file not readable: {p}") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{p}: not UTF-8 text ({exc.reason})") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{p}: invalid TOML: {exc}") from None
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read: {exc.strerror or exc}") from None
