@@ -49,14 +49,19 @@ def _clean(v: Any) -> Any:
 class CutEvent:
     """One behaviour boundary, as sent to show control.
 
-    event: 1-based running number of cut events this session.
-    segment: index of the segment that starts at this boundary (the first segment of a
-        session is 0, so the first cut starts segment 1).
+    event: 1-based running number of the cuts sent on the wire (OSC) this session, so
+        consecutive numbers there mean no lost message; 0 for a cut kept off the wire
+        (``wire`` False).
+    segment: index of the segment that starts at this boundary in this method's stream
+        (the first segment of a session is 0, so a method's first cut starts segment 1).
     frame: boundary frame (first frame of the new segment), 0-based among received frames.
     time: boundary time, seconds since session start.
     method: detector name ("pca", "ppca", ...).
     label: behaviour label of the new segment; the method name until recognition exists.
-    confidence: 0..1.
+    confidence: 0..1, the same for every method: ``1 - threshold / statistic`` - the
+        fraction of the detector's statistic at the cut that lies beyond its decision
+        threshold (0 = just at the threshold, 0.5 = twice the threshold, -> 1 far past
+        it); clipped to 0..1.
     latency_ms: boundary arrival to send, ms; None until stamped (see module docstring).
     detector_delay_ms: the detector's own delay, ms.
     boundary_recv_time: monotonic ``recv_time`` of the boundary frame, or None.
@@ -66,6 +71,9 @@ class CutEvent:
     detected_recv_time: monotonic ``recv_time`` of the frame that revealed the cut, or None.
     processing_ms: that frame's arrival to the send, ms (the latency rtseg adds, without
         the detector's delay); filled by :meth:`stamped` with ``latency_ms``.
+    wire: True when the cut is sent to the OSC targets (the primary detector's cuts by
+        default, see ``[output] cut_methods``); False when it only goes to the JSON-lines
+        log and the session recording.
     """
     event: int
     segment: int
@@ -82,6 +90,7 @@ class CutEvent:
     wall_time: float = field(default_factory=_wall_time)
     detected_recv_time: float | None = None
     processing_ms: float | None = None
+    wire: bool = True
 
     def __post_init__(self) -> None:
         if not self.label:
@@ -107,6 +116,19 @@ class CutEvent:
         return d
 
 
+#: Input counters carried by ``StatusEvent`` (and ``/rtseg/input``), in argument order.
+INPUT_COUNTERS = ("corrupt", "crc_failures", "bad_messages", "bad_values", "unknown_names")
+
+
+def input_text(counts: Mapping[str, int]) -> str:
+    """One phrase for the status line and the summary, e.g. ``"bad input: 12 corrupt
+    (3 CRC), 0 bad messages, 0 bad values, 4 unknown names"``."""
+    c = {k: int(counts.get(k, 0)) for k in INPUT_COUNTERS}
+    return (f"bad input: {c['corrupt']} corrupt ({c['crc_failures']} CRC), "
+            f"{c['bad_messages']} bad messages, {c['bad_values']} bad values, "
+            f"{c['unknown_names']} unknown names")
+
+
 @dataclass
 class StatusEvent:
     """Once-a-second health report.
@@ -120,6 +142,18 @@ class StatusEvent:
     backlog: frames received but not yet processed - how far the live loop is behind
     (JSON output and recordings only).
     time: seconds since session start.
+
+    Input counters, each since the session started (``INPUT_COUNTERS``; sent over OSC as
+    ``/rtseg/input``, see ``rtseg.publishers.base``).  They count input the source had to
+    refuse, which may or may not have cost frames (a frame lost is in ``dropped``):
+    corrupt: damaged messages (serial: bad COBS/CRC/length/version, garbage lines; OSC:
+        datagrams that are not OSC at all).
+    crc_failures: of ``corrupt``, serial messages whose CRC did not match.
+    bad_messages: well-formed but unusable messages (unknown type or address, wrong
+        argument types, malformed text lines, repeated sequence numbers).
+    bad_values: orientation values refused (NaN/inf, zero or non-unit quaternions), by the
+        driver or by the live loop.
+    unknown_names: sensor ids / bone names not in the suit profile.
     """
     alive: int = 1
     frame_rate: float = 0.0
@@ -130,6 +164,19 @@ class StatusEvent:
     wall_time: float = field(default_factory=_wall_time)
     lag_ms: float = 0.0
     backlog: int = 0
+    corrupt: int = 0
+    crc_failures: int = 0
+    bad_messages: int = 0
+    bad_values: int = 0
+    unknown_names: int = 0
+
+    def input_counts(self) -> dict[str, int]:
+        """The input counters by name (``INPUT_COUNTERS`` order)."""
+        return {k: int(getattr(self, k)) for k in INPUT_COUNTERS}
+
+    def input_text(self) -> str:
+        """``"bad input: 12 corrupt (3 CRC), 0 bad messages, ..."``, one phrase."""
+        return input_text(self.input_counts())
 
     def to_dict(self) -> dict[str, Any]:
         d = {"type": "status"}

@@ -126,12 +126,13 @@ def test_udp_latency_stamped_from_boundary_recv_time(receiver):
 def test_udp_status_and_dropout(receiver):
     with OscUdpPublisher(HOST, receiver.port) as pub:
         pub.publish_status(StatusEvent(alive=1, frame_rate=np.float32(99.5), dropped=np.int64(3),
-                                       stale_joints=2))
+                                       stale_joints=2, corrupt=7, crc_failures=5,
+                                       bad_messages=np.int64(4), bad_values=2, unknown_names=1))
         pub.publish_dropout(DropoutEvent("LeftHand", lost=True))
         pub.publish_dropout(DropoutEvent("LeftHand", lost=False))
-        got = receiver.get(3)
-    assert got == [("/rtseg/status", [1, 99.5, 3, 2]), ("/rtseg/dropout", ["LeftHand", 1]),
-                   ("/rtseg/dropout", ["LeftHand", 0])]
+        got = receiver.get(4)
+    assert got == [("/rtseg/status", [1, 99.5, 3, 2]), ("/rtseg/input", [7, 5, 4, 2, 1]),
+                   ("/rtseg/dropout", ["LeftHand", 1]), ("/rtseg/dropout", ["LeftHand", 0])]
 
 
 def test_udp_big_int_goes_as_int32_on_the_wire():

@@ -18,6 +18,11 @@ address                     tags       arguments
 ``/rtseg/status``           ifii       alive, input frame rate (Hz), dropped frames, stale
                                        joints
 ``/rtseg/dropout``          si         joint/sensor name, 1 lost / 0 restored
+``/rtseg/input``            iiiii      input refused since start: corrupt messages, CRC
+                                       failures (part of corrupt), bad messages, bad
+                                       values, unknown names (``rtseg.events.
+                                       StatusEvent``); sent right after ``/rtseg/status``
+                                       whenever one of them is not 0
 ==========================  =========  ==================================================
 """
 
@@ -29,7 +34,7 @@ import time
 from dataclasses import asdict, dataclass
 from typing import Any, Callable, Sequence
 
-from rtseg.events import CutEvent, DropoutEvent, StatusEvent
+from rtseg.events import INPUT_COUNTERS, CutEvent, DropoutEvent, StatusEvent
 from rtseg.publishers.oscmsg import encode_message
 from rtseg.publishers.templates import AddressTemplate, cut_arg_value, sanitize_label
 
@@ -146,6 +151,11 @@ def status_message(ev: StatusEvent) -> bytes:
                           [ev.alive, ev.frame_rate, ev.dropped, ev.stale_joints])
 
 
+def input_message(ev: StatusEvent) -> bytes:
+    return encode_message("/rtseg/input", "iiiii",
+                          [int(getattr(ev, k)) for k in INPUT_COUNTERS])
+
+
 def dropout_message(ev: DropoutEvent) -> bytes:
     return encode_message("/rtseg/dropout", "si", [ev.name, 1 if ev.lost else 0])
 
@@ -184,7 +194,9 @@ class OscPublisher(Publisher):
 
     def publish_status(self, ev: StatusEvent) -> None:
         if self.standard:
-            self._guarded(lambda: [status_message(ev)], "status event")
+            self._guarded(lambda: [status_message(ev)] + (
+                [input_message(ev)] if any(getattr(ev, k, 0) for k in INPUT_COUNTERS) else []),
+                "status event")
 
     def publish_dropout(self, ev: DropoutEvent) -> None:
         if self.standard:
