@@ -110,6 +110,13 @@ def _methods(v: Any) -> str | None:
     return None
 
 
+def _cut_methods(v: Any) -> str | None:
+    if isinstance(v, str):
+        return None if v in ("primary", "all") else \
+            f"must be 'primary', 'all' or a list of methods; got {v!r}"
+    return None if v else "an empty list would send no cut; use 'primary' or 'all'"
+
+
 SCHEMA: dict[str, dict[str, Key]] = {
     "source": {
         "suit": Key("str", "default17", doc="suit profile in config/suits.toml (serial ids -> bones)"),
@@ -125,6 +132,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
     "detectors": {
         "methods": Key("list[str]", ["pca", "ppca"], _methods),
+        "primary": Key("str", "", doc="the detector whose cuts go on the wire by default; "
+                                      "'' = the first of methods"),
         "params": Key("str", "", doc="detector parameter file; '' = config/detectors.toml"),
         "pca": Key("table", {}, doc="overrides of the pca parameters"),
         "ppca": Key("table", {}, doc="overrides of the ppca parameters"),
@@ -137,6 +146,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "targets": Key("list[str]", [], item_check=_check_spec,
                        doc="full target specs of rtseg.publishers.parse_target"),
         "jsonl": Key("str", "", doc="JSON-lines event log path, '-' for stdout, '' for none"),
+        "cut_methods": Key("str|list[str]", "primary", _cut_methods,
+                           doc="detectors whose cuts go to OSC: 'primary', 'all' or a list; "
+                               "every cut still goes to the JSON-lines log and the recording"),
     },
     "recording": {
         "dir": Key("str", "", doc="folder for the session recording; '' = do not record"),
@@ -199,6 +211,8 @@ def _type_ok(kind: str, v: Any) -> bool:
         return isinstance(v, bool)
     if kind == "list[str]":
         return isinstance(v, list) and all(isinstance(x, str) for x in v)
+    if kind == "str|list[str]":
+        return _type_ok("str", v) or _type_ok("list[str]", v)
     if kind == "table":
         return isinstance(v, dict)
     raise AssertionError(kind)
