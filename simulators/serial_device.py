@@ -14,17 +14,20 @@ symlink at it, as udev does with ``/dev/serial/by-id/...`` links.
 What is sent
 ------------
 Frame k = 0, 1, 2, ... is take frame ``k % n_frames`` (``loop=True``) sent at
-``t0 + k / rate`` (+ jitter) with device time ``start_time_us + round(k * 1e6 / rate)``;
+``t0 + k / (rate * speed)`` (+ jitter) with device time ``start_time_us + round(k * 1e6 /
+rate)``: ``speed`` > 1 sends faster while the device clock (and the sequence numbers)
+keep the take's own frame clock, so a receiver that times by the device sees the take's
+seconds;
 ``t0`` is when a reader first opened the port (``wait_reader``, the default: like a board
 that starts streaming when the port is opened, no frame is lost to a late reader).
 The device's clock keeps running while unplugged: frames due then are lost (recorded) and
 the sequence number keeps counting, so a receiver sees the loss as a sequence gap.  In the
 binary format a device-info message (type 3) follows each (re)plug; it takes a sequence
-number like every message.  Sensors are the suit's (``config/suits.toml``); a take joint
-maps to a suit bone by case-insensitive name, else via ``joint_map`` or the built-in CMU
-(ASF) name table.  Local takes are converted to global orientations
-(``rtseg.quat.global_from_local``).  Sensors in a fault dropout, or whose ``take.valid``
-is False, are left out of that frame.
+number like every message.  Fault schedules (unplug, dropout windows) are in take seconds
+(``k / rate``).  Sensors are the suit's (``config/suits.toml``); each carries the global
+orientation of the take joint that the skeleton map gives it, by forward kinematics, with
+optional IMU noise and heading drift (:mod:`rtseg.simulators.retarget`).  Sensors in a
+fault dropout, or whose take joint is not valid, are left out of that frame.
 
 ``sent_log`` lists one :class:`SentMessage` per message attempted, with its fate.
 """
@@ -48,8 +51,8 @@ import numpy as np
 
 from rtseg.drivers import codec_serial as codec
 from rtseg.profiles import SuitProfile, suit_profile
-from rtseg.quat import global_from_local, normalize
 from rtseg.simulators.faults import FaultConfig, FaultInjector
+from rtseg.simulators.retarget import ImuModel, retarget
 from rtseg.take import Take
 
 log = logging.getLogger("rtseg.simulators.serial")
@@ -58,17 +61,6 @@ READER_SETTLE_S = 0.2
 """With ``wait_reader``, sending starts this long after a reader opened the port, as a
 board reset by the port's DTR line starts streaming after it boots (and so the reader's
 own input flush at open cannot swallow the first frames)."""
-
-#: CMU / Acclaim ASF segment -> HumanBodyBones bone carried by the same body part.
-CMU_TO_HUMANOID: dict[str, str] = {
-    "root": "Hips", "lowerback": "Spine", "upperback": "Chest", "lowerneck": "Neck",
-    "head": "Head", "lhumerus": "LeftUpperArm", "lradius": "LeftLowerArm",
-    "lhand": "LeftHand", "rhumerus": "RightUpperArm", "rradius": "RightLowerArm",
-    "rhand": "RightHand", "lfemur": "LeftUpperLeg", "ltibia": "LeftLowerLeg",
-    "lfoot": "LeftFoot", "rfemur": "RightUpperLeg", "rtibia": "RightLowerLeg",
-    "rfoot": "RightFoot",
-}
-
 
 @dataclass(slots=True)
 class SentMessage:
@@ -87,48 +79,17 @@ class SentMessage:
     fate: str
 
 
-def suit_orientations(take: Take, suit: SuitProfile, joint_map: dict[str, str] | None = None
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Global orientations of the suit's sensors from a take.
-
-    Returns (quats (frames, sensors, 4) scalar-last, present (sensors,) bool - the take has
-    that bone, valid (frames, sensors) bool).  ValueError if no bone of the suit is found.
-    """
-    names = [n.lower() for n in take.joint_names]
-    mapping = {k.lower(): v.lower() for k, v in (joint_map or {}).items()}
-    by_bone: dict[str, int] = {}
-    for j, n in enumerate(names):
-        bone = mapping.get(n) or n
-        by_bone.setdefault(bone, j)
-    if not any(b.lower() in by_bone for b in suit.bones):
-        for j, n in enumerate(names):
-            if n in CMU_TO_HUMANOID:
-                by_bone.setdefault(CMU_TO_HUMANOID[n].lower(), j)
-    cols = [by_bone.get(b.lower(), -1) for b in suit.bones]
-    present = np.array([c >= 0 for c in cols])
-    if not present.any():
-        raise ValueError(
-            f"take {take.source or '<memory>'} has none of suit {suit.name!r}'s bones "
-            f"({', '.join(suit.bones[:4])}, ...); pass joint_map")
-    q = take.quats
-    if take.space == "local":
-        q = global_from_local(q, list(take.parents))
-    q = normalize(q)
-    out = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (take.n_frames, len(suit.bones), 1))
-    valid = np.zeros((take.n_frames, len(suit.bones)), dtype=bool)
-    for k, c in enumerate(cols):
-        if c >= 0:
-            out[:, k] = q[:, c]
-            valid[:, k] = True if take.valid is None else take.valid[:, c]
-    return out, present, valid
-
-
 class SerialSuit:
     """Simulated suit on a pty; see the module docstring.
 
-    ``take_or_frames``: a ``Take`` (any space; mapped to the suit's bones) or an array
+    ``take_or_frames``: a ``Take`` (any space; retargeted to the suit's bones with
+    ``skeleton_map`` (a name of ``retarget.MAPS``, default detected), ``joint_map``
+    (suit bone -> take joint overrides), ``imu`` (an ``ImuModel`` or its spec string) and
+    ``allow_missing``, see :func:`rtseg.simulators.retarget.retarget`) or an array
     (frames, sensors, 4) of global scalar-last orientations in suit order.  ``rate``: Hz
-    (default the take's, else the suit's).  ``faults``: ``FaultConfig``, its CLI string or
+    of the take's frame clock (default the take's, else the suit's); ``speed``: frames go
+    out ``speed`` times faster than that clock while device time and sequence numbers
+    follow it.  ``faults``: ``FaultConfig``, its CLI string or
     a ``FaultInjector`` (to share its record).  ``link``: the stable device path.
     ``fmt``: "rtseg" (binary) or "text".  ``loop``: repeat the take forever.
     ``start_seq`` / ``start_time_us``: first sequence number and device time (to exercise
@@ -143,12 +104,22 @@ class SerialSuit:
                  link: str | os.PathLike | None = None, fmt: str = "rtseg", loop: bool = False,
                  suit: str | SuitProfile = "default17", joint_map: dict[str, str] | None = None,
                  start_seq: int = 0, start_time_us: int = 0, text_blank_line: bool = False,
-                 status: int = codec.STATUS_DEFAULT, wait_reader: bool = True) -> None:
+                 status: int = codec.STATUS_DEFAULT, wait_reader: bool = True,
+                 speed: float = 1.0, skeleton_map: str | None = None,
+                 imu: ImuModel | str | None = None, allow_missing: bool = False) -> None:
         if fmt not in ("rtseg", "text"):
             raise ValueError(f"fmt must be 'rtseg' or 'text', not {fmt!r}")
+        if not (isinstance(speed, (int, float)) and 0 < speed < float("inf")):
+            raise ValueError(f"speed must be a positive number, got {speed!r}")
+        self.speed = float(speed)
         self.suit = suit if isinstance(suit, SuitProfile) else suit_profile(suit)
+        self.retargeted = None
         if isinstance(take_or_frames, Take):
-            self.quats, present, self.valid = suit_orientations(take_or_frames, self.suit, joint_map)
+            imu_model = ImuModel.parse(imu) if isinstance(imu, str) or imu is None else imu
+            self.retargeted = retarget(take_or_frames, self.suit, skeleton_map, joint_map,
+                                       imu_model, allow_missing)
+            self.quats, present = self.retargeted.quats, self.retargeted.present
+            self.valid = self.retargeted.valid
             default_rate = take_or_frames.frame_rate
         else:
             q = np.asarray(take_or_frames, dtype=np.float64)
@@ -365,8 +336,8 @@ class SerialSuit:
                 self._done.set()
                 self._stop.wait(0.05)
                 continue
-            t_rel = frame / self.rate
-            due = t0 + t_rel
+            t_rel = frame / self.rate          # take time (device clock)
+            due = t0 + t_rel / self.speed
             now = time.monotonic()
             if due > now:
                 if self._stop.wait(due - now):
@@ -393,7 +364,8 @@ class SerialSuit:
                     inj.note_unplug(sched_unplug_start, t_rel)
                     sched_unplug_start = None
                 else:
-                    inj.note_unplug((unplugged_since or back) - t0, back - t0)
+                    inj.note_unplug(((unplugged_since or back) - t0) * self.speed,
+                                    (back - t0) * self.speed)
                 replug_at = unplugged_since = None
                 send_info = self.fmt == "rtseg"
             seq = (self.start_seq + index) & 0xFFFF
@@ -435,6 +407,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("take", nargs="?", help="take file (.amc/.bvh/.npz/.csv); default: synthesised")
     p.add_argument("--skeleton", help="ASF for an .amc take")
     p.add_argument("--rate", type=float, help="frames per second (default: the take's)")
+    p.add_argument("--speed", type=float, default=1.0,
+                   help="send this many times faster; device time keeps the take's clock")
     p.add_argument("--format", choices=("rtseg", "text"), default="rtseg")
     p.add_argument("--faults", default="", help="e.g. corrupt=0.01,drop=0.02,unplug=10:0.5")
     p.add_argument("--link", help="stable device path (symlink) to create")
@@ -448,7 +422,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         from rtseg.simulators.synth import synthesize
         take = synthesize().take
     suit = SerialSuit(take, rate=args.rate, faults=FaultConfig.parse(args.faults), link=args.link,
-                      fmt=args.format, loop=not args.once, suit=args.suit)
+                      fmt=args.format, loop=not args.once, suit=args.suit, speed=args.speed)
     path = suit.start()
     print(path, flush=True)
     try:

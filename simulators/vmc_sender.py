@@ -6,15 +6,22 @@ bridges) do: ``/VMC/Ext/Root/Pos``, one ``/VMC/Ext/Bone/Pos`` per bone, ``/VMC/E
 ``/VMC/Ext/OK``, packed into bundles of at most ``max_datagram`` bytes (one skeleton may
 span several datagrams).
 
-Take conventions: rotations ``take.quats`` in rtseg's right-handed Y-up frame,
-scalar-last; ``space="local"`` is sent as is, ``"global"`` is first converted to
-parent-relative rotations.  Joint names are matched case-insensitively against Unity
-``HumanBodyBones`` and sent in Unity spelling; joints with other names are not sent
-(listed in ``.skipped_joints``).  ``take.root_position`` is sent as the Root/Pos position
-(scaled to metres when ``take.length_unit`` is a known unit); bone positions are zero.
-``/VMC/Ext/T`` is the sender clock: slot ``k`` of the schedule is sent at ``k / rate``
-seconds after start and carries T = ``k / rate``.  Frames where ``take.valid`` is False
-omit that bone.
+What is sent: the take is retargeted to the bones of ``suit`` (a ``config/suits.toml``
+profile, Unity ``HumanBodyBones`` names, default ``default17`` - the receiver's default
+too) by :func:`rtseg.simulators.retarget.retarget`: a named skeleton map (CMU ASF/AMC,
+CMU BVH, Mixamo, Unity humanoid; detected or ``skeleton_map``) picks the take joint of
+each bone, forward kinematics gives its global orientation (optional IMU noise / drift),
+and each bone is sent **relative to its parent in the suit's hierarchy**
+(q_parent⁻¹ ⊗ q_child, rtseg's right-handed Y-up frame, scalar-last), which is how the
+VMC receiver (``osc://...?format=vmc&suit=...``) chains them.  Take joints that no bone
+uses are listed in ``.skipped_joints``.  ``take.root_position`` is sent as the Root/Pos
+position (scaled to metres when the take says how: ``meta["metres_per_unit"]`` or a known
+``length_unit``); bone positions are zero.
+
+Clock: ``/VMC/Ext/T`` is the take's frame clock: slot ``k`` carries T = ``k / rate`` and
+is sent ``k / (rate * speed)`` seconds after start, so ``speed`` > 1 replays faster while
+T still advances in take seconds.  Frames where a bone's take joint is not valid omit
+that bone.
 
 Faults: ``faults`` is a :class:`rtseg.simulators.faults.FaultConfig`, a ``FaultInjector``
 or a CLI spec (``"drop=0.05,jitter=0.002,dropout=LeftHand:1:0.5,corrupt=0.001"``).  One
@@ -38,8 +45,9 @@ from typing import Any
 
 import numpy as np
 
-from rtseg import quat
 from rtseg.drivers.codec_vmc import DEFAULT_MAX_DATAGRAM, canonical_bone_name, encode_frame
+from rtseg.profiles import SuitProfile, suit_profile
+from rtseg.simulators.retarget import ImuModel, retarget
 from rtseg.take import Take
 
 log = logging.getLogger("rtseg.simulators.vmc")
@@ -68,14 +76,20 @@ class SentFrame:
 class VmcSender:
     """Send ``take`` as VMC to ``host:port`` from a background thread (see module doc).
 
-    ``rate``: frames per second (default ``take.frame_rate``).  ``loop``: start over at the
-    end (T keeps increasing).  ``start()``/``stop()``/``wait()``, or use as a context
-    manager.  ``ok``: ``/VMC/Ext/OK`` arguments (None to omit), ``send_time``: include
-    ``/VMC/Ext/T``; ``send_root``: include ``/VMC/Ext/Root/Pos``.
+    ``rate``: frames per second of the take's clock (default ``take.frame_rate``);
+    ``speed``: send that many times faster (T keeps the take's clock).  ``loop``: start over
+    at the end (T keeps increasing).  ``suit``, ``skeleton_map``, ``joint_map`` (suit bone
+    -> take joint), ``imu`` (``ImuModel`` or spec) and ``allow_missing``: retargeting, see
+    :func:`rtseg.simulators.retarget.retarget`.  ``start()``/``stop()``/``wait()``, or use
+    as a context manager.  ``ok``: ``/VMC/Ext/OK`` arguments (None to omit),
+    ``send_time``: include ``/VMC/Ext/T``; ``send_root``: include ``/VMC/Ext/Root/Pos``.
     """
 
     def __init__(self, take: Take, host: str = "127.0.0.1", port: int = 39539,
                  rate: float | None = None, faults: Any = None, loop: bool = False, *,
+                 speed: float = 1.0, suit: str | SuitProfile = "default17",
+                 skeleton_map: str | None = None, joint_map: dict[str, str] | None = None,
+                 imu: ImuModel | str | None = None, allow_missing: bool = False,
                  max_datagram: int = DEFAULT_MAX_DATAGRAM,
                  ok: tuple[int, ...] | None = (1, 3, 0, 1), send_time: bool = True,
                  send_root: bool = True) -> None:
@@ -85,38 +99,34 @@ class VmcSender:
         self.rate = float(rate) if rate is not None else float(take.frame_rate)
         if not self.rate > 0:
             raise ValueError(f"rate must be positive, got {rate}")
+        if not (isinstance(speed, (int, float)) and 0 < speed < float("inf")):
+            raise ValueError(f"speed must be a positive number, got {speed!r}")
+        self.speed = float(speed)
         self.loop = loop
         self.max_datagram = max_datagram
         self.ok = ok
         self.send_time = send_time
         self.send_root = send_root
-        names: list[str] = []
-        cols: list[int] = []
-        self.skipped_joints: list[str] = []
-        for j, name in enumerate(take.joint_names):
-            bone = canonical_bone_name(name)
-            if bone is None:
-                self.skipped_joints.append(name)
-            elif bone in names:
-                raise ValueError(f"take joints {take.joint_names[cols[names.index(bone)]]!r} and "
-                                 f"{name!r} both map to HumanBodyBones {bone!r}")
-            else:
-                names.append(bone)
-                cols.append(j)
-        if not names:
-            raise ValueError(f"no joint of take {take.source or '<memory>'} is a HumanBodyBones "
-                             f"name: {', '.join(take.joint_names)}")
-        if self.skipped_joints:
-            log.info("VMC sender: joints without a HumanBodyBones name not sent: %s",
-                     ", ".join(self.skipped_joints))
-        self.bone_names = names
-        q = take.quats if take.space == "local" else quat.local_from_global(take.quats, take.parents)
-        self._quats = np.ascontiguousarray(q[:, cols, :])
-        self._valid = None if take.valid is None else take.valid[:, cols]
+        self.suit = suit if isinstance(suit, SuitProfile) else suit_profile(suit)
+        imu_model = ImuModel.parse(imu) if isinstance(imu, str) or imu is None else imu
+        self.retargeted = rt = retarget(take, self.suit, skeleton_map, joint_map, imu_model,
+                                        allow_missing)
+        sent = np.flatnonzero(rt.present)
+        for k in sent:
+            if canonical_bone_name(self.suit.bones[k]) is None:
+                raise ValueError(f"suit {self.suit.name!r} bone {self.suit.bones[k]!r} is not a "
+                                 f"HumanBodyBones name: VMC cannot carry it")
+        self.bone_names = [canonical_bone_name(self.suit.bones[k]) for k in sent]
+        used = {rt.columns[k] for k in sent}
+        self.skipped_joints = [n for j, n in enumerate(take.joint_names) if j not in used]
+        self._quats = np.ascontiguousarray(rt.local()[:, sent, :])
+        self._valid = None if rt.valid[:, sent].all() else rt.valid[:, sent]
         self._root = None
         if send_root and take.root_position is not None:
-            scale = UNIT_SCALE.get(take.length_unit.lower(), 1.0)
-            self._root = take.root_position * scale
+            scale = take.meta.get("metres_per_unit")
+            if not isinstance(scale, (int, float)) or not scale > 0:
+                scale = UNIT_SCALE.get(take.length_unit.lower(), 1.0)
+            self._root = take.root_position * float(scale)
         #: The FaultInjector in use (its ``record`` says what was damaged), or None.
         self.injector = _make_injector(faults)
         self.sent_log: list[SentFrame] = []
@@ -194,7 +204,8 @@ class VmcSender:
 
     def _run(self) -> None:
         n = self._quats.shape[0]
-        period = 1.0 / self.rate
+        period = 1.0 / self.rate               # take seconds per slot (T)
+        wall = period / self.speed             # wall seconds per slot
         inj = self.injector
         t0 = time.monotonic()
         slot = 0
@@ -205,7 +216,7 @@ class VmcSender:
                 index = slot % n
                 t_sched = slot * period
                 jitter = inj.jitter() if inj else 0.0
-                delay = t0 + t_sched + jitter - time.monotonic()
+                delay = t0 + slot * wall + jitter - time.monotonic()
                 if delay > 0 and self._stop.wait(delay):
                     break
                 if inj and inj.unplugged(t_sched):
@@ -272,6 +283,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--host", default="127.0.0.1")
     p.add_argument("--port", type=int, default=39539)
     p.add_argument("--rate", type=float, help="frames per second (default: the take's)")
+    p.add_argument("--speed", type=float, default=1.0,
+                   help="send this many times faster; /VMC/Ext/T keeps the take's clock")
     p.add_argument("--loop", action="store_true", help="repeat forever")
     p.add_argument("--seed", type=int, default=0, help="synthesiser seed")
     p.add_argument("--faults", help="fault spec, e.g. drop=0.02,jitter=0.002,dropout=LeftHand:2:1")
@@ -283,7 +296,7 @@ def main(argv: list[str] | None = None) -> int:
         from rtseg.simulators.synth import synthesize
         take = synthesize(args.script, seed=args.seed).take
     with VmcSender(take, args.host, args.port, rate=args.rate, faults=args.faults,
-                   loop=args.loop) as sender:
+                   loop=args.loop, speed=args.speed) as sender:
         try:
             while not sender.wait(0.5):
                 pass

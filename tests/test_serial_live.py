@@ -319,20 +319,26 @@ def test_scheduled_unplugs_from_fault_string(rig):
                if m.frame >= 0 and suit.injector.unplugged(m.frame / 200.0))
 
 
-def test_take_mapping_cmu_names_and_joint_map():
-    from rtseg.simulators.serial_device import suit_orientations
-    names = ["root", "lowerback", "upperback", "lhumerus", "mystery"]
+def test_suit_retargets_a_partial_cmu_take_and_joint_map():
+    """The suit's sensors come from rtseg.simulators.retarget (maps tested in
+    test_retarget.py): a partial CMU take is refused naming the unmapped bones, or sent
+    without them when allowed; a joint map places a bone by hand."""
+    from rtseg.simulators.retarget import RetargetError
+    names = ["root", "lowerback", "thorax", "lhumerus", "mystery"]
     q = np.tile([0.0, 0.0, np.sin(0.25), np.cos(0.25)], (3, 5, 1))
     take = Take(names, [-1, 0, 1, 2, 0], 120.0, q, space="local")
-    quats, present, valid = suit_orientations(take, SUIT)
+    with pytest.raises(RetargetError, match="Head .*looked for head"):
+        SerialSuit(take)
+    suit = SerialSuit(take, allow_missing=True)
+    present = suit.retargeted.present
     assert [SUIT.bones[k] for k in np.flatnonzero(present)] == ["Hips", "Spine", "Chest", "LeftUpperArm"]
     g = global_from_local(q, take.parents)
-    np.testing.assert_allclose(quats[:, SUIT.bones.index("LeftUpperArm")], g[:, 3])
-    assert not valid[:, SUIT.bones.index("Head")].any()
-    quats, present, _ = suit_orientations(take, SUIT, joint_map={"mystery": "Head"})
-    assert present[SUIT.bones.index("Head")]
-    with pytest.raises(ValueError, match="none of suit"):
-        suit_orientations(Take(["a"], [-1], 120.0, q[:, :1]), SUIT)
+    np.testing.assert_allclose(suit.quats[:, SUIT.bones.index("LeftUpperArm")], g[:, 3])
+    assert not suit.valid[:, SUIT.bones.index("Head")].any()
+    suit = SerialSuit(take, allow_missing=True, joint_map={"Head": "mystery"})
+    assert suit.valid[:, SUIT.bones.index("Head")].all()
+    with pytest.raises(RetargetError, match="no known skeleton family"):
+        SerialSuit(Take(["a"], [-1], 120.0, q[:, :1]))
 
 
 def test_sequence_numbering_of_info_messages_and_duplicates(raw_pty):

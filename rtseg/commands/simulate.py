@@ -2,12 +2,26 @@
 
     rtseg simulate serial [--synth SCRIPT | --take FILE [--skeleton ASF]] [--link PATH]
                           [--format rtseg|text] [--faults SPEC] [--loop] [--duration S]
+                          [--speed X] [--start S] [--end S] [--imu SPEC] [--map NAME]
     rtseg simulate vmc    [--synth SCRIPT | --take FILE] [--host H] [--port P] ...
 
 ``serial`` serves the take on a pseudo-terminal (``rtseg.simulators.serial_device.SerialSuit``)
-and prints its device path - read it with ``rtseg live --source serial://PATH``.
+and prints its device path - read it with ``rtseg live serial://PATH``.
 ``vmc`` sends it as VMC over OSC/UDP (``rtseg.simulators.vmc_sender.VmcSender``) to
-``--host``:``--port`` (default 127.0.0.1:39539, the VMC receiver port).
+``--host``:``--port`` (default 127.0.0.1:39539, the VMC receiver port) - read it with
+``rtseg live "osc://127.0.0.1:39539?format=vmc"``.
+
+A recorded take is retargeted to the suit (``rtseg.simulators.retarget``): the skeleton
+family (CMU ASF/AMC, CMU BVH, Mixamo, Unity humanoid) is detected from the joint names
+(or named with ``--map``), each suit sensor gets the global orientation of its body
+segment by forward kinematics, optionally with IMU noise and heading drift (``--imu
+noise=0.5,drift=3,seed=1``: degrees, degrees per minute).  A suit bone the map cannot
+place is an error naming it; ``--joint-map Head=upperneck,...`` places it by hand and
+``--allow-missing`` sends the suit without it.
+
+``--speed X`` sends X times faster while the stream keeps the take's own clock (serial
+device time and sequence numbers, VMC ``/VMC/Ext/T``); ``--start``/``--end`` (take
+seconds) send only that part of the take.
 
 Without ``--take`` the built-in synthesiser performs ``--synth`` (default: its default
 script) with ``--seed``; the exact transition frame ranges (the blend spans) are printed so
@@ -47,6 +61,21 @@ def register(subparsers: Any) -> None:
                    "take's rate (default: the take's own, 120 for the synthesiser)")
     p.add_argument("--faults", default="", metavar="SPEC", help="fault injection, e.g. "
                    "corrupt=0.001,drop=0.01,jitter=0.002,dropout=5:2:1,unplug=10:0.5,seed=1")
+    p.add_argument("--speed", type=float, default=1.0, metavar="X",
+                   help="send X times faster than real time; the stream's own clock (device "
+                   "time, sequence numbers, /VMC/Ext/T) stays the take's (default 1)")
+    p.add_argument("--start", type=float, metavar="S", help="send the take from S seconds")
+    p.add_argument("--end", type=float, metavar="S", help="send the take up to S seconds")
+    p.add_argument("--map", dest="skeleton_map", metavar="NAME",
+                   help="skeleton map of a take (cmu-asf, cmu-bvh, mixamo, unity; "
+                   "default: detected from the joint names)")
+    p.add_argument("--joint-map", metavar="BONE=JOINT,...", default="",
+                   help="place suit bones on take joints by hand, e.g. Head=upperneck")
+    p.add_argument("--allow-missing", action="store_true",
+                   help="send the suit without the bones the take has no joint for")
+    p.add_argument("--imu", metavar="SPEC", default="",
+                   help="IMU errors: noise=DEG (white, per axis), drift=DEG_PER_MIN (heading), "
+                   "seed=N")
     p.add_argument("--loop", action="store_true", help="repeat the take until stopped")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     p.add_argument("--save", metavar="NPZ", help="also write the take (with the synthesiser's "
@@ -56,7 +85,8 @@ def register(subparsers: Any) -> None:
                    "(default: a fresh temporary path)")
     g.add_argument("--format", choices=("rtseg", "text"), default="rtseg",
                    help="wire format (default rtseg binary frames)")
-    g.add_argument("--suit", default="default17", help="suit profile (config/suits.toml)")
+    p.add_argument("--suit", default="default17", help="suit profile (config/suits.toml): "
+                   "the sensors (serial) or bones and hierarchy (VMC) sent")
     g.add_argument("--linger", type=float, default=0.5, metavar="S",
                    help="keep the device open S seconds after the last frame (default 0.5)")
     g = p.add_argument_group("vmc")
@@ -75,17 +105,51 @@ def load(args: argparse.Namespace):
         raise ValueError(f"--rate must be positive, got {args.rate}")
     if args.duration is not None and not args.duration > 0:
         raise ValueError(f"--duration must be positive, got {args.duration}")
+    if not (0 < args.speed < float("inf")):
+        raise ValueError(f"--speed must be a positive number, got {args.speed}")
+    for name in ("start", "end"):
+        v = getattr(args, name)
+        if v is not None and not (0 <= v < float("inf")):
+            raise ValueError(f"--{name} must be a number of seconds >= 0, got {v}")
     if args.faults:
         from rtseg.simulators.faults import FaultConfig
         FaultConfig.parse(args.faults)          # fail before anything starts
+    from rtseg.simulators.retarget import ImuModel
+    ImuModel.parse(args.imu)
+    parse_joint_map(args.joint_map)
     if args.take:
         from rtseg.drivers.readers import read_take
-        return read_take(args.take, skeleton=args.skeleton, frame_rate=args.rate), None
-    if args.skeleton:
-        raise ValueError("--skeleton goes with --take")
-    from rtseg.simulators.synth import DEFAULT_SCRIPT, synthesize
-    result = synthesize(args.synth or DEFAULT_SCRIPT, frame_rate=args.rate or 120.0, seed=args.seed)
-    return result.take, result
+        take, result = read_take(args.take, skeleton=args.skeleton, frame_rate=args.rate), None
+    else:
+        if args.skeleton:
+            raise ValueError("--skeleton goes with --take")
+        from rtseg.simulators.synth import DEFAULT_SCRIPT, synthesize
+        result = synthesize(args.synth or DEFAULT_SCRIPT, frame_rate=args.rate or 120.0,
+                            seed=args.seed)
+        take = result.take
+    return take, result
+
+
+def parse_joint_map(spec: str) -> dict[str, str]:
+    """``"Head=upperneck,Chest=upperback"`` -> {suit bone: take joint}."""
+    out: dict[str, str] = {}
+    for part in filter(None, (p.strip() for p in spec.split(","))):
+        bone, eq, joint = (x.strip() for x in part.partition("="))
+        if not eq or not bone or not joint:
+            raise ValueError(f"--joint-map: expected BONE=JOINT, got {part!r}")
+        out[bone] = joint
+    return out
+
+
+def portion(take: Take, start: float | None, end: float | None) -> Take:
+    """Frames of ``take`` from ``start`` to ``end`` seconds (take time)."""
+    if start is None and end is None:
+        return take
+    a = 0 if start is None else int(round(start * take.frame_rate))
+    b = take.n_frames if end is None else min(take.n_frames, int(round(end * take.frame_rate)))
+    if a >= b:
+        raise ValueError(f"--start/--end select no frame of the {take.duration:.2f} s take")
+    return take.slice(a, b)
 
 
 def describe(take: Take, result) -> None:
@@ -126,15 +190,23 @@ def _run_until(done: Callable[[float], bool], duration: float | None) -> str:
             return "end of take"
 
 
+def _retarget_kw(args) -> dict:
+    return {"skeleton_map": args.skeleton_map, "joint_map": parse_joint_map(args.joint_map),
+            "imu": args.imu or None, "allow_missing": args.allow_missing}
+
+
 def _serve_serial(args, take: Take) -> tuple[str, list[str]]:
     from rtseg.simulators.faults import FaultConfig
     from rtseg.simulators.serial_device import SerialSuit
 
     suit = SerialSuit(take, faults=FaultConfig.parse(args.faults), link=args.link,
-                      fmt=args.format, loop=args.loop, suit=args.suit)
+                      fmt=args.format, loop=args.loop, suit=args.suit, speed=args.speed,
+                      **_retarget_kw(args))
+    _out(f"  {suit.retargeted.describe(take.joint_names)}")
     path = suit.start()
-    _out(f"serial device: {path}")
-    _out(f"  read it with: rtseg live --source serial://{path}"
+    _out(f"serial device: {path} ({len(suit.suit.bones)}-sensor suit {suit.suit.name}, "
+         f"{suit.rate:g} Hz device clock, sent at x{suit.speed:g})")
+    _out(f"  read it with: rtseg live serial://{path}"
          + ("?format=text&baud=115200" if args.format == "text" else ""))
     t0 = time.monotonic()
     reason = "interrupted"
@@ -166,12 +238,13 @@ def _serve_vmc(args, take: Take) -> tuple[str, list[str]]:
 
     if not 0 < args.port < 65536:
         raise ValueError(f"--port must be 1..65535, got {args.port}")
-    sender = VmcSender(take, args.host, args.port, faults=args.faults or None, loop=args.loop)
+    sender = VmcSender(take, args.host, args.port, faults=args.faults or None, loop=args.loop,
+                       speed=args.speed, suit=args.suit, **_retarget_kw(args))
+    _out(f"  {sender.retargeted.describe(take.joint_names)}")
     _out(f"VMC sender: {len(sender.bone_names)} bones to udp {args.host}:{args.port} "
-         f"at {sender.rate:g} Hz")
-    if sender.skipped_joints:
-        _out(f"  not sent (no HumanBodyBones name): {', '.join(sender.skipped_joints)}")
-    _out(f"  receive it with: rtseg live --source osc://0.0.0.0:{args.port}")
+         f"at {sender.rate:g} Hz (T in take seconds), sent at x{sender.speed:g}")
+    _out(f"  receive it with: rtseg live \"osc://{args.host}:{args.port}?format=vmc"
+         f"&suit={sender.suit.name}\"")
     t0 = time.monotonic()
     reason = "interrupted"
     sender.start()
@@ -197,6 +270,10 @@ def _serve_vmc(args, take: Take) -> tuple[str, list[str]]:
 def run(args: argparse.Namespace) -> int:
     take, result = load(args)
     describe(take, result)
+    part = portion(take, args.start, args.end)
+    if part is not take:
+        _out(f"sending {part.n_frames} frames ({part.duration:.2f} s) from "
+             f"{(args.start or 0.0):.2f} s")
     if args.save:
         from rtseg.drivers.readers import write_take
         _out(f"saved take to {write_take(args.save, take)}")
@@ -208,7 +285,7 @@ def run(args: argparse.Namespace) -> int:
         pass
     try:
         serve = _serve_serial if args.device == "serial" else _serve_vmc
-        reason, lines = serve(args, take)
+        reason, lines = serve(args, part)
     finally:
         if old is not None:
             signal.signal(signal.SIGTERM, old)
