@@ -39,6 +39,23 @@ datagram sent) is measured for every frame that revealed a cut (``LiveStats.cut_
 and, for benchmarking, the arrival -> end-of-processing time of every frame
 (``LiveStats.frame_latency_ms``).
 
+One cut per change on the wire
+------------------------------
+Every detector in ``detectors.methods`` runs on every frame, but by default only the
+*primary* one's cuts (``detectors.primary``, default the first of ``methods``) are sent to
+the OSC targets (``/rtseg/cut`` and templates), so one behaviour change fires one cue.
+``output.cut_methods = "all"`` (or a list of methods) sends other streams too.  Every cut of
+every detector still goes to the JSON-lines targets and the session recording, with
+``CutEvent.wire`` saying whether it was sent (``wire_methods``).
+
+Input counters
+--------------
+Input the source had to refuse (corrupt messages, CRC failures, bad messages, bad values,
+unknown names: ``rtseg.events.INPUT_COUNTERS``) is read from ``source.stats`` (plus the
+pipeline's own ``bad_values``) into every ``StatusEvent`` (``/rtseg/input`` over OSC, the
+JSON-lines log, the recording) and the ``SessionSummary``.  These are counts of refused
+input, not of lost frames (``dropped``).
+
 Shutdown
 --------
 SIGINT / SIGTERM (when ``run()`` is called from the main thread) only set a stop flag; the
@@ -60,7 +77,7 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from rtseg.config import ConfigError
-from rtseg.events import CutEvent, DropoutEvent, StatusEvent
+from rtseg.events import INPUT_COUNTERS, CutEvent, DropoutEvent, StatusEvent, input_text
 from rtseg.pipeline import (DEFAULT_FRAME_RATE, Pipeline, PipelineCut, PipelineStats,
                             _blas_limit, detector_params, make_detectors, replay_frames,
                             replay_session)
@@ -73,7 +90,32 @@ Event = CutEvent | StatusEvent | DropoutEvent
 
 __all__ = ["DEFAULT_FRAME_RATE", "LiveSession", "LiveStats", "Pipeline", "PipelineCut",
            "PipelineStats", "SessionSummary", "build_publishers", "detector_params",
-           "make_detectors", "replay_frames", "replay_session", "with_suit"]
+           "make_detectors", "replay_frames", "replay_session", "wire_methods", "with_suit"]
+
+
+def wire_methods(config: SessionConfig, methods: Iterable[str] | None = None
+                 ) -> tuple[str, frozenset[str]]:
+    """``(primary, methods whose cuts go to the OSC targets)`` for the running detectors
+    ``methods`` (default ``detectors.methods``).  ``detectors.primary`` "" means the first
+    method; ``output.cut_methods`` is "primary", "all" or a list.  A name that is not a
+    running detector is refused with a ConfigError naming the key."""
+    names = list(config["detectors.methods"] if methods is None else methods)
+    if not names:
+        raise ConfigError("detectors.methods: no detector to run")
+    primary = config["detectors.primary"] or names[0]
+    if primary not in names:
+        raise ConfigError(f"detectors.primary: {primary!r} is not among the detectors run "
+                          f"({', '.join(names)}; see detectors.methods)")
+    sel = config["output.cut_methods"]
+    if sel == "primary":
+        return primary, frozenset([primary])
+    if sel == "all":
+        return primary, frozenset(names)
+    unknown = [m for m in sel if m not in names]
+    if unknown:
+        raise ConfigError(f"output.cut_methods: {', '.join(map(repr, unknown))} not among the "
+                          f"detectors run ({', '.join(names)}; see detectors.methods)")
+    return primary, frozenset(sel)
 
 
 def with_suit(url: str, suit: str) -> str:
@@ -83,8 +125,10 @@ def with_suit(url: str, suit: str) -> str:
     parts = urlsplit(url)
     if parts.scheme.lower() not in ("serial", "osc") or not suit:
         return url
-    if "suit" in parse_qs(parts.query, keep_blank_values=True):
-        return url
+    query = parse_qs(parts.query, keep_blank_values=True)
+    if "suit" in query or (parts.scheme.lower() == "osc"
+                           and query.get("format", ["vmc"])[-1].lower() not in ("vmc", "")):
+        return url      # a suit is named, or an OSC format without suits (vrchat)
     return url + ("&" if parts.query else "?") + f"suit={suit}"
 
 
@@ -127,7 +171,8 @@ class LiveStats:
     overruns: int = 0            # frames overwritten in the ring before processing
     record_errors: int = 0
     publish_errors: int = 0
-    cuts: int = 0
+    cuts: int = 0                # cuts of every detector (JSON lines, recording)
+    wire_cuts: int = 0           # of those, cuts sent to the OSC targets
     cuts_by_method: dict[str, int] = field(default_factory=dict)
     dropouts: int = 0
     lag_s: float = 0.0           # age of the last frame processed, s
@@ -159,6 +204,8 @@ class SessionSummary:
     cut_latency_ms_p99: float | None
     recording: str | None
     stop_reason: str
+    wire_cuts: int = 0
+    input: dict[str, int] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -170,12 +217,25 @@ class SessionSummary:
         return (f"session ended ({self.stop_reason}) after {self.duration_s:.1f} s: "
                 f"{self.frames_received} frames received ({self.frame_rate:.1f}/s), "
                 f"{self.frames_processed} processed, {self.dropped} dropped, "
-                f"{self.cuts} cuts ({methods}), processing latency {lat}, "
+                f"{input_text(self.input)}, "
+                f"{self.cuts} cuts ({methods}; {self.wire_cuts} sent over OSC), "
+                f"processing latency {lat}, "
                 f"max lag {self.max_lag_ms:.1f} ms"
                 + (f", recording {self.recording}" if self.recording else ""))
 
     def cut_latency_items(self) -> list[tuple[str, int]]:
         return sorted(self.cuts_by_method.items())
+
+
+def _log_publishers(publishers: Any) -> Callable[[CutEvent], None] | None:
+    """Where cuts kept off the wire go: the JSON-lines publishers of a ``PublisherSet``, or
+    a custom publisher's ``publish_log_cut(ev)`` if it has one (else nowhere but the
+    recording and the listeners)."""
+    from rtseg.publishers import JsonlPublisher, PublisherSet
+    if isinstance(publishers, PublisherSet):
+        logs = PublisherSet([p for p in publishers.publishers if isinstance(p, JsonlPublisher)])
+        return logs.publish_cut if len(logs) else None
+    return getattr(publishers, "publish_log_cut", None)
 
 
 def _percentile(values: Iterable[float], p: float) -> float | None:
@@ -203,6 +263,7 @@ class LiveSession:
                  duration: float | None = None, handle_signals: bool = True) -> None:
         self.config = config if config is not None else load_session_config()
         detector_params(self.config)          # refuse bad detector settings before opening
+        wire_methods(self.config)
         self._source_arg = source
         self.source: Any = None
         self.publishers = publishers
@@ -221,6 +282,9 @@ class LiveSession:
         self._rec_lock = threading.Lock()
         self._event_no = 0
         self._segment: dict[str, int] = {}
+        self.primary = ""
+        self.wire: frozenset[str] = frozenset()
+        self._log_pubs: Any = None
         self.stop_reason = "running"
         self._warn_at: dict[str, float] = {}
 
@@ -264,10 +328,12 @@ class LiveSession:
             log.warning("source has no nominal frame rate; assuming %.0f Hz", DEFAULT_FRAME_RATE)
         self.frame_rate = float(rate or DEFAULT_FRAME_RATE)
         self.pipeline = Pipeline(names, parents, space, self.frame_rate, self.config)
+        self.primary, self.wire = wire_methods(self.config, self.pipeline.detectors)
         J = len(names)
         self.ring = RingBuffer(int(self.config["buffer.capacity"]), J * 4, valid_width=J)
         if self.publishers is None:
             self.publishers = build_publishers(self.config)
+        self._log_pubs = _log_publishers(self.publishers)
         if self.recorder is None and self.config["recording.dir"]:
             from rtseg.recording import SessionRecorder
             url = (self._source_arg if isinstance(self._source_arg, str)
@@ -276,7 +342,8 @@ class LiveSession:
                 self.config["recording.dir"], names, parents, space=space,
                 frame_rate=self.frame_rate, start_monotonic=self.session_start,
                 meta={"source": url, "config": self.config.origin,
-                      "methods": list(self.pipeline.detectors)})
+                      "methods": list(self.pipeline.detectors), "primary": self.primary,
+                      "wire_methods": sorted(self.wire)})
 
     # ---------------------------------------------------------------- reader thread
     def _reader(self) -> None:
@@ -333,7 +400,12 @@ class LiveSession:
         """Publish, record and show one event; returns it as sent (cuts: latency stamped)."""
         try:
             if isinstance(ev, CutEvent):
-                ev = self.publishers.publish_cut(ev) or ev.stamped()
+                if ev.wire:
+                    ev = self.publishers.publish_cut(ev) or ev.stamped()
+                else:
+                    ev = ev.stamped()
+                    if self._log_pubs is not None:
+                        self._log_pubs(ev)
             elif isinstance(ev, StatusEvent):
                 self.publishers.publish_status(ev)
             else:
@@ -363,18 +435,20 @@ class LiveSession:
         m = pc.cut.method
         seg = self._segment.get(m, 0) + 1
         self._segment[m] = seg
-        self._event_no += 1
+        wire = m in self.wire
+        if wire:
+            self._event_no += 1
         b_recv = ring.recv_time_at(pc.boundary) if ring is not None else None
         if b_recv is None:
             b_recv = detected_recv - (pc.detected - pc.boundary) / self.frame_rate
         return CutEvent(
-            event=self._event_no, segment=seg, frame=int(pc.boundary),
+            event=self._event_no if wire else 0, segment=seg, frame=int(pc.boundary),
             time=float(b_recv - self.session_start), method=m,
             label=m,
             confidence=float(np.clip(pc.cut.confidence, 0.0, 1.0)),
             detector_delay_ms=float(max(0, pc.detected - pc.boundary) / self.frame_rate * 1000.0),
             boundary_recv_time=float(b_recv), detected_frame=int(pc.detected),
-            score=float(pc.cut.score), detected_recv_time=float(detected_recv))
+            score=float(pc.cut.score), detected_recv_time=float(detected_recv), wire=wire)
 
     # ---------------------------------------------------------------- processing
     def _process_window(self, w) -> None:
@@ -405,6 +479,7 @@ class LiveSession:
             for pc in cuts:
                 ev = self._emit(self._cut_event(pc, recv))
                 st.cuts += 1
+                st.wire_cuts += int(ev.wire)
                 st.cuts_by_method[ev.method] = st.cuts_by_method.get(ev.method, 0) + 1
                 st.last_cut = ev
                 st.cut_latency_ms.append((time.monotonic() - recv) * 1000.0)
@@ -453,6 +528,15 @@ class LiveSession:
         src = int(getattr(s, "dropped", 0)) if s is not None else 0
         return src + self.stats.bad_frames + self.stats.overruns
 
+    def input_counts(self) -> dict[str, int]:
+        """Input refused since start (``INPUT_COUNTERS``): the source's counters, plus the
+        quaternions the pipeline itself replaced as non-finite/zero in ``bad_values``."""
+        s = getattr(self.source, "stats", None)
+        out = {k: int(getattr(s, k, 0) or 0) for k in INPUT_COUNTERS}
+        if self.pipeline is not None:
+            out["bad_values"] += int(self.pipeline.stats.bad_values)
+        return out
+
     def _status(self, now: float, alive: int = 1) -> StatusEvent:
         dt = max(1e-9, now - self._status_t)
         rate = (self.stats.frames_received - self._status_frames) / dt
@@ -465,7 +549,7 @@ class LiveSession:
         return StatusEvent(alive=alive, frame_rate=float(rate), dropped=self.dropped(),
                            stale_joints=stale, stale_names=names, time=now - self.session_start,
                            lag_ms=float(self.stats.lag_s * 1000.0),
-                           backlog=int(self.stats.backlog))
+                           backlog=int(self.stats.backlog), **self.input_counts())
 
     # ---------------------------------------------------------------- run
     def run(self) -> SessionSummary:
@@ -554,7 +638,10 @@ class LiveSession:
 
     def _shutdown(self) -> SessionSummary:
         now = time.monotonic()
-        if self.pipeline is not None and self.publishers is not None:
+        # no final status when setup failed before the loop state existed (e.g. the
+        # recording folder could not be created after the publishers were built)
+        if (self.pipeline is not None and self.publishers is not None
+                and hasattr(self, "_status_t")):
             try:
                 self._emit(self._status(now, alive=0))
             except Exception as exc:  # pragma: no cover - defensive
@@ -583,6 +670,7 @@ class LiveSession:
             cut_latency_ms_p50=_percentile(st.cut_latency_ms, 50),
             cut_latency_ms_p99=_percentile(st.cut_latency_ms, 99),
             recording=str(rec) if rec else None,
-            stop_reason=self.stop_reason)
+            stop_reason=self.stop_reason, wire_cuts=st.wire_cuts,
+            input=self.input_counts() if self.pipeline is not None else {})
         log.info("%s", summary.text())
         return summary

@@ -152,6 +152,13 @@ def offline_cuts(rec: Path, config) -> tuple[list, object]:
     return cuts, tk
 
 
+def on_wire(expected: list, session: LiveSession) -> list:
+    """The offline cuts of the detectors whose cuts the session sends over OSC (by default
+    only the primary detector's: one cut per behaviour change)."""
+    assert session.wire, "the session names no detector for the wire"
+    return [c for c in expected if c.cut.method in session.wire]
+
+
 def assert_cuts_match(received: list[tuple], expected: list, tk, what: str) -> None:
     """received: /rtseg/cut argument tuples (event, segment, time, conf, latency, delay,
     label); expected: PipelineCuts.  Same order, same methods, boundary ±2 frames."""
@@ -196,10 +203,12 @@ def test_serial_pty_to_osc_matches_offline(tmp_path, take):
     assert tk.n_frames >= 0.98 * take.n_frames
     assert summary.overruns == 0 and summary.bad_frames == 0
     assert len(expected) >= 4, "the take has 3 behaviour changes; both methods should see some"
-    assert_cuts_match(osc.cuts(), expected, tk, "python-osc")
-    assert_cuts_match(dump.cuts(), expected, tk, "oscdump")
-    # the recording's own cut log agrees with what went over the wire
+    assert session.wire == {session.primary}        # default: output.cut_methods = "primary"
+    assert_cuts_match(osc.cuts(), on_wire(expected, session), tk, "python-osc")
+    assert_cuts_match(dump.cuts(), on_wire(expected, session), tk, "oscdump")
+    # the recording's own cut log holds every detector's cuts, marked on or off the wire
     assert [c.frame for c in tk.meta["cuts"]] == [c.boundary for c in expected]
+    assert [c.wire for c in tk.meta["cuts"]] == [c.cut.method in session.wire for c in expected]
     statuses = [a for addr, a in osc.messages if addr == "/rtseg/status"]
     assert statuses and statuses[0][0] == 1 and statuses[-1][0] == 0
     # processing latency (arrival of the revealing frame -> send) is small
@@ -233,7 +242,7 @@ def test_vmc_over_osc_to_osc_matches_offline(tmp_path, take):
     assert tk.n_frames >= 0.98 * take.n_frames
     assert session.pipeline.stats.calibration_frames == 30    # rig-relative input calibrated
     assert len(expected) >= 4
-    assert_cuts_match(osc.cuts(), expected, tk, "python-osc (VMC input)")
+    assert_cuts_match(osc.cuts(), on_wire(expected, session), tk, "python-osc (VMC input)")
 
 
 @pytest.mark.parametrize("corrupt,min_cuts", [(0.01, 0), (0.0003, 2)])
@@ -275,7 +284,7 @@ def test_faults_session_survives_and_records_every_frame(tmp_path, take, corrupt
     assert session.pipeline.stats.restarts >= 1
     expected, tk = offline_cuts(rec, cfg)
     assert len(expected) >= min_cuts
-    assert_cuts_match(osc.cuts(), expected, tk, "with faults")
+    assert_cuts_match(osc.cuts(), on_wire(expected, session), tk, "with faults")
     dropouts = [a for addr, a in osc.messages if addr == "/rtseg/dropout"]
     assert ("source", 1) in dropouts and ("source", 0) in dropouts
 

@@ -13,6 +13,7 @@ import sys
 import time
 from typing import Any, Callable, TextIO
 
+from rtseg.cli import positive_float
 from rtseg.config import ConfigError
 from rtseg.events import CutEvent, DropoutEvent, StatusEvent
 from rtseg.session_config import SessionConfig, load_session_config
@@ -40,7 +41,8 @@ def add_session_arguments(p: argparse.ArgumentParser, osc_default_note: str = ""
     p.add_argument("--record", metavar="DIR", help="record the session (frames + events) to DIR")
     p.add_argument("--config", metavar="FILE", help="session configuration (default config/live.toml)")
     p.add_argument("--methods", metavar="LIST", help="online detectors, comma separated (pca,ppca)")
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument("--duration", type=positive_float, metavar="S",
+                   help="stop after S seconds (a number > 0)")
     p.add_argument("--quiet", action="store_true", help="no status line on stderr")
 
 
@@ -61,6 +63,7 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
     if args.jsonl:
         over["output.jsonl"] = args.jsonl
     if args.record:
+        check_record_dir(args.record)
         over["recording.dir"] = args.record
     if args.methods:
         over["detectors.methods"] = [m.strip() for m in args.methods.split(",") if m.strip()]
@@ -76,6 +79,29 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
     return cfg
 
 
+def check_record_dir(path: str) -> None:
+    """Refuse a ``--record`` folder that cannot hold a new recording (not empty, a file,
+    or its parent missing / not writable) before anything is opened."""
+    import os
+    from pathlib import Path
+    p = Path(path)
+    if p.exists():
+        if not p.is_dir():
+            raise ConfigError(f"--record {path}: exists and is not a folder")
+        if any(p.iterdir()):
+            raise ConfigError(f"--record {path}: folder exists and is not empty "
+                              "(give a new or empty folder)")
+        if not os.access(p, os.W_OK | os.X_OK):
+            raise ConfigError(f"--record {path}: folder is not writable")
+        return
+    parent = p.absolute().parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise ConfigError(f"--record {path}: cannot create the folder ({parent} is not a "
+                          "writable folder)")
+
+
 #: configuration key -> the command-line flag that sets it (for error messages)
 FLAGS = {"output.osc": "--osc", "output.osc_tcp": "--osc-tcp", "output.templates": "--template",
          "output.targets": "--target", "output.jsonl": "--jsonl", "recording.dir": "--record",
@@ -84,7 +110,8 @@ FLAGS = {"output.osc": "--osc", "output.osc_tcp": "--osc-tcp", "output.templates
 
 def format_cut(ev: CutEvent) -> str:
     proc = "-" if ev.processing_ms is None else f"{ev.processing_ms:.2f}"
-    return (f"cut #{ev.event:<3d} {ev.method:<5s} segment {ev.segment:<3d} "
+    num = f"#{ev.event:<3d}" if ev.wire else "(log)"    # (log): not sent over OSC
+    return (f"cut {num} {ev.method:<5s} segment {ev.segment:<3d} "
             f"frame {ev.frame:<7d} t={ev.time:9.3f} s  confidence {ev.confidence:.2f}  "
             f"detector delay {ev.detector_delay_ms:4.0f} ms  processing {proc} ms")
 
@@ -134,6 +161,8 @@ class Console:
             last = f"{c.method} #{c.event} at {c.time:.2f} s"
         line = (f"rtseg live: {ev.time:7.1f} s | {ev.frame_rate:6.1f} fps | "
                 f"{ev.dropped} dropped | {ev.stale_joints} stale{lag} | last cut: {last}")
+        if any(ev.input_counts().values()):
+            line += f" | {ev.input_text()}"
         if self.tty:
             self.err.write("\r\033[K" + line)
             self.err.flush()
@@ -181,6 +210,10 @@ def run(args: argparse.Namespace) -> int:
         return run_session(url, cfg, args.duration, args.quiet)
     except (ConfigError, SourceError) as exc:
         print(f"rtseg live: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:   # setup (recording folder, output file): the loop never raises
+        print(f"rtseg live: error: {exc.strerror or exc}"
+              + (f": {exc.filename}" if exc.filename else ""), file=sys.stderr)
         return 2
 
 
