@@ -60,6 +60,7 @@ Behaviour
 from __future__ import annotations
 
 import collections
+import errno
 import logging
 import threading
 import time
@@ -77,6 +78,8 @@ from rtseg.profiles import SuitProfile, suit_profile
 log = logging.getLogger("rtseg.drivers.serial")
 
 DEFAULT_BAUD = 921600
+#: highest baud rate accepted (fast USB UARTs reach 12 Mbaud)
+MAX_BAUD = 50_000_000
 LOG_INTERVAL_S = 5.0
 
 
@@ -179,7 +182,12 @@ class SerialSource(Source):
         self._ever_connected = False
         self._connected = threading.Event()
 
-        if not self._open() and not wait:
+        self._not_a_port = False
+        opened = self._open()
+        if not opened and self._not_a_port:
+            raise SourceError(f"{path!r} is not a serial port (it refuses serial settings: "
+                              f"{self._open_error})")
+        if not opened and not wait:
             raise SourceError(f"cannot open serial device {path!r}: {self._open_error}"
                               " (add wait=1 to keep trying)")
         self._thread = threading.Thread(target=self._run, name=f"rtseg-serial {path}", daemon=True)
@@ -243,8 +251,13 @@ class SerialSource(Source):
             if self.exclusive and "://" not in self.path:
                 kwargs["exclusive"] = True
             ser = serial.serial_for_url(self.path, **kwargs)
-        except (serial.SerialException, OSError, ValueError) as exc:
+        except (serial.SerialException, OSError, ValueError, OverflowError) as exc:
             self._open_error = str(exc)
+            ctx = exc.__context__
+            self._not_a_port = (getattr(exc, "errno", None) == errno.ENOTTY
+                                or (ctx is not None and getattr(ctx, "args", (None,))[0]
+                                    == errno.ENOTTY)
+                                or "Inappropriate ioctl" in str(exc))
             return False
         self._ser = ser
         self._decoder.reset()
@@ -456,19 +469,27 @@ def open_url(location: str, options: dict[str, str]) -> SerialSource:
     if not location:
         raise SourceError("serial URL needs a device path, e.g. serial:///dev/ttyUSB0")
 
-    def num(key: str, kind: type, default):
+    def num(key: str, kind: type, default, lo: float, hi: float):
+        """Option ``key`` as ``kind`` within [lo, hi] (finite), or ``default``."""
         if key not in options:
             return default
+        text = options[key]
         try:
-            return kind(options[key])
+            value = kind(text)
         except ValueError:
-            raise SourceError(f"serial option {key}={options[key]!r}: expected a number") from None
+            raise SourceError(f"serial option {key}={text!r}: expected "
+                              f"{'an integer' if kind is int else 'a number'}") from None
+        if not (lo <= value <= hi):          # also refuses nan and inf
+            raise SourceError(f"serial option {key}={text}: out of range {lo}..{hi}")
+        return value
 
     return SerialSource(
-        location, baud=num("baud", int, DEFAULT_BAUD), fmt=options.get("format", "rtseg"),
+        location, baud=num("baud", int, DEFAULT_BAUD, 50, MAX_BAUD),
+        fmt=options.get("format", "rtseg"),
         suit=options.get("suit", "default17"), suits_path=options.get("suits"),
-        stale=num("stale", float, 0.25), rate=num("rate", float, None),
-        queue_size=num("queue", int, 256), backoff_max=num("backoff", float, 0.5),
+        stale=num("stale", float, 0.25, 1e-3, 3600.0), rate=num("rate", float, None, 1e-3, 1e5),
+        queue_size=num("queue", int, 256, 1, 1_000_000),
+        backoff_max=num("backoff", float, 0.5, 0.05, 3600.0),
         wait=_flag(options["wait"], "wait") if "wait" in options else False,
         exclusive=_flag(options["exclusive"], "exclusive") if "exclusive" in options else True)
 

@@ -1,18 +1,58 @@
 """The ``rtseg`` console command.  Each sub-command is a module in ``rtseg.commands`` with
-``register(subparsers)`` adding its parser and setting ``func(args) -> int``."""
+``register(subparsers)`` adding its parser and setting ``func(args) -> int``.
+
+Exit status: 0 success, 2 a usage, configuration or input error (bad option, missing or
+unreadable file, bad source URL), reported as ONE line on stderr
+(``rtseg live: error: ...``) - never a traceback; 1 an unexpected internal error (one line
+too; ``-vv`` shows the traceback); 130 Ctrl-C.
+"""
 
 from __future__ import annotations
 
 import argparse
 import importlib
 import logging
+import math
 import sys
+from typing import NoReturn
 
 COMMANDS = ["segment", "evaluate", "plot", "simulate", "live", "demo"]
 
 
+#: exit status of a usage, configuration or input error
+EXIT_USAGE = 2
+
+
+class Parser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose usage errors are one line: ``PROG: error: MESSAGE (see
+    PROG --help)``, exit status 2.  Sub-command parsers are of this class too."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0 (seconds, Hz, factors)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(v) or v <= 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return v
+
+
+def error_text(exc: BaseException) -> str:
+    """One line describing ``exc`` (a KeyError's message without its quotes)."""
+    if isinstance(exc, KeyError) and len(exc.args) == 1 and isinstance(exc.args[0], str):
+        text = exc.args[0]
+    else:
+        text = str(exc) or type(exc).__name__
+    return " ".join(text.split())
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="rtseg", description="Cut motion capture into distinct behaviours, live or offline.")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more logging")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -40,8 +80,13 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         return 130
-    except (OSError, ValueError, KeyError, EOFError) as exc:
-        print(f"rtseg {args.command}: error: {exc}", file=sys.stderr)
+    except (OSError, ValueError, KeyError, EOFError, MemoryError) as exc:
+        print(f"rtseg {args.command}: error: {error_text(exc)}", file=sys.stderr)
+        return EXIT_USAGE
+    except Exception as exc:  # a bug: one line, the traceback only with -vv
+        logging.getLogger("rtseg").debug("internal error", exc_info=True)
+        print(f"rtseg {args.command}: internal error: {type(exc).__name__}: "
+              f"{error_text(exc)} (rerun with -vv for the traceback)", file=sys.stderr)
         return 1
 
 

@@ -12,6 +12,7 @@ Units: seconds for times, frames for frame counts, Hz for rates.
 from __future__ import annotations
 
 import copy
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -20,6 +21,8 @@ from rtseg.config import ConfigError, config_dir, load_toml
 
 CALIBRATION_MODES = ("auto", "first", "average", "none")
 KNOWN_METHODS = ("pca", "ppca")
+#: largest ring buffer: 2^20 frames (2.4 h at 120 Hz; 570 MB for 17 joints of 4 float64)
+MAX_CAPACITY = 1 << 20
 
 
 # --------------------------------------------------------------------------- validators
@@ -95,6 +98,28 @@ def _min(lo: float, strict: bool = False) -> Callable[[Any], str | None]:
     return f
 
 
+def _range(lo: float, hi: float, strict_lo: bool = False) -> Callable[[Any], str | None]:
+    """``lo <= v <= hi`` (``lo < v`` when ``strict_lo``); the upper bounds keep a typo
+    (``capacity = 10000000000``) from becoming a memory error at start."""
+    def f(v: Any) -> str | None:
+        if (v <= lo) if strict_lo else (v < lo):
+            return f"must be {'>' if strict_lo else '>='} {lo}, got {v}"
+        if v > hi:
+            return f"must be <= {hi}, got {v}"
+        return None
+    return f
+
+
+def _profile(v: Any) -> str | None:
+    """A skeleton profile of ``config/skeletons.toml`` (or '' / 'all')."""
+    if v in ("", "all"):
+        return None
+    from rtseg.profiles import profiles
+    known = sorted(profiles())
+    return None if v in known else \
+        f"unknown skeleton profile {v!r}; known: {', '.join(known)}, all"
+
+
 def _one_of(options: tuple[str, ...]) -> Callable[[Any], str | None]:
     def f(v: Any) -> str | None:
         return None if v in options else f"must be one of {', '.join(options)}; got {v!r}"
@@ -123,12 +148,12 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "url": Key("str", "", doc="default source URL when none is given on the command line"),
     },
     "features": {
-        "profile": Key("str", "", doc="skeleton/feature profile for PoseFeatures; '' = its default"),
+        "profile": Key("str", "", _profile, doc="skeleton/feature profile for PoseFeatures; '' = its default"),
     },
     "calibration": {
         "mode": Key("str", "auto", _one_of(CALIBRATION_MODES),
                     doc="auto: calibrate rig-relative input (space local, e.g. VMC) only"),
-        "frames": Key("int", 30, _min(1), doc="frames averaged for mode average (and auto)"),
+        "frames": Key("int", 30, _range(1, 100_000), doc="frames averaged for mode average (and auto)"),
     },
     "detectors": {
         "methods": Key("list[str]", ["pca", "ppca"], _methods),
@@ -154,23 +179,24 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "dir": Key("str", "", doc="folder for the session recording; '' = do not record"),
     },
     "status": {
-        "interval": Key("float", 1.0, _min(0.0, strict=True)),
+        "interval": Key("float", 1.0, _range(0.0, 3600.0, strict_lo=True), doc="seconds"),
     },
     "gaps": {
-        "max_frames": Key("int", 3, _min(0), doc="longest tolerated run of missing/invalid frames"),
-        "max_seconds": Key("float", 0.25, _min(0.0, strict=True),
+        "max_frames": Key("int", 3, _range(0, 1_000_000), doc="longest tolerated run of missing/invalid frames"),
+        "max_seconds": Key("float", 0.25, _range(0.0, 3600.0, strict_lo=True),
                            doc="longest tolerated silence between frames"),
         "required_joints": Key("list[str]", [],
                                doc="joints that must be valid; [] = those the features use"),
-        "dropout_seconds": Key("float", 0.5, _min(0.0, strict=True),
+        "dropout_seconds": Key("float", 0.5, _range(0.0, 3600.0, strict_lo=True),
                                doc="a joint invalid (or the source silent) this long is a dropout"),
     },
     "buffer": {
-        "capacity": Key("int", 4096, _min(16), doc="ring buffer frames"),
-        "max_batch": Key("int", 256, _min(1), doc="frames processed per wake-up at most"),
-        "lag_warn_seconds": Key("float", 0.1, _min(0.0, strict=True),
+        "capacity": Key("int", 4096, _range(16, MAX_CAPACITY), doc="ring buffer frames"),
+        "max_batch": Key("int", 256, _range(1, MAX_CAPACITY),
+                         doc="frames processed per wake-up at most"),
+        "lag_warn_seconds": Key("float", 0.1, _range(0.0, 3600.0, strict_lo=True),
                                 doc="warn when a frame waits longer than this before processing"),
-        "blas_threads": Key("int", 1, _min(0),
+        "blas_threads": Key("int", 1, _range(0, 1024),
                             doc="BLAS threads while the session runs (0 = leave as is)"),
     },
 }
@@ -241,6 +267,8 @@ def validate(raw: dict[str, Any], origin: str = "live.toml") -> dict[str, dict[s
                     f"{origin}: {name}: expected {spec.kind}, got {type(value).__name__} {value!r}")
             if spec.kind == "float":
                 value = float(value)
+                if not math.isfinite(value):
+                    raise ConfigError(f"{origin}: {name}: must be a finite number, got {value}")
             if spec.item_check is not None:
                 for i, item in enumerate(value):
                     problem = spec.item_check(item)

@@ -28,6 +28,8 @@ def read_take(path: str | Path, skeleton: str | Path | None = None,
     ``frame_rate`` (Hz) overrides the file's rate (ASF/AMC, CSV have none; default 120).
     """
     path = Path(path)
+    if not path.exists():
+        raise ReaderError(path, "file not found")
     if path.is_dir():
         try:
             from rtseg.recording import read_session

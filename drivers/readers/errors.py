@@ -23,7 +23,8 @@ class ReaderError(ValueError):
 
 
 def read_text_lines(path: Path) -> list[str]:
-    """The lines of a text take file (UTF-8, else Latin-1; CRLF, CR and LF alike).
+    """The lines of a text take file (UTF-8 with or without a byte-order mark, else
+    Latin-1; CRLF, CR and LF alike).
 
     A missing file or a directory raises ``ReaderError`` naming the path.
     """
@@ -33,8 +34,12 @@ def read_text_lines(path: Path) -> list[str]:
         raise ReaderError(path, "file not found") from None
     except IsADirectoryError:
         raise ReaderError(path, "is a directory, not a file") from None
+    except PermissionError:
+        raise ReaderError(path, "permission denied") from None
+    except OSError as exc:
+        raise ReaderError(path, f"cannot read ({exc.strerror or exc})") from None
     try:
-        text = data.decode("utf-8")
+        text = data.decode("utf-8-sig")   # drops a leading UTF-8 byte-order mark
     except UnicodeDecodeError:
         text = data.decode("latin-1")
     return text.splitlines()

@@ -98,10 +98,21 @@ def read_npz(path: str | Path, frame_rate: float | None = None) -> Take:
     """Read an rtseg ``.npz`` take; ``frame_rate`` overrides the stored rate."""
     path = Path(path)
     try:
-        z = np.load(path, allow_pickle=False)
+        with open(path, "rb") as fh:
+            magic = fh.read(4)
     except FileNotFoundError:
         raise ReaderError(path, "file not found") from None
-    except (zipfile.BadZipFile, OSError, ValueError) as exc:
+    except IsADirectoryError:
+        raise ReaderError(path, "is a directory, not a file") from None
+    except OSError as exc:
+        raise ReaderError(path, f"cannot read ({exc.strerror or exc})") from None
+    if not magic:
+        raise ReaderError(path, "empty file (not an .npz take)")
+    if magic != b"PK\x03\x04":   # .npz files are zip archives
+        raise ReaderError(path, "not an .npz take (no zip archive signature)")
+    try:
+        z = np.load(path, allow_pickle=False)
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
         raise ReaderError(path, f"not a readable .npz file ({exc})") from None
     with z:
         keys = set(z.files)

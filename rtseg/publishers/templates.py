@@ -8,7 +8,7 @@ A template is ``ADDRESS [ARG ...]`` separated by spaces, e.g.
 - ``/show/cut 1``                           a constant argument
 
 Fields usable in ADDRESS (Python ``str.format`` syntax, format specs allowed, e.g.
-``{segment:03d}``): ``label`` and ``method`` (both sanitised to ``[A-Za-z0-9_-]``),
+``{segment:03d}``, widths and precisions at most 64): ``label`` and ``method`` (both sanitised to ``[A-Za-z0-9_-]``),
 ``segment`` (index of the new segment), ``event`` (cut event number).
 
 ARGs (default: none - the message carries no arguments, which is what QLab's
@@ -46,6 +46,9 @@ ARG_FIELDS: dict[str, str] = {
     "latency_ms": "f", "detector_delay_ms": "f", "label": "s", "method": "s",
 }
 
+#: largest width or precision in an address field's format spec (``{segment:03d}``)
+MAX_FORMAT_WIDTH = 64
+
 _BAD_LABEL_CHARS = re.compile(r"[^A-Za-z0-9_-]+")
 _OSC_FORBIDDEN = set(" #*,?[]{}")
 
@@ -79,9 +82,20 @@ class AddressTemplate:
         if not self.address.startswith("/"):
             raise ValueError(f"OSC address template {spec!r} must start with '/'")
         try:
-            used = [f for _, f, _, _ in string.Formatter().parse(self.address) if f is not None]
+            fields = [(f, fs or "") for _, f, fs, _ in string.Formatter().parse(self.address)
+                      if f is not None]
         except ValueError as exc:
             raise ValueError(f"OSC address template {spec!r}: {exc}") from None
+        used = [f for f, _ in fields]
+        for f, fs in fields:
+            if "{" in fs:
+                raise ValueError(f"OSC address template {spec!r}: nested fields in a format "
+                                 f"spec ({{{f}:{fs}}}) are not supported")
+            for num in re.findall(r"\d+", fs):
+                if int(num) > MAX_FORMAT_WIDTH:
+                    raise ValueError(f"OSC address template {spec!r}: format width or "
+                                     f"precision {num} in {{{f}:{fs}}} is larger than "
+                                     f"{MAX_FORMAT_WIDTH}")
         for f in used:
             if f not in ADDRESS_FIELDS:
                 raise ValueError(
@@ -112,7 +126,8 @@ class AddressTemplate:
             label=sanitize_label(ev.label), method=sanitize_label(ev.method),
             segment=int(ev.segment), event=int(ev.event))
         if any(c in _OSC_FORBIDDEN for c in address):
-            raise ValueError(f"template {self.spec!r} produced an invalid OSC address {address!r}")
+            shown = address if len(address) <= 80 else address[:77] + "..."
+            raise ValueError(f"template {self.spec!r} produced an invalid OSC address {shown!r}")
         args = [cut_arg_value(ev, v) if kind == "field" else v for kind, _, v in self._args]
         return address, self.typetags, args
 
