@@ -106,9 +106,20 @@ MAPS: dict[str, SkeletonMap] = {m.name: m for m in (
         }),
         signature=("lhumerus", "rhumerus", "lfemur", "rfemur", "thorax")),
     SkeletonMap(
+        "unity", "Unity humanoid HumanBodyBones names (rtseg's synthetic and suit takes)",
+        _sides({
+            "Hips": ("Hips",), "Spine": ("Spine",), "Chest": ("Chest", "UpperChest"),
+            "UpperChest": ("UpperChest", "Chest"), "Neck": ("Neck",), "Head": ("Head",),
+            "{Side}Shoulder": ("{Side}Shoulder",), "{Side}UpperArm": ("{Side}UpperArm",),
+            "{Side}LowerArm": ("{Side}LowerArm",), "{Side}Hand": ("{Side}Hand",),
+            "{Side}UpperLeg": ("{Side}UpperLeg",), "{Side}LowerLeg": ("{Side}LowerLeg",),
+            "{Side}Foot": ("{Side}Foot",), "{Side}Toes": ("{Side}Toes",),
+        }),
+        signature=("LeftUpperArm", "RightUpperArm", "LeftUpperLeg", "RightUpperLeg")),
+    SkeletonMap(
         "cmu-bvh", "CMU BVH conversion (cgspeed, 31 joints)",
         _sides({
-            "Hips": ("Hips",), "Spine": ("LowerBack",), "Chest": ("Spine1", "Spine"),
+            "Hips": ("Hips",), "Spine": ("LowerBack",), "Chest": ("Spine1",),
             "UpperChest": ("Spine1",), "Neck": ("Neck",), "Head": ("Head",),
             "{Side}Shoulder": ("{Side}Shoulder",), "{Side}UpperArm": ("{Side}Arm",),
             "{Side}LowerArm": ("{Side}ForeArm",), "{Side}Hand": ("{Side}Hand",),
@@ -127,17 +138,6 @@ MAPS: dict[str, SkeletonMap] = {m.name: m for m in (
             "{Side}Foot": ("{Side}Foot",), "{Side}Toes": ("{Side}ToeBase",),
         }),
         prefix=r"^mixamorig\d*:", signature=("Spine2", "HeadTop_End")),
-    SkeletonMap(
-        "unity", "Unity humanoid HumanBodyBones names (rtseg's synthetic and suit takes)",
-        _sides({
-            "Hips": ("Hips",), "Spine": ("Spine",), "Chest": ("Chest", "UpperChest"),
-            "UpperChest": ("UpperChest", "Chest"), "Neck": ("Neck",), "Head": ("Head",),
-            "{Side}Shoulder": ("{Side}Shoulder",), "{Side}UpperArm": ("{Side}UpperArm",),
-            "{Side}LowerArm": ("{Side}LowerArm",), "{Side}Hand": ("{Side}Hand",),
-            "{Side}UpperLeg": ("{Side}UpperLeg",), "{Side}LowerLeg": ("{Side}LowerLeg",),
-            "{Side}Foot": ("{Side}Foot",), "{Side}Toes": ("{Side}Toes",),
-        }),
-        signature=("LeftUpperArm", "RightUpperArm", "LeftUpperLeg", "RightUpperLeg")),
 )}
 
 
@@ -169,7 +169,8 @@ def _candidates(bone: str, smap: SkeletonMap) -> tuple[str, ...]:
 
 def detect_family(take_names: list[str], bones: tuple[str, ...]) -> SkeletonMap:
     """The map resolving most of ``bones`` from ``take_names`` (ties: most signature joints,
-    then the order of :data:`MAPS`).  RetargetError if none resolves any."""
+    then the order of :data:`MAPS`: cmu-asf, unity, cmu-bvh, mixamo, so plain
+    HumanBodyBones names win a tie).  RetargetError if none resolves any."""
     best, best_key = None, (0, 0)
     for smap in MAPS.values():
         found = sum(c >= 0 for c in _resolve_with(take_names, bones, smap))

@@ -158,7 +158,7 @@ def test_simulate_duration_stops_a_looping_device(tmp_path):
 def test_simulate_bad_arguments_are_clear_errors(argv, fragment, capsys, tmp_path):
     if "--faults" in argv:
         argv = argv + ["--link", str(tmp_path / "f")]
-    assert main(["simulate", *argv]) == 1
+    assert main(["simulate", *argv]) in (1, 2)        # an error exit (2 for usage errors)
     assert fragment in capsys.readouterr().err
 
 
@@ -182,3 +182,155 @@ def test_simulate_prints_the_transitions_saved_in_a_synthetic_take(tmp_path, cap
     assert rc == 0
     assert _printed_transitions(out.splitlines()) == [
         (t.lo, t.hi, t.mid, t.before, t.after) for t in truth.transitions]
+
+
+# --------------------------------------------------------------------------- recorded takes
+
+CMU_AMC = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "data",
+                       "cmu", "86_01.amc")
+needs_cmu = pytest.mark.skipif(not os.path.exists(CMU_AMC),
+                               reason=f"CMU take 86_01 not found at {CMU_AMC}")
+#: The first 15 s of 86_01 (walk, jump, walk: labelled changes at frames 550 and 1150),
+#: sent 10x faster than real time.
+REPLAY = ["--take", CMU_AMC, "--end", "15", "--speed", "10"]
+REPLAY_FRAMES = 1800
+
+
+def _live(url: str, tmp_path) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "rtseg.cli", "live", url, "--no-osc", "--quiet",
+         "--jsonl", str(tmp_path / "events.jsonl"), "--record", str(tmp_path / "rec"),
+         "--duration", "60"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=os.getcwd())
+
+
+def _stop_live(live: subprocess.Popen) -> tuple[int, str, str]:
+    live.send_signal(signal.SIGINT)
+    try:
+        out, err = live.communicate(timeout=20)
+    except subprocess.TimeoutExpired:
+        live.kill()
+        out, err = live.communicate()
+        raise AssertionError(f"rtseg live did not stop on SIGINT; stderr {err!r}")
+    return live.returncode, out, err
+
+
+def _check_replay(tmp_path, err: str, sent_frames: int) -> list[dict]:
+    """What reached the live loop: every frame with every sensor valid, the take's own
+    clock in the source times, and at least one cut.  Returns the cut events."""
+    import json
+
+    from rtseg.recording import read_session
+    tk = read_session(tmp_path / "rec")
+    assert tk.n_frames >= 0.98 * sent_frames, (tk.n_frames, sent_frames, err)
+    assert tk.valid is None or tk.valid.all(), \
+        f"stale sensors: {[tk.joint_names[j] for j in np.flatnonzero(~tk.valid.all(0))]}"
+    # --speed 10: the stream's clock is the take's (1/120 s a frame) although the frames
+    # arrived ~10x faster
+    st = tk.meta["source_time"]
+    assert np.allclose(np.diff(st), 1 / 120.0, atol=1e-5), np.unique(np.round(np.diff(st), 6))
+    recv = tk.meta["recv_time"]
+    assert (recv[-1] - recv[0]) < 0.5 * (st[-1] - st[0])
+    events = [json.loads(line) for line in (tmp_path / "events.jsonl").read_text().splitlines()]
+    lost = [e for e in events if e["type"] == "dropout" and e.get("lost") and e.get("name") != "source"]
+    assert not lost, f"sensor dropouts reported: {lost}"
+    # status while frames flow and the source is not reported lost (before the first frame
+    # and after the last one the whole source is lost, which is not a stale sensor)
+    source_lost, playing = False, []
+    for e in events:
+        if e["type"] == "dropout" and e.get("name") == "source":
+            source_lost = bool(e.get("lost"))
+        elif e["type"] == "status" and e["frame_rate"] > 0 and not source_lost:
+            playing.append(e)
+    assert all(e["stale_joints"] == 0 for e in playing), playing
+    cuts = [e for e in events if e["type"] == "cut"]
+    assert cuts, f"no cut from {tk.n_frames} frames of 86_01; stderr {err!r}"
+    return cuts
+
+
+@needs_cmu
+def test_cmu_take_replays_through_the_serial_suit_into_rtseg_live(tmp_path):
+    link = tmp_path / "suit"
+    sim = _spawn("serial", *REPLAY, "--link", str(link))
+    live = None
+    try:
+        m, lines = _read_until(sim, r"^serial device: (\S+)")
+        assert any("skeleton map cmu-asf" in ln and "Chest<-thorax" in ln for ln in lines), lines
+        live = _live(f"serial://{link}", tmp_path)
+        rc, out, err = _finish(sim, timeout=30.0)
+        assert rc == 0, err
+        assert f"sent {REPLAY_FRAMES} frame messages" in out, out
+        time.sleep(0.3)
+        lrc, lout, lerr = _stop_live(live)
+    finally:
+        for p in (sim, live):
+            if p is not None and p.poll() is None:
+                p.kill()
+                p.communicate()
+    assert lrc == 0, lerr
+    _check_replay(tmp_path, lerr, REPLAY_FRAMES)
+
+
+def _free_udp_port() -> int:
+    import socket
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _wait_bound(port: int, proc: subprocess.Popen, timeout: float = 20.0) -> None:
+    """Until something has bound UDP ``port`` on 127.0.0.1 (our own bind fails)."""
+    import socket
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()[1]
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                return
+        time.sleep(0.05)
+    raise AssertionError(f"nothing listens on udp 127.0.0.1:{port}")
+
+
+@needs_cmu
+def test_cmu_take_replays_as_vmc_into_rtseg_live(tmp_path):
+    port = _free_udp_port()
+    live = _live(f"osc://127.0.0.1:{port}?format=vmc", tmp_path)
+    sim = None
+    try:
+        _wait_bound(port, live)
+        time.sleep(0.3)      # the session's reader thread is up once the port is bound
+        sim = _spawn("vmc", *REPLAY, "--port", str(port))
+        rc, out, err = _finish(sim, timeout=30.0)
+        assert rc == 0, err
+        assert "VMC sender: 17 bones" in out and "skeleton map cmu-asf" in out, out
+        assert f"sent {REPLAY_FRAMES} frames" in out, out
+        time.sleep(0.3)
+        lrc, lout, lerr = _stop_live(live)
+    finally:
+        for p in (sim, live):
+            if p is not None and p.poll() is None:
+                p.kill()
+                p.communicate()
+    assert lrc == 0, lerr
+    _check_replay(tmp_path, lerr, REPLAY_FRAMES)
+
+
+def test_simulate_take_errors_name_the_unmapped_bones(tmp_path, capsys):
+    from rtseg.drivers.readers import write_take
+    from rtseg.take import Take
+    q = np.tile([0.0, 0.0, 0.0, 1.0], (10, 3, 1))
+    path = write_take(tmp_path / "odd.npz", Take(["Hips", "Spine", "Tail"], [-1, 0, 1], 120.0, q))
+    assert main(["simulate", "vmc", "--take", str(path), "--port", "9"]) in (1, 2)
+    err = capsys.readouterr().err
+    assert "skeleton map 'unity'" in err and "Chest (looked for Chest or UpperChest)" in err
+    assert "Hips (" not in err
+    for argv, fragment in [
+        (["--speed", "0"], "--speed must be a positive number"),
+        (["--imu", "noise=x"], "noise needs a number"),
+        (["--joint-map", "Head"], "--joint-map: expected BONE=JOINT"),
+        (["--start", "5", "--end", "4"], "--start/--end select no frame"),
+    ]:
+        assert main(["simulate", "vmc", "--synth", "idle:2", "--port", "9", *argv]) in (1, 2), argv
+        assert fragment in capsys.readouterr().err, argv
