@@ -129,16 +129,16 @@ def test_segment_params_file_changes_the_result(synth_dir, capsys, tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[pca]\nno_such_knob = 1\n")
     rc, _, err = run_cli(capsys, "segment", take, "--method", "pca", "--params", bad)
-    assert rc == 1 and "no_such_knob" in err
+    assert rc == 2 and "no_such_knob" in err
 
 
 def test_segment_bad_input_is_a_clear_error(tmp_path, capsys):
     rc, out, err = run_cli(capsys, "segment", tmp_path / "missing.npz")
-    assert rc == 1 and out == "" and "missing.npz" in err
+    assert rc == 2 and out == "" and "missing.npz" in err
     junk = tmp_path / "junk.bvh"
     junk.write_text("this is not a BVH file\n")
     rc, _, err = run_cli(capsys, "segment", junk)
-    assert rc == 1 and "junk.bvh" in err
+    assert rc == 2 and "junk.bvh" in err
 
 
 # ------------------------------------------------------------------------ evaluate
@@ -217,9 +217,9 @@ def test_evaluate_reports_unreadable_take_and_continues(synth_dir, capsys, tmp_p
 
 def test_evaluate_empty_folder(tmp_path, capsys):
     rc, _, err = run_cli(capsys, "evaluate", tmp_path)
-    assert rc == 1 and "no labelled takes" in err
+    assert rc == 2 and "no labelled takes" in err
     rc, _, err = run_cli(capsys, "evaluate", tmp_path / "nope")
-    assert rc == 1 and "does not exist" in err
+    assert rc == 2 and "does not exist" in err
 
 
 # ------------------------------------------------------------------------ plot
@@ -238,7 +238,7 @@ def test_plot_writes_png(synth_dir, capsys, tmp_path):
     assert rc == 0 and out2.read_bytes()[:4] == b"\x89PNG"
     rc, _, err = run_cli(capsys, "plot", root / "cmu" / "91_01.npz", "--method", "gmm",
                          "--labels", tmp_path / "nolabels.txt", "-o", out2)
-    assert rc == 1 and "nolabels.txt" in err
+    assert rc == 2 and "nolabels.txt" in err
 
 
 def test_plot_without_matplotlib_is_a_clear_error(synth_dir, capsys, tmp_path, monkeypatch):

@@ -109,7 +109,7 @@ def read_npz(path: str | Path, frame_rate: float | None = None) -> Take:
     if not magic:
         raise ReaderError(path, "empty file (not an .npz take)")
     if magic != b"PK\x03\x04":   # .npz files are zip archives
-        raise ReaderError(path, "not an .npz take (no zip archive signature)")
+        raise ReaderError(path, "not a readable .npz file (no zip archive signature)")
     try:
         z = np.load(path, allow_pickle=False)
     except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:

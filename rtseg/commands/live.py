@@ -119,10 +119,12 @@ def format_cut(ev: CutEvent) -> str:
 class Console:
     """Prints cuts on ``out`` and the status line on ``err`` (an event listener)."""
 
-    def __init__(self, out: TextIO = sys.stdout, err: TextIO = sys.stderr,
+    def __init__(self, out: TextIO | None = None, err: TextIO | None = None,
                  print_cuts: bool = True, status: bool = True,
                  session_stats: Callable[[], Any] | None = None) -> None:
-        self.out, self.err = out, err
+        # the streams of the moment (not those bound when this module was imported)
+        self.out = out if out is not None else sys.stdout
+        self.err = err if err is not None else sys.stderr
         self.print_cuts = print_cuts
         self.status = status
         self.tty = bool(getattr(err, "isatty", lambda: False)())
