@@ -1,11 +1,13 @@
 """Live sources chosen by URL, one module each (in the spirit of pyserial's URL handlers).
 
     serial:///dev/ttyUSB0?baud=921600&format=rtseg   -> rtseg.drivers.serial_source
-    osc://0.0.0.0:39539?format=vmc                   -> rtseg.drivers.osc_source
+    osc://127.0.0.1:39539?format=vmc&allow=...       -> rtseg.drivers.osc_source
     file://take.amc?skeleton=86.asf&speed=1.0        -> rtseg.drivers.file_source
     sim://synth?seed=1&script=...                    -> rtseg.drivers.sim_source
 
-``open_source(url)`` parses the URL and returns a started ``Source``.
+``open_source(url)`` parses the URL and returns a started ``Source``.  Network sources
+listen on loopback (127.0.0.1) unless the URL writes another address (``osc://0.0.0.0:...``);
+``allow=`` restricts who may send (see ``rtseg.drivers.osc_source``).
 """
 
 from __future__ import annotations

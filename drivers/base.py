@@ -26,7 +26,8 @@ class SourceStats:
     bad COBS, garbage); crc_failures: of those, messages whose CRC did not match (serial);
     gaps: sequence discontinuities seen; reconnects: device reopened after loss;
     bad_values: NaN / non-unit quaternions refused; unknown_names: bone or sensor names not
-    in the profile; bad_messages: wrongly typed or short messages.
+    in the profile; bad_messages: wrongly typed or short messages; refused_senders:
+    datagrams from senders outside a network source's ``allow=`` list (dropped unread).
     """
     frames_ok: int = 0
     dropped: int = 0
@@ -37,6 +38,7 @@ class SourceStats:
     unknown_names: int = 0
     bad_messages: int = 0
     crc_failures: int = 0
+    refused_senders: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)

@@ -1,6 +1,11 @@
 """Live VMC input over OSC/UDP: ``osc://HOST:PORT?format=vmc&suit=default17&quiet=0.02``.
 
-rtseg listens as a VMC receiver ("Marionette", default UDP 39539).  One reader thread
+rtseg listens as a VMC receiver ("Marionette", default UDP 39539) on **127.0.0.1** unless
+another address is written: ``osc://`` and ``osc://:39541`` listen on loopback only (a
+sender on the same machine); ``osc://0.0.0.0:39539`` (every IPv4 interface),
+``osc://[::]:39539`` or an interface address must be given explicitly to receive from
+other machines - and then anyone who can reach that port can send poses and so fire cues:
+restrict senders with ``allow=``.  One reader thread
 blocks on the socket, feeds every datagram in arrival order to a
 :class:`rtseg.drivers.codec_vmc.VmcAssembler`, and queues the completed frames; ``read``
 takes them off the queue.  (No threaded OSC server: it would handle datagrams in parallel
@@ -30,6 +35,10 @@ URL options (VMC)
              ``VmcAssembler``.
 ``burst``    seconds within which the datagrams of one frame arrive (default 0.004): a root
              arriving later than this after a frame's first bone starts a new frame.
+``allow``    senders accepted, comma separated addresses or CIDR networks
+             (``allow=192.168.1.20,10.0.0.0/24``; default: any sender that can reach the
+             bound address).  Datagrams from others are dropped before decoding, counted in
+             ``stats.refused_senders`` and logged once per sender address.  (Both formats.)
 
 Frames: ``space = "local"`` (parent-relative rotations), joints in suit order,
 right-handed Y-up scalar-last; ``recv_time`` monotonic s when the frame closed,
@@ -40,6 +49,7 @@ right-handed Y-up scalar-last; ``recv_time`` monotonic s when the frame closed,
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 import math
 import socket
@@ -58,9 +68,56 @@ log = logging.getLogger("rtseg.drivers.osc")
 
 DEFAULT_PORT = 39539
 FORMATS = ("vmc", "vrchat")
+#: address listened on when the URL names none: loopback only
+DEFAULT_HOST = "127.0.0.1"
 OPTIONS = ("format", "suit", "quiet", "queue", "rate", "rcvbuf", "tolerance", "time_order",
-           "burst")
-VRCHAT_OPTIONS = ("format", "quiet", "queue", "rate", "rcvbuf", "root")
+           "burst", "allow")
+VRCHAT_OPTIONS = ("format", "quiet", "queue", "rate", "rcvbuf", "root", "allow")
+#: distinct refused senders remembered (each is logged once); later ones are only counted
+MAX_REFUSED_LOGGED = 1024
+
+Network = ipaddress.IPv4Network | ipaddress.IPv6Network
+
+
+def parse_allow(text: str) -> tuple[Network, ...]:
+    """``allow=`` value -> networks (a bare address is a /32 or /128 network).  Refuses
+    an empty list or a bad entry with a ``SourceError`` naming it."""
+    nets = []
+    for part in text.split(","):
+        part = part.strip()
+        if not part:
+            continue
+        try:
+            nets.append(ipaddress.ip_network(part, strict=False))
+        except ValueError as exc:
+            raise SourceError(f"osc:// allow={text!r}: {exc}") from None
+    if not nets:
+        raise SourceError("osc:// allow= needs at least one address or network "
+                          "(e.g. allow=127.0.0.1,192.168.1.0/24)")
+    return tuple(nets)
+
+
+def sender_allowed(host: str, allow: tuple[Network, ...] | None) -> bool:
+    """Whether a datagram from ``host`` (as ``recvfrom`` gives it) passes ``allow``
+    (None: everyone).  IPv4-mapped IPv6 senders (``::ffff:a.b.c.d``) match IPv4 entries."""
+    if allow is None:
+        return True
+    try:
+        addr = ipaddress.ip_address(host.split("%", 1)[0])
+    except ValueError:
+        return False
+    if isinstance(addr, ipaddress.IPv6Address) and addr.ipv4_mapped is not None:
+        addr = addr.ipv4_mapped
+    return any(addr.version == n.version and addr in n for n in allow)
+
+
+def is_wide(host: str) -> bool:
+    """True when listening on ``host`` accepts datagrams from other machines (anything but
+    a loopback address)."""
+    try:
+        return not ipaddress.ip_address(host.split("%", 1)[0]).is_loopback
+    except ValueError:
+        return host.lower() != "localhost"      # a host name: whatever it resolves to
 
 
 def load_suit(name: str) -> tuple[list[str], list[int]]:
@@ -92,7 +149,9 @@ class OscUdpSource(Source):
     _asm: Any
 
     def _start(self, host: str, port: int, quiet: float, queue_size: int,
-               rcvbuf: int | None) -> None:
+               rcvbuf: int | None, allow: tuple[Network, ...] | None = None) -> None:
+        self.allow = allow
+        self._refused: set[str] = set()
         self._queue = FrameQueue(queue_size)   # drop policy: the oldest frame goes
         self._stop = threading.Event()
         self._closed = False
@@ -101,17 +160,22 @@ class OscUdpSource(Source):
             infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
             family, _, _, _, addr = infos[0]
             self._sock = socket.socket(family, socket.SOCK_DGRAM)
-        except OSError as exc:
+        except (OSError, UnicodeError) as exc:
             raise SourceError(f"osc://{host}:{port}: {exc}") from None
         try:
             if rcvbuf:
                 self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, int(rcvbuf))
             self._sock.bind(addr)
-        except OSError as exc:
+        except (OSError, OverflowError) as exc:
             self._sock.close()
             raise SourceError(f"cannot listen on UDP {host}:{port}: {exc}") from None
         self.host = host
         self.port: int = self._sock.getsockname()[1]
+        if is_wide(host):
+            log.warning("OSC: listening on %s:%d - reachable from other machines; %s",
+                        host, self.port,
+                        "senders restricted to allow=" + ",".join(map(str, allow)) if allow
+                        else "any host that can reach it can send poses (restrict with allow=)")
         # wake up often enough to apply the quiet-gap rule and to notice close()
         self._sock.settimeout(max(0.001, min(quiet / 2.0, 0.05)))
         self._thread = threading.Thread(target=self._run, name=f"rtseg-osc-{self.port}",
@@ -127,7 +191,7 @@ class OscUdpSource(Source):
         asm = self._asm
         while not self._stop.is_set():
             try:
-                data = sock.recv(65536)
+                data, sender = sock.recvfrom(65536)
             except (socket.timeout, BlockingIOError, InterruptedError):
                 try:
                     frames = asm.flush(time.monotonic())
@@ -141,6 +205,9 @@ class OscUdpSource(Source):
                 time.sleep(0.01)
                 continue
             else:
+                if self.allow is not None and not sender_allowed(sender[0], self.allow):
+                    self._refuse(sender[0])
+                    continue
                 try:
                     frames = asm.feed(data, time.monotonic())
                 except Exception:  # a decoder bug must not kill the live loop
@@ -150,6 +217,15 @@ class OscUdpSource(Source):
                     continue
             for frame in frames:
                 self._put(frame)
+
+    def _refuse(self, host: str) -> None:
+        """Count a datagram from a sender outside ``allow``; log each sender once."""
+        self.count("refused_senders")
+        if host not in self._refused and len(self._refused) < MAX_REFUSED_LOGGED:
+            self._refused.add(host)
+            log.warning("OSC port %d: datagram from %s refused (not in allow=%s); further "
+                        "datagrams from it are counted in refused_senders, not logged",
+                        self.port, host, ",".join(map(str, self.allow or ())))
 
     def _put(self, frame: Frame) -> None:
         if self._queue.put(frame):
@@ -186,12 +262,13 @@ class OscVmcSource(OscUdpSource):
 
     space = "local"
 
-    def __init__(self, host: str = "0.0.0.0", port: int = DEFAULT_PORT, *,
+    def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
                  suit: str = "default17", bone_names: Sequence[str] | None = None,
                  parents: Sequence[int] | None = None, quiet: float = 0.02,
                  queue_size: int = 256, rate: float | None = None,
                  rcvbuf: int | None = None, tolerance: float = 0.05,
-                 time_order: str = "last", burst: float = 0.004) -> None:
+                 time_order: str = "last", burst: float = 0.004,
+                 allow: tuple[Network, ...] | None = None) -> None:
         super().__init__()
         if bone_names is None:
             bones, pars = load_suit(suit)
@@ -210,7 +287,7 @@ class OscVmcSource(OscUdpSource):
             raise SourceError(f"time_order must be 'last' or 'first', not {time_order!r}")
         self._asm = VmcAssembler(bones, quiet=quiet, unit_tolerance=tolerance,
                                  time_order=time_order, burst=burst, stats=self.stats)
-        self._start(host, port, quiet, queue_size, rcvbuf)
+        self._start(host, port, quiet, queue_size, rcvbuf, allow)
 
     @property
     def ok_state(self) -> tuple[int, ...] | None:
@@ -226,9 +303,10 @@ class OscVrchatSource(OscUdpSource):
 
     space = "global"
 
-    def __init__(self, host: str = "0.0.0.0", port: int = VRCHAT_PORT, *,
+    def __init__(self, host: str = DEFAULT_HOST, port: int = VRCHAT_PORT, *,
                  quiet: float = 0.02, queue_size: int = 256, rate: float | None = None,
-                 rcvbuf: int | None = None, root: str | None = None) -> None:
+                 rcvbuf: int | None = None, root: str | None = None,
+                 allow: tuple[Network, ...] | None = None) -> None:
         super().__init__()
         if not quiet > 0:
             raise SourceError(f"quiet must be positive seconds, got {quiet}")
@@ -239,13 +317,13 @@ class OscVrchatSource(OscUdpSource):
             self._asm = VrchatAssembler(quiet=quiet, root=root, stats=self.stats)
         except ValueError as exc:
             raise SourceError(f"osc:// format=vrchat: {exc}") from None
-        self._start(host, port, quiet, queue_size, rcvbuf)
+        self._start(host, port, quiet, queue_size, rcvbuf, allow)
 
 
 def _parse_location(location: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
     loc = location.strip("/")
     if not loc:
-        return "0.0.0.0", default_port
+        return DEFAULT_HOST, default_port
     if loc.startswith("["):                       # [v6addr]:port
         host, _, rest = loc[1:].partition("]")
         port_s = rest[1:] if rest.startswith(":") else ""
@@ -257,17 +335,26 @@ def _parse_location(location: str, default_port: int = DEFAULT_PORT) -> tuple[st
         raise SourceError(f"osc://{location}: port {port_s!r} is not a number") from None
     if not 0 <= port <= 65535:
         raise SourceError(f"osc://{location}: port {port} out of range 0..65535")
-    return host or "0.0.0.0", port
+    return host or DEFAULT_HOST, port
+
+
+#: accepted range of each numeric option
+_RANGES = {"quiet": (1e-4, 60.0), "queue": (1, 1_000_000), "rate": (1e-3, 1e5),
+           "rcvbuf": (1, 1 << 30), "tolerance": (0.0, 1.0), "burst": (0.0, 60.0)}
 
 
 def _num(options: dict[str, str], key: str, default, kind=float):
     if key not in options or options[key] == "":
         return default
     try:
-        return kind(options[key])
+        value = kind(options[key])
     except ValueError:
         raise SourceError(f"osc:// option {key}={options[key]!r} is not a valid "
-                          f"{kind.__name__}") from None
+                          f"{'integer' if kind is int else 'number'}") from None
+    lo, hi = _RANGES[key]
+    if not lo <= value <= hi:                 # also refuses nan and inf
+        raise SourceError(f"osc:// option {key}={options[key]}: out of range {lo}..{hi}")
+    return value
 
 
 def open_url(location: str, options: dict[str, str]) -> OscUdpSource:
@@ -281,12 +368,14 @@ def open_url(location: str, options: dict[str, str]) -> OscUdpSource:
     if unknown:
         raise SourceError(f"osc:// unknown option(s) {', '.join(unknown)} for format={fmt}; "
                           f"known: {', '.join(known)}")
+    allow = parse_allow(options["allow"]) if "allow" in options else None
     if fmt == "vrchat":
         host, port = _parse_location(location, VRCHAT_PORT)
         return OscVrchatSource(
             host, port, quiet=_num(options, "quiet", 0.02),
             queue_size=_num(options, "queue", 256, int), rate=_num(options, "rate", None),
-            rcvbuf=_num(options, "rcvbuf", None, int), root=options.get("root") or None)
+            rcvbuf=_num(options, "rcvbuf", None, int), root=options.get("root") or None,
+            allow=allow)
     host, port = _parse_location(location)
     return OscVmcSource(
         host, port, suit=options.get("suit", "default17") or "default17",
@@ -294,8 +383,8 @@ def open_url(location: str, options: dict[str, str]) -> OscUdpSource:
         rate=_num(options, "rate", None), rcvbuf=_num(options, "rcvbuf", None, int),
         tolerance=_num(options, "tolerance", 0.05),
         time_order=options.get("time_order", "last").lower() or "last",
-        burst=_num(options, "burst", 0.004))
+        burst=_num(options, "burst", 0.004), allow=allow)
 
 
 __all__ = ["OscUdpSource", "OscVmcSource", "OscVrchatSource", "open_url", "load_suit",
-           "DEFAULT_PORT"]
+           "parse_allow", "sender_allowed", "DEFAULT_HOST", "DEFAULT_PORT"]

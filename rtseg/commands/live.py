@@ -224,7 +224,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "live", help="segment a live stream and send cuts over OSC",
         description="Segment a live motion stream into behaviours and send each cut over OSC "
                     "as it happens.  Sources: serial:///dev/ttyUSB0?baud=921600, "
-                    "osc://0.0.0.0:39539?format=vmc, file://take.amc?skeleton=86.asf, "
+                    "osc://:39539?format=vmc (loopback; write 0.0.0.0 and allow= to listen on the "
+                    "network), file://take.amc?skeleton=86.asf, "
                     "sim://synth.")
     p.add_argument("source", nargs="?", metavar="SOURCE_URL",
                    help="where frames come from (default: source.url of the configuration)")

@@ -7,8 +7,10 @@
 - The socket is non-blocking and connected, so the kernel reports a down target: after a
   datagram meets "ICMP port unreachable", the *next* send fails with
   ConnectionRefusedError.  That notice is counted (``stats.refused`` and ``stats.dropped``:
-  the earlier datagram was lost), logged at most every 5 s, and the current datagram is
-  sent again once (it was not sent).  A full socket buffer (BlockingIOError) or any other
+  the earlier datagram was lost) and the current datagram is sent again once (it was not
+  sent).  A target with nothing listening is logged ONCE (a warning), not at every
+  message; when two sends in a row meet no refusal the receiver is back (logged at info),
+  and a later outage is warned about again.  A full socket buffer (BlockingIOError) or any other
   OSError drops the datagram and counts it.  Nothing here blocks or raises to the caller.
 - Cost: one ``send`` syscall per message (a cut is two messages plus one per template).
 """
@@ -17,7 +19,7 @@ from __future__ import annotations
 
 import socket
 
-from rtseg.publishers.base import OscPublisher
+from rtseg.publishers.base import OscPublisher, log
 from rtseg.publishers.templates import AddressTemplate
 
 DEFAULT_HOST = "127.0.0.1"
@@ -48,6 +50,8 @@ class OscUdpPublisher(OscPublisher):
             self._sock.close()
             raise ValueError(f"OSC target {self.target}: {exc}") from None
         self._closed = False
+        self._down = False       # a refusal was seen and no delivery confirmed since
+        self._maybe_up = False   # one send without refusal since then
 
     def _send(self, packet: bytes) -> None:
         if self._closed:
@@ -57,12 +61,23 @@ class OscUdpPublisher(OscPublisher):
             try:
                 self._sock.send(packet)
                 self.count("sent")
+                if self._down:
+                    if self._maybe_up:      # the previous datagram met no refusal
+                        self._down = self._maybe_up = False
+                        log.info("%s: receiver is listening again", self.target)
+                    else:
+                        self._maybe_up = True
                 return
             except ConnectionRefusedError:
                 # Reports an earlier datagram; this one was not sent: retry once.
                 self.count("refused")
                 self.count("dropped")
-                self.warn("refused", "nothing listening (port unreachable); messages are being lost")
+                self._maybe_up = False
+                if not self._down:
+                    self._down = True
+                    log.warning("%s: nothing listening (port unreachable); messages to it "
+                                "are lost and counted as dropped until a receiver starts "
+                                "(warned once per outage)", self.target)
                 continue
             except BlockingIOError:
                 self.count("dropped")
