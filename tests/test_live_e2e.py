@@ -335,7 +335,7 @@ def test_demo_command_prints_cuts(tmp_path):
     osc = OscCollector()
     try:
         proc = subprocess.run(
-            [sys.executable, "-m", "rtseg.cli", "demo", "--duration", "4", "--speed", "4",
+            [sys.executable, "-m", "rtseg.cli", "demo", "--duration", "16", "--speed", "4",
              "--script", "idle:3,walk:4,punch:4", "--osc", f"127.0.0.1:{osc.port}"],
             capture_output=True, text=True, timeout=60, cwd=REPO)
         time.sleep(0.1)

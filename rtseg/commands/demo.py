@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from rtseg.cli import positive_float
 from rtseg.commands.live import add_session_arguments, config_from_args, run_session
 from rtseg.config import ConfigError
 
@@ -38,7 +39,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"rtseg demo: {exc}", file=sys.stderr)
         return 2
     take = synth.take
-    suit = SerialSuit(take, rate=args.rate * args.speed, faults=faults, loop=True)
+    # --speed: frames go out speed x faster while the suit's clock and sequence numbers stay
+    # those of the performance, so detector delays (frames / rate) and the t= printed are
+    # performance time; --duration is performance time too (wall clock: duration / speed)
+    suit = SerialSuit(take, rate=args.rate, speed=args.speed, faults=faults, loop=True)
     path = suit.start()
     try:
         url = f"serial://{path}?rate={args.rate:g}"
@@ -46,16 +50,24 @@ def run(args: argparse.Namespace) -> int:
         where = (f"cuts go to OSC {targets} (try `oscdump {cfg['output.osc'][0].rsplit(':', 1)[1]}`)"
                  if targets else "no OSC/UDP target")
         print(f"rtseg demo: simulated suit on {path} ({take.n_joints} sensors, "
-              f"{args.rate * args.speed:g} Hz{', faults ' + faults.to_spec() if faults.enabled else ''})",
+              f"{args.rate:g} Hz{', faults ' + faults.to_spec() if faults.enabled else ''})",
               file=sys.stderr)
+        if args.speed != 1:
+            print(f"rtseg demo: --speed {args.speed:g}: frames are sent {args.speed:g}x faster "
+                  f"({args.rate * args.speed:g} frames per wall-clock second) on the "
+                  f"performance's {args.rate:g} Hz clock; t= and detector delays are "
+                  f"performance time (divide by {args.speed:g} for wall-clock time), "
+                  f"processing times are wall-clock", file=sys.stderr)
         print(f"rtseg demo: script {script}", file=sys.stderr)
-        print(f"rtseg demo: reading {url}; {where}; ending after {args.duration:g} s, "
-              f"Ctrl-C to stop", file=sys.stderr)
+        print(f"rtseg demo: reading {url}; {where}; ending after {args.duration:g} s of "
+              f"performance ({args.duration / args.speed:.1f} s), Ctrl-C to stop",
+              file=sys.stderr)
         if args.truth:
             for tr in synth.transitions:
                 print(f"truth: {tr.before} -> {tr.after} at frame {tr.mid} "
                       f"(t={tr.mid / args.rate:.2f} s, blend {tr.lo}..{tr.hi})", file=sys.stderr)
-        return run_session(url, cfg, args.duration, args.quiet)
+        return run_session(url, cfg, args.duration / args.speed, args.quiet,
+                           performance_time=args.speed != 1)
     finally:
         suit.stop()
 
@@ -72,9 +84,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="inject faults into the serial link, e.g. "
                         "'corrupt=0.01,unplug=20:0.5,dropout=5:10:1'")
     p.add_argument("--seed", type=int, default=0, help="synthesiser seed (default 0)")
-    p.add_argument("--rate", type=float, default=120.0, help="suit frame rate, Hz (default 120)")
-    p.add_argument("--speed", type=float, default=1.0,
-                   help="playback speed factor (frames are sent at rate x speed)")
+    p.add_argument("--rate", type=positive_float, default=120.0,
+                   help="suit frame rate, Hz (default 120)")
+    p.add_argument("--speed", type=positive_float, default=1.0,
+                   help="playback speed factor: frames are sent at rate x speed on the "
+                        "performance's own clock, so --duration, t= and detector delays are "
+                        "performance time (default 1)")
     p.add_argument("--truth", action="store_true",
                    help="print the script's true transition frames before starting")
     add_session_arguments(p)

@@ -108,11 +108,14 @@ FLAGS = {"output.osc": "--osc", "output.osc_tcp": "--osc-tcp", "output.templates
          "detectors.methods": "--methods"}
 
 
-def format_cut(ev: CutEvent) -> str:
+def format_cut(ev: CutEvent, time: float | None = None) -> str:
+    """One cut line.  ``time``: the boundary time to show (default ``ev.time``, seconds
+    since the session started; the demo at ``--speed`` shows performance time)."""
     proc = "-" if ev.processing_ms is None else f"{ev.processing_ms:.2f}"
     num = f"#{ev.event:<3d}" if ev.wire else "(log)"    # (log): not sent over OSC
+    t = ev.time if time is None else time
     return (f"cut {num} {ev.method:<5s} segment {ev.segment:<3d} "
-            f"frame {ev.frame:<7d} t={ev.time:9.3f} s  confidence {ev.confidence:.2f}  "
+            f"frame {ev.frame:<7d} t={t:9.3f} s  confidence {ev.confidence:.2f}  "
             f"detector delay {ev.detector_delay_ms:4.0f} ms  processing {proc} ms")
 
 
@@ -121,7 +124,8 @@ class Console:
 
     def __init__(self, out: TextIO | None = None, err: TextIO | None = None,
                  print_cuts: bool = True, status: bool = True,
-                 session_stats: Callable[[], Any] | None = None) -> None:
+                 session_stats: Callable[[], Any] | None = None,
+                 cut_time: Callable[[CutEvent], float] | None = None) -> None:
         # the streams of the moment (not those bound when this module was imported)
         self.out = out if out is not None else sys.stdout
         self.err = err if err is not None else sys.stderr
@@ -130,6 +134,7 @@ class Console:
         self.tty = bool(getattr(err, "isatty", lambda: False)())
         self.last_cut: CutEvent | None = None
         self.session_stats = session_stats
+        self.cut_time = cut_time     # None: ev.time (seconds since the session started)
         self._line_shown = False
         self._last_plain = 0.0
 
@@ -144,7 +149,8 @@ class Console:
             self.last_cut = ev
             if self.print_cuts:
                 self._clear()
-                print(format_cut(ev), file=self.out, flush=True)
+                t = self.cut_time(ev) if self.cut_time is not None else None
+                print(format_cut(ev, t), file=self.out, flush=True)
         elif isinstance(ev, DropoutEvent):
             self._clear()
             print(f"rtseg: dropout: {ev.name} {'lost' if ev.lost else 'restored'} "
@@ -160,7 +166,8 @@ class Console:
         last = "-"
         if self.last_cut is not None:
             c = self.last_cut
-            last = f"{c.method} #{c.event} at {c.time:.2f} s"
+            t = self.cut_time(c) if self.cut_time is not None else c.time
+            last = f"{c.method} #{c.event} at {t:.2f} s"
         line = (f"rtseg live: {ev.time:7.1f} s | {ev.frame_rate:6.1f} fps | "
                 f"{ev.dropped} dropped | {ev.stale_joints} stale{lag} | last cut: {last}")
         if any(ev.input_counts().values()):
@@ -180,12 +187,19 @@ class Console:
 
 
 def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: bool,
-                before_run: Callable[[], None] | None = None) -> int:
-    """Run a live session with console output; returns the exit status."""
+                before_run: Callable[[], None] | None = None,
+                performance_time: bool = False) -> int:
+    """Run a live session with console output; returns the exit status.
+
+    ``performance_time``: print each cut's ``t=`` as its boundary frame over the source's
+    nominal rate (the performance's own clock, for a replay sent faster than real time)
+    instead of seconds since the session started."""
     from rtseg.live import LiveSession
     console = Console(print_cuts=cfg["output.jsonl"] != "-", status=not quiet)
     session = LiveSession(source, cfg, listeners=[console], duration=duration)
     console.session_stats = lambda: session.stats
+    if performance_time:
+        console.cut_time = lambda ev: ev.frame / session.frame_rate
     try:
         if before_run is not None:
             before_run()
