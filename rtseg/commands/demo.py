@@ -59,9 +59,9 @@ def run(args: argparse.Namespace) -> int:
                   f"performance time (divide by {args.speed:g} for wall-clock time), "
                   f"processing times are wall-clock", file=sys.stderr)
         print(f"rtseg demo: script {script}", file=sys.stderr)
+        wall = f" ({args.duration / args.speed:.1f} s)" if args.speed != 1 else ""
         print(f"rtseg demo: reading {url}; {where}; ending after {args.duration:g} s of "
-              f"performance ({args.duration / args.speed:.1f} s), Ctrl-C to stop",
-              file=sys.stderr)
+              f"performance{wall}, Ctrl-C to stop", file=sys.stderr)
         if args.truth:
             for tr in synth.transitions:
                 print(f"truth: {tr.before} -> {tr.after} at frame {tr.mid} "
