@@ -325,3 +325,49 @@ def _keep_cwd_and_logging():
     for h in list(root.handlers):
         if h not in before:
             root.removeHandler(h)
+
+
+@pytest.fixture(scope="module")
+def synth_take(tmp_path_factory) -> Path:
+    from rtseg.drivers.readers.npz_take import write_npz
+    from rtseg.simulators.synth import synthesize
+    p = tmp_path_factory.mktemp("take") / "synth.npz"
+    write_npz(p, synthesize("idle:2,walk:2", seed=2).take)
+    return p
+
+
+_param_keys = st.sampled_from(["k_sigma", "window", "variant", "min_contrast", "tau", "nope",
+                               "k", "threshold"])
+
+
+@settings(max_examples=25, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(method=st.sampled_from(["pca", "ppca", "gmm"]),
+       fmt=st.sampled_from(["table", "json", "csv"]),
+       profile=st.one_of(st.none(), _text, st.sampled_from(["cmu14", "unity", "all"])),
+       params=st.one_of(st.none(), st.dictionaries(
+           st.sampled_from(["pca", "ppca", "gmm", "x"]),
+           st.dictionaries(_param_keys, _scalar, max_size=2), max_size=2)),
+       skeleton=st.one_of(st.none(), _safe_rel))
+def test_random_segment_options_give_a_clean_run_or_one_line(capsys, tmp_path, synth_take,
+                                                             method, fmt, profile, params,
+                                                             skeleton):
+    os.chdir(tmp_path)
+    argv = ["segment", str(synth_take), "--method", method, "--format", fmt]
+    if profile is not None:
+        argv += ["--profile", profile]
+    if skeleton is not None:
+        argv += ["--skeleton", skeleton]
+    if params is not None:
+        p = tmp_path / "params.toml"
+        p.write_text("".join(f"[{m}]\n" + "".join(f"{k} = {_toml_value(v)}\n"
+                                                   for k, v in table.items())
+                             for m, table in params.items()), encoding="utf-8",
+                     errors="surrogatepass")
+        argv += ["--params", str(p)]
+    rc, _, err = run(capsys, *argv)
+    event(f"exit status {rc}")
+    if rc == 0:
+        assert "Traceback" not in err, err
+        return
+    assert_one_line_error(rc, err)
