@@ -274,7 +274,7 @@ def test_open_errors_are_clear(tmp_path):
         open_source(f"serial://{tmp_path}/x?bogus=1")
     with pytest.raises(SourceError, match="cannot open serial device"):
         open_source(f"serial://{tmp_path}/absent")
-    with pytest.raises(SourceError, match="expected a number"):
+    with pytest.raises(SourceError, match="baud='fast': expected an integer"):
         open_source(f"serial://{tmp_path}/x?baud=fast")
     with pytest.raises(SourceError, match="format"):
         open_source(f"serial://{tmp_path}/x?format=json")
