@@ -7,6 +7,9 @@
   (``rtseg.detectors.ppca``).
 - ``gmm``  (batch): cut where consecutive frames change Gaussian-mixture cluster
   (``rtseg.detectors.gmm``).
+- ``contrast`` (online, rtseg's own; the default of ``rtseg live``): cut at a causal maximum
+  of the contrast between the windows just before and just after a frame
+  (``rtseg.detectors.contrast``); offline it runs unchanged.
 
 Parameters live in ``config/detectors.toml`` (sections ``[pca]``, ``[ppca]``, ``[gmm]``).
 Windows are given in seconds and converted to frames with the frame rate of the take or
@@ -24,7 +27,9 @@ import numpy as np
 from rtseg.config import ConfigError, config_dir, load_toml
 from rtseg.detectors.base import BatchDetector, Cut, OnlineDetector
 
-METHODS: tuple[str, ...] = ("pca", "ppca", "gmm")
+METHODS: tuple[str, ...] = ("contrast", "pca", "ppca", "gmm")
+#: Methods with a streaming detector (``make_online``).
+ONLINE_METHODS: tuple[str, ...] = ("contrast", "pca", "ppca")
 
 # key -> (type(s), check, description); checks return True when the value is acceptable.
 _pos = (lambda v: v > 0, "> 0")
@@ -33,6 +38,19 @@ _nonneg = (lambda v: v >= 0, ">= 0")
 _posint = (lambda v: v >= 1, ">= 1")
 
 SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
+    "contrast": {
+        "before_s": ((int, float), _pos),
+        "after_s": ((int, float), _pos),
+        "min_before_s": ((int, float), _pos),
+        "step_s": ((int, float), _pos),
+        "threshold": ((int, float), _pos),
+        "hold_s": ((int, float), _nonneg),
+        "drop": ((int, float), (lambda v: 0 <= v < 1, "in [0, 1)")),
+        "min_gap_s": ((int, float), _nonneg),
+        "pca_energy": ((int, float), _unit),
+        "ppca_energy": ((int, float), _unit),
+        "noise_floor": ((int, float), _nonneg),
+    },
     "pca": {
         "window_s": ((int, float), _pos),
         "lag_s": ((int, float), _pos),
@@ -154,13 +172,17 @@ def make_online(method: str, frame_rate: float, params: Mapping[str, Any] | None
                 keep_trace: bool = False) -> OnlineDetector:
     """A streaming detector ("pca" or "ppca") for features arriving at ``frame_rate`` Hz."""
     p = method_params(method, params)
+    if method == "contrast":
+        from rtseg.detectors.contrast import ContrastDetector
+        return ContrastDetector.from_params(p, frame_rate, keep_trace=keep_trace)
     if method == "pca":
         from rtseg.detectors.pca import PCADetector
         return PCADetector.from_params(p, frame_rate, keep_trace=keep_trace)
     if method == "ppca":
         from rtseg.detectors.ppca import PPCADetector
         return PPCADetector.from_params(p, frame_rate, keep_trace=keep_trace)
-    raise ConfigError(f"method {method!r} has no online detector (online: pca, ppca)")
+    raise ConfigError(f"method {method!r} has no online detector "
+                      f"(online: {', '.join(ONLINE_METHODS)})")
 
 
 def segment_features(X: np.ndarray, method: str, frame_rate: float,
@@ -180,7 +202,10 @@ def segment_features(X: np.ndarray, method: str, frame_rate: float,
         bad = np.argwhere(~np.isfinite(X))[0]
         raise ValueError(f"X has a non-finite value at frame {bad[0]}, dim {bad[1]}")
     p = method_params(method, params)
-    if method == "pca":
+    if method == "contrast":
+        from rtseg.detectors.contrast import segment_contrast
+        cuts, trace = segment_contrast(X, p, frame_rate, keep_trace=keep_trace)
+    elif method == "pca":
         from rtseg.detectors.pca import segment_pca
         cuts, trace = segment_pca(X, p, frame_rate, keep_trace=keep_trace)
     elif method == "ppca":
@@ -205,5 +230,5 @@ class CutList(list):
         return list(self)
 
 
-__all__ = ["METHODS", "Cut", "OnlineDetector", "BatchDetector", "load_params", "make_online",
+__all__ = ["METHODS", "ONLINE_METHODS", "Cut", "OnlineDetector", "BatchDetector", "load_params", "make_online",
            "segment_features", "frames", "validate", "method_params", "SCHEMA"]

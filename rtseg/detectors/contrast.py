@@ -1,0 +1,190 @@
+"""Causal two-window contrast detector: rtseg's default live segmenter (not in the paper).
+
+At every position c on a grid of ``step`` frames, once the ``after`` frames from c on have
+arrived, the motion just after c is compared with the motion just before it:
+
+    A0 = [c-2w, c-w)   A = [c-w, c)   B = [c, c+after)          (w = before, frames)
+
+    contrast(c) = sqrt( Dpca(A, B) / Dpca(A0, A)  x  Dppca(A, B) / Dppca(A0, A) )
+
+with the window distances of ``rtseg.detectors.window_models`` (PCA projection error and
+PPCA Mahalanobis distance, the two models of Barbič et al. 2004).  A behaviour change makes
+the window after c unlike the one before it, more than that one is unlike its own
+predecessor (contrast well above 1); within a behaviour whose cycle is shorter than the
+windows it stays about 1.  Near the start of a segment (after the stream starts or a gap)
+w shrinks to half the frames so far, down to ``min_before``.  The profile's maxima are
+picked causally (``rtseg.detectors.peaks.CausalPeaks``: at least ``threshold``,
+``min_gap`` apart, confirmed after at most ``hold`` frames or as soon as the profile drops
+below ``drop`` x the maximum) and each is sent once, as a cut at c.
+
+Delay: a cut at c is known ``after`` frames later plus the confirmation (at most ``hold``
+frames): 1.75 + <= 0.75 s at the defaults.  The statistics of every ``step``-frame block are
+summed once (one BLAS call); windows are differences of their prefix sums, and each
+window's models are fitted once (``window_models.fit``: one 56x56 eigen-decomposition) and
+reused while the window is in use (A becomes A0 w frames later).
+
+Frames are numbered from the detector's creation; ``restart()`` (a gap) starts a new
+segment: the grid, the windows and the peak picker begin again from the next frame.
+``Cut.frame`` = c, ``detected_at`` = the frame whose arrival confirmed it, ``score`` = the
+contrast at c, ``confidence`` = 1 - threshold / contrast (0 at the threshold, -> 1 for a
+change far above it; the same meaning as every rtseg detector's confidence).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+
+from rtseg.detectors.base import Cut, OnlineDetector
+from rtseg.detectors.peaks import CausalPeaks
+from rtseg.detectors.window_models import (
+    WindowModel, WindowStats, fit, pca_distance, ppca_distance,
+)
+
+
+class ContrastDetector(OnlineDetector):
+    """Streaming two-window contrast detector.  All lengths in frames (see module docstring)."""
+
+    name = "contrast"
+    frame_origin = "creation"
+
+    def __init__(self, step: int = 10, before: int = 360, after: int = 210,
+                 min_before: int = 180, threshold: float = 2.0, hold: int = 90,
+                 min_gap: int = 240, drop: float = 0.5, pca_energy: float = 0.9,
+                 ppca_energy: float = 0.95, noise_floor: float = 1e-6,
+                 keep_trace: bool = False) -> None:
+        if step < 1:
+            raise ValueError(f"step must be >= 1 frame, got {step}")
+        for key, v in (("before", before), ("after", after), ("min_before", min_before)):
+            if v < 2 * step:
+                raise ValueError(f"{key} must be at least two steps ({2 * step} frames), got {v}")
+        if min_before > before:
+            raise ValueError(f"min_before ({min_before}) must not exceed before ({before})")
+        if not (threshold > 0 and math.isfinite(threshold)):
+            raise ValueError(f"threshold must be positive, got {threshold}")
+        self.step = int(step)
+        self.wa = max(1, int(round(before / step)))        # before window, blocks
+        self.wb = max(1, int(round(after / step)))         # after window, blocks
+        self.wmin = max(1, int(round(min_before / step)))  # shortest before window, blocks
+        self.threshold = float(threshold)
+        self.fit_args = dict(pca_energy=float(pca_energy), ppca_energy=float(ppca_energy),
+                             noise_floor=float(noise_floor))
+        self.peaks = CausalPeaks(threshold, hold=int(hold), min_gap=int(min_gap), drop=drop)
+        self.keep_trace = keep_trace
+        self.trace: list[tuple[int, float, float]] = []
+        self.rejected_frames = 0
+        self._t = 0
+        self._dim: int | None = None
+        self._buf: np.ndarray | None = None
+        self.restart()
+
+    @classmethod
+    def from_params(cls, p: Mapping[str, Any], frame_rate: float,
+                    keep_trace: bool = False) -> "ContrastDetector":
+        """From ``[contrast]`` parameters in seconds (``config/detectors.toml``)."""
+        from rtseg.detectors import frames
+        step = frames(p["step_s"], frame_rate)
+        return cls(step=step, before=frames(p["before_s"], frame_rate),
+                   after=frames(p["after_s"], frame_rate),
+                   min_before=frames(p["min_before_s"], frame_rate),
+                   threshold=p["threshold"], hold=frames(p["hold_s"], frame_rate),
+                   min_gap=frames(p["min_gap_s"], frame_rate), drop=p["drop"],
+                   pca_energy=p["pca_energy"], ppca_energy=p["ppca_energy"],
+                   noise_floor=p["noise_floor"], keep_trace=keep_trace)
+
+    @property
+    def delay_frames(self) -> int:
+        """Longest delay from a cut's frame to the frame that sends it."""
+        return self.wb * self.step + self.peaks.hold + self.step
+
+    # ------------------------------------------------------------------ state
+    def restart(self) -> None:
+        """Forget the current segment; the next frame starts a new one."""
+        self._seg0 = self._t                 # first frame of the segment
+        self._nb = 0                         # whole blocks in the segment
+        self._fill = 0                       # frames in the block being filled
+        self._ref: np.ndarray | None = None  # the segment's first frame (sums are about it)
+        self._models: dict[tuple[int, int], WindowModel] = {}
+        self.peaks.reset()
+        if self._dim is not None:              # the ring restarts at block 0
+            self._P1[0] = 0.0
+            self._P2[0] = 0.0
+
+    def _alloc(self, dim: int) -> None:
+        self._dim = dim
+        self._buf = np.empty((self.step, dim))
+        cap = 2 * self.wa + self.wb + 2
+        self._cap = cap
+        # prefix sums at block boundaries k (blocks < k), ring of cap entries
+        self._P1 = np.zeros((cap, dim))
+        self._P2 = np.zeros((cap, dim, dim))
+
+    # ------------------------------------------------------------------ streaming
+    def update(self, x: np.ndarray) -> Cut | None:
+        """Feed one frame (1-D feature vector); a Cut when a change is confirmed."""
+        x = self._admit(x)
+        if x is None:
+            return None
+        self._t += 1
+        if self._ref is None:
+            self._ref = x.copy()
+        self._buf[self._fill] = x - self._ref
+        self._fill += 1
+        if self._fill < self.step:
+            return None
+        self._fill = 0
+        return self._block_done()
+
+    def _block_done(self) -> Cut | None:
+        B = self._buf
+        k, cap = self._nb, self._cap
+        self._P1[(k + 1) % cap] = self._P1[k % cap] + B.sum(axis=0)
+        self._P2[(k + 1) % cap] = self._P2[k % cap] + B.T @ B
+        self._nb = k + 1
+        c = self._nb - self.wb                       # newest position with a whole B
+        if c < 2 * self.wmin:
+            return None
+        value = self._contrast(c)
+        position = self._seg0 + c * self.step
+        now = self._t - 1                            # the frame that completed the block
+        if self.keep_trace:
+            self.trace.append((position, value, self.threshold))
+        peak = self.peaks.update(position, value, now)
+        if peak is None:
+            return None
+        conf = 1.0 - self.threshold / peak.value if peak.value > 0 else 0.0
+        return Cut(frame=peak.position, method=self.name,
+                   confidence=float(min(max(conf, 0.0), 1.0)),
+                   detected_at=peak.confirmed_at, score=float(peak.value))
+
+    def _model(self, lo: int, hi: int) -> WindowModel:
+        m = self._models.get((lo, hi))
+        if m is None:
+            cap = self._cap
+            stats = WindowStats.from_sums((hi - lo) * self.step,
+                                          self._P1[hi % cap] - self._P1[lo % cap],
+                                          self._P2[hi % cap] - self._P2[lo % cap])
+            m = self._models[(lo, hi)] = fit(stats, **self.fit_args)
+        return m
+
+    def _contrast(self, c: int) -> float:
+        """The contrast at block position c (see the module docstring)."""
+        w = min(self.wa, c // 2)
+        a0, a, b = self._model(c - 2 * w, c - w), self._model(c - w, c), \
+            self._model(c, c + self.wb)
+        kp = pca_distance(a, b) / max(pca_distance(a0, a), 1e-300)
+        kq = ppca_distance(a, b) / max(ppca_distance(a0, a), 1e-300)
+        oldest = c + 1 - 2 * self.wa
+        for key in [k for k in self._models if k[0] < oldest]:
+            del self._models[key]
+        return math.sqrt(max(kp, 0.0) * max(kq, 0.0))
+
+
+def segment_contrast(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
+                     keep_trace: bool = False) -> tuple[list[Cut], list]:
+    """Offline: the causal detector run over every row of X, unchanged (offline and live
+    give the same cuts).  Returns (cuts, trace of (frame, contrast, threshold))."""
+    det = ContrastDetector.from_params(p, frame_rate, keep_trace=keep_trace)
+    return det.run(X), det.trace

@@ -1,0 +1,64 @@
+"""Causal peak picking: turn a profile that arrives one value at a time into events, once.
+
+``CausalPeaks.update(position, value, now)`` takes the profile's next value (``position``:
+the frame the value belongs to; ``now``: the frame whose arrival made it known) and
+returns a ``Peak`` when a maximum is confirmed.  A maximum is a *candidate* when its value
+reaches ``threshold``, lies at least ``min_gap`` frames after the last event, and exceeds
+every value of the preceding ``min_gap`` frames; a higher value replaces it.  It is
+confirmed (sent, never withdrawn) as soon as the profile falls below ``drop`` x its value,
+or ``hold`` frames of positions after it brought nothing higher — whichever comes first.
+So ``hold`` bounds the extra delay and ``drop`` ends it early on a clean peak.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Peak:
+    """A confirmed maximum: its position and value, and the frame that confirmed it."""
+    position: int
+    value: float
+    confirmed_at: int
+
+
+class CausalPeaks:
+    """Streaming maxima of a profile (positions in frames, increasing)."""
+
+    def __init__(self, threshold: float, hold: int, min_gap: int, drop: float = 0.5) -> None:
+        if hold < 0 or min_gap < 0:
+            raise ValueError(f"hold and min_gap must be >= 0 frames (got {hold}, {min_gap})")
+        if not 0.0 <= drop < 1.0:
+            raise ValueError(f"drop must be in [0, 1), got {drop}")
+        self.threshold, self.hold, self.min_gap, self.drop = float(threshold), int(hold), \
+            int(min_gap), float(drop)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the profile (after a gap): no candidate, no recent values, no last event."""
+        self._recent: deque[tuple[int, float]] = deque()
+        self._cand: tuple[int, float] | None = None
+        self._last = None
+
+    def update(self, position: int, value: float, now: int) -> Peak | None:
+        """Feed the value at ``position`` (known since frame ``now``); a Peak once confirmed."""
+        out = None
+        recent = self._recent
+        while recent and recent[0][0] < position - self.min_gap:
+            recent.popleft()
+        cand = self._cand
+        if cand is not None:
+            if value > cand[1]:
+                self._cand = (position, value)
+            elif value < self.drop * cand[1] or position - cand[0] >= self.hold:
+                out = Peak(cand[0], cand[1], now)
+                self._last = cand[0]
+                self._cand = None
+        elif (value >= self.threshold
+              and (self._last is None or position - self._last >= self.min_gap)
+              and all(value > v for _, v in recent)):
+            self._cand = (position, value)
+        recent.append((position, value))
+        return out

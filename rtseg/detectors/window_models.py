@@ -1,0 +1,119 @@
+"""Window models: how different two stretches of motion are.
+
+A *window* is a stretch of consecutive feature frames, summarised by its sufficient
+statistics ``WindowStats`` (frame count n, mean, centred scatter S = sum (x - mean)(x - mean)^T).
+Its models come from one eigen-decomposition of S (``fit``):
+
+- PCA (Barbič et al. 2004, 3.1): the mean and the top-r directions, r the smallest with
+  E_r > ``pca_energy`` (Eq. 6), at most the number of varying directions less one.  The
+  projection error of a window Y off a model, per frame and over the model's own error
+  (1 = as well explained as the model's own frames), is ``pca_error``; the distance of two
+  windows is the geometric mean of the two directions (``pca_distance``).
+- PPCA (3.2, Eqs. 7-9): a Gaussian with the top-r directions' variances (r from
+  ``ppca_energy``) and sigma^2 = mean of the other non-null eigenvalues, floored at
+  ``noise_floor``.  ``ppca_distance`` is the larger of the two windows' root mean squared
+  Mahalanobis distance under the other's model (the paper's symmetric distance of Fig. 6,
+  on squared distances so that it follows from the statistics alone).
+
+Everything here works on statistics, never on frames, so a window's cost does not depend
+on its length once its sums are known: a streaming detector adds blocks of frames
+(``WindowStats.from_sums``) and a batch caller gets them from prefix sums.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from rtseg.detectors._linalg import full_eigh, rank_for_energy
+
+
+@dataclass(frozen=True)
+class WindowStats:
+    """Sufficient statistics of n frames: ``mean`` (d,), centred ``scatter`` (d, d)."""
+    n: int
+    mean: np.ndarray
+    scatter: np.ndarray
+
+    @classmethod
+    def from_sums(cls, n: int, s1: np.ndarray, s2: np.ndarray) -> "WindowStats":
+        """From the raw sums s1 = sum x (d,) and s2 = sum x x^T (d, d) of n >= 1 frames."""
+        mean = s1 / n
+        return cls(n, mean, s2 - n * np.outer(mean, mean))
+
+    @classmethod
+    def of(cls, X: np.ndarray) -> "WindowStats":
+        """Of the frames X (n, d)."""
+        X = np.asarray(X, dtype=np.float64)
+        return cls.from_sums(len(X), X.sum(axis=0), X.T @ X)
+
+
+@dataclass(frozen=True)
+class WindowModel:
+    """PCA and PPCA models of one window (see the module docstring).
+
+    pca_basis (d, r_pca) and ppca_basis (d, r_ppca): orthonormal columns; pca_own: the
+    window's own mean per-frame projection error; ppca_var (r_ppca,): the kept variances;
+    ppca_sigma2: the variance of every other direction.
+    """
+    stats: WindowStats
+    pca_basis: np.ndarray
+    pca_own: float
+    ppca_basis: np.ndarray
+    ppca_var: np.ndarray
+    ppca_sigma2: float
+
+
+def fit(stats: WindowStats, pca_energy: float = 0.9, ppca_energy: float = 0.95,
+        noise_floor: float = 1e-6, null_rel: float = 1e-15) -> WindowModel:
+    """Both models of a window from one eigen-decomposition of its scatter."""
+    n = stats.n
+    lam, V = full_eigh(stats.scatter)
+    total = float(lam.sum())
+    # PCA: as rtseg.detectors.pca._pca_model (leave at least one varying direction out)
+    varying = int(np.count_nonzero(lam > 1e-12 * total))
+    r = max(0, min(rank_for_energy(lam, total, pca_energy), n, varying - 1))
+    own = max(float(lam[r:].sum()) / n, 1e-12 * total / n + 1e-300)
+    # PPCA on the covariance S / n; structural null directions (rounding-level
+    # eigenvalues) do not dilute sigma^2
+    cov = lam / n
+    nonnull = int(np.count_nonzero(cov > null_rel * float(cov.sum())))
+    q = max(0, min(rank_for_energy(cov, float(cov.sum()), ppca_energy), nonnull - 1))
+    rest = cov[q:nonnull]
+    sigma2 = max(float(rest.mean()) if len(rest) else noise_floor, noise_floor)
+    return WindowModel(stats, V[:, :r], own, V[:, :q], np.maximum(cov[:q], noise_floor), sigma2)
+
+
+def _moments_about(y: WindowStats, mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(second-moment matrix sum (x - mu)(x - mu)^T of y's frames, y.mean - mu)."""
+    dm = y.mean - mu
+    return y.scatter + y.n * np.outer(dm, dm), dm
+
+
+def pca_error(y: WindowStats, m: WindowModel) -> float:
+    """Mean per-frame projection error of y's frames off m's mean + hyperplane, over m's own."""
+    M, _ = _moments_about(y, m.stats.mean)
+    B = m.pca_basis
+    proj = float(np.einsum("ij,ij->", B, M @ B)) if B.shape[1] else 0.0
+    return (float(np.trace(M)) - proj) / y.n / m.pca_own
+
+
+def pca_distance(a: WindowModel, b: WindowModel) -> float:
+    """sqrt(pca_error(b | a) x pca_error(a | b)): 1 for two windows of the same motion."""
+    return math.sqrt(max(pca_error(b.stats, a), 0.0) * max(pca_error(a.stats, b), 0.0))
+
+
+def ppca_msq(y: WindowStats, m: WindowModel) -> float:
+    """Mean squared Mahalanobis distance of y's frames under m's PPCA Gaussian."""
+    M, _ = _moments_about(y, m.stats.mean)
+    M = M / y.n
+    B = m.ppca_basis
+    P = np.einsum("ij,ij->j", B, M @ B) if B.shape[1] else np.zeros(0)
+    return float((P / m.ppca_var).sum() + (float(np.trace(M)) - float(P.sum())) / m.ppca_sigma2)
+
+
+def ppca_distance(a: WindowModel, b: WindowModel) -> float:
+    """sqrt(max(ppca_msq(b | a), ppca_msq(a | b))): about sqrt(d_eff) within one behaviour."""
+    return math.sqrt(max(ppca_msq(b.stats, a), ppca_msq(a.stats, b), 0.0))
