@@ -86,7 +86,12 @@ def main(argv: list[str] | None = None) -> int:
     except (OSError, ValueError, KeyError, EOFError, MemoryError) as exc:
         print(f"rtseg {args.command}: error: {error_text(exc)}", file=sys.stderr)
         return EXIT_USAGE
-    except Exception as exc:  # a bug: one line, the traceback only with -vv
+    except Exception as exc:
+        from rtseg.drivers.base import SourceError
+        if isinstance(exc, SourceError):          # a source that cannot be opened
+            print(f"rtseg {args.command}: error: {error_text(exc)}", file=sys.stderr)
+            return EXIT_USAGE
+        # a bug: one line, the traceback only with -vv
         logging.getLogger("rtseg").debug("internal error", exc_info=True)
         print(f"rtseg {args.command}: internal error: {type(exc).__name__}: "
               f"{error_text(exc)} (rerun with -vv for the traceback)", file=sys.stderr)
