@@ -18,9 +18,9 @@ from pathlib import Path
 from typing import Any, Callable
 
 from rtseg.config import ConfigError, config_dir, load_toml
+from rtseg.detectors import ONLINE_METHODS as KNOWN_METHODS
 
 CALIBRATION_MODES = ("auto", "first", "average", "none")
-KNOWN_METHODS = ("pca", "ppca")
 #: largest ring buffer: 2^20 frames (2.4 h at 120 Hz; 570 MB for 17 joints of 4 float64)
 MAX_CAPACITY = 1 << 20
 
@@ -156,10 +156,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "frames": Key("int", 30, _range(1, 100_000), doc="frames averaged for mode average (and auto)"),
     },
     "detectors": {
-        "methods": Key("list[str]", ["pca", "ppca"], _methods),
+        "methods": Key("list[str]", ["contrast"], _methods),
         "primary": Key("str", "", doc="the detector whose cuts go on the wire by default; "
                                       "'' = the first of methods"),
         "params": Key("str", "", doc="detector parameter file; '' = config/detectors.toml"),
+        "contrast": Key("table", {}, doc="overrides of the contrast parameters"),
         "pca": Key("table", {}, doc="overrides of the pca parameters"),
         "ppca": Key("table", {}, doc="overrides of the ppca parameters"),
     },
