@@ -323,14 +323,14 @@ def detector_params(config: SessionConfig) -> dict[str, dict[str, Any]]:
     except (ValueError, OSError) as exc:
         raise ConfigError(f"detectors.params: {exc}") from None
     out = {}
-    for m in config["detectors.methods"]:
+    for m in det_mod.ONLINE_METHODS:     # every override is checked, run or not
         p = dict(all_params.get(m, {}))
         try:
             p.update(det_mod.validate(m, config[f"detectors.{m}"]))
         except ValueError as exc:
             raise ConfigError(f"detectors.{m}: {exc}") from None
         out[m] = p
-    return out
+    return {m: out[m] for m in config["detectors.methods"]}
 
 
 def make_detectors(config: SessionConfig, frame_rate: float) -> dict[str, OnlineDetector]:

@@ -184,7 +184,9 @@ def test_serial_pty_to_osc_matches_offline(tmp_path, take):
     suit = SerialSuit(take, rate=RATE * SPEED)
     try:
         path = suit.start()
-        cfg = session_config(rec, [osc.port, dump.port])
+        # the default detector (primary, on the wire) beside the paper's PCA (log only)
+        cfg = session_config(rec, [osc.port, dump.port],
+                             detectors={"methods": ["contrast", "pca"]})
         session = LiveSession(f"serial://{path}?rate={RATE:g}", cfg, handle_signals=False)
         t, box = run_in_thread(session)
         assert suit.wait_done(take.n_frames / (RATE * SPEED) + 10)
@@ -203,6 +205,7 @@ def test_serial_pty_to_osc_matches_offline(tmp_path, take):
     assert tk.n_frames >= 0.98 * take.n_frames
     assert summary.overruns == 0 and summary.bad_frames == 0
     assert len(expected) >= 4, "the take has 3 behaviour changes; both methods should see some"
+    assert session.primary == "contrast"
     assert session.wire == {session.primary}        # default: output.cut_methods = "primary"
     assert_cuts_match(osc.cuts(), on_wire(expected, session), tk, "python-osc")
     assert_cuts_match(dump.cuts(), on_wire(expected, session), tk, "oscdump")
@@ -221,7 +224,7 @@ def test_vmc_over_osc_to_osc_matches_offline(tmp_path, take):
     source = open_source(f"osc://127.0.0.1:0?format=vmc&rate={RATE:g}")
     sender = VmcSender(take, "127.0.0.1", source.port, rate=RATE * SPEED)
     try:
-        cfg = session_config(rec, [osc.port])
+        cfg = session_config(rec, [osc.port], detectors={"methods": ["contrast", "pca"]})
         session = LiveSession(source, cfg, handle_signals=False)
         t, box = run_in_thread(session)
         time.sleep(0.2)
@@ -245,10 +248,12 @@ def test_vmc_over_osc_to_osc_matches_offline(tmp_path, take):
     assert_cuts_match(osc.cuts(), on_wire(expected, session), tk, "python-osc (VMC input)")
 
 
-@pytest.mark.parametrize("corrupt,min_cuts", [(0.01, 0), (0.0003, 2)])
+@pytest.mark.parametrize("corrupt,min_cuts", [(0.01, 0), (0.0003, 1)])
 def test_faults_session_survives_and_records_every_frame(tmp_path, take, corrupt, min_cuts):
     """1 % corrupt bytes ruin ~80 % of the 173-byte frames (gaps everywhere: the detectors
-    keep restarting and rightly place no cut); 0.03 % ruin ~5 %: cuts still come through."""
+    keep restarting and rightly place no cut); 0.03 % ruin ~5 %: cuts still come through
+    (the unplug at 55 % restarts the contrast detector, which then needs 3 s of motion
+    before it checks again, so the last change, ~3 s after the replug, may go unseen)."""
     rec = tmp_path / "session"
     osc = OscCollector()
     play_s = take.n_frames / (RATE * SPEED)
