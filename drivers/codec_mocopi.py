@@ -1,0 +1,374 @@
+"""Sony mocopi UDP stream ("sony motion format"): parser, encoder, frame assembler.
+
+Pure bytes -> frames: no sockets here (see :mod:`rtseg.drivers.mocopi_source`).
+
+A datagram is a sequence of little-endian fields ``u32 length | 4-char tag | value``;
+some values are themselves fields (nested).  Per the Sony receiver plugin
+(sony/mocopi-receiver-plugin-blender ``models.py``), the unofficial protocol notes of
+seagetch/mcp-receiver (``doc/Protocol.md``) and t-34400/mocopi_protocol_supplement (its
+sample packets are test fixtures here)::
+
+    head { ftyp "sony motion format", vrsn u8 }
+    sndf { ipad 8 bytes, rcvp u16 (receiver port) }
+    skdf { bons { bndt { bnid u16, pbid u16, tran 7 x f32 } x 27 } }     skeleton packet
+    fram { fnum u32, time u32, [uttm f64], [tmcd ...], btrs { btdt { bnid u16,
+           tran 7 x f32 } x 27 } }                                          frame packet
+
+``tran`` = rotation qx qy qz qw then position px py pz (metres), **local to the parent
+bone**, right-handed Y-up (the supplement's finding; the Sony plugin mirrors x to reach
+Blender/Unity).  That is rtseg's frame already: quaternions pass through unchanged
+(scalar-last).  The rest pose of the sample packets carries (0, 0, 0, -1): a sign-flipped
+identity, the same rotation as (0, 0, 0, 1).  ``uttm`` (newer apps) is the sender's Unix
+time in seconds; ``time`` is a u32 whose unit is not documented (kept raw).  Bone ids
+0..26 = :data:`BONE_NAMES`; parents from ``pbid`` (65535 = none).
+
+:class:`MocopiAssembler` turns each ``fram`` datagram into one frame; ``skdf`` updates
+``skeleton``; nothing raises on bad input (counted in the stats instead).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import struct
+from dataclasses import dataclass
+from typing import Iterator, Sequence
+
+import numpy as np
+
+from rtseg.drivers.base import SourceStats
+from rtseg.frame import Frame
+
+log = logging.getLogger("rtseg.drivers.mocopi")
+
+DEFAULT_PORT = 12351
+FTYP = b"sony motion format"
+#: mocopi bone ids 0..26
+BONE_NAMES: tuple[str, ...] = (
+    "root", "torso_1", "torso_2", "torso_3", "torso_4", "torso_5", "torso_6", "torso_7",
+    "neck_1", "neck_2", "head",
+    "l_shoulder", "l_up_arm", "l_low_arm", "l_hand",
+    "r_shoulder", "r_up_arm", "r_low_arm", "r_hand",
+    "l_up_leg", "l_low_leg", "l_foot", "l_toes",
+    "r_up_leg", "r_low_leg", "r_foot", "r_toes",
+)
+#: parent bone id of each bone id (-1: root), as the mocopi skeleton packet gives them
+BONE_PARENTS: tuple[int, ...] = (
+    -1, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9,
+    7, 11, 12, 13, 7, 15, 16, 17,
+    0, 19, 20, 21, 0, 23, 24, 25,
+)
+NO_PARENT = 0xFFFF
+_FIELD = struct.Struct("<I4s")
+_TRAN = struct.Struct("<7f")
+#: one ``btdt`` record of a frame packet, header included (54 bytes)
+BTDT = np.dtype([("len", "<u4"), ("tag", "S4"), ("id_len", "<u4"), ("id_tag", "S4"),
+                 ("bnid", "<u2"), ("tr_len", "<u4"), ("tr_tag", "S4"), ("tran", "<f4", (7,))])
+_MAX_DEPTH = 6
+
+
+class MocopiParseError(ValueError):
+    """Malformed mocopi bytes (a field overrunning its parent, a missing required field)."""
+
+
+@dataclass(slots=True)
+class MocopiFrame:
+    """A decoded ``fram``.  ``bone_ids`` (n,) int; ``tran`` (n, 7) float32 qx qy qz qw px py
+    pz; ``uttm`` Unix seconds or None; ``tmcd`` raw time-code bytes or None."""
+    fnum: int
+    time: int
+    uttm: float | None
+    tmcd: bytes | None
+    bone_ids: np.ndarray
+    tran: np.ndarray
+
+
+@dataclass(slots=True)
+class MocopiSkeleton:
+    """A decoded ``skdf``: ``bone_ids``, ``parent_ids`` (-1: none) and rest ``tran``."""
+    bone_ids: np.ndarray
+    parent_ids: np.ndarray
+    tran: np.ndarray
+
+
+@dataclass(slots=True)
+class MocopiPacket:
+    """One datagram: ``ftyp``/``version`` from ``head``, ``port`` from ``sndf``, and a
+    ``frame`` or a ``skeleton`` (or neither for an unknown kind)."""
+    ftyp: bytes | None
+    version: int | None
+    port: int | None
+    frame: MocopiFrame | None = None
+    skeleton: MocopiSkeleton | None = None
+
+
+def iter_fields(data: bytes, start: int, end: int) -> Iterator[tuple[bytes, int, int]]:
+    """(tag, value start, value end) of each field in ``data[start:end]``; raises
+    :class:`MocopiParseError` when a field overruns ``end``."""
+    pos = start
+    while pos < end:
+        if pos + 8 > end:
+            raise MocopiParseError(f"{end - pos} stray bytes at offset {pos}")
+        length, tag = _FIELD.unpack_from(data, pos)
+        vstart = pos + 8
+        vend = vstart + length
+        if vend > end:
+            raise MocopiParseError(f"field {tag!r} at offset {pos} ({length} bytes) overruns "
+                                   f"its container ending at {end}")
+        yield tag, vstart, vend
+        pos = vend
+
+
+def _children(data: bytes, start: int, end: int) -> dict[bytes, tuple[int, int]]:
+    out: dict[bytes, tuple[int, int]] = {}
+    for tag, a, b in iter_fields(data, start, end):
+        out.setdefault(tag, (a, b))
+    return out
+
+
+def _uint(data: bytes, a: int, b: int, what: str) -> int:
+    if not 1 <= b - a <= 8:
+        raise MocopiParseError(f"{what} has {b - a} bytes")
+    return int.from_bytes(data[a:b], "little")
+
+
+def _tran(data: bytes, a: int, b: int) -> tuple[float, ...]:
+    if b - a != 28:
+        raise MocopiParseError(f"tran has {b - a} bytes, expected 28")
+    return _TRAN.unpack_from(data, a)
+
+
+def _bones_generic(data: bytes, a: int, b: int, record: bytes, with_parent: bool):
+    ids, pids, trans = [], [], []
+    for tag, ra, rb in iter_fields(data, a, b):
+        if tag != record:
+            continue
+        kids = _children(data, ra, rb)
+        if b"bnid" not in kids or b"tran" not in kids:
+            raise MocopiParseError(f"{record.decode()} without bnid or tran")
+        ids.append(_uint(data, *kids[b"bnid"], "bnid"))
+        if with_parent:
+            if b"pbid" not in kids:
+                raise MocopiParseError("bndt without pbid")
+            pids.append(_uint(data, *kids[b"pbid"], "pbid"))
+        trans.append(_tran(data, *kids[b"tran"]))
+    tran = np.array(trans, dtype=np.float32).reshape(-1, 7)
+    return np.array(ids, dtype=np.int64), np.array(pids, dtype=np.int64), tran
+
+
+def _btrs(data: bytes, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+    """Bone ids and tran of a ``btrs`` value: one vectorised read when every record has the
+    standard layout (what mocopi sends), else field by field."""
+    n, rem = divmod(b - a, BTDT.itemsize)
+    if n and not rem:
+        rec = np.frombuffer(data, dtype=BTDT, count=n, offset=a)
+        if ((rec["len"] == 46).all() and (rec["tag"] == b"btdt").all()
+                and (rec["id_len"] == 2).all() and (rec["id_tag"] == b"bnid").all()
+                and (rec["tr_len"] == 28).all() and (rec["tr_tag"] == b"tran").all()):
+            return rec["bnid"].astype(np.int64), rec["tran"]
+    ids, _, tran = _bones_generic(data, a, b, b"btdt", False)
+    return ids, tran
+
+
+def parse_packet(data: bytes) -> MocopiPacket:
+    """Decode one datagram; raises :class:`MocopiParseError` on malformed bytes."""
+    top = _children(data, 0, len(data))
+    ftyp = version = port = None
+    if b"head" in top:
+        head = _children(data, *top[b"head"])
+        if b"ftyp" in head:
+            ftyp = bytes(data[slice(*head[b"ftyp"])])
+        if b"vrsn" in head:
+            version = _uint(data, *head[b"vrsn"], "vrsn")
+    if b"sndf" in top:
+        sndf = _children(data, *top[b"sndf"])
+        if b"rcvp" in sndf:
+            port = _uint(data, *sndf[b"rcvp"], "rcvp")
+    pkt = MocopiPacket(ftyp, version, port)
+    if b"fram" in top:
+        fr = _children(data, *top[b"fram"])
+        for need in (b"fnum", b"btrs"):
+            if need not in fr:
+                raise MocopiParseError(f"fram without {need.decode()}")
+        fnum = _uint(data, *fr[b"fnum"], "fnum")
+        tm = _uint(data, *fr[b"time"], "time") if b"time" in fr else 0
+        uttm = None
+        if b"uttm" in fr:
+            ua, ub = fr[b"uttm"]
+            if ub - ua != 8:
+                raise MocopiParseError(f"uttm has {ub - ua} bytes, expected 8")
+            uttm = struct.unpack_from("<d", data, ua)[0]
+        tmcd = bytes(data[slice(*fr[b"tmcd"])]) if b"tmcd" in fr else None
+        ids, tran = _btrs(data, *fr[b"btrs"])
+        pkt.frame = MocopiFrame(fnum, tm, uttm, tmcd, ids, tran)
+    elif b"skdf" in top:
+        sk = _children(data, *top[b"skdf"])
+        if b"bons" not in sk:
+            raise MocopiParseError("skdf without bons")
+        ids, pids, tran = _bones_generic(data, *sk[b"bons"], b"bndt", True)
+        pids = np.where(pids == NO_PARENT, -1, pids)
+        pkt.skeleton = MocopiSkeleton(ids, pids, tran)
+    return pkt
+
+
+# --------------------------------------------------------------------------- encoder
+
+def field(tag: bytes, value: bytes) -> bytes:
+    """One ``length | tag | value`` field."""
+    return _FIELD.pack(len(value), tag) + value
+
+
+def _head_sndf(port: int, ipad: bytes) -> bytes:
+    return (field(b"head", field(b"ftyp", FTYP) + field(b"vrsn", b"\x01"))
+            + field(b"sndf", field(b"ipad", ipad) + field(b"rcvp", struct.pack("<H", port))))
+
+
+_IPAD = bytes(8)
+
+
+def encode_frame(fnum: int, quats: np.ndarray, positions: np.ndarray | None = None, *,
+                 bone_ids: Sequence[int] | None = None, time: int = 0,
+                 uttm: float | None = None, port: int = DEFAULT_PORT,
+                 ipad: bytes = _IPAD) -> bytes:
+    """A ``fram`` datagram.  ``quats`` (n, 4) local rotations, scalar-last, rtseg frame (=
+    mocopi's); ``positions`` (n, 3) local positions in metres (default zeros);
+    ``bone_ids`` default 0..n-1; ``time`` u32; ``uttm`` Unix seconds (omitted if None)."""
+    q = np.asarray(quats, dtype=np.float64)
+    n = q.shape[0]
+    ids = np.arange(n) if bone_ids is None else np.asarray(bone_ids)
+    if q.shape != (n, 4) or len(ids) != n:
+        raise ValueError(f"quats must be (n, 4) with n bone ids, got {q.shape}, {len(ids)} ids")
+    rec = np.zeros(n, dtype=BTDT)
+    rec["len"], rec["tag"] = 46, b"btdt"
+    rec["id_len"], rec["id_tag"], rec["bnid"] = 2, b"bnid", ids
+    rec["tr_len"], rec["tr_tag"] = 28, b"tran"
+    rec["tran"][:, :4] = q
+    if positions is not None:
+        rec["tran"][:, 4:] = np.asarray(positions, dtype=np.float64)
+    body = (field(b"fnum", struct.pack("<I", fnum & 0xFFFFFFFF))
+            + field(b"time", struct.pack("<I", int(time) & 0xFFFFFFFF)))
+    if uttm is not None:
+        body += field(b"uttm", struct.pack("<d", uttm))
+    body += field(b"btrs", rec.tobytes())
+    return _head_sndf(port, ipad) + field(b"fram", body)
+
+
+def encode_skeleton(parent_ids: Sequence[int], rest: np.ndarray, *,
+                    bone_ids: Sequence[int] | None = None, port: int = DEFAULT_PORT,
+                    ipad: bytes = _IPAD) -> bytes:
+    """A ``skdf`` datagram: ``rest`` (n, 7) qx qy qz qw px py pz per bone, parents -1 ->
+    65535."""
+    rest = np.asarray(rest, dtype=np.float32)
+    ids = range(len(parent_ids)) if bone_ids is None else bone_ids
+    recs = b"".join(
+        field(b"bndt", field(b"bnid", struct.pack("<H", int(i)))
+              + field(b"pbid", struct.pack("<H", NO_PARENT if p < 0 else int(p)))
+              + field(b"tran", rest[k].astype("<f4").tobytes()))
+        for k, (i, p) in enumerate(zip(ids, parent_ids)))
+    return _head_sndf(port, ipad) + field(b"skdf", field(b"bons", recs))
+
+
+# --------------------------------------------------------------------------- assembler
+
+class MocopiAssembler:
+    """Frames from mocopi datagrams: one ``fram`` datagram is one frame.
+
+    ``bone_ids[k]``: mocopi bone id carried by output joint k (a suit profile's sensor
+    ids).  Per frame: ``quats`` (J, 4) local rotations, scalar-last (bones absent from the
+    packet hold their last value, ``valid`` False); ``seq`` = ``fnum``; ``source_time`` =
+    ``uttm`` (Unix s) when sent, else None; ``root_position`` = bone ``root_id``'s ``tran``
+    position (metres).  Non-finite or non-unit (| |q|^2 - 1 | > ``unit_tolerance``)
+    rotations are counted in ``bad_values`` and marked invalid; ``continuous`` flips signs
+    for a non-negative dot with the previous value (so a sign-flipped identity is
+    harmless).  ``skdf`` packets set ``skeleton``; a ``head.ftyp`` other than
+    ``"sony motion format"`` is counted in ``bad_messages``.  :meth:`feed` never raises.
+    """
+
+    def __init__(self, bone_ids: Sequence[int] = tuple(range(len(BONE_NAMES))), *,
+                 unit_tolerance: float = 0.05, continuous: bool = True, root_id: int = 0,
+                 stats: SourceStats | None = None) -> None:
+        ids = [int(b) for b in bone_ids]
+        if not ids or len(set(ids)) != len(ids) or not all(0 <= b < 1 << 16 for b in ids):
+            raise ValueError(f"bone ids must be distinct, 0..65535, got {ids}")
+        self.bone_ids = ids
+        self.n = len(ids)
+        self.unit_tolerance = float(unit_tolerance)
+        self.continuous = continuous
+        self.stats = stats if stats is not None else SourceStats()
+        self._lut = np.full(1 << 16, -1, dtype=np.int64)
+        self._lut[ids] = np.arange(self.n)
+        self._root_row = int(self._lut[root_id]) if 0 <= root_id < 1 << 16 else -1
+        self._q = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (self.n, 1))
+        self._warned: set[str] = set()
+        #: last skeleton definition received (``skdf``) or None
+        self.skeleton: MocopiSkeleton | None = None
+        #: last frame's raw fields (fnum, time, uttm, tmcd) or None
+        self.last_frame: MocopiFrame | None = None
+
+    def _count(self, what: str, n: int, message: str) -> None:
+        setattr(self.stats, what, getattr(self.stats, what) + n)
+        if what not in self._warned:
+            self._warned.add(what)
+            log.warning("mocopi: %s (further ones counted in %s, not logged)", message, what)
+
+    def feed(self, data: bytes, now: float) -> list[Frame]:
+        """One datagram received at ``now`` (monotonic s) -> [frame] or []."""
+        try:
+            pkt = parse_packet(data)
+        except (MocopiParseError, struct.error, ValueError) as exc:
+            self._count("corrupt", 1, f"datagram of {len(data)} bytes refused: {exc}")
+            return []
+        if pkt.ftyp is not None and pkt.ftyp != FTYP:
+            self._count("bad_messages", 1, f"unknown format {pkt.ftyp[:32]!r}")
+            return []
+        if pkt.skeleton is not None:
+            self.skeleton = pkt.skeleton
+            return []
+        if pkt.frame is None:
+            self._count("bad_messages", 1, "datagram with neither fram nor skdf")
+            return []
+        return [self._frame(pkt.frame, now)]
+
+    def flush(self, now: float, force: bool = False) -> list[Frame]:
+        """Nothing to flush: each datagram is a whole frame."""
+        return []
+
+    def _frame(self, fr: MocopiFrame, now: float) -> Frame:
+        self.last_frame = fr
+        ids = fr.bone_ids
+        ok = (ids >= 0) & (ids < len(self._lut))
+        rows = np.full(len(ids), -1, dtype=np.int64)
+        rows[ok] = self._lut[ids[ok]]
+        keep = rows >= 0
+        if not ok.all():
+            self._count("unknown_names", int((~ok).sum()), "bone id out of range")
+        rows = rows[keep]
+        tran = fr.tran[keep].astype(np.float64)
+        qq = tran[:, :4]
+        norm2 = np.einsum("ij,ij->i", qq, qq)
+        good = np.isfinite(norm2) & (np.abs(norm2 - 1.0) <= self.unit_tolerance)
+        if not good.all():
+            self._count("bad_values", int((~good).sum()), "non-unit or non-finite rotation")
+            rows, qq, tran = rows[good], qq[good], tran[good]
+        q = self._q.copy()
+        if self.continuous and len(rows):
+            flip = np.einsum("ij,ij->i", qq, self._q[rows]) < 0
+            qq = np.where(flip[:, None], -qq, qq)
+        q[rows] = qq
+        valid = np.zeros(self.n, dtype=bool)
+        valid[rows] = True
+        self._q = q
+        root = None
+        hit = np.flatnonzero(rows == self._root_row)
+        if hit.size:
+            pos = tran[hit[0], 4:7]
+            if np.isfinite(pos).all():
+                root = pos.copy()
+        st = fr.uttm if fr.uttm is not None and math.isfinite(fr.uttm) else None
+        return Frame(recv_time=now, quats=q, valid=valid, source_time=st, seq=fr.fnum,
+                     root_position=root)
+
+
+__all__ = ["MocopiAssembler", "MocopiParseError", "MocopiPacket", "MocopiFrame",
+           "MocopiSkeleton", "parse_packet", "iter_fields", "encode_frame", "encode_skeleton",
+           "field", "BONE_NAMES", "BONE_PARENTS", "DEFAULT_PORT", "FTYP"]

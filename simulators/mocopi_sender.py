@@ -1,0 +1,110 @@
+"""Simulated Sony mocopi: send a take as mocopi UDP packets ("sony motion format").
+
+``MocopiSender(take, host, port, speed=1.0, ...)`` retargets ``take`` onto the 27 bones of
+suit ``mocopi`` (:mod:`rtseg.simulators.udp_take_sender`; bones the take lacks, e.g.
+torso_1/3/5/7 or neck_2, take their parent's orientation) and sends one ``fram`` datagram
+per frame: ``fnum`` = frame slot, ``time`` = take time in ms (u32; the unit mocopi uses is
+not documented), ``uttm`` = Unix time at start + take time (s), ``btrs`` with each bone's
+rotation **relative to its parent** (scalar-last, right-handed Y-up, as mocopi sends it)
+and position (root: the take's root in metres; other bones: 0).  A ``skdf`` skeleton
+packet is sent before the first frame and every ``skeleton_every`` frames.  See
+:mod:`rtseg.drivers.codec_mocopi`.
+
+Read it with ``rtseg live mocopi://127.0.0.1:12351``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from rtseg import quat as Q
+from rtseg.drivers.codec_mocopi import DEFAULT_PORT, encode_frame, encode_skeleton
+from rtseg.profiles import SuitProfile
+from rtseg.simulators.retarget import ImuModel
+from rtseg.simulators.udp_take_sender import UdpTakeSender
+from rtseg.take import Take
+
+
+class MocopiSender(UdpTakeSender):
+    """Send ``take`` as mocopi to ``host:port`` from a background thread (see module doc).
+    ``unix_start``: ``uttm`` of slot 0 (default: the wall clock when built);
+    ``skeleton_every``: frames between ``skdf`` packets (0: only before the first)."""
+
+    name = "mocopi"
+
+    def __init__(self, take: Take, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
+                 rate: float | None = None, loop: bool = False, *, speed: float = 1.0,
+                 suit: str | SuitProfile = "mocopi", skeleton_map: str | None = None,
+                 joint_map: dict[str, str] | None = None, imu: ImuModel | str | None = None,
+                 allow_missing: bool = False, unix_start: float | None = None,
+                 skeleton_every: int = 0) -> None:
+        super().__init__(take, host, port, rate, loop, speed, suit, skeleton_map, joint_map,
+                         imu, allow_missing)
+        self.bone_ids = list(self.suit.sensor_ids)
+        self.unix_start = time.time() if unix_start is None else float(unix_start)
+        self.skeleton_every = int(skeleton_every)
+        self._local = np.ascontiguousarray(Q.make_continuous(
+            Q.local_from_global(self.retargeted.quats, list(self.suit.parents)), 0))
+        n, s = self._local.shape[:2]
+        self._pos = np.zeros((n, s, 3))
+        if self.root is not None:
+            root = self.suit.parents.index(-1)
+            self._pos[:, root] = self.root
+        parents = [self.bone_ids[p] if p >= 0 else -1 for p in self.suit.parents]
+        rest = np.zeros((s, 7))
+        rest[:, 3] = 1.0
+        self._skdf = encode_skeleton(parents, rest, bone_ids=self.bone_ids, port=self.port)
+
+    @property
+    def local_quats(self) -> np.ndarray:
+        """(frames, bones, 4) the rotations sent, relative to the parent bone."""
+        return self._local
+
+    def preamble(self) -> list[bytes]:
+        return [self._skdf]
+
+    def encode(self, slot: int, index: int, source_time: float) -> list[bytes]:
+        out = []
+        if self.skeleton_every > 0 and slot and slot % self.skeleton_every == 0:
+            out.append(self._skdf)
+        out.append(encode_frame(slot, self._local[index], self._pos[index],
+                                bone_ids=self.bone_ids, time=int(round(source_time * 1000.0)),
+                                uttm=self.unix_start + source_time, port=self.port))
+        return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m rtseg.simulators.mocopi_sender``: send a synthetic or recorded take."""
+    p = argparse.ArgumentParser(prog="python -m rtseg.simulators.mocopi_sender",
+                                description="Send a take as Sony mocopi UDP packets.")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--take", help="take file (any format rtseg reads)")
+    src.add_argument("--script", default="idle:3,walk:6,punch:4,squat:4",
+                     help="synthesiser script behaviour:seconds,... (default %(default)s)")
+    p.add_argument("--host", default="127.0.0.1")
+    p.add_argument("--port", type=int, default=DEFAULT_PORT)
+    p.add_argument("--speed", type=float, default=1.0)
+    p.add_argument("--loop", action="store_true")
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args(argv)
+    if args.take:
+        from rtseg.drivers.readers import read_take
+        take = read_take(args.take)
+    else:
+        from rtseg.simulators.synth import synthesize
+        take = synthesize(args.script, seed=args.seed).take
+    with MocopiSender(take, args.host, args.port, loop=args.loop, speed=args.speed) as sender:
+        try:
+            while not sender.wait(0.5):
+                pass
+        except KeyboardInterrupt:
+            pass
+    print(f"sent {len(sender.sent_log)} frames to {args.host}:{args.port}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
