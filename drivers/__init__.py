@@ -4,6 +4,8 @@
     osc://127.0.0.1:39539?format=vmc&allow=...       -> rtseg.drivers.osc_source
     file://take.amc?skeleton=86.asf&speed=1.0        -> rtseg.drivers.file_source
     sim://synth?seed=1&script=...                    -> rtseg.drivers.sim_source
+    mvn://:9763?character=0&allow=...                -> rtseg.drivers.mvn_source (Xsens MVN)
+    mocopi://:12351?allow=...                        -> rtseg.drivers.mocopi_source (Sony mocopi)
 
 ``open_source(url)`` parses the URL and returns a started ``Source``.  Network sources
 listen on loopback (127.0.0.1) unless the URL writes another address (``osc://0.0.0.0:...``);
@@ -22,6 +24,8 @@ SCHEMES: dict[str, str] = {
     "osc": "rtseg.drivers.osc_source",
     "file": "rtseg.drivers.file_source",
     "sim": "rtseg.drivers.sim_source",
+    "mvn": "rtseg.drivers.mvn_source",
+    "mocopi": "rtseg.drivers.mocopi_source",
 }
 
 
