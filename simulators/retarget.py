@@ -138,6 +138,31 @@ MAPS: dict[str, SkeletonMap] = {m.name: m for m in (
             "{Side}Foot": ("{Side}Foot",), "{Side}Toes": ("{Side}ToeBase",),
         }),
         prefix=r"^mixamorig\d*:", signature=("Spine2", "HeadTop_End")),
+    SkeletonMap(
+        "xsens-mvn", "Xsens MVN segments (MVNX labels; also the xsens-mvn suit's L3/T12)",
+        _sides({
+            "Hips": ("Pelvis",), "Spine": ("L5",), "L3": ("L3",), "T12": ("T12",),
+            "Chest": ("T8",), "UpperChest": ("T8",), "Neck": ("Neck",), "Head": ("Head",),
+            "{Side}Shoulder": ("{Side}Shoulder",), "{Side}UpperArm": ("{Side}UpperArm",),
+            "{Side}LowerArm": ("{Side}ForeArm", "{Side}LowerArm"),
+            "{Side}Hand": ("{Side}Hand",), "{Side}UpperLeg": ("{Side}UpperLeg",),
+            "{Side}LowerLeg": ("{Side}LowerLeg",), "{Side}Foot": ("{Side}Foot",),
+            "{Side}Toes": ("{Side}Toe", "{Side}Toes"),
+        }),
+        signature=("Pelvis", "L5", "L3", "T12", "T8")),
+    SkeletonMap(
+        "mocopi", "Sony mocopi bones (root, torso_1..7, neck_1/2, l_up_arm ...)",
+        {
+            "Hips": ("root",), "Spine": ("torso_2",), "Chest": ("torso_4",),
+            "UpperChest": ("torso_6",), "Neck": ("neck_1",), "Head": ("head",),
+            **{f"torso_{k}": (f"torso_{k}",) for k in (1, 3, 5, 7)}, "neck_2": ("neck_2",),
+            **{f"{side}{hbb}": (f"{s}_{m}",) for side, s in (("Left", "l"), ("Right", "r"))
+               for hbb, m in (("Shoulder", "shoulder"), ("UpperArm", "up_arm"),
+                              ("LowerArm", "low_arm"), ("Hand", "hand"),
+                              ("UpperLeg", "up_leg"), ("LowerLeg", "low_leg"),
+                              ("Foot", "foot"), ("Toes", "toes"))},
+        },
+        signature=("torso_1", "torso_7", "neck_2", "l_up_arm", "r_low_leg")),
 )}
 
 

@@ -4,12 +4,19 @@
                           [--format rtseg|text] [--faults SPEC] [--loop] [--duration S]
                           [--speed X] [--start S] [--end S] [--imu SPEC] [--map NAME]
     rtseg simulate vmc    [--synth SCRIPT | --take FILE] [--host H] [--port P] ...
+    rtseg simulate mvn    [--synth SCRIPT | --take FILE] [--port 9763] [--character N] ...
+    rtseg simulate mocopi [--synth SCRIPT | --take FILE] [--port 12351] ...
 
 ``serial`` serves the take on a pseudo-terminal (``rtseg.simulators.serial_device.SerialSuit``)
 and prints its device path - read it with ``rtseg live serial://PATH``.
 ``vmc`` sends it as VMC over OSC/UDP (``rtseg.simulators.vmc_sender.VmcSender``) to
 ``--host``:``--port`` (default 127.0.0.1:39539, the VMC receiver port) - read it with
 ``rtseg live "osc://127.0.0.1:39539?format=vmc"``.
+``mvn`` sends Xsens MVN network streaming (``rtseg.simulators.mvn_sender``, suit
+``xsens-mvn``, default port 9763) - read it with ``rtseg live mvn://127.0.0.1:9763``;
+``mocopi`` sends Sony mocopi packets (``rtseg.simulators.mocopi_sender``, suit ``mocopi``,
+default port 12351) - read it with ``rtseg live mocopi://127.0.0.1:12351``.  Their suit
+segments a take has no joint for are filled from the parent segment.
 
 A recorded take is retargeted to the suit (``rtseg.simulators.retarget``): the skeleton
 family (CMU ASF/AMC, CMU BVH, Mixamo, Unity humanoid) is detected from the joint names
@@ -40,7 +47,9 @@ from typing import Any, Callable
 
 from rtseg.take import Take
 
-DEVICES = ("serial", "vmc")
+DEVICES = ("serial", "vmc", "mvn", "mocopi")
+#: default UDP port of each network device
+DEFAULT_PORTS = {"vmc": 39539, "mvn": 9763, "mocopi": 12351}
 
 
 def register(subparsers: Any) -> None:
@@ -91,7 +100,10 @@ def register(subparsers: Any) -> None:
                    help="keep the device open S seconds after the last frame (default 0.5)")
     g = p.add_argument_group("vmc")
     g.add_argument("--host", default="127.0.0.1", help="receiver address (default 127.0.0.1)")
-    g.add_argument("--port", type=int, default=39539, help="receiver UDP port (default 39539)")
+    g.add_argument("--port", type=int, default=None, help="receiver UDP port (default 39539; "
+                   "mvn 9763, mocopi 12351)")
+    g = p.add_argument_group("mvn")
+    g.add_argument("--character", type=int, default=0, help="MVN character id (default 0)")
     p.set_defaults(func=run)
 
 
@@ -236,6 +248,8 @@ def _serve_serial(args, take: Take) -> tuple[str, list[str]]:
 def _serve_vmc(args, take: Take) -> tuple[str, list[str]]:
     from rtseg.simulators.vmc_sender import VmcSender
 
+    if args.port is None:
+        args.port = DEFAULT_PORTS["vmc"]
     if not 0 < args.port < 65536:
         raise ValueError(f"--port must be 1..65535, got {args.port}")
     sender = VmcSender(take, args.host, args.port, faults=args.faults or None, loop=args.loop,
@@ -267,6 +281,48 @@ def _serve_vmc(args, take: Take) -> tuple[str, list[str]]:
     return reason, lines
 
 
+def _serve_vendor(args, take: Take) -> tuple[str, list[str]]:
+    """``mvn`` / ``mocopi``: a UDP sender of that format (its own suit unless --suit names
+    another whose ids fit the format)."""
+    port = DEFAULT_PORTS[args.device] if args.port is None else args.port
+    if not 0 < port < 65536:
+        raise ValueError(f"--port must be 1..65535, got {port}")
+    if args.faults:
+        raise ValueError(f"--faults is not supported by the {args.device} simulator")
+    kw = dict(speed=args.speed, loop=args.loop, **_retarget_kw(args))
+    if args.suit != "default17":
+        kw["suit"] = args.suit
+    if args.device == "mvn":
+        from rtseg.simulators.mvn_sender import MvnSender
+        sender = MvnSender(take, args.host, port, character=args.character, **kw)
+        url = f"mvn://{args.host}:{port}" + (f"?character={args.character}" if args.character else "")
+    else:
+        from rtseg.simulators.mocopi_sender import MocopiSender
+        sender = MocopiSender(take, args.host, port, **kw)
+        url = f"mocopi://{args.host}:{port}"
+    _out(f"  {sender.describe()}")
+    _out(f"{sender.name} sender: {len(sender.suit.bones)}-segment suit {sender.suit.name} to udp "
+         f"{args.host}:{port} at {sender.rate:g} Hz (stream clock in take time), sent at "
+         f"x{sender.speed:g}")
+    _out(f"  receive it with: rtseg live {url}")
+    t0 = time.monotonic()
+    reason = "interrupted"
+    sender.start()
+    try:
+        reason = _run_until(sender.wait, args.duration)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        sender.stop()
+    log = list(sender.sent_log)
+    lines = [f"sent {len(log)} frames ({sum(f.datagrams for f in log)} datagrams) in "
+             f"{time.monotonic() - t0:.2f} s; {sender.send_errors} send errors"]
+    if log:
+        lines.append(f"take frames {log[0].index}..{log[-1].index}, last take time "
+                     f"{log[-1].source_time:.3f} s")
+    return reason, lines
+
+
 def run(args: argparse.Namespace) -> int:
     take, result = load(args)
     describe(take, result)
@@ -284,7 +340,8 @@ def run(args: argparse.Namespace) -> int:
     except ValueError:  # not the main thread
         pass
     try:
-        serve = _serve_serial if args.device == "serial" else _serve_vmc
+        serve = {"serial": _serve_serial, "mvn": _serve_vendor,
+                 "mocopi": _serve_vendor}.get(args.device, _serve_vmc)
         reason, lines = serve(args, part)
     finally:
         if old is not None:
