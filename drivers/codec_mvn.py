@@ -275,8 +275,10 @@ class MvnAssembler:
     ``other_characters`` and ignored).  A frame is emitted when all its datagrams (indices
     0..last) have arrived, when a datagram of a newer sample arrives (the open frame is
     emitted with what it holds: missing segments ``valid`` False), or by :meth:`flush`
-    ``quiet`` seconds after its first datagram.  A datagram of a sample older than the last
-    emitted one is late: counted in ``dropped`` and discarded.
+    ``quiet`` seconds after its first datagram.  A datagram of a sample at most
+    ``LATE_WINDOW`` (64) samples older than the newest seen, or of the sample last emitted, is
+    late: counted in ``dropped`` and discarded; one further back is taken as the sender
+    restarting its counter and starts a new frame.
 
     Per frame: ``quats`` (J, 4) rtseg frame, global; segments not received hold their last
     value with ``valid`` False; ``seq`` = sample counter; ``source_time`` = time code / 1000
@@ -371,19 +373,17 @@ class MvnAssembler:
 
     def _pose(self, hdr: MxtpHeader, items: np.ndarray, now: float, out: list[Frame]) -> None:
         last = self._last_sample
-        if last is not None and _older(hdr.sample, last):
-            self._count("dropped", f"datagram of sample {hdr.sample} arrived after sample "
-                        f"{last} was emitted")
-            return
         p = self._open
-        if p is not None and p.sample != hdr.sample:
+        newest = p.sample if p is not None else last
+        if newest is not None and (_older(hdr.sample, newest) or
+                                   (p is None and hdr.sample == last)):
+            self._count("dropped", f"datagram of sample {hdr.sample} arrived after sample "
+                        f"{newest} (late or repeated); dropped")
+            return
+        if p is not None and p.sample != hdr.sample:      # a newer sample: close the open one
             self._open = None
             out.append(self._emit(p, now))
             p = None
-        if last is not None and hdr.sample == last:
-            self._count("dropped", f"datagram of sample {hdr.sample} arrived after its frame "
-                        "was emitted")
-            return
         if p is None:
             p = self._open = _Partial(hdr.sample, hdr.time_ms, now)
         if hdr.index in p.parts:
@@ -466,10 +466,15 @@ class MvnAssembler:
             self.timecode = text.strip() or None
 
 
+#: a sample this many or fewer counts behind the newest is late; further back is taken as
+#: a restart of the sender's counter (accepted), so one bad counter cannot block the stream
+LATE_WINDOW = 64
+
+
 def _older(a: int, b: int) -> bool:
-    """Sample counter ``a`` is before ``b`` (u32, wrapping; within half the range)."""
+    """Sample counter ``a`` is shortly before ``b`` (u32, wrapping; within LATE_WINDOW)."""
     d = (b - a) & 0xFFFFFFFF
-    return 0 < d < 0x80000000
+    return 0 < d <= LATE_WINDOW
 
 
 def segment_parent_ids(ids: Sequence[int]) -> list[int]:
