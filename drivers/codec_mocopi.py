@@ -313,6 +313,9 @@ class MocopiAssembler:
 
     def feed(self, data: bytes, now: float) -> list[Frame]:
         """One datagram received at ``now`` (monotonic s) -> [frame] or []."""
+        if len(data) < 8:
+            self._count("corrupt", 1, f"datagram of {len(data)} bytes holds no field")
+            return []
         try:
             pkt = parse_packet(data)
         except (MocopiParseError, struct.error, ValueError) as exc:
