@@ -4,6 +4,8 @@
     osc://127.0.0.1:39539?format=vmc&allow=...       -> rtseg.drivers.osc_source
     file://take.amc?skeleton=86.asf&speed=1.0        -> rtseg.drivers.file_source
     sim://synth?seed=1&script=...                    -> rtseg.drivers.sim_source
+    rokoko://:14043?actor=NAME                       -> rtseg.drivers.rokoko_source
+    axis://127.0.0.1:7001?format=text | axis://:7002 -> rtseg.drivers.axis_source
     mvn://:9763?character=0&allow=...                -> rtseg.drivers.mvn_source (Xsens MVN)
     mocopi://:12351?allow=...                        -> rtseg.drivers.mocopi_source (Sony mocopi)
 
@@ -24,6 +26,8 @@ SCHEMES: dict[str, str] = {
     "osc": "rtseg.drivers.osc_source",
     "file": "rtseg.drivers.file_source",
     "sim": "rtseg.drivers.sim_source",
+    "rokoko": "rtseg.drivers.rokoko_source",
+    "axis": "rtseg.drivers.axis_source",
     "mvn": "rtseg.drivers.mvn_source",
     "mocopi": "rtseg.drivers.mocopi_source",
 }

@@ -6,6 +6,8 @@
     rtseg simulate vmc    [--synth SCRIPT | --take FILE] [--host H] [--port P] ...
     rtseg simulate mvn    [--synth SCRIPT | --take FILE] [--port 9763] [--character N] ...
     rtseg simulate mocopi [--synth SCRIPT | --take FILE] [--port 12351] ...
+    rtseg simulate rokoko [--synth SCRIPT | --take FILE] [--port 14043] [--actor A,B] [--lz4]
+    rtseg simulate axis   [--synth SCRIPT | --take FILE] [--axis-format binary|text] [--port P]
 
 ``serial`` serves the take on a pseudo-terminal (``rtseg.simulators.serial_device.SerialSuit``)
 and prints its device path - read it with ``rtseg live serial://PATH``.
@@ -17,6 +19,12 @@ and prints its device path - read it with ``rtseg live serial://PATH``.
 ``mocopi`` sends Sony mocopi packets (``rtseg.simulators.mocopi_sender``, suit ``mocopi``,
 default port 12351) - read it with ``rtseg live mocopi://127.0.0.1:12351``.  Their suit
 segments a take has no joint for are filled from the parent segment.
+``rokoko`` sends Rokoko Studio Live Custom JSON v3 (``rtseg.simulators.rokoko_sender``, suit
+``rokoko``, UDP 14043) - read it with ``rtseg live "rokoko://127.0.0.1:14043?rate=R"``;
+``axis`` sends Axis Neuron BVH broadcast (``rtseg.simulators.axis_sender``, suit ``axis``):
+binary datagrams to UDP 7002, or with ``--axis-format text`` text frames from a TCP server
+on 7001 - read it with ``rtseg live "axis://127.0.0.1:7002?rate=R"`` or
+``"axis://127.0.0.1:7001?format=text&rate=R"`` (R: the take's frame rate, printed).
 
 A recorded take is retargeted to the suit (``rtseg.simulators.retarget``): the skeleton
 family (CMU ASF/AMC, CMU BVH, Mixamo, Unity humanoid) is detected from the joint names
@@ -47,7 +55,11 @@ from typing import Any, Callable
 
 from rtseg.take import Take
 
-DEVICES = ("serial", "vmc", "mvn", "mocopi")
+DEVICES = ("serial", "vmc", "mvn", "mocopi", "rokoko", "axis")
+#: devices served by ``rtseg.simulators.<device>_sender.serve(args, take, out, run_until,
+#: retarget_kw)``
+SENDER_MODULES = {"rokoko": "rtseg.simulators.rokoko_sender",
+                  "axis": "rtseg.simulators.axis_sender"}
 #: default UDP port of each network device
 DEFAULT_PORTS = {"vmc": 39539, "mvn": 9763, "mocopi": 12351}
 
@@ -104,6 +116,13 @@ def register(subparsers: Any) -> None:
                    "mvn 9763, mocopi 12351)")
     g = p.add_argument_group("mvn")
     g.add_argument("--character", type=int, default=0, help="MVN character id (default 0)")
+    g = p.add_argument_group("rokoko")
+    g.add_argument("--actor", metavar="NAME,...", help="actor name(s), one actor each in every "
+                   "payload (default Actor1)")
+    g.add_argument("--lz4", action="store_true", help="LZ4-compress each payload")
+    g = p.add_argument_group("axis")
+    g.add_argument("--axis-format", choices=("binary", "text"), default="binary",
+                   help="binary frames to UDP 7002 (default) or text frames served on TCP 7001")
     p.set_defaults(func=run)
 
 
@@ -342,6 +361,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         serve = {"serial": _serve_serial, "mvn": _serve_vendor,
                  "mocopi": _serve_vendor}.get(args.device, _serve_vmc)
+        if args.device in SENDER_MODULES:
+            serve = _sender(args.device)
         reason, lines = serve(args, part)
     finally:
         if old is not None:
@@ -350,6 +371,13 @@ def run(args: argparse.Namespace) -> int:
     for line in lines:
         _out(line)
     return 0
+
+
+def _sender(device: str) -> Callable:
+    """serve(args, take) of a simulator module of ``SENDER_MODULES``."""
+    import importlib
+    mod = importlib.import_module(SENDER_MODULES[device])
+    return lambda args, take: mod.serve(args, take, _out, _run_until, _retarget_kw(args))
 
 
 def _raise_interrupt(signum, frame) -> None:

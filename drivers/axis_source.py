@@ -1,0 +1,368 @@
+"""Live Noitom Axis Neuron / Axis Studio BVH broadcast input.
+
+    axis://127.0.0.1:7001?format=text      TCP client of Axis's BVH server (text frames)
+    axis://:7002?format=binary             UDP listener on 127.0.0.1:7002 (binary frames)
+
+See :mod:`rtseg.drivers.codec_axis` for both encodings.  ``format`` defaults to ``binary``;
+the default port follows the format (7002 binary, 7001 text).
+
+``format=binary``: rtseg listens on **127.0.0.1** unless the URL writes another address
+(``axis://0.0.0.0:7002`` to receive from Axis on another machine - then restrict senders
+with ``allow=``).  The socket machinery is the OSC sources'
+(:class:`rtseg.drivers.osc_source.OscUdpSource`: one reader thread, ``allow=`` filtering
+before decoding, refused senders counted, bounded drop-oldest queue).  A frame split over
+several datagrams (Axis Neuron on macOS) is joined.
+
+``format=text``: Axis is the TCP server; rtseg connects to ``host:port`` (default
+127.0.0.1:7001) and reads frames separated by ``||``.  A refused connection or a closed
+stream is retried with exponential backoff (``backoff`` s doubling up to ``max_backoff``),
+as the serial source does after an unplug; each new connection after the first counts in
+``stats.reconnects`` and the partial frame before it is discarded.
+
+URL options
+-----------
+``format``   ``binary`` (default) or ``text``.
+``avatar``   avatar to follow: its index (``avatar=1``) or name (``avatar=Avatar01``)
+             (default: the first avatar seen).  Frames of other avatars are skipped and
+             counted in ``.other_avatars`` (not an error: several performers share a stream).
+``order``    Euler order of the rotation channels as configured in Axis (default ``YXZ``).
+``rate``     nominal frame rate in Hz (default 60; Axis does not announce it).
+             ``source_time`` = binary frame index / rate.
+``unit``     length unit of positions: ``cm`` (default, Axis's BVH unit), ``m`` or ``mm``.
+``queue``    frames held for ``read`` (default 256; the oldest is dropped when full,
+             counted in ``stats.dropped``).
+``rcvbuf``   SO_RCVBUF bytes (binary).  ``allow``: accepted senders (binary).
+``backoff``, ``max_backoff``  reconnect delays in seconds (text; default 0.2 and 5).
+
+Frames: the 59 Axis joints (:data:`~rtseg.drivers.codec_axis.JOINTS`) with their hierarchy,
+``space = "local"`` (BVH parent-relative rotations, right-handed Y-up, scalar-last),
+``root_position`` = Hips position in metres, ``seq`` = binary frame index (text: count of
+frames received), ``valid`` False for joints whose angles are not finite.  Counters:
+damaged bytes -> ``corrupt``; a frame whose value count fits no layout -> ``bad_messages``;
+non-finite angles -> ``bad_values``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import socket
+import threading
+import time
+
+import numpy as np
+
+from rtseg.drivers.base import FrameQueue, Source, SourceError
+from rtseg.drivers.codec_axis import (BINARY_PORT, JOINTS, PARENTS, TEXT_PORT, AxisError,
+                                      AxisFrame, BinaryAssembler, TextSplitter,
+                                      decode_binary, decode_text, to_pose)
+from rtseg.drivers.osc_source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
+                                      parse_allow)
+from rtseg.frame import Frame
+
+log = logging.getLogger("rtseg.drivers.axis")
+
+FORMATS = ("binary", "text")
+UNITS = {"cm": 0.01, "m": 1.0, "mm": 0.001}
+BINARY_OPTIONS = ("format", "avatar", "order", "rate", "unit", "queue", "rcvbuf", "allow")
+TEXT_OPTIONS = ("format", "avatar", "order", "rate", "unit", "queue", "backoff",
+                "max_backoff")
+_RANGES = {"rate": (1e-3, 1e5), "queue": (1, 1_000_000), "rcvbuf": (1, 1 << 30),
+           "backoff": (1e-3, 60.0), "max_backoff": (1e-3, 600.0)}
+
+
+class AxisFrames:
+    """Decoded :class:`AxisFrame` -> rtseg ``Frame`` of the selected avatar (shared by both
+    transports).  ``count(field, n, message)``: the source's counter method."""
+
+    def __init__(self, count, avatar: str | None = None, order: str = "YXZ",
+                 unit_scale: float = 0.01, rate: float = 60.0) -> None:
+        self._count = count
+        self.avatar = avatar
+        self.order = order
+        self.unit_scale = unit_scale
+        self.rate = rate
+        self.other_avatars = 0
+        self.avatar_seen: tuple[int, str] | None = None
+        self.received = 0
+        self._last = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (len(JOINTS), 1))
+        self._log_at: dict[str, float] = {}
+
+    def warn(self, key: str, now: float, msg: str, *args) -> None:
+        if now - self._log_at.get(key, -math.inf) >= 5.0:
+            self._log_at[key] = now
+            log.warning(msg, *args)
+
+    def error(self, exc: AxisError, now: float) -> None:
+        self._count(exc.kind)
+        self.warn(exc.kind, now, "Axis: frame dropped (%s): %s", exc.kind, exc)
+
+    def _selected(self, f: AxisFrame) -> bool:
+        if self.avatar is None:
+            if self.avatar_seen is None:
+                self.avatar_seen = (f.avatar_index, f.avatar_name)
+                log.info("Axis: following avatar %d %r (choose with ?avatar=)",
+                         f.avatar_index, f.avatar_name)
+            return (f.avatar_index, f.avatar_name) == self.avatar_seen
+        return self.avatar == f.avatar_name or self.avatar == str(f.avatar_index)
+
+    def frame(self, f: AxisFrame, now: float) -> Frame | None:
+        if not self._selected(f):
+            self.other_avatars += 1
+            return None
+        q, valid, pos = to_pose(f, self.order, self.unit_scale)
+        if not valid.all():
+            n = int(np.count_nonzero(~valid))
+            self._count("bad_values", n)
+            self.warn("bad", now, "Axis: %d joint(s) with non-finite angles; marked invalid", n)
+            q[~valid] = self._last[~valid]
+        self._last = q
+        seq = f.frame_index if f.frame_index is not None else self.received
+        self.received += 1
+        return Frame(recv_time=now, quats=q.copy(), valid=valid,
+                     source_time=None if f.frame_index is None else f.frame_index / self.rate,
+                     seq=seq, root_position=pos)
+
+
+class _BinaryAdapter:
+    """``feed``/``flush`` for :class:`OscUdpSource`: datagrams -> Frames."""
+
+    def __init__(self, frames: AxisFrames) -> None:
+        self.frames = frames
+        self.joiner = BinaryAssembler()
+
+    def feed(self, data: bytes, now: float) -> list[Frame]:
+        out: list[Frame] = []
+        chunks, errors = self.joiner.feed(data, now)
+        for e in errors:
+            self.frames.error(e, now)
+        for chunk in chunks:
+            try:
+                fr = self.frames.frame(decode_binary(chunk), now)
+            except AxisError as e:
+                self.frames.error(e, now)
+                continue
+            if fr is not None:
+                out.append(fr)
+        return out
+
+    def flush(self, now: float) -> list[Frame]:
+        e = self.joiner.flush(now)
+        if e is not None:
+            self.frames.error(e, now)
+        return []
+
+
+class AxisBinarySource(OscUdpSource):
+    """Axis binary BVH frames on a UDP socket (see module docstring).  ``.port``: bound
+    port."""
+
+    space = "local"
+
+    def __init__(self, host: str = DEFAULT_HOST, port: int = BINARY_PORT, *,
+                 avatar: str | None = None, order: str = "YXZ", rate: float = 60.0,
+                 unit_scale: float = 0.01, queue_size: int = 256, rcvbuf: int | None = None,
+                 allow: tuple[Network, ...] | None = None) -> None:
+        super().__init__()
+        self.joint_names = list(JOINTS)
+        self.parents = list(PARENTS)
+        self.frame_rate = float(rate)
+        self._frames = AxisFrames(self.count, avatar, order, unit_scale, rate)
+        self._asm = _BinaryAdapter(self._frames)
+        self._start(host, port, 0.1, queue_size, rcvbuf, allow)
+
+    @property
+    def other_avatars(self) -> int:
+        return self._frames.other_avatars
+
+    def _put(self, frame: Frame) -> None:
+        if self._queue.put(frame):
+            self.count("dropped")
+            self._frames.warn("drop", time.monotonic(), "Axis: reader too slow, dropped "
+                              "oldest queued frame (%d so far)", self.stats.dropped)
+
+
+class AxisTextSource(Source):
+    """TCP client of Axis's text BVH server (see module docstring)."""
+
+    space = "local"
+
+    def __init__(self, host: str = DEFAULT_HOST, port: int = TEXT_PORT, *,
+                 avatar: str | None = None, order: str = "YXZ", rate: float = 60.0,
+                 unit_scale: float = 0.01, queue_size: int = 256, backoff: float = 0.2,
+                 max_backoff: float = 5.0, connect_timeout: float = 2.0) -> None:
+        super().__init__()
+        self.joint_names = list(JOINTS)
+        self.parents = list(PARENTS)
+        self.frame_rate = float(rate)
+        self.host, self.port = host, int(port)
+        self.backoff, self.max_backoff = float(backoff), float(max(backoff, max_backoff))
+        self.connect_timeout = connect_timeout
+        self._frames = AxisFrames(self.count, avatar, order, unit_scale, rate)
+        self._queue = FrameQueue(queue_size)
+        self._stop = threading.Event()
+        self._closed = False
+        self._sock: socket.socket | None = None
+        self._sock_lock = threading.Lock()
+        #: True while a connection is up
+        self.connected = threading.Event()
+        self.connections = 0
+        self._thread = threading.Thread(target=self._run, daemon=True,
+                                        name=f"rtseg-axis-{host}:{port}")
+        self._thread.start()
+
+    @property
+    def other_avatars(self) -> int:
+        return self._frames.other_avatars
+
+    def _connect(self) -> socket.socket | None:
+        try:
+            s = socket.create_connection((self.host, self.port), timeout=self.connect_timeout)
+        except (OSError, UnicodeError) as exc:
+            self._frames.warn("connect", time.monotonic(), "Axis: cannot connect to "
+                              "tcp %s:%d (%s); retrying", self.host, self.port, exc)
+            return None
+        s.settimeout(0.1)
+        return s
+
+    def _run(self) -> None:
+        delay = self.backoff
+        splitter = TextSplitter()
+        while not self._stop.is_set():
+            sock = self._connect()
+            if sock is None:
+                if self._stop.wait(delay):
+                    break
+                delay = min(delay * 2.0, self.max_backoff)
+                continue
+            with self._sock_lock:
+                if self._stop.is_set():
+                    sock.close()
+                    break
+                self._sock = sock
+            if self.connections:
+                self.count("reconnects")
+            self.connections += 1
+            log.info("Axis: connected to tcp %s:%d", self.host, self.port)
+            self.connected.set()
+            delay = self.backoff
+            splitter.reset()
+            self._read(sock, splitter)
+            self.connected.clear()
+            with self._sock_lock:
+                self._sock = None
+            sock.close()
+            if not self._stop.is_set():
+                log.warning("Axis: tcp %s:%d closed; reconnecting", self.host, self.port)
+                if self._stop.wait(delay):
+                    break
+
+    def _read(self, sock: socket.socket, splitter: TextSplitter) -> None:
+        while not self._stop.is_set():
+            try:
+                data = sock.recv(65536)
+            except socket.timeout:
+                continue
+            except OSError:
+                return
+            if not data:
+                return
+            now = time.monotonic()
+            before = splitter.overflows
+            chunks = splitter.feed(data)
+            if splitter.overflows != before:
+                self._frames.error(AxisError("corrupt", "no '||' within 64 KiB; discarded"),
+                                   now)
+            for chunk in chunks:
+                try:
+                    fr = self._frames.frame(decode_text(chunk), now)
+                except AxisError as e:
+                    self._frames.error(e, now)
+                    continue
+                except Exception:   # pragma: no cover - a decoder bug must not end the loop
+                    self.count("corrupt")
+                    log.exception("Axis: text frame crashed the decoder; dropped")
+                    continue
+                if fr is not None and self._queue.put(fr):
+                    self.count("dropped")
+                    self._frames.warn("drop", now, "Axis: reader too slow, dropped oldest "
+                                      "queued frame (%d so far)", self.stats.dropped)
+
+    def read(self, timeout: float | None = None) -> Frame | None:
+        frame = self._queue.get(timeout)
+        if frame is None:
+            return None
+        self.count("frames_ok")
+        return frame
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        self._stop.set()
+        with self._sock_lock:
+            if self._sock is not None:
+                try:
+                    self._sock.shutdown(socket.SHUT_RDWR)
+                except OSError:
+                    pass
+        self._queue.close()
+        self._thread.join(timeout=3.0)
+
+
+def _num(options: dict[str, str], key: str, default, kind=float):
+    if options.get(key, "") == "":
+        return default
+    try:
+        value = kind(options[key])
+    except ValueError:
+        raise SourceError(f"axis:// option {key}={options[key]!r} is not a valid "
+                          f"{'integer' if kind is int else 'number'}") from None
+    lo, hi = _RANGES[key]
+    if not lo <= value <= hi:
+        raise SourceError(f"axis:// option {key}={options[key]}: out of range {lo}..{hi}")
+    return value
+
+
+def open_url(location: str, options: dict[str, str]) -> Source:
+    """Open ``axis://location?options`` (see module docstring)."""
+    fmt = (options.get("format") or "binary").lower()
+    if fmt not in FORMATS:
+        raise SourceError(f"axis:// format {fmt!r} is not supported; supported: "
+                          f"{', '.join(FORMATS)}")
+    known = BINARY_OPTIONS if fmt == "binary" else TEXT_OPTIONS
+    unknown = sorted(set(options) - set(known))
+    if unknown:
+        raise SourceError(f"axis:// unknown option(s) {', '.join(unknown)} for format={fmt}; "
+                          f"known: {', '.join(known)}")
+    order = (options.get("order") or "YXZ").upper()
+    if len(order) != 3 or set(order) != set("XYZ"):
+        raise SourceError(f"axis:// order={options.get('order')!r}: a permutation of XYZ "
+                          f"(as set in Axis's BVH output, default YXZ)")
+    unit = (options.get("unit") or "cm").lower()
+    if unit not in UNITS:
+        raise SourceError(f"axis:// unit={unit!r}: one of {', '.join(UNITS)}")
+    try:
+        host, port = _parse_location(location, BINARY_PORT if fmt == "binary" else TEXT_PORT)
+    except SourceError as exc:
+        raise SourceError(str(exc).replace("osc://", "axis://")) from None
+    kw = dict(avatar=options.get("avatar") or None, order=order,
+              rate=_num(options, "rate", 60.0), unit_scale=UNITS[unit],
+              queue_size=_num(options, "queue", 256, int))
+    if fmt == "text":
+        if port == 0:
+            raise SourceError("axis:// format=text connects to Axis's server: give its port "
+                              "(default 7001)")
+        return AxisTextSource(host, port, backoff=_num(options, "backoff", 0.2),
+                              max_backoff=_num(options, "max_backoff", 5.0), **kw)
+    allow = None
+    if "allow" in options:
+        try:
+            allow = parse_allow(options["allow"])
+        except SourceError as exc:
+            raise SourceError(str(exc).replace("osc://", "axis://")) from None
+    return AxisBinarySource(host, port, rcvbuf=_num(options, "rcvbuf", None, int),
+                            allow=allow, **kw)
+
+
+__all__ = ["AxisBinarySource", "AxisTextSource", "AxisFrames", "open_url"]

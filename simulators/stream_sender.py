@@ -1,0 +1,201 @@
+"""Shared machinery of the vendor-suit simulators (Rokoko, Axis): a take retargeted onto a
+suit profile, sent frame by frame on the take's clock from a background thread.
+
+:class:`StreamSender` retargets the take with :func:`rtseg.simulators.retarget.retarget`
+(named skeleton map detected or given, forward kinematics, optional IMU errors) onto a
+``config/suits.toml`` profile.  Bones listed as *optional* (e.g. shoulders and toes, which
+rtseg's synthetic takes and many recorded skeletons lack) are sent rigid with their parent
+when the take has no joint for them; any other unmapped bone is a ``RetargetError`` naming
+it, unless ``allow_missing`` (those bones are then sent as not valid).
+
+Clock: slot ``k`` carries take time ``k / rate`` and is sent ``k / (rate * speed)`` s
+after start, so ``speed`` > 1 replays faster while the stream's own clock (timestamps,
+frame indices) stays the take's.  Subclasses implement ``encode(index, slot, t)`` (the
+datagrams or stream chunks of one frame) and the transport (``_open``, ``_send``,
+``_close``, optionally ``_ready``).  Every slot is recorded in ``sent_log``.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from rtseg import quat as Q
+from rtseg.profiles import SuitProfile, suit_profile
+from rtseg.simulators.retarget import ImuModel, RetargetError, Retargeted, resolve, retarget
+from rtseg.simulators.vmc_sender import UNIT_SCALE
+from rtseg.take import Take
+
+log = logging.getLogger("rtseg.simulators")
+
+__all__ = ["StreamSender", "Sent", "retarget_with_optional", "root_metres"]
+
+
+@dataclass(slots=True)
+class Sent:
+    """One frame slot: ``slot`` (from 0 over loops), ``index`` take frame, ``source_time``
+    take seconds, ``send_time`` monotonic s, ``parts`` datagrams / chunks sent, ``nbytes``."""
+    slot: int
+    index: int
+    source_time: float
+    send_time: float
+    parts: int
+    nbytes: int
+
+
+def retarget_with_optional(take: Take, suit: SuitProfile, optional: set[str],
+                           skeleton_map: str | None = None,
+                           joint_map: dict[str, str] | None = None,
+                           imu: ImuModel | None = None,
+                           allow_missing: bool = False) -> Retargeted:
+    """:func:`retarget`, except that ``optional`` bones the take lacks get their parent's
+    orientation and validity (rigid with it).  Other missing bones: RetargetError (or, with
+    ``allow_missing``, not present and never valid)."""
+    res = resolve(take, suit, skeleton_map, joint_map, allow_missing=True)
+    required = [b for b in res.missing if b not in optional]
+    if required and not allow_missing:
+        raise RetargetError(
+            f"take {take.source or '<memory>'} (skeleton map {res.family!r}) has no joint for "
+            f"suit {suit.name!r} bone(s) {', '.join(required)}; joints in the take: "
+            f"{', '.join(take.joint_names)}. Map them (suit bone -> take joint) or allow "
+            f"missing bones")
+    rt = retarget(take, suit, res.family, joint_map, imu, allow_missing=True)
+    for k, bone in enumerate(suit.bones):
+        p = suit.parents[k]
+        if not rt.present[k] and bone in optional and p >= 0:
+            rt.quats[:, k] = rt.quats[:, p]
+            rt.valid[:, k] = rt.valid[:, p]
+            rt.present[k] = rt.present[p]
+    return rt
+
+
+def root_metres(take: Take) -> np.ndarray | None:
+    """``take.root_position`` in metres (``meta["metres_per_unit"]`` or ``length_unit``)."""
+    if take.root_position is None:
+        return None
+    scale = take.meta.get("metres_per_unit")
+    if not isinstance(scale, (int, float)) or not scale > 0:
+        scale = UNIT_SCALE.get(str(take.length_unit).lower(), 1.0)
+    return np.asarray(take.root_position, dtype=np.float64) * float(scale)
+
+
+class StreamSender:
+    """Base of the suit simulators (see module docstring).  After construction:
+    ``retargeted``, ``quats`` (frames, bones, 4) global orientations in suit order,
+    ``valid`` (frames, bones), ``root`` (frames, 3) metres or None, ``rate``, ``speed``."""
+
+    optional: frozenset[str] = frozenset()
+    name = "stream"
+
+    def __init__(self, take: Take, suit: str | SuitProfile, *, rate: float | None = None,
+                 speed: float = 1.0, loop: bool = False, skeleton_map: str | None = None,
+                 joint_map: dict[str, str] | None = None, imu: ImuModel | str | None = None,
+                 allow_missing: bool = False) -> None:
+        self.take = take
+        self.rate = float(rate) if rate is not None else float(take.frame_rate)
+        if not self.rate > 0:
+            raise ValueError(f"rate must be positive, got {rate}")
+        if not (isinstance(speed, (int, float)) and 0 < speed < float("inf")):
+            raise ValueError(f"speed must be a positive number, got {speed!r}")
+        self.speed = float(speed)
+        self.loop = loop
+        self.suit = suit if isinstance(suit, SuitProfile) else suit_profile(suit)
+        imu_model = ImuModel.parse(imu) if isinstance(imu, str) or imu is None else imu
+        self.retargeted = rt = retarget_with_optional(
+            take, self.suit, set(self.optional), skeleton_map, joint_map, imu_model,
+            allow_missing)
+        self.quats = Q.make_continuous(rt.quats, axis=0)
+        self.valid = rt.valid & rt.present[None, :]
+        self.root = root_metres(take)
+        self.n_frames = take.n_frames
+        self.sent_log: list[Sent] = []
+        self.send_errors = 0
+        self._stop = threading.Event()
+        self.done = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def describe(self) -> str:
+        """Which take joint drives each suit bone, which bones go rigid with their parent,
+        and which are not sent."""
+        rt, names = self.retargeted, self.take.joint_names
+        pairs = [f"{b}<-{names[c]}" for b, c in zip(self.suit.bones, rt.columns) if c >= 0]
+        rigid = [b for b, c, p in zip(self.suit.bones, rt.columns, rt.present) if c < 0 and p]
+        miss = [b for b, p in zip(self.suit.bones, rt.present) if not p]
+        text = f"skeleton map {rt.family}: " + ", ".join(pairs)
+        if rigid:
+            text += f"; rigid with their parent: {', '.join(rigid)}"
+        return text + (f"; not sent: {', '.join(miss)}" if miss else "")
+
+    # -- to implement
+    def encode(self, index: int, slot: int, t: float) -> list[bytes]:
+        raise NotImplementedError
+
+    def _open(self) -> None:
+        raise NotImplementedError
+
+    def _send(self, parts: list[bytes]) -> None:
+        raise NotImplementedError
+
+    def _close(self) -> None:
+        pass
+
+    def _ready(self) -> bool:
+        """Called once before the first frame; False ends the run (stopped)."""
+        return True
+
+    # -- lifecycle
+    def start(self) -> "StreamSender":
+        if self._thread is not None:
+            raise RuntimeError(f"{type(self).__name__} already started")
+        self._open()
+        self._thread = threading.Thread(target=self._run, name=f"rtseg-{self.name}-sender",
+                                        daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop sending, join the thread, close the transport.  Safe to call twice."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+        self._close()
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Block until a non-looping take has been sent; True if finished."""
+        return self.done.wait(timeout)
+
+    def __enter__(self) -> "StreamSender":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def _run(self) -> None:
+        n = self.n_frames
+        period = 1.0 / self.rate
+        wall = period / self.speed
+        try:
+            if not self._ready():
+                return
+            t0 = time.monotonic()
+            slot = 0
+            while not self._stop.is_set():
+                if slot >= n and not self.loop:
+                    break
+                delay = t0 + slot * wall - time.monotonic()
+                if delay > 0 and self._stop.wait(delay):
+                    break
+                index = slot % n
+                t = slot * period
+                parts = self.encode(index, slot, t)
+                sent_at = time.monotonic()
+                self._send(parts)
+                self.sent_log.append(Sent(slot, index, t, sent_at, len(parts),
+                                          sum(len(p) for p in parts)))
+                slot += 1
+        finally:
+            self.done.set()
