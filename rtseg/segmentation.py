@@ -24,8 +24,8 @@ if TYPE_CHECKING:  # pragma: no cover
 
 log = logging.getLogger(__name__)
 
-#: The detectors of the paper, in the order they are reported.
-METHODS: tuple[str, ...] = ("pca", "ppca", "gmm")
+#: rtseg's causal contrast detector and the detectors of the paper, in the order reported.
+METHODS: tuple[str, ...] = ("contrast", "pca", "ppca", "gmm")
 
 
 @dataclass(frozen=True)
@@ -192,7 +192,7 @@ def segment_features_result(X: np.ndarray, method: str, frame_rate: float,
 def segment_take(take: "Take", method: str, params: Mapping[str, Any] | None = None,
                  profile: Any = None, keep_trace: bool = False,
                  features: np.ndarray | None = None) -> SegmentationResult:
-    """Segment a whole take with one method ("pca", "ppca", "gmm").
+    """Segment a whole take with one method ("contrast", "pca", "ppca", "gmm").
 
     params: detector parameters overriding the defaults; profile: passed to
     ``take_features`` (joint selection); features: a precomputed feature matrix of this take

@@ -18,7 +18,7 @@ import pytest
 
 from rtseg.cli import main
 from rtseg.drivers.readers import write_take
-from rtseg.evaluation import score
+from rtseg.evaluation import score, widen
 from rtseg.labels import read_cmu86_transitions
 from rtseg.simulators.synth import synthesize
 
@@ -83,7 +83,7 @@ def test_segment_json_all_methods(synth_dir, capsys):
     doc = json.loads(out)
     n = synth_dir["a"].take.n_frames
     assert doc["n_frames"] == n and doc["frame_rate"] == 120.0
-    assert sorted(doc["methods"]) == ["gmm", "pca", "ppca"]
+    assert sorted(doc["methods"]) == ["contrast", "gmm", "pca", "ppca"]
     for m, r in doc["methods"].items():
         frames = [c["frame"] for c in r["cuts"]]
         assert frames == sorted(set(frames)) and all(0 < f < n for f in frames)
@@ -148,11 +148,14 @@ def test_evaluate_json_synthetic(synth_dir, capsys):
     rc, out, err = run_cli(capsys, "evaluate", root, "--json")
     assert rc == 0
     doc = json.loads(out)
-    assert sorted(doc) == ["gmm", "pca", "ppca"]
+    assert sorted(doc) == ["contrast", "gmm", "pca", "ppca"]     # offline: no live_default
     truth = read_cmu86_transitions(root / "labels" / "cmu86_transitions.txt")["90_01"]
+    wide = widen(truth.transitions, 60)                           # 0.5 s at 120 fps
     for m, r in doc.items():
+        assert r["tolerance_s"] == 0.5 and r["online"] is False
         assert sorted(r["takes"]) == ["90_01", "91_01"]
-        assert set(r["pooled"]) >= {"precision", "recall", "f1", "cuts", "transitions"}
+        assert set(r["pooled"]) >= {"precision", "recall", "f1", "cuts", "transitions", "strict"}
+        assert "delay_s" not in r["pooled"]
         assert r["pooled"]["transitions"] == 3 + 2
         assert r["pooled"]["cuts"] == sum(t["cuts"] for t in r["takes"].values())
         tp = sum(t["tp"] for t in r["takes"].values())
@@ -162,10 +165,12 @@ def test_evaluate_json_synthetic(synth_dir, capsys):
         assert a["labels"].startswith("ranges") and a["group"] == "cmu"
         assert r["takes"]["91_01"]["labels"].startswith("points +/-60")
         # the per-take counts are the scoring of the reported cuts against the labels
-        s = score(a["cut_frames"], truth.transitions)
+        # widened by the tolerance; "strict" against the labelled ranges themselves
+        s = score(a["cut_frames"], wide)
         assert (a["tp"], a["fp"], a["fn"]) == (s.tp, s.fp, s.fn)
+        assert a["strict"]["f1"] == pytest.approx(score(a["cut_frames"], truth.transitions).f1)
         assert len(a["matched"]) == a["tp"]
-        by_mid = {t.mid: t for t in truth.transitions}
+        by_mid = {t.mid: t for t in wide}
         for mt in a["matched"]:
             assert by_mid[mt["mid"]].contains(mt["cut"]) and mt["cut"] in a["cut_frames"]
     assert "2/2" in err   # progress on stderr, not stdout

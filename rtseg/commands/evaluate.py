@@ -4,6 +4,14 @@ cuts against the labels (precision, recall, F1 per take and pooled over takes).
 The folder is laid out like ``../shared/data`` (see ``rtseg.labels.find_labelled_takes``).
 Group "cmu" holds the full-rotation takes (what accuracy targets are about, the default);
 "tsseg4d" the four-channel takes, reported separately.
+
+Scoring: a cut is correct for a transition when it lies in the labelled range widened by
+``--tolerance`` seconds on each side (default 0.5 s, the tolerance at which a second human
+annotation agrees with the first: F1 0.98); the strict score (tolerance 0) is reported
+beside it.  ``--online`` runs, instead of the offline methods, exactly what ``rtseg live``
+runs (``rtseg.online_eval``: the live pipeline and detectors from the live configuration,
+frame by frame) and reports each matched cut's detection delay: (frame whose arrival
+produced the cut - labelled transition mid) / frame rate, in seconds.
 """
 
 from __future__ import annotations
@@ -11,17 +19,22 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence, TextIO
 
+import numpy as np
+
 from rtseg.commands.segment import (
     add_method_argument, add_profile_argument, methods_of, params_by_method,
 )
-from rtseg.evaluation import Score, pooled, score
+from rtseg.evaluation import Score, detection_delays, pooled, score, widen
 from rtseg.labels import GROUPS, LabelledTake, find_labelled_takes
+from rtseg.detectors import ONLINE_METHODS
+from rtseg.online_eval import live_config, live_cuts
 from rtseg.segmentation import segment_take_methods
 
 log = logging.getLogger(__name__)
@@ -66,7 +79,8 @@ class Progress:
 
 @dataclass
 class TakeScore:
-    """One method on one take."""
+    """One method on one take: ``score`` at the tolerance, ``strict`` inside the labelled
+    ranges; ``delays_s`` per matched transition (online runs only, else empty)."""
     name: str
     group: str
     score: Score
@@ -74,15 +88,26 @@ class TakeScore:
     label_source: str
     elapsed_s: float
     mids: list[int] = field(default_factory=list)
+    strict: Score | None = None
+    delays_s: list[float] = field(default_factory=list)
+    detected_frames: list[int] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
-        """Score counts and ratios, the cut frames, and per matched transition its labelled
-        ``mid`` and the matching cut (``offset`` = cut - mid, frames)."""
-        matched = [{"mid": self.mids[j], "cut": c, "offset": c - self.mids[j]}
+        """Score counts and ratios (and ``strict``), the cut frames, and per matched
+        transition its labelled ``mid`` and the matching cut (``offset`` = cut - mid,
+        frames; online: ``delay_s``)."""
+        delays = dict(zip((c for c, _ in self.score.matches), self.delays_s))
+        matched = [{"mid": self.mids[j], "cut": c, "offset": c - self.mids[j],
+                    **({"delay_s": round(delays[c], 4)} if c in delays else {})}
                    for c, j in self.score.matches] if self.mids else []
-        return {**self.score.as_dict(), "group": self.group, "cut_frames": self.cut_frames,
-                "matched": sorted(matched, key=lambda m: m["mid"]),
-                "labels": self.label_source, "elapsed_s": round(self.elapsed_s, 4)}
+        out = {**self.score.as_dict(), "group": self.group, "cut_frames": self.cut_frames,
+               "matched": sorted(matched, key=lambda m: m["mid"]),
+               "labels": self.label_source, "elapsed_s": round(self.elapsed_s, 4)}
+        if self.strict is not None:
+            out["strict"] = _ratios(self.strict)
+        if self.detected_frames:
+            out["detected_frames"] = self.detected_frames
+        return out
 
 
 @dataclass
@@ -90,20 +115,47 @@ class MethodReport:
     """All takes of one method: per take, pooled per group, pooled over everything."""
     method: str
     takes: dict[str, TakeScore] = field(default_factory=dict)
+    tolerance_s: float = 0.5
+    online: bool = False
+
+    def _takes(self, group: str | None) -> list[TakeScore]:
+        return [t for t in self.takes.values() if group in (None, t.group)]
 
     def pooled(self, group: str | None = None) -> Score:
-        return pooled(t.score for t in self.takes.values() if group in (None, t.group))
+        return pooled(t.score for t in self._takes(group))
+
+    def pooled_strict(self, group: str | None = None) -> Score:
+        return pooled(t.strict for t in self._takes(group) if t.strict is not None)
+
+    def delays(self, group: str | None = None) -> list[float]:
+        return [d for t in self._takes(group) for d in t.delays_s]
 
     def groups(self) -> list[str]:
-        return sorted({t.group for t in self.takes.values()}, key=GROUPS.index)
+        return sorted({t.group for t in self.takes.values()},
+                      key=lambda g: (GROUPS.index(g) if g in GROUPS else len(GROUPS), g))
+
+    def summary(self, group: str | None = None) -> dict[str, Any]:
+        """Pooled counts and ratios at the tolerance, ``strict`` ones, and (online)
+        ``delay_s: {median, p90}`` of the matched cuts."""
+        out = {**_pooled_dict(self.pooled(group)), "strict": _ratios(self.pooled_strict(group))}
+        if self.online:
+            d = self.delays(group)
+            out["delay_s"] = ({"median": float(np.median(d)), "p90": float(np.percentile(d, 90))}
+                              if d else {"median": None, "p90": None})
+        return out
 
     def as_dict(self) -> dict[str, Any]:
-        p = self.pooled()
         return {
-            "pooled": _pooled_dict(p),
-            "groups": {g: _pooled_dict(self.pooled(g)) for g in self.groups()},
+            "tolerance_s": self.tolerance_s,
+            "online": self.online,
+            "pooled": self.summary(),
+            "groups": {g: self.summary(g) for g in self.groups()},
             "takes": {k: t.as_dict() for k, t in self.takes.items()},
         }
+
+
+def _ratios(s: Score) -> dict[str, float]:
+    return {"precision": s.precision, "recall": s.recall, "f1": s.f1}
 
 
 def _pooled_dict(s: Score) -> dict[str, Any]:
@@ -115,14 +167,19 @@ def _pooled_dict(s: Score) -> dict[str, Any]:
 class EvaluationReport:
     methods: dict[str, MethodReport]
     errors: dict[str, str] = field(default_factory=dict)
+    live_default: str | None = None
 
     def as_dict(self) -> dict[str, Any]:
-        """``{method: {"pooled", "groups", "takes"[, "errors"]}}``; takes that failed are
-        listed under every method (no top-level key besides the methods)."""
-        doc: dict[str, Any] = {m: r.as_dict() for m, r in self.methods.items()}
+        """``{method: {"tolerance_s", "online", "pooled", "groups", "takes"[, "errors"]}}``;
+        takes that failed are listed under every method; online runs add a top-level
+        ``"live_default"``: the name of the default live detector."""
+        doc: dict[str, Any] = {}
+        if self.live_default is not None:
+            doc["live_default"] = self.live_default
+        doc.update({m: r.as_dict() for m, r in self.methods.items()})
         if self.errors:
-            for d in doc.values():
-                d["errors"] = dict(self.errors)
+            for m in self.methods:
+                doc[m]["errors"] = dict(self.errors)
         return doc
 
 
@@ -130,18 +187,38 @@ def select_groups(group: str) -> tuple[str, ...]:
     return GROUPS if group == "all" else (group,)
 
 
+def _cuts_of_take(take: Any, methods: Sequence[str], params: dict[str, dict[str, Any]] | None,
+                  profile: str | None, online: Any) -> dict[str, tuple[list[int], list[int], float]]:
+    """{method: (cut frames, frames that produced them (online; else []), elapsed s)}."""
+    if online is None:
+        results = segment_take_methods(take, methods, params, profile=profile)
+        return {m: (r.cut_frames, [], r.elapsed_s) for m, r in results.items()}
+    t0 = time.perf_counter()
+    cuts = live_cuts(take, online)
+    elapsed = time.perf_counter() - t0
+    return {m: ([c.boundary for c in cuts[m]], [c.detected for c in cuts[m]], elapsed)
+            for m in methods}
+
+
 def evaluate_takes(takes: Sequence[LabelledTake], methods: Sequence[str],
                    params: dict[str, dict[str, Any]] | None = None,
-                   progress: Progress | None = None, profile: str | None = None
-                   ) -> EvaluationReport:
-    """Segment each take with every method (features computed once a take) and score it.
+                   progress: Progress | None = None, profile: str | None = None,
+                   tolerance_s: float = 0.5, online: Any = None) -> EvaluationReport:
+    """Segment each take with every method (features computed once a take) and score it,
+    at ``tolerance_s`` and strictly.
 
+    ``online``: a live configuration (``rtseg.online_eval.live_config``) whose detectors
+    are ``methods``: the take's frames go through the live pipeline instead of the offline
+    methods, and the delay of every matched cut is kept.
     Take keys are the bare take names, or ``group/name`` when a name occurs in two groups.
     A take that cannot be read or segmented is logged and listed in ``errors``.
     """
+    if not (tolerance_s >= 0 and math.isfinite(tolerance_s)):
+        raise ValueError(f"tolerance must be a finite number of seconds >= 0, got {tolerance_s}")
     names = [t.name for t in takes]
     clash = {n for n in names if names.count(n) > 1}
-    report = EvaluationReport({m: MethodReport(m) for m in methods})
+    report = EvaluationReport({m: MethodReport(m, tolerance_s=tolerance_s,
+                                               online=online is not None) for m in methods})
     for t in takes:
         key = f"{t.group}/{t.name}" if t.name in clash else t.name
         if progress:
@@ -151,15 +228,20 @@ def evaluate_takes(takes: Sequence[LabelledTake], methods: Sequence[str],
             if t.labels.n_frames is not None and abs(t.labels.n_frames - take.n_frames) > 12:
                 log.warning("%s: labels say %d frames, the take has %d", key,
                             t.labels.n_frames, take.n_frames)
-            results = segment_take_methods(take, methods, params, profile=profile)
+            results = _cuts_of_take(take, methods, params, profile, online)
         except (OSError, ValueError, KeyError) as exc:
             log.error("%s: %s", key, exc)
             report.errors[key] = str(exc)
             continue
-        for m, r in results.items():
+        wide = widen(t.transitions, int(round(tolerance_s * take.frame_rate)))
+        for m, (frames_, detected, elapsed) in results.items():
+            sc = score(frames_, wide)
+            delays = (detection_delays(sc, dict(zip(frames_, detected)), wide, take.frame_rate)
+                      if detected else [])
             report.methods[m].takes[key] = TakeScore(
-                t.name, t.group, score(r.cut_frames, t.transitions), r.cut_frames,
-                t.label_source, r.elapsed_s, [tr.mid for tr in t.transitions])
+                t.name, t.group, sc, frames_, t.label_source, elapsed,
+                [tr.mid for tr in t.transitions], strict=score(frames_, t.transitions),
+                delays_s=delays, detected_frames=detected)
     if progress:
         progress.close()
     return report
@@ -167,34 +249,51 @@ def evaluate_takes(takes: Sequence[LabelledTake], methods: Sequence[str],
 
 def evaluate_dir(data_dir: str | Path, methods: Sequence[str], group: str = "cmu",
                  params: dict[str, dict[str, Any]] | None = None,
-                 progress: bool = True, profile: str | None = None) -> EvaluationReport:
+                 progress: bool = True, profile: str | None = None,
+                 tolerance_s: float = 0.5, online: Any = None) -> EvaluationReport:
     """Find the labelled takes of ``data_dir`` in ``group`` ("cmu", "tsseg4d" or "all")
-    and evaluate them."""
+    and evaluate them (see ``evaluate_takes``)."""
     takes = find_labelled_takes(data_dir, select_groups(group))
     if not takes:
         raise ValueError(f"no labelled takes of group {group!r} found in {data_dir}")
     bar = Progress(len(takes), enabled=progress)
-    return evaluate_takes(takes, methods, params, bar, profile)
+    return evaluate_takes(takes, methods, params, bar, profile, tolerance_s, online)
+
+
+def _delay_text(r: MethodReport, group: str | None) -> str:
+    if not r.online:
+        return ""
+    d = r.delays(group)
+    return (f"  {np.median(d):>5.2f} {np.percentile(d, 90):>5.2f}" if d else
+            f"  {'-':>5} {'-':>5}")
 
 
 def format_table(report: EvaluationReport) -> str:
     lines = []
-    hdr = (f"{'method':<6} {'take':<16} {'cuts':>5} {'trans':>5} {'tp':>4} {'prec':>6} "
-           f"{'recall':>6} {'f1':>6}  labels")
     for m, r in report.methods.items():
+        tol = f"+-{r.tolerance_s:g}s"
+        hdr = (f"{'method':<8} {'take':<16} {'cuts':>5} {'trans':>5} {'tp':>4} {'prec':>6} "
+               f"{'recall':>6} {'f1':>6} {'strict':>6}"
+               + (f"  {'delay':>5} {'p90':>5}" if r.online else "") + "  labels")
+        lines.append(f"{m}{' (live)' if r.online else ''}{' [default live detector]' if m == report.live_default else ''}: "
+                     f"F1 with cuts within {tol} of the labelled ranges; strict = inside them"
+                     + ("; delay = median/p90 s from the labelled transition to the frame "
+                        "that produced the cut" if r.online else ""))
         lines.append(hdr)
-        for key, t in r.takes.items():
-            s = t.score
-            lines.append(f"{m:<6} {key:<16} {s.cuts:>5} {s.transitions:>5} {s.tp:>4} "
-                         f"{s.precision:>6.3f} {s.recall:>6.3f} {s.f1:>6.3f}  {t.label_source}")
-        for g in r.groups():
-            s = r.pooled(g)
-            lines.append(f"{m:<6} {'POOLED ' + g:<16} {s.cuts:>5} {s.transitions:>5} {s.tp:>4} "
-                         f"{s.precision:>6.3f} {s.recall:>6.3f} {s.f1:>6.3f}")
-        if len(r.groups()) > 1:
-            s = r.pooled()
-            lines.append(f"{m:<6} {'POOLED all':<16} {s.cuts:>5} {s.transitions:>5} {s.tp:>4} "
-                         f"{s.precision:>6.3f} {s.recall:>6.3f} {s.f1:>6.3f}")
+        rows = [(key, t.score, t.strict, t.label_source, [t]) for key, t in r.takes.items()]
+        for key, s, st, src, _ in rows:
+            t = r.takes[key]
+            d = ((f"  {np.median(t.delays_s):>5.2f} {np.percentile(t.delays_s, 90):>5.2f}"
+                  if t.delays_s else f"  {'-':>5} {'-':>5}") if r.online else "")
+            lines.append(f"{m:<8} {key:<16} {s.cuts:>5} {s.transitions:>5} {s.tp:>4} "
+                         f"{s.precision:>6.3f} {s.recall:>6.3f} {s.f1:>6.3f} "
+                         f"{st.f1 if st else float('nan'):>6.3f}{d}  {src}")
+        groups = r.groups() + ([None] if len(r.groups()) > 1 else [])
+        for g in groups:
+            s, st = r.pooled(g), r.pooled_strict(g)
+            lines.append(f"{m:<8} {'POOLED ' + (g or 'all'):<16} {s.cuts:>5} {s.transitions:>5} "
+                         f"{s.tp:>4} {s.precision:>6.3f} {s.recall:>6.3f} {s.f1:>6.3f} "
+                         f"{st.f1:>6.3f}{_delay_text(r, g)}")
         lines.append("")
     if report.errors:
         lines.append("takes that failed:")
@@ -213,7 +312,28 @@ def add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--params", metavar="FILE",
                    help="detector parameters, TOML or JSON: flat, or one table per method")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    p.add_argument("--tolerance", type=tolerance_seconds, default=0.5, metavar="S",
+                   help="a cut counts for a transition within S seconds outside its labelled "
+                        "range (default 0.5: where a second human annotation agrees with "
+                        "the first); the strict score (S = 0) is always given beside it")
+    p.add_argument("--online", action="store_true",
+                   help="score what `rtseg live` would have sent: each take through the live "
+                        "pipeline and detectors (config/live.toml or --config), frame by "
+                        "frame, with each matched cut's detection delay")
+    p.add_argument("--config", metavar="FILE",
+                   help="live configuration for --online (default: the shipped live.toml)")
     add_profile_argument(p)
+
+
+def tolerance_seconds(text: str) -> float:
+    """argparse type: a finite number of seconds >= 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (v >= 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"must be a finite number of seconds >= 0, got {text}")
+    return v
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -226,10 +346,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    methods = methods_of(args.method)
+    online = live_default = None
+    if args.online:
+        methods = list(ONLINE_METHODS) if args.method == "all" else [args.method]
+        if any(m not in ONLINE_METHODS for m in methods):
+            raise ValueError(f"--online: {args.method} has no live detector "
+                             f"(live: {', '.join(ONLINE_METHODS)})")
+        if args.params or args.profile:
+            raise ValueError("--online takes the detectors and features of the live "
+                             "configuration: give --config FILE instead of --params/--profile")
+        online, live_default = live_config(args.config, methods)
+    else:
+        if args.config:
+            raise ValueError("--config goes with --online (offline methods take --params)")
+        methods = methods_of(args.method)
     report = evaluate_dir(args.data_dir, methods, args.group,
-                          params_by_method(args.params, methods), progress=not args.no_progress,
-                          profile=args.profile)
+                          None if online else params_by_method(args.params, methods),
+                          progress=not args.no_progress, profile=args.profile,
+                          tolerance_s=args.tolerance, online=online)
+    report.live_default = live_default
     if args.json:
         sys.stdout.write(json.dumps(report.as_dict(), indent=2, allow_nan=False) + "\n")
     else:

@@ -1,0 +1,43 @@
+"""What the live loop would have sent on a recorded take: the take's frames, one by one,
+through the same ``rtseg.pipeline.Pipeline`` as ``rtseg live`` (the same pose features,
+calibration, gap rules and detector objects built from a live configuration).
+
+Frames are given in order with sequence number = frame index and source/receive time =
+index / frame rate, so no gap is seen unless the take marks joints invalid.  Cut frames
+(``boundary``) and the frames that produced them (``detected``) are 0-based take frames.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+
+from rtseg.pipeline import PipelineCut, replay_frames
+from rtseg.session_config import SessionConfig, load_session_config
+
+
+def live_config(path: str | None = None, methods: Sequence[str] | None = None
+                ) -> tuple[SessionConfig, str]:
+    """The live configuration (``config/live.toml`` or ``path``) with ``detectors.methods``
+    replaced by ``methods`` when given, and the name of its default live detector (the
+    configured ``detectors.primary``, else the first configured method)."""
+    cfg = load_session_config(path)
+    default = cfg["detectors.primary"] or cfg["detectors.methods"][0]
+    if methods is not None:
+        cfg["detectors.methods"] = list(methods)
+        if cfg["detectors.primary"] not in ("", *methods):
+            cfg["detectors.primary"] = ""
+    return cfg, default
+
+
+def live_cuts(take: Any, config: SessionConfig) -> dict[str, list[PipelineCut]]:
+    """{method: the cuts the live pipeline gives on ``take``} for every configured method."""
+    n, fr = take.n_frames, float(take.frame_rate)
+    valid = take.valid if take.valid is not None else np.ones((n, take.n_joints), dtype=bool)
+    frames = ((take.quats[i], valid[i], i, i / fr, i / fr) for i in range(n))
+    cuts = replay_frames(frames, take.joint_names, take.parents, take.space, fr, config)
+    out: dict[str, list[PipelineCut]] = {m: [] for m in config["detectors.methods"]}
+    for c in cuts:
+        out[c.cut.method].append(c)
+    return out

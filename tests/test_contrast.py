@@ -1,0 +1,194 @@
+"""The causal contrast detector (rtseg.detectors.contrast), its window models and its
+causal peak picker: behaviour on synthetic motion, causality, restarts, bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rtseg.detectors import make_online, segment_features
+from rtseg.detectors.contrast import ContrastDetector
+from rtseg.detectors.pca import _cross_error, _pca_model
+from rtseg.detectors.peaks import CausalPeaks
+from rtseg.detectors.window_models import (
+    WindowStats, fit, pca_distance, pca_error, ppca_distance, ppca_msq,
+)
+from rtseg.features import take_features
+from rtseg.simulators.synth import synthesize
+
+FR = 120.0
+
+
+@pytest.fixture(scope="module")
+def perf():
+    """A synthetic performance with 4 changes and its pose features."""
+    res = synthesize("idle:5,walk:6,punch:6,squat:6,jumping_jacks:6", seed=4)
+    return res, take_features(res.take)
+
+
+# ---------------------------------------------------------------- window models
+def test_window_stats_from_sums_equal_direct():
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(50, 6))
+    s = WindowStats.of(X)
+    Z = X - X.mean(axis=0)
+    assert s.n == 50
+    np.testing.assert_allclose(s.mean, X.mean(axis=0))
+    np.testing.assert_allclose(s.scatter, Z.T @ Z, atol=1e-10)
+
+
+def test_pca_error_equals_the_frame_wise_projection_error():
+    """From statistics alone, the same number as projecting every frame (pca.py)."""
+    rng = np.random.default_rng(1)
+    A = rng.normal(size=(120, 8)) @ rng.normal(size=(8, 8))
+    B = rng.normal(size=(90, 8)) @ rng.normal(size=(8, 8)) + 0.3
+    ma = fit(WindowStats.of(A), pca_energy=0.9)
+    assert pca_error(WindowStats.of(B), ma) == pytest.approx(
+        _cross_error(B, _pca_model(A, 0.9)), rel=1e-9)
+    assert pca_error(WindowStats.of(A), ma) == pytest.approx(1.0, rel=1e-9)
+
+
+def test_ppca_msq_equals_the_frame_wise_mahalanobis_mean():
+    rng = np.random.default_rng(2)
+    A = rng.normal(size=(200, 5)) * [3.0, 2.0, 1.0, 0.5, 0.2]
+    B = rng.normal(size=(80, 5)) + 1.0
+    m = fit(WindowStats.of(A), ppca_energy=0.95)
+    mu = A.mean(axis=0)
+    C = (m.ppca_basis * m.ppca_var) @ m.ppca_basis.T + m.ppca_sigma2 * (
+        np.eye(5) - m.ppca_basis @ m.ppca_basis.T)
+    Z = B - mu
+    direct = float(np.mean(np.einsum("ij,jk,ik->i", Z, np.linalg.inv(C), Z)))
+    assert ppca_msq(WindowStats.of(B), m) == pytest.approx(direct, rel=1e-9)
+
+
+def test_distances_small_within_a_motion_large_between():
+    rng = np.random.default_rng(3)
+    t = np.arange(600) / FR
+    walk = np.stack([np.sin(2 * np.pi * 1.0 * t + k) for k in range(6)], axis=1)
+    wave = np.stack([np.sin(2 * np.pi * 2.3 * t + 2 * k) * (k % 2) for k in range(6)], axis=1)
+    walk += rng.normal(scale=0.01, size=walk.shape)
+    wave += rng.normal(scale=0.01, size=wave.shape)
+    a, b, c = (fit(WindowStats.of(X)) for X in (walk[:300], walk[300:], wave[:300]))
+    assert pca_distance(a, b) < 2.0 < pca_distance(a, c)
+    assert ppca_distance(a, b) < ppca_distance(a, c)
+    assert pca_distance(a, c) == pytest.approx(pca_distance(c, a))
+
+
+# ---------------------------------------------------------------- peak picker
+def test_peaks_threshold_hold_and_once():
+    pk = CausalPeaks(threshold=2.0, hold=30, min_gap=50, drop=0.0)
+    prof = [1, 1.5, 2.5, 3.0, 2.9, 2.8, 2.7, 2.6, 1.0, 1.0]
+    out = [pk.update(10 * i, v, 10 * i + 100) for i, v in enumerate(prof)]
+    peaks = [p for p in out if p is not None]
+    assert len(peaks) == 1
+    p = peaks[0]
+    assert (p.position, p.value) == (30, 3.0)
+    assert p.confirmed_at == 60 + 100        # 30 frames of positions after the maximum
+
+
+def test_peaks_drop_confirms_early_and_min_gap_separates():
+    pk = CausalPeaks(threshold=2.0, hold=100, min_gap=40, drop=0.5)
+    seq = [(0, 1.0), (10, 4.0), (20, 1.5), (30, 5.0), (40, 1.0), (50, 1.0), (60, 6.0),
+           (70, 1.0)]
+    got = [p for p in (pk.update(pos, v, pos) for pos, v in seq) if p is not None]
+    # 4.0 confirmed by the drop to 1.5; 5.0 at 30 is only 20 after it: refused; 6.0 at 60 ok
+    assert [(p.position, p.value, p.confirmed_at) for p in got] == [(10, 4.0, 20), (60, 6.0, 70)]
+
+
+def test_peaks_need_to_beat_the_recent_past():
+    """The slow shoulder of a peak already sent is not a new change once min_gap has
+    passed: a candidate must exceed every value of the preceding min_gap frames."""
+    pk = CausalPeaks(threshold=1.0, hold=10, min_gap=30, drop=0.0)
+    vals = [9.0, 8.9, 8.8, 8.7, 8.6, 8.5, 8.4]
+    got = [p for p in (pk.update(10 * i, v, 10 * i) for i, v in enumerate(vals)) if p]
+    assert [(p.position, p.value) for p in got] == [(0, 9.0)]
+    # a rise above the shoulder after it is a new change
+    assert pk.update(70, 9.5, 70) is None and pk.update(80, 2.0, 80).position == 70
+
+
+def test_peaks_reset_and_validation():
+    pk = CausalPeaks(threshold=1.0, hold=10, min_gap=0, drop=0.0)
+    assert pk.update(0, 5.0, 0) is None
+    pk.reset()
+    assert pk.update(10, 0.5, 10) is None and pk.update(20, 0.4, 20) is None
+    with pytest.raises(ValueError):
+        CausalPeaks(1.0, hold=-1, min_gap=0)
+    with pytest.raises(ValueError):
+        CausalPeaks(1.0, hold=1, min_gap=0, drop=1.0)
+
+
+# ---------------------------------------------------------------- detector
+def test_finds_every_synthetic_change_within_half_a_second(perf):
+    res, X = perf
+    cuts = make_online("contrast", FR).run(X)
+    mids = [t.mid for t in res.transitions]
+    assert len(cuts) == len(mids), ([c.frame for c in cuts], mids)
+    for c, m in zip(cuts, mids):
+        assert abs(c.frame - m) <= 0.5 * FR
+        delay = (c.detected_at - m) / FR
+        assert 0 < delay <= 1.75 + 0.75 + 0.2 + 0.5       # after window + hold (+ a step)
+        assert 0.0 <= c.confidence <= 1.0 and c.score >= 2.0 and c.method == "contrast"
+
+
+def test_no_cut_in_one_long_behaviour():
+    res = synthesize("walk:40", seed=5)
+    assert make_online("contrast", FR).run(take_features(res.take)) == []
+
+
+def test_causal_a_prefix_gives_the_cuts_already_sent(perf):
+    """A cut never depends on frames after the one that produced it: running any prefix
+    gives exactly the cuts of the full run that were produced within the prefix."""
+    _, X = perf
+    full = make_online("contrast", FR, keep_trace=True)
+    cuts = full.run(X)
+    assert cuts
+    for n in sorted({c.detected_at + 1 for c in cuts} | {1000, 2345, len(X) - 1}):
+        part = make_online("contrast", FR, keep_trace=True)
+        got = part.run(X[:n])
+        assert got == [c for c in cuts if c.detected_at < n]
+        # and the contrast profile itself is the same up to the prefix
+        assert part.trace == full.trace[:len(part.trace)]
+
+
+def test_offline_segment_runs_the_same_core(perf):
+    _, X = perf
+    live = make_online("contrast", FR).run(X)
+    assert [c.frame for c in segment_features(X, "contrast", FR)] == [c.frame for c in live]
+
+
+def test_restart_forgets_the_segment_and_keeps_the_frame_count(perf):
+    _, X = perf
+    det = make_online("contrast", FR)
+    det.run(X[:1000])
+    det.restart()
+    cuts = det.run(X[1000:])
+    fresh = make_online("contrast", FR).run(X[1000:])
+    assert [c.frame for c in cuts] == [c.frame + 1000 for c in fresh]
+
+
+def test_non_finite_frame_restarts_and_is_counted(perf):
+    _, X = perf
+    det = make_online("contrast", FR)
+    Y = X.copy()
+    Y[700, 3] = np.nan
+    cuts = det.run(Y)
+    assert det.rejected_frames == 1
+    assert all(c.frame > 700 for c in cuts if c.detected_at > 700)
+    with pytest.raises(ValueError):
+        det.update(np.zeros(X.shape[1] + 1))
+
+
+def test_frame_rate_scales_the_windows():
+    det = make_online("contrast", 60.0)
+    assert (det.step, det.wa, det.wb) == (5, 36, 21)
+    assert det.delay_frames == 21 * 5 + 45 + 5
+
+
+@pytest.mark.parametrize("kw", [dict(step=0), dict(before=10), dict(after=5),
+                                dict(min_before=400), dict(threshold=0.0),
+                                dict(threshold=math.nan)])
+def test_bad_parameters_are_refused(kw):
+    with pytest.raises(ValueError):
+        ContrastDetector(**kw)
