@@ -66,7 +66,6 @@ the loop: malformed frames are counted (``LiveStats.bad_frames``) and logged.
 
 from __future__ import annotations
 
-import collections
 import logging
 import signal
 import threading
@@ -161,6 +160,36 @@ def build_publishers(config: SessionConfig) -> Any:
 
 
 # ============================================================================ live session
+class FloatRing:
+    """The last ``size`` floats appended, in a preallocated array: memory is fixed from the
+    start (a deque of Python floats grows by ~30 bytes per value until full, which a long
+    session would see as a leak).  Iterates oldest first; ``values()`` is that as an array."""
+
+    def __init__(self, size: int) -> None:
+        self._a = np.zeros(int(size), dtype=np.float64)
+        self._n = 0                    # values appended since the last clear
+
+    def append(self, v: float) -> None:
+        self._a[self._n % self._a.size] = v
+        self._n += 1
+
+    def clear(self) -> None:
+        self._n = 0
+
+    def __len__(self) -> int:
+        return min(self._n, self._a.size)
+
+    def values(self) -> np.ndarray:
+        n, size = self._n, self._a.size
+        if n <= size:
+            return self._a[:n].copy()
+        i = n % size
+        return np.concatenate((self._a[i:], self._a[:i]))
+
+    def __iter__(self):
+        return iter(self.values().tolist())
+
+
 @dataclass
 class LiveStats:
     """Run-time counters of a live session (all since start)."""
@@ -181,8 +210,8 @@ class LiveStats:
     max_backlog: int = 0
     lag_warnings: int = 0
     last_cut: CutEvent | None = None
-    cut_latency_ms: collections.deque = field(default_factory=lambda: collections.deque(maxlen=100_000))
-    frame_latency_ms: collections.deque = field(default_factory=lambda: collections.deque(maxlen=200_000))
+    cut_latency_ms: FloatRing = field(default_factory=lambda: FloatRing(100_000))
+    frame_latency_ms: FloatRing = field(default_factory=lambda: FloatRing(200_000))
 
 
 @dataclass
@@ -239,7 +268,7 @@ def _log_publishers(publishers: Any) -> Callable[[CutEvent], None] | None:
 
 
 def _percentile(values: Iterable[float], p: float) -> float | None:
-    a = np.fromiter(values, dtype=np.float64)
+    a = values.values() if isinstance(values, FloatRing) else np.fromiter(values, dtype=np.float64)
     return float(np.percentile(a, p)) if a.size else None
 
 

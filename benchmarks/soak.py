@@ -1,0 +1,370 @@
+#!/usr/bin/env python3
+"""Soak test: a long live session through the real pty serial suit with faults, accelerated.
+
+    python3 benchmarks/soak.py                  # 8 session hours at 120 Hz (3.46 M frames)
+    python3 benchmarks/soak.py --hours 0.25     # a quick one
+    python3 benchmarks/soak.py --hours 0.5 --json
+
+What runs
+---------
+The synthesised default performance loops on a simulated 17-sensor suit
+(``rtseg.simulators.serial_device.SerialSuit``) in a **separate process** on a real pty,
+rtseg's binary serial format, with faults (``--faults``, default ``corrupt=0.01`` of bytes,
+an unplug of 0.3 s every 60 s, bursts: jitter of up to 2 ms per message so frames arrive
+bunched, 0.1 % of frames dropped, and two sensors silent for 1 s every 20 s).  This
+process runs ``LiveSession("serial://<pty>?rate=120")`` exactly as ``rtseg live`` does
+(serial driver, ring buffer, pose features, every configured online detector, OSC to a
+socket on 127.0.0.1; no recording).  The suit sends ``--speed`` (default 20) times faster
+than 120 Hz, so 8 session hours take 24 minutes; the session's windows stay those of 120 Hz
+(the URL's ``rate``).  "Hours" below are **session** hours: 432 000 frames each.
+
+Measured
+--------
+- ``frames``: frames the suit attempted to send (its ``sent_log``); ``frames_received``.
+- ``crashes``: the session ended other than by the soak's stop, raised, or its reader
+  thread failed (``stop_reason``), plus source read errors and frames the loop could not
+  process.
+- ``rss_growth_mb``: median resident set size of this process (``/proc/self/status``,
+  sampled every second) over the last window minus that over the first window; a window is
+  one session hour, or a quarter of the run when it is shorter than 4 hours.
+- ``p99_first_hour_us`` / ``p99_last_hour_us``: 99th percentile of the time one frame
+  spends in ``Pipeline.process`` (features + every detector), microseconds, in the first
+  and last window (log-binned histograms, 0.1 % resolution, so memory stays fixed).
+- ``lost_frames``: frames the suit sent intact that the session did not process: the suit
+  reports every message's fate (intact / corrupted / dropped / unplugged / overflow); the
+  session's frames are matched by unwrapped sequence number up to the last one received,
+  and ring-buffer overruns are added.  ``destroyed_by_faults`` = corrupted + dropped +
+  unplugged frames (expected losses); ``overflow`` (pty full: nobody reading) counts as
+  lost.
+Bar (issue 11): 0 crashes, RSS growth < 5 MB, p99 last window within 10 % of the first,
+lost_frames 0.  ``pass`` says whether all hold.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import multiprocessing as mp
+import os
+import socket
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from rtseg.live import LiveSession  # noqa: E402
+from rtseg.session_config import from_dict  # noqa: E402
+
+RATE = 120.0
+FRAMES_PER_HOUR = int(RATE * 3600)
+DEFAULT_FAULTS = ("corrupt=0.01,drop=0.001,jitter=0.002,unplug=60:0.3,"
+                  "dropout=5:10:1:20,dropout=11:15:1:20,seed=11")
+BINS_PER_E = 1000            # log-spaced histogram bins per factor e (0.1 % wide)
+
+
+# ============================================================================ suit process
+def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int) -> None:
+    """Child process: serve the looping synthesised take on a pty until ``n_frames`` frames
+    were attempted, then unplug for good (frames still in the pty are lost, but they come
+    after the last one the session received and so are not counted, see below).
+
+    Tallies message fates as it goes (the suit's ``sent_log`` is swapped out every 0.5 s,
+    so memory stays flat); the last ~20 s are kept per message so that, at the end, fates
+    can be counted up to the parent's last received message index."""
+    logging.basicConfig(level=logging.ERROR)
+    from collections import deque
+    from rtseg.simulators.serial_device import SerialSuit
+    from rtseg.simulators.synth import synthesize
+    take = synthesize(frame_rate=RATE, seed=0).take
+    suit = SerialSuit(take, rate=send_rate, faults=faults, link=link, loop=True)
+    conn.send(suit.start())
+    totals: dict[str, int] = {}
+    recent: deque[list] = deque()
+    attempted = 0
+
+    def tally(chunk: list, upto: int | None = None) -> None:
+        for m in chunk:
+            if m.frame < 0 or (upto is not None and m.index > upto):
+                continue
+            totals[m.fate] = totals.get(m.fate, 0) + 1
+
+    while attempted < n_frames and not conn.poll(0):
+        time.sleep(0.05 if n_frames - attempted < send_rate else 0.5)
+        chunk, suit.sent_log = suit.sent_log, []
+        attempted += sum(1 for m in chunk if m.frame >= 0)
+        recent.append(chunk)
+        conn.send(("progress", attempted))
+        while len(recent) > 400:
+            tally(recent.popleft())
+    suit.stop()
+    chunk, suit.sent_log = suit.sent_log, []
+    recent.append(chunk)
+    conn.send(("stopped", attempted))
+    upto = conn.recv()                    # the parent's last received message index
+    first_kept = next((c[0].index for c in recent if c), None)
+    for c in recent:
+        tally(c, upto)
+    conn.send(("done", totals, first_kept))
+    conn.close()
+
+
+# ============================================================================ measuring
+class Meter:
+    """Per-window histograms of ``Pipeline.process`` time and RSS samples, by session
+    time (the unwrapped sequence number of the last frame processed = messages the suit
+    sent, so destroyed frames still advance it); the same number bounds the lost-frame
+    count.  ``wrap(pipeline)`` installs the timer."""
+
+    def __init__(self, window_frames: int) -> None:
+        self.window_frames = window_frames
+        self.hist: dict[int, dict[int, int]] = {}
+        self.rss: dict[int, list[float]] = {}
+        self.processed = 0
+        self.last_abs = -1            # unwrapped sequence number of the last frame processed
+
+    def wrap(self, pipeline) -> None:
+        process = pipeline.process
+        perf = time.perf_counter_ns
+        log = math.log
+        hist = self.hist
+
+        def timed(index, quats, valid, seq=None, recv_time=None, lost=0, source_time=None):
+            t0 = perf()
+            out = process(index, quats, valid, seq, recv_time, lost, source_time)
+            dt = perf() - t0
+            if seq is not None:
+                prev = self.last_abs
+                self.last_abs = seq if prev < 0 else prev + ((seq - prev) & 0xFFFF)
+            w = max(self.last_abs, 0) // self.window_frames
+            h = hist.get(w)
+            if h is None:
+                h = hist[w] = {}
+            b = int(log(max(dt, 1)) * BINS_PER_E)
+            h[b] = h.get(b, 0) + 1
+            self.processed += 1
+            return out
+
+        pipeline.process = timed
+
+    def sample_rss(self) -> None:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmRSS:"):
+                    kb = float(line.split()[1])
+                    break
+            else:
+                return
+        w = max(self.last_abs, 0) // self.window_frames
+        self.rss.setdefault(w, []).append(kb / 1024.0)
+
+    def p99_us(self, window: int) -> float | None:
+        h = self.hist.get(window)
+        if not h:
+            return None
+        bins = np.array(sorted(h))
+        counts = np.array([h[b] for b in bins], dtype=np.float64)
+        c = np.cumsum(counts)
+        b = bins[np.searchsorted(c, 0.99 * c[-1])]
+        return float(math.exp((b + 0.5) / BINS_PER_E) / 1000.0)
+
+    def rss_mb(self, window: int) -> float | None:
+        v = self.rss.get(window)
+        return float(np.median(v)) if v else None
+
+
+def soak(hours: float, speed: float, faults: str, log) -> dict:
+    n_frames = int(round(hours * FRAMES_PER_HOUR))
+    window_frames = max(1, min(FRAMES_PER_HOUR, n_frames // 4))
+    n_windows = max(1, n_frames // window_frames)
+    tmp = tempfile.mkdtemp(prefix=f"rtseg-soak-{os.getpid()}-")
+    link = os.path.join(tmp, "suit")
+    ctx = mp.get_context("spawn")
+    parent, child = ctx.Pipe()
+    proc = ctx.Process(target=_suit_main, args=(child, RATE * speed, faults, link, n_frames),
+                       daemon=True)
+    proc.start()
+    sink = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sink.bind(("127.0.0.1", 0))
+    sink.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+    stop_sink = threading.Event()
+
+    def drain() -> None:
+        sink.settimeout(0.2)
+        while not stop_sink.is_set():
+            try:
+                sink.recv(65536)
+            except OSError:
+                pass
+
+    drainer = threading.Thread(target=drain, daemon=True)
+    drainer.start()
+    meter = Meter(window_frames)
+    crashes = 0
+    summary = None
+    result: dict = {}
+    try:
+        if not parent.poll(60):
+            raise RuntimeError("the suit process did not start")
+        path = parent.recv()
+        cfg = from_dict({"output": {"osc": [f"127.0.0.1:{sink.getsockname()[1]}"]},
+                         "status": {"interval": 1.0}}, origin="soak")
+
+        class SoakSession(LiveSession):
+            def _open(self) -> None:
+                super()._open()
+                meter.wrap(self.pipeline)
+
+        session = SoakSession(f"serial://{path}?rate={RATE:g}", cfg, handle_signals=False)
+        box: dict = {}
+
+        def body() -> None:
+            try:
+                box["summary"] = session.run()
+            except BaseException as exc:          # noqa: BLE001 - a crash is a result
+                box["error"] = exc
+
+        runner = threading.Thread(target=body, name="soak-session", daemon=True)
+        t_start = time.monotonic()
+        runner.start()
+        attempted = 0
+        stopped = False
+        next_report = t_start + 30
+        while not stopped and runner.is_alive():
+            while parent.poll(0):
+                msg = parent.recv()
+                attempted = msg[1]
+                stopped = msg[0] == "stopped"
+            meter.sample_rss()
+            now = time.monotonic()
+            if now >= next_report:
+                next_report = now + 30
+                log(f"  {attempted / FRAMES_PER_HOUR:5.2f} session h sent, "
+                    f"{meter.processed} frames processed, RSS {meter.rss_mb(max(meter.rss)):.1f} MB, "
+                    f"{now - t_start:.0f} s")
+            time.sleep(1.0)
+        # the suit has stopped: let the session finish what it received
+        last = -1
+        while runner.is_alive() and meter.processed != last:
+            last = meter.processed
+            time.sleep(0.5)
+        parent.send(meter.last_abs)
+        while True:
+            if not parent.poll(60):
+                raise RuntimeError("the suit process did not report")
+            msg = parent.recv()
+            if msg[0] == "done":
+                _, fates, first_kept = msg
+                break
+        wall = time.monotonic() - t_start
+        session.stop("soak done")
+        runner.join(30)
+        if runner.is_alive() or "error" in box:
+            crashes += 1
+        summary = box.get("summary")
+        if summary is not None and summary.stop_reason != "soak done":
+            crashes += 1
+        crashes += session.stats.source_errors + session.stats.bad_frames
+        if session._reader_error is not None:
+            crashes += 1
+        if first_kept is not None and meter.last_abs < first_kept:
+            raise RuntimeError("the session fell more than 20 s behind the suit; "
+                               "lost frames cannot be counted")
+        intact = fates.get("intact", 0)
+        overruns = session.stats.overruns
+        processed_matched = meter.processed
+        lost = max(0, intact - processed_matched) + overruns + fates.get("overflow", 0)
+        first, lastw = 0, n_windows - 1
+        while lastw > 0 and lastw not in meter.hist:
+            lastw -= 1
+        p_first, p_last = meter.p99_us(first), meter.p99_us(lastw)
+        r_first, r_last = meter.rss_mb(first), meter.rss_mb(lastw)
+        growth = (r_last - r_first) if r_first is not None and r_last is not None else None
+        sent = sum(fates.values())
+        result = {
+            "hours": hours, "speed": speed, "faults": faults,
+            "frames": sent, "frames_received": session.stats.frames_received,
+            "frames_processed": meter.processed, "wall_s": round(wall, 1),
+            "crashes": crashes,
+            "rss_first_mb": r_first, "rss_last_mb": r_last, "rss_growth_mb": growth,
+            "window_hours": window_frames / FRAMES_PER_HOUR,
+            "p99_first_hour_us": p_first, "p99_last_hour_us": p_last,
+            "p99_change": (p_last / p_first - 1.0) if p_first and p_last else None,
+            "lost_frames": lost,
+            "destroyed_by_faults": sum(fates.get(k, 0) for k in ("corrupted", "dropped",
+                                                                 "unplugged")),
+            "fates": fates, "overruns": overruns,
+            "reconnects": session.source.stats.reconnects if session.source else None,
+            "input": summary.input if summary is not None else None,
+            "cuts": summary.cuts if summary is not None else None,
+            "detector_restarts": session.pipeline.stats.restarts if session.pipeline else None,
+        }
+        result["pass"] = bool(crashes == 0 and growth is not None and growth < 5.0
+                              and result["p99_change"] is not None
+                              and result["p99_change"] <= 0.10 and lost == 0)
+    finally:
+        stop_sink.set()
+        drainer.join(2)
+        sink.close()
+        if proc.is_alive():
+            try:
+                parent.send(-1)
+            except OSError:
+                pass
+            proc.join(10)
+            if proc.is_alive():
+                proc.terminate()
+                proc.join(5)
+        try:
+            os.rmdir(tmp)
+        except OSError:
+            pass
+    return result
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--hours", type=float, default=8.0,
+                   help="session hours at 120 Hz (default 8 = 3.46 M frames)")
+    p.add_argument("--speed", type=float, default=20.0,
+                   help="the suit sends this many times faster than 120 Hz (default 20)")
+    p.add_argument("--faults", default=DEFAULT_FAULTS,
+                   help=f"fault spec of rtseg.simulators.faults (default {DEFAULT_FAULTS})")
+    p.add_argument("--json", action="store_true", help="print only the JSON result")
+    args = p.parse_args(argv)
+    if not (args.hours > 0 and math.isfinite(args.hours)):
+        p.error("--hours must be a number > 0")
+    if not (args.speed > 0 and math.isfinite(args.speed)):
+        p.error("--speed must be a number > 0")
+    logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
+
+    def log(msg: str) -> None:
+        print(msg, file=sys.stderr, flush=True)
+
+    log(f"soak: {args.hours:g} session hours ({int(args.hours * FRAMES_PER_HOUR)} frames) at "
+        f"{args.speed:g}x 120 Hz, faults {args.faults}")
+    r = soak(args.hours, args.speed, args.faults, log)
+    if args.json:
+        print(json.dumps(r, indent=2))
+    else:
+        fmt = lambda v, f: "-" if v is None else format(v, f)   # noqa: E731
+        print(f"frames sent {r['frames']}, received {r['frames_received']}, "
+              f"destroyed by faults {r['destroyed_by_faults']}, lost {r['lost_frames']}")
+        print(f"crashes {r['crashes']}; RSS {fmt(r['rss_first_mb'], '.1f')} -> "
+              f"{fmt(r['rss_last_mb'], '.1f')} MB (growth {fmt(r['rss_growth_mb'], '.2f')} MB)")
+        print(f"Pipeline.process p99: first window {fmt(r['p99_first_hour_us'], '.1f')} us, "
+              f"last {fmt(r['p99_last_hour_us'], '.1f')} us "
+              f"({fmt(r['p99_change'] and 100 * r['p99_change'], '+.1f')} %)")
+        print(f"wall time {r['wall_s']} s; {'PASS' if r['pass'] else 'FAIL'}")
+    return 0 if r["pass"] else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
