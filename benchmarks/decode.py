@@ -21,7 +21,19 @@ only, on one core, median of ``--repeat`` runs:
 - ``python_osc_parse`` (for comparison): python-osc's ``OscPacket`` parsing the same VMC
   datagrams, without any frame assembly.
 
-Targets: >= 20 000 frames/s for VMC (a suit sends 60-120).
+- ``mvn``: ``rtseg.drivers.codec_mvn.MvnAssembler`` fed Xsens MVN type-02 datagrams (23
+  segments, one 760-byte datagram per frame); ``mvn_3_datagrams``: the same frames split
+  over 3 datagrams each (reassembly by sample counter).
+- ``mocopi``: ``rtseg.drivers.codec_mocopi.MocopiAssembler`` fed mocopi ``fram`` datagrams
+  (27 bones, one datagram per frame).
+
+Targets: >= 20 000 frames/s for VMC, MVN and mocopi (a suit sends 60-240).
+
+    python3 benchmarks/decode.py --fuzz [--fuzz-inputs 100000]
+
+feeds, per format (mvn, mocopi), that many mutated datagrams (bit flips, truncation,
+rewritten header/length fields, appended bytes, random bytes; seeded) to the assembler
+and reports how many raised (must be 0), frames produced, counters, and inputs/s.
 """
 
 from __future__ import annotations
@@ -101,6 +113,112 @@ def bench_python_osc(q: np.ndarray, repeat: int) -> dict | None:
     return {"frames_per_s": round(statistics.median(rates))}
 
 
+def vendor_motion(n: int, joints: int, seed: int = 0) -> np.ndarray:
+    """(n, joints, 4) smooth unit quaternions (scalar-last)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n)[:, None, None] / 120.0
+    rv = 0.7 * np.sin(2 * np.pi * (0.3 + rng.random((1, joints, 3))) * t
+                      + 6 * rng.random((1, joints, 3)))
+    return Rotation.from_rotvec(rv.reshape(-1, 3)).as_quat().reshape(n, joints, 4)
+
+
+def _time_feed(make, dgrams: list[bytes], n: int, repeat: int, what: str) -> list[float]:
+    rates = []
+    for _ in range(repeat):
+        asm = make()
+        got = 0
+        t0 = time.perf_counter()
+        for k, d in enumerate(dgrams):
+            got += len(asm.feed(d, k * 1e-3))
+        dt = time.perf_counter() - t0
+        got += len(asm.flush(1e9, force=True))
+        if got != n:
+            raise RuntimeError(f"{what} decoded {got} of {n} frames")
+        rates.append(n / dt)
+    return rates
+
+
+def bench_mvn(n: int, repeat: int, parts: int = 1) -> dict:
+    from rtseg.drivers.codec_mvn import HEADER_SIZE, ITEM_SIZE, MvnAssembler, encode_datagrams
+    q = vendor_motion(n, 23)
+    ids = list(range(1, 24))
+    per = -(-23 // parts)
+    dgrams = [d for i in range(n) for d in encode_datagrams(
+        i, i * 8, ids, q[i], np.zeros((23, 3)), max_datagram=HEADER_SIZE + per * ITEM_SIZE)]
+    rates = _time_feed(lambda: MvnAssembler(ids), dgrams, n, repeat, "MVN")
+    return {"frames_per_s": round(statistics.median(rates)), "runs": [round(r) for r in rates],
+            "datagrams_per_frame": len(dgrams) / n, "bytes_per_frame": sum(map(len, dgrams)) / n}
+
+
+def bench_mocopi(n: int, repeat: int) -> dict:
+    from rtseg.drivers.codec_mocopi import MocopiAssembler, encode_frame
+    q = vendor_motion(n, 27)
+    dgrams = [encode_frame(i, q[i], time=i * 20, uttm=1.7e9 + i / 50) for i in range(n)]
+    rates = _time_feed(MocopiAssembler, dgrams, n, repeat, "mocopi")
+    return {"frames_per_s": round(statistics.median(rates)), "runs": [round(r) for r in rates],
+            "datagrams_per_frame": 1.0, "bytes_per_frame": sum(map(len, dgrams)) / n}
+
+
+def mutate(seeds: list[bytes], n: int, seed: int, magic: bytes = b""):
+    """``n`` mutated datagrams from ``seeds`` (generator; seeded, reproducible)."""
+    rng = np.random.default_rng(seed)
+    for _ in range(n):
+        d = bytearray(seeds[rng.integers(len(seeds))])
+        op = rng.integers(6)
+        if op == 0:
+            for _ in range(rng.integers(1, 8)):
+                d[rng.integers(len(d))] ^= 1 << int(rng.integers(8))
+        elif op == 1:
+            d = d[:rng.integers(len(d) + 1)]
+        elif op == 2:
+            a = int(rng.integers(0, min(len(d), 64)))
+            d[a:a + 4] = rng.bytes(4)
+        elif op == 3:
+            d = d + rng.bytes(rng.integers(1, 64))
+        elif op == 4:
+            d = bytearray(magic + rng.bytes(rng.integers(0, 300)))
+        else:
+            d = bytearray(rng.bytes(rng.integers(0, 300)))
+        yield bytes(d)
+
+
+def fuzz(fmt: str, n: int, seed: int = 1) -> dict:
+    """Feed ``n`` mutated datagrams of ``fmt`` (mvn | mocopi); count escaped exceptions."""
+    import struct
+    if fmt == "mvn":
+        from rtseg.drivers.codec_mvn import (HEADER_SIZE, ITEM_SIZE, MvnAssembler,
+                                             encode_datagrams, encode_message)
+        q = vendor_motion(4, 23)
+        ids = list(range(1, 24))
+        seeds = [d for i in range(4) for d in encode_datagrams(
+            i, i, ids, q[i], max_datagram=HEADER_SIZE + 8 * ITEM_SIZE)]
+        seeds += [encode_message("12", b"\x00\x00\x00\x0aname:fuzz\n"),
+                  encode_message("13", struct.pack(">II", 1, 2) + b"L5" + bytes(12)),
+                  encode_message("24", bytes(12)), encode_message("25", b"01:02:03.004")]
+        asm, magic = MvnAssembler(ids, quiet=0.0), b"MXTP"
+    else:
+        from rtseg.drivers.codec_mocopi import MocopiAssembler, encode_frame, encode_skeleton
+        from rtseg.drivers.codec_mocopi import BONE_PARENTS
+        q = vendor_motion(3, 27)
+        seeds = [encode_frame(i, q[i], uttm=1.0 + i) for i in range(3)]
+        seeds.append(encode_skeleton(list(BONE_PARENTS), np.tile([0, 0, 0, 1, 0, 0, 0], (27, 1))))
+        asm, magic = MocopiAssembler(), b""
+    escaped = frames = 0
+    t0 = time.perf_counter()
+    for k, d in enumerate(mutate(seeds, n, seed, magic)):
+        try:
+            frames += len(asm.feed(d, k * 1e-3)) + len(asm.flush(k * 1e-3))
+        except Exception as exc:  # noqa: BLE001 - counting is the point
+            escaped += 1
+            if escaped <= 3:
+                print(f"{fmt}: input {k} raised {exc!r}", file=sys.stderr)
+    dt = time.perf_counter() - t0
+    st = asm.stats
+    return {"inputs": n, "escaped": escaped, "frames": frames, "corrupt": st.corrupt,
+            "bad_values": st.bad_values, "bad_messages": st.bad_messages,
+            "dropped": st.dropped, "inputs_per_s": round(n / dt)}
+
+
 def bench_serial(q: np.ndarray, repeat: int) -> dict | None:
     try:
         from rtseg.drivers.codec_serial import SerialFrameDecoder, encode_frame as ser_encode
@@ -132,7 +250,21 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--frames", type=int, default=5000, help="frames per run (default 5000)")
     p.add_argument("--repeat", type=int, default=5, help="runs; the median is reported (default 5)")
+    p.add_argument("--fuzz", action="store_true", help="fuzz the MVN and mocopi decoders "
+                   "instead of timing (exit 1 if any input raised)")
+    p.add_argument("--fuzz-inputs", type=int, default=100_000, help="inputs per format")
     args = p.parse_args(argv)
+    if args.fuzz:
+        out = {fmt: fuzz(fmt, args.fuzz_inputs) for fmt in ("mvn", "mocopi")}
+        if args.json:
+            print(json.dumps(out))
+        else:
+            for fmt, r in out.items():
+                print(f"fuzz {fmt}: {r['inputs']:,} inputs, {r['escaped']} escaped, "
+                      f"{r['frames']:,} frames, corrupt {r['corrupt']:,}, bad values "
+                      f"{r['bad_values']:,}, bad messages {r['bad_messages']:,}, dropped "
+                      f"{r['dropped']:,}; {r['inputs_per_s']:,} inputs/s")
+        return 1 if any(r["escaped"] for r in out.values()) else 0
     if args.frames < 10 or args.repeat < 1:
         p.error("--frames must be >= 10 and --repeat >= 1")
     q = motion(args.frames)
@@ -142,6 +274,9 @@ def main(argv: list[str] | None = None) -> int:
     result["vmc"] = bench_vmc(q, args.repeat)
     result["vmc_general_path"] = bench_vmc(q, args.repeat, fast=False)
     result["vmc_55_bones"] = bench_vmc(q, args.repeat, full=True)
+    result["mvn"] = bench_mvn(args.frames, args.repeat)
+    result["mvn_3_datagrams"] = bench_mvn(args.frames, args.repeat, parts=3)
+    result["mocopi"] = bench_mocopi(args.frames, args.repeat)
     pyosc = bench_python_osc(q[: max(10, args.frames // 5)], max(1, min(args.repeat, 3)))
     if pyosc is not None:
         result["python_osc_parse"] = pyosc
@@ -161,6 +296,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  VMC, message-by-message path only:           {g['frames_per_s']:>9,} frames/s")
     print(f"  VMC, 55 bones ({f['datagrams_per_frame']:.0f} datagrams, {f['bytes_per_frame']:.0f} B/frame):"
           f"       {f['frames_per_s']:>9,} frames/s")
+    for key, label in (("mvn", "Xsens MVN, 23 segments"), ("mvn_3_datagrams", "Xsens MVN, 3 datagrams/frame"),
+                       ("mocopi", "Sony mocopi, 27 bones")):
+        r = result[key]
+        print(f"  {label} ({r['bytes_per_frame']:.0f} B/frame): ".ljust(47)
+              + f"{r['frames_per_s']:>9,} frames/s")
     if pyosc is not None:
         print(f"  python-osc parse only (comparison):          {pyosc['frames_per_s']:>9,} frames/s")
     return 0

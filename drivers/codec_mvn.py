@@ -64,6 +64,10 @@ ITEM_SIZE = ITEM_02.itemsize                  # 32
 #: UDP payload limit that avoids IP fragmentation on Ethernet (1500 - 20 - 8)
 DEFAULT_MAX_DATAGRAM = 1472
 LAST_FLAG = 0x80
+#: columns of a type-02 item read as 8 float32 (id, px, py, pz, qw, qx, qy, qz) that give
+#: rtseg's quaternion (y, z, x, w) and position (y, z, x)
+_QCOLS = [6, 7, 5, 4]
+_PCOLS = [2, 3, 1]
 
 #: Body segment names of MVN, segment id = index + 1.
 SEGMENT_NAMES: tuple[str, ...] = (
@@ -305,6 +309,9 @@ class MvnAssembler:
         self._lut = np.full(max(size, 256), -1, dtype=np.int64)
         self._lut[ids] = np.arange(self.n)
         self._q = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (self.n, 1))
+        #: the suit's ids in order, as they arrive when a sender sends exactly the suit
+        self._ids_bytes = np.array(ids, dtype=">i4").tobytes()
+        self._all_valid = np.ones(self.n, dtype=bool)
         self._open: _Partial | None = None
         self._last_sample: int | None = None
         self._root_row = 0
@@ -405,8 +412,14 @@ class MvnAssembler:
                             "its missing segments are marked invalid (further ones counted in "
                             ".incomplete_frames)", p.sample, sorted(p.parts))
         self._last_sample = p.sample
-        parts = [p.parts[i] for i in sorted(p.parts)]
-        items = parts[0] if len(parts) == 1 else np.concatenate(parts)
+        parts = [p.parts[i] for i in sorted(p.parts)] if len(p.parts) > 1 else \
+            list(p.parts.values())
+        # (np.concatenate would convert to native byte order; joining bytes keeps it)
+        items = parts[0] if len(parts) == 1 else \
+            np.frombuffer(b"".join(x.tobytes() for x in parts), dtype=ITEM_02)
+        fast = self._emit_fast(items, p, now)
+        if fast is not None:
+            return fast
         ids = items["id"].astype(np.int64)
         ok = (ids >= 0) & (ids < len(self._lut))
         rows = np.full(len(ids), -1, dtype=np.int64)
@@ -417,7 +430,8 @@ class MvnAssembler:
         root = None
         if keep.any():
             rows = rows[keep]
-            raw = items["quat"][keep].astype(np.float64)
+            with np.errstate(invalid="ignore"):       # signalling NaNs are refused below
+                raw = items["quat"][keep].astype(np.float64)
             qq = from_mvn_quat(raw)
             norm2 = np.einsum("ij,ij->i", qq, qq)
             good = np.isfinite(norm2) & (np.abs(norm2 - 1.0) <= self.unit_tolerance)
@@ -445,6 +459,26 @@ class MvnAssembler:
         self._q = q
         return Frame(recv_time=now, quats=q, valid=valid, source_time=p.time_ms / 1000.0,
                      seq=p.sample, root_position=root)
+
+    def _emit_fast(self, items: np.ndarray, p: _Partial, now: float) -> Frame | None:
+        """The common case in few numpy operations: exactly the suit's segments, in suit
+        order, all finite and unit.  None: use the general path (same result)."""
+        if len(items) != self.n or items["id"].tobytes() != self._ids_bytes:
+            return None
+        with np.errstate(invalid="ignore"):
+            raw = items.view(">f4").astype(np.float64).reshape(self.n, 8)
+        q = raw[:, _QCOLS]                           # (w, x, y, z) MVN -> (y, z, x, w)
+        if not np.abs(np.einsum("ij,ij->i", q, q) - 1.0).max() <= self.unit_tolerance:
+            return None                              # NaN fails the comparison too
+        if self.continuous:
+            dots = np.einsum("ij,ij->i", q, self._q)
+            if dots.min() < 0:
+                q[dots < 0] *= -1.0
+        self._q = q
+        pos = raw[self._root_row, _PCOLS]
+        return Frame(recv_time=now, quats=q, valid=self._all_valid.copy(),
+                     source_time=p.time_ms / 1000.0, seq=p.sample,
+                     root_position=pos if np.isfinite(pos).all() else None)
 
     def _other(self, t: str, payload: memoryview) -> None:
         if t == "12":
