@@ -57,6 +57,34 @@ from rtseg.take import Take
 
 log = logging.getLogger("rtseg.simulators.serial")
 
+def remove_stale_dirs(tmp: str | None = None) -> list[str]:
+    """Remove ``rtseg-serial-<pid>-*`` link folders (made by a suit without ``link``) whose
+    process is gone: a SIGKILLed ``rtseg demo`` cannot run ``stop()``.  Folders of live
+    processes, and folders without a pid in their name, are left alone.  Returns those
+    removed."""
+    removed = []
+    for d in Path(tmp or tempfile.gettempdir()).glob("rtseg-serial-*-*"):
+        pid = d.name.split("-")[2]
+        if not pid.isdigit() or d.is_symlink() or not d.is_dir():
+            continue
+        try:
+            os.kill(int(pid), 0)
+            continue                          # the owner is alive (or not ours to ask)
+        except ProcessLookupError:
+            pass
+        except (PermissionError, OverflowError):
+            continue
+        try:
+            for f in d.iterdir():             # the link and its ".new" twin
+                if f.is_symlink() or f.is_file():
+                    f.unlink()
+            d.rmdir()
+            removed.append(str(d))
+        except OSError:
+            continue
+    return removed
+
+
 READER_SETTLE_S = 0.2
 """With ``wait_reader``, sending starts this long after a reader opened the port, as a
 board reset by the port's DTR line starts streaming after it boots (and so the reader's
@@ -149,7 +177,8 @@ class SerialSuit:
         self.wait_reader = wait_reader
         self._own_dir: str | None = None
         if link is None:
-            self._own_dir = tempfile.mkdtemp(prefix="rtseg-serial-")
+            remove_stale_dirs()
+            self._own_dir = tempfile.mkdtemp(prefix=f"rtseg-serial-{os.getpid()}-")
             link = os.path.join(self._own_dir, "rtseg-suit")
         self.link = Path(link)
         self.sent_log: list[SentMessage] = []
