@@ -350,3 +350,37 @@ def test_demo_command_prints_cuts(tmp_path):
     cut_lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("cut #")]
     assert cut_lines and len(cut_lines) == len(osc.cuts())
     assert "session ended (duration reached)" in proc.stderr
+
+
+def test_sigkilled_demo_leaves_no_stale_suit_folder(take):
+    """A SIGKILLed ``rtseg demo`` cannot remove its pty link folder; the next suit that
+    makes one removes it (its process is gone) and keeps the folders of live processes."""
+    import re
+    import tempfile
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "rtseg.cli", "demo", "--duration", "60", "--no-osc", "--quiet"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO)
+    try:
+        line = proc.stderr.readline()
+        m = re.search(r"simulated suit on (\S+)", line)
+        assert m, f"unexpected first line: {line!r}"
+        folder = Path(m.group(1)).parent
+        assert folder.name.startswith(f"rtseg-serial-{proc.pid}-") and folder.is_dir()
+    finally:
+        proc.kill()
+        proc.wait(10)
+    assert folder.is_dir(), "SIGKILL left nothing behind: nothing to test"
+    alive = SerialSuit(take)                 # this process: alive, its folder must stay
+    try:
+        mine = Path(alive.path).parent
+        assert mine.is_dir() and mine.name.startswith(f"rtseg-serial-{os.getpid()}-")
+        assert not folder.exists()
+        other = SerialSuit(take)
+        try:
+            assert mine.is_dir()
+        finally:
+            other.stop()
+    finally:
+        alive.stop()
+    assert not mine.exists()
+    assert Path(tempfile.gettempdir()) == folder.parent
