@@ -12,7 +12,10 @@ address                     tags       arguments
 ``/rtseg/cut``              iiffffs    event number, new segment index, boundary time (s
                                        since session start), confidence 0..1, latency
                                        boundary->send (ms, -1 if unknown), detector delay
-                                       (ms), label
+                                       (ms), label.  One per behaviour change by default:
+                                       the live loop sends only the primary detector's
+                                       cuts (``[output] cut_methods``); confidence is
+                                       ``1 - threshold / statistic`` for every method
 ``/rtseg/cut/<label>``      if         new segment index, confidence (label sanitised to
                                        ``[A-Za-z0-9_-]``)
 ``/rtseg/status``           ifii       alive, input frame rate (Hz), dropped frames, stale
