@@ -21,7 +21,8 @@ from rtseg.drivers.codec_mocopi import (
     BONE_NAMES, BONE_PARENTS, FTYP, MocopiAssembler, encode_frame, encode_skeleton, field,
     iter_fields, parse_packet,
 )
-from rtseg.drivers.mocopi_source import MocopiSource
+from rtseg import quat as Q
+from rtseg.drivers.mocopi_source import ForwardKinematics, MocopiSource
 from rtseg.live import LiveSession
 from rtseg.profiles import suit_profile
 from rtseg.session_config import from_dict
@@ -199,6 +200,22 @@ def test_fuzzed_datagrams_never_escape():
     assert frames > 200 and asm.stats.corrupt > 3000      # both paths were exercised
 
 
+def test_forward_kinematics_matches_the_reference_chain():
+    fk = ForwardKinematics(BONE_PARENTS)
+    q = random_pose(3, seed=9)
+    for k in range(3):
+        assert np.allclose(fk(q[k]), Q.global_from_local(q[k][None], list(BONE_PARENTS))[0],
+                           atol=1e-15)
+    valid = np.ones(N, dtype=bool)
+    valid[BONE_NAMES.index("torso_7")] = False
+    v = fk.chain_valid(valid)
+    below = {"torso_7", "neck_1", "neck_2", "head", "l_shoulder", "l_up_arm", "l_low_arm",
+             "l_hand", "r_shoulder", "r_up_arm", "r_low_arm", "r_hand"}
+    assert {BONE_NAMES[j] for j in np.flatnonzero(~v)} == below
+    with pytest.raises(ValueError):
+        ForwardKinematics([1, -1])
+
+
 # --------------------------------------------------------------------------- sockets
 
 def test_url_defaults_options_and_errors():
@@ -206,13 +223,19 @@ def test_url_defaults_options_and_errors():
     try:
         assert isinstance(src, MocopiSource) and src.host == "127.0.0.1" and src.port > 0
         prof = suit_profile("mocopi")
-        assert src.space == "local" and src.joint_names == list(prof.bones)
+        assert src.space == "global" and src.joint_names == list(prof.bones)
         assert src.bone_ids == list(range(27))
         # the suit's hierarchy is mocopi's own (BONE_PARENTS)
         assert src.parents == list(BONE_PARENTS)
     finally:
         src.close()
+    local = open_source("mocopi://:0?space=local")
+    try:
+        assert local.space == "local" and isinstance(local.assembler, MocopiAssembler)
+    finally:
+        local.close()
     for bad, text in (("mocopi://:0?character=1", "character"), ("mocopi://:99999", "range"),
+                      ("mocopi://:0?space=world", "space"),
                       ("mocopi://:0?queue=0", "queue"), ("mocopi://:0?allow=", "allow")):
         with pytest.raises(SourceError, match=text):
             open_source(bad).close()
@@ -292,8 +315,8 @@ def test_simulator_through_live_session_gives_valid_joints_and_cuts():
     assert [f.seq for f in frames] == list(range(take.n_frames))
     st = np.array([f.source_time for f in frames]) - 1.7e9
     assert np.allclose(st, np.arange(take.n_frames) / rate, atol=1e-6)   # the take's clock
-    # the rotations that arrived are the ones the simulator sent
-    sent = sender.local_quats
+    # the rotations that arrived are the ones the simulator sent, chained to global ones
+    sent = Q.global_from_local(sender.local_quats, list(BONE_PARENTS))
     got = np.stack([f.quats for f in frames])
     d = np.minimum(np.abs(got - sent).max(-1), np.abs(got + sent).max(-1))
     assert d.max() < 1e-6
@@ -317,3 +340,33 @@ def test_rtseg_simulate_mocopi_command_reaches_the_source():
         assert len(frames) == 200 and all(f.valid.all() for f in frames)
     finally:
         src.close()
+
+
+def test_real_take_cuts_match_the_serial_suit(data_dir):
+    """86_01 (CMU, 38 s) through the mocopi codec and the source's default global
+    conversion gives the cuts the 17-sensor serial suit gives, within 0.25 s."""
+    from rtseg.drivers.codec_serial import SerialFrameDecoder, encode_frame as ser_encode
+    from rtseg.drivers.readers import read_take
+    from rtseg.pipeline import replay_frames
+    from rtseg.simulators.retarget import retarget
+
+    take = read_take(str(data_dir / "cmu" / "86_01.amc"))
+    rate = take.frame_rate
+    suit = suit_profile("default17")
+    rt = retarget(take, suit)
+    ids = list(suit.sensor_ids)
+    dec = SerialFrameDecoder(known_ids=ids)
+    serial = [(f.quats.copy(), f.valid.copy(), i, i / rate, i / rate)
+              for i in range(take.n_frames)
+              for f in dec.feed(ser_encode(i & 0xFFFF, int(i / rate * 1e6), ids, rt.quats[i]))]
+    sender = MocopiSender(take, "127.0.0.1", 9, unix_start=1.7e9)   # encode only
+    asm = MocopiAssembler(sender.bone_ids)
+    fk = ForwardKinematics(sender.suit.parents)
+    moc = [(fk(f.quats), f.valid, f.seq, i / rate, f.source_time) for i in range(take.n_frames)
+           for d in sender.encode(i, i, i / rate) for f in asm.feed(d, i / rate)]
+    assert len(serial) == len(moc) == take.n_frames
+    ref = replay_frames(serial, list(suit.bones), list(suit.parents), "global", rate)
+    got = replay_frames(moc, list(sender.suit.bones), list(sender.suit.parents), "global", rate)
+    assert len(ref) >= 3, "the reference suit should cut 86_01"
+    assert [c.cut.method for c in got] == [c.cut.method for c in ref]
+    assert max(abs(a.boundary - b.boundary) for a, b in zip(got, ref)) <= 0.25 * rate
