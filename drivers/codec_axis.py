@@ -47,13 +47,10 @@ with non-finite angles come back invalid.
 
 from __future__ import annotations
 
-import math
 import struct
 from dataclasses import dataclass
 
 import numpy as np
-
-from rtseg import quat as Q
 
 __all__ = ["JOINTS", "PARENTS", "TEXT_PORT", "BINARY_PORT", "HEADER", "TOKEN1", "TOKEN2",
            "AxisError", "AxisFrame", "layout", "value_count", "decode_binary",
@@ -178,9 +175,10 @@ def decode_binary(data: bytes, joints: int = len(JOINTS)) -> AxisFrame:
         raise AxisError("bad_messages", f"{count} values with displacement={disp}, "
                         f"reference={ref}: expected {want} for {joints} joints")
     values = np.frombuffer(data, dtype="<f4", count=count, offset=HEADER.size)
+    with np.errstate(invalid="ignore"):       # signalling NaNs stay NaN, quietly
+        values = values.astype(np.float64)
     return AxisFrame(avatar, name.split(b"\0", 1)[0].decode("ascii", "replace"),
-                     values.astype(np.float64), bool(disp), bool(ref), frame,
-                     (major, minor, rev, build))
+                     values, bool(disp), bool(ref), frame, (major, minor, rev, build))
 
 
 def encode_binary(values: np.ndarray, *, with_disp: bool = True, with_ref: bool = False,

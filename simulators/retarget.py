@@ -19,6 +19,10 @@ Skeleton families (:data:`MAPS`; the family is detected from the joint names, or
                Spine2, Neck, Head, LeftArm, LeftForeArm, LeftHand, LeftUpLeg, LeftLeg, ...
 ``unity``      Unity humanoid ``HumanBodyBones`` names (also rtseg's own synthetic takes
                and recorded suit sessions): the identity, Chest falls back to UpperChest
+``rokoko``     Rokoko Studio body bones: hip, spine, chest, leftUpperArm, leftUpLeg, leftLeg,
+               leftToe, ... (sessions recorded from ``rokoko://``)
+``axis``       Axis Neuron / Axis Studio BVH: Hips, Spine, Spine1..3 (Chest = Spine3),
+               LeftArm, LeftForeArm, LeftUpLeg, LeftLeg, ... and finger joints
 =============  ==========================================================================
 
 Names match case-insensitively.  A map entry lists candidate joints tried in order.  The
@@ -163,6 +167,29 @@ MAPS: dict[str, SkeletonMap] = {m.name: m for m in (
                               ("Foot", "foot"), ("Toes", "toes"))},
         },
         signature=("torso_1", "torso_7", "neck_2", "l_up_arm", "r_low_leg")),
+    SkeletonMap(
+        "rokoko", "Rokoko Studio body bones (hip, spine, chest, leftUpperArm, leftUpLeg, ...; "
+        "sessions recorded from rokoko://)",
+        _sides({
+            "Hips": ("hip",), "Spine": ("spine",), "Chest": ("chest",),
+            "UpperChest": ("chest",), "Neck": ("neck",), "Head": ("head",),
+            "{Side}Shoulder": ("{Side}Shoulder",), "{Side}UpperArm": ("{Side}UpperArm",),
+            "{Side}LowerArm": ("{Side}LowerArm",), "{Side}Hand": ("{Side}Hand",),
+            "{Side}UpperLeg": ("{Side}UpLeg",), "{Side}LowerLeg": ("{Side}Leg",),
+            "{Side}Foot": ("{Side}Foot",), "{Side}Toes": ("{Side}Toe",),
+        }),
+        signature=("hip", "leftUpLeg", "rightUpLeg", "leftToe", "rightToe")),
+    SkeletonMap(
+        "axis", "Noitom Axis Neuron / Axis Studio BVH (59 joints: Spine..Spine3, fingers)",
+        _sides({
+            "Hips": ("Hips",), "Spine": ("Spine",), "Chest": ("Spine3", "Spine2"),
+            "UpperChest": ("Spine3",), "Neck": ("Neck",), "Head": ("Head",),
+            "{Side}Shoulder": ("{Side}Shoulder",), "{Side}UpperArm": ("{Side}Arm",),
+            "{Side}LowerArm": ("{Side}ForeArm",), "{Side}Hand": ("{Side}Hand",),
+            "{Side}UpperLeg": ("{Side}UpLeg",), "{Side}LowerLeg": ("{Side}Leg",),
+            "{Side}Foot": ("{Side}Foot",),
+        }),
+        signature=("Spine3", "RightInHandIndex", "LeftInHandIndex", "RightHandThumb1")),
 )}
 
 

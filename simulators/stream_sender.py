@@ -32,7 +32,7 @@ from rtseg.take import Take
 
 log = logging.getLogger("rtseg.simulators")
 
-__all__ = ["StreamSender", "Sent", "retarget_with_optional", "root_metres"]
+__all__ = ["StreamSender", "Sent", "retarget_with_optional", "root_metres", "FAMILY_UNITS"]
 
 
 @dataclass(slots=True)
@@ -73,13 +73,18 @@ def retarget_with_optional(take: Take, suit: SuitProfile, optional: set[str],
     return rt
 
 
-def root_metres(take: Take) -> np.ndarray | None:
-    """``take.root_position`` in metres (``meta["metres_per_unit"]`` or ``length_unit``)."""
+#: metres per unit of a skeleton family whose files do not say (Axis Neuron BVH: cm)
+FAMILY_UNITS = {"axis": 0.01}
+
+
+def root_metres(take: Take, default: float = 1.0) -> np.ndarray | None:
+    """``take.root_position`` in metres (``meta["metres_per_unit"]`` or ``length_unit``;
+    ``default`` metres per unit when neither says)."""
     if take.root_position is None:
         return None
     scale = take.meta.get("metres_per_unit")
     if not isinstance(scale, (int, float)) or not scale > 0:
-        scale = UNIT_SCALE.get(str(take.length_unit).lower(), 1.0)
+        scale = UNIT_SCALE.get(str(take.length_unit).lower(), default)
     return np.asarray(take.root_position, dtype=np.float64) * float(scale)
 
 
@@ -110,7 +115,7 @@ class StreamSender:
             allow_missing)
         self.quats = Q.make_continuous(rt.quats, axis=0)
         self.valid = rt.valid & rt.present[None, :]
-        self.root = root_metres(take)
+        self.root = root_metres(take, FAMILY_UNITS.get(rt.family, 1.0))
         self.n_frames = take.n_frames
         self.sent_log: list[Sent] = []
         self.send_errors = 0

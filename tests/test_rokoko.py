@@ -325,31 +325,12 @@ class _NoPublish:
 
 def test_simulator_through_live_session_gives_valid_joints_and_cuts():
     """A synthetic take with 3 behaviour changes, sent x4 as Rokoko JSON over 127.0.0.1 into
-    a LiveSession (URL opened by the session): every mapped joint valid in every frame, the
-    take's clock, and at least one cut."""
+    a LiveSession: every mapped joint valid in every frame, the take's clock, and at least
+    one cut."""
     rate, speed = 120.0, 4.0
     take = synthesize("idle:3,walk:4,punch:4,squat:4", frame_rate=rate, seed=3).take
-    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    probe.bind(("127.0.0.1", 0))
-    port = probe.getsockname()[1]
-    probe.close()
-    cuts = []
-    session = LiveSession(f"rokoko://127.0.0.1:{port}?rate={rate:g}&queue=4096", from_dict({}),
-                          handle_signals=False, publishers=_NoPublish(),
-                          listeners=[lambda ev: cuts.append(ev) if type(ev).__name__ ==
-                                     "CutEvent" else None])
-    frames = []
-    box: dict = {}
-
-    def run():
-        box["s"] = session.run()
-
-    t = threading.Thread(target=run, daemon=True)
-    t.start()
-    deadline = time.monotonic() + 5
-    while session.source is None and time.monotonic() < deadline:
-        time.sleep(0.01)
-    src = session.source
+    src = open_source(f"rokoko://127.0.0.1:0?rate={rate:g}&queue=4096")
+    frames, cuts = [], []
     orig = src.read
 
     def read(timeout=None):
@@ -359,8 +340,15 @@ def test_simulator_through_live_session_gives_valid_joints_and_cuts():
         return f
 
     src.read = read
-    sender = RokokoSender(take, "127.0.0.1", port, speed=speed)
+    session = LiveSession(src, from_dict({}), handle_signals=False, publishers=_NoPublish(),
+                          listeners=[lambda ev: cuts.append(ev) if type(ev).__name__ ==
+                                     "CutEvent" else None])
+    box: dict = {}
+    t = threading.Thread(target=lambda: box.setdefault("s", session.run()), daemon=True)
+    sender = RokokoSender(take, "127.0.0.1", src.port, speed=speed)
     try:
+        t.start()
+        time.sleep(0.2)
         sender.start()
         assert sender.wait(take.n_frames / (rate * speed) + 10)
         time.sleep(0.3)
@@ -401,3 +389,51 @@ def test_suit_profile_names_rokokos_bones():
     assert [suit.parents[k] for k in range(J)] == list(BODY_PARENTS)
     # the pose-feature joints resolve on Rokoko's names (unity profile aliases)
     assert len(resolve_joints("unity", list(BODY_BONES))) == 12
+    # the rokoko skeleton profile picks the same bones as the unity profile's aliases
+    assert resolve_joints("rokoko", list(BODY_BONES)) == resolve_joints("unity", list(BODY_BONES))
+
+
+def test_rtseg_live_rokoko_url_prints_cuts():
+    """``rtseg live rokoko://127.0.0.1:PORT`` (a separate process) fed by the simulator:
+    the session prints cuts and ends after --duration."""
+    rate, speed = 120.0, 4.0
+    take = synthesize("idle:3,walk:4,punch:4", frame_rate=rate, seed=5).take
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "rtseg.cli", "live", f"rokoko://127.0.0.1:{port}?rate={rate:g}",
+         "--no-osc", "--quiet", "--duration", "7"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    sender = RokokoSender(take, "127.0.0.1", port, speed=speed)
+    try:
+        time.sleep(2.0)                         # the process imports and binds the port
+        with sender:
+            sender.wait(10)
+        out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(5)
+    assert proc.returncode == 0, err
+    assert any(ln.startswith("cut #") for ln in out.splitlines()), out + err
+
+
+def test_a_take_with_rokoko_names_replays_unchanged():
+    """A take named like Rokoko's bones (a session recorded from rokoko://) is placed by the
+    ``rokoko`` skeleton map: the bodies sent are the take's global orientations."""
+    from rtseg import quat as Q
+    from rtseg.take import Take
+    rng = np.random.default_rng(3)
+    n = 30
+    local = Rotation.from_rotvec(rng.normal(scale=0.5, size=(n * J, 3))).as_quat().reshape(n, J, 4)
+    take = Take(list(BODY_BONES), list(BODY_PARENTS), 60.0, local,
+                root_position=rng.normal(size=(n, 3)), length_unit="m")
+    s = RokokoSender(take)
+    assert s.retargeted.family == "rokoko" and s.describe().count("<-") == J
+    g = Q.global_from_local(local, list(BODY_PARENTS))
+    for k in range(n):
+        a = decode_packet(s.payload(k, k / 60)).actors[0]
+        assert a.valid.all()
+        assert (np.abs(np.abs(np.sum(a.quats * g[k], -1)) - 1) < 1e-6).all()

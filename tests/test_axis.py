@@ -1,0 +1,496 @@
+"""Noitom Axis Neuron / Axis Studio BVH broadcast: a real Axis BVH's motion (ISC fixture)
+through both encodings, codec round trip, layouts, split datagrams, avatars, bad input and
+fuzzing, and end to end over real sockets on 127.0.0.1 (UDP binary, TCP text)."""
+
+from __future__ import annotations
+
+import random
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rtseg import quat as Q
+from rtseg.drivers import SourceError, open_source
+from rtseg.drivers import codec_axis as A
+from rtseg.drivers.axis_source import AxisFrames, _BinaryAdapter
+from rtseg.drivers.readers.bvh import read_bvh
+from rtseg.live import LiveSession
+from rtseg.profiles import resolve_joints, suit_profile
+from rtseg.session_config import from_dict
+from rtseg.simulators.axis_sender import AxisSender
+from rtseg.simulators.synth import synthesize
+
+FIXTURE = Path(__file__).parent / "fixtures" / "axis" / "test.bvh"
+
+
+def fixture_motion() -> list[str]:
+    """The MOTION lines of axis-streamer's test.bvh, as written by Axis Neuron."""
+    text = FIXTURE.read_text()
+    lines = text.split("Frame Time:", 1)[1].splitlines()[1:]
+    return [ln for ln in lines if ln.strip()]
+
+
+def same_rotation(a: np.ndarray, b: np.ndarray, atol: float = 1e-6) -> bool:
+    return bool((np.abs(np.abs(np.sum(a * b, -1)) - 1) <= atol).all())
+
+
+class Counter:
+    def __init__(self) -> None:
+        self.counts: dict[str, int] = {}
+
+    def __call__(self, field: str, n: int = 1, message=None) -> None:
+        self.counts[field] = self.counts.get(field, 0) + n
+
+
+# --------------------------------------------------------------------------- the real BVH
+
+def test_skeleton_is_the_one_axis_neuron_exports():
+    take = read_bvh(FIXTURE)
+    assert tuple(take.joint_names) == A.JOINTS and tuple(take.parents) == A.PARENTS
+    assert len(A.JOINTS) == 59
+    # 6 channels per joint, rotations Y X Z: the layout with displacement, order YXZ
+    assert all(ch == ["px", "py", "pz", "Y", "X", "Z"] for ch in take.meta["channels"].values())
+
+
+def test_fixture_motion_decodes_to_the_files_values_in_both_encodings():
+    """Each MOTION line of the real Axis BVH streamed as Axis does: text (the line itself
+    between index/name and ``||``) and binary (1480 bytes = 64 + 354 x 4, the single-packet
+    size BvhStream.js notes).  Values come back exactly (float32 for binary), rotations
+    equal those of the BVH reader (YXZ), the root position in metres."""
+    take = read_bvh(FIXTURE)
+    for k, line in enumerate(fixture_motion()):
+        values = np.array(line.split(), dtype=np.float64)
+        assert values.size == 354
+        f = A.decode_text(f"0 Avatar00 {line} ||".encode())
+        assert (f.avatar_index, f.avatar_name, f.with_disp, f.with_ref) == (0, "Avatar00", True, False)
+        assert np.array_equal(f.values, values)
+        q, valid, pos = A.to_pose(f)
+        assert valid.all() and same_rotation(q, take.quats[k], 1e-12)
+        assert np.allclose(pos, take.root_position[k] / 100.0)
+        data = A.encode_binary(values, frame_index=k)
+        assert len(data) == 1480
+        fb = A.decode_binary(data)
+        assert np.array_equal(fb.values, values.astype(np.float32))
+        assert fb.frame_index == k and fb.version == (1, 1, 0, 0)
+        qb, validb, posb = A.to_pose(fb)
+        assert validb.all() and same_rotation(qb, take.quats[k], 1e-6)
+    # the first frame's documented values (test.bvh line 352)
+    f0 = A.decode_text(b"0 Avatar00 " + fixture_motion()[0].encode())
+    assert f0.values[:6].tolist() == [-8.964398, 108.673515, 16.348038, -10.676419, -5.120858,
+                                      -1.091372]
+
+
+def test_header_layout_matches_the_documented_offsets():
+    v = np.arange(354, dtype=np.float32)
+    d = A.encode_binary(v, avatar_index=3, avatar_name="Dancer", frame_index=0x01020304)
+    assert d[0:2] == b"\xff\xdd"                 # token 0xDDFF little-endian
+    assert d[2:6] == b"\x00\x00\x01\x01"         # version 1.1.0.0: build, rev, minor, major
+    assert d[6:8] == b"\x62\x01"                 # 354 values
+    assert d[8] == 1 and d[9] == 0               # with displacement, without reference
+    assert struct.unpack_from("<I", d, 10)[0] == 3
+    assert d[14:46] == b"Dancer" + b"\0" * 26
+    assert struct.unpack_from("<I", d, 46)[0] == 0x01020304
+    assert d[62:64] == b"\xff\xee"               # token 0xEEFF
+    assert np.array_equal(np.frombuffer(d, "<f4", offset=64), v)
+
+
+@pytest.mark.parametrize("disp,ref,count", [(True, False, 354), (True, True, 360),
+                                            (False, False, 180), (False, True, 186)])
+def test_layouts(disp, ref, count):
+    assert A.value_count(disp, ref) == count and A.layout(count) == (disp, ref)
+    rng = np.random.default_rng(count)
+    angles = rng.uniform(-170, 170, (59, 3))
+    root = np.array([1.0, 95.0, -30.0])
+    if disp:
+        v = np.zeros((59, 6))
+        v[:, 3:] = angles
+        v[0, :3] = root
+        v = v.ravel()
+    else:
+        v = np.concatenate([root, angles.ravel()])
+    if ref:
+        v = np.concatenate([rng.normal(size=6), v])
+    f = A.decode_binary(A.encode_binary(v, with_disp=disp, with_ref=ref))
+    q, valid, pos = A.to_pose(f)
+    assert valid.all()
+    assert same_rotation(q, Q.from_euler("YXZ", angles.astype(np.float32)), 1e-9)
+    assert np.allclose(pos, root / 100.0)
+    ft = A.decode_text(A.encode_text(v))
+    assert (ft.with_disp, ft.with_ref) == (disp, ref)
+    assert np.array_equal(ft.values.astype(np.float32), v.astype(np.float32))
+
+
+def test_euler_orders_match_the_bvh_convention():
+    x = np.random.default_rng(0).uniform(-180, 180, (500, 3))
+    for order in ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"):
+        assert same_rotation(A.euler_to_quat(order, x), Q.from_euler(order, x), 1e-12)
+        back = A.euler_to_quat(order, A.quat_to_euler(order, A.euler_to_quat(order, x)))
+        assert same_rotation(back, A.euler_to_quat(order, x), 1e-12)
+
+
+# --------------------------------------------------------------------------- simulator
+
+def test_simulator_round_trip_is_exact_to_float32_and_keeps_the_suit_pose():
+    take = synthesize("idle:2,walk:2", frame_rate=60.0, seed=4).take
+    for fmt in ("binary", "text"):
+        s = AxisSender(take, fmt)
+        for k in (0, 77, 200):
+            part = s.encode(k, k, k / 60)[0]
+            f = A.decode_binary(part) if fmt == "binary" else A.decode_text(part)
+            assert np.array_equal(f.values.astype(np.float32), s.values[k])
+            q, valid, pos = A.to_pose(f)
+            assert valid.all()
+            g = Q.global_from_local(q, list(A.PARENTS))
+            # every suit segment arrives as the global orientation the retargeting gave it
+            for b, joint in A.SUIT_SEGMENTS.items():
+                kk = s.suit.bones.index(b)
+                assert same_rotation(g[A.JOINTS.index(joint)], s.quats[k, kk], 1e-5), (b, joint)
+            assert np.allclose(pos, s.root[k], atol=1e-5)
+
+
+def test_split_datagrams_are_joined_and_a_lost_part_is_counted():
+    take = synthesize("idle:2,walk:2", frame_rate=60.0, seed=5).take
+    s = AxisSender(take, "binary", split=1024)
+    count = Counter()
+    adapter = _BinaryAdapter(AxisFrames(count))
+    parts = s.encode(3, 3, 0.05)
+    assert [len(p) for p in parts] == [1024, 456]
+    assert adapter.feed(parts[0], 0.0) == []
+    (frame,) = adapter.feed(parts[1], 0.001)
+    assert frame.seq == 3 and frame.valid.all()
+    # a first part whose continuation never comes: counted when the next header arrives
+    whole = AxisSender(take, "binary").encode(4, 4, 0.07)[0]
+    assert adapter.feed(parts[0], 0.01) == []
+    (frame,) = adapter.feed(whole, 0.02)
+    assert frame.seq == 4 and count.counts == {"corrupt": 1}
+    # a continuation without its header
+    assert adapter.feed(parts[1], 0.03) == []
+    assert count.counts == {"corrupt": 2}
+    # ... or when the continuation is late past the timeout (0.1 s)
+    assert adapter.feed(parts[0], 0.04) == []
+    assert adapter.flush(0.1) == [] and count.counts == {"corrupt": 2}
+    adapter.flush(0.2)
+    assert count.counts == {"corrupt": 3}
+
+
+def test_avatars_are_told_apart():
+    take = synthesize("idle:2,walk:2", frame_rate=60.0, seed=6).take
+    s = AxisSender(take, "binary", avatars=[(0, "Avatar00", 0), (1, "Avatar01", 40)])
+    parts = s.encode(5, 5, 0.0)
+    for sel, want in ((None, 5), ("1", 45), ("Avatar01", 45), ("Avatar00", 5)):
+        frames = AxisFrames(Counter(), avatar=sel)
+        out = [frames.frame(A.decode_binary(p), 0.0) for p in parts]
+        got = [f for f in out if f is not None]
+        assert len(got) == 1 and frames.other_avatars == 1
+        q, _, _ = A.to_pose(A.decode_binary(A.encode_binary(s.values[want])))
+        assert np.array_equal(got[0].quats, q)
+
+
+# --------------------------------------------------------------------------- bad input
+
+@pytest.mark.parametrize("mutate,kind", [
+    (lambda d: d[:40], "corrupt"),
+    (lambda d: b"\x00\x00" + d[2:], "corrupt"),
+    (lambda d: d[:62] + b"\x00\x00" + d[64:], "corrupt"),
+    (lambda d: d[:-4], "corrupt"),
+    (lambda d: d[:8] + b"\x00" + d[9:], "bad_messages"),      # 354 values without displacement
+    (lambda d: d[:8] + b"\x07" + d[9:], "bad_messages"),
+])
+def test_bad_binary_frames_raise_a_counted_kind(mutate, kind):
+    d = A.encode_binary(np.zeros(354))
+    with pytest.raises(A.AxisError) as exc:
+        A.decode_binary(mutate(d))
+    assert exc.value.kind == kind
+
+
+@pytest.mark.parametrize("text,kind", [
+    (b"", "corrupt"), (b"0 Avatar00", "corrupt"), (b"x Avatar00 1 2 3", "corrupt"),
+    (b"0 Avatar00 " + b"1 " * 100, "bad_messages"), (b"\xff\xfe 0 a 1", "corrupt"),
+    (b"0 Avatar00 " + b"1 " * 179 + b"abc", "corrupt"),
+])
+def test_bad_text_frames_raise_a_counted_kind(text, kind):
+    with pytest.raises(A.AxisError) as exc:
+        A.decode_text(text)
+    assert exc.value.kind == kind
+
+
+def test_non_finite_angles_make_joints_invalid():
+    v = np.zeros((59, 6))
+    v[12, 4] = np.nan                          # Head
+    v[0, 1] = np.inf                           # root position
+    count = Counter()
+    frames = AxisFrames(count)
+    f = frames.frame(A.decode_binary(A.encode_binary(v.ravel())), 0.0)
+    assert [A.JOINTS[j] for j in np.flatnonzero(~f.valid)] == ["Head"]
+    assert f.root_position is None and count.counts == {"bad_values": 1}
+
+
+def test_text_splitter_bounds_its_buffer():
+    sp = A.TextSplitter(max_frame=100)
+    assert sp.feed(b"0 a 1 2 ||0 b 3") == [b"0 a 1 2 "]
+    assert sp.feed(b" 4 ||") == [b"0 b 3 4 "]
+    sp.feed(b"x" * 500)
+    assert sp.overflows == 1 and sp.feed(b"||") == []
+
+
+def test_fuzzed_inputs_never_escape():
+    """10^4 fuzzed binary datagrams and 10^4 fuzzed text chunks: only AxisError from the
+    codec, and what the sources run (datagram joiner + decoder, splitter + decoder) never
+    raises."""
+    rng = random.Random(2)
+    take = synthesize("idle:2", frame_rate=60.0, seed=7).take
+    sb, st = AxisSender(take, "binary"), AxisSender(take, "text", displacement=False)
+    bins = [sb.encode(k, k, 0)[0] for k in range(5)]
+    texts = [st.encode(k, k, 0)[0] for k in range(5)]
+    count = Counter()
+    adapter = _BinaryAdapter(AxisFrames(count))
+    ok = bad = 0
+
+    def mutate(src: bytes) -> bytes:
+        r = rng.random()
+        if r < 0.45:
+            b = bytearray(src)
+            for _ in range(rng.randint(1, 6)):
+                b[rng.randrange(len(b))] = rng.randrange(256)
+            return bytes(b)
+        if r < 0.65:
+            return src[:rng.randrange(len(src))]
+        if r < 0.75:
+            return src[rng.randrange(len(src)):]
+        if r < 0.85:
+            return src + src[:rng.randrange(len(src))]
+        return bytes(rng.randrange(256) for _ in range(rng.randrange(80)))
+
+    for k in range(10_000):
+        d = mutate(rng.choice(bins))
+        try:
+            A.decode_binary(d)
+            ok += 1
+        except A.AxisError:
+            bad += 1
+        adapter.feed(d, k * 1e-3)
+        adapter.flush(k * 1e-3)
+    frames = AxisFrames(count)
+    splitter = A.TextSplitter()
+    for _ in range(10_000):
+        d = mutate(rng.choice(texts))
+        for chunk in [d, *splitter.feed(d)]:
+            try:
+                frames.frame(A.decode_text(chunk), 0.0)
+                ok += 1
+            except A.AxisError:
+                bad += 1
+    assert ok > 1000 and bad > 1000
+
+
+# --------------------------------------------------------------------------- sockets
+
+def read_all(src, idle: float = 0.3) -> list:
+    frames = []
+    while (f := src.read(timeout=idle)) is not None:
+        frames.append(f)
+    return frames
+
+
+def test_url_defaults_options_and_errors():
+    src = open_source("axis://:0?rate=90&avatar=Avatar01&order=zxy")
+    try:
+        assert src.host == "127.0.0.1" and src.port > 0 and src.space == "local"
+        assert src.joint_names == list(A.JOINTS) and src.frame_rate == 90.0
+    finally:
+        src.close()
+    for url, msg in [("axis://:0?format=csv", "not supported"),
+                     ("axis://:0?order=XXY", "permutation"),
+                     ("axis://:0?unit=ft", "unit="),
+                     ("axis://:0?backoff=1", "unknown option"),
+                     ("axis://127.0.0.1:0?format=text", "give its port"),
+                     ("axis://:0?allow=x", "axis:// allow=")]:
+        with pytest.raises(SourceError, match=msg):
+            open_source(url)
+
+
+def test_binary_over_udp_split_datagrams_and_avatar_choice():
+    take = synthesize("idle:2,walk:2", frame_rate=60.0, seed=8).take
+    src = open_source("axis://127.0.0.1:0?avatar=Avatar01&queue=4096&rate=60")
+    sender = AxisSender(take, "binary", "127.0.0.1", src.port, speed=8.0, split=1024,
+                        avatars=[(0, "Avatar00", 0), (1, "Avatar01", 30)])
+    try:
+        with sender:
+            assert sender.wait(10)
+        frames = read_all(src)
+    finally:
+        src.close()
+    n = take.n_frames
+    assert len(frames) == n and src.other_avatars == n
+    assert [f.seq for f in frames] == list(range(n))
+    assert np.allclose([f.source_time for f in frames], np.arange(n) / 60.0)
+    assert all(f.valid.all() for f in frames)
+    want = [A.to_pose(A.decode_binary(A.encode_binary(sender.values[(k + 30) % n])))[0]
+            for k in range(n)]
+    assert np.array_equal(np.array([f.quats for f in frames]), np.array(want))
+    assert src.stats.corrupt == src.stats.dropped == 0
+
+
+def test_allow_list_refuses_other_senders_before_decoding():
+    src = open_source("axis://127.0.0.1:0?allow=10.1.2.3")
+    out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        out.sendto(A.encode_binary(np.zeros(354)), ("127.0.0.1", src.port))
+        assert src.read(timeout=0.4) is None
+        assert src.stats.refused_senders == 1 and src.stats.corrupt == 0
+    finally:
+        out.close()
+        src.close()
+
+
+def test_text_over_tcp_connects_late_and_reconnects_after_the_server_drops():
+    """rtseg is the client: started before Axis's server is up it retries with backoff;
+    when the server drops the connection it reconnects (counted) and frames resume."""
+    take = synthesize("idle:2,walk:2", frame_rate=60.0, seed=9).take
+    probe = socket.socket()
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    src = open_source(f"axis://127.0.0.1:{port}?format=text&rate=60&backoff=0.05&queue=4096")
+    sender = AxisSender(take, "text", "127.0.0.1", port, speed=4.0, loop=True)
+    try:
+        time.sleep(0.3)                         # nothing listening yet: refused, retried
+        assert not src.connected.is_set()
+        sender.start()
+        assert src.connected.wait(5)
+        first = [src.read(timeout=2) for _ in range(20)]
+        assert all(f is not None and f.valid.all() for f in first)
+        assert sender.disconnect() == 1
+        deadline = time.monotonic() + 5
+        while src.stats.reconnects < 1 and time.monotonic() < deadline:
+            src.read(timeout=0.05)
+        assert src.stats.reconnects == 1
+        after = [src.read(timeout=2) for _ in range(20)]
+        assert all(f is not None and f.valid.all() for f in after)
+        assert src.stats.corrupt <= 1          # at most the frame cut by the drop
+    finally:
+        sender.stop()
+        src.close()
+
+
+class _NoPublish:
+    def publish_cut(self, ev):
+        return ev
+
+    def publish_status(self, ev):
+        pass
+
+    def publish_dropout(self, ev):
+        pass
+
+    def close(self):
+        pass
+
+
+@pytest.mark.parametrize("fmt", ["binary", "text"])
+def test_simulator_through_live_session_gives_valid_joints_and_cuts(fmt):
+    """A synthetic take with 3 behaviour changes, sent x4 (UDP binary, or TCP text from the
+    simulator's server) into a LiveSession: every mapped joint valid in every frame, the
+    take's clock (binary), and at least one cut."""
+    rate, speed = 120.0, 4.0
+    take = synthesize("idle:3,walk:4,punch:4,squat:4", frame_rate=rate, seed=3).take
+    sender = None
+    if fmt == "text":
+        sender = AxisSender(take, "text", "127.0.0.1", 0, speed=speed, wait_client=10)
+        sender.start()
+        src = open_source(f"axis://127.0.0.1:{sender.port}?format=text&rate={rate:g}&queue=4096")
+    else:
+        src = open_source(f"axis://127.0.0.1:0?rate={rate:g}&queue=4096")
+        sender = AxisSender(take, "binary", "127.0.0.1", src.port, speed=speed)
+    frames, cuts = [], []
+    orig = src.read
+
+    def read(timeout=None):
+        f = orig(timeout)
+        if f is not None:
+            frames.append(f)
+        return f
+
+    src.read = read
+    # text: the axis skeleton profile (whole spine); binary: the default (unity, aliases)
+    cfg = from_dict({"features": {"profile": "axis"}} if fmt == "text" else {})
+    session = LiveSession(src, cfg, handle_signals=False, publishers=_NoPublish(),
+                          listeners=[lambda ev: cuts.append(ev) if type(ev).__name__ ==
+                                     "CutEvent" else None])
+    box: dict = {}
+    t = threading.Thread(target=lambda: box.setdefault("s", session.run()), daemon=True)
+    try:
+        t.start()
+        time.sleep(0.2)
+        if fmt == "binary":
+            sender.start()
+        assert sender.wait(take.n_frames / (rate * speed) + 15)
+        time.sleep(0.3)
+        session.stop("test done")
+        t.join(10)
+        assert not t.is_alive()
+    finally:
+        sender.stop()
+        src.close()
+    assert len(frames) == take.n_frames == box["s"].frames_received
+    mapped = resolve_joints("axis" if fmt == "text" else "unity", src.joint_names)
+    assert all(f.valid[mapped].all() for f in frames)
+    if fmt == "binary":
+        assert np.allclose([f.source_time for f in frames], np.arange(take.n_frames) / rate)
+    assert [f.seq for f in frames] == list(range(take.n_frames))
+    assert src.stats.corrupt == src.stats.dropped == 0
+    assert len(cuts) >= 1, "no cut on a take with 3 behaviour changes"
+
+
+def test_rtseg_simulate_axis_command_reaches_the_source():
+    src = open_source("axis://127.0.0.1:0?queue=10000")
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-m", "rtseg.cli", "simulate", "axis", "--synth", "idle:2,walk:2",
+             "--rate", "60", "--speed", "10", "--port", str(src.port)],
+            capture_output=True, text=True, timeout=60)
+        assert proc.returncode == 0, proc.stderr
+        assert f'rtseg live "axis://127.0.0.1:{src.port}?format=binary&rate=60"' in proc.stdout
+        assert "rigid with their parent: RightShoulder, LeftShoulder" in proc.stdout
+        frames = read_all(src)
+        assert len(frames) == 240 and all(f.valid.all() for f in frames)
+    finally:
+        src.close()
+
+
+def test_suit_profile_places_every_segment_on_an_axis_joint():
+    suit = suit_profile("axis")
+    assert set(suit.bones) == set(A.SUIT_SEGMENTS)
+    for k, b in enumerate(suit.bones):
+        p = suit.parents[k]
+        if p >= 0:   # the suit's hierarchy is the Axis one, restricted to its segments
+            j, pj = A.JOINTS.index(A.SUIT_SEGMENTS[b]), A.JOINTS.index(A.SUIT_SEGMENTS[suit.bones[p]])
+            while j >= 0 and j != pj:
+                j = A.PARENTS[j]
+            assert j == pj, b
+    assert len(resolve_joints("unity", list(A.JOINTS))) == 12
+    assert [A.JOINTS[j] for j in resolve_joints("axis", list(A.JOINTS))][:4] == [
+        "Spine", "Spine1", "Spine2", "Spine3"]
+
+
+def test_the_real_axis_bvh_replays_through_the_simulators():
+    """The fixture as a take: the ``axis`` skeleton map is detected (Chest = Spine3) and the
+    Axis simulator re-sends every suit segment with the global orientation the BVH gives it."""
+    take = read_bvh(FIXTURE)
+    s = AxisSender(take, "binary")
+    assert s.retargeted.family == "axis"
+    g_take = Q.global_from_local(take.quats, list(take.parents))
+    for k in range(take.n_frames):
+        q, valid, pos = A.to_pose(A.decode_binary(s.encode(k, k, 0.0)[0]))
+        g = Q.global_from_local(q, list(A.PARENTS))
+        for b, joint in A.SUIT_SEGMENTS.items():
+            j = A.JOINTS.index(joint)
+            assert same_rotation(g[j], g_take[k, j], 1e-5), joint
+        assert np.allclose(pos, take.root_position[k] / 100.0, atol=1e-6)
