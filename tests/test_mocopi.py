@@ -370,3 +370,17 @@ def test_real_take_cuts_match_the_serial_suit(data_dir):
     assert len(ref) >= 3, "the reference suit should cut 86_01"
     assert [c.cut.method for c in got] == [c.cut.method for c in ref]
     assert max(abs(a.boundary - b.boundary) for a, b in zip(got, ref)) <= 0.25 * rate
+
+
+def test_learned_layout_and_general_paths_agree():
+    q = random_pose(30, seed=13)
+    fast, slow = MocopiAssembler(), MocopiAssembler(fast=False)
+    for k in range(30):
+        d = encode_frame(k, q[k], np.full((N, 3), 0.5), uttm=100.0 + k, time=k)
+        a, b = fast.feed(d, 0.0)[0], slow.feed(d, 0.0)[0]
+        assert np.array_equal(a.quats, b.quats) and a.seq == b.seq == k
+        assert a.source_time == b.source_time and np.array_equal(a.root_position, b.root_position)
+    assert fast.fast_frames == 29 and slow.fast_frames == 0
+    # a packet of another layout (no uttm) falls back and is learned in turn
+    out = fast.feed(encode_frame(99, q[0]), 0.0)[0]
+    assert out.seq == 99 and out.source_time is None and fast.fast_frames == 29
