@@ -59,6 +59,9 @@ BONE_PARENTS: tuple[int, ...] = (
     0, 19, 20, 21, 0, 23, 24, 25,
 )
 NO_PARENT = 0xFFFF
+#: | |q|^2 - 1 | up to which a rotation is passed on unchanged (float32 rounding of a unit
+#: quaternion stays far below); accepted ones further off are renormalised
+UNIT_EXACT = 1e-6
 _FIELD = struct.Struct("<I4s")
 _TRAN = struct.Struct("<7f")
 #: one ``btdt`` record of a frame packet, header included (54 bytes)
@@ -358,7 +361,8 @@ class MocopiAssembler:
     packet hold their last value, ``valid`` False); ``seq`` = ``fnum``; ``source_time`` =
     ``uttm`` (Unix s) when sent, else None; ``root_position`` = bone ``root_id``'s ``tran``
     position (metres).  Non-finite or non-unit (| |q|^2 - 1 | > ``unit_tolerance``)
-    rotations are counted in ``bad_values`` and marked invalid; ``continuous`` flips signs
+    rotations are counted in ``bad_values`` and marked invalid (accepted ones more than
+    ``UNIT_EXACT`` off unit are renormalised); ``continuous`` flips signs
     for a non-negative dot with the previous value (so a sign-flipped identity is
     harmless).  ``skdf`` packets set ``skeleton``; a ``head.ftyp`` other than
     ``"sony motion format"`` is counted in ``bad_messages``.  :meth:`feed` never raises.
@@ -447,7 +451,11 @@ class MocopiAssembler:
         good = np.isfinite(norm2) & (np.abs(norm2 - 1.0) <= self.unit_tolerance)
         if not good.all():
             self._count("bad_values", int((~good).sum()), "non-unit or non-finite rotation")
-            rows, qq, tran = rows[good], qq[good], tran[good]
+            rows, qq, tran, norm2 = rows[good], qq[good], tran[good], norm2[good]
+        off = np.abs(norm2 - 1.0) > UNIT_EXACT         # accepted but not unit: renormalise
+        if off.any():
+            qq = qq.copy()
+            qq[off] /= np.sqrt(norm2[off])[:, None]
         q = self._q.copy()
         if self.continuous and len(rows):
             flip = np.einsum("ij,ij->i", qq, self._q[rows]) < 0
@@ -473,7 +481,7 @@ class MocopiAssembler:
             return None
         tran = fr.tran.astype(np.float64)
         q = tran[:, :4]
-        if not (np.abs(np.einsum("ij,ij->i", q, q) - 1.0) <= self.unit_tolerance).all():
+        if not np.abs(np.einsum("ij,ij->i", q, q) - 1.0).max() <= UNIT_EXACT:
             return None                              # NaN fails the comparison too
         q = np.ascontiguousarray(q)
         if self.continuous:

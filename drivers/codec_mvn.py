@@ -64,6 +64,9 @@ ITEM_SIZE = ITEM_02.itemsize                  # 32
 #: UDP payload limit that avoids IP fragmentation on Ethernet (1500 - 20 - 8)
 DEFAULT_MAX_DATAGRAM = 1472
 LAST_FLAG = 0x80
+#: | |q|^2 - 1 | up to which a quaternion is passed on unchanged (float32 rounding of a unit
+#: quaternion stays far below); accepted ones further off are renormalised
+UNIT_EXACT = 1e-6
 #: columns of a type-02 item read as 8 float32 (id, px, py, pz, qw, qx, qy, qz) that give
 #: rtseg's quaternion (y, z, x, w) and position (y, z, x)
 _QCOLS = [6, 7, 5, 4]
@@ -288,8 +291,9 @@ class MvnAssembler:
     value with ``valid`` False; ``seq`` = sample counter; ``source_time`` = time code / 1000
     (s); ``root_position`` = position of the first joint (the pelvis), metres, rtseg frame.
     Quaternions with | |q|^2 - 1 | > ``unit_tolerance`` or non-finite values are counted
-    in ``bad_values`` and marked invalid.  ``continuous``: flip signs so each joint's dot
-    with its previous value is >= 0.  :meth:`feed` never raises on any input.
+    in ``bad_values`` and marked invalid; accepted ones more than ``UNIT_EXACT`` off unit
+    are renormalised.  ``continuous``: flip signs so each joint's dot with its previous
+    value is >= 0.  :meth:`feed` never raises on any input.
     """
 
     def __init__(self, segment_ids: Sequence[int], *, character: int = 0,
@@ -441,10 +445,13 @@ class MvnAssembler:
                     self._warned.add("bad_values")
                     log.warning("MVN: non-unit or non-finite quaternion refused (further ones "
                                 "counted in bad_values, not logged)")
-                rows, qq = rows[good], qq[good]
+                rows, qq, norm2 = rows[good], qq[good], norm2[good]
                 sel_pos = items["pos"][keep][good]
             else:
                 sel_pos = items["pos"][keep]
+            off = np.abs(norm2 - 1.0) > UNIT_EXACT     # accepted but not unit: renormalise
+            if off.any():
+                qq[off] /= np.sqrt(norm2[off])[:, None]
             if self.continuous:
                 prev = self._q[rows]
                 flip = np.einsum("ij,ij->i", qq, prev) < 0
@@ -468,7 +475,7 @@ class MvnAssembler:
         with np.errstate(invalid="ignore"):
             raw = items.view(">f4").astype(np.float64).reshape(self.n, 8)
         q = raw[:, _QCOLS]                           # (w, x, y, z) MVN -> (y, z, x, w)
-        if not np.abs(np.einsum("ij,ij->i", q, q) - 1.0).max() <= self.unit_tolerance:
+        if not np.abs(np.einsum("ij,ij->i", q, q) - 1.0).max() <= UNIT_EXACT:
             return None                              # NaN fails the comparison too
         if self.continuous:
             dots = np.einsum("ij,ij->i", q, self._q)
