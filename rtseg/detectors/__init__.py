@@ -50,6 +50,7 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "pca_energy": ((int, float), _unit),
         "ppca_energy": ((int, float), _unit),
         "noise_floor": ((int, float), _nonneg),
+        "reference_dims": ((int,), _posint),
     },
     "pca": {
         "window_s": ((int, float), _pos),

@@ -8,7 +8,12 @@ arrived, the motion just after c is compared with the motion just before it:
     contrast(c) = sqrt( Dpca(A, B) / Dpca(A0, A)  x  Dppca(A, B) / Dppca(A0, A) )
 
 with the window distances of ``rtseg.detectors.window_models`` (PCA projection error and
-PPCA Mahalanobis distance, the two models of Barbič et al. 2004).  A behaviour change makes
+PPCA Mahalanobis distance, the two models of Barbič et al. 2004), then stated for
+``reference_dims`` effective input dimensions: 1 + (contrast - 1) x sqrt(d_eff /
+reference_dims), d_eff = the before window's varying directions.  Ratios of distances
+estimated from fewer dimensions scatter more (like the PPCA detector's R, scaled by the
+same rule): 48 = the CMU 14-joint features less their 8 structural zeros, unchanged there;
+on the 4-channel tsseg4d features (d_eff 8) a contrast of 3.4 counts as 2.  A behaviour change makes
 the window after c unlike the one before it, more than that one is unlike its own
 predecessor (contrast well above 1); within a behaviour whose cycle is shorter than the
 windows it stays about 1.  Near the start of a segment (after the stream starts or a gap)
@@ -18,7 +23,7 @@ picked causally (``rtseg.detectors.peaks.CausalPeaks``: at least ``threshold``,
 below ``drop`` x the maximum) and each is sent once, as a cut at c.
 
 Delay: a cut at c is known ``after`` frames later plus the confirmation (at most ``hold``
-frames): 1.75 + <= 0.75 s at the defaults.  The statistics of every ``step``-frame block are
+frames): 1.75 + <= 1 s at the defaults.  The statistics of every ``step``-frame block are
 summed once (one BLAS call); windows are differences of their prefix sums, and each
 window's models are fitted once (``window_models.fit``: one 56x56 eigen-decomposition) and
 reused while the window is in use (A becomes A0 w frames later).
@@ -51,10 +56,10 @@ class ContrastDetector(OnlineDetector):
     frame_origin = "creation"
 
     def __init__(self, step: int = 10, before: int = 360, after: int = 210,
-                 min_before: int = 180, threshold: float = 2.0, hold: int = 90,
+                 min_before: int = 180, threshold: float = 2.0, hold: int = 120,
                  min_gap: int = 240, drop: float = 0.5, pca_energy: float = 0.9,
                  ppca_energy: float = 0.95, noise_floor: float = 1e-6,
-                 keep_trace: bool = False) -> None:
+                 reference_dims: int = 48, keep_trace: bool = False) -> None:
         if step < 1:
             raise ValueError(f"step must be >= 1 frame, got {step}")
         for key, v in (("before", before), ("after", after), ("min_before", min_before)):
@@ -69,6 +74,9 @@ class ContrastDetector(OnlineDetector):
         self.wb = max(1, int(round(after / step)))         # after window, blocks
         self.wmin = max(1, int(round(min_before / step)))  # shortest before window, blocks
         self.threshold = float(threshold)
+        if reference_dims < 1:
+            raise ValueError(f"reference_dims must be >= 1, got {reference_dims}")
+        self.reference_dims = int(reference_dims)
         self.fit_args = dict(pca_energy=float(pca_energy), ppca_energy=float(ppca_energy),
                              noise_floor=float(noise_floor))
         self.peaks = CausalPeaks(threshold, hold=int(hold), min_gap=int(min_gap), drop=drop)
@@ -92,7 +100,8 @@ class ContrastDetector(OnlineDetector):
                    threshold=p["threshold"], hold=frames(p["hold_s"], frame_rate),
                    min_gap=frames(p["min_gap_s"], frame_rate), drop=p["drop"],
                    pca_energy=p["pca_energy"], ppca_energy=p["ppca_energy"],
-                   noise_floor=p["noise_floor"], keep_trace=keep_trace)
+                   noise_floor=p["noise_floor"], reference_dims=p["reference_dims"],
+                   keep_trace=keep_trace)
 
     @property
     def delay_frames(self) -> int:
@@ -179,7 +188,8 @@ class ContrastDetector(OnlineDetector):
         oldest = c + 1 - 2 * self.wa
         for key in [k for k in self._models if k[0] < oldest]:
             del self._models[key]
-        return math.sqrt(max(kp, 0.0) * max(kq, 0.0))
+        k = math.sqrt(max(kp, 0.0) * max(kq, 0.0))
+        return 1.0 + (k - 1.0) * math.sqrt(a.nonnull / self.reference_dims)
 
 
 def segment_contrast(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,

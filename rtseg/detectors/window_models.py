@@ -56,7 +56,8 @@ class WindowModel:
 
     pca_basis (d, r_pca) and ppca_basis (d, r_ppca): orthonormal columns; pca_own: the
     window's own mean per-frame projection error; ppca_var (r_ppca,): the kept variances;
-    ppca_sigma2: the variance of every other direction.
+    ppca_sigma2: the variance of every other direction; nonnull: the number of directions
+    that vary at all (d less the structural null space: the input's effective dimension).
     """
     stats: WindowStats
     pca_basis: np.ndarray
@@ -64,6 +65,7 @@ class WindowModel:
     ppca_basis: np.ndarray
     ppca_var: np.ndarray
     ppca_sigma2: float
+    nonnull: int
 
 
 def fit(stats: WindowStats, pca_energy: float = 0.9, ppca_energy: float = 0.95,
@@ -83,7 +85,8 @@ def fit(stats: WindowStats, pca_energy: float = 0.9, ppca_energy: float = 0.95,
     q = max(0, min(rank_for_energy(cov, float(cov.sum()), ppca_energy), nonnull - 1))
     rest = cov[q:nonnull]
     sigma2 = max(float(rest.mean()) if len(rest) else noise_floor, noise_floor)
-    return WindowModel(stats, V[:, :r], own, V[:, :q], np.maximum(cov[:q], noise_floor), sigma2)
+    return WindowModel(stats, V[:, :r], own, V[:, :q], np.maximum(cov[:q], noise_floor), sigma2,
+                       nonnull)
 
 
 def _moments_about(y: WindowStats, mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

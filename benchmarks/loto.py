@@ -1,0 +1,278 @@
+"""Leave-one-take-out choice of the live (contrast) detector's parameters, and their
+sensitivity.
+
+    python3 benchmarks/loto.py [DATA] [--synth-seeds 0 1 2 3 4 5] [--json]
+
+Every take of DATA (a folder laid out like ../shared/data: its cmu and tsseg4d groups) and
+the synthetic performances (``rtseg.simulators.synth``, the default script, one per seed)
+goes once through the live pipeline (``rtseg.online_eval``: the same features as
+``rtseg live``); the features fed to the detector are kept, and every candidate parameter
+set runs the real ``ContrastDetector`` on them (the contrast profile is computed once per
+window geometry; the causal peak picker runs per threshold/hold/drop, and the script
+checks that this equals a full detector run for the shipped defaults).
+
+A parameter set is scored on a set of takes by the mean over groups (cmu, tsseg4d,
+synthetic) of the pooled F1 at +-0.5 s, and only counts when its median / p90 detection
+delay is <= 2.5 / 3.5 s there.  Leave-one-take-out: for each take name (86_01 holds out its
+cmu and tsseg4d versions together), the best set on the other takes is scored on it; the
+held-out cuts are pooled per group.  Also printed: the set chosen on every take (what
+should ship), and the F1 of the shipped defaults as each parameter moves alone.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from rtseg.detectors import load_params
+from rtseg.detectors.contrast import ContrastDetector
+from rtseg.detectors.peaks import CausalPeaks
+from rtseg.evaluation import detection_delays, score, widen
+from rtseg.labels import find_labelled_takes
+from rtseg.online_eval import live_config, live_cuts
+from rtseg.pipeline import Pipeline
+from rtseg.simulators.synth import DEFAULT_SCRIPT, synthesize
+
+TOL_S = 0.5
+MAX_MEDIAN_S, MAX_P90_S = 2.5, 3.5
+GRID = {                       # the candidates: after window and the peak picker
+    "after_s": [1.5, 1.75, 2.0],
+    "threshold": [1.5, 2.0, 2.5, 3.0],
+    "hold_s": [0.5, 0.75, 1.0],
+    "drop": [0.5, 0.75],
+}
+
+
+@dataclass
+class Case:
+    """One take: features fed to the detector (session index of each), the transitions."""
+    key: str            # group/name
+    name: str           # take name (the LOTO unit)
+    group: str
+    frame_rate: float
+    X: np.ndarray
+    index: np.ndarray   # session frame of each fed row
+    transitions: list
+    restarts: int
+
+
+class _Tap:
+    """Stands in for a detector in the live pipeline and keeps what it is fed."""
+    name = "tap"
+
+    def __init__(self) -> None:
+        self.rows: list[np.ndarray] = []
+        self.restarts = 0
+
+    def update(self, x: np.ndarray):
+        self.rows.append(np.array(x, dtype=np.float64))
+        return None
+
+    def restart(self) -> None:
+        self.restarts += 1
+
+
+def tap_features(take, cfg) -> tuple[np.ndarray, np.ndarray, int]:
+    tap = _Tap()
+    pipe = Pipeline(take.joint_names, take.parents, take.space, take.frame_rate, cfg,
+                    detectors={"tap": tap})
+    fr = float(take.frame_rate)
+    valid = take.valid if take.valid is not None else np.ones((take.n_frames, take.n_joints), bool)
+    index = []
+    for i in range(take.n_frames):
+        before = len(tap.rows)
+        pipe.process(i, take.quats[i], valid[i], i, i / fr, 0, i / fr)
+        index.extend([i] * (len(tap.rows) - before))
+    return np.array(tap.rows), np.array(index), tap.restarts - 0
+
+
+def load_cases(data: Path | None, seeds: list[int]) -> list[Case]:
+    cfg, _ = live_config(methods=["contrast"])
+    cases = []
+    if data is not None:
+        for t in find_labelled_takes(data, ("cmu", "tsseg4d")):
+            take = t.load()
+            X, idx, rs = tap_features(take, cfg)
+            cases.append(Case(f"{t.group}/{t.name}", t.name, t.group, take.frame_rate, X, idx,
+                              list(t.transitions), rs))
+    for s in seeds:
+        res = synthesize(DEFAULT_SCRIPT, seed=s)
+        X, idx, rs = tap_features(res.take, cfg)
+        cases.append(Case(f"synthetic/seed{s}", f"synth{s}", "synthetic", res.take.frame_rate,
+                          X, idx, list(res.transitions), rs))
+    return cases
+
+
+def detector(p: dict, fr: float) -> ContrastDetector:
+    return ContrastDetector.from_params(p, fr, keep_trace=True)
+
+
+def peaks_on_trace(trace, det: ContrastDetector, p: dict, fr: float) -> list[tuple[int, int]]:
+    """(cut frame, detected frame) of the causal peak picker with ``p`` on a profile
+    (clean take: the value at c is known at c + after - 1)."""
+    from rtseg.detectors import frames
+    pk = CausalPeaks(p["threshold"], hold=frames(p["hold_s"], fr),
+                     min_gap=frames(p["min_gap_s"], fr), drop=p["drop"])
+    lag = det.wb * det.step - 1
+    out = []
+    for pos, v, _ in trace:
+        peak = pk.update(pos, v, pos + lag)
+        if peak is not None:
+            out.append((peak.position, peak.confirmed_at))
+    return out
+
+
+def counts(case: Case, cuts: list[tuple[int, int]]) -> tuple[int, int, int, int, list[float]]:
+    """(tp, cuts, transitions, strict tp, delays) of cuts given in fed-row frames."""
+    frames_ = [int(case.index[min(c, len(case.index) - 1)]) for c, _ in cuts]
+    det = {f: int(case.index[min(d, len(case.index) - 1)]) for f, (_, d) in zip(frames_, cuts)}
+    wide = widen(case.transitions, int(round(TOL_S * case.frame_rate)))
+    s = score(frames_, wide)
+    return (s.tp, s.cuts, s.transitions, score(frames_, case.transitions).tp,
+            detection_delays(s, det, wide, case.frame_rate))
+
+
+def summary(rows: list) -> dict:
+    tp = sum(r[0] for r in rows)
+    nc = sum(r[1] for r in rows)
+    nt = sum(r[2] for r in rows)
+    st = sum(r[3] for r in rows)
+    d = [x for r in rows for x in r[4]]
+    return {"f1": 2 * tp / (nc + nt) if nc + nt else 1.0,
+            "strict_f1": 2 * st / (nc + nt) if nc + nt else 1.0,
+            "cuts": nc, "transitions": nt,
+            "delay_median": float(np.median(d)) if d else None,
+            "delay_p90": float(np.percentile(d, 90)) if d else None}
+
+
+def objective(res: dict, cases: list[Case], kind: str = "pooled") -> float:
+    """``pooled``: F1 over every transition of the takes (each counts once, whatever its
+    group); ``groups``: the mean of the groups' pooled F1.  Minus 1 when the median / p90
+    delay over the real takes (else all) exceeds the budget."""
+    real = [res[c.key] for c in cases if c.group != "synthetic"] or [res[c.key] for c in cases]
+    allrows = summary(real)
+    ok = (allrows["delay_median"] or 0) <= MAX_MEDIAN_S and (allrows["delay_p90"] or 0) <= MAX_P90_S
+    if kind == "pooled":
+        f = summary([res[c.key] for c in cases])["f1"]
+    else:
+        groups = sorted({c.group for c in cases})
+        f = float(np.mean([summary([res[c.key] for c in cases if c.group == g])["f1"]
+                           for g in groups]))
+    return f - (0 if ok else 1.0)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("data", nargs="?", default=str(Path(__file__).resolve().parents[2] / "shared" / "data"))
+    ap.add_argument("--synth-seeds", type=int, nargs="*", default=[0, 1, 2, 3, 4, 5])
+    ap.add_argument("--objective", choices=["pooled", "groups"], default="pooled",
+                    help="what a parameter set maximises on the training takes: F1 over all "
+                         "their transitions pooled (default), or the mean of the groups' F1")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    data = Path(args.data)
+    if not (data / "cmu").is_dir() and not (data / "tsseg4d").is_dir():
+        print(f"loto: no labelled takes in {data}; synthetic performances only", file=sys.stderr)
+        data = None
+    cases = load_cases(data, args.synth_seeds)
+    base = load_params()["contrast"]
+    keys = list(GRID)
+    configs = [dict(zip(keys, v)) for v in itertools.product(*GRID.values())]
+    if not any(all(base[k] == c[k] for k in keys) for c in configs):
+        configs.append({k: base[k] for k in keys})
+    results: dict[tuple, dict] = {}
+    traces: dict[tuple, tuple] = {}
+    for cfgv in configs:
+        p = {**base, **cfgv}
+        geo = p["after_s"]
+        res = {}
+        for case in cases:
+            if (geo, case.key) not in traces:
+                det = detector(p, case.frame_rate)
+                det.run(case.X)
+                traces[(geo, case.key)] = (det.trace, det)
+            trace, det = traces[(geo, case.key)]
+            if case.restarts:
+                d2 = detector(p, case.frame_rate)
+                cuts = [(c.frame, c.detected_at) for c in d2.run(case.X)]
+            else:
+                cuts = peaks_on_trace(trace, det, p, case.frame_rate)
+            res[case.key] = counts(case, cuts)
+        results[tuple(cfgv[k] for k in keys)] = res
+    # the shortcut equals a full detector run for the shipped defaults
+    for case in cases:
+        full = [(c.frame, c.detected_at) for c in detector(base, case.frame_rate).run(case.X)]
+        assert counts(case, full)[:4] == results[tuple(base[k] for k in keys)][case.key][:4], case.key
+
+    def best(train: list[Case]) -> tuple:
+        return max(results, key=lambda k: (objective(results[k], train, args.objective), -k[0]))
+
+    chosen_all = best(cases)
+    names = sorted({c.name for c in cases})
+    held: dict[str, tuple] = {}
+    folds = {}
+    for n in names:
+        train = [c for c in cases if c.name != n]
+        k = best(train)
+        held_rows = [results[k][c.key] for c in cases if c.name == n]
+        folds[n] = {**dict(zip(keys, k)), "held_out_f1": round(summary(held_rows)["f1"], 3)}
+        for c in cases:
+            if c.name == n:
+                held[c.key] = results[k][c.key]
+    groups = sorted({c.group for c in cases})
+    shipped = tuple(base[k] for k in keys)
+    report = {
+        "tolerance_s": TOL_S,
+        "objective": args.objective,
+        "loto": {g: summary([held[c.key] for c in cases if c.group == g]) for g in groups},
+        "shipped": {"params": dict(zip(keys, shipped)),
+                    **{g: summary([results[shipped][c.key] for c in cases if c.group == g])
+                       for g in groups}},
+        "chosen_on_all": {"params": dict(zip(keys, chosen_all)),
+                          **{g: summary([results[chosen_all][c.key] for c in cases if c.group == g])
+                             for g in groups}},
+        "folds": folds,
+        "sensitivity": {},
+    }
+    for i, k in enumerate(keys):
+        rows = []
+        for v in GRID[k]:
+            cfgk = tuple(v if j == i else shipped[j] for j in range(len(keys)))
+            if cfgk in results:
+                rows.append({"value": v, **{g: summary([results[cfgk][c.key] for c in cases
+                                                        if c.group == g]) for g in groups}})
+        report["sensitivity"][k] = rows
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return 0
+    fmt = lambda s: (f"F1 {s['f1']:.3f} (strict {s['strict_f1']:.3f}), delay "
+                     f"{s['delay_median'] if s['delay_median'] is not None else float('nan'):.2f}/"
+                     f"{s['delay_p90'] if s['delay_p90'] is not None else float('nan'):.2f} s, "
+                     f"{s['cuts']} cuts / {s['transitions']} transitions")
+    print(f"leave-one-take-out over {len(names)} takes ({', '.join(names)}), "
+          f"{len(results)} parameter sets, F1 at +-{TOL_S} s:")
+    for g in groups:
+        print(f"  held-out {g:<10} {fmt(report['loto'][g])}")
+    print(f"shipped defaults {report['shipped']['params']}:")
+    for g in groups:
+        print(f"  {g:<19} {fmt(report['shipped'][g])}")
+    print(f"chosen on all takes {report['chosen_on_all']['params']}")
+    for n, f in folds.items():
+        print(f"  fold without {n:<8} chose {f}")
+    print("sensitivity (one parameter moved from the shipped defaults):")
+    for k, rows in report["sensitivity"].items():
+        for r in rows:
+            print(f"  {k:<10} {r['value']:<6} " + " | ".join(
+                f"{g} {r[g]['f1']:.3f} d{r[g]['delay_median'] or 0:.2f}/{r[g]['delay_p90'] or 0:.2f}"
+                for g in groups))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
