@@ -445,7 +445,8 @@ class MocopiAssembler:
         if not ok.all():
             self._count("unknown_names", int((~ok).sum()), "bone id out of range")
         rows = rows[keep]
-        tran = fr.tran[keep].astype(np.float64)
+        with np.errstate(invalid="ignore"):           # signalling NaNs are refused below
+            tran = fr.tran[keep].astype(np.float64)
         qq = tran[:, :4]
         norm2 = np.einsum("ij,ij->i", qq, qq)
         good = np.isfinite(norm2) & (np.abs(norm2 - 1.0) <= self.unit_tolerance)
@@ -479,7 +480,8 @@ class MocopiAssembler:
         operations.  None: the general path (same result)."""
         if len(fr.bone_ids) != self.n or not np.array_equal(fr.bone_ids, self._ids_arr):
             return None
-        tran = fr.tran.astype(np.float64)
+        with np.errstate(invalid="ignore"):
+            tran = fr.tran.astype(np.float64)
         q = tran[:, :4]
         if not np.abs(np.einsum("ij,ij->i", q, q) - 1.0).max() <= UNIT_EXACT:
             return None                              # NaN fails the comparison too
