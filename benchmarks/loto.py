@@ -35,8 +35,7 @@ from rtseg.detectors.contrast import ContrastDetector
 from rtseg.detectors.peaks import CausalPeaks
 from rtseg.evaluation import detection_delays, score, widen
 from rtseg.labels import find_labelled_takes
-from rtseg.online_eval import live_config, live_cuts
-from rtseg.pipeline import Pipeline
+from rtseg.online_eval import fed_features, live_config
 from rtseg.simulators.synth import DEFAULT_SCRIPT, synthesize
 
 TOL_S = 0.5
@@ -62,48 +61,18 @@ class Case:
     restarts: int
 
 
-class _Tap:
-    """Stands in for a detector in the live pipeline and keeps what it is fed."""
-    name = "tap"
-
-    def __init__(self) -> None:
-        self.rows: list[np.ndarray] = []
-        self.restarts = 0
-
-    def update(self, x: np.ndarray):
-        self.rows.append(np.array(x, dtype=np.float64))
-        return None
-
-    def restart(self) -> None:
-        self.restarts += 1
-
-
-def tap_features(take, cfg) -> tuple[np.ndarray, np.ndarray, int]:
-    tap = _Tap()
-    pipe = Pipeline(take.joint_names, take.parents, take.space, take.frame_rate, cfg,
-                    detectors={"tap": tap})
-    fr = float(take.frame_rate)
-    valid = take.valid if take.valid is not None else np.ones((take.n_frames, take.n_joints), bool)
-    index = []
-    for i in range(take.n_frames):
-        before = len(tap.rows)
-        pipe.process(i, take.quats[i], valid[i], i, i / fr, 0, i / fr)
-        index.extend([i] * (len(tap.rows) - before))
-    return np.array(tap.rows), np.array(index), tap.restarts - 0
-
-
 def load_cases(data: Path | None, seeds: list[int]) -> list[Case]:
     cfg, _ = live_config(methods=["contrast"])
     cases = []
     if data is not None:
         for t in find_labelled_takes(data, ("cmu", "tsseg4d")):
             take = t.load()
-            X, idx, rs = tap_features(take, cfg)
+            X, idx, rs = fed_features(take, cfg)
             cases.append(Case(f"{t.group}/{t.name}", t.name, t.group, take.frame_rate, X, idx,
                               list(t.transitions), rs))
     for s in seeds:
         res = synthesize(DEFAULT_SCRIPT, seed=s)
-        X, idx, rs = tap_features(res.take, cfg)
+        X, idx, rs = fed_features(res.take, cfg)
         cases.append(Case(f"synthetic/seed{s}", f"synth{s}", "synthetic", res.take.frame_rate,
                           X, idx, list(res.transitions), rs))
     return cases

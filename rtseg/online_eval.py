@@ -41,3 +41,38 @@ def live_cuts(take: Any, config: SessionConfig) -> dict[str, list[PipelineCut]]:
     for c in cuts:
         out[c.cut.method].append(c)
     return out
+
+
+class _Tap:
+    """Stands in for a detector in the live pipeline and keeps what it is fed."""
+    name = "tap"
+
+    def __init__(self) -> None:
+        self.rows: list[np.ndarray] = []
+        self.restarts = 0
+
+    def update(self, x: np.ndarray) -> None:
+        self.rows.append(np.array(x, dtype=np.float64))
+
+    def restart(self) -> None:
+        self.restarts += 1
+
+
+def fed_features(take: Any, config: SessionConfig) -> tuple[np.ndarray, np.ndarray, int]:
+    """The pose features the live pipeline feeds its detectors on ``take`` (rows, in
+    order), the take frame of each row, and how often the detectors were restarted (gaps).
+    A detector run on these rows sees exactly what it sees live: benchmarks use this to try
+    many parameter sets without replaying the pipeline each time."""
+    from rtseg.pipeline import Pipeline
+    tap = _Tap()
+    pipe = Pipeline(take.joint_names, take.parents, take.space, take.frame_rate, config,
+                    detectors={"tap": tap})
+    n, fr = take.n_frames, float(take.frame_rate)
+    valid = take.valid if take.valid is not None else np.ones((n, take.n_joints), dtype=bool)
+    index: list[int] = []
+    for i in range(n):
+        before = len(tap.rows)
+        pipe.process(i, take.quats[i], valid[i], i, i / fr, 0, i / fr)
+        index.extend([i] * (len(tap.rows) - before))
+    X = np.array(tap.rows) if tap.rows else np.zeros((0, 0))
+    return X, np.array(index, dtype=np.int64), tap.restarts

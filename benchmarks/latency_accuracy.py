@@ -1,0 +1,180 @@
+"""The live detector's accuracy against its detection delay, beside the paper's online
+passes and the offline methods: a table and a PNG.
+
+    python3 benchmarks/latency_accuracy.py [DATA] [--group cmu|tsseg4d|all] [--json]
+                                           [--png latency_accuracy.png]
+
+DATA is a folder laid out like ../shared/data.  Every take goes once through the live
+pipeline (``rtseg.online_eval.fed_features``: the features ``rtseg live`` computes); the
+default live detector (``contrast``) then runs on them at several delay budgets — its after
+window (how long after a change it looks) and hold (how long it may wait to confirm a
+maximum) — with every other parameter at the shipped defaults.  For each: F1 at +-0.5 s and
+strict, median and p90 detection delay (frame that produced the cut - labelled transition
+mid).  Beside them: the paper's online PCA and PPCA forward passes through the same live
+pipeline (``rtseg evaluate --online``), and the offline methods on whole takes
+(``rtseg evaluate``), drawn as lines (no delay: they see the whole take).  The best F1 with a
+median delay <= 1.5 s is stated.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from rtseg.commands.evaluate import evaluate_takes
+from rtseg.detectors import load_params
+from rtseg.detectors.contrast import ContrastDetector
+from rtseg.evaluation import detection_delays, score, widen
+from rtseg.labels import find_labelled_takes
+from rtseg.online_eval import fed_features, live_config
+
+TOL_S = 0.5
+BUDGETS = [(0.75, 0.25), (1.0, 0.25), (1.0, 0.5), (1.25, 0.5), (1.5, 0.5), (1.5, 0.75),
+           (1.75, 0.5), (1.75, 1.0), (2.0, 1.0), (2.5, 1.0)]     # (after_s, hold_s)
+
+
+def pooled_row(rows: list[tuple]) -> dict:
+    tp = sum(r[0] for r in rows)
+    nc = sum(r[1] for r in rows)
+    nt = sum(r[2] for r in rows)
+    st = sum(r[3] for r in rows)
+    d = [x for r in rows for x in r[4]]
+    return {"f1": 2 * tp / (nc + nt) if nc + nt else 1.0,
+            "strict_f1": 2 * st / (nc + nt) if nc + nt else 1.0,
+            "cuts": nc, "transitions": nt,
+            "delay_median": float(np.median(d)) if d else None,
+            "delay_p90": float(np.percentile(d, 90)) if d else None}
+
+
+def score_cuts(cuts: list[tuple[int, int]], transitions, fr: float) -> tuple:
+    """(tp, cuts, transitions, strict tp, delays) of (cut frame, detected frame) pairs."""
+    frames_ = [c for c, _ in cuts]
+    wide = widen(transitions, int(round(TOL_S * fr)))
+    s = score(frames_, wide)
+    return (s.tp, s.cuts, s.transitions, score(frames_, transitions).tp,
+            detection_delays(s, dict(cuts), wide, fr))
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("data", nargs="?",
+                    default=str(Path(__file__).resolve().parents[2] / "shared" / "data"))
+    ap.add_argument("--group", choices=["cmu", "tsseg4d", "all"], default="cmu")
+    ap.add_argument("--json", action="store_true", help="print JSON instead of the table")
+    ap.add_argument("--png", default="latency_accuracy.png",
+                    help="figure path ('' for none; needs matplotlib)")
+    args = ap.parse_args()
+    groups = ("cmu", "tsseg4d") if args.group == "all" else (args.group,)
+    takes = find_labelled_takes(args.data, groups)
+    if not takes:
+        print(f"latency_accuracy: no labelled takes of group {args.group} in {args.data}",
+              file=sys.stderr)
+        return 2
+    base = load_params()["contrast"]
+    cfg, default = live_config(methods=["contrast"])
+    loaded = [(t, t.load()) for t in takes]
+    fed = [(t, take, *fed_features(take, cfg)) for t, take in loaded]
+    live_rows = []
+    for after, hold in BUDGETS:
+        p = {**base, "after_s": after, "hold_s": hold}
+        rows = []
+        for t, take, X, index, _ in fed:
+            det = ContrastDetector.from_params(p, take.frame_rate)
+            cuts = [(int(index[c.frame]), int(index[min(c.detected_at, len(index) - 1)]))
+                    for c in det.run(X)]
+            rows.append(score_cuts(cuts, t.transitions, take.frame_rate))
+        live_rows.append({"after_s": after, "hold_s": hold,
+                          "shipped": after == base["after_s"] and hold == base["hold_s"],
+                          **pooled_row(rows)})
+    paper_cfg, _ = live_config(methods=["pca", "ppca"])
+    paper = evaluate_takes(takes, ["pca", "ppca"], online=paper_cfg, tolerance_s=TOL_S)
+    offline = evaluate_takes(takes, ["contrast", "pca", "ppca", "gmm"], tolerance_s=TOL_S)
+
+    def method_row(rep, m) -> dict:
+        r = rep.methods[m]
+        d = r.delays()
+        return {"f1": r.pooled().f1, "strict_f1": r.pooled_strict().f1,
+                "delay_median": float(np.median(d)) if d else None,
+                "delay_p90": float(np.percentile(d, 90)) if d else None}
+
+    quick = [r for r in live_rows if r["delay_median"] is not None and r["delay_median"] <= 1.5]
+    best_quick = max(quick, key=lambda r: r["f1"]) if quick else None
+    doc = {"tolerance_s": TOL_S, "groups": list(groups), "live_default": default,
+           "live": live_rows,
+           "paper_online": {m: method_row(paper, m) for m in ("pca", "ppca")},
+           "offline": {m: method_row(offline, m) for m in ("contrast", "pca", "ppca", "gmm")},
+           "best_f1_median_delay_le_1_5s": best_quick}
+    if args.png:
+        try:
+            draw(doc, args.png)
+        except ImportError:
+            print("latency_accuracy: matplotlib not installed; no figure", file=sys.stderr)
+    if args.json:
+        print(json.dumps(doc, indent=2))
+        return 0
+    print(f"{len(takes)} takes ({', '.join(groups)}), F1 at +-{TOL_S} s / strict, delay = "
+          f"median/p90 s from the labelled transition to the frame that produced the cut")
+    print(f"{'detector':<34} {'F1':>6} {'strict':>6} {'median':>7} {'p90':>6}")
+    for r in live_rows:
+        name = f"contrast after {r['after_s']:.2f} s hold {r['hold_s']:.2f} s"
+        print(f"{name + (' *' if r['shipped'] else ''):<34} {r['f1']:>6.3f} {r['strict_f1']:>6.3f} "
+              f"{r['delay_median'] or float('nan'):>7.2f} {r['delay_p90'] or float('nan'):>6.2f}")
+    for m, r in doc["paper_online"].items():
+        print(f"{'paper ' + m + ' forward pass (live)':<34} {r['f1']:>6.3f} {r['strict_f1']:>6.3f} "
+              f"{r['delay_median'] or float('nan'):>7.2f} {r['delay_p90'] or float('nan'):>6.2f}")
+    for m, r in doc["offline"].items():
+        print(f"{'offline ' + m + ' (whole take)':<34} {r['f1']:>6.3f} {r['strict_f1']:>6.3f} "
+              f"{'-':>7} {'-':>6}")
+    print("* shipped defaults")
+    if best_quick:
+        print(f"best F1 with median delay <= 1.5 s: {best_quick['f1']:.3f} (strict "
+              f"{best_quick['strict_f1']:.3f}; after {best_quick['after_s']} s, hold "
+              f"{best_quick['hold_s']} s; delay {best_quick['delay_median']:.2f}/"
+              f"{best_quick['delay_p90']:.2f} s)")
+    else:
+        print("no budget reached a median delay <= 1.5 s")
+    if args.png:
+        print(f"figure: {args.png}")
+    return 0
+
+
+def draw(doc: dict, path: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(7.5, 4.8))
+    live = doc["live"]
+    x = [r["delay_median"] for r in live]
+    ax.plot(x, [r["f1"] for r in live], "o-", color="C0", label="contrast (live), F1 +-0.5 s")
+    ax.plot(x, [r["strict_f1"] for r in live], "o--", color="C0", alpha=0.5,
+            label="contrast (live), strict")
+    for r in live:
+        ax.errorbar(r["delay_median"], r["f1"], xerr=[[0], [r["delay_p90"] - r["delay_median"]]],
+                    color="C0", alpha=0.3, capsize=2)
+        if r["shipped"]:
+            ax.annotate("shipped", (r["delay_median"], r["f1"]), textcoords="offset points",
+                        xytext=(4, -12), fontsize=8)
+    for i, (m, r) in enumerate(doc["paper_online"].items()):
+        if r["delay_median"] is not None:
+            ax.plot([r["delay_median"]], [r["f1"]], "s", color=f"C{i + 1}",
+                    label=f"paper {m} forward pass (live)")
+    for i, (m, r) in enumerate(doc["offline"].items()):
+        ax.axhline(r["f1"], color=f"C{i + 3}", ls=":", lw=1,
+                   label=f"offline {m} (whole take)")
+    ax.axvline(1.5, color="grey", lw=0.8, ls="--")
+    ax.set_xlabel("median detection delay (s) from the labelled transition; bars to p90")
+    ax.set_ylabel("F1")
+    ax.set_ylim(0, 1.02)
+    ax.set_title(f"accuracy against delay ({', '.join(doc['groups'])} takes)")
+    ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
