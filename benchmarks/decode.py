@@ -27,11 +27,21 @@ only, on one core, median of ``--repeat`` runs:
 - ``mocopi``: ``rtseg.drivers.codec_mocopi.MocopiAssembler`` fed mocopi ``fram`` datagrams
   (27 bones, one datagram per frame).
 
-Targets: >= 20 000 frames/s for VMC, MVN and mocopi (a suit sends 60-240).
+- ``rokoko``: ``rtseg.drivers.rokoko_source.RokokoAssembler`` fed Rokoko Studio Custom
+  JSON v3 payloads (one actor, 21 bones; JSON parsed with orjson when installed, else the
+  json module - the row says which); ``rokoko_lz4``: the same payloads LZ4-compressed;
+  ``rokoko_json_module``: plain payloads parsed with the standard json module.
+- ``axis_binary``: Axis BVH binary datagrams (64-byte header + 354 float32, 1480 bytes)
+  through the axis source's datagram joiner, decoder and Euler -> quaternion conversion;
+  ``axis_binary_global``: the same with ``space=global`` (forward kinematics per frame);
+  ``axis_text``: the same frames as the TCP text stream (``||``-separated), fed in 4096-byte
+  reads.
+
+Targets: >= 20 000 frames/s for VMC, MVN, mocopi, Rokoko and Axis (a suit sends 60-240).
 
     python3 benchmarks/decode.py --fuzz [--fuzz-inputs 100000]
 
-feeds, per format (mvn, mocopi), that many mutated datagrams (bit flips, truncation,
+feeds, per format (mvn, mocopi, rokoko, axis binary, axis text), that many mutated datagrams (bit flips, truncation,
 rewritten header/length fields, appended bytes, random bytes; seeded) to the assembler
 and reports how many raised (must be 0), frames produced, counters, and inputs/s.
 """
@@ -196,6 +206,22 @@ def fuzz(fmt: str, n: int, seed: int = 1) -> dict:
                   encode_message("13", struct.pack(">II", 1, 2) + b"L5" + bytes(12)),
                   encode_message("24", bytes(12)), encode_message("25", b"01:02:03.004")]
         asm, magic = MvnAssembler(ids, quiet=0.0), b"MXTP"
+    elif fmt == "rokoko":
+        from rtseg.drivers.codec_rokoko import LZ4_MAGIC
+        seeds = _rokoko_payloads(3, False) + _rokoko_payloads(2, True)
+        asm, magic = _rokoko_assembler(), LZ4_MAGIC
+    elif fmt == "axis":
+        from rtseg.drivers.codec_axis import encode_binary
+        v = _axis_values(3)
+        d = encode_binary(v[0])
+        seeds = [encode_binary(v[1], frame_index=1), d[:1024], d[1024:],
+                 encode_binary(v[2][:180], with_disp=False)]
+        asm, magic = _axis_binary_assembler(), b"\xff\xdd"
+    elif fmt == "axis_text":
+        from rtseg.drivers.codec_axis import encode_text
+        v = _axis_values(3)
+        seeds = [encode_text(v[0]), encode_text(v[1][:180], 1, "Avatar01"), b" ||", b"||"]
+        asm, magic = _AxisText(), b"0 Avatar00 "
     else:
         from rtseg.drivers.codec_mocopi import MocopiAssembler, encode_frame, encode_skeleton
         from rtseg.drivers.codec_mocopi import BONE_PARENTS
@@ -217,6 +243,108 @@ def fuzz(fmt: str, n: int, seed: int = 1) -> dict:
     return {"inputs": n, "escaped": escaped, "frames": frames, "corrupt": st.corrupt,
             "bad_values": st.bad_values, "bad_messages": st.bad_messages,
             "dropped": st.dropped, "inputs_per_s": round(n / dt)}
+
+
+class _CountingStats:
+    """A SourceStats and the ``count(field, n, message)`` callable the Rokoko/Axis
+    assemblers take."""
+
+    def __init__(self) -> None:
+        from rtseg.drivers.base import SourceStats
+        self.stats = SourceStats()
+
+    def __call__(self, field: str, n: int = 1, message=None) -> None:
+        setattr(self.stats, field, getattr(self.stats, field) + n)
+
+
+class _AxisText:
+    """What the axis text source runs on each TCP read: split on ``||``, decode, convert."""
+
+    def __init__(self) -> None:
+        from rtseg.drivers.axis_source import AxisFrames
+        from rtseg.drivers.codec_axis import TextSplitter
+        self.count = _CountingStats()
+        self.stats = self.count.stats
+        self.frames, self.splitter = AxisFrames(self.count), TextSplitter()
+
+    def feed(self, data: bytes, now: float) -> list:
+        from rtseg.drivers.codec_axis import AxisError, decode_text
+        out = []
+        for chunk in self.splitter.feed(data):
+            try:
+                f = self.frames.frame(decode_text(chunk), now)
+            except AxisError as e:
+                self.frames.error(e, now)
+                continue
+            if f is not None:
+                out.append(f)
+        return out
+
+    def flush(self, now: float, force: bool = False) -> list:
+        return []
+
+
+def _rokoko_assembler():
+    from rtseg.drivers.rokoko_source import RokokoAssembler
+    count = _CountingStats()
+    asm = RokokoAssembler(None, count)
+    asm.stats = count.stats
+    return asm
+
+
+def _axis_binary_assembler(space: str = "local"):
+    from rtseg.drivers.axis_source import AxisFrames, _BinaryAdapter
+    count = _CountingStats()
+    asm = _BinaryAdapter(AxisFrames(count, space=space))
+    asm.stats = count.stats
+    return asm
+
+
+def _rokoko_payloads(n: int, compress: bool) -> list[bytes]:
+    from rtseg.drivers.codec_rokoko import encode_packet
+    q = vendor_motion(n, 21)
+    return [encode_packet([("Actor1", q[i], None, np.array([0.0, 0.95, 0.01 * i]))], i / 60,
+                          compress=compress) for i in range(n)]
+
+
+def _axis_values(n: int) -> np.ndarray:
+    from rtseg.drivers.codec_axis import JOINTS, quat_to_euler
+    v = np.zeros((n, len(JOINTS), 6))
+    v[:, :, 3:] = quat_to_euler("YXZ", vendor_motion(n, len(JOINTS)))
+    v[:, 0, :3] = (0.0, 95.0, 0.0)
+    return v.reshape(n, -1)
+
+
+def bench_rokoko(n: int, repeat: int, compress: bool = False, json_module: bool = False) -> dict:
+    from rtseg.drivers import codec_rokoko
+    dgrams = _rokoko_payloads(n, compress)
+    saved = codec_rokoko._loads
+    if json_module:
+        codec_rokoko._loads = json.loads
+    try:
+        rates = _time_feed(_rokoko_assembler, dgrams, n, repeat, "Rokoko")
+    finally:
+        codec_rokoko._loads = saved
+    return {"frames_per_s": round(statistics.median(rates)), "runs": [round(r) for r in rates],
+            "datagrams_per_frame": 1.0, "bytes_per_frame": sum(map(len, dgrams)) / n,
+            "json_parser": "json" if json_module else codec_rokoko.JSON_PARSER}
+
+
+def bench_axis(n: int, repeat: int, text: bool = False, space: str = "local") -> dict:
+    from rtseg.drivers.codec_axis import encode_binary, encode_text
+    v = _axis_values(n)
+    if text:
+        stream = b"".join(encode_text(v[i]) for i in range(n))
+        dgrams = [stream[k:k + SERIAL_CHUNK] for k in range(0, len(stream), SERIAL_CHUNK)]
+        dgrams.append(b"||")          # the stream's last frame ends at the next separator
+        make = _AxisText
+    else:
+        dgrams = [encode_binary(v[i], frame_index=i) for i in range(n)]
+        stream = b"".join(dgrams)
+        make = lambda: _axis_binary_assembler(space)  # noqa: E731
+    rates = _time_feed(make, dgrams, n, repeat, "Axis")
+    return {"frames_per_s": round(statistics.median(rates)), "runs": [round(r) for r in rates],
+            "bytes_per_frame": len(stream) / n}
 
 
 def bench_serial(q: np.ndarray, repeat: int) -> dict | None:
@@ -250,12 +378,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--frames", type=int, default=5000, help="frames per run (default 5000)")
     p.add_argument("--repeat", type=int, default=5, help="runs; the median is reported (default 5)")
-    p.add_argument("--fuzz", action="store_true", help="fuzz the MVN and mocopi decoders "
+    p.add_argument("--fuzz", action="store_true", help="fuzz the MVN, mocopi, Rokoko and Axis decoders "
                    "instead of timing (exit 1 if any input raised)")
     p.add_argument("--fuzz-inputs", type=int, default=100_000, help="inputs per format")
     args = p.parse_args(argv)
     if args.fuzz:
-        out = {fmt: fuzz(fmt, args.fuzz_inputs) for fmt in ("mvn", "mocopi")}
+        out = {fmt: fuzz(fmt, args.fuzz_inputs)
+               for fmt in ("mvn", "mocopi", "rokoko", "axis", "axis_text")}
         if args.json:
             print(json.dumps(out))
         else:
@@ -277,6 +406,12 @@ def main(argv: list[str] | None = None) -> int:
     result["mvn"] = bench_mvn(args.frames, args.repeat)
     result["mvn_3_datagrams"] = bench_mvn(args.frames, args.repeat, parts=3)
     result["mocopi"] = bench_mocopi(args.frames, args.repeat)
+    result["rokoko"] = bench_rokoko(args.frames, args.repeat)
+    result["rokoko_lz4"] = bench_rokoko(args.frames, args.repeat, compress=True)
+    result["rokoko_json_module"] = bench_rokoko(args.frames, args.repeat, json_module=True)
+    result["axis_binary"] = bench_axis(args.frames, args.repeat)
+    result["axis_binary_global"] = bench_axis(args.frames, args.repeat, space="global")
+    result["axis_text"] = bench_axis(args.frames, args.repeat, text=True)
     pyosc = bench_python_osc(q[: max(10, args.frames // 5)], max(1, min(args.repeat, 3)))
     if pyosc is not None:
         result["python_osc_parse"] = pyosc
@@ -297,7 +432,13 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  VMC, 55 bones ({f['datagrams_per_frame']:.0f} datagrams, {f['bytes_per_frame']:.0f} B/frame):"
           f"       {f['frames_per_s']:>9,} frames/s")
     for key, label in (("mvn", "Xsens MVN, 23 segments"), ("mvn_3_datagrams", "Xsens MVN, 3 datagrams/frame"),
-                       ("mocopi", "Sony mocopi, 27 bones")):
+                       ("mocopi", "Sony mocopi, 27 bones"),
+                       ("rokoko", f"Rokoko JSON v3 ({result['rokoko']['json_parser']})"),
+                       ("rokoko_lz4", f"Rokoko JSON v3 LZ4 ({result['rokoko']['json_parser']})"),
+                       ("rokoko_json_module", "Rokoko JSON v3 (json module)"),
+                       ("axis_binary", "Axis BVH binary, 59 joints"),
+                       ("axis_binary_global", "Axis BVH binary, space=global"),
+                       ("axis_text", "Axis BVH text (TCP)")):
         r = result[key]
         print(f"  {label} ({r['bytes_per_frame']:.0f} B/frame): ".ljust(47)
               + f"{r['frames_per_s']:>9,} frames/s")

@@ -29,13 +29,20 @@ URL options
 ``rate``     nominal frame rate in Hz (default 60; Axis does not announce it).
              ``source_time`` = binary frame index / rate.
 ``unit``     length unit of positions: ``cm`` (default, Axis's BVH unit), ``m`` or ``mm``.
+``space``    ``local`` (default: the BVH's parent-relative rotations, as sent) or
+             ``global`` (world orientations by forward kinematics in the source, about 6x
+             the decode cost).  The live loop calibrates local sources against their
+             first frames (``calibration.mode = "auto"``) and not global ones; Axis's
+             rotations are already relative to its calibrated T-pose, so ``space=global``
+             or ``calibration.mode = "none"`` skip that step (docs/protocols.md).
 ``queue``    frames held for ``read`` (default 256; the oldest is dropped when full,
              counted in ``stats.dropped``).
 ``rcvbuf``   SO_RCVBUF bytes (binary).  ``allow``: accepted senders (binary).
 ``backoff``, ``max_backoff``  reconnect delays in seconds (text; default 0.2 and 5).
 
 Frames: the 59 Axis joints (:data:`~rtseg.drivers.codec_axis.JOINTS`) with their hierarchy,
-``space = "local"`` (BVH parent-relative rotations, right-handed Y-up, scalar-last),
+``space = "local"`` (BVH parent-relative rotations, right-handed Y-up, scalar-last; or
+world orientations with ``space=global``),
 ``root_position`` = Hips position in metres, ``seq`` = binary frame index (text: count of
 frames received), ``valid`` False for joints whose angles are not finite.  Counters:
 damaged bytes -> ``corrupt``; a frame whose value count fits no layout -> ``bad_messages``;
@@ -55,7 +62,7 @@ import numpy as np
 from rtseg.drivers.base import FrameQueue, Source, SourceError
 from rtseg.drivers.codec_axis import (BINARY_PORT, JOINTS, PARENTS, TEXT_PORT, AxisError,
                                       AxisFrame, BinaryAssembler, TextSplitter,
-                                      decode_binary, decode_text, to_pose)
+                                      decode_binary, decode_text, global_pose, to_pose)
 from rtseg.drivers.osc_source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
                                       parse_allow)
 from rtseg.frame import Frame
@@ -64,9 +71,11 @@ log = logging.getLogger("rtseg.drivers.axis")
 
 FORMATS = ("binary", "text")
 UNITS = {"cm": 0.01, "m": 1.0, "mm": 0.001}
-BINARY_OPTIONS = ("format", "avatar", "order", "rate", "unit", "queue", "rcvbuf", "allow")
-TEXT_OPTIONS = ("format", "avatar", "order", "rate", "unit", "queue", "backoff",
+BINARY_OPTIONS = ("format", "avatar", "order", "rate", "unit", "space", "queue", "rcvbuf",
+                  "allow")
+TEXT_OPTIONS = ("format", "avatar", "order", "rate", "unit", "space", "queue", "backoff",
                 "max_backoff")
+SPACES = ("local", "global")
 _RANGES = {"rate": (1e-3, 1e5), "queue": (1, 1_000_000), "rcvbuf": (1, 1 << 30),
            "backoff": (1e-3, 60.0), "max_backoff": (1e-3, 600.0)}
 
@@ -76,8 +85,9 @@ class AxisFrames:
     transports).  ``count(field, n, message)``: the source's counter method."""
 
     def __init__(self, count, avatar: str | None = None, order: str = "YXZ",
-                 unit_scale: float = 0.01, rate: float = 60.0) -> None:
+                 unit_scale: float = 0.01, rate: float = 60.0, space: str = "local") -> None:
         self._count = count
+        self.space = space
         self.avatar = avatar
         self.order = order
         self.unit_scale = unit_scale
@@ -110,16 +120,18 @@ class AxisFrames:
         if not self._selected(f):
             self.other_avatars += 1
             return None
-        q, valid, pos = to_pose(f, self.order, self.unit_scale)
+        q, valid, pos = to_pose(f, self.order, self.unit_scale)   # fresh arrays
         if not valid.all():
             n = int(np.count_nonzero(~valid))
             self._count("bad_values", n)
             self.warn("bad", now, "Axis: %d joint(s) with non-finite angles; marked invalid", n)
             q[~valid] = self._last[~valid]
         self._last = q
+        if self.space == "global":
+            q = global_pose(q)
         seq = f.frame_index if f.frame_index is not None else self.received
         self.received += 1
-        return Frame(recv_time=now, quats=q.copy(), valid=valid,
+        return Frame(recv_time=now, quats=q, valid=valid,
                      source_time=None if f.frame_index is None else f.frame_index / self.rate,
                      seq=seq, root_position=pos)
 
@@ -146,7 +158,7 @@ class _BinaryAdapter:
                 out.append(fr)
         return out
 
-    def flush(self, now: float) -> list[Frame]:
+    def flush(self, now: float, force: bool = False) -> list[Frame]:
         e = self.joiner.flush(now)
         if e is not None:
             self.frames.error(e, now)
@@ -161,13 +173,14 @@ class AxisBinarySource(OscUdpSource):
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = BINARY_PORT, *,
                  avatar: str | None = None, order: str = "YXZ", rate: float = 60.0,
-                 unit_scale: float = 0.01, queue_size: int = 256, rcvbuf: int | None = None,
-                 allow: tuple[Network, ...] | None = None) -> None:
+                 unit_scale: float = 0.01, space: str = "local", queue_size: int = 256,
+                 rcvbuf: int | None = None, allow: tuple[Network, ...] | None = None) -> None:
         super().__init__()
         self.joint_names = list(JOINTS)
         self.parents = list(PARENTS)
         self.frame_rate = float(rate)
-        self._frames = AxisFrames(self.count, avatar, order, unit_scale, rate)
+        self.space = space
+        self._frames = AxisFrames(self.count, avatar, order, unit_scale, rate, space)
         self._asm = _BinaryAdapter(self._frames)
         self._start(host, port, 0.1, queue_size, rcvbuf, allow)
 
@@ -189,16 +202,18 @@ class AxisTextSource(Source):
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = TEXT_PORT, *,
                  avatar: str | None = None, order: str = "YXZ", rate: float = 60.0,
-                 unit_scale: float = 0.01, queue_size: int = 256, backoff: float = 0.2,
-                 max_backoff: float = 5.0, connect_timeout: float = 2.0) -> None:
+                 unit_scale: float = 0.01, space: str = "local", queue_size: int = 256,
+                 backoff: float = 0.2, max_backoff: float = 5.0,
+                 connect_timeout: float = 2.0) -> None:
         super().__init__()
         self.joint_names = list(JOINTS)
         self.parents = list(PARENTS)
         self.frame_rate = float(rate)
+        self.space = space
         self.host, self.port = host, int(port)
         self.backoff, self.max_backoff = float(backoff), float(max(backoff, max_backoff))
         self.connect_timeout = connect_timeout
-        self._frames = AxisFrames(self.count, avatar, order, unit_scale, rate)
+        self._frames = AxisFrames(self.count, avatar, order, unit_scale, rate, space)
         self._queue = FrameQueue(queue_size)
         self._stop = threading.Event()
         self._closed = False
@@ -339,6 +354,9 @@ def open_url(location: str, options: dict[str, str]) -> Source:
     if len(order) != 3 or set(order) != set("XYZ"):
         raise SourceError(f"axis:// order={options.get('order')!r}: a permutation of XYZ "
                           f"(as set in Axis's BVH output, default YXZ)")
+    space = (options.get("space") or "local").lower()
+    if space not in SPACES:
+        raise SourceError(f"axis:// space={space!r}: local or global")
     unit = (options.get("unit") or "cm").lower()
     if unit not in UNITS:
         raise SourceError(f"axis:// unit={unit!r}: one of {', '.join(UNITS)}")
@@ -347,7 +365,7 @@ def open_url(location: str, options: dict[str, str]) -> Source:
     except SourceError as exc:
         raise SourceError(str(exc).replace("osc://", "axis://")) from None
     kw = dict(avatar=options.get("avatar") or None, order=order,
-              rate=_num(options, "rate", 60.0), unit_scale=UNITS[unit],
+              rate=_num(options, "rate", 60.0), unit_scale=UNITS[unit], space=space,
               queue_size=_num(options, "queue", 256, int))
     if fmt == "text":
         if port == 0:

@@ -55,7 +55,7 @@ import numpy as np
 __all__ = ["JOINTS", "PARENTS", "TEXT_PORT", "BINARY_PORT", "HEADER", "TOKEN1", "TOKEN2",
            "AxisError", "AxisFrame", "layout", "value_count", "decode_binary",
            "decode_text", "encode_binary", "encode_text", "euler_to_quat", "quat_to_euler",
-           "to_pose", "BinaryAssembler", "TextSplitter", "SUIT_SEGMENTS"]
+           "to_pose", "global_pose", "BinaryAssembler", "TextSplitter", "SUIT_SEGMENTS"]
 
 TEXT_PORT = 7001
 BINARY_PORT = 7002
@@ -324,17 +324,22 @@ def euler_to_quat(order: str, angles: np.ndarray) -> np.ndarray:
     vectorised without SciPy's per-call overhead."""
     o = _check_order(order)
     a, b, c = (_AXIS[x] for x in o)
-    eps = 1.0 if (a, b, c) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0
-    half = np.deg2rad(np.asarray(angles, dtype=np.float64)) * 0.5
+    half = np.asarray(angles, dtype=np.float64) * (np.pi / 360.0)
     s, co = np.sin(half), np.cos(half)
     sa, sb, sc = s[..., 0], s[..., 1], s[..., 2]
     ca, cb, cc = co[..., 0], co[..., 1], co[..., 2]
     cacb, sasb, sacb, casb = ca * cb, sa * sb, sa * cb, ca * sb
     out = np.empty(half.shape[:-1] + (4,))
-    out[..., 3] = cacb * cc - eps * sasb * sc
-    out[..., a] = sacb * cc + eps * casb * sc
-    out[..., b] = casb * cc - eps * sacb * sc
-    out[..., c] = cacb * sc + eps * sasb * cc
+    if (a, b, c) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):       # eps = +1
+        out[..., 3] = cacb * cc - sasb * sc
+        out[..., a] = sacb * cc + casb * sc
+        out[..., b] = casb * cc - sacb * sc
+        out[..., c] = cacb * sc + sasb * cc
+    else:                                                      # eps = -1
+        out[..., 3] = cacb * cc + sasb * sc
+        out[..., a] = sacb * cc - casb * sc
+        out[..., b] = casb * cc + sacb * sc
+        out[..., c] = cacb * sc - sasb * cc
     return out
 
 
@@ -345,6 +350,23 @@ def quat_to_euler(order: str, q: np.ndarray) -> np.ndarray:
     q = np.asarray(q, dtype=np.float64)
     return Rotation.from_quat(q.reshape(-1, 4)).as_euler(o, degrees=True).reshape(
         q.shape[:-1] + (3,))
+
+
+def global_pose(local: np.ndarray) -> np.ndarray:
+    """(59, 4) parent-relative rotations -> global orientations (forward kinematics over
+    the Axis hierarchy, global_j = global_parent ⊗ local_j).  A plain loop over Python
+    floats: for one 59-joint frame it beats per-level numpy products several times."""
+    rows = local.tolist()
+    out: list = [None] * len(rows)
+    for j, p in enumerate(PARENTS):
+        if p < 0:
+            out[j] = rows[j]
+            continue
+        ax, ay, az, aw = out[p]
+        bx, by, bz, bw = rows[j]
+        out[j] = (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                  aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+    return np.array(out, dtype=np.float64)
 
 
 def to_pose(frame: AxisFrame, order: str = "YXZ", unit_scale: float = 0.01,

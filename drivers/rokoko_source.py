@@ -98,16 +98,17 @@ class RokokoAssembler:
             self._count("bad_values", actor.bad)
             self._log("bad", now, "Rokoko: %d bone rotation(s) of actor %r not unit "
                       "quaternions; marked invalid", actor.bad, actor.name)
-        q = actor.quats
-        q[~actor.valid] = self._last[~actor.valid]
+        q = actor.quats                     # a fresh array per payload, never changed later
+        if not actor.valid.all():
+            q[~actor.valid] = self._last[~actor.valid]
         self._last = q
-        frame = Frame(recv_time=now, quats=q.copy(), valid=actor.valid,
+        frame = Frame(recv_time=now, quats=q, valid=actor.valid,
                       source_time=pkt.timestamp, seq=self.seq,
                       root_position=actor.hip_position)
         self.seq += 1
         return [frame]
 
-    def flush(self, now: float) -> list[Frame]:
+    def flush(self, now: float, force: bool = False) -> list[Frame]:
         return []
 
 
