@@ -1,9 +1,12 @@
 """The live session: source -> ring buffer -> pose features -> online detectors -> cut events.
 
 The per-frame work (gaps, calibration, features, detectors) is ``rtseg.pipeline.Pipeline``;
-this module runs it in a threaded session and publishes what it finds.  The pipeline's
-names (``Pipeline``, ``PipelineCut``, ``make_detectors``, ``replay_frames``,
-``replay_session``) are re-exported here.
+this module runs it in a threaded session and publishes what it finds.  Where events go
+(publishers, which detectors' cuts go on the wire) is ``rtseg.outputs``; the counters and
+the summary are ``rtseg.session_stats``.  Their public names (``Pipeline``,
+``PipelineCut``, ``make_detectors``, ``replay_frames``, ``replay_session``,
+``build_publishers``, ``wire_methods``, ``LiveStats``, ``SessionSummary``) are re-exported
+here.
 
 Threads and data flow
 ---------------------
@@ -70,51 +73,28 @@ import logging
 import signal
 import threading
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from rtseg.config import ConfigError
-from rtseg.events import INPUT_COUNTERS, CutEvent, DropoutEvent, StatusEvent, input_text
+from rtseg.events import INPUT_COUNTERS, CutEvent, DropoutEvent, StatusEvent
+from rtseg.outputs import build_publishers, log_publishers, wire_methods
 from rtseg.pipeline import (DEFAULT_FRAME_RATE, Pipeline, PipelineCut, PipelineStats,
                             _blas_limit, detector_params, make_detectors, replay_frames,
                             replay_session)
 from rtseg.ringbuffer import RingBuffer
 from rtseg.session_config import SessionConfig, load_session_config
+from rtseg.session_stats import FloatRing, LiveStats, SessionSummary, percentile
 
 log = logging.getLogger("rtseg.live")
 
 Event = CutEvent | StatusEvent | DropoutEvent
 
-__all__ = ["DEFAULT_FRAME_RATE", "LiveSession", "LiveStats", "Pipeline", "PipelineCut",
-           "PipelineStats", "SessionSummary", "build_publishers", "detector_params",
-           "make_detectors", "replay_frames", "replay_session", "wire_methods", "with_suit"]
-
-
-def wire_methods(config: SessionConfig, methods: Iterable[str] | None = None
-                 ) -> tuple[str, frozenset[str]]:
-    """``(primary, methods whose cuts go to the OSC targets)`` for the running detectors
-    ``methods`` (default ``detectors.methods``).  ``detectors.primary`` "" means the first
-    method; ``output.cut_methods`` is "primary", "all" or a list.  A name that is not a
-    running detector is refused with a ConfigError naming the key."""
-    names = list(config["detectors.methods"] if methods is None else methods)
-    if not names:
-        raise ConfigError("detectors.methods: no detector to run")
-    primary = config["detectors.primary"] or names[0]
-    if primary not in names:
-        raise ConfigError(f"detectors.primary: {primary!r} is not among the detectors run "
-                          f"({', '.join(names)}; see detectors.methods)")
-    sel = config["output.cut_methods"]
-    if sel == "primary":
-        return primary, frozenset([primary])
-    if sel == "all":
-        return primary, frozenset(names)
-    unknown = [m for m in sel if m not in names]
-    if unknown:
-        raise ConfigError(f"output.cut_methods: {', '.join(map(repr, unknown))} not among the "
-                          f"detectors run ({', '.join(names)}; see detectors.methods)")
-    return primary, frozenset(sel)
+__all__ = ["DEFAULT_FRAME_RATE", "FloatRing", "LiveSession", "LiveStats", "Pipeline",
+           "PipelineCut", "PipelineStats", "SessionSummary", "build_publishers",
+           "detector_params", "make_detectors", "replay_frames", "replay_session",
+           "wire_methods", "with_suit"]
 
 
 def with_suit(url: str, suit: str) -> str:
@@ -129,147 +109,6 @@ def with_suit(url: str, suit: str) -> str:
                            and query.get("format", ["vmc"])[-1].lower() not in ("vmc", "")):
         return url      # a suit is named, or an OSC format without suits (vrchat)
     return url + ("&" if parts.query else "?") + f"suit={suit}"
-
-
-def build_publishers(config: SessionConfig) -> Any:
-    """A ``rtseg.publishers.PublisherSet`` for the config's ``output`` section.
-
-    A bad target is refused with a ``ConfigError`` naming the key (``output.osc[0]``)."""
-    from rtseg.publishers import PublisherSet, parse_target
-    templates = list(config["output.templates"])
-    specs: list[tuple[str, str, bool]] = []
-    specs += [(f"output.osc[{i}]", f"udp:{t}", True) for i, t in enumerate(config["output.osc"])]
-    specs += [(f"output.osc_tcp[{i}]", f"tcp:{t}", True)
-              for i, t in enumerate(config["output.osc_tcp"])]
-    specs += [(f"output.targets[{i}]", t, not (t.strip() == "-" or t.strip().startswith("jsonl:")))
-              for i, t in enumerate(config["output.targets"])]
-    if config["output.jsonl"]:
-        specs.append(("output.jsonl", "-" if config["output.jsonl"] == "-"
-                      else f"jsonl:{config['output.jsonl']}", False))
-    pubs = PublisherSet()
-    try:
-        for key, spec, is_osc in specs:
-            try:
-                pubs.add(parse_target(spec, templates if is_osc else None))
-            except (ValueError, OSError) as exc:
-                raise ConfigError(f"{key}: {exc}") from None
-    except BaseException:
-        pubs.close()
-        raise
-    return pubs
-
-
-# ============================================================================ live session
-class FloatRing:
-    """The last ``size`` floats appended, in a preallocated array: memory is fixed from the
-    start (a deque of Python floats grows by ~30 bytes per value until full, which a long
-    session would see as a leak).  Iterates oldest first; ``values()`` is that as an array."""
-
-    def __init__(self, size: int) -> None:
-        self._a = np.zeros(int(size), dtype=np.float64)
-        self._n = 0                    # values appended since the last clear
-
-    def append(self, v: float) -> None:
-        self._a[self._n % self._a.size] = v
-        self._n += 1
-
-    def clear(self) -> None:
-        self._n = 0
-
-    def __len__(self) -> int:
-        return min(self._n, self._a.size)
-
-    def values(self) -> np.ndarray:
-        n, size = self._n, self._a.size
-        if n <= size:
-            return self._a[:n].copy()
-        i = n % size
-        return np.concatenate((self._a[i:], self._a[:i]))
-
-    def __iter__(self):
-        return iter(self.values().tolist())
-
-
-@dataclass
-class LiveStats:
-    """Run-time counters of a live session (all since start)."""
-    frames_received: int = 0
-    frames_processed: int = 0
-    bad_frames: int = 0          # frames refused by the reader (wrong shape / type)
-    source_errors: int = 0       # exceptions raised by source.read (logged, retried)
-    overruns: int = 0            # frames overwritten in the ring before processing
-    record_errors: int = 0
-    publish_errors: int = 0
-    cuts: int = 0                # cuts of every detector (JSON lines, recording)
-    wire_cuts: int = 0           # of those, cuts sent to the OSC targets
-    cuts_by_method: dict[str, int] = field(default_factory=dict)
-    dropouts: int = 0
-    lag_s: float = 0.0           # age of the last frame processed, s
-    max_lag_s: float = 0.0
-    backlog: int = 0
-    max_backlog: int = 0
-    lag_warnings: int = 0
-    last_cut: CutEvent | None = None
-    cut_latency_ms: FloatRing = field(default_factory=lambda: FloatRing(100_000))
-    frame_latency_ms: FloatRing = field(default_factory=lambda: FloatRing(200_000))
-
-
-@dataclass
-class SessionSummary:
-    """What ``LiveSession.run()`` returns (also logged and printed by the CLI)."""
-    duration_s: float
-    frames_received: int
-    frames_processed: int
-    frame_rate: float
-    cuts: int
-    cuts_by_method: dict[str, int]
-    dropped: int
-    source_stats: dict[str, int]
-    pipeline: dict[str, int]
-    overruns: int
-    bad_frames: int
-    max_lag_ms: float
-    cut_latency_ms_p50: float | None
-    cut_latency_ms_p99: float | None
-    recording: str | None
-    stop_reason: str
-    wire_cuts: int = 0
-    input: dict[str, int] = field(default_factory=dict)
-
-    def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    def text(self) -> str:
-        lat = ("-" if self.cut_latency_ms_p50 is None else
-               f"{self.cut_latency_ms_p50:.2f}/{self.cut_latency_ms_p99:.2f} ms (p50/p99)")
-        methods = ", ".join(f"{k} {v}" for k, v in self.cut_latency_items()) or "none"
-        return (f"session ended ({self.stop_reason}) after {self.duration_s:.1f} s: "
-                f"{self.frames_received} frames received ({self.frame_rate:.1f}/s), "
-                f"{self.frames_processed} processed, {self.dropped} dropped, "
-                f"{input_text(self.input)}, "
-                f"{self.cuts} cuts ({methods}; {self.wire_cuts} sent over OSC), "
-                f"processing latency {lat}, "
-                f"max lag {self.max_lag_ms:.1f} ms"
-                + (f", recording {self.recording}" if self.recording else ""))
-
-    def cut_latency_items(self) -> list[tuple[str, int]]:
-        return sorted(self.cuts_by_method.items())
-
-
-def _log_publishers(publishers: Any) -> Callable[[CutEvent], None] | None:
-    """Where cuts kept off the wire go: the JSON-lines publishers of a ``PublisherSet``, or
-    a custom publisher's ``publish_log_cut(ev)`` if it has one (else nowhere but the
-    recording and the listeners)."""
-    from rtseg.publishers import JsonlPublisher, PublisherSet
-    if isinstance(publishers, PublisherSet):
-        logs = PublisherSet([p for p in publishers.publishers if isinstance(p, JsonlPublisher)])
-        return logs.publish_cut if len(logs) else None
-    return getattr(publishers, "publish_log_cut", None)
-
-
-def _percentile(values: Iterable[float], p: float) -> float | None:
-    a = values.values() if isinstance(values, FloatRing) else np.fromiter(values, dtype=np.float64)
-    return float(np.percentile(a, p)) if a.size else None
 
 
 class LiveSession:
@@ -362,7 +201,7 @@ class LiveSession:
         self.ring = RingBuffer(int(self.config["buffer.capacity"]), J * 4, valid_width=J)
         if self.publishers is None:
             self.publishers = build_publishers(self.config)
-        self._log_pubs = _log_publishers(self.publishers)
+        self._log_pubs = log_publishers(self.publishers)
         if self.recorder is None and self.config["recording.dir"]:
             from rtseg.recording import SessionRecorder
             url = (self._source_arg if isinstance(self._source_arg, str)
@@ -696,8 +535,8 @@ class LiveSession:
             source_stats=src_stats,
             pipeline=asdict(self.pipeline.stats) if self.pipeline else {},
             overruns=st.overruns, bad_frames=st.bad_frames, max_lag_ms=st.max_lag_s * 1000.0,
-            cut_latency_ms_p50=_percentile(st.cut_latency_ms, 50),
-            cut_latency_ms_p99=_percentile(st.cut_latency_ms, 99),
+            cut_latency_ms_p50=percentile(st.cut_latency_ms, 50),
+            cut_latency_ms_p99=percentile(st.cut_latency_ms, 99),
             recording=str(rec) if rec else None,
             stop_reason=self.stop_reason, wire_cuts=st.wire_cuts,
             input=self.input_counts() if self.pipeline is not None else {})

@@ -1,0 +1,118 @@
+"""Run-time counters of a live session and the summary ``LiveSession.run()`` returns.
+
+Times: ``lag_s`` seconds; latencies in milliseconds (``FloatRing``s of the most recent
+values, fixed memory).  ``SessionSummary.text()`` is the one-paragraph report the CLI
+prints (frames, drops, input counters, cuts per method and on the wire, latency, lag).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any, Iterable
+
+import numpy as np
+
+from rtseg.events import CutEvent, input_text
+
+__all__ = ["FloatRing", "LiveStats", "SessionSummary", "percentile"]
+
+
+class FloatRing:
+    """The last ``size`` floats appended, in a preallocated array: memory is fixed from the
+    start (a deque of Python floats grows by ~30 bytes per value until full, which a long
+    session would see as a leak).  Iterates oldest first; ``values()`` is that as an array."""
+
+    def __init__(self, size: int) -> None:
+        self._a = np.zeros(int(size), dtype=np.float64)
+        self._n = 0                    # values appended since the last clear
+
+    def append(self, v: float) -> None:
+        self._a[self._n % self._a.size] = v
+        self._n += 1
+
+    def clear(self) -> None:
+        self._n = 0
+
+    def __len__(self) -> int:
+        return min(self._n, self._a.size)
+
+    def values(self) -> np.ndarray:
+        n, size = self._n, self._a.size
+        if n <= size:
+            return self._a[:n].copy()
+        i = n % size
+        return np.concatenate((self._a[i:], self._a[:i]))
+
+    def __iter__(self):
+        return iter(self.values().tolist())
+
+
+@dataclass
+class LiveStats:
+    """Run-time counters of a live session (all since start)."""
+    frames_received: int = 0
+    frames_processed: int = 0
+    bad_frames: int = 0          # frames refused by the reader (wrong shape / type)
+    source_errors: int = 0       # exceptions raised by source.read (logged, retried)
+    overruns: int = 0            # frames overwritten in the ring before processing
+    record_errors: int = 0
+    publish_errors: int = 0
+    cuts: int = 0                # cuts of every detector (JSON lines, recording)
+    wire_cuts: int = 0           # of those, cuts sent to the OSC targets
+    cuts_by_method: dict[str, int] = field(default_factory=dict)
+    dropouts: int = 0
+    lag_s: float = 0.0           # age of the last frame processed, s
+    max_lag_s: float = 0.0
+    backlog: int = 0
+    max_backlog: int = 0
+    lag_warnings: int = 0
+    last_cut: CutEvent | None = None
+    cut_latency_ms: FloatRing = field(default_factory=lambda: FloatRing(100_000))
+    frame_latency_ms: FloatRing = field(default_factory=lambda: FloatRing(200_000))
+
+
+@dataclass
+class SessionSummary:
+    """What ``LiveSession.run()`` returns (also logged and printed by the CLI)."""
+    duration_s: float
+    frames_received: int
+    frames_processed: int
+    frame_rate: float
+    cuts: int
+    cuts_by_method: dict[str, int]
+    dropped: int
+    source_stats: dict[str, int]
+    pipeline: dict[str, int]
+    overruns: int
+    bad_frames: int
+    max_lag_ms: float
+    cut_latency_ms_p50: float | None
+    cut_latency_ms_p99: float | None
+    recording: str | None
+    stop_reason: str
+    wire_cuts: int = 0
+    input: dict[str, int] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    def text(self) -> str:
+        lat = ("-" if self.cut_latency_ms_p50 is None else
+               f"{self.cut_latency_ms_p50:.2f}/{self.cut_latency_ms_p99:.2f} ms (p50/p99)")
+        methods = ", ".join(f"{k} {v}" for k, v in self.cut_latency_items()) or "none"
+        return (f"session ended ({self.stop_reason}) after {self.duration_s:.1f} s: "
+                f"{self.frames_received} frames received ({self.frame_rate:.1f}/s), "
+                f"{self.frames_processed} processed, {self.dropped} dropped, "
+                f"{input_text(self.input)}, "
+                f"{self.cuts} cuts ({methods}; {self.wire_cuts} sent over OSC), "
+                f"processing latency {lat}, "
+                f"max lag {self.max_lag_ms:.1f} ms"
+                + (f", recording {self.recording}" if self.recording else ""))
+
+    def cut_latency_items(self) -> list[tuple[str, int]]:
+        return sorted(self.cuts_by_method.items())
+
+
+def percentile(values: Iterable[float], p: float) -> float | None:
+    a = values.values() if isinstance(values, FloatRing) else np.fromiter(values, dtype=np.float64)
+    return float(np.percentile(a, p)) if a.size else None
