@@ -257,7 +257,9 @@ def test_faults_session_survives_and_records_every_frame(tmp_path, take, corrupt
     rec = tmp_path / "session"
     osc = OscCollector()
     play_s = take.n_frames / (RATE * SPEED)
-    faults = f"corrupt={corrupt},unplug={0.55 * play_s:.2f}:0.4,seed=7"
+    # unplugged 0.8 s: longer than gaps.dropout_seconds (0.5) plus the reader's reconnect
+    # back-off, so the source dropout is always reported (0.4 s was borderline)
+    faults = f"corrupt={corrupt},unplug={0.55 * play_s:.2f}:0.8,seed=7"
     suit = SerialSuit(take, rate=RATE * SPEED, faults=faults)
     try:
         path = suit.start()
