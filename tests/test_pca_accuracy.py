@@ -10,7 +10,7 @@ import pytest
 from rtseg.config import ConfigError
 from rtseg.detectors import make_online, method_params, segment_features
 from rtseg.detectors.base import Cut
-from rtseg.detectors.pca import cut_contrast, merge_passes, verify_cuts
+from rtseg.detectors.pca_scan import cut_contrast, merge_passes, verify_cuts
 
 FPS = 120.0
 
@@ -132,7 +132,7 @@ def test_bad_scan_windows_are_rejected(value):
 
 
 def test_scan_contrast_peaks_at_the_change_and_stays_low_inside_behaviours():
-    from rtseg.detectors.pca import contrast_profile, scan_cuts
+    from rtseg.detectors.pca_scan import contrast_profile, scan_cuts
     X, la = two_behaviours(5, la=2400, lb=2400)
     f, k = contrast_profile(X, [300, 360, 420], 10, 0.9)
     assert f[0] == 300 and np.all(np.diff(f) == 10)      # from the shortest window
@@ -168,7 +168,7 @@ def test_scan_on_few_noise_like_dims_has_no_false_cuts(dim):
 
 
 def test_scan_falls_back_to_the_verified_variant_on_a_short_take(monkeypatch):
-    import rtseg.detectors.pca as pca_mod
+    import rtseg.detectors.pca_scan as pca_mod
     X, la = two_behaviours(6, la=320, lb=320)      # 640 frames: no position has an outer window
     assert pca_mod.scan_cuts(X, [300, 360, 420], 10, 2.0, 0.9) is None
     checked = []
@@ -187,7 +187,7 @@ def test_scan_falls_back_to_the_verified_variant_on_a_short_take(monkeypatch):
 
 
 def test_refine_moves_a_late_cut_to_the_change():
-    from rtseg.detectors.pca import refine_cuts
+    from rtseg.detectors.pca_scan import refine_cuts
     for seed in range(3):
         X, la = two_behaviours(seed)
         cuts = [Cut(la + 45, "pca", 0.8, la + 45), Cut(la - 700, "pca", 0.3, la - 700)]
@@ -213,7 +213,7 @@ def test_scan_windows_are_put_on_the_step_grid():
 
 
 def test_scan_windows_shorter_than_two_frames_are_a_clear_error():
-    from rtseg.detectors.pca import contrast_profile
+    from rtseg.detectors.pca_scan import contrast_profile
     X, _ = two_behaviours(8, la=600, lb=600)
     with pytest.raises(ValueError, match="scan windows must be >= 2 frames"):
         contrast_profile(X, [1, 300], 10, 0.9)

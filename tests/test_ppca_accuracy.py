@@ -11,7 +11,8 @@ import pytest
 from rtseg.config import ConfigError
 from rtseg.detectors import method_params, segment_features
 from rtseg.detectors.base import Cut
-from rtseg.detectors.ppca import cut_contrast, fit_ppca, mean_distance, verify_cuts
+from rtseg.detectors.ppca_distance import cut_contrast, fit_ppca, mean_distance
+from rtseg.detectors.ppca_offline import verify_cuts
 
 FPS = 120.0
 
@@ -81,7 +82,7 @@ def test_scan_places_changes_between_the_forward_and_backward_peaks():
 def test_localise_blends_the_passes_estimate_with_the_anchor():
     """anchor_weight w: (1 - w) x the passes' estimate + w x the anchor; 0 is the passes
     alone, 1 the anchor alone; a change no pass peak is near goes to its anchor."""
-    from rtseg.detectors.ppca import localise_cuts
+    from rtseg.detectors.ppca_offline import localise_cuts
     X, la = blended_take(5)
     args = dict(T=150, delta=10)
     passes = localise_cuts(X, [la], args, reach=150)[0]
@@ -101,7 +102,7 @@ def test_localise_blends_the_passes_estimate_with_the_anchor():
 
 
 def test_scan_cuts_reports_local_maxima_above_the_threshold_one_window_apart():
-    from rtseg.detectors.ppca import contrast_profile, scan_cuts
+    from rtseg.detectors.ppca_offline import contrast_profile, scan_cuts
     rng = np.random.default_rng(4)
     dim = 12
     parts = [stationary(rng, 1200, dim, 0.6 * rng.normal(size=dim)) for _ in range(3)]

@@ -254,20 +254,21 @@ def scan_profiles(X: np.ndarray, frame_rate: float,
     variant scans (PCA "scan", PPCA "verified"): ``{method: {"frame": frames, "contrast":
     values (inf where nothing can be checked), "threshold": min_contrast}}``."""
     from rtseg.detectors import method_params
-    from rtseg.detectors import pca as pca_mod
-    from rtseg.detectors import ppca as ppca_mod
+    from rtseg.detectors import pca_scan
+    from rtseg.detectors import ppca_offline
     X = np.asarray(X, dtype=np.float64)
     out: dict[str, dict[str, Any]] = {}
     if "pca" in params:
         p = method_params("pca", params["pca"])
         if p["variant"] == "scan":
-            f, k = pca_mod.contrast_profile(X, *pca_mod.scan_windows(p, frame_rate), p["energy"])
+            f, k = pca_scan.contrast_profile(X, *pca_scan.scan_windows(p, frame_rate), p["energy"])
             out["pca"] = {"frame": f, "contrast": k, "threshold": float(p["min_contrast"])}
     if "ppca" in params:
         p = method_params("ppca", params["ppca"])
         if p["variant"] == "verified":
-            f, k = ppca_mod.contrast_profile(X, *ppca_mod.scan_window(p, frame_rate), p["energy"],
-                                             p["noise_floor"], p["null_rel"], p["distance"])
+            f, k = ppca_offline.contrast_profile(
+                X, *ppca_offline.scan_window(p, frame_rate), p["energy"], p["noise_floor"],
+                p["null_rel"], p["distance"])
             out["ppca"] = {"frame": f, "contrast": k, "threshold": float(p["min_contrast"])}
     return out
 

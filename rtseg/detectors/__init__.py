@@ -1,10 +1,12 @@
 """The three detectors of Barbič et al. 2004 and their parameters.
 
 - ``pca``  (online): cut where the PCA projection error of the current segment starts to grow
-  faster than before (``rtseg.detectors.pca``).
-- ``ppca`` (online, plus backward passes offline): cut at a peak of the mean Mahalanobis
-  distance of the next T frames to a probabilistic-PCA model of the segment so far
-  (``rtseg.detectors.ppca``).
+  faster than before (``rtseg.detectors.pca``); offline the two-sided contrast scan with the
+  PCA window distance (``pca_scan``, ``pca_distance``).
+- ``ppca`` (online): cut at a peak of the mean Mahalanobis distance of the next T frames to
+  a probabilistic-PCA model of the segment so far (``rtseg.detectors.ppca``); offline the
+  two-sided contrast scan with the PPCA window distance, placed by forward/backward passes
+  (``ppca_offline``, ``ppca_distance``).
 - ``gmm``  (batch): cut where consecutive frames change Gaussian-mixture cluster
   (``rtseg.detectors.gmm``).
 - ``contrast`` (online, rtseg's own; the default of ``rtseg live``): cut at a causal maximum
@@ -207,10 +209,10 @@ def segment_features(X: np.ndarray, method: str, frame_rate: float,
         from rtseg.detectors.contrast import segment_contrast
         cuts, trace = segment_contrast(X, p, frame_rate, keep_trace=keep_trace)
     elif method == "pca":
-        from rtseg.detectors.pca import segment_pca
+        from rtseg.detectors.pca_scan import segment_pca
         cuts, trace = segment_pca(X, p, frame_rate, keep_trace=keep_trace)
     elif method == "ppca":
-        from rtseg.detectors.ppca import segment_ppca
+        from rtseg.detectors.ppca_offline import segment_ppca
         cuts, trace = segment_ppca(X, p, frame_rate, keep_trace=keep_trace)
     else:
         from rtseg.detectors.gmm import GMMDetector

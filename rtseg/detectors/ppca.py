@@ -42,22 +42,16 @@ its top eigenvectors are tracked by one warm-started subspace-iteration step per
 full 56x56 eigen-decomposition at each segment start and every 8 steps.  H costs one
 (T x d) @ (d x r) product per step.
 
-Offline verification (``segment_ppca``, ``variant = "verified"``, not in the paper).  The
-forward/backward passes over-segment behaviours whose cycle is longer than T (alternating-
-side exercises: toe touches, knee raises): H peaks when the model of one side meets the
-other.  Each candidate cut c is therefore checked with the paper's own symmetric distance
-(Fig. 6: the larger of the two mean Mahalanobis distances between two windows, each scored
-against the other's PPCA model), on windows of W = ``verify_window_s`` (3 s, longer than
-the cycles of such exercises) before and after c, and compared with the same distance
-between consecutive W windows on either side (c-2W..c-W vs c-W..c, c..c+W vs c+W..c+2W).
-The cut is kept when the change at c is at least ``min_contrast`` (1.15) times the mean of
-those two (a behaviour boundary is a larger change than the within-behaviour drift next to
-it) and no stronger kept cut lies within W (whose windows would straddle it).  The online detector (``PPCADetector``) is the paper's forward pass, unverified.
-
 Frames are numbered from the detector's creation.  ``Cut.frame`` = first frame of the new
 segment (the K of the peak), ``detected_at`` = the frame whose arrival confirmed the peak,
 so the delay is T + (a few) Delta frames; ``score`` = peak - valley; ``confidence`` =
 1 - R / (peak - valley).
+
+``VerifiedPPCADetector`` (``online_verify = true``, not in the paper) holds each cut of the
+forward pass and applies the offline two-sided check before reporting it.  The offline
+strategies live beside this module: the window models and their distance in
+``rtseg.detectors.ppca_distance``, the contrast scan, the passes and the placement
+(``segment_ppca``) in ``rtseg.detectors.ppca_offline``.
 """
 
 from __future__ import annotations
@@ -69,8 +63,8 @@ from typing import Any, Mapping
 import numpy as np
 
 from rtseg.detectors._linalg import full_eigh, rank_for_energy, subspace_step
-from rtseg.detectors._scan import local_maxima, on_grid, window_contrast
 from rtseg.detectors.base import Cut, OnlineDetector
+from rtseg.detectors.ppca_distance import cut_contrast
 
 log = logging.getLogger(__name__)
 
@@ -268,90 +262,6 @@ class PPCADetector(OnlineDetector):
         self._reset_model()
 
 
-# ---------------------------------------------------------------------- two-sided check
-def fit_ppca(X: np.ndarray, tau: float, noise_floor: float = 1e-6,
-             null_rel: float = 1e-15) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Batch PPCA model (mean, V_r, kept variances, sigma^2) of the rows of X, with the same
-    rules as the online model: r from E_r > tau, sigma^2 over the non-null discarded dims,
-    both floored at ``noise_floor`` (feature units^2)."""
-    X = np.asarray(X, dtype=np.float64)
-    if len(X) < 2:
-        raise ValueError(f"a PPCA model needs at least 2 frames, got {len(X)}")
-    m = X.mean(axis=0)
-    Z = X - m
-    S = Z.T @ Z
-    trace = float(np.trace(S))
-    lam, V = full_eigh(S)
-    d = S.shape[0]
-    nullity = int(np.count_nonzero(lam <= null_rel * max(trace, 1e-300)))
-    r = max(1, min(rank_for_energy(lam, trace, tau), d - nullity, len(lam)))
-    var = 1.0 / (len(X) - 1)
-    free = d - nullity - r
-    s2 = (trace - float(lam[:r].sum())) * var / free if free > 0 else 0.0
-    s2 = max(s2, noise_floor, 1e-300)
-    return m, V[:, :r], np.maximum(lam[:r] * var, s2), s2
-
-
-def mean_distance(model: tuple[np.ndarray, np.ndarray, np.ndarray, float], Y: np.ndarray,
-                  distance: str = "mean") -> float:
-    """H of the rows of Y under ``model`` (Eq. 10): mean Mahalanobis distance ("mean") or
-    mean squared distance ("mean_sq")."""
-    m, Vr, lam_r, s2 = model
-    Z = Y - m
-    P = Z @ Vr
-    P2 = P * P
-    q = (P2 / lam_r).sum(axis=1) + (np.einsum("ij,ij->i", Z, Z) - P2.sum(axis=1)) / s2
-    np.maximum(q, 0.0, out=q)
-    return float(np.sqrt(q).mean() if distance == "mean" else q.mean())
-
-
-def cut_contrast(X: np.ndarray, c: int, W: int, tau: float, noise_floor: float = 1e-6,
-                 null_rel: float = 1e-15, distance: str = "mean") -> float:
-    """How much more the motion changes at frame c than just before and just after it.
-
-    With A = X[c-W:c], B = X[c:c+W], A0 = X[c-2W:c-W], B2 = X[c+W:c+2W] (W frames each,
-    cut short by the take's ends):
-    contrast = D(A, B) / mean(D(A0, A), D(B, B2)), D the symmetric distance
-    max(H(B|A), H(A|B)).  A true behaviour change makes D(A, B) larger than the change
-    between consecutive windows of the same behaviour on either side (> 1); a cut inside a
-    behaviour whose cycle is shorter than W (alternating-side exercises) does not (~1 or
-    less).  Outer windows shorter than W (take ends) are left out; when both are, the
-    contrast is +inf (the cut cannot be checked and is kept).
-    """
-    return _WindowModels(np.asarray(X, dtype=np.float64), tau, noise_floor, null_rel,
-                         distance).contrast(int(c), int(W))
-
-
-def verify_cuts(X: np.ndarray, cuts: list[Cut], W: int, min_contrast: float, tau: float,
-                noise_floor: float = 1e-6, null_rel: float = 1e-15,
-                distance: str = "mean") -> list[Cut]:
-    """The cuts that pass the two-sided check, sorted by frame.
-
-    A cut is kept when its ``cut_contrast`` (windows of W frames) is at least
-    ``min_contrast`` and no stronger kept cut lies within W frames of it: cuts are accepted
-    in decreasing contrast, and a weaker cut closer than W to an accepted one is dropped,
-    because its windows straddle that stronger change and its test is not valid (this also
-    merges double cuts around one transition).  Behaviours shorter than W are therefore
-    not separated from their neighbours by this check.
-    """
-    scored = []
-    for c in cuts:
-        k = cut_contrast(X, c.frame, W, tau, noise_floor, null_rel, distance)
-        if k >= min_contrast:
-            scored.append((k, c))
-        else:
-            log.debug("ppca: cut at frame %d dropped, contrast %.2f < %.2f",
-                      c.frame, k, min_contrast)
-    kept: list[Cut] = []
-    for k, c in sorted(scored, key=lambda kc: (-kc[0], kc[1].frame)):
-        if all(abs(c.frame - o.frame) >= W for o in kept):
-            kept.append(c)
-        else:
-            log.debug("ppca: cut at frame %d dropped, within %d frames of a stronger cut",
-                      c.frame, W)
-    return sorted(kept, key=lambda c: c.frame)
-
-
 class VerifiedPPCADetector(OnlineDetector):
     """Online PPCA forward pass whose cuts are checked two-sided before they are reported.
 
@@ -450,187 +360,3 @@ class VerifiedPPCADetector(OnlineDetector):
         self._last = c.frame
         return Cut(frame=c.frame, method=self.name, confidence=c.confidence, detected_at=t,
                    score=c.score)
-
-
-class _WindowModels:
-    """PPCA fits and mean distances of windows X[lo:hi], each computed once (windows recur:
-    the "after" window of one scan position is the "before" window of the next but W)."""
-
-    def __init__(self, X: np.ndarray, tau: float, noise_floor: float, null_rel: float,
-                 distance: str) -> None:
-        self.X, self.args, self.distance = X, (tau, noise_floor, null_rel), distance
-        self._fits: dict[tuple[int, int], tuple] = {}
-        self._h: dict[tuple[int, int, int, int], float] = {}
-
-    def _fit(self, w: tuple[int, int]) -> tuple:
-        m = self._fits.get(w)
-        if m is None:
-            m = self._fits[w] = fit_ppca(self.X[w[0]:w[1]], *self.args)
-        return m
-
-    def sym(self, a: tuple[int, int], b: tuple[int, int]) -> float:
-        """D(a, b) = max(H(b | model of a), H(a | model of b)): the paper's Fig. 6 symmetric
-        distance between windows a and b (``(lo, hi)`` frame ranges)."""
-        key = a + b
-        d = self._h.get(key)
-        if d is None:
-            d = self._h[key] = max(
-                mean_distance(self._fit(a), self.X[b[0]:b[1]], self.distance),
-                mean_distance(self._fit(b), self.X[a[0]:a[1]], self.distance))
-        return d
-
-    def contrast(self, c: int, W: int) -> float:
-        """``cut_contrast(X, c, W, ...)``, with the fits shared between calls."""
-        return window_contrast(self.sym, len(self.X), c, W)
-
-
-def contrast_profile(X: np.ndarray, W: int, step: int, tau: float, noise_floor: float = 1e-6,
-                     null_rel: float = 1e-15,
-                     distance: str = "mean") -> tuple[np.ndarray, np.ndarray]:
-    """``cut_contrast`` at every ``step``-th frame c from W to n - W/2.
-
-    The scan starts once a whole window precedes c (a window cut short by the start of the
-    take has a narrower model, which alone inflates the contrast; the forward pass likewise
-    tests nothing in its first T frames) and ends where the window after c would be shorter
-    than W/2.  Returns (frames, contrast); +inf where the check is impossible (no outer
-    window: takes shorter than 3 W).  Windows fall on the grid of ``step`` frames,
-    so each W-frame window is fitted once: cost ~ (n / step) PPCA fits of W x d windows."""
-    X = np.asarray(X, dtype=np.float64)
-    h = max(2, W // 2)
-    frames_ = np.arange(W, len(X) - h + 1, max(1, int(step)))
-    models = _WindowModels(X, tau, noise_floor, null_rel, distance)
-    return frames_, np.array([models.contrast(int(c), W) for c in frames_], dtype=float)
-
-
-def scan_window(p: Mapping[str, Any], frame_rate: float) -> tuple[int, int]:
-    """(W, step) of the offline scan in frames for parameters ``p`` (``verify_window_s``,
-    ``step_s`` = Delta), W rounded to whole steps."""
-    from rtseg.detectors import frames
-    step = frames(p["step_s"], frame_rate)
-    return on_grid(frames(p["verify_window_s"], frame_rate), step), step
-
-
-def scan_cuts(X: np.ndarray, W: int, step: int, min_contrast: float, tau: float,
-              noise_floor: float = 1e-6, null_rel: float = 1e-15,
-              distance: str = "mean") -> list[tuple[int, float]] | None:
-    """(frame, contrast) of the local maxima of ``contrast_profile`` that reach
-    ``min_contrast``, at least W frames apart (a higher maximum wins), sorted by frame.
-    None when no position of the take can be checked (see ``contrast_profile``)."""
-    frames_, k = contrast_profile(X, W, step, tau, noise_floor, null_rel, distance)
-    return local_maxima(frames_, k, min_contrast, W)
-
-
-def localise_cuts(X: np.ndarray, frames_: list[int], det_args: dict[str, Any],
-                  reach: int, anchors: list[int] | None = None,
-                  anchor_weight: float = 0.0) -> list[int]:
-    """Each change placed at the mean of the nearest forward-pass and backward-pass peak,
-    optionally blended with a second estimate of its position.
-
-    For a change near frame c between its neighbours p and q (or the take's ends), the
-    paper's forward pass over X[p:q] and its backward pass over the reversed X[p:q] each
-    propose cuts; the forward peak marks where the new motion starts to differ from the
-    old behaviour's model (the start of the transition), the backward peak where the old
-    motion starts to differ from the new one's (its end), so their mean is the middle of
-    the transition, where labels put it.  Only peaks within ``reach`` frames of c count; with
-    one of the two, the passes' estimate is that peak; with neither, c stays (or moves to
-    its anchor when ``anchor_weight`` > 0).
-
-    ``anchors`` (one frame per change, e.g. the contrast maximum of ``scan_cuts``): the
-    result is ``(1 - anchor_weight) * passes' estimate + anchor_weight * anchor``.  Two
-    estimates with independent errors average to a smaller error than either.  One frame
-    per input frame."""
-    n = len(X)
-    if anchors is not None and len(anchors) != len(frames_):
-        raise ValueError(f"{len(anchors)} anchors for {len(frames_)} changes")
-    if not 0.0 <= anchor_weight <= 1.0:
-        raise ValueError(f"anchor_weight must be in [0, 1], got {anchor_weight}")
-    w = float(anchor_weight) if anchors is not None else 0.0
-    bounds = [0] + list(frames_) + [n]
-    out = []
-    for i, c in enumerate(frames_):
-        lo, hi = bounds[i], bounds[i + 2]
-        seg = X[lo:hi]
-        fwd = [lo + k.frame for k in _pass(seg, det_args)]
-        bwd = [hi - k.frame for k in _pass(seg[::-1], det_args)]
-        near = [min(side, key=lambda f: abs(f - c)) for side in (fwd, bwd) if side]
-        near = [f for f in near if abs(f - c) <= reach]
-        est = float(np.mean(near)) if near else float(c)
-        if w > 0.0:
-            est = (1.0 - w) * est + w * anchors[i] if near else float(anchors[i])
-        out.append(int(round(est)))
-    return out
-
-
-def _pass(X: np.ndarray, det_args: dict[str, Any]) -> list[Cut]:
-    if len(X) < 2 * det_args["T"] + det_args["delta"]:
-        return []
-    return PPCADetector(**det_args).run(X)
-
-
-def segment_ppca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
-                 keep_trace: bool = False) -> tuple[list[Cut], list]:
-    """Offline PPCA.
-
-    ``variant = "paper"`` (Barbič et al. 2004 as published): forward pass, then backward,
-    forward, ... within the segments found so far, until a pass adds no cut (at most
-    ``max_passes``).  Cuts of the first (forward) pass keep their online ``detected_at``;
-    cuts added by later passes are batch results (``detected_at == frame``).
-
-    ``variant = "verified"`` (default): the changes are the local maxima of the two-sided
-    contrast (``scan_cuts``: ``cut_contrast`` with windows of ``verify_window_s`` every
-    ``step_s``, kept when >= ``min_contrast``, at least one window apart), i.e. the frames
-    where the motion before and after differ more than consecutive windows on either side
-    do; each starts from the alternating passes' nearest cut within W/2 (if any) and is
-    then placed by the paper's own passes (``localise_cuts``: the mean of the nearest
-    forward and backward peak within T).  On a take too short for any contrast (< about
-    3 windows) the alternating passes' cuts are checked with ``verify_cuts`` instead.
-    ``detected_at == frame`` (batch).
-
-    The trace is the first forward pass's (H and its threshold, for plotting).
-    """
-    from rtseg.detectors import frames
-    args = dict(T=frames(p["window_s"], frame_rate), delta=frames(p["step_s"], frame_rate),
-                tau=p["energy"], R=p["peak_threshold"], distance=p["distance"],
-                noise_floor=p["noise_floor"], null_rel=p["null_rel"],
-                reference_dims=p["reference_dims"])
-    X = np.asarray(X, dtype=np.float64)
-    n = len(X)
-    first = PPCADetector(keep_trace=keep_trace, **args)
-    cuts: dict[int, Cut] = {c.frame: c for c in first.run(X)}
-    backward = True
-    for _ in range(int(p["max_passes"]) - 1):
-        bounds = [0] + sorted(cuts) + [n]
-        new: list[Cut] = []
-        for a, b in zip(bounds[:-1], bounds[1:]):
-            seg = X[a:b][::-1] if backward else X[a:b]
-            for c in _pass(seg, args):
-                f = b - c.frame if backward else a + c.frame
-                new.append(Cut(frame=f, method="ppca", confidence=c.confidence,
-                               detected_at=f, score=c.score))
-        if not new:
-            break
-        for c in new:
-            cuts.setdefault(c.frame, c)
-        backward = not backward
-    out = sorted(cuts.values(), key=lambda c: c.frame)
-    if p.get("variant", "verified") != "verified":
-        return out, first.trace
-    W = scan_window(p, frame_rate)[0]
-    check = (args["tau"], args["noise_floor"], args["null_rel"], args["distance"])
-    found = scan_cuts(X, W, args["delta"], float(p["min_contrast"]), *check)
-    if found is None:   # too short to scan: check the passes' cuts where possible
-        return verify_cuts(X, out, W, float(p["min_contrast"]), *check), first.trace
-    # each change starts from the passes' nearest cut (a peak of H) within W/2, if any:
-    # the contrast maximum only places it to within a fraction of its 3 s windows
-    starts = []
-    for f, _ in found:
-        near = [c.frame for c in out if abs(c.frame - f) <= W // 2]
-        starts.append(min(near, key=lambda g: abs(g - f)) if near else f)
-    at = localise_cuts(X, starts, args, reach=args["T"], anchors=[f for f, _ in found],
-                       anchor_weight=float(p.get("scan_weight", 0.0)))
-    placed: dict[int, Cut] = {}
-    for f, (_, k) in zip(at, found):
-        if f not in placed or k > placed[f].score:
-            placed[f] = Cut(frame=f, method="ppca", detected_at=f, score=k,
-                            confidence=min(max(1.0 - float(p["min_contrast"]) / k, 0.0), 1.0))
-    return sorted(placed.values(), key=lambda c: c.frame), first.trace
