@@ -21,7 +21,7 @@ from pythonosc.osc_message import OscMessage
 
 from rtseg.config import ConfigError
 from rtseg.live import LiveSession, wire_methods
-from rtseg.recording import read_session_cuts
+from rtseg.recording import read_session_cuts, read_session_header
 from rtseg.session_config import from_dict
 
 SCRIPT = "idle:4,walk:5,punch:5"          # changes at frames 480 and 1080 (120 Hz)
@@ -81,6 +81,8 @@ def run_session(tmp_path: Path, **output) -> tuple[LiveSession, UdpReceiver, lis
     # the recording's cut log is the JSON-lines log's cuts, wire flags included
     assert [(c.method, c.frame, c.wire) for c in read_session_cuts(rec)] == \
         [(c["method"], c["frame"], c["wire"]) for c in cuts]
+    meta = read_session_header(rec)["meta"]         # the recording says what went out
+    assert meta["primary"] == session.primary and set(meta["wire_methods"]) == session.wire
     return session, rx, cuts
 
 
