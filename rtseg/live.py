@@ -118,7 +118,10 @@ class LiveSession:
     config: a ``SessionConfig`` (default: ``config/live.toml``).
     publishers: object with ``publish_cut(ev) -> ev``, ``publish_status(ev)``,
         ``publish_dropout(ev)`` and ``close()`` (default: ``build_publishers(config)``, a
-        ``rtseg.publishers.PublisherSet``); recorder: object with ``record_frame(frame)``,
+        ``rtseg.publishers.PublisherSet``).  ``publish_cut`` gets the cuts that go on the
+        wire (``wire_methods``); the others go to a ``PublisherSet``'s JSON-lines targets,
+        or to a custom object's ``publish_log_cut(ev)`` if it has one, and always to the
+        recorder and the listeners.  recorder: object with ``record_frame(frame)``,
         ``record_cut(ev)``, ``record_event(ev)``, ``close()`` (default: a
         ``rtseg.recording.SessionRecorder`` when ``recording.dir`` is set).
     listeners: callables given every event after it is published (the CLI prints them).
