@@ -175,8 +175,11 @@ def decode_binary(data: bytes, joints: int = len(JOINTS)) -> AxisFrame:
         raise AxisError("bad_messages", f"{count} values with displacement={disp}, "
                         f"reference={ref}: expected {want} for {joints} joints")
     values = np.frombuffer(data, dtype="<f4", count=count, offset=HEADER.size)
-    with np.errstate(invalid="ignore"):       # signalling NaNs stay NaN, quietly
+    if np.isfinite(values).all():
         values = values.astype(np.float64)
+    else:
+        with np.errstate(invalid="ignore"):   # signalling NaNs stay NaN, quietly
+            values = values.astype(np.float64)
     return AxisFrame(avatar, name.split(b"\0", 1)[0].decode("ascii", "replace"),
                      values, bool(disp), bool(ref), frame, (major, minor, rev, build))
 

@@ -51,7 +51,6 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
-from itertools import chain
 from operator import itemgetter
 
 import numpy as np
@@ -204,9 +203,13 @@ def _rotations(body: dict) -> tuple[np.ndarray, np.ndarray]:
     value-by-value path when any bone is missing or malformed."""
     J = len(BODY_BONES)
     try:
-        rows = [_XYZW(body[bone]["rotation"]) for bone in BODY_BONES]
-        if set(map(type, chain.from_iterable(rows))) <= _NUMBER_TYPES:   # no bools, strings
-            return np.array(rows, dtype=np.float64), _ALL_PRESENT.copy()
+        flat: list = []
+        extend = flat.extend
+        for bone in BODY_BONES:
+            extend(_XYZW(body[bone]["rotation"]))
+        if set(map(type, flat)) <= _NUMBER_TYPES:                # no bools, strings, nulls
+            return (np.fromiter(flat, dtype=np.float64, count=4 * J).reshape(J, 4),
+                    _ALL_PRESENT.copy())
     except (KeyError, TypeError):
         pass
     q = np.zeros((J, 4))
