@@ -97,6 +97,7 @@ def _parents() -> tuple[int, ...]:
 
 #: parent index of each of :data:`JOINTS`
 PARENTS: tuple[int, ...] = _parents()
+_ALL_VALID = np.ones(len(JOINTS), dtype=bool)
 
 #: Unity HumanBodyBones suit bone (``config/suits.toml`` suit ``axis``) -> Axis joint that
 #: carries the same body segment (the simulator's map; Chest is the thorax the arms hang
@@ -381,9 +382,8 @@ def to_pose(frame: AxisFrame, order: str = "YXZ", unit_scale: float = 0.01,
         root, angles = ch[0, :3], ch[:, 3:]
     else:
         root, angles = v[:3], v[3:].reshape(joints, 3)
-    finite = np.isfinite(v)
-    if finite.all():
-        valid = np.ones(joints, dtype=bool)
+    if np.isfinite(v).all():
+        valid = _ALL_VALID.copy() if joints == len(JOINTS) else np.ones(joints, dtype=bool)
         return euler_to_quat(order, angles), valid, root * unit_scale
     valid = np.isfinite(angles).all(axis=1)
     q = euler_to_quat(order, np.where(valid[:, None], angles, 0.0))
