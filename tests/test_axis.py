@@ -552,3 +552,24 @@ def test_real_take_cuts_match_the_serial_suit(data_dir):
         got = replay_frames(runs[space], list(A.JOINTS), list(A.PARENTS), space, rate, cfg)
         assert [c.cut.method for c in got] == [c.cut.method for c in ref], space
         assert max(abs(a.boundary - b.boundary) for a, b in zip(got, ref)) <= 0.25 * rate, space
+
+
+def test_rtseg_simulate_axis_take_replays_the_real_bvh():
+    """``rtseg simulate axis --take test.bvh``: the skeleton map is detected as axis and the
+    file's two frames arrive with the file's Hips rotation and root position."""
+    take = read_bvh(FIXTURE)
+    src = open_source("axis://127.0.0.1:0?queue=100&rate=125")
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-m", "rtseg.cli", "simulate", "axis", "--take", str(FIXTURE),
+             "--port", str(src.port)], capture_output=True, text=True, timeout=60)
+        assert proc.returncode == 0, proc.stderr
+        assert "skeleton map axis: Hips<-Hips" in proc.stdout and "Chest<-Spine3" in proc.stdout
+        frames = read_all(src)
+    finally:
+        src.close()
+    assert len(frames) == 2
+    for k, f in enumerate(frames):
+        assert f.valid.all() and f.source_time == k / 125
+        assert same_rotation(f.quats[0], take.quats[k, 0], 1e-6)
+        assert np.allclose(f.root_position, take.root_position[k] / 100.0, atol=1e-6)
