@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from operator import itemgetter
 
 import numpy as np
@@ -143,12 +143,15 @@ class RokokoActor:
 @dataclass(slots=True)
 class RokokoPacket:
     """A decoded payload: ``version`` (3), ``fps`` (Hz or None), ``timestamp`` (scene time,
-    seconds, or None), ``actors`` in payload order, ``compressed`` (came as LZ4)."""
+    seconds, or None), ``actors`` decoded, in payload order (all of them, or only the one
+    asked for: see :func:`decode_packet`), ``compressed`` (came as LZ4), ``names`` every
+    actor's name in the payload."""
     version: int
     fps: float | None
     timestamp: float | None
     actors: list[RokokoActor]
     compressed: bool = False
+    names: list[str] = field(default_factory=list)
 
     def actor(self, name: str | None) -> RokokoActor | None:
         """The actor called ``name`` (None: the first), or None if absent."""
@@ -257,11 +260,14 @@ def _actor(raw, tolerance: float) -> RokokoActor:
     return RokokoActor(name, q, ok, hip, bad)
 
 
-def decode_packet(data: bytes, tolerance: float = 0.05) -> RokokoPacket:
+def decode_packet(data: bytes, tolerance: float = 0.05, only: str | None | bool = False
+                  ) -> RokokoPacket:
     """Decode one datagram (JSON or an LZ4 frame of JSON), see the module docstring.
 
-    ``tolerance``: accepted | |q|^2 - 1 | (accepted quaternions are renormalised).  Raises
-    :class:`RokokoError` only."""
+    ``tolerance``: accepted | |q|^2 - 1 | (accepted quaternions are renormalised).
+    ``only``: False decodes every actor; a name decodes only that actor, None only the
+    first (what a source following one performer needs: the others cost nothing but their
+    JSON parse).  Raises :class:`RokokoError` only."""
     compressed = data[:4] == LZ4_MAGIC
     if compressed:
         data = _decompress(data)
@@ -297,10 +303,18 @@ def decode_packet(data: bytes, tolerance: float = 0.05) -> RokokoPacket:
         raise RokokoError("bad_messages", "scene.actors is not a list")
     fps = _num(doc.get("fps"))
     ts = _num(scene.get("timestamp"))
+    names = [a.get("name") if isinstance(a, dict) and isinstance(a.get("name"), str) else ""
+             for a in actors]
+    if only is False:
+        chosen = actors
+    elif only is None:
+        chosen = actors[:1]
+    else:
+        chosen = [a for a, n in zip(actors, names) if n == only][:1]
     return RokokoPacket(
         major, fps if math.isfinite(fps) and fps > 0 else None,
         ts if math.isfinite(ts) else None,
-        [_actor(a, tolerance) for a in actors], compressed)
+        [_actor(a, tolerance) for a in chosen], compressed, names)
 
 
 def _short(a: np.ndarray) -> list:

@@ -75,7 +75,7 @@ class RokokoAssembler:
 
     def feed(self, data: bytes, now: float) -> list[Frame]:
         try:
-            pkt = decode_packet(data, self.tolerance)
+            pkt = decode_packet(data, self.tolerance, only=self.actor)
         except RokokoError as exc:
             self._count(exc.kind)
             self._log(exc.kind, now, "Rokoko: payload of %d bytes dropped (%s): %s",
@@ -87,13 +87,13 @@ class RokokoAssembler:
         if actor is None:
             self._count("unknown_names")
             self._log("actor", now, "Rokoko: payload without actor %r (actors: %s); dropped",
-                      self.actor, ", ".join(repr(a.name) for a in pkt.actors) or "none")
+                      self.actor, ", ".join(map(repr, pkt.names)) or "none")
             return []
-        if self.actor is None and len(pkt.actors) > 1 and not self._told_choice:
+        if self.actor is None and len(pkt.names) > 1 and not self._told_choice:
             self._told_choice = True
             log.warning("Rokoko: %d actors in the scene (%s); following %r (choose with "
-                        "?actor=NAME)", len(pkt.actors),
-                        ", ".join(repr(a.name) for a in pkt.actors), actor.name)
+                        "?actor=NAME)", len(pkt.names), ", ".join(map(repr, pkt.names)),
+                        actor.name)
         if actor.bad:
             self._count("bad_values", actor.bad)
             self._log("bad", now, "Rokoko: %d bone rotation(s) of actor %r not unit "

@@ -102,6 +102,11 @@ def test_several_actors_and_selection():
     assert [a.name for a in pkt.actors] == ["Alice", "Bob"]
     assert np.array_equal(pkt.actor("Bob").quats.astype(np.float32), qb.astype(np.float32))
     assert pkt.actor(None).name == "Alice" and pkt.actor("Carol") is None
+    only = decode_packet(data, only="Bob")          # what a source following Bob decodes
+    assert [a.name for a in only.actors] == ["Bob"] and only.names == ["Alice", "Bob"]
+    assert np.array_equal(only.actor("Bob").quats, pkt.actor("Bob").quats)
+    assert [a.name for a in decode_packet(data, only=None).actors] == ["Alice"]
+    assert decode_packet(data, only="Carol").actors == []
     count = Counter()
     asm = RokokoAssembler("Bob", count)
     f = asm.feed(data, 1.0)[0]
@@ -219,6 +224,10 @@ def test_fuzzed_payloads_never_escape():
         data = next(gen)
         try:
             decode_packet(data)
+        except RokokoError:
+            pass
+        try:
+            decode_packet(data, only=None)              # what the assembler decodes
         except RokokoError:
             errors += 1
         frames += len(asm.feed(data, 0.0))
