@@ -247,13 +247,20 @@ def evaluate_takes(takes: Sequence[LabelledTake], methods: Sequence[str],
     return report
 
 
-def evaluate_dir(data_dir: str | Path, methods: Sequence[str], group: str = "cmu",
+def evaluate_dir(data_dir: str | Path, methods: Sequence[str], group: str | None = None,
                  params: dict[str, dict[str, Any]] | None = None,
                  progress: bool = True, profile: str | None = None,
                  tolerance_s: float = 0.5, online: Any = None) -> EvaluationReport:
-    """Find the labelled takes of ``data_dir`` in ``group`` ("cmu", "tsseg4d" or "all")
-    and evaluate them (see ``evaluate_takes``)."""
-    takes = find_labelled_takes(data_dir, select_groups(group))
+    """Find the labelled takes of ``data_dir`` in ``group`` (one of ``GROUPS`` or "all";
+    None: the cmu takes when there are any, else every group found, e.g. a folder of
+    spliced performances) and evaluate them (see ``evaluate_takes``)."""
+    if group is None:
+        takes = find_labelled_takes(data_dir, GROUPS)
+        cmu = [t for t in takes if t.group == "cmu"]
+        takes = cmu or takes
+        group = "cmu" if cmu else "any"
+    else:
+        takes = find_labelled_takes(data_dir, select_groups(group))
     if not takes:
         raise ValueError(f"no labelled takes of group {group!r} found in {data_dir}")
     bar = Progress(len(takes), enabled=progress)
@@ -303,11 +310,13 @@ def format_table(report: EvaluationReport) -> str:
 
 def add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("data_dir", help="folder laid out like ../shared/data "
-                   "(cmu/, labels/, tsseg4d/)")
+                   "(cmu/, labels/, tsseg4d/), or a folder of spliced .npz performances")
     add_method_argument(p, "all")
-    p.add_argument("--group", choices=[*GROUPS, "all"], default="cmu",
-                   help="which takes: cmu (full-rotation takes, default), tsseg4d "
-                        "(four-channel takes) or all (pooled per group and overall)")
+    p.add_argument("--group", choices=[*GROUPS, "all"], default=None,
+                   help="which takes: cmu (full-rotation takes; the default when the folder "
+                        "has any, else every group found), tsseg4d (four-channel takes), "
+                        "spliced (performances written by benchmarks/splice.py) or all "
+                        "(pooled per group and overall)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--params", metavar="FILE",
                    help="detector parameters, TOML or JSON: flat, or one table per method")
