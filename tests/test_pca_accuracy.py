@@ -1,6 +1,6 @@
-"""PCA offline variants: "scan" (default: the two-sided PCA contrast scanned over the take),
-"verified" (forward + backward passes merged, then the two-sided PCA contrast check of their
-cuts), "paper" (the online pass), and the parameters that select them."""
+"""PCA offline variants: "scan" (default: the two-sided PCA contrast scanned over the take)
+and "paper" (the online pass), the parameters that select them, and the retired "verified"
+variant's keys refused."""
 
 from __future__ import annotations
 
@@ -9,8 +9,6 @@ import pytest
 
 from rtseg.config import ConfigError
 from rtseg.detectors import make_online, method_params, segment_features
-from rtseg.detectors.base import Cut
-from rtseg.detectors.pca_scan import cut_contrast, merge_passes, verify_cuts
 
 FPS = 120.0
 
@@ -32,53 +30,6 @@ def two_behaviours(seed: int, la: int = 1500, lb: int = 1500, dim: int = 24
     return np.concatenate([behaviour(rng, la, dim, 1.0), behaviour(rng, lb, dim, 0.8)]), la
 
 
-def test_contrast_separates_a_change_from_a_cut_inside_a_behaviour():
-    W = 480
-    for seed in range(5):
-        X, la = two_behaviours(seed)
-        change = cut_contrast(X, 0, la, len(X), W, 0.9)
-        inside = cut_contrast(X, 0, la // 2, la, W, 0.9)
-        assert change > 4.0, (seed, change)
-        assert inside < 2.0, (seed, inside)
-
-
-def test_contrast_is_zero_when_a_side_is_shorter_than_min_len():
-    X, la = two_behaviours(0)
-    assert cut_contrast(X, la - 50, la, len(X), 480, 0.9, min_len=120) == 0.0
-    assert cut_contrast(X, 0, la, la + 50, 480, 0.9, min_len=120) == 0.0
-    assert cut_contrast(X, la - 200, la, len(X), 480, 0.9, min_len=120) > 4.0
-
-
-def test_verify_drops_false_cuts_and_keeps_the_change():
-    X, la = two_behaviours(1)
-    cuts = [Cut(400, "pca", 0.5), Cut(la - 30, "pca", 0.2), Cut(la, "pca", 0.9),
-            Cut(2300, "pca", 0.4)]
-    kept = verify_cuts(X, cuts, W=480, min_len=120, ratio=4.0, tau=0.9)
-    # la - 30 leaves a 30-frame segment (removed first, lower confidence), 400 and 2300 lie
-    # inside a behaviour; the change survives
-    assert [c.frame for c in kept] == [la]
-
-
-def test_verify_keeps_every_cut_at_ratio_zero_except_too_short_segments():
-    X, la = two_behaviours(2)
-    cuts = [Cut(400, "pca"), Cut(la, "pca"), Cut(la + 40, "pca", 0.1)]
-    kept = verify_cuts(X, cuts, W=480, min_len=120, ratio=0.0, tau=0.9)
-    assert [c.frame for c in kept] == [400, la, la + 40]      # 0 >= 0: nothing removed
-    kept = verify_cuts(X, cuts, W=480, min_len=120, ratio=1e-9, tau=0.9)
-    assert [c.frame for c in kept] == [400, la]
-
-
-def test_merge_passes_pairs_forward_and_backward_cuts_at_their_mean():
-    F = [Cut(1000, "pca", 0.7, 1000), Cut(3000, "pca", 0.3, 3000)]
-    B = [Cut(940, "pca", 0.5, 940), Cut(2000, "pca", 0.6, 2000)]
-    out = merge_passes(F, B, tol=120)
-    assert [c.frame for c in out] == [970, 2000, 3000]
-    assert out[0].confidence == 0.7 and out[0].detected_at == 970
-    # cuts of one pass closer than tol are merged too
-    out = merge_passes([Cut(1000, "pca"), Cut(1050, "pca")], [], tol=120)
-    assert [c.frame for c in out] == [1025]
-
-
 def test_paper_variant_is_the_online_pass():
     X, la = two_behaviours(3, la=1200, lb=1200)
     rng = np.random.default_rng(9)
@@ -88,8 +39,8 @@ def test_paper_variant_is_the_online_pass():
     assert paper == online and paper
 
 
-@pytest.mark.parametrize("better", ["verified", "scan"])
-def test_offline_variants_find_the_changes_with_fewer_false_cuts_than_the_paper(better):
+def test_the_scan_finds_the_changes_with_fewer_false_cuts_than_the_paper():
+    better = "scan"
     n_true = hits_v = hits_p = extra_v = extra_p = 0
     for seed in range(4):
         rng = np.random.default_rng(100 + seed)
@@ -111,9 +62,13 @@ def test_offline_variants_find_the_changes_with_fewer_false_cuts_than_the_paper(
 
 
 @pytest.mark.parametrize("key,value,word", [
-    ("variant", "fancy", "variant"), ("verify_ratio", -1.0, "verify_ratio"),
-    ("verify_window_s", 0.0, "verify_window_s"), ("min_segment_s", True, "min_segment_s")])
-def test_bad_verification_params_name_the_key(key, value, word):
+    ("variant", "fancy", "variant"), ("min_contrast", -1.0, "min_contrast"),
+    ("scan_step_s", 0.0, "scan_step_s"), ("energy", True, "energy"),
+    # the retired "verified" variant and its keys are refused, naming the key
+    ("variant", "verified", "variant"), ("verify_ratio", 4.0, "unknown key 'verify_ratio'"),
+    ("verify_window_s", 4.0, "unknown key 'verify_window_s'"),
+    ("min_segment_s", 1.0, "unknown key 'min_segment_s'")])
+def test_bad_params_name_the_key(key, value, word):
     with pytest.raises(ConfigError, match=word):
         method_params("pca", {key: value})
 
@@ -122,7 +77,6 @@ def test_defaults_select_the_scan_variant():
     p = method_params("pca")
     assert p["variant"] == "scan" and p["min_contrast"] > 1.0
     assert len(p["scan_windows_s"]) >= 1 and p["scan_step_s"] < min(p["scan_windows_s"])
-    assert p["verify_ratio"] > 1.0 and p["min_segment_s"] < p["verify_window_s"]
 
 
 @pytest.mark.parametrize("value", [[], [0.0], [2.0, -1.0], "3.0", [True], 3.0])
@@ -167,35 +121,24 @@ def test_scan_on_few_noise_like_dims_has_no_false_cuts(dim):
         assert len(cuts) <= 2 and all(abs(c - 1500) <= 840 for c in cuts), cuts
 
 
-def test_scan_falls_back_to_the_verified_variant_on_a_short_take(monkeypatch):
-    import rtseg.detectors.pca_scan as pca_mod
-    X, la = two_behaviours(6, la=320, lb=320)      # 640 frames: no position has an outer window
-    assert pca_mod.scan_cuts(X, [300, 360, 420], 10, 2.0, 0.9) is None
-    checked = []
-    real = pca_mod.verify_cuts
-    monkeypatch.setattr(pca_mod, "verify_cuts",
-                        lambda X, cuts, **kw: checked.append(len(cuts)) or real(X, cuts, **kw))
-    # a low k_sigma makes the passes propose cuts, so the check really runs
-    scan = [c.frame for c in segment_features(X, "pca", FPS, {"variant": "scan", "k_sigma": 1.0})]
-    assert checked and checked[0] > 0
-    ver = [c.frame for c in segment_features(X, "pca", FPS, {"variant": "verified", "k_sigma": 1.0})]
-    assert scan == ver
-    checked.clear()
-    long_X, _ = two_behaviours(6, la=1500, lb=1500)
-    segment_features(long_X, "pca", FPS, {"variant": "scan", "k_sigma": 1.0})
-    assert checked == []                            # long enough: scanned, not checked
-
-
-def test_refine_moves_a_late_cut_to_the_change():
-    from rtseg.detectors.pca_scan import refine_cuts
-    for seed in range(3):
-        X, la = two_behaviours(seed)
-        cuts = [Cut(la + 45, "pca", 0.8, la + 45), Cut(la - 700, "pca", 0.3, la - 700)]
-        out = refine_cuts(X, cuts, W=480, min_len=120, reach=60, tau=0.9)
-        frames = [c.frame for c in out]
-        assert abs(frames[1] - la) <= 20, (seed, frames)   # was 45 frames late
-        assert abs(frames[0] - (la - 700)) <= 60          # stays within reach
-        assert out[1].detected_at == out[1].frame and out[1].confidence == 0.8
+def test_a_take_too_short_to_scan_gets_the_paper_forward_pass():
+    from rtseg.detectors.pca_scan import scan_cuts
+    # 740 frames: under 2.5 x the shortest default window (300 frames), so no position has
+    # a whole window before it and a whole outer window
+    X, la = two_behaviours(6, la=370, lb=370)
+    assert scan_cuts(X, [300, 360, 420], 10, 2.0, 0.9) is None
+    # a low k_sigma makes the forward pass cut, so the fallback is really exercised
+    args = {"k_sigma": 1.0}
+    scan = segment_features(X, "pca", FPS, {"variant": "scan", **args})
+    paper = segment_features(X, "pca", FPS, {"variant": "paper", **args})
+    assert scan and [(c.frame, c.detected_at) for c in scan] == \
+        [(c.frame, c.detected_at) for c in paper]
+    # 750 frames can be scanned: the scan's own result (at most one cut, at a maximum)
+    X, la = two_behaviours(6, la=375, lb=375)
+    assert scan_cuts(X, [300, 360, 420], 10, 2.0, 0.9) is not None
+    scanned = segment_features(X, "pca", FPS, {"variant": "scan", **args})
+    assert [c.frame for c in scanned] != [c.frame for c in
+                                          segment_features(X, "pca", FPS, {"variant": "paper", **args})]
 
 
 def test_scan_windows_are_put_on_the_step_grid():

@@ -181,52 +181,27 @@ def test_fit_ppca_distance_of_own_frames_is_about_sqrt_dim():
 
 @pytest.mark.parametrize("key,value", [("variant", "bogus"), ("verify_window_s", 0.0),
                                        ("min_contrast", -1.0), ("variant", 3),
-                                       ("online_verify", 1), ("scan_weight", 1.5),
+                                       ("scan_weight", 1.5),
                                        ("scan_weight", -0.1)])
 def test_verification_params_validated(key, value):
     with pytest.raises(ConfigError, match=key):
         method_params("ppca", {key: value})
 
 
-# ------------------------------------------------------------------ online verification
-def test_online_verify_matches_the_check_applied_to_the_forward_pass():
+def test_the_retired_online_check_is_refused_and_the_online_detector_is_the_forward_pass():
+    """``online_verify`` (the retired ``VerifiedPPCADetector``) is an unknown key now; the
+    online PPCA detector is the paper's forward pass, cutting like the "paper" variant's
+    first pass."""
     from rtseg.detectors import make_online
-    from rtseg.detectors.ppca import PPCADetector, VerifiedPPCADetector
-    p = method_params("ppca")
-    W = int(round(p["verify_window_s"] * FPS))
-    for seed in (0, 1, 4):
-        X, la = alternating_take(seed)
-        fwd = make_online("ppca", FPS).run(X)
-        det = make_online("ppca", FPS, {"online_verify": True})
-        assert isinstance(det, VerifiedPPCADetector) and det.T == 150
-        got = det.run(X)
-        want, last = [], None
-        for c in fwd:
-            if c.frame + 2 * W > len(X):
-                continue                                  # never confirmed: take ended
-            k = cut_contrast(X[max(0, c.frame - 2 * W):c.frame + 2 * W],
-                             min(c.frame, 2 * W), W, p["energy"])
-            if k >= p["min_contrast"] and (last is None or c.frame - last >= W):
-                want.append(c.frame)
-                last = c.frame
-        assert [c.frame for c in got] == want
-        assert all(c.detected_at == c.frame + 2 * W - 1 for c in got)
-        assert det.dropped_cuts == len([c for c in fwd if c.frame + 2 * W <= len(X)]) - len(got)
-        assert len(got) < len(fwd)                        # the check removed some cuts
-    assert isinstance(make_online("ppca", FPS), PPCADetector)
-
-
-def test_online_verify_gap_drops_held_cuts_and_counts_the_bad_frame():
-    from rtseg.detectors import make_online
-    X, la = alternating_take(2)
-    det = make_online("ppca", FPS, {"online_verify": True})
-    out = [det.update(x) for x in X[:la + 300]]          # the change at la is still held
-    assert all(c is None or c.frame < la for c in out)
-    bad = np.full(X.shape[1], np.nan)
-    assert det.update(bad) is None
-    assert det.rejected_frames == 1
-    rest = [c for c in (det.update(x) for x in X[la + 300:]) if c is not None]
-    assert all(c.frame > la + 300 for c in rest)         # nothing held across the gap
-    det.restart()
-    with pytest.raises(ValueError):
-        det.update(np.zeros(3))
+    from rtseg.detectors.ppca import PPCADetector
+    with pytest.raises(ConfigError, match="unknown key 'online_verify'"):
+        method_params("ppca", {"online_verify": True})
+    det = make_online("ppca", FPS)
+    assert type(det) is PPCADetector and det.T == 150
+    X, la = alternating_take(0)
+    online = {(c.frame, c.detected_at) for c in det.run(X)}
+    # the offline "paper" variant starts from the same forward pass (its later passes' cuts
+    # are batch cuts: detected_at == frame)
+    paper = segment_features(X, "ppca", FPS, {"variant": "paper"})
+    assert online and online <= {(c.frame, c.detected_at) for c in paper}
+    assert all(c.detected_at == c.frame for c in paper if (c.frame, c.detected_at) not in online)

@@ -61,11 +61,7 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "energy": ((int, float), _unit),
         "k_sigma": ((int, float), _pos),
         "refresh_frames": ((int,), _posint),
-        "variant": ((str,), (lambda v: v in ("scan", "verified", "paper"),
-                             "'scan', 'verified' or 'paper'")),
-        "verify_window_s": ((int, float), _pos),
-        "min_segment_s": ((int, float), _pos),
-        "verify_ratio": ((int, float), _nonneg),
+        "variant": ((str,), (lambda v: v in ("scan", "paper"), "'scan' or 'paper'")),
         "scan_windows_s": ((list,), (lambda v: len(v) > 0 and all(
             isinstance(w, (int, float)) and not isinstance(w, bool) and w > 0 for w in v),
             "a non-empty list of positive numbers")),
@@ -86,7 +82,6 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "verify_window_s": ((int, float), _pos),
         "min_contrast": ((int, float), _nonneg),
         "scan_weight": ((int, float), (lambda v: 0 <= v <= 1, "in [0, 1]")),
-        "online_verify": ((bool,), (lambda v: True, "true or false")),
     },
     "gmm": {
         "energy": ((int, float), _unit),

@@ -47,16 +47,17 @@ segment (the K of the peak), ``detected_at`` = the frame whose arrival confirmed
 so the delay is T + (a few) Delta frames; ``score`` = peak - valley; ``confidence`` =
 1 - R / (peak - valley).
 
-``VerifiedPPCADetector`` (``online_verify = true``, not in the paper) holds each cut of the
-forward pass and applies the offline two-sided check before reporting it.  The offline
-strategies live beside this module: the window models and their distance in
+The offline strategies live beside this module: the window models and their distance in
 ``rtseg.detectors.ppca_distance``, the contrast scan, the passes and the placement
 (``segment_ppca``) in ``rtseg.detectors.ppca_offline``.
+
+History: ``VerifiedPPCADetector`` (``online_verify = true``: each forward-pass cut held 2W
+frames, 6 s, then checked two-sided like the offline cuts) was retired (issue 10: neither
+the paper's detector nor the live default); its figures are in docs/detectors.md.
 """
 
 from __future__ import annotations
 
-import logging
 import math
 from typing import Any, Mapping
 
@@ -64,9 +65,6 @@ import numpy as np
 
 from rtseg.detectors._linalg import full_eigh, rank_for_energy, subspace_step
 from rtseg.detectors.base import Cut, OnlineDetector
-from rtseg.detectors.ppca_distance import cut_contrast
-
-log = logging.getLogger(__name__)
 
 _FULL_EVERY = 8
 
@@ -98,18 +96,13 @@ class PPCADetector(OnlineDetector):
 
     @classmethod
     def from_params(cls, p: Mapping[str, Any], frame_rate: float,
-                    keep_trace: bool = False) -> "OnlineDetector":
-        """The forward pass; wrapped in ``VerifiedPPCADetector`` when ``online_verify`` is
-        true and ``variant`` is "verified" (cuts then delayed by 2 x verify_window_s)."""
+                    keep_trace: bool = False) -> "PPCADetector":
+        """The forward pass with the ``[ppca]`` parameters ``p`` (windows in seconds)."""
         from rtseg.detectors import frames
-        det = cls(T=frames(p["window_s"], frame_rate), delta=frames(p["step_s"], frame_rate),
-                  tau=p["energy"], R=p["peak_threshold"], distance=p["distance"],
-                  noise_floor=p["noise_floor"], null_rel=p["null_rel"],
-                  reference_dims=p["reference_dims"], keep_trace=keep_trace)
-        if p.get("online_verify", False) and p.get("variant", "verified") == "verified":
-            return VerifiedPPCADetector(det, frames(p["verify_window_s"], frame_rate),
-                                        float(p["min_contrast"]))
-        return det
+        return cls(T=frames(p["window_s"], frame_rate), delta=frames(p["step_s"], frame_rate),
+                   tau=p["energy"], R=p["peak_threshold"], distance=p["distance"],
+                   noise_floor=p["noise_floor"], null_rel=p["null_rel"],
+                   reference_dims=p["reference_dims"], keep_trace=keep_trace)
 
     # ------------------------------------------------------------------ state
     def restart(self) -> None:
@@ -260,103 +253,3 @@ class PPCADetector(OnlineDetector):
         self._off = 0
         self._buf[:self._n] = rest
         self._reset_model()
-
-
-class VerifiedPPCADetector(OnlineDetector):
-    """Online PPCA forward pass whose cuts are checked two-sided before they are reported.
-
-    Each cut of the inner ``PPCADetector`` (the paper's forward pass) is held until the 2W
-    frames after it have arrived, then ``cut_contrast`` over X[c-2W, c+2W) decides: kept
-    when >= ``min_contrast`` and at least W frames after the last reported cut (online, a
-    reported cut cannot be withdrawn, so the earlier of two close cuts wins; offline the
-    stronger one does).  ``detected_at`` is therefore c + 2W (6 s with W = 3 s) instead of
-    the forward pass's c + T + a few Delta.  A restart (input gap) drops the cuts still held
-    (logged) and the frames before the gap: no window spans a gap.  Frames are numbered
-    from creation, like the inner detector.
-    """
-
-    name = "ppca"
-    frame_origin = "creation"
-
-    def __init__(self, inner: PPCADetector, W: int, min_contrast: float) -> None:
-        if W < 2:
-            raise ValueError(f"verification window must be >= 2 frames, got {W}")
-        self.inner, self.W, self.min_contrast = inner, int(W), float(min_contrast)
-        self.dropped_cuts = 0       # candidate cuts that failed the check
-        self._t = 0
-        self._buf: np.ndarray | None = None
-        self._first = 0             # frame number of self._buf[0]
-        self._len = 0
-        self._pending: list[Cut] = []
-        self._last: int | None = None
-
-    # pass-through views of the inner detector (trace, counters, paper parameters)
-    @property
-    def trace(self) -> list:
-        return self.inner.trace
-
-    @property
-    def rejected_frames(self) -> int:
-        return self.inner.rejected_frames
-
-    @property
-    def segment_start(self) -> int:
-        return self.inner.segment_start
-
-    def __getattr__(self, item: str) -> Any:
-        if item in ("T", "delta", "tau", "R", "R_eff", "distance", "noise_floor", "null_rel",
-                    "reference_dims", "keep_trace", "last_model"):
-            return getattr(self.inner, item)
-        raise AttributeError(item)
-
-    def restart(self) -> None:
-        """Input gap: the inner detector restarts; held cuts and old frames are dropped."""
-        if self._pending:
-            log.info("ppca: %d unverified cut(s) dropped at a restart (frames %s)",
-                     len(self._pending), [c.frame for c in self._pending])
-        self._pending.clear()
-        self._first, self._len = self._t, 0
-        self.inner.restart()
-
-    def update(self, x: np.ndarray) -> Cut | None:
-        """Feed one frame; a verified Cut (2W frames after its frame) or None."""
-        x = np.asarray(x, dtype=np.float64)
-        finite = x.ndim == 1 and math.isfinite(float(x.sum()))
-        cand = self.inner.update(x)         # validates shape, counts/logs non-finite frames
-        t = self._t
-        self._t += 1
-        if not finite:                      # the inner detector restarted after this frame
-            self._pending.clear()
-            self._first, self._len = self._t, 0
-            return None
-        self._store(x)
-        if cand is not None:
-            self._pending.append(cand)
-        if self._pending and t + 1 >= self._pending[0].frame + 2 * self.W:
-            return self._check(self._pending.pop(0), t)
-        return None
-
-    def _store(self, x: np.ndarray) -> None:
-        keep = 4 * self.W + 2 * self.inner.T + 64   # c-2W .. c+2W, c up to T+ behind t
-        if self._buf is None:
-            self._buf = np.empty((2 * keep, x.shape[0]))
-        if self._len == self._buf.shape[0]:
-            self._buf[:keep] = self._buf[self._len - keep:self._len].copy()
-            self._first += self._len - keep
-            self._len = keep
-        self._buf[self._len] = x
-        self._len += 1
-
-    def _check(self, c: Cut, t: int) -> Cut | None:
-        if c.frame < self._first:           # frames before it are gone (cannot happen
-            return None                     # with the buffer sized above); be safe
-        X = self._buf[:self._len]
-        k = cut_contrast(X, c.frame - self._first, self.W, self.inner.tau,
-                         self.inner.noise_floor, self.inner.null_rel, self.inner.distance)
-        if k < self.min_contrast or (self._last is not None and c.frame - self._last < self.W):
-            self.dropped_cuts += 1
-            log.debug("ppca: online cut at frame %d dropped (contrast %.2f)", c.frame, k)
-            return None
-        self._last = c.frame
-        return Cut(frame=c.frame, method=self.name, confidence=c.confidence, detected_at=t,
-                   score=c.score)

@@ -1,18 +1,25 @@
 """Offline PPCA segmentation (``segment_ppca``): the paper's alternating passes
-(``variant = "paper"``), or (``"verified"``, the default) the two-sided contrast scan with
-the PPCA window distance, each change placed by the paper's forward/backward passes.
+(``variant = "paper"``), or (``"verified"``, the default; not in the paper) the two-sided
+contrast scan with the PPCA window distance, each change placed by the paper's
+forward/backward passes.
 
-Offline verification (``segment_ppca``, ``variant = "verified"``, not in the paper).  The
-forward/backward passes over-segment behaviours whose cycle is longer than T (alternating-
-side exercises: toe touches, knee raises): H peaks when the model of one side meets the
-other.  Each candidate cut c is therefore checked with the paper's own symmetric distance
-(Fig. 6: the larger of the two mean Mahalanobis distances between two windows, each scored
-against the other's PPCA model), on windows of W = ``verify_window_s`` (3 s, longer than
-the cycles of such exercises) before and after c, and compared with the same distance
-between consecutive W windows on either side (c-2W..c-W vs c-W..c, c..c+W vs c+W..c+2W).
-The cut is kept when the change at c is at least ``min_contrast`` (1.15) times the mean of
-those two (a behaviour boundary is a larger change than the within-behaviour drift next to
-it) and no stronger kept cut lies within W (whose windows would straddle it).  The online detector (``PPCADetector``) is the paper's forward pass, unverified.
+Why a scan: the forward/backward passes over-segment behaviours whose cycle is longer than
+T (alternating-side exercises: toe touches, knee raises): H peaks when the model of one
+side meets the other.  The scan compares, at every Delta, the paper's own symmetric
+distance (Fig. 6: the larger of the two mean Mahalanobis distances between two windows,
+each scored against the other's PPCA model; ``rtseg.detectors.ppca_distance``) between
+the W = ``verify_window_s`` windows before and after c (3 s, longer than the cycles of
+such exercises) with the same distance between consecutive W windows on either side
+(c-2W..c-W vs c-W..c, c..c+W vs c+W..c+2W): a behaviour boundary is a larger change than
+the within-behaviour drift next to it.  The changes are the contrast's local maxima
+reaching ``min_contrast``, at least W apart (``scan_cuts``); each is placed at the mean of
+the nearest forward and backward pass peak, blended with the contrast maximum by
+``scan_weight`` (``localise_cuts``).  A take too short to scan keeps the passes' cuts that
+pass the same check one by one (``verify_cuts``).
+
+Frames count from 0 (rows of X); windows and steps are in frames here, in seconds in
+``config/detectors.toml``.  The online detector (``rtseg.detectors.ppca.PPCADetector``) is
+the paper's forward pass, unverified.
 """
 
 from __future__ import annotations
