@@ -1,15 +1,24 @@
-"""``rtseg segment TAKE``: cut a recorded take into behaviours and print the cuts and the
-segments between them (frames are 0-based; a cut frame is the first frame of a segment)."""
+"""``rtseg segment PATH...``: cut recorded takes into behaviours.
+
+One take and no ``--out``: print its cuts and the segments between them (table, JSON or
+CSV; frames are 0-based; a cut frame is the first frame of a segment).  Many takes
+(files, folders searched recursively, globs) or ``--out FILE``: one record per take and
+method, as JSON lines or Parquet, resumable, optionally on Dask (``rtseg.archive``).
+"""
 
 from __future__ import annotations
 
 import argparse
 import csv
+import glob
 import io
 import json
 import sys
+import warnings
+from pathlib import Path
 from typing import Any
 
+from rtseg.archive import SESSION_HEADER
 from rtseg.segmentation import METHODS, SegmentationResult, load_params, segment_take_methods
 
 
@@ -32,16 +41,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "segment", help="cut a recorded take into behaviours",
         description="Segment a recorded take (.amc with its .asf, .bvh, .npz, tsseg4d .csv, "
                     "or a recorded session folder) and print the cut frames and times and "
-                    "the segments between them.  Frames are 0-based at the take's rate.")
-    p.add_argument("take", help="take file or session folder")
+                    "the segments between them.  Frames are 0-based at the take's rate.  "
+                    "Given several takes (files, folders searched recursively, glob "
+                    "patterns) or --out, write one record per take and method (JSON lines "
+                    "on stdout, or to --out FILE: .jsonl, or .parquet with pyarrow); takes "
+                    "already in FILE are skipped, so an interrupted run resumes.")
+    p.add_argument("paths", nargs="+", metavar="PATH",
+                   help="take file, session folder, folder of takes (recursive) or glob")
     p.add_argument("--skeleton", metavar="ASF", help="ASF skeleton of an .amc take "
                    "(default: SS.asf beside SS_TT.amc)")
     add_method_argument(p, "all")
-    p.add_argument("--format", choices=["table", "json", "csv"], default="table",
-                   help="output format (default table)")
+    p.add_argument("--format", choices=["table", "json", "csv"], default=None,
+                   help="output format of a single take without --out (default table)")
     p.add_argument("--params", metavar="FILE",
                    help="detector parameters, TOML or JSON: flat, or one table per method")
     add_profile_argument(p)
+    a = p.add_argument_group("archives (many takes)")
+    a.add_argument("--out", metavar="FILE",
+                   help="write records to FILE (.jsonl, or .parquet with pyarrow); takes "
+                        "already there are skipped")
+    a.add_argument("--force", action="store_true", help="redo takes already in --out")
+    a.add_argument("--retry-errors", action="store_true",
+                   help="redo takes whose records in --out hold an error")
+    a.add_argument("--workers", type=int, metavar="N",
+                   help="run on a local Dask cluster of N worker processes "
+                        "(pip install 'rtseg[scale]'; without Dask: in this process)")
+    a.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on a running Dask scheduler (e.g. tcp://host:8786); its workers "
+                        "must have rtseg installed and see the take paths")
+    a.add_argument("--limit", type=int, metavar="N",
+                   help="run at most N takes not yet done (the rest stay for the next run)")
+    a.add_argument("--no-progress", action="store_true", help="no progress line on stderr")
     p.set_defaults(func=run)
 
 
@@ -51,15 +81,62 @@ def add_profile_argument(parser: argparse.ArgumentParser) -> None:
                              "(config/skeletons.toml; default: chosen from the joint names)")
 
 
+def _single_take(args: argparse.Namespace) -> bool:
+    """One PATH naming one take (a file, or a session folder, or a missing path: its
+    error) and nothing asking for records: today's table/JSON/CSV output."""
+    if len(args.paths) != 1 or args.out or args.workers or args.scheduler \
+            or args.force or args.retry_errors or args.limit is not None:
+        return False
+    p = Path(args.paths[0])
+    if p.is_dir():
+        return (p / SESSION_HEADER).is_file()
+    return p.exists() or not glob.has_magic(args.paths[0])
+
+
 def run(args: argparse.Namespace) -> int:
-    from rtseg.take import load_take
     methods = methods_of(args.method)
     params = params_by_method(args.params, methods)
-    take = load_take(args.take, skeleton=args.skeleton)
-    results = segment_take_methods(take, methods, params, profile=args.profile)
-    out = {"table": format_table, "json": format_json, "csv": format_csv}[args.format]
-    sys.stdout.write(out(args.take, results))
-    return 0
+    if _single_take(args):
+        from rtseg.take import load_take
+        path = args.paths[0]
+        take = load_take(path, skeleton=args.skeleton)
+        results = segment_take_methods(take, methods, params, profile=args.profile)
+        out = {"table": format_table, "json": format_json,
+               "csv": format_csv}[args.format or "table"]
+        sys.stdout.write(out(path, results))
+        return 0
+    return run_many(args, methods, params)
+
+
+def run_many(args: argparse.Namespace, methods: list[str],
+             params: dict[str, dict[str, Any]]) -> int:
+    """Records of every take (``rtseg.archive.run_archive``); exit 1 when a take failed."""
+    from rtseg.archive import run_archive
+    if args.format not in (None, "json"):
+        raise ValueError(f"--format {args.format} is for one take; several takes give one "
+                         "JSON record per take and method (on stdout, or --out FILE)")
+    for flag in ("force", "retry_errors"):
+        if getattr(args, flag) and not args.out:
+            raise ValueError(f"--{flag.replace('_', '-')} needs --out FILE")
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be at least 1, got {args.workers}")
+    if args.workers and args.scheduler:
+        raise ValueError("give --workers (a local cluster) or --scheduler (a running one), "
+                         "not both")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
+        stats = run_archive(args.paths, methods, args.out, params, profile=args.profile,
+                            skeleton=args.skeleton, workers=args.workers,
+                            scheduler=args.scheduler, force=args.force,
+                            retry_errors=args.retry_errors, limit=args.limit,
+                            progress=not args.no_progress)
+    for w in caught:
+        print(f"rtseg segment: warning: {w.message}", file=sys.stderr)
+    if stats.failed:
+        where = f" (errors in {args.out})" if args.out else ""
+        print(f"rtseg segment: {stats.failed} of {stats.run} takes failed{where}",
+              file=sys.stderr)
+    return 1 if stats.failed else 0
 
 
 def format_table(name: str, results: dict[str, SegmentationResult]) -> str:

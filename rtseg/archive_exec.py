@@ -1,0 +1,153 @@
+"""Where the per-take tasks of ``rtseg.archive`` run: in this process, on a local Dask
+cluster (``dask.distributed.LocalCluster``, worker processes, one thread each), or on a
+running Dask scheduler; and the progress line on stderr.
+
+Dask is optional (``pip install 'rtseg[scale]'``).  Without it ``workers`` falls back to
+this process with a warning and ``scheduler`` is a clear error.  One task per take: the
+task's arguments are the take's path, its method names and the (small) parameter dicts;
+its result is the take's records.  A task that dies on its worker (the worker crashed or
+was killed) is a record with the error, like any other failed take.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import sys
+import time
+import warnings
+from typing import Any, Iterator, Sequence, TextIO
+
+log = logging.getLogger(__name__)
+
+
+def have_dask() -> bool:
+    try:
+        import dask.distributed  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+@contextlib.contextmanager
+def dask_client(workers: int | None = None, scheduler: str | None = None) -> Iterator[Any]:
+    """A ``dask.distributed.Client``: connected to ``scheduler`` (an address such as
+    ``tcp://10.0.0.5:8786``), or to a new local cluster of ``workers`` processes with one
+    thread each, listening on 127.0.0.1 only, closed on exit."""
+    from dask.distributed import Client, LocalCluster
+    if scheduler:
+        client = Client(scheduler, timeout="30s")
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    cluster = LocalCluster(n_workers=int(workers or 1), threads_per_worker=1, processes=True,
+                           host="127.0.0.1", dashboard_address=None,
+                           silence_logs=logging.ERROR)
+    try:
+        client = Client(cluster)
+        try:
+            yield client
+        finally:
+            client.close()
+    finally:
+        cluster.close()
+
+
+def backend_of(workers: int | None, scheduler: str | None) -> str:
+    """"dask" or "in-process"; ValueError when ``scheduler`` is given without Dask."""
+    if not scheduler and not workers:
+        return "in-process"
+    if have_dask():
+        return "dask"
+    if scheduler:
+        raise ValueError("--scheduler needs Dask: pip install 'rtseg[scale]' "
+                         "(or drop --scheduler to run in this process)")
+    warnings.warn("Dask is not installed (pip install 'rtseg[scale]'): --workers ignored, "
+                  "running in this process", RuntimeWarning, stacklevel=3)
+    return "in-process"
+
+
+def run_tasks(todo: Sequence[tuple[str, list[str]]], kwargs: dict[str, Any],
+              workers: int | None = None, scheduler: str | None = None,
+              stats: Any = None) -> Iterator[tuple[str, list[dict[str, Any]]]]:
+    """Yield ``(path, records)`` for each ``(path, methods)`` of ``todo`` as it completes
+    (in-process: in order; Dask: in completion order).  Stopping the iteration cancels
+    the tasks not yet done."""
+    from rtseg.archive import error_record, take_records
+    backend = backend_of(workers, scheduler)
+    if stats is not None:
+        stats.backend = backend if backend == "in-process" else (
+            f"dask scheduler {scheduler}" if scheduler else f"dask LocalCluster {workers} workers")
+    if backend == "in-process" or not todo:
+        for path, methods in todo:
+            yield path, take_records(path, methods, **kwargs)
+        return
+    from dask.distributed import as_completed
+    with dask_client(workers, scheduler) as client:
+        futures = client.map(take_records, [p for p, _ in todo], [m for _, m in todo],
+                             pure=False, **kwargs)
+        pending = {f.key: (f, path, methods) for f, (path, methods) in zip(futures, todo)}
+        del futures
+        try:
+            for fut in as_completed(list(f for f, _, _ in pending.values())):
+                _, path, methods = pending.pop(fut.key)
+                try:
+                    recs = fut.result()
+                except Exception as exc:  # noqa: BLE001 - a lost task is a failed take
+                    recs = [error_record(path, m, f"task failed on its worker: "
+                                         f"{type(exc).__name__}: {exc}") for m in methods]
+                fut.release()
+                yield path, recs
+        finally:
+            if pending:
+                client.cancel([f for f, _, _ in pending.values()])
+
+
+class Progress:
+    """``segment: 120/200 takes, 2 failed, 35 skipped, 3.1 takes/s, eta 26 s`` on stderr:
+    rewritten in place on a terminal, else one line every ``every_s`` seconds and at the
+    end."""
+
+    def __init__(self, total: int, skipped: int = 0, stream: TextIO | None = None,
+                 enabled: bool = True, every_s: float = 5.0) -> None:
+        self.total = total
+        self.skipped = skipped
+        self.stream = stream if stream is not None else sys.stderr
+        self.enabled = enabled
+        self.every_s = every_s
+        self.done = 0
+        self.failed = 0
+        self.t0 = time.monotonic()
+        self.last = -1e9
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+
+    def text(self) -> str:
+        dt = time.monotonic() - self.t0
+        rate = self.done / dt if dt > 0 else 0.0
+        left = self.total - self.done
+        eta = f", eta {left / rate:.0f} s" if rate > 0 and left else ""
+        return (f"segment: {self.done}/{self.total} takes, {self.failed} failed, "
+                f"{self.skipped} skipped, {rate:.2f} takes/s, {dt:.1f} s{eta}")
+
+    def update(self, failed: bool = False) -> None:
+        self.done += 1
+        self.failed += bool(failed)
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if self.tty:
+            self.stream.write("\r" + self.text().ljust(90))
+            self.stream.flush()
+        elif now - self.last >= self.every_s:
+            self.last = now
+            self.stream.write(self.text() + "\n")
+            self.stream.flush()
+
+    def close(self) -> None:
+        if not self.enabled:
+            return
+        self.stream.write(("\r" + self.text().ljust(90) + "\n") if self.tty
+                          else self.text() + "\n")
+        self.stream.flush()
