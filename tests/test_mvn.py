@@ -286,9 +286,11 @@ def test_allow_list_refuses_other_senders_before_decoding():
 
 def test_two_characters_over_udp_into_one_source_each():
     take = synthesize("idle:2,walk:2", frame_rate=60.0, seed=1).take
-    a = open_source("mvn://127.0.0.1:0?character=0&queue=10000")
-    b = open_source(f"mvn://127.0.0.1:0?character=2&queue=10000")
-    senders = [MvnSender(take, "127.0.0.1", src.port, character=c, speed=10.0,
+    # 2 sources x 2 senders x 4 datagrams per frame: modest speed and a large receive
+    # buffer so a loaded 2-core machine does not drop datagrams in the kernel
+    a = open_source("mvn://127.0.0.1:0?character=0&queue=10000&rcvbuf=4194304")
+    b = open_source("mvn://127.0.0.1:0?character=2&queue=10000&rcvbuf=4194304")
+    senders = [MvnSender(take, "127.0.0.1", src.port, character=c, speed=3.0,
                          max_datagram=HEADER_SIZE + 6 * ITEM_SIZE)
                for src in (a, b) for c in (0, 2)]
     try:
