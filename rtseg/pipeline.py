@@ -110,6 +110,12 @@ class Pipeline:
         if detectors is None:
             detectors = make_detectors(config, self.frame_rate)
         self.detectors = detectors
+        # behaviour identity (rtseg.identity): fed every row and the primary detector's cuts
+        self.identity: Any = None
+        if config["identity.enabled"] and self.detectors:
+            from rtseg.identity import tracker_from_config
+            primary = config["detectors.primary"] or next(iter(self.detectors))
+            self.identity = tracker_from_config(config, self.frame_rate, primary)
         req = config["gaps.required_joints"]
         self.required = (_resolve_joints(req, self.joint_names, "gaps.required_joints")
                          if req else self._feature_joints())
@@ -287,6 +293,8 @@ class Pipeline:
             out_cut = self._to_session(m, cut, index)
             if out_cut is not None:
                 out.append(out_cut)
+        if self.identity is not None:
+            self.identity.step(index, x, out)
         return out
 
     def _to_session(self, method: str, cut: Cut, index: int) -> PipelineCut | None:

@@ -191,6 +191,13 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "dropout_seconds": Key("float", 0.5, _range(0.0, 3600.0, strict_lo=True),
                                doc="a joint invalid (or the source silent) this long is a dropout"),
     },
+    "identity": {
+        "enabled": Key("bool", False, doc="send each segment's behaviour id (rtseg.identity)"),
+        "decide_after_s": Key("float", 1.5, _range(0.0, 60.0, strict_lo=True),
+                              doc="seconds of a new segment summed before its id is decided"),
+        "threshold": Key("float", 4.0, _range(1.0, 100.0),
+                         doc="distance at or below which a segment is an earlier behaviour"),
+    },
     "buffer": {
         "capacity": Key("int", 4096, _range(16, MAX_CAPACITY), doc="ring buffer frames"),
         "max_batch": Key("int", 256, _range(1, MAX_CAPACITY),

@@ -1,0 +1,386 @@
+"""Unsupervised behaviour identity, live: which earlier behaviour each new segment is.
+
+``IdentityTracker`` is a streaming object the live pipeline (``rtseg.pipeline.Pipeline``)
+feeds with every pose-feature row it gives the detectors and with the primary detector's
+cuts.  For every segment it decides a behaviour id once - the id of an earlier segment of
+the session when the new segment is the same behaviour, else a new id - and may correct it
+once when the whole segment is known (at the next cut).
+
+Frames and times
+----------------
+Frame indices are the pipeline's session indices (0-based among received frames).  The
+tracker works in *blocks* of ``step`` fed frames (default 10, 83 ms at 120 Hz): it keeps
+running prefix sums (n, sum x, sum x x^T) at every block start in a ring of
+``history_s`` seconds, so the statistics of any stretch of the recent past cost one
+subtraction, never a pass over frames.  A segment boundary is rounded to the nearest
+block start.
+
+Decision
+--------
+A cut reaches the tracker when the detector reveals it, ``detected - boundary`` frames
+after the boundary (~2.4 s for ``contrast``), so the new segment's first frames are
+already summed.  The segment is decided when at least ``decide_after_s`` seconds of it are
+summed (at once when the cut arrives that late): its window [boundary, decision frame),
+at most ``max_window_s`` long, is fitted (``window_models.fit``) and compared with every
+known behaviour's model (all its finished segments pooled) by
+
+    D(a, b) = sqrt( pca_distance(a, b) x ppca_distance(a, b) / sqrt(d_eff) )
+
+(both factors are about 1 for two windows of one motion; d_eff = the larger number of
+varying directions of the two), stated for ``reference_dims`` (8) effective dimensions:
+1 + (D - 1) x sqrt(reference_dims / d_eff), so that one threshold serves the 4-channel
+(d_eff 8) and the 14-joint (d_eff 48) features.  The default threshold, 4.0, was chosen by
+leave-one-take-out over the labelled cmu and tsseg4d takes (docs/identity.md).  The nearest behaviour is taken when D <= ``threshold``,
+else a new id is made.  The first segment of the session (before any cut) gets id 1 after
+``decide_after_s`` seconds of frames.
+
+Correction
+----------
+At the next cut the finished segment's full statistics are compared again.  When they
+disagree with the decision clearly - the sent behaviour is now farther than
+``threshold x correction_margin``, or (a new id was sent) an earlier behaviour is nearer
+than ``threshold / correction_margin`` - one correction is sent (``corrections`` counts
+them); either way the segment's statistics then join its final behaviour's model.
+
+Cost: per frame one row copy into the block buffer; per block one (step x d)^T (step x d)
+product; per decision one eigen-decomposition per changed model (a few per cut).
+``benchmarks/identity_speed.py`` measures it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from rtseg.detectors.window_models import WindowModel, WindowStats, fit, pca_distance, ppca_distance
+
+#: defaults (also the ``[identity]`` keys of ``config/live.toml``)
+DEFAULT_DECIDE_AFTER_S = 1.5
+DEFAULT_THRESHOLD = 4.0
+
+
+@dataclass
+class IdentityDecision:
+    """One identity message: a decision (``correction`` False) or a correction.
+
+    segment: index of the segment in the primary detector's stream (0 = before the first cut).
+    boundary: its first frame (session index).
+    behaviour: the behaviour id (1-based, in order of first appearance this session).
+    previous: for a correction, the id sent before (else 0).
+    decided_frame: session index of the frame whose arrival produced this message.
+    confidence: 0..1, the margin to the threshold (match: 1 - D / threshold; new id:
+        1 - threshold / D; 0 when there was nothing to compare with).
+    distance: D to the nearest known behaviour (inf if none).
+    new: True when ``behaviour`` was created by this message.
+    """
+    segment: int
+    boundary: int
+    behaviour: int
+    decided_frame: int
+    confidence: float
+    distance: float
+    correction: bool = False
+    previous: int = 0
+    new: bool = False
+
+
+@dataclass
+class _Segment:
+    index: int
+    boundary: int
+    block: int                        # absolute block index of its first block
+    n0: int                           # prefix at that block
+    s10: np.ndarray
+    s20: np.ndarray
+    decide_block: int                 # decide once this many blocks are complete
+    behaviour: int = 0                # 0: not decided yet
+    created: bool = False
+
+
+@dataclass
+class IdentityStats:
+    segments: int = 0
+    decisions: int = 0
+    corrections: int = 0
+    new_behaviours: int = 0
+    clamped: int = 0                  # boundaries older than the history (window shortened)
+
+
+class IdentityTracker:
+    """Streaming unsupervised identity (see module docstring).
+
+    frame_rate: Hz.  method: the detector whose cuts delimit segments ("" = any cut).
+    decide_after_s: seconds of the new segment summed before its decision.
+    max_window_s: longest decision window (when the cut arrives later than decide_after_s).
+    threshold: D at or below which a segment is an earlier behaviour.
+    correction_margin: factor (>= 1) by which the full segment must disagree to correct.
+    step: frames per block.  history_s: seconds of block sums kept.
+    """
+
+    def __init__(self, frame_rate: float, method: str = "", *,
+                 decide_after_s: float = DEFAULT_DECIDE_AFTER_S, max_window_s: float = 3.0,
+                 threshold: float = DEFAULT_THRESHOLD, correction_margin: float = 1.25,
+                 step: int = 10, history_s: float = 30.0, reference_dims: int = 8) -> None:
+        if not frame_rate > 0:
+            raise ValueError(f"frame_rate must be positive, got {frame_rate}")
+        if not decide_after_s > 0:
+            raise ValueError(f"decide_after_s must be positive, got {decide_after_s}")
+        if not threshold > 0:
+            raise ValueError(f"threshold must be positive, got {threshold}")
+        if correction_margin < 1:
+            raise ValueError(f"correction_margin must be >= 1, got {correction_margin}")
+        self.frame_rate = float(frame_rate)
+        self.reference_dims = int(reference_dims)
+        self.method = method
+        self.step = int(step)
+        self.threshold = float(threshold)
+        self.margin = float(correction_margin)
+        self.decide_blocks = max(2, int(math.ceil(decide_after_s * frame_rate / step)))
+        self.max_blocks = max(self.decide_blocks, int(round(max_window_s * frame_rate / step)))
+        self.H = max(self.max_blocks + 4, int(math.ceil(history_s * frame_rate / step)))
+        self.stats = IdentityStats()
+        self.events: list[IdentityDecision] = []
+        self.history: list[IdentityDecision] = []   # every message, in order
+        self._d = 0
+        self._behaviours: list[list[Any]] = []       # [n, s1, s2, model or None]
+        self._seg: _Segment | None = None
+        self._next_seg = 0
+
+    # ------------------------------------------------------------------ streaming state
+    def _init(self, d: int) -> None:
+        H = self.H
+        self._d = d
+        self._buf = np.zeros((self.step, d))
+        self._fill = 0
+        self._n = 0
+        self._s1 = np.zeros(d)
+        self._s2 = np.zeros((d, d))
+        self._pn = np.zeros(H, dtype=np.int64)
+        self._p1 = np.zeros((H, d))
+        self._p2 = np.zeros((H, d, d))
+        self._pstart = np.zeros(H, dtype=np.int64)
+        self._blocks = 0          # blocks started
+        self._index = -1
+
+    def update(self, index: int, x: np.ndarray) -> None:
+        """One fed feature row ``x`` (d,) of session frame ``index``."""
+        if self._d == 0:
+            self._init(len(x))
+        if self._fill == 0:                       # a block starts: record the prefix
+            k = self._blocks % self.H
+            self._pn[k] = self._n
+            self._p1[k] = self._s1
+            self._p2[k] = self._s2
+            self._pstart[k] = index
+            self._blocks += 1
+        self._buf[self._fill] = x
+        self._fill += 1
+        self._index = index
+        if self._seg is None:
+            self._open(index, 0, self._blocks - 1)
+        if self._fill == self.step:
+            B = self._buf
+            self._n += self.step
+            self._s1 += B.sum(axis=0)
+            self._s2 += B.T @ B
+            self._fill = 0
+            seg = self._seg
+            if seg.behaviour == 0 and self._blocks >= seg.decide_block:
+                self._decide(seg, self._blocks, index)
+
+    def on_cut(self, boundary: int, detected: int, method: str = "") -> None:
+        """A cut of the primary detector (``boundary`` = first frame of the new segment)."""
+        if self.method and method and method != self.method:
+            return
+        if self._d == 0:
+            return
+        blk = self._block_at(boundary)
+        seg = self._seg
+        if seg is not None:
+            end = max(blk, seg.block + 1)
+            if seg.behaviour == 0:
+                self._decide(seg, min(end, self._complete()), detected)
+            self._finish(seg, end, detected)
+        self._open(boundary, self._next_seg, blk)
+        new = self._seg
+        if self._complete() >= new.decide_block:
+            self._decide(new, min(self._complete(), new.block + self.max_blocks), detected)
+
+    def step(self, index: int, x: np.ndarray | None, cuts: Sequence[Any]) -> None:
+        """The pipeline hook: the fed row (None when the frame was not fed) and the cuts its
+        arrival revealed (``PipelineCut``)."""
+        if x is not None:
+            self.update(index, x)
+        for c in cuts:
+            self.on_cut(c.boundary, c.detected, c.cut.method)
+
+    def drain(self) -> list[IdentityDecision]:
+        """Messages made since the last call, in order."""
+        out, self.events = self.events, []
+        return out
+
+    # ------------------------------------------------------------------ blocks
+    def _complete(self) -> int:
+        """Absolute index one past the last complete block."""
+        return self._blocks - (1 if self._fill else 0)
+
+    def _block_at(self, frame: int) -> int:
+        """Absolute block whose start is nearest ``frame`` (within the history)."""
+        lo = max(0, self._blocks - self.H)
+        ks = np.arange(lo, self._blocks)
+        starts = self._pstart[ks % self.H]
+        j = int(np.searchsorted(starts, frame))
+        if j == 0 and frame < starts[0] and lo > 0:
+            self.stats.clamped += 1
+        if 0 < j < len(ks) and frame - starts[j - 1] < starts[j] - frame:
+            j -= 1
+        return int(ks[min(j, len(ks) - 1)])
+
+    def _prefix(self, k: int) -> tuple[int, np.ndarray, np.ndarray]:
+        """Prefix sums before absolute block k (k past the started blocks: the running
+        sums, i.e. every complete block)."""
+        if k >= self._blocks:
+            return self._n, self._s1, self._s2
+        i = k % self.H
+        return int(self._pn[i]), self._p1[i], self._p2[i]
+
+    def _window(self, seg: _Segment, end: int) -> WindowStats | None:
+        n, s1, s2 = self._prefix(end)
+        n -= seg.n0
+        if n < 2:
+            return None
+        return WindowStats.from_sums(n, s1 - seg.s10, s2 - seg.s20)
+
+    # ------------------------------------------------------------------ segments
+    def _open(self, boundary: int, index: int, blk: int) -> None:
+        n0, s10, s20 = self._prefix(blk)
+        self._seg = _Segment(index, boundary, blk, n0, s10.copy(), s20.copy(),
+                             blk + self.decide_blocks)
+        self._next_seg = index + 1
+        self.stats.segments += 1
+
+    def _model(self, j: int) -> WindowModel:
+        b = self._behaviours[j]
+        if b[3] is None:
+            b[3] = fit(WindowStats.from_sums(b[0], b[1], b[2]))
+        return b[3]
+
+    def distance(self, a: WindowModel, b: WindowModel) -> float:
+        """D(a, b) of the module docstring."""
+        deff = max(a.nonnull, b.nonnull, 1)
+        p = pca_distance(a, b)
+        q = ppca_distance(a, b) / math.sqrt(deff)
+        v = p * q
+        if not (v >= 0 and math.isfinite(v)):
+            return math.inf
+        dist = math.sqrt(v)
+        if self.reference_dims > 0:
+            dist = 1.0 + (dist - 1.0) * math.sqrt(self.reference_dims / deff)
+        return dist
+
+    def _nearest(self, stats: WindowStats) -> tuple[int, float]:
+        """(behaviour id, D) of the nearest known behaviour; (0, inf) if none."""
+        if not self._behaviours:
+            return 0, math.inf
+        m = fit(stats)
+        best, bd = 0, math.inf
+        for j in range(len(self._behaviours)):
+            if self._behaviours[j][0] < 2:
+                continue
+            d = self.distance(m, self._model(j))
+            if d < bd:
+                best, bd = j + 1, d
+        return best, bd
+
+    def _new_behaviour(self) -> int:
+        d = self._d
+        self._behaviours.append([0, np.zeros(d), np.zeros((d, d)), None])
+        self.stats.new_behaviours += 1
+        return len(self._behaviours)
+
+    def _confidence(self, matched: bool, dist: float) -> float:
+        if not math.isfinite(dist):
+            return 0.0
+        c = 1.0 - dist / self.threshold if matched else 1.0 - self.threshold / max(dist, 1e-12)
+        return float(min(1.0, max(0.0, c)))
+
+    def _emit(self, msg: IdentityDecision) -> None:
+        self.events.append(msg)
+        self.history.append(msg)
+
+    def _decide(self, seg: _Segment, end: int, frame: int) -> None:
+        end = min(end, seg.block + self.max_blocks)
+        w = self._window(seg, end)
+        j, dist = self._nearest(w) if w is not None else (0, math.inf)
+        matched = j > 0 and dist <= self.threshold
+        if not matched:
+            j = self._new_behaviour()
+        seg.behaviour, seg.created = j, not matched
+        self.stats.decisions += 1
+        self._emit(IdentityDecision(seg.index, seg.boundary, j, int(frame),
+                                    self._confidence(matched, dist), dist, new=not matched))
+
+    def _finish(self, seg: _Segment, end: int, frame: int) -> None:
+        """The segment ended at block ``end``: correct it if clearly wrong, then pool its
+        statistics into its behaviour's model."""
+        w = self._window(seg, end)
+        if w is None:
+            return
+        sent = seg.behaviour
+        known = [j for j in range(len(self._behaviours))
+                 if j + 1 != sent or not seg.created]
+        m = fit(w)
+        dists = {j + 1: self.distance(m, self._model(j)) for j in known
+                 if self._behaviours[j][0] >= 2}
+        final = sent
+        if seg.created:
+            if dists:
+                j = min(dists, key=dists.get)
+                if dists[j] <= self.threshold / self.margin:
+                    final = j
+        elif dists.get(sent, math.inf) > self.threshold * self.margin:
+            j = min(dists, key=dists.get)
+            final = j if dists[j] <= self.threshold else 0
+        if final != sent:
+            if final == 0:
+                final = self._new_behaviour()
+            self.stats.corrections += 1
+            d = dists.get(final, math.inf)
+            self._emit(IdentityDecision(seg.index, seg.boundary, final, int(frame),
+                                        self._confidence(final in dists, d), d,
+                                        correction=True, previous=sent,
+                                        new=final not in dists))
+            seg.behaviour = final
+        b = self._behaviours[final - 1]
+        b[0] += w.n
+        b[1] = b[1] + w.n * w.mean
+        b[2] = b[2] + w.scatter + w.n * np.outer(w.mean, w.mean)
+        b[3] = None
+
+    # ------------------------------------------------------------------ results
+    def frame_labels(self, n_frames: int, corrected: bool = False) -> np.ndarray:
+        """Per-frame behaviour ids (0 before the first decision) from the messages sent:
+        each segment's decided id (``corrected``: its last id) from its boundary on."""
+        out = np.zeros(n_frames, dtype=np.int64)
+        ids: dict[int, tuple[int, int]] = {}
+        for m in self.history:
+            if m.correction and not corrected:
+                continue
+            ids[m.segment] = (m.boundary, m.behaviour)
+        segs = sorted(ids.values())
+        for i, (b, j) in enumerate(segs):
+            e = segs[i + 1][0] if i + 1 < len(segs) else n_frames
+            out[max(0, b if i else 0):max(0, e)] = j
+        return out
+
+
+def tracker_from_config(config: Any, frame_rate: float, method: str) -> IdentityTracker | None:
+    """The tracker of a session configuration's ``[identity]`` section (None when off)."""
+    if not config["identity.enabled"]:
+        return None
+    return IdentityTracker(frame_rate, method,
+                           decide_after_s=float(config["identity.decide_after_s"]),
+                           threshold=float(config["identity.threshold"]))
