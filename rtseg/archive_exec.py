@@ -33,8 +33,13 @@ def have_dask() -> bool:
 def dask_client(workers: int | None = None, scheduler: str | None = None) -> Iterator[Any]:
     """A ``dask.distributed.Client``: connected to ``scheduler`` (an address such as
     ``tcp://10.0.0.5:8786``), or to a new local cluster of ``workers`` processes with one
-    thread each, listening on 127.0.0.1 only, closed on exit."""
+    thread each, listening on 127.0.0.1 only (its status page on a free port), closed on
+    exit."""
     from dask.distributed import Client, LocalCluster
+    root = logging.getLogger().getEffectiveLevel()
+    # Dask logs every worker start and stop at INFO: shown with -v only
+    logging.getLogger("distributed").setLevel(logging.ERROR if root >= logging.WARNING
+                                              else root)
     if scheduler:
         client = Client(scheduler, timeout="30s")
         try:
@@ -43,7 +48,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
             client.close()
         return
     cluster = LocalCluster(n_workers=int(workers or 1), threads_per_worker=1, processes=True,
-                           host="127.0.0.1", dashboard_address=None,
+                           host="127.0.0.1", dashboard_address="127.0.0.1:0",
                            silence_logs=logging.ERROR)
     try:
         client = Client(cluster)
