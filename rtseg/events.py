@@ -19,7 +19,7 @@ Times and frames
   own delay (``Cut.delay_frames / frame_rate * 1000``), a part of the latency.
 
 ``to_dict()`` gives a JSON-ready dict with a ``"type"`` field ("cut", "status",
-"dropout"); NaN/inf become None.  ``event_from_dict`` reverses it.
+"dropout", "behaviour"); NaN/inf become None.  ``event_from_dict`` reverses it.
 """
 
 from __future__ import annotations
@@ -201,10 +201,51 @@ class DropoutEvent:
         return d
 
 
-_TYPES = {"cut": CutEvent, "status": StatusEvent, "dropout": DropoutEvent}
+@dataclass
+class BehaviourEvent:
+    """The behaviour id of a segment (``rtseg.identity``), sent once when decided, and at
+    most once more as a correction (``correction`` True) when the whole segment overturns it.
+
+    event: 1-based running number of the behaviour messages of this session.
+    segment: the segment's index in the primary detector's stream (as ``CutEvent.segment``;
+        0 = the segment before the first cut).
+    behaviour: behaviour id as text ("1", "2", ... in order of first appearance).
+    name: behaviour name; the id when no library names it.
+    confidence: 0..1 margin of the decision to its threshold.
+    frame: the segment's first frame (session index); decided_frame: the frame whose
+        arrival produced the message.
+    time: seconds since session start when the message was made.
+    previous: for a correction, the id sent before ("" otherwise).
+    """
+    event: int
+    segment: int
+    behaviour: str
+    name: str
+    confidence: float = 0.0
+    frame: int = -1
+    decided_frame: int = -1
+    time: float = float("nan")
+    correction: bool = False
+    previous: str = ""
+    wall_time: float = field(default_factory=_wall_time)
+
+    @property
+    def label(self) -> str:
+        """What templates' ``{label}`` resolves to: the name, else the id."""
+        return self.name or self.behaviour
+
+    def to_dict(self) -> dict[str, Any]:
+        d = {"type": "behaviour"}
+        d.update({k: _clean(v) for k, v in asdict(self).items()})
+        return d
 
 
-def event_from_dict(d: Mapping[str, Any]) -> CutEvent | StatusEvent | DropoutEvent:
+_TYPES = {"cut": CutEvent, "status": StatusEvent, "dropout": DropoutEvent,
+          "behaviour": BehaviourEvent}
+
+
+def event_from_dict(d: Mapping[str, Any]
+                    ) -> CutEvent | StatusEvent | DropoutEvent | BehaviourEvent:
     """Rebuild an event from ``to_dict()`` output; unknown keys are ignored.
 
     Raises ValueError for a missing or unknown ``type``.

@@ -78,7 +78,7 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from rtseg.events import INPUT_COUNTERS, CutEvent, DropoutEvent, StatusEvent
+from rtseg.events import INPUT_COUNTERS, BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
 from rtseg.outputs import build_publishers, log_publishers, wire_methods
 from rtseg.pipeline import (DEFAULT_FRAME_RATE, Pipeline, PipelineCut, PipelineStats,
                             _blas_limit, detector_params, make_detectors, replay_frames,
@@ -89,7 +89,7 @@ from rtseg.session_stats import FloatRing, LiveStats, SessionSummary, percentile
 
 log = logging.getLogger("rtseg.live")
 
-Event = CutEvent | StatusEvent | DropoutEvent
+Event = CutEvent | StatusEvent | DropoutEvent | BehaviourEvent
 
 __all__ = ["DEFAULT_FRAME_RATE", "FloatRing", "LiveSession", "LiveStats", "Pipeline",
            "PipelineCut", "PipelineStats", "SessionSummary", "build_publishers",
@@ -205,6 +205,9 @@ class LiveSession:
         if self.publishers is None:
             self.publishers = build_publishers(self.config)
         self._log_pubs = log_publishers(self.publishers)
+        if self.pipeline.identity is not None and hasattr(self.publishers,
+                                                          "templates_on_behaviour"):
+            self.publishers.templates_on_behaviour()   # {label} = the behaviour (identity)
         if self.recorder is None and self.config["recording.dir"]:
             from rtseg.recording import SessionRecorder
             url = (self._source_arg if isinstance(self._source_arg, str)
@@ -279,6 +282,10 @@ class LiveSession:
                         self._log_pubs(ev)
             elif isinstance(ev, StatusEvent):
                 self.publishers.publish_status(ev)
+            elif isinstance(ev, BehaviourEvent):
+                send = getattr(self.publishers, "publish_behaviour", None)
+                if send is not None:
+                    send(ev)
             else:
                 self.publishers.publish_dropout(ev)
         except Exception as exc:
@@ -321,6 +328,16 @@ class LiveSession:
             boundary_recv_time=float(b_recv), detected_frame=int(pc.detected),
             score=float(pc.cut.score), detected_recv_time=float(detected_recv), wire=wire)
 
+    def _behaviour_event(self, d: Any) -> BehaviourEvent:
+        """A ``rtseg.identity.IdentityDecision`` as the event sent (ids as text)."""
+        self._behaviour_no = getattr(self, "_behaviour_no", 0) + 1
+        return BehaviourEvent(event=self._behaviour_no, segment=int(d.segment),
+                              behaviour=str(d.behaviour), name=str(d.behaviour),
+                              confidence=float(d.confidence), frame=int(d.boundary),
+                              decided_frame=int(d.decided_frame), time=self._now(),
+                              correction=bool(d.correction),
+                              previous=str(d.previous) if d.correction else "")
+
     # ---------------------------------------------------------------- processing
     def _process_window(self, w) -> None:
         pipe = self.pipeline
@@ -354,6 +371,9 @@ class LiveSession:
                 st.cuts_by_method[ev.method] = st.cuts_by_method.get(ev.method, 0) + 1
                 st.last_cut = ev
                 st.cut_latency_ms.append((time.monotonic() - recv) * 1000.0)
+            if pipe.identity is not None:
+                for d in pipe.identity.drain():
+                    self._emit(self._behaviour_event(d))
             st.frame_latency_ms.append((time.monotonic() - recv) * 1000.0)
         if len(w):
             now = time.monotonic()

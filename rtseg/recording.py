@@ -64,7 +64,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from rtseg.events import CutEvent, DropoutEvent, StatusEvent, event_from_dict
+from rtseg.events import BehaviourEvent, CutEvent, DropoutEvent, StatusEvent, event_from_dict
 from rtseg.frame import Frame
 from rtseg.take import Take
 
@@ -358,10 +358,11 @@ class SessionRecorder:
         """Append a cut event to ``cuts.jsonl`` (written and flushed at once)."""
         self._append_line(self._cuts, ev.to_dict(), "cuts")
 
-    def record_event(self, ev: StatusEvent | DropoutEvent | Mapping[str, Any]) -> None:
-        """Append a status/dropout event, or a dict (``"type"`` defaults to ``"log"``), to
+    def record_event(self, ev: StatusEvent | DropoutEvent | BehaviourEvent | Mapping[str, Any]
+                     ) -> None:
+        """Append a status/dropout/behaviour event, or a dict (``"type"`` defaults to ``"log"``), to
         ``events.jsonl``; ``time`` (session s) and ``wall_time`` are added if missing."""
-        if isinstance(ev, (StatusEvent, DropoutEvent, CutEvent)):
+        if isinstance(ev, (StatusEvent, DropoutEvent, CutEvent, BehaviourEvent)):
             d = ev.to_dict()
         else:
             d = dict(ev)
@@ -548,6 +549,23 @@ def read_session_cuts(directory: str | Path) -> list[CutEvent]:
         if isinstance(ev, CutEvent):
             cuts.append(ev)
     return cuts
+
+
+def read_session_behaviours(directory: str | Path) -> list[BehaviourEvent]:
+    """The behaviour messages (``rtseg.identity``) a session recorded in events.jsonl, in
+    order (decisions and corrections)."""
+    objs, _, _ = _read_jsonl(Path(directory) / EVENTS_FILE)
+    out = []
+    for o in objs:
+        if o.get("type") != "behaviour":
+            continue
+        try:
+            ev = event_from_dict(o)
+        except (ValueError, TypeError) as exc:
+            log.warning("%s: behaviour line skipped: %s", Path(directory) / EVENTS_FILE, exc)
+            continue
+        out.append(ev)
+    return out
 
 
 def _estimate_rate(recv_time: np.ndarray) -> float | None:

@@ -9,6 +9,7 @@ Interface (what the live loop uses)
                                     "udp:127.0.0.1:53000,standard=off,template=/cue/{label}/start",
                                     "-"])
     sent = pubs.publish_cut(cut_event)   # returns the event with latency_ms stamped
+    pubs.publish_behaviour(behaviour_event)  # /rtseg/behaviour (rtseg.identity)
     pubs.publish_status(status_event)    # once a second
     pubs.publish_dropout(dropout_event)
     pubs.stats()                         # {target: {"sent": .., "dropped": .., ...}}
@@ -190,12 +191,15 @@ class PublisherSet:
 
     def _each(self, method: str, ev: Any) -> None:
         for p in self.publishers:
-            try:
-                getattr(p, method)(ev)
-            except Exception as exc:   # noqa: BLE001 - a publisher must never stop the loop
-                key = getattr(p, "target", repr(p))
-                self.failures[key] = self.failures.get(key, 0) + 1
-                self._ratelog(f"{key}:{method}", f"{key}: {method} failed: {exc!r}")
+            self._each_one(p, method, ev)
+
+    def _each_one(self, p: Any, method: str, ev: Any) -> None:
+        try:
+            getattr(p, method)(ev)
+        except Exception as exc:   # noqa: BLE001 - a publisher must never stop the loop
+            key = getattr(p, "target", repr(p))
+            self.failures[key] = self.failures.get(key, 0) + 1
+            self._ratelog(f"{key}:{method}", f"{key}: {method} failed: {exc!r}")
 
     def publish_cut(self, ev: CutEvent) -> CutEvent:
         """Send a cut everywhere; returns the event with ``latency_ms`` stamped (one value
@@ -209,6 +213,19 @@ class PublisherSet:
 
     def publish_dropout(self, ev: DropoutEvent) -> None:
         self._each("publish_dropout", ev)
+
+    def publish_behaviour(self, ev: Any) -> None:
+        """Send a behaviour message (``rtseg.events.BehaviourEvent``) to every publisher
+        that takes one."""
+        for p in self.publishers:
+            if hasattr(p, "publish_behaviour"):
+                self._each_one(p, "publish_behaviour", ev)
+
+    def templates_on_behaviour(self) -> None:
+        """Fire the OSC targets' templates on behaviour messages instead of on cuts."""
+        for p in self.publishers:
+            if hasattr(p, "templates_on_behaviour"):
+                p.templates_on_behaviour = True
 
     def stats(self) -> dict[str, dict[str, int]]:
         """Counters per target (plus ``failures``: exceptions caught by the fan-out)."""

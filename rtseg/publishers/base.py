@@ -21,6 +21,11 @@ address                     tags       arguments
 ``/rtseg/status``           ifii       alive, input frame rate (Hz), dropped frames, stale
                                        joints
 ``/rtseg/dropout``          si         joint/sensor name, 1 lost / 0 restored
+``/rtseg/behaviour``        iissf      behaviour message number, segment index, behaviour
+                                       id, name (the id when unnamed), confidence 0..1
+                                       (``rtseg.identity``; ``[identity] enabled``)
+``/rtseg/behaviour/correct``  iissfs   the same five, then the id sent before: a
+                                       segment's one correction
 ``/rtseg/input``            iiiii      input refused since start: corrupt messages, CRC
                                        failures (part of corrupt), bad messages, bad
                                        values, unknown names (``rtseg.events.
@@ -37,7 +42,7 @@ import time
 from dataclasses import asdict, dataclass
 from typing import Any, Callable, Sequence
 
-from rtseg.events import INPUT_COUNTERS, CutEvent, DropoutEvent, StatusEvent
+from rtseg.events import INPUT_COUNTERS, BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
 from rtseg.publishers.oscmsg import encode_message
 from rtseg.publishers.templates import AddressTemplate, cut_arg_value, sanitize_label
 
@@ -149,6 +154,30 @@ def cut_messages(ev: CutEvent, standard: bool = True,
     return out
 
 
+def behaviour_messages(ev: BehaviourEvent, standard: bool = True,
+                       templates: Sequence[AddressTemplate] = ()) -> list[bytes]:
+    """Encoded OSC messages for a behaviour decision or correction: ``/rtseg/behaviour``
+    (or ``/rtseg/behaviour/correct``) if ``standard``, then one per template, rendered
+    with ``{label}`` = the behaviour name (else its id), ``{method}`` = "identity"."""
+    out = []
+    args = [int(ev.event), int(ev.segment), str(ev.behaviour), str(ev.label),
+            float(ev.confidence)]
+    if standard:
+        if ev.correction:
+            out.append(encode_message("/rtseg/behaviour/correct", "iissfs",
+                                      args + [str(ev.previous)]))
+        else:
+            out.append(encode_message("/rtseg/behaviour", "iissf", args))
+    if templates:
+        proxy = CutEvent(event=int(ev.event), segment=int(ev.segment), frame=int(ev.frame),
+                         time=float(ev.time), method="identity", label=ev.label,
+                         confidence=float(ev.confidence))
+        for t in templates:
+            address, tags, targs = t.render(proxy)
+            out.append(encode_message(address, tags, targs))
+    return out
+
+
 def status_message(ev: StatusEvent) -> bytes:
     return encode_message("/rtseg/status", "ifii",
                           [ev.alive, ev.frame_rate, ev.dropped, ev.stale_joints])
@@ -177,6 +206,9 @@ class OscPublisher(Publisher):
         self.standard = standard
         self.templates = [t if isinstance(t, AddressTemplate) else AddressTemplate(t)
                           for t in templates]
+        #: True (set by the live loop when identity is on): templates fire on behaviour
+        #: messages, with {label} = the behaviour, instead of on cuts
+        self.templates_on_behaviour = False
 
     def _send(self, packet: bytes) -> None:
         raise NotImplementedError
@@ -193,7 +225,13 @@ class OscPublisher(Publisher):
 
     def publish_cut(self, ev: CutEvent) -> None:
         ev = ev.stamped()
-        self._guarded(lambda: cut_messages(ev, self.standard, self.templates), "cut event")
+        tmpl = () if self.templates_on_behaviour else self.templates
+        self._guarded(lambda: cut_messages(ev, self.standard, tmpl), "cut event")
+
+    def publish_behaviour(self, ev: BehaviourEvent) -> None:
+        tmpl = self.templates if self.templates_on_behaviour else ()
+        if self.standard or tmpl:
+            self._guarded(lambda: behaviour_messages(ev, self.standard, tmpl), "behaviour event")
 
     def publish_status(self, ev: StatusEvent) -> None:
         if self.standard:

@@ -19,7 +19,7 @@ import sys
 import threading
 from typing import IO, Any
 
-from rtseg.events import CutEvent, DropoutEvent, StatusEvent
+from rtseg.events import BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
 from rtseg.publishers.base import Publisher
 
 
@@ -74,6 +74,9 @@ class JsonlPublisher(Publisher):
         self._publish(ev)
 
     def publish_dropout(self, ev: DropoutEvent) -> None:
+        self._publish(ev)
+
+    def publish_behaviour(self, ev: BehaviourEvent) -> None:
         self._publish(ev)
 
     def close(self) -> None:
