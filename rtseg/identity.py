@@ -135,7 +135,7 @@ class IdentityTracker:
         self.frame_rate = float(frame_rate)
         self.reference_dims = int(reference_dims)
         self.method = method
-        self.step = int(step)
+        self.block = int(step)
         self.threshold = float(threshold)
         self.margin = float(correction_margin)
         self.decide_blocks = max(2, int(math.ceil(decide_after_s * frame_rate / step)))
@@ -153,7 +153,7 @@ class IdentityTracker:
     def _init(self, d: int) -> None:
         H = self.H
         self._d = d
-        self._buf = np.zeros((self.step, d))
+        self._buf = np.zeros((self.block, d))
         self._fill = 0
         self._n = 0
         self._s1 = np.zeros(d)
@@ -181,9 +181,9 @@ class IdentityTracker:
         self._index = index
         if self._seg is None:
             self._open(index, 0, self._blocks - 1)
-        if self._fill == self.step:
+        if self._fill == self.block:
             B = self._buf
-            self._n += self.step
+            self._n += self.block
             self._s1 += B.sum(axis=0)
             self._s2 += B.T @ B
             self._fill = 0

@@ -126,7 +126,8 @@ def evaluate_identity(takes: Sequence[LabelledTake], config: Any,
                     "corrected": scores(truth, run.corrected),
                     "segments": st.segments, "behaviours": st.new_behaviours,
                     "corrections": st.corrections, "true_behaviours": len(set(truth)),
-                    "decision_delay_s": _delays(run, take.frame_rate)}
+                    "decision_delay_s": _delays(run, take.frame_rate,
+                                                [t.mid for t in lt.transitions])}
         pairs.setdefault(lt.group, []).append((key, truth, run.decided))
     allp = [p for g in pairs.values() for p in g]
     return {"pooled": pooled_scores(allp),
@@ -134,10 +135,79 @@ def evaluate_identity(takes: Sequence[LabelledTake], config: Any,
             "takes": per}
 
 
-def _delays(run: IdentityRun, frame_rate: float) -> dict[str, float | None]:
-    """Median and max of (decision frame - segment boundary) / frame rate, s (cuts only)."""
-    d = [(m.decided_frame - m.boundary) / frame_rate for m in run.tracker.history
-         if not m.correction and m.segment > 0]
-    if not d:
-        return {"median": None, "max": None}
-    return {"median": round(float(np.median(d)), 3), "max": round(float(np.max(d)), 3)}
+def _delays(run: IdentityRun, frame_rate: float, mids: Sequence[int] = ()
+            ) -> dict[str, float | None]:
+    """Decision times of the segments after cuts, s: ``median``/``max`` of (decision frame
+    - segment boundary); ``after_transition_median``: of (decision frame - labelled
+    transition mid) for the segments whose boundary lies within 1 s of one."""
+    dec = [m for m in run.tracker.history if not m.correction and m.segment > 0]
+    d = [(m.decided_frame - m.boundary) / frame_rate for m in dec]
+    out: dict[str, float | None] = {"median": None, "max": None, "after_transition_median": None}
+    if d:
+        out["median"] = round(float(np.median(d)), 3)
+        out["max"] = round(float(np.max(d)), 3)
+    mids_a = np.asarray(mids, dtype=np.int64)
+    t = []
+    for m in dec:
+        if len(mids_a):
+            j = int(np.argmin(np.abs(mids_a - m.boundary)))
+            if abs(int(mids_a[j]) - m.boundary) <= frame_rate:
+                t.append((m.decided_frame - int(mids_a[j])) / frame_rate)
+    if t:
+        out["after_transition_median"] = round(float(np.median(t)), 3)
+    return out
+
+
+# --------------------------------------------------------------------------- CLI path
+def format_identity_table(doc: dict[str, Any]) -> str:
+    """The ``identity`` report as text: per take, per group and pooled."""
+    lines = [f"behaviour identity (live, causal: the ids sent; {doc.get('primary', '')} cuts)",
+             f"{'take':<16} {'ARI':>6} {'NMI':>6} {'ARI+c':>6}  {'segs':>4} {'ids':>4} "
+             f"{'true':>4} {'corr':>4}  {'dec_s':>6} {'vs_lab':>6}"]
+    for k, t in doc["takes"].items():
+        d = t["decision_delay_s"]["median"]
+        dl = t["decision_delay_s"]["after_transition_median"]
+        lines.append(f"{k:<16} {t['ari']:6.3f} {t['nmi']:6.3f} {t['corrected']['ari']:6.3f}  "
+                     f"{t['segments']:4d} {t['behaviours']:4d} {t['true_behaviours']:4d} "
+                     f"{t['corrections']:4d}  {'-' if d is None else f'{d:.2f}':>6} "
+                     f"{'-' if dl is None else f'{dl:.2f}':>6}")
+    for g, s in doc["groups"].items():
+        lines.append(f"{'pooled ' + g:<16} {s['ari']:6.3f} {s['nmi']:6.3f}")
+    lines.append(f"{'pooled':<16} {doc['pooled']['ari']:6.3f} {doc['pooled']['nmi']:6.3f}")
+    lines.append("ARI+c: with the corrections applied; ids: per take (pooled over the takes' "
+                 "frames concatenated); dec_s: median s from segment boundary to its id; "
+                 "vs_lab: from the labelled transition")
+    return "\n".join(lines) + "\n"
+
+
+def run_evaluate_identity(args: Any) -> int:
+    """``rtseg evaluate DATA --online --identity [--json]``: JSON ``{"live_default",
+    "identity": {"pooled", "groups", "takes"}}`` or a table.  Takes: ``--group`` (default
+    cmu and tsseg4d)."""
+    import json
+    import sys
+    from rtseg.commands.evaluate import Progress
+    from rtseg.labels import GROUPS, find_labelled_takes
+    from rtseg.online_eval import live_config
+    if not args.online:
+        raise ValueError("--identity scores what the live loop sends: add --online")
+    methods = None if args.method == "all" else [args.method]
+    cfg, default = live_config(args.config, methods)
+    cfg["identity.enabled"] = True
+    groups = (("cmu", "tsseg4d") if args.group is None
+              else GROUPS if args.group == "all" else (args.group,))
+    takes = find_labelled_takes(args.data_dir, groups)
+    if not takes:
+        raise ValueError(f"no labelled takes of {', '.join(groups)} found in {args.data_dir}")
+    bar = Progress(len(takes), enabled=not args.no_progress)
+    doc = evaluate_identity(takes, cfg, bar)
+    bar.close()
+    primary = cfg["detectors.primary"] or cfg["detectors.methods"][0]
+    doc = {"primary": primary, "threshold": cfg["identity.threshold"],
+           "decide_after_s": cfg["identity.decide_after_s"], **doc}
+    if args.json:
+        sys.stdout.write(json.dumps({"live_default": default, "identity": doc}, indent=2,
+                                    allow_nan=False) + "\n")
+    else:
+        sys.stdout.write(format_identity_table(doc))
+    return 0

@@ -331,6 +331,10 @@ def add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
                         "frame, with each matched cut's detection delay")
     p.add_argument("--config", metavar="FILE",
                    help="live configuration for --online (default: the shipped live.toml)")
+    p.add_argument("--identity", action="store_true",
+                   help="with --online: score the behaviour ids the live loop sends "
+                        "(adjusted Rand index, NMI per take and pooled; rtseg.identity_eval) "
+                        "instead of the cuts; takes: cmu and tsseg4d unless --group")
     add_profile_argument(p)
 
 
@@ -355,6 +359,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if getattr(args, "identity", False):          # separate path: rtseg.identity_eval
+        from rtseg.identity_eval import run_evaluate_identity
+        return run_evaluate_identity(args)
     online = live_default = None
     if args.online:
         methods = list(ONLINE_METHODS) if args.method == "all" else [args.method]
