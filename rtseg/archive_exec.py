@@ -49,7 +49,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
         return
     cluster = LocalCluster(n_workers=int(workers or 1), threads_per_worker=1, processes=True,
                            host="127.0.0.1", dashboard_address="127.0.0.1:0",
-                           silence_logs=logging.ERROR)
+                           silence_logs=logging.CRITICAL)
     try:
         client = Client(cluster)
         try:
@@ -76,12 +76,14 @@ def backend_of(workers: int | None, scheduler: str | None) -> str:
 
 def run_tasks(todo: Sequence[tuple[str, list[str]]], kwargs: dict[str, Any],
               workers: int | None = None, scheduler: str | None = None,
-              stats: Any = None) -> Iterator[tuple[str, list[dict[str, Any]]]]:
+              stats: Any = None, client: Any = None
+              ) -> Iterator[tuple[str, list[dict[str, Any]]]]:
     """Yield ``(path, records)`` for each ``(path, methods)`` of ``todo`` as it completes
     (in-process: in order; Dask: in completion order).  Stopping the iteration cancels
-    the tasks not yet done."""
+    the tasks not yet done.  ``client``: a running ``dask.distributed.Client`` to use
+    (benchmarks: cluster start-up timed apart)."""
     from rtseg.archive import error_record, take_records
-    backend = backend_of(workers, scheduler)
+    backend = "dask" if client is not None else backend_of(workers, scheduler)
     if stats is not None:
         stats.backend = backend if backend == "in-process" else (
             f"dask scheduler {scheduler}" if scheduler else f"dask LocalCluster {workers} workers")
@@ -90,7 +92,8 @@ def run_tasks(todo: Sequence[tuple[str, list[str]]], kwargs: dict[str, Any],
             yield path, take_records(path, methods, **kwargs)
         return
     from dask.distributed import as_completed
-    with dask_client(workers, scheduler) as client:
+    with (contextlib.nullcontext(client) if client is not None
+          else dask_client(workers, scheduler)) as client:
         futures = client.map(take_records, [p for p, _ in todo], [m for _, m in todo],
                              pure=False, **kwargs)
         pending = {f.key: (f, path, methods) for f, (path, methods) in zip(futures, todo)}
