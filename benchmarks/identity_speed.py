@@ -1,0 +1,105 @@
+"""Cost of behaviour identity (rtseg.identity) per frame, on top of the detectors.
+
+The take's fed feature rows and the primary detector's cuts are computed once through the
+live pipeline (``rtseg.online_eval``); then the ``IdentityTracker`` alone is run over them
+``--repeat`` times, as the pipeline calls it (``step(index, row, cuts)``), and the
+per-frame time printed: mean per frame over the whole take (amortised cost; median over
+repeats), and the per-frame distribution (median, p99, max: the frames that decide or
+finish a segment).  Also the whole pipeline per frame with identity off and on.
+
+    python3 benchmarks/identity_speed.py [--take ../shared/data/cmu/86_01.amc] [--repeat 5]
+
+Without a take (or when the data folder is absent) a synthetic performance is used.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rtseg.identity import IdentityTracker
+from rtseg.online_eval import fed_features, live_config, live_cuts
+from rtseg.pipeline import _blas_limit
+
+DEFAULT_TAKE = Path(__file__).resolve().parents[2] / "shared" / "data" / "cmu" / "86_01.amc"
+
+
+class _Cut:
+    def __init__(self, method, boundary, detected):
+        self.boundary, self.detected = boundary, detected
+        self.cut = type("C", (), {"method": method})()
+
+
+def load(path: str | None):
+    if path or DEFAULT_TAKE.is_file():
+        from rtseg.take import load_take
+        return load_take(path or DEFAULT_TAKE), str(path or DEFAULT_TAKE)
+    from rtseg.simulators.synth import synthesize
+    return synthesize("walk:8,punch:8,walk:8,squat:8,punch:8", seed=0).take, "synthetic"
+
+
+def pipeline_per_frame(take, cfg) -> float:
+    """Whole live pipeline, microseconds per frame (one pass)."""
+    from rtseg.pipeline import Pipeline
+    fr = float(take.frame_rate)
+    pipe = Pipeline(take.joint_names, take.parents, take.space, fr, cfg)
+    valid = np.ones(take.n_joints, dtype=bool)
+    t0 = time.perf_counter()
+    for i in range(take.n_frames):
+        pipe.process(i, take.quats[i], valid, i, i / fr, 0, i / fr)
+    return (time.perf_counter() - t0) / take.n_frames * 1e6
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--take", help="motion file (default: CMU 86_01 when present)")
+    ap.add_argument("--repeat", type=int, default=5)
+    args = ap.parse_args(argv)
+    take, name = load(args.take)
+    cfg, primary = live_config()
+    blas = _blas_limit(1)
+    X, index, _ = fed_features(take, cfg)
+    cuts = live_cuts(take, cfg)[primary]
+    by_frame: dict[int, list] = {}
+    for c in cuts:
+        by_frame.setdefault(int(c.detected), []).append(_Cut(primary, c.boundary, c.detected))
+    fr = float(take.frame_rate)
+    means, per = [], []
+    for _ in range(args.repeat):
+        tr = IdentityTracker(fr, primary)
+        t = np.empty(len(X))
+        t_all = time.perf_counter()
+        for k in range(len(X)):
+            i = int(index[k])
+            t0 = time.perf_counter()
+            tr.step(i, X[k], by_frame.get(i, ()))
+            tr.drain()
+            t[k] = time.perf_counter() - t0
+        means.append((time.perf_counter() - t_all) / len(X) * 1e6)
+        per.append(t * 1e6)
+    allp = np.concatenate(per)
+    print(f"take: {name}  frames fed: {len(X)}  features: {X.shape[1]}  "
+          f"{primary} cuts: {len(cuts)}  decisions: {tr.stats.decisions}  "
+          f"corrections: {tr.stats.corrections}")
+    print(f"identity, amortised us/frame (median of {args.repeat}): {np.median(means):.2f}")
+    print(f"identity, per-frame us: median {np.median(allp):.2f}  p99 {np.percentile(allp, 99):.2f}"
+          f"  max {allp.max():.0f}")
+    off, on = [], []
+    for _ in range(3):                  # interleaved: the machine's load drifts
+        cfg["identity.enabled"] = False
+        off.append(pipeline_per_frame(take, cfg))
+        cfg["identity.enabled"] = True
+        on.append(pipeline_per_frame(take, cfg))
+    print(f"live pipeline us/frame (median of 3, interleaved; noisy on a shared machine): "
+          f"identity off {np.median(off):.1f}, on {np.median(on):.1f}")
+    if blas is not None:
+        blas.restore_original_limits()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
