@@ -16,7 +16,7 @@ import logging
 import sys
 import time
 import warnings
-from typing import Any, Iterator, Sequence, TextIO
+from typing import Any, Callable, Iterator, Sequence, TextIO
 
 log = logging.getLogger(__name__)
 
@@ -74,43 +74,74 @@ def backend_of(workers: int | None, scheduler: str | None) -> str:
     return "in-process"
 
 
+def map_tasks(fn: Callable[..., Any], items: Sequence[Any], kwargs: dict[str, Any] | None = None,
+              workers: int | None = None, scheduler: str | None = None, client: Any = None
+              ) -> Iterator[tuple[int, Any, BaseException | None]]:
+    """Run ``fn(item, **kwargs)`` for every item, one task each, and yield ``(index,
+    result, None)`` or ``(index, None, exception)`` as each completes (in-process: in
+    order; Dask: in completion order).  ``fn`` must be importable by name (a module-level
+    function) and items and results small: they travel through the scheduler.  Stopping
+    the iteration cancels the tasks not yet done.  ``client``: a running
+    ``dask.distributed.Client`` to use instead of starting one."""
+    kwargs = kwargs or {}
+    backend = "dask" if client is not None else backend_of(workers, scheduler)
+    if backend == "in-process" or not items:
+        for i, item in enumerate(items):
+            try:
+                res = fn(item, **kwargs)
+            except Exception as exc:  # noqa: BLE001 - the caller decides, as with Dask
+                yield i, None, exc
+            else:
+                yield i, res, None
+        return
+    from dask.distributed import as_completed
+    with (contextlib.nullcontext(client) if client is not None
+          else dask_client(workers, scheduler)) as client:
+        futures = client.map(fn, list(items), pure=False, **kwargs)
+        pending = {f.key: (i, f) for i, f in enumerate(futures)}
+        del futures
+        try:
+            for fut in as_completed([f for _, f in pending.values()]):
+                i, _ = pending.pop(fut.key)
+                try:
+                    res, exc = fut.result(), None
+                except Exception as e:  # noqa: BLE001 - raised by the task or a lost worker
+                    res, exc = None, e
+                fut.release()
+                yield i, res, exc
+        finally:
+            if pending:
+                client.cancel([f for _, f in pending.values()])
+
+
+def _records_task(item: tuple[str, list[str]], **kwargs: Any) -> list[dict[str, Any]]:
+    from rtseg.archive import take_records
+    return take_records(item[0], item[1], **kwargs)
+
+
 def run_tasks(todo: Sequence[tuple[str, list[str]]], kwargs: dict[str, Any],
               workers: int | None = None, scheduler: str | None = None,
               stats: Any = None, client: Any = None
               ) -> Iterator[tuple[str, list[dict[str, Any]]]]:
     """Yield ``(path, records)`` for each ``(path, methods)`` of ``todo`` as it completes
-    (in-process: in order; Dask: in completion order).  Stopping the iteration cancels
-    the tasks not yet done.  ``client``: a running ``dask.distributed.Client`` to use
-    (benchmarks: cluster start-up timed apart)."""
-    from rtseg.archive import error_record, take_records
-    backend = "dask" if client is not None else backend_of(workers, scheduler)
+    (``map_tasks`` of ``rtseg.archive.take_records``).  A task lost on its worker gives
+    error records.  ``client``: a running Dask client (benchmarks: start-up timed apart)."""
+    from rtseg.archive import error_record
     if stats is not None:
+        backend = "dask" if client is not None else backend_of(workers, scheduler)
         stats.backend = backend if backend == "in-process" else (
-            f"dask scheduler {scheduler}" if scheduler else f"dask LocalCluster {workers} workers")
-    if backend == "in-process" or not todo:
-        for path, methods in todo:
-            yield path, take_records(path, methods, **kwargs)
-        return
-    from dask.distributed import as_completed
-    with (contextlib.nullcontext(client) if client is not None
-          else dask_client(workers, scheduler)) as client:
-        futures = client.map(take_records, [p for p, _ in todo], [m for _, m in todo],
-                             pure=False, **kwargs)
-        pending = {f.key: (f, path, methods) for f, (path, methods) in zip(futures, todo)}
-        del futures
-        try:
-            for fut in as_completed(list(f for f, _, _ in pending.values())):
-                _, path, methods = pending.pop(fut.key)
-                try:
-                    recs = fut.result()
-                except Exception as exc:  # noqa: BLE001 - a lost task is a failed take
-                    recs = [error_record(path, m, f"task failed on its worker: "
-                                         f"{type(exc).__name__}: {exc}") for m in methods]
-                fut.release()
-                yield path, recs
-        finally:
-            if pending:
-                client.cancel([f for f, _, _ in pending.values()])
+            f"dask scheduler {scheduler}" if scheduler else
+            f"dask LocalCluster {workers} workers" if workers else "dask client")
+        if backend == "in-process":
+            workers = scheduler = None       # warned once already
+    tasks = map_tasks(_records_task, todo, kwargs, workers, scheduler, client)
+    with contextlib.closing(tasks):
+        for i, recs, exc in tasks:
+            path, methods = todo[i]
+            if exc is not None:
+                recs = [error_record(path, m, f"task failed: {type(exc).__name__}: {exc}")
+                        for m in methods]
+            yield path, recs
 
 
 class Progress:
