@@ -1,0 +1,93 @@
+"""Choosing the identity threshold by leave-one-take-out (rtseg.identity, docs/identity.md).
+
+Every labelled cmu and tsseg4d take is run once through the live pipeline (fed feature
+rows and the primary detector's cuts, ``rtseg.online_eval``); then the ``IdentityTracker``
+is run on them at every threshold of ``--grid``.  For each take *name* (86_01 is in both
+groups and is held out from both), the threshold with the best pooled ARI over all the
+other takes is chosen and the held-out take scored with it.  Prints the ARI pooled per
+group at every threshold, the LOTO choices and the LOTO-pooled ARI/NMI per group (each
+take scored with a threshold chosen without it).
+
+    python3 benchmarks/identity_loto.py [DATA_DIR] [--grid 2,2.5,...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from rtseg.identity import IdentityTracker
+from rtseg.identity_eval import pooled_scores, truth_labels
+from rtseg.labels import find_labelled_takes
+from rtseg.online_eval import fed_features, live_config, live_cuts
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def replay(d: dict, threshold: float, method: str) -> np.ndarray:
+    tr = IdentityTracker(d["fr"], method, threshold=threshold)
+    by: dict[int, list[int]] = {}
+    for b, det in d["cuts"]:
+        by.setdefault(det, []).append(b)
+    X, idx = d["X"], d["idx"]
+    for k in range(len(X)):
+        f = int(idx[k])
+        tr.update(f, X[k])
+        for b in by.get(f, ()):
+            tr.on_cut(b, f, method)
+    return tr.frame_labels(d["n"])
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("data_dir", nargs="?", default=str(DATA))
+    ap.add_argument("--grid", default="2,2.5,3,3.5,4,4.5,5,5.5,6")
+    args = ap.parse_args(argv)
+    grid = [float(v) for v in args.grid.split(",")]
+    cfg, method = live_config()
+    takes = find_labelled_takes(args.data_dir, ("cmu", "tsseg4d"))
+    if not takes:
+        print(f"no labelled takes in {args.data_dir}", file=sys.stderr)
+        return 1
+    D = {}
+    for lt in takes:
+        tk = lt.load()
+        X, idx, _ = fed_features(tk, cfg)
+        cuts = [(c.boundary, c.detected) for c in live_cuts(tk, cfg)[method]]
+        D[f"{lt.group}/{lt.name}"] = dict(X=X, idx=idx, cuts=cuts, n=tk.n_frames,
+                                          fr=float(tk.frame_rate),
+                                          truth=truth_labels(lt, tk.n_frames))
+    pred = {(k, t): replay(d, t, method) for k, d in D.items() for t in grid}
+    groups = sorted({k.split("/")[0] for k in D})
+
+    def pooled(keys, t):
+        return pooled_scores([(k, D[k]["truth"], pred[(k, t)]) for k in keys])
+
+    print("threshold  " + "  ".join(f"{g:>8}" for g in groups) + "       all")
+    for t in grid:
+        row = [pooled([k for k in D if k.startswith(g + "/")], t)["ari"] for g in groups]
+        print(f"{t:9.2f}  " + "  ".join(f"{v:8.3f}" for v in row)
+              + f"  {pooled(list(D), t)['ari']:8.3f}")
+    names = sorted({k.split("/")[1] for k in D})
+    held, chosen = {}, {}
+    for nm in names:
+        train = [k for k in D if k.split("/")[1] != nm]
+        best = max(grid, key=lambda t: pooled(train, t)["ari"])
+        for k in D:
+            if k.split("/")[1] == nm:
+                held[k], chosen[k] = pred[(k, best)], best
+    print("LOTO thresholds:", ", ".join(f"{k} {v:g}" for k, v in chosen.items()))
+    for g in groups:
+        ks = [k for k in D if k.startswith(g + "/")]
+        s = pooled_scores([(k, D[k]["truth"], held[k]) for k in ks])
+        print(f"LOTO pooled {g}: ARI {s['ari']:.3f}  NMI {s['nmi']:.3f}")
+    best_all = max(grid, key=lambda t: pooled(list(D), t)["ari"])
+    print(f"threshold with the best pooled ARI over all takes: {best_all:g}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
