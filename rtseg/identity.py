@@ -122,7 +122,7 @@ class IdentityTracker:
 
     def __init__(self, frame_rate: float, method: str = "", *,
                  decide_after_s: float = DEFAULT_DECIDE_AFTER_S, max_window_s: float = 3.0,
-                 threshold: float = DEFAULT_THRESHOLD, correction_margin: float = 1.25,
+                 threshold: float = DEFAULT_THRESHOLD, correction_margin: float = 2.0,
                  step: int = 10, history_s: float = 30.0, reference_dims: int = 8) -> None:
         if not frame_rate > 0:
             raise ValueError(f"frame_rate must be positive, got {frame_rate}")
