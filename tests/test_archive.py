@@ -207,3 +207,38 @@ def test_parquet_roundtrip_and_resume(archive, reference, tmp_path):
     recs = load_records(out)
     assert _strip(recs) == _strip(reference)
     assert np.isclose(recs[0]["frame_rate"], 120.0)
+
+
+def test_evaluate_on_local_cluster_gives_the_same_report(tmp_path, capsys):
+    """``rtseg evaluate --workers 2``: the takes read and segmented on a LocalCluster, the
+    JSON report equal to the in-process one (elapsed times apart), a corrupt take listed
+    in the errors of both."""
+    pytest.importorskip("dask.distributed", reason="Dask not installed (pip install 'rtseg[scale]')")
+    (tmp_path / "cmu").mkdir()
+    (tmp_path / "labels").mkdir()
+    blocks = []
+    for name, script, seed in [("90_01", "idle:3,walk:3,punch:3", 1),
+                               ("90_02", "squat:3,wave:3", 2)]:
+        res = synthesize(script, seed=seed)
+        write_take(tmp_path / "cmu" / f"{name}.npz", res.take)
+        ss, tt = name.split("_")
+        lines = [f"{ss} {tt}"] + [f"{t.before} {t.lo + 1} {t.mid + 1} {t.hi + 1}"
+                                  for t in res.transitions]
+        n = res.take.n_frames
+        blocks.append("\n".join(lines + [f"{res.segments[-1].name} {n} {n} {n}"]) + "\n")
+    (tmp_path / "cmu" / "90_03.npz").write_bytes(b"not a zip")
+    blocks.append("90 03\nwalk 100 100 100\n")
+    (tmp_path / "labels" / "cmu86_transitions.txt").write_text("".join(blocks))
+
+    def report(*extra: str) -> tuple[int, dict]:
+        rc = main(["evaluate", str(tmp_path), "--method", "pca", "--json", *extra])
+        doc = json.loads(capsys.readouterr().out)
+        for t in doc["pca"]["takes"].values():
+            t.pop("elapsed_s")
+        return rc, doc
+
+    rc1, one = report("--no-progress")
+    rc2, many = report("--workers", "2")
+    assert rc1 == rc2 == 1 and one == many
+    assert sorted(one["pca"]["takes"]) == ["90_01", "90_02"]
+    assert list(one["pca"]["errors"]) == ["90_03"]

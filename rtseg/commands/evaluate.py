@@ -200,10 +200,18 @@ def _cuts_of_take(take: Any, methods: Sequence[str], params: dict[str, dict[str,
             for m in methods}
 
 
+def _load_and_cut(t: LabelledTake, methods: Sequence[str], params: dict[str, dict[str, Any]] | None,
+                  profile: str | None, online: Any) -> tuple[int, float, dict[str, Any]]:
+    """One take's task on a Dask worker: (frames, frame rate, ``_cuts_of_take``)."""
+    take = t.load()
+    return take.n_frames, take.frame_rate, _cuts_of_take(take, methods, params, profile, online)
+
+
 def evaluate_takes(takes: Sequence[LabelledTake], methods: Sequence[str],
                    params: dict[str, dict[str, Any]] | None = None,
                    progress: Progress | None = None, profile: str | None = None,
-                   tolerance_s: float = 0.5, online: Any = None) -> EvaluationReport:
+                   tolerance_s: float = 0.5, online: Any = None,
+                   workers: int | None = None, scheduler: str | None = None) -> EvaluationReport:
     """Segment each take with every method (features computed once a take) and score it,
     at ``tolerance_s`` and strictly.
 
@@ -212,6 +220,8 @@ def evaluate_takes(takes: Sequence[LabelledTake], methods: Sequence[str],
     methods, and the delay of every matched cut is kept.
     Take keys are the bare take names, or ``group/name`` when a name occurs in two groups.
     A take that cannot be read or segmented is logged and listed in ``errors``.
+    ``workers``/``scheduler``: read and segment the takes on Dask, one task per take
+    (``rtseg.archive_exec.map_tasks``); scoring and the report are unchanged.
     """
     if not (tolerance_s >= 0 and math.isfinite(tolerance_s)):
         raise ValueError(f"tolerance must be a finite number of seconds >= 0, got {tolerance_s}")
@@ -219,24 +229,42 @@ def evaluate_takes(takes: Sequence[LabelledTake], methods: Sequence[str],
     clash = {n for n in names if names.count(n) > 1}
     report = EvaluationReport({m: MethodReport(m, tolerance_s=tolerance_s,
                                                online=online is not None) for m in methods})
-    for t in takes:
+    parallel = bool(workers or scheduler)
+    ahead: dict[int, tuple[Any, BaseException | None]] = {}
+    if parallel:
+        from rtseg.archive_exec import map_tasks
+        for i, res, exc in map_tasks(_load_and_cut, takes, {"methods": list(methods),
+                                     "params": params, "profile": profile, "online": online},
+                                     workers, scheduler):
+            ahead[i] = (res, exc)
+            if progress:
+                progress.step(takes[i].name)
+    for i, t in enumerate(takes):
         key = f"{t.group}/{t.name}" if t.name in clash else t.name
-        if progress:
+        if progress and not parallel:
             progress.step(key)
         try:
-            take = t.load()
-            if t.labels.n_frames is not None and abs(t.labels.n_frames - take.n_frames) > 12:
+            if parallel:
+                res, exc = ahead.pop(i)
+                if exc is not None:
+                    raise exc
+                n_frames, rate, results = res
+            else:
+                take = t.load()
+                n_frames, rate = take.n_frames, take.frame_rate
+            if t.labels.n_frames is not None and abs(t.labels.n_frames - n_frames) > 12:
                 log.warning("%s: labels say %d frames, the take has %d", key,
-                            t.labels.n_frames, take.n_frames)
-            results = _cuts_of_take(take, methods, params, profile, online)
+                            t.labels.n_frames, n_frames)
+            if not parallel:
+                results = _cuts_of_take(take, methods, params, profile, online)
         except (OSError, ValueError, KeyError) as exc:
             log.error("%s: %s", key, exc)
             report.errors[key] = str(exc)
             continue
-        wide = widen(t.transitions, int(round(tolerance_s * take.frame_rate)))
+        wide = widen(t.transitions, int(round(tolerance_s * rate)))
         for m, (frames_, detected, elapsed) in results.items():
             sc = score(frames_, wide)
-            delays = (detection_delays(sc, dict(zip(frames_, detected)), wide, take.frame_rate)
+            delays = (detection_delays(sc, dict(zip(frames_, detected)), wide, rate)
                       if detected else [])
             report.methods[m].takes[key] = TakeScore(
                 t.name, t.group, sc, frames_, t.label_source, elapsed,
@@ -250,7 +278,8 @@ def evaluate_takes(takes: Sequence[LabelledTake], methods: Sequence[str],
 def evaluate_dir(data_dir: str | Path, methods: Sequence[str], group: str | None = None,
                  params: dict[str, dict[str, Any]] | None = None,
                  progress: bool = True, profile: str | None = None,
-                 tolerance_s: float = 0.5, online: Any = None) -> EvaluationReport:
+                 tolerance_s: float = 0.5, online: Any = None,
+                 workers: int | None = None, scheduler: str | None = None) -> EvaluationReport:
     """Find the labelled takes of ``data_dir`` in ``group`` (one of ``GROUPS`` or "all";
     None: the cmu takes when there are any, else every group found, e.g. a folder of
     spliced performances) and evaluate them (see ``evaluate_takes``)."""
@@ -264,7 +293,8 @@ def evaluate_dir(data_dir: str | Path, methods: Sequence[str], group: str | None
     if not takes:
         raise ValueError(f"no labelled takes of group {group!r} found in {data_dir}")
     bar = Progress(len(takes), enabled=progress)
-    return evaluate_takes(takes, methods, params, bar, profile, tolerance_s, online)
+    return evaluate_takes(takes, methods, params, bar, profile, tolerance_s, online,
+                          workers, scheduler)
 
 
 def _delay_text(r: MethodReport, group: str | None) -> str:
@@ -336,6 +366,12 @@ def add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
                         "(adjusted Rand index, NMI per take and pooled; rtseg.identity_eval) "
                         "instead of the cuts; takes: cmu and tsseg4d unless --group")
     add_profile_argument(p)
+    p.add_argument("--workers", type=int, metavar="N",
+                   help="read and segment the takes on a local Dask cluster of N processes "
+                        "(pip install 'rtseg[scale]'; same report)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="read and segment the takes on a running Dask scheduler "
+                        "(tcp://host:8786; its workers see the data folder)")
 
 
 def tolerance_seconds(text: str) -> float:
@@ -359,6 +395,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if getattr(args, "identity", False) and (args.workers or args.scheduler):
+        raise ValueError("--identity runs in this process: drop --workers/--scheduler")
     if getattr(args, "identity", False):          # separate path: rtseg.identity_eval
         from rtseg.identity_eval import run_evaluate_identity
         return run_evaluate_identity(args)
@@ -379,7 +417,8 @@ def run(args: argparse.Namespace) -> int:
     report = evaluate_dir(args.data_dir, methods, args.group,
                           None if online else params_by_method(args.params, methods),
                           progress=not args.no_progress, profile=args.profile,
-                          tolerance_s=args.tolerance, online=online)
+                          tolerance_s=args.tolerance, online=online,
+                          workers=args.workers, scheduler=args.scheduler)
     report.live_default = live_default
     if args.json:
         sys.stdout.write(json.dumps(report.as_dict(), indent=2, allow_nan=False) + "\n")
