@@ -157,6 +157,8 @@ class RecordStore:
     def finish(self) -> None:
         """Rewrite the output sorted, one record per key (atomically: temp file, rename)."""
         self.close()
+        if not self.records and not self.path.exists():
+            return                      # nothing ran (e.g. no scheduler): no empty file
         recs = self.sorted_records()
         tmp = self.path.with_name(self.path.name + ".tmp")
         if self.parquet:
