@@ -175,6 +175,9 @@ def main(argv: list[str] | None = None) -> int:
         "noop_round_trip_s": None if rt is None else round(rt, 5),
         "compute_per_take_s": round(per_take, 3),
         "archive_10000_hours": {str(w): round(10000 / r / 3600, 2) for w, r in best.items()},
+        # CPU time alone (what an idle core would take): 10 000 / takes per CPU second
+        "archive_10000_cpu_hours": round(10000 / one["takes_per_cpu_s"] / 3600, 2)
+        if one["takes_per_cpu_s"] else None,
     }
     if args.json:
         print(json.dumps(doc, indent=2))
@@ -194,9 +197,10 @@ def main(argv: list[str] | None = None) -> int:
               f"by the second worker; the rest is the cores the machine gave)")
     if rt is not None:
         print(f"no-op task round trip on 1 worker: {rt * 1000:.2f} ms")
-    print(f"compute per take: {per_take:.2f} s; a 10 000-take archive like this one: "
+    print(f"compute per take: {per_take:.2f} s wall; a 10 000-take archive like this one: "
           + ", ".join(f"{h} h on {w} worker(s)" for w, h in doc["archive_10000_hours"].items())
-          + f"; on N free cores about {10000 * per_take / 3600:.1f} h / N")
+          + f" at this load; {doc['archive_10000_cpu_hours']} CPU hours, i.e. about "
+          f"{doc['archive_10000_cpu_hours']} h / N on N idle cores")
     return 0
 
 
