@@ -89,6 +89,28 @@ def run_identity(take: Any, config: Any) -> IdentityRun:
                        tracker, cuts)
 
 
+def replay_session_identities(directory: str, config: Any) -> IdentityTracker:
+    """The identities the live loop makes on a recorded session folder, offline: every
+    recorded frame with its sequence number, receive and source time through the
+    ``Pipeline`` (as ``rtseg.pipeline.replay_session``) with identity on; the tracker
+    (``history``: every message in order)."""
+    from rtseg.pipeline import Pipeline
+    from rtseg.recording import read_session
+    cfg = config
+    if not cfg["identity.enabled"]:
+        cfg = type(config)({k: dict(v) for k, v in config.values.items()}, config.origin,
+                           dict(config.detector_params))
+        cfg["identity.enabled"] = True
+    tk = read_session(directory)
+    m = tk.meta
+    seq, recv, src = m["seq"], m["recv_time"], m["source_time"]
+    pipe = Pipeline(tk.joint_names, tk.parents, tk.space, tk.frame_rate, cfg)
+    for i in range(tk.n_frames):
+        pipe.process(i, tk.quats[i], tk.valid[i], None if seq[i] < 0 else int(seq[i]),
+                     float(recv[i]), 0, None if not np.isfinite(src[i]) else float(src[i]))
+    return pipe.identity
+
+
 def scores(truth: np.ndarray, pred: np.ndarray) -> dict[str, float]:
     """{"ari", "nmi"} of per-frame labels."""
     from sklearn.metrics import adjusted_rand_score, normalized_mutual_info_score

@@ -59,6 +59,7 @@ class PipelineStats:
     skipped_invalid: int = 0   # of those, frames not fed (run longer than the limit)
     bad_values: int = 0        # non-finite / zero quaternions replaced by the last good ones
     discarded_cuts: int = 0    # cuts whose boundary preceded a restart
+    identity_errors: int = 0   # frames on which rtseg.identity failed (cuts still sent)
 
 
 def _average_quats(q: np.ndarray) -> np.ndarray:
@@ -294,7 +295,14 @@ class Pipeline:
             if out_cut is not None:
                 out.append(out_cut)
         if self.identity is not None:
-            self.identity.step(index, x, out)
+            try:
+                self.identity.step(index, x, out)
+            except Exception as exc:  # identity must never cost a cut
+                self.stats.identity_errors += 1
+                n = self.stats.identity_errors
+                if n & (n - 1) == 0:            # logged at the 1st, 2nd, 4th, 8th, ... failure
+                    log.warning("behaviour identity failed at frame %d (%s: %s; %d so far)",
+                                index, type(exc).__name__, exc, n)
         return out
 
     def _to_session(self, method: str, cut: Cut, index: int) -> PipelineCut | None:

@@ -22,7 +22,7 @@ from rtseg.drivers.base import Source
 from rtseg.events import BehaviourEvent, CutEvent, event_from_dict
 from rtseg.frame import Frame
 from rtseg.identity import IdentityTracker
-from rtseg.identity_eval import run_identity
+from rtseg.identity_eval import replay_session_identities, run_identity
 from rtseg.live import LiveSession
 from rtseg.online_eval import live_config
 from rtseg.publishers import OscUdpPublisher, PublisherSet, parse_target
@@ -141,6 +141,25 @@ def test_a_correction_is_sent_once_and_counted():
     lab = tr.frame_labels(len(X))
     labc = tr.frame_labels(len(X), corrected=True)
     assert lab[1500] == 1 and labc[1500] == 2
+
+
+def test_an_identity_failure_never_costs_a_cut():
+    """A tracker that raises is counted and logged; the frame's cuts still come out."""
+    from rtseg.pipeline import Pipeline
+    res = synthesize("walk:6,punch:6", seed=0)
+    take = res.take
+    cfg = _config(threshold=SYNTH_THRESHOLD)
+    pipe = Pipeline(take.joint_names, take.parents, take.space, take.frame_rate, cfg)
+
+    class Broken:
+        def step(self, index, x, cuts):
+            raise RuntimeError("boom")
+    pipe.identity = Broken()
+    cuts = []
+    for i in range(take.n_frames):
+        cuts += pipe.process(i, take.quats[i], np.ones(take.n_joints, bool), i)
+    assert len(cuts) == 1
+    assert pipe.stats.identity_errors == pipe.stats.fed
 
 
 def test_bad_parameters_are_refused():
@@ -276,11 +295,8 @@ def test_live_session_sends_records_and_logs_identities(tmp_path):
     recorded = read_session_behaviours(rec)
     assert [(b.segment, b.behaviour) for b in recorded] == [(s, p[2]) for p in beh
                                                             for s in [p[1]]]
-    # the same frames offline give the same identities (the pipeline is deterministic)
-    from rtseg.pipeline import replay_session  # noqa: F401  (cuts only)
-    from rtseg.recording import read_session
-    tk = read_session(rec)
-    offline = run_identity(tk, cfg).tracker.history
+    # the recording replayed offline gives the same identities (deterministic pipeline)
+    offline = replay_session_identities(str(rec), cfg).history
     assert [(m.segment, m.behaviour) for m in offline] == [(b.segment, int(b.behaviour))
                                                            for b in recorded]
 
