@@ -227,8 +227,12 @@ def _check_replay(tmp_path, err: str, sent_frames: int) -> list[dict]:
         f"stale sensors: {[tk.joint_names[j] for j in np.flatnonzero(~tk.valid.all(0))]}"
     # --speed 10: the stream's clock is the take's (1/120 s a frame) although the frames
     # arrived ~10x faster
+    # (UDP may drop a datagram under load: a lost frame is a step of whole frames)
     st = tk.meta["source_time"]
-    assert np.allclose(np.diff(st), 1 / 120.0, atol=1e-5), np.unique(np.round(np.diff(st), 6))
+    steps = np.diff(st) * 120.0
+    assert np.allclose(steps, np.round(steps), atol=2e-3) and steps.min() > 0.5, \
+        np.unique(np.round(np.diff(st), 6))
+    assert np.mean(np.round(steps) == 1) >= 0.98
     recv = tk.meta["recv_time"]
     assert (recv[-1] - recv[0]) < 0.5 * (st[-1] - st[0])
     events = [json.loads(line) for line in (tmp_path / "events.jsonl").read_text().splitlines()]
