@@ -43,12 +43,21 @@ def positive_float(text: str) -> float:
 
 
 def error_text(exc: BaseException) -> str:
-    """One line describing ``exc`` (a KeyError's message without its quotes)."""
+    """One line describing ``exc`` (a KeyError's message without its quotes): runs of
+    white space become one space and other unprintable characters (a path may hold any)
+    are escaped, so the message is one line on every terminal and to ``str.splitlines``."""
     if isinstance(exc, KeyError) and len(exc.args) == 1 and isinstance(exc.args[0], str):
         text = exc.args[0]
     else:
         text = str(exc) or type(exc).__name__
-    return " ".join(text.split())
+    return one_line(text)
+
+
+def one_line(text: str) -> str:
+    """``text`` on one printable line (see ``error_text``)."""
+    text = " ".join(text.split())
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii")
+                   for c in text)
 
 
 def build_parser() -> argparse.ArgumentParser:

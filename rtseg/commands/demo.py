@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from rtseg.cli import positive_float
+from rtseg.cli import error_text, positive_float
 from rtseg.commands.live import add_session_arguments, config_from_args, run_session
 from rtseg.config import ConfigError
 
@@ -26,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         cfg = config_from_args(args)
     except ConfigError as exc:
-        print(f"rtseg demo: configuration error: {exc}", file=sys.stderr)
+        print(f"rtseg demo: configuration error: {error_text(exc)}", file=sys.stderr)
         return 2
     from rtseg.simulators.faults import FaultConfig
     from rtseg.simulators.serial_device import SerialSuit

@@ -13,7 +13,7 @@ import sys
 import time
 from typing import Any, Callable, TextIO
 
-from rtseg.cli import positive_float
+from rtseg.cli import error_text, positive_float
 from rtseg.config import ConfigError
 from rtseg.events import CutEvent, DropoutEvent, StatusEvent
 from rtseg.session_config import SessionConfig, load_session_config
@@ -214,7 +214,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         cfg = config_from_args(args)
     except ConfigError as exc:
-        print(f"rtseg live: configuration error: {exc}", file=sys.stderr)
+        print(f"rtseg live: configuration error: {error_text(exc)}", file=sys.stderr)
         return 2
     url = args.source or cfg["source.url"]
     if not url:
