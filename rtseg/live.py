@@ -150,6 +150,7 @@ class LiveSession:
         self._eof = threading.Event()
         self._reader_error: BaseException | None = None
         self._first_recv: float | None = None
+        self._first_src: float | None = None    # the first frame's source time (s)
         self._rec_lock = threading.Lock()
         self._event_no = 0
         self._segment: dict[str, int] = {}
@@ -260,6 +261,7 @@ class LiveSession:
                 ring.append(q, recv, stime, seq, v)
                 if self._first_recv is None:
                     self._first_recv = recv
+                    self._first_src = stime if stime is not None and np.isfinite(stime) else None
                 self.stats.frames_received += 1
         except BaseException as exc:  # pragma: no cover - defensive
             self._reader_error = exc
@@ -321,12 +323,28 @@ class LiveSession:
             b_recv = detected_recv - (pc.detected - pc.boundary) / self.frame_rate
         return CutEvent(
             event=self._event_no if wire else 0, segment=seg, frame=int(pc.boundary),
-            time=float(b_recv - self.session_start), method=m,
+            time=self._boundary_time(pc.boundary, b_recv), method=m,
             label=m,
             confidence=float(np.clip(pc.cut.confidence, 0.0, 1.0)),
             detector_delay_ms=float(max(0, pc.detected - pc.boundary) / self.frame_rate * 1000.0),
             boundary_recv_time=float(b_recv), detected_frame=int(pc.detected),
             score=float(pc.cut.score), detected_recv_time=float(detected_recv), wire=wire)
+
+    def _boundary_time(self, index: int, b_recv: float) -> float:
+        """Seconds since session start of frame ``index``: on the source's own clock when it
+        has one (a replay sent faster than real time, ``--speed``, keeps the take's clock,
+        so cut times are the take's), counted from the first frame's arrival; else its
+        receive time.  A source clock that runs backwards or over 100x faster than the
+        frames arrive (a wrap, a restarted device) is not used."""
+        recv_t = float(b_recv - self.session_start)
+        src = self.ring.source_time_at(index) if self.ring is not None else None
+        if src is None or self._first_src is None or self._first_recv is None:
+            return recv_t
+        d_src = src - self._first_src
+        d_recv = max(float(b_recv) - self._first_recv, 1.0 / self.frame_rate)
+        if not (0.0 <= d_src <= 100.0 * d_recv + 1.0):
+            return recv_t
+        return float(self._first_recv - self.session_start + d_src)
 
     def _behaviour_event(self, d: Any) -> BehaviourEvent:
         """A ``rtseg.identity.IdentityDecision`` as the event sent (ids as text)."""

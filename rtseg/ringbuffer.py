@@ -179,6 +179,15 @@ class RingBuffer:
                 return float(self._recv[index % self.capacity])
             return None
 
+    def source_time_at(self, index: int) -> float | None:
+        """Source-clock time of absolute frame ``index``; None if it is no longer held or
+        the source gave none."""
+        with self._cond:
+            if self.oldest <= index < self._head:
+                v = float(self._src[index % self.capacity])
+                return v if np.isfinite(v) else None
+            return None
+
     def wait(self, index: int, timeout: float | None) -> bool:
         """Block until frame ``index`` exists (head > index) or ``timeout`` passes."""
         with self._cond:

@@ -56,6 +56,10 @@ def test_86_01_through_the_serial_suit_scores_like_evaluate_online(data_dir, tmp
     src = tk.meta["source_time"]
     assert np.allclose(np.diff(src), 1 / take.frame_rate, atol=2e-5)
     to_take = [int(round(src[c.frame] * take.frame_rate)) for c in sent]
+    # cut times are on the take's clock although the frames arrived 8x faster
+    t0 = float(tk.meta["recv_time"][0]) - float(tk.meta["header"]["start_monotonic"])
+    for c in sent:
+        assert c.time == pytest.approx(src[c.frame] + t0, abs=0.02), (c.time, src[c.frame])
     wide = widen(lt.transitions, int(round(0.5 * take.frame_rate)))
     f1_suit = score(to_take, wide).f1
     cfg_online, _ = live_config(methods=["contrast"])
