@@ -28,35 +28,13 @@ import numpy as np
 from rtseg.commands.evaluate import evaluate_takes
 from rtseg.detectors import load_params
 from rtseg.detectors.contrast import ContrastDetector
-from rtseg.evaluation import detection_delays, score, widen
+from rtseg.evaluation import pooled_tally, tally
 from rtseg.labels import find_labelled_takes
 from rtseg.online_eval import fed_features, live_config
 
 TOL_S = 0.5
 BUDGETS = [(0.75, 0.25), (1.0, 0.25), (1.0, 0.5), (1.25, 0.5), (1.5, 0.5), (1.5, 0.75),
            (1.75, 0.5), (1.75, 1.0), (2.0, 1.0), (2.5, 1.0)]     # (after_s, hold_s)
-
-
-def pooled_row(rows: list[tuple]) -> dict:
-    tp = sum(r[0] for r in rows)
-    nc = sum(r[1] for r in rows)
-    nt = sum(r[2] for r in rows)
-    st = sum(r[3] for r in rows)
-    d = [x for r in rows for x in r[4]]
-    return {"f1": 2 * tp / (nc + nt) if nc + nt else 1.0,
-            "strict_f1": 2 * st / (nc + nt) if nc + nt else 1.0,
-            "cuts": nc, "transitions": nt,
-            "delay_median": float(np.median(d)) if d else None,
-            "delay_p90": float(np.percentile(d, 90)) if d else None}
-
-
-def score_cuts(cuts: list[tuple[int, int]], transitions, fr: float) -> tuple:
-    """(tp, cuts, transitions, strict tp, delays) of (cut frame, detected frame) pairs."""
-    frames_ = [c for c, _ in cuts]
-    wide = widen(transitions, int(round(TOL_S * fr)))
-    s = score(frames_, wide)
-    return (s.tp, s.cuts, s.transitions, score(frames_, transitions).tp,
-            detection_delays(s, dict(cuts), wide, fr))
 
 
 def main() -> int:
@@ -86,10 +64,10 @@ def main() -> int:
             det = ContrastDetector.from_params(p, take.frame_rate)
             cuts = [(int(index[c.frame]), int(index[min(c.detected_at, len(index) - 1)]))
                     for c in det.run(X)]
-            rows.append(score_cuts(cuts, t.transitions, take.frame_rate))
+            rows.append(tally(cuts, t.transitions, take.frame_rate, TOL_S))
         live_rows.append({"after_s": after, "hold_s": hold,
                           "shipped": after == base["after_s"] and hold == base["hold_s"],
-                          **pooled_row(rows)})
+                          **pooled_tally(rows)})
     paper_cfg, _ = live_config(methods=["pca", "ppca"])
     paper = evaluate_takes(takes, ["pca", "ppca"], online=paper_cfg, tolerance_s=TOL_S)
     offline = evaluate_takes(takes, ["contrast", "pca", "ppca", "gmm"], tolerance_s=TOL_S)

@@ -33,7 +33,7 @@ import numpy as np
 from rtseg.detectors import load_params
 from rtseg.detectors.contrast import ContrastDetector
 from rtseg.detectors.peaks import CausalPeaks
-from rtseg.evaluation import detection_delays, score, widen
+from rtseg.evaluation import pooled_tally, tally
 from rtseg.labels import find_labelled_takes
 from rtseg.online_eval import fed_features, live_config
 from rtseg.simulators.synth import DEFAULT_SCRIPT, synthesize
@@ -98,26 +98,13 @@ def peaks_on_trace(trace, det: ContrastDetector, p: dict, fr: float) -> list[tup
 
 
 def counts(case: Case, cuts: list[tuple[int, int]]) -> tuple[int, int, int, int, list[float]]:
-    """(tp, cuts, transitions, strict tp, delays) of cuts given in fed-row frames."""
-    frames_ = [int(case.index[min(c, len(case.index) - 1)]) for c, _ in cuts]
-    det = {f: int(case.index[min(d, len(case.index) - 1)]) for f, (_, d) in zip(frames_, cuts)}
-    wide = widen(case.transitions, int(round(TOL_S * case.frame_rate)))
-    s = score(frames_, wide)
-    return (s.tp, s.cuts, s.transitions, score(frames_, case.transitions).tp,
-            detection_delays(s, det, wide, case.frame_rate))
+    """``tally`` of cuts given in fed-row frames, mapped to take frames."""
+    last = len(case.index) - 1
+    return tally([(int(case.index[min(c, last)]), int(case.index[min(d, last)])) for c, d in cuts],
+                 case.transitions, case.frame_rate, TOL_S)
 
 
-def summary(rows: list) -> dict:
-    tp = sum(r[0] for r in rows)
-    nc = sum(r[1] for r in rows)
-    nt = sum(r[2] for r in rows)
-    st = sum(r[3] for r in rows)
-    d = [x for r in rows for x in r[4]]
-    return {"f1": 2 * tp / (nc + nt) if nc + nt else 1.0,
-            "strict_f1": 2 * st / (nc + nt) if nc + nt else 1.0,
-            "cuts": nc, "transitions": nt,
-            "delay_median": float(np.median(d)) if d else None,
-            "delay_p90": float(np.percentile(d, 90)) if d else None}
+summary = pooled_tally
 
 
 def objective(res: dict, cases: list[Case], kind: str = "pooled") -> float:

@@ -143,3 +143,27 @@ def detection_delays(score_: Score, detected: dict[int, int], transitions: Seque
     produced its cut: (detected[cut frame] - mid) / frame_rate, in the order of
     ``score_.matches``.  ``detected`` maps a cut's frame to its ``detected_at`` frame."""
     return [(detected[c] - transitions[j].mid) / frame_rate for c, j in score_.matches]
+
+
+def tally(cuts: Sequence[tuple[int, int]], transitions: Sequence[Transition], frame_rate: float,
+          tolerance_s: float = 0.5) -> tuple[int, int, int, int, list[float]]:
+    """Counts of (cut frame, detected frame) pairs against ``transitions``: (tp at the
+    tolerance, cuts, transitions, strict tp, delays in seconds of the matched cuts).  Rows
+    of several takes pool with ``pooled_tally``."""
+    frames_ = [int(c) for c, _ in cuts]
+    wide = widen(transitions, int(round(tolerance_s * frame_rate)))
+    s = score(frames_, wide)
+    return (s.tp, s.cuts, s.transitions, score(frames_, transitions).tp,
+            detection_delays(s, {int(c): int(d) for c, d in cuts}, wide, frame_rate))
+
+
+def pooled_tally(rows: Iterable[tuple[int, int, int, int, list[float]]]) -> dict[str, float | int | None]:
+    """F1 at the tolerance and strict, counts and median/p90 delay of ``tally`` rows pooled
+    (counts summed, then divided; the zero-division conventions of this module)."""
+    rows = list(rows)
+    tp, nc, nt, st = (sum(r[i] for r in rows) for i in range(4))
+    d = [x for r in rows for x in r[4]]
+    return {"f1": Score.from_counts(tp, nc, nt).f1, "strict_f1": Score.from_counts(st, nc, nt).f1,
+            "cuts": nc, "transitions": nt,
+            "delay_median": float(np.median(d)) if d else None,
+            "delay_p90": float(np.percentile(d, 90)) if d else None}

@@ -109,3 +109,15 @@ def test_real_cmu_online_default_detector(data_dir, capsys):
     assert p["transitions"] == 22
     assert p["f1"] >= 0.88, p
     assert p["delay_s"]["median"] <= 2.5 and p["delay_s"]["p90"] <= 3.5, p
+
+
+def test_tally_and_pooled_tally():
+    from rtseg.evaluation import pooled_tally, tally
+    tr = [Transition(lo=100, hi=200, mid=150), Transition(lo=500, hi=600, mid=550)]
+    row = tally([(230, 400), (900, 1000)], tr, 120.0, 0.5)       # 230: only within 0.5 s
+    assert row[:4] == (1, 2, 2, 0)
+    assert row[4] == pytest.approx([(400 - 150) / 120])
+    p = pooled_tally([row, tally([], tr, 120.0)])
+    assert (p["cuts"], p["transitions"]) == (2, 4)
+    assert p["f1"] == pytest.approx(2 * 1 / (2 + 4)) and p["strict_f1"] == 0.0
+    assert p["delay_median"] == pytest.approx(250 / 120)
