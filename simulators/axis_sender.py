@@ -108,7 +108,6 @@ class AxisSender(StreamSender):
             v = np.concatenate([root, angles.reshape(self.n_frames, -1)], axis=1)
         #: (frames, values) float32 as sent
         self.values = v.astype(np.float32)
-        self._sock: socket.socket | None = None
         self._server: socket.socket | None = None
         self._clients: list[socket.socket] = []
         self._clients_lock = threading.Lock()
@@ -134,9 +133,7 @@ class AxisSender(StreamSender):
     # -- transport
     def _open(self) -> None:
         if self.fmt == "binary":
-            family, _, _, _, self._addr = socket.getaddrinfo(self.host, self.port,
-                                                             type=socket.SOCK_DGRAM)[0]
-            self._sock = socket.socket(family, socket.SOCK_DGRAM)
+            super()._open()
             return
         family, _, _, _, addr = socket.getaddrinfo(self.host, self.port,
                                                    type=socket.SOCK_STREAM)[0]
@@ -173,11 +170,7 @@ class AxisSender(StreamSender):
 
     def _send(self, parts: list[bytes]) -> None:
         if self.fmt == "binary":
-            for p in parts:
-                try:
-                    self._sock.sendto(p, self._addr)
-                except OSError:
-                    self.send_errors += 1
+            super()._send(parts)
             return
         data = b"".join(parts)
         with self._clients_lock:
@@ -209,9 +202,7 @@ class AxisSender(StreamSender):
 
     def _close(self) -> None:
         self._accepting.clear()
-        if self._sock is not None:
-            self._sock.close()
-            self._sock = None
+        super()._close()
         if self._server is not None:
             self._server.close()
             self._server = None

@@ -41,8 +41,9 @@ class MocopiSender(UdpTakeSender):
                  joint_map: dict[str, str] | None = None, imu: ImuModel | str | None = None,
                  allow_missing: bool = False, unix_start: float | None = None,
                  skeleton_every: int = 0) -> None:
-        super().__init__(take, host, port, rate, loop, speed, suit, skeleton_map, joint_map,
-                         imu, allow_missing)
+        super().__init__(take, host, port, suit, rate=rate, loop=loop, speed=speed,
+                         skeleton_map=skeleton_map, joint_map=joint_map, imu=imu,
+                         allow_missing=allow_missing)
         self.bone_ids = list(self.suit.sensor_ids)
         self.unix_start = time.time() if unix_start is None else float(unix_start)
         self.skeleton_every = int(skeleton_every)
@@ -66,7 +67,7 @@ class MocopiSender(UdpTakeSender):
     def preamble(self) -> list[bytes]:
         return [self._skdf]
 
-    def encode(self, slot: int, index: int, source_time: float) -> list[bytes]:
+    def encode(self, index: int, slot: int, source_time: float) -> list[bytes]:
         out = []
         if self.skeleton_every > 0 and slot and slot % self.skeleton_every == 0:
             out.append(self._skdf)

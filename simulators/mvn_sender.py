@@ -44,8 +44,9 @@ class MvnSender(UdpTakeSender):
                  joint_map: dict[str, str] | None = None, imu: ImuModel | str | None = None,
                  allow_missing: bool = False,
                  max_datagram: int = DEFAULT_MAX_DATAGRAM) -> None:
-        super().__init__(take, host, port, rate, loop, speed, suit, skeleton_map, joint_map,
-                         imu, allow_missing)
+        super().__init__(take, host, port, suit, rate=rate, loop=loop, speed=speed,
+                         skeleton_map=skeleton_map, joint_map=joint_map, imu=imu,
+                         allow_missing=allow_missing)
         if not 0 <= int(character) <= 255:
             raise ValueError(f"character must be 0..255, got {character}")
         self.character = int(character)
@@ -62,7 +63,7 @@ class MvnSender(UdpTakeSender):
         return [encode_message("12", f"name:{self.character_name}\n".encode(),
                                character=self.character)]
 
-    def encode(self, slot: int, index: int, source_time: float) -> list[bytes]:
+    def encode(self, index: int, slot: int, source_time: float) -> list[bytes]:
         return encode_datagrams(slot, int(round(source_time * 1000.0)), self.segment_ids,
                                 self._quats[index], self._pos[index], character=self.character,
                                 max_datagram=self.max_datagram)

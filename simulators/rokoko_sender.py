@@ -20,7 +20,6 @@ sent at ``speed`` times real time.
 
 from __future__ import annotations
 
-import socket
 import time
 
 import numpy as np
@@ -43,8 +42,8 @@ class RokokoSender(StreamSender):
     def __init__(self, take: Take, host: str = "127.0.0.1", port: int = DEFAULT_PORT, *,
                  actors: list[tuple[str, int]] | None = None, compress: bool = False,
                  suit: str = "rokoko", **kw) -> None:
-        super().__init__(take, suit, **kw)
         self.host, self.port = host, int(port)
+        super().__init__(take, suit, **kw)
         self.compress = compress
         self.actors = list(actors) if actors else [("Actor1", 0)]
         low = {b.lower(): k for k, b in enumerate(self.suit.bones)}
@@ -59,7 +58,6 @@ class RokokoSender(StreamSender):
         #: (frames, 21, 4) global orientations in Rokoko bone order, rtseg frame, float32
         self.body = self.quats[:, cols_a].astype(np.float32)
         self.body_valid = self.valid[:, cols_a]
-        self._sock: socket.socket | None = None
 
     def payload(self, index: int, t: float) -> bytes:
         """The datagram for take frame ``index`` (first actor; others offset) at time ``t``."""
@@ -74,23 +72,6 @@ class RokokoSender(StreamSender):
 
     def encode(self, index: int, slot: int, t: float) -> list[bytes]:
         return [self.payload(index, t)]
-
-    def _open(self) -> None:
-        family, _, _, _, self._addr = socket.getaddrinfo(self.host, self.port,
-                                                         type=socket.SOCK_DGRAM)[0]
-        self._sock = socket.socket(family, socket.SOCK_DGRAM)
-
-    def _send(self, parts: list[bytes]) -> None:
-        for p in parts:
-            try:
-                self._sock.sendto(p, self._addr)
-            except OSError:
-                self.send_errors += 1
-
-    def _close(self) -> None:
-        if self._sock is not None:
-            self._sock.close()
-            self._sock = None
 
 
 def serve(args, take: Take, out, run_until, retarget_kw: dict) -> tuple[str, list[str]]:

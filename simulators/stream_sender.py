@@ -1,5 +1,6 @@
-"""Shared machinery of the vendor-suit simulators (Rokoko, Axis): a take retargeted onto a
-suit profile, sent frame by frame on the take's clock from a background thread.
+"""Shared machinery of the vendor-suit simulators (Rokoko, Axis; MVN and mocopi through
+:mod:`rtseg.simulators.udp_take_sender`): a take retargeted onto a suit profile, sent frame
+by frame on the take's clock from a background thread.
 
 :class:`StreamSender` retargets the take with :func:`rtseg.simulators.retarget.retarget`
 (named skeleton map detected or given, forward kinematics, optional IMU errors) onto a
@@ -11,13 +12,15 @@ it, unless ``allow_missing`` (those bones are then sent as not valid).
 Clock: slot ``k`` carries take time ``k / rate`` and is sent ``k / (rate * speed)`` s
 after start, so ``speed`` > 1 replays faster while the stream's own clock (timestamps,
 frame indices) stays the take's.  Subclasses implement ``encode(index, slot, t)`` (the
-datagrams or stream chunks of one frame) and the transport (``_open``, ``_send``,
-``_close``, optionally ``_ready``).  Every slot is recorded in ``sent_log``.
+datagrams or stream chunks of one frame) and may replace the transport (default: UDP
+datagrams to ``host:port``; ``_open``, ``_send``, ``_close``, optionally ``_ready``) or the
+retargeting policy (``_retarget``).  Every slot is recorded in ``sent_log``.
 """
 
 from __future__ import annotations
 
 import logging
+import socket
 import threading
 import time
 from dataclasses import dataclass
@@ -45,6 +48,11 @@ class Sent:
     send_time: float
     parts: int
     nbytes: int
+
+    @property
+    def datagrams(self) -> int:
+        """``parts`` (the name the UDP senders' logs use)."""
+        return self.parts
 
 
 def retarget_with_optional(take: Take, suit: SuitProfile, optional: set[str],
@@ -110,18 +118,28 @@ class StreamSender:
         self.loop = loop
         self.suit = suit if isinstance(suit, SuitProfile) else suit_profile(suit)
         imu_model = ImuModel.parse(imu) if isinstance(imu, str) or imu is None else imu
-        self.retargeted = rt = retarget_with_optional(
-            take, self.suit, set(self.optional), skeleton_map, joint_map, imu_model,
-            allow_missing)
+        self.retargeted = rt = self._retarget(skeleton_map, joint_map, imu_model,
+                                              allow_missing)
         self.quats = Q.make_continuous(rt.quats, axis=0)
         self.valid = rt.valid & rt.present[None, :]
-        self.root = root_metres(take, FAMILY_UNITS.get(rt.family, 1.0))
+        self.root = self._root_metres()
         self.n_frames = take.n_frames
         self.sent_log: list[Sent] = []
         self.send_errors = 0
         self._stop = threading.Event()
         self.done = threading.Event()
         self._thread: threading.Thread | None = None
+        self._sock: socket.socket | None = None
+
+    def _retarget(self, skeleton_map: str | None, joint_map: dict[str, str] | None,
+                  imu: ImuModel | None, allow_missing: bool) -> Retargeted:
+        """The take on ``self.suit``: :func:`retarget_with_optional` with ``optional``."""
+        return retarget_with_optional(self.take, self.suit, set(self.optional), skeleton_map,
+                                      joint_map, imu, allow_missing)
+
+    def _root_metres(self) -> np.ndarray | None:
+        """The root trajectory sent, metres (a family's own unit when the take says none)."""
+        return root_metres(self.take, FAMILY_UNITS.get(self.retargeted.family, 1.0))
 
     def describe(self) -> str:
         """Which take joint drives each suit bone, which bones go rigid with their parent,
@@ -139,14 +157,27 @@ class StreamSender:
     def encode(self, index: int, slot: int, t: float) -> list[bytes]:
         raise NotImplementedError
 
+    # -- transport (default: UDP datagrams to ``self.host``:``self.port``)
     def _open(self) -> None:
-        raise NotImplementedError
+        family, _, _, _, self._addr = socket.getaddrinfo(self.host, self.port,
+                                                         type=socket.SOCK_DGRAM)[0]
+        self._sock = socket.socket(family, socket.SOCK_DGRAM)
 
     def _send(self, parts: list[bytes]) -> None:
-        raise NotImplementedError
+        for p in parts:
+            try:
+                self._sock.sendto(p, self._addr)
+            except OSError as exc:      # e.g. ICMP port unreachable: nobody listening yet
+                self.send_errors += 1
+                self._send_failed(exc)
+
+    def _send_failed(self, exc: OSError) -> None:
+        """Called after each failed datagram (``send_errors`` already counts it)."""
 
     def _close(self) -> None:
-        pass
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
 
     def _ready(self) -> bool:
         """Called once before the first frame; False ends the run (stopped)."""

@@ -12,31 +12,30 @@ use (the ``unity`` skeleton profile's joints on this suit) must come from the ta
 without one is a ``RetargetError`` naming it, unless ``allow_missing`` (then they are
 filled too).
 
-Clock (:class:`UdpTakeSender`): slot ``k`` carries take time ``k / rate`` and is sent
-``k / (rate * speed)`` s after start, so ``speed`` > 1 replays faster while the stream's
-own clock (sample counter, time code, ``uttm``) keeps the take's.
+Sending (:class:`UdpTakeSender`): a :class:`rtseg.simulators.stream_sender.StreamSender`
+(clock, thread, UDP transport, ``sent_log``) with this retargeting, a ``preamble`` sent
+once before the first frame, and a warning logged at the first failed send.  Slot ``k``
+carries take time ``k / rate`` and is sent ``k / (rate * speed)`` s after start, so
+``speed`` > 1 replays faster while the stream's own clock (sample counter, time code,
+``uttm``) keeps the take's.
 """
 
 from __future__ import annotations
 
 import logging
-import socket
-import threading
-import time
-from dataclasses import dataclass
 
 import numpy as np
 
 from rtseg import quat as Q
-from rtseg.profiles import SuitProfile, resolve_joints, suit_profile
+from rtseg.profiles import SuitProfile, resolve_joints
 from rtseg.simulators.retarget import ImuModel, RetargetError, Retargeted, retarget
+from rtseg.simulators.stream_sender import Sent, StreamSender, root_metres
 from rtseg.take import Take
 
 log = logging.getLogger("rtseg.simulators.udp")
 
-#: metres per unit for ``Take.length_unit`` values the senders convert
-UNIT_SCALE = {"m": 1.0, "metre": 1.0, "metres": 1.0, "meter": 1.0, "meters": 1.0,
-              "cm": 0.01, "mm": 0.001, "in": 0.0254, "inch": 0.0254, "inches": 0.0254}
+#: one frame slot of ``sent_log`` (``datagrams`` = ``parts``)
+SentFrame = Sent
 
 
 def feature_bones(suit: SuitProfile, profile: str = "unity") -> list[str]:
@@ -76,60 +75,28 @@ def retarget_filled(take: Take, suit: SuitProfile, skeleton_map: str | None = No
     return filled, missing
 
 
-def root_metres(take: Take) -> np.ndarray | None:
-    """The take's root trajectory in metres (``meta["metres_per_unit"]`` or a known
-    ``length_unit``; unknown units are taken as metres), or None."""
-    if take.root_position is None:
-        return None
-    scale = take.meta.get("metres_per_unit")
-    if not isinstance(scale, (int, float)) or not scale > 0:
-        scale = UNIT_SCALE.get(take.length_unit.lower(), 1.0)
-    return take.root_position * float(scale)
-
-
-@dataclass(slots=True)
-class SentFrame:
-    """One frame slot sent: ``slot`` from 0 over loops, ``index`` take frame,
-    ``source_time`` take seconds, ``send_time`` monotonic s, ``datagrams`` count."""
-    slot: int
-    index: int
-    source_time: float
-    send_time: float
-    datagrams: int
-
-
-class UdpTakeSender:
+class UdpTakeSender(StreamSender):
     """Send a retargeted take over UDP from a thread.  Subclasses implement
-    :meth:`encode` (``slot``, take frame ``index``, take time s -> datagrams) and may
-    override :meth:`preamble` (datagrams sent once before the first frame)."""
+    :meth:`encode` (take frame ``index``, ``slot``, take time s -> datagrams) and may
+    override :meth:`preamble` (datagrams sent once before the first frame).  Options as
+    :class:`StreamSender`; ``filled``: the suit bones filled from their parents."""
 
     name = "UDP"
 
-    def __init__(self, take: Take, host: str, port: int, rate: float | None, loop: bool,
-                 speed: float, suit: str | SuitProfile, skeleton_map: str | None,
-                 joint_map: dict[str, str] | None, imu: ImuModel | str | None,
-                 allow_missing: bool) -> None:
-        self.take = take
+    def __init__(self, take: Take, host: str, port: int, suit: str | SuitProfile,
+                 **kw) -> None:
         self.host = host
         self.port = int(port)
-        self.rate = float(rate) if rate is not None else float(take.frame_rate)
-        if not self.rate > 0:
-            raise ValueError(f"rate must be positive, got {rate}")
-        if not (isinstance(speed, (int, float)) and 0 < speed < float("inf")):
-            raise ValueError(f"speed must be a positive number, got {speed!r}")
-        self.speed = float(speed)
-        self.loop = loop
-        self.suit = suit if isinstance(suit, SuitProfile) else suit_profile(suit)
-        imu_model = ImuModel.parse(imu) if isinstance(imu, str) or imu is None else imu
-        self.retargeted, self.filled = retarget_filled(take, self.suit, skeleton_map,
-                                                       joint_map, imu_model, allow_missing)
-        self.root = root_metres(take)
-        self.sent_log: list[SentFrame] = []
-        self.send_errors = 0
-        self._stop = threading.Event()
-        self.done = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._sock: socket.socket | None = None
+        super().__init__(take, suit, **kw)
+
+    def _retarget(self, skeleton_map: str | None, joint_map: dict[str, str] | None,
+                  imu: ImuModel | None, allow_missing: bool) -> Retargeted:
+        rt, self.filled = retarget_filled(self.take, self.suit, skeleton_map, joint_map, imu,
+                                          allow_missing)
+        return rt
+
+    def _root_metres(self) -> np.ndarray | None:
+        return root_metres(self.take)
 
     def describe(self) -> str:
         rt, names = self.retargeted, self.take.joint_names
@@ -138,78 +105,17 @@ class UdpTakeSender:
         return text + (f"; filled from their parents: {', '.join(self.filled)}"
                        if self.filled else "")
 
-    # -- to implement
-
-    def encode(self, slot: int, index: int, source_time: float) -> list[bytes]:
-        raise NotImplementedError
-
     def preamble(self) -> list[bytes]:
         return []
 
-    # -- lifecycle
+    def _ready(self) -> bool:
+        self._send(self.preamble())
+        return True
 
-    def start(self) -> "UdpTakeSender":
-        if self._thread is not None:
-            raise RuntimeError(f"{type(self).__name__} already started")
-        family, _, _, _, self._addr = socket.getaddrinfo(self.host, self.port,
-                                                         type=socket.SOCK_DGRAM)[0]
-        self._sock = socket.socket(family, socket.SOCK_DGRAM)
-        self._thread = threading.Thread(target=self._run, name=f"rtseg-{self.name}-sender",
-                                        daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        """Stop sending and join the thread.  Safe to call twice."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
-        if self._sock is not None:
-            self._sock.close()
-            self._sock = None
-
-    def wait(self, timeout: float | None = None) -> bool:
-        """Block until a non-looping take has been sent; True if finished."""
-        return self.done.wait(timeout)
-
-    def __enter__(self) -> "UdpTakeSender":
-        return self.start()
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
-
-    def _send(self, dgrams: list[bytes]) -> None:
-        for d in dgrams:
-            try:
-                self._sock.sendto(d, self._addr)
-            except OSError as exc:      # e.g. ICMP port unreachable: nobody listening yet
-                self.send_errors += 1
-                if self.send_errors == 1:
-                    log.warning("%s sender: send to %s:%d failed: %s", self.name, self.host,
-                                self.port, exc)
-
-    def _run(self) -> None:
-        n = self.retargeted.quats.shape[0]
-        period = 1.0 / self.rate
-        wall = period / self.speed
-        t0 = time.monotonic()
-        slot = 0
-        try:
-            self._send(self.preamble())
-            while not self._stop.is_set():
-                if slot >= n and not self.loop:
-                    break
-                index = slot % n
-                delay = t0 + slot * wall - time.monotonic()
-                if delay > 0 and self._stop.wait(delay):
-                    break
-                dgrams = self.encode(slot, index, slot * period)
-                sent_at = time.monotonic()
-                self._send(dgrams)
-                self.sent_log.append(SentFrame(slot, index, slot * period, sent_at, len(dgrams)))
-                slot += 1
-        finally:
-            self.done.set()
+    def _send_failed(self, exc: OSError) -> None:
+        if self.send_errors == 1:
+            log.warning("%s sender: send to %s:%d failed: %s", self.name, self.host,
+                        self.port, exc)
 
 
 __all__ = ["UdpTakeSender", "SentFrame", "retarget_filled", "feature_bones", "root_metres"]
