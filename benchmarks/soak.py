@@ -11,7 +11,9 @@ The synthesised default performance loops on a simulated 17-sensor suit
 (``rtseg.simulators.serial_device.SerialSuit``) in a **separate process** on a real pty,
 rtseg's binary serial format, with faults (``--faults``, default ``corrupt=0.01`` of bytes,
 an unplug of 0.3 s every 60 s, bursts: jitter of up to 2 ms per message so frames arrive
-bunched, 0.1 % of frames dropped, and two sensors silent for 1 s every 20 s).  This
+bunched, 0.1 % of frames dropped, and two sensors silent for 1 s every 20 s; fault times
+are seconds of the suit's device clock, which runs at ``120 x speed`` frames per second, so
+60 s = 144 000 frames at speed 20).  This
 process runs ``LiveSession("serial://<pty>?rate=120")`` exactly as ``rtseg live`` does
 (serial driver, ring buffer, pose features, every configured online detector, OSC to a
 socket on 127.0.0.1; no recording).  The suit sends ``--speed`` (default 20) times faster
@@ -34,7 +36,11 @@ Measured
   reports every message's fate (intact / corrupted / dropped / unplugged / overflow); the
   session's frames are matched by unwrapped sequence number up to the last one received,
   and ring-buffer overruns are added.  ``destroyed_by_faults`` = corrupted + dropped +
-  unplugged frames, plus frames that met a full pty within 1 s after a replug
+  unplugged frames, plus intact frames never read that were written in the last 0.1 s
+  before a pull (in the pty when the cable went, as bytes in a USB adapter are) or in the
+  1 s after a replug while the reader was still reconnecting (the port's input is flushed
+  when it reopens) - ``lost_to_unplug`` - plus frames that met a full pty within 1 s after
+  a replug
   (``overflow_after_replug``: the device is back but the reader is still in its reconnect
   back-off, 50-400 ms, which at 20x speed is up to 8 s of session frames; at 120 Hz the
   pty's 4 KB buffer covers it); any other ``overflow`` (pty full: the reader too slow)
@@ -70,6 +76,7 @@ RATE = 120.0
 FRAMES_PER_HOUR = int(RATE * 3600)
 DEFAULT_FAULTS = ("corrupt=0.01,drop=0.001,jitter=0.002,unplug=60:0.3,"
                   "dropout=5:10:1:20,dropout=11:15:1:20,seed=11")
+IN_FLIGHT_S = 0.1            # intact frames written this soon before a pull may die in the pty
 REPLUG_S = 1.0               # overflow this soon after a replug: the reader is reopening
 BINS_PER_E = 1000            # log-spaced histogram bins per factor e (0.1 % wide)
 
@@ -94,14 +101,23 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int) ->
     recent: deque[list] = deque()
     attempted = 0
 
+    near_unplug: list[int] = []          # intact frames written just before a pull or
+                                         # just after a replug (reader reconnecting)
+
     def tally(chunk: list, upto: int | None = None) -> None:
-        replugs = [r for _, r in list(suit.unplug_log)]
+        log_ = list(suit.unplug_log)
+        replugs = [r for _, r in log_]
+        pulls = [u for u, _ in log_]
         for m in chunk:
             if m.frame < 0 or (upto is not None and m.index > upto):
                 continue
             fate = m.fate
             if fate == "overflow" and any(0 <= m.send_time - r < REPLUG_S for r in replugs):
                 fate = "overflow_after_replug"
+            elif fate == "intact" and (
+                    any(0 <= u - m.send_time < IN_FLIGHT_S for u in pulls)
+                    or any(0 <= m.send_time - r < REPLUG_S for r in replugs)):
+                near_unplug.append(m.index)
             totals[fate] = totals.get(fate, 0) + 1
 
     while attempted < n_frames and not conn.poll(0):
@@ -120,7 +136,7 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int) ->
     first_kept = next((c[0].index for c in recent if c), None)
     for c in recent:
         tally(c, upto)
-    conn.send(("done", totals, first_kept))
+    conn.send(("done", totals, first_kept, near_unplug))
     conn.close()
 
 
@@ -137,6 +153,7 @@ class Meter:
         self.rss: dict[int, list[float]] = {}
         self.processed = 0
         self.last_abs = -1            # unwrapped sequence number of the last frame processed
+        self.seen = np.zeros(0, dtype=bool)   # received message indices (preallocated)
 
     def wrap(self, pipeline) -> None:
         process = pipeline.process
@@ -151,6 +168,8 @@ class Meter:
             if seq is not None:
                 prev = self.last_abs
                 self.last_abs = seq if prev < 0 else prev + ((seq - prev) & 0xFFFF)
+                if self.last_abs < self.seen.size:
+                    self.seen[self.last_abs] = True
             w = max(self.last_abs, 0) // self.window_frames
             h = hist.get(w)
             if h is None:
@@ -215,6 +234,8 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
     drainer = threading.Thread(target=drain, daemon=True)
     drainer.start()
     meter = Meter(window_frames)
+    meter.seen = np.zeros(n_frames + n_frames // 50 + 100_000, dtype=bool)  # + info messages
+    meter.seen[:] = False                  # touch every page now: RSS does not grow later
     crashes = 0
     summary = None
     result: dict = {}
@@ -269,7 +290,7 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
                 raise RuntimeError("the suit process did not report")
             msg = parent.recv()
             if msg[0] == "done":
-                _, fates, first_kept = msg
+                _, fates, first_kept, near_unplug = msg
                 break
         wall = time.monotonic() - t_start
         session.stop("soak done")
@@ -288,7 +309,11 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
         intact = fates.get("intact", 0)
         overruns = session.stats.overruns
         processed_matched = meter.processed
-        lost = max(0, intact - processed_matched) + overruns + fates.get("overflow", 0)
+        # intact frames written just before a pull (they die with the pty) or just after a
+        # replug, before the reader has reopened the port (its open discards them), never read
+        in_flight = sum(1 for i in near_unplug if i < meter.seen.size and not meter.seen[i])
+        lost = (max(0, intact - processed_matched - in_flight) + overruns
+                + fates.get("overflow", 0))
         first, lastw = 0, n_windows - 1
         while lastw > 0 and lastw not in meter.hist:
             lastw -= 1
@@ -307,8 +332,8 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
             "p99_change": (p_last / p_first - 1.0) if p_first and p_last else None,
             "lost_frames": lost,
             "destroyed_by_faults": sum(fates.get(k, 0) for k in (
-                "corrupted", "dropped", "unplugged", "overflow_after_replug")),
-            "fates": fates, "overruns": overruns,
+                "corrupted", "dropped", "unplugged", "overflow_after_replug")) + in_flight,
+            "fates": fates, "lost_to_unplug": in_flight, "overruns": overruns,
             "reconnects": session.source.stats.reconnects if session.source else None,
             "input": summary.input if summary is not None else None,
             "cuts": summary.cuts if summary is not None else None,
