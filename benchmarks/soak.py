@@ -10,10 +10,10 @@ What runs
 The synthesised default performance loops on a simulated 17-sensor suit
 (``rtseg.simulators.serial_device.SerialSuit``) in a **separate process** on a real pty,
 rtseg's binary serial format, with faults (``--faults``, default ``corrupt=0.01`` of bytes,
-an unplug of 0.3 s every 60 s, bursts: jitter of up to 2 ms per message so frames arrive
+an unplug of 0.3 s every 10 s, bursts: jitter of up to 2 ms per message so frames arrive
 bunched, 0.1 % of frames dropped, and two sensors silent for 1 s every 20 s; fault times
 are seconds of the suit's device clock, which runs at ``120 x speed`` frames per second, so
-60 s = 144 000 frames at speed 20).  This
+10 s = 24 000 frames at speed 20: 144 unplugs in 8 session hours).  This
 process runs ``LiveSession("serial://<pty>?rate=120")`` exactly as ``rtseg live`` does
 (serial driver, ring buffer, pose features, every configured online detector, OSC to a
 socket on 127.0.0.1; no recording).  The suit sends ``--speed`` (default 20) times faster
@@ -74,7 +74,7 @@ from rtseg.session_config import from_dict  # noqa: E402
 
 RATE = 120.0
 FRAMES_PER_HOUR = int(RATE * 3600)
-DEFAULT_FAULTS = ("corrupt=0.01,drop=0.001,jitter=0.002,unplug=60:0.3,"
+DEFAULT_FAULTS = ("corrupt=0.01,drop=0.001,jitter=0.002,unplug=10:0.3,"
                   "dropout=5:10:1:20,dropout=11:15:1:20,seed=11")
 IN_FLIGHT_S = 0.1            # intact frames written this soon before a pull may die in the pty
 REPLUG_S = 1.0               # overflow this soon after a replug: the reader is reopening
