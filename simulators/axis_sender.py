@@ -209,16 +209,12 @@ class AxisSender(StreamSender):
         self.disconnect()
 
 
-def serve(args, take: Take, out, run_until, retarget_kw: dict) -> tuple[str, list[str]]:
-    """``rtseg simulate axis``: send ``take`` (``out`` prints a line, ``run_until(done,
-    duration)`` waits); returns (stop reason, summary lines)."""
+def serve(args, take: Take, host) -> tuple[str, list[str]]:
+    """``rtseg simulate axis``: send ``take`` (``host``: a
+    :class:`rtseg.commands.simulate.Host`); returns (stop reason, summary lines)."""
+    out, retarget_kw = host.out, host.retarget_kw
     fmt = args.axis_format
-    port = args.port if args.port is not None else (BINARY_PORT if fmt == "binary"
-                                                    else TEXT_PORT)
-    if not 0 <= port < 65536:
-        raise ValueError(f"--port must be 0..65535, got {port}")
-    if args.faults:
-        raise ValueError("--faults is not supported by the axis simulator")
+    port = host.port(BINARY_PORT if fmt == "binary" else TEXT_PORT, lowest=0)
     suit = args.suit if args.suit != "default17" else "axis"
     sender = AxisSender(take, fmt, args.host, port, loop=args.loop, speed=args.speed,
                         suit=suit, **retarget_kw)
@@ -230,17 +226,10 @@ def serve(args, take: Take, out, run_until, retarget_kw: dict) -> tuple[str, lis
         f"{sender.order}) to {how} at {sender.rate:g} Hz, sent at x{sender.speed:g}")
     out(f"  receive it with: rtseg live \"axis://{args.host}:{sender.port}?format={fmt}"
         f"&rate={sender.rate:g}\"")
-    t0 = time.monotonic()
-    reason = "interrupted"
-    try:
-        reason = run_until(sender.wait, args.duration)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        sender.stop()
+    reason, elapsed = host.drive(sender, start=False)
     log = list(sender.sent_log)
     lines = [f"sent {len(log)} frames ({sum(s.nbytes for s in log)} bytes) in "
-             f"{time.monotonic() - t0:.2f} s; {sender.send_errors} send errors"]
+             f"{elapsed:.2f} s; {sender.send_errors} send errors"]
     if log:
         lines.append(f"take frames {log[0].index}..{log[-1].index}, last frame index "
                      f"{log[-1].slot}")

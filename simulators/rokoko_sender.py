@@ -20,8 +20,6 @@ sent at ``speed`` times real time.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from rtseg.drivers.codec_rokoko import BODY_BONES, DEFAULT_PORT, SUIT_BONES, encode_packet
@@ -74,14 +72,11 @@ class RokokoSender(StreamSender):
         return [self.payload(index, t)]
 
 
-def serve(args, take: Take, out, run_until, retarget_kw: dict) -> tuple[str, list[str]]:
-    """``rtseg simulate rokoko``: send ``take`` (``out`` prints a line, ``run_until(done,
-    duration)`` waits); returns (stop reason, summary lines)."""
-    port = args.port if args.port is not None else DEFAULT_PORT
-    if not 0 < port < 65536:
-        raise ValueError(f"--port must be 1..65535, got {port}")
-    if args.faults:
-        raise ValueError("--faults is not supported by the rokoko simulator")
+def serve(args, take: Take, host) -> tuple[str, list[str]]:
+    """``rtseg simulate rokoko``: send ``take`` (``host``: a
+    :class:`rtseg.commands.simulate.Host`); returns (stop reason, summary lines)."""
+    out, retarget_kw = host.out, host.retarget_kw
+    port = host.port(DEFAULT_PORT)
     suit = args.suit if args.suit != "default17" else "rokoko"
     names = [n.strip() for n in (args.actor or "Actor1").split(",") if n.strip()]
     # several actors: each performs the take from a different point
@@ -93,18 +88,10 @@ def serve(args, take: Take, out, run_until, retarget_kw: dict) -> tuple[str, lis
         f"Custom JSON v3{' LZ4' if args.lz4 else ''} to udp {args.host}:{port} at "
         f"{sender.rate:g} Hz (timestamps in take seconds), sent at x{sender.speed:g}")
     out(f"  receive it with: rtseg live \"rokoko://{args.host}:{port}?rate={sender.rate:g}\"")
-    t0 = time.monotonic()
-    reason = "interrupted"
-    sender.start()
-    try:
-        reason = run_until(sender.wait, args.duration)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        sender.stop()
+    reason, elapsed = host.drive(sender)
     log = list(sender.sent_log)
     lines = [f"sent {len(log)} payloads ({sum(s.nbytes for s in log)} bytes) in "
-             f"{time.monotonic() - t0:.2f} s; {sender.send_errors} send errors"]
+             f"{elapsed:.2f} s; {sender.send_errors} send errors"]
     if log:
         lines.append(f"take frames {log[0].index}..{log[-1].index}, last timestamp "
                      f"{log[-1].source_time:.3f} s")

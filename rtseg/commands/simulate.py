@@ -56,8 +56,8 @@ from typing import Any, Callable
 from rtseg.take import Take
 
 DEVICES = ("serial", "vmc", "mvn", "mocopi", "rokoko", "axis")
-#: devices served by ``rtseg.simulators.<device>_sender.serve(args, take, out, run_until,
-#: retarget_kw)``
+#: devices served by ``rtseg.simulators.<device>_sender.serve(args, take, host)`` (host: a
+#: :class:`Host`)
 SENDER_MODULES = {"rokoko": "rtseg.simulators.rokoko_sender",
                   "axis": "rtseg.simulators.axis_sender"}
 #: default UDP port of each network device
@@ -226,6 +226,42 @@ def _retarget_kw(args) -> dict:
             "imu": args.imu or None, "allow_missing": args.allow_missing}
 
 
+class Host:
+    """What a network simulator's ``serve(args, take, host)`` gets from the command: ``out``
+    (print a line), ``retarget_kw`` (retargeting options), :meth:`port` and :meth:`drive`."""
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        self.args = args
+        self.out = _out
+        self.retarget_kw = _retarget_kw(args)
+
+    def port(self, default: int, lowest: int = 1, faults: bool = False) -> int:
+        """``--port`` (``default`` when not given) checked to be ``lowest``..65535; unless
+        ``faults``, a ``--faults`` spec is refused (the device cannot inject them)."""
+        args = self.args
+        port = default if args.port is None else args.port
+        if not lowest <= port < 65536:
+            raise ValueError(f"--port must be {lowest}..65535, got {port}")
+        if args.faults and not faults:
+            raise ValueError(f"--faults is not supported by the {args.device} simulator")
+        return port
+
+    def drive(self, sender, start: bool = True) -> tuple[str, float]:
+        """Run ``sender`` (``start()`` it unless already started) until its ``wait`` says
+        done, ``--duration`` passes or Ctrl-C, then ``stop()`` it: (stop reason, seconds)."""
+        t0 = time.monotonic()
+        reason = "interrupted"
+        if start:
+            sender.start()
+        try:
+            reason = _run_until(sender.wait, self.args.duration)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            sender.stop()
+        return reason, time.monotonic() - t0
+
+
 def _serve_serial(args, take: Take) -> tuple[str, list[str]]:
     from rtseg.simulators.faults import FaultConfig
     from rtseg.simulators.serial_device import SerialSuit
@@ -267,27 +303,16 @@ def _serve_serial(args, take: Take) -> tuple[str, list[str]]:
 def _serve_vmc(args, take: Take) -> tuple[str, list[str]]:
     from rtseg.simulators.vmc_sender import VmcSender
 
-    if args.port is None:
-        args.port = DEFAULT_PORTS["vmc"]
-    if not 0 < args.port < 65536:
-        raise ValueError(f"--port must be 1..65535, got {args.port}")
+    host = Host(args)
+    args.port = host.port(DEFAULT_PORTS["vmc"], faults=True)
     sender = VmcSender(take, args.host, args.port, faults=args.faults or None, loop=args.loop,
-                       speed=args.speed, suit=args.suit, **_retarget_kw(args))
+                       speed=args.speed, suit=args.suit, **host.retarget_kw)
     _out(f"  {sender.retargeted.describe(take.joint_names)}")
     _out(f"VMC sender: {len(sender.bone_names)} bones to udp {args.host}:{args.port} "
          f"at {sender.rate:g} Hz (T in take seconds), sent at x{sender.speed:g}")
     _out(f"  receive it with: rtseg live \"osc://{args.host}:{args.port}?format=vmc"
          f"&suit={sender.suit.name}\"")
-    t0 = time.monotonic()
-    reason = "interrupted"
-    sender.start()
-    try:
-        reason = _run_until(sender.wait, args.duration)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        sender.stop()
-    elapsed = time.monotonic() - t0
+    reason, elapsed = host.drive(sender)
     log = list(sender.sent_log)
     sent = [f for f in log if not f.dropped]
     lines = [f"sent {len(sent)} frames ({sum(f.datagrams for f in sent)} datagrams) in "
@@ -303,12 +328,9 @@ def _serve_vmc(args, take: Take) -> tuple[str, list[str]]:
 def _serve_vendor(args, take: Take) -> tuple[str, list[str]]:
     """``mvn`` / ``mocopi``: a UDP sender of that format (its own suit unless --suit names
     another whose ids fit the format)."""
-    port = DEFAULT_PORTS[args.device] if args.port is None else args.port
-    if not 0 < port < 65536:
-        raise ValueError(f"--port must be 1..65535, got {port}")
-    if args.faults:
-        raise ValueError(f"--faults is not supported by the {args.device} simulator")
-    kw = dict(speed=args.speed, loop=args.loop, **_retarget_kw(args))
+    host = Host(args)
+    port = host.port(DEFAULT_PORTS[args.device])
+    kw = dict(speed=args.speed, loop=args.loop, **host.retarget_kw)
     if args.suit != "default17":
         kw["suit"] = args.suit
     if args.device == "mvn":
@@ -324,18 +346,10 @@ def _serve_vendor(args, take: Take) -> tuple[str, list[str]]:
          f"{args.host}:{port} at {sender.rate:g} Hz (stream clock in take time), sent at "
          f"x{sender.speed:g}")
     _out(f"  receive it with: rtseg live {url}")
-    t0 = time.monotonic()
-    reason = "interrupted"
-    sender.start()
-    try:
-        reason = _run_until(sender.wait, args.duration)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        sender.stop()
+    reason, elapsed = host.drive(sender)
     log = list(sender.sent_log)
     lines = [f"sent {len(log)} frames ({sum(f.datagrams for f in log)} datagrams) in "
-             f"{time.monotonic() - t0:.2f} s; {sender.send_errors} send errors"]
+             f"{elapsed:.2f} s; {sender.send_errors} send errors"]
     if log:
         lines.append(f"take frames {log[0].index}..{log[-1].index}, last take time "
                      f"{log[-1].source_time:.3f} s")
@@ -377,7 +391,7 @@ def _sender(device: str) -> Callable:
     """serve(args, take) of a simulator module of ``SENDER_MODULES``."""
     import importlib
     mod = importlib.import_module(SENDER_MODULES[device])
-    return lambda args, take: mod.serve(args, take, _out, _run_until, _retarget_kw(args))
+    return lambda args, take: mod.serve(args, take, Host(args))
 
 
 def _raise_interrupt(signum, frame) -> None:
