@@ -40,7 +40,8 @@ from rtseg.simulators.synth import DEFAULT_SCRIPT, synthesize
 
 TOL_S = 0.5
 MAX_MEDIAN_S, MAX_P90_S = 2.5, 3.5
-GRID = {                       # the candidates: after window and the peak picker
+GRID = {                       # the candidates: grid step, after window, the peak picker
+    "step_s": [0.0833333333, 0.125],
     "after_s": [1.5, 1.75, 2.0],
     "threshold": [1.5, 2.0, 2.5, 3.0],
     "hold_s": [0.5, 0.75, 1.0],
@@ -146,7 +147,7 @@ def main() -> int:
     traces: dict[tuple, tuple] = {}
     for cfgv in configs:
         p = {**base, **cfgv}
-        geo = p["after_s"]
+        geo = (p["step_s"], p["after_s"])
         res = {}
         for case in cases:
             if (geo, case.key) not in traces:
@@ -167,7 +168,8 @@ def main() -> int:
         assert counts(case, full)[:4] == results[tuple(base[k] for k in keys)][case.key][:4], case.key
 
     def best(train: list[Case]) -> tuple:
-        return max(results, key=lambda k: (objective(results[k], train, args.objective), -k[0]))
+        return max(results, key=lambda k: (objective(results[k], train, args.objective),
+                                           -k[keys.index("after_s")]))
 
     chosen_all = best(cases)
     names = sorted({c.name for c in cases})

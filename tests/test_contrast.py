@@ -128,7 +128,7 @@ def test_finds_every_synthetic_change_within_half_a_second(perf):
     for c, m in zip(cuts, mids):
         assert abs(c.frame - m) <= 0.5 * FR
         delay = (c.detected_at - m) / FR
-        assert 0 < delay <= 1.75 + 1.0 + 0.1 + 0.5        # after window + hold (+ a step)
+        assert 0 < delay <= 1.75 + 1.0 + 0.125 + 0.5      # after window + hold (+ a step)
         assert 0.0 <= c.confidence <= 1.0 and c.score >= 2.0 and c.method == "contrast"
 
 
@@ -182,8 +182,9 @@ def test_non_finite_frame_restarts_and_is_counted(perf):
 
 def test_frame_rate_scales_the_windows():
     det = make_online("contrast", 60.0)
-    assert (det.step, det.wa, det.wb) == (5, 36, 21)
-    assert det.delay_frames == 21 * 5 + 60 + 5
+    # 0.125 s -> 8 frames (7.5 rounded half to even); 3 s -> 22 blocks; 1.75 s -> 13 blocks
+    assert (det.step, det.wa, det.wb) == (8, 22, 13)
+    assert det.delay_frames == 13 * 8 + 60 + 8
 
 
 @pytest.mark.parametrize("kw", [dict(step=0), dict(before=10), dict(after=5),

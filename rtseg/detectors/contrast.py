@@ -57,7 +57,7 @@ class ContrastDetector(OnlineDetector):
     name = "contrast"
     frame_origin = "creation"
 
-    def __init__(self, step: int = 10, before: int = 360, after: int = 210,
+    def __init__(self, step: int = 15, before: int = 360, after: int = 210,
                  min_before: int = 180, threshold: float = 2.0, hold: int = 120,
                  min_gap: int = 240, drop: float = 0.5, pca_energy: float = 0.9,
                  ppca_energy: float = 0.95, noise_floor: float = 1e-6,
