@@ -64,7 +64,7 @@ from rtseg.drivers.codec_axis import (BINARY_PORT, JOINTS, PARENTS, TEXT_PORT, A
                                       AxisFrame, BinaryAssembler, TextSplitter,
                                       decode_binary, decode_text, global_pose, to_pose)
 from rtseg.drivers.osc_source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
-                                      parse_allow)
+                                      check_options, number_option, parse_allow)
 from rtseg.frame import Frame
 
 log = logging.getLogger("rtseg.drivers.axis")
@@ -326,17 +326,7 @@ class AxisTextSource(Source):
 
 
 def _num(options: dict[str, str], key: str, default, kind=float):
-    if options.get(key, "") == "":
-        return default
-    try:
-        value = kind(options[key])
-    except ValueError:
-        raise SourceError(f"axis:// option {key}={options[key]!r} is not a valid "
-                          f"{'integer' if kind is int else 'number'}") from None
-    lo, hi = _RANGES[key]
-    if not lo <= value <= hi:
-        raise SourceError(f"axis:// option {key}={options[key]}: out of range {lo}..{hi}")
-    return value
+    return number_option("axis", options, key, default, kind, _RANGES)
 
 
 def open_url(location: str, options: dict[str, str]) -> Source:
@@ -346,10 +336,7 @@ def open_url(location: str, options: dict[str, str]) -> Source:
         raise SourceError(f"axis:// format {fmt!r} is not supported; supported: "
                           f"{', '.join(FORMATS)}")
     known = BINARY_OPTIONS if fmt == "binary" else TEXT_OPTIONS
-    unknown = sorted(set(options) - set(known))
-    if unknown:
-        raise SourceError(f"axis:// unknown option(s) {', '.join(unknown)} for format={fmt}; "
-                          f"known: {', '.join(known)}")
+    check_options("axis", options, known, fmt)
     order = (options.get("order") or "YXZ").upper()
     if len(order) != 3 or set(order) != set("XYZ"):
         raise SourceError(f"axis:// order={options.get('order')!r}: a permutation of XYZ "

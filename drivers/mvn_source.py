@@ -35,13 +35,12 @@ from __future__ import annotations
 
 import logging
 import math
-import time
-from typing import Sequence
 
 from rtseg.drivers.base import SourceError
 from rtseg.drivers.codec_mvn import DEFAULT_PORT, MvnAssembler
-from rtseg.drivers.osc_source import DEFAULT_HOST, Network, OscUdpSource, load_suit, parse_allow
-from rtseg.frame import Frame
+from rtseg.drivers.osc_source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
+                                      check_options, load_suit, parse_allow)
+from rtseg.drivers.osc_source import number_option as osc_number_option
 
 log = logging.getLogger("rtseg.drivers.mvn")
 
@@ -53,59 +52,20 @@ _RANGES = {"character": (0, 255), "quiet": (1e-4, 60.0), "queue": (1, 1_000_000)
 def parse_location(scheme: str, location: str, default_port: int) -> tuple[str, int]:
     """``host:port`` / ``:port`` / ``[v6]:port`` / ``""`` -> (host, port); loopback when no
     host is written."""
-    loc = location.strip("/")
-    if not loc:
-        return DEFAULT_HOST, default_port
-    if loc.startswith("["):
-        host, _, rest = loc[1:].partition("]")
-        port_s = rest[1:] if rest.startswith(":") else ""
-    else:
-        host, _, port_s = loc.rpartition(":") if ":" in loc else (loc, "", "")
-    try:
-        port = int(port_s) if port_s else default_port
-    except ValueError:
-        raise SourceError(f"{scheme}://{location}: port {port_s!r} is not a number") from None
-    if not 0 <= port <= 65535:
-        raise SourceError(f"{scheme}://{location}: port {port} out of range 0..65535")
-    return host or DEFAULT_HOST, port
+    return _parse_location(location, default_port, scheme)
 
 
 def number_option(scheme: str, options: dict[str, str], key: str, default, kind=float,
                   ranges: dict[str, tuple[float, float]] = _RANGES):
     """Option ``key`` as ``kind`` within ``ranges[key]``, or ``default`` when absent."""
-    if key not in options or options[key] == "":
-        return default
-    try:
-        value = kind(options[key])
-    except ValueError:
-        raise SourceError(f"{scheme}:// option {key}={options[key]!r} is not a valid "
-                          f"{'integer' if kind is int else 'number'}") from None
-    lo, hi = ranges[key]
-    if not lo <= value <= hi:
-        raise SourceError(f"{scheme}:// option {key}={options[key]}: out of range {lo}..{hi}")
-    return value
-
-
-def check_options(scheme: str, options: dict[str, str], known: Sequence[str]) -> None:
-    unknown = sorted(set(options) - set(known))
-    if unknown:
-        raise SourceError(f"{scheme}:// unknown option(s) {', '.join(unknown)}; known: "
-                          f"{', '.join(known)}")
+    return osc_number_option(scheme, options, key, default, kind, ranges)
 
 
 class VendorUdpSource(OscUdpSource):
     """An ``OscUdpSource`` whose drop log names the format (``_fmt``)."""
 
     _fmt = "UDP"
-
-    def _put(self, frame: Frame) -> None:
-        if self._queue.put(frame):
-            self.count("dropped")
-            now = time.monotonic()
-            if now - self._last_drop_log > 5.0:
-                self._last_drop_log = now
-                log.warning("%s: reader too slow, dropped oldest queued frame (%d dropped so "
-                            "far)", self._fmt, self.stats.dropped)
+    _log = log
 
 
 class MvnSource(VendorUdpSource):

@@ -147,6 +147,9 @@ class OscUdpSource(Source):
     (drop-oldest).  ``.port`` is the bound port."""
 
     _asm: Any
+    #: name in the drop warning, and the logger it goes to
+    _fmt = "VMC"
+    _log = log
 
     def _start(self, host: str, port: int, quiet: float, queue_size: int,
                rcvbuf: int | None, allow: tuple[Network, ...] | None = None) -> None:
@@ -233,8 +236,8 @@ class OscUdpSource(Source):
             now = time.monotonic()
             if now - self._last_drop_log > 5.0:
                 self._last_drop_log = now
-                log.warning("VMC: reader too slow, dropped oldest queued frame "
-                            "(%d dropped so far)", self.stats.dropped)
+                self._log.warning("%s: reader too slow, dropped oldest queued frame "
+                                  "(%d dropped so far)", self._fmt, self.stats.dropped)
 
     def read(self, timeout: float | None = None) -> Frame | None:
         """Next frame in arrival order, or None if none within ``timeout`` s (None: wait
@@ -320,7 +323,10 @@ class OscVrchatSource(OscUdpSource):
         self._start(host, port, quiet, queue_size, rcvbuf, allow)
 
 
-def _parse_location(location: str, default_port: int = DEFAULT_PORT) -> tuple[str, int]:
+def _parse_location(location: str, default_port: int = DEFAULT_PORT,
+                    scheme: str = "osc") -> tuple[str, int]:
+    """``host:port`` / ``:port`` / ``[v6]:port`` / ``""`` -> (host, port); loopback when no
+    host is written.  Errors name ``scheme``."""
     loc = location.strip("/")
     if not loc:
         return DEFAULT_HOST, default_port
@@ -332,9 +338,9 @@ def _parse_location(location: str, default_port: int = DEFAULT_PORT) -> tuple[st
     try:
         port = int(port_s) if port_s else default_port
     except ValueError:
-        raise SourceError(f"osc://{location}: port {port_s!r} is not a number") from None
+        raise SourceError(f"{scheme}://{location}: port {port_s!r} is not a number") from None
     if not 0 <= port <= 65535:
-        raise SourceError(f"osc://{location}: port {port} out of range 0..65535")
+        raise SourceError(f"{scheme}://{location}: port {port} out of range 0..65535")
     return host or DEFAULT_HOST, port
 
 
@@ -343,18 +349,35 @@ _RANGES = {"quiet": (1e-4, 60.0), "queue": (1, 1_000_000), "rate": (1e-3, 1e5),
            "rcvbuf": (1, 1 << 30), "tolerance": (0.0, 1.0), "burst": (0.0, 60.0)}
 
 
-def _num(options: dict[str, str], key: str, default, kind=float):
+def number_option(scheme: str, options: dict[str, str], key: str, default, kind=float,
+                  ranges: dict[str, tuple[float, float]] = _RANGES):
+    """Option ``key`` as ``kind`` within ``ranges[key]``, or ``default`` when absent or
+    empty; errors name ``scheme``."""
     if key not in options or options[key] == "":
         return default
     try:
         value = kind(options[key])
     except ValueError:
-        raise SourceError(f"osc:// option {key}={options[key]!r} is not a valid "
+        raise SourceError(f"{scheme}:// option {key}={options[key]!r} is not a valid "
                           f"{'integer' if kind is int else 'number'}") from None
-    lo, hi = _RANGES[key]
+    lo, hi = ranges[key]
     if not lo <= value <= hi:                 # also refuses nan and inf
-        raise SourceError(f"osc:// option {key}={options[key]}: out of range {lo}..{hi}")
+        raise SourceError(f"{scheme}:// option {key}={options[key]}: out of range {lo}..{hi}")
     return value
+
+
+def check_options(scheme: str, options: dict[str, str], known: Sequence[str],
+                  fmt: str | None = None) -> None:
+    """Refuse options not in ``known`` (naming ``scheme`` and, when given, the format)."""
+    unknown = sorted(set(options) - set(known))
+    if unknown:
+        raise SourceError(f"{scheme}:// unknown option(s) {', '.join(unknown)}"
+                          f"{'' if fmt is None else f' for format={fmt}'}; known: "
+                          f"{', '.join(known)}")
+
+
+def _num(options: dict[str, str], key: str, default, kind=float):
+    return number_option("osc", options, key, default, kind)
 
 
 def open_url(location: str, options: dict[str, str]) -> OscUdpSource:
@@ -363,11 +386,7 @@ def open_url(location: str, options: dict[str, str]) -> OscUdpSource:
     if fmt not in FORMATS:
         raise SourceError(f"osc:// format {fmt!r} is not supported; supported: "
                           f"{', '.join(FORMATS)}")
-    known = OPTIONS if fmt == "vmc" else VRCHAT_OPTIONS
-    unknown = sorted(set(options) - set(known))
-    if unknown:
-        raise SourceError(f"osc:// unknown option(s) {', '.join(unknown)} for format={fmt}; "
-                          f"known: {', '.join(known)}")
+    check_options("osc", options, OPTIONS if fmt == "vmc" else VRCHAT_OPTIONS, fmt)
     allow = parse_allow(options["allow"]) if "allow" in options else None
     if fmt == "vrchat":
         host, port = _parse_location(location, VRCHAT_PORT)
@@ -387,4 +406,5 @@ def open_url(location: str, options: dict[str, str]) -> OscUdpSource:
 
 
 __all__ = ["OscUdpSource", "OscVmcSource", "OscVrchatSource", "open_url", "load_suit",
-           "parse_allow", "sender_allowed", "DEFAULT_HOST", "DEFAULT_PORT"]
+           "parse_allow", "sender_allowed", "number_option", "check_options", "DEFAULT_HOST",
+           "DEFAULT_PORT"]

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 
 import numpy as np
 
@@ -42,7 +41,7 @@ from rtseg.drivers.base import SourceError
 from rtseg.drivers.codec_rokoko import (BODY_BONES, BODY_PARENTS, DEFAULT_PORT, RokokoError,
                                         decode_packet)
 from rtseg.drivers.osc_source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
-                                      parse_allow)
+                                      check_options, number_option, parse_allow)
 from rtseg.frame import Frame
 
 log = logging.getLogger("rtseg.drivers.rokoko")
@@ -116,6 +115,8 @@ class RokokoSource(OscUdpSource):
     """Rokoko Studio Live receiver on a UDP socket (see module docstring)."""
 
     space = "global"
+    _fmt = "Rokoko"
+    _log = log
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
                  actor: str | None = None, rate: float = 60.0, queue_size: int = 256,
@@ -133,36 +134,14 @@ class RokokoSource(OscUdpSource):
         """``fps`` of the last payload (Hz), None before the first."""
         return self._asm.announced_fps
 
-    def _put(self, frame: Frame) -> None:
-        if self._queue.put(frame):
-            self.count("dropped")
-            now = time.monotonic()
-            if now - self._last_drop_log > 5.0:
-                self._last_drop_log = now
-                log.warning("Rokoko: reader too slow, dropped oldest queued frame "
-                            "(%d dropped so far)", self.stats.dropped)
-
 
 def _num(options: dict[str, str], key: str, default, kind=float):
-    if options.get(key, "") == "":
-        return default
-    try:
-        value = kind(options[key])
-    except ValueError:
-        raise SourceError(f"rokoko:// option {key}={options[key]!r} is not a valid "
-                          f"{'integer' if kind is int else 'number'}") from None
-    lo, hi = _RANGES[key]
-    if not lo <= value <= hi:
-        raise SourceError(f"rokoko:// option {key}={options[key]}: out of range {lo}..{hi}")
-    return value
+    return number_option("rokoko", options, key, default, kind, _RANGES)
 
 
 def open_url(location: str, options: dict[str, str]) -> RokokoSource:
     """Open ``rokoko://location?options`` (see module docstring)."""
-    unknown = sorted(set(options) - set(OPTIONS))
-    if unknown:
-        raise SourceError(f"rokoko:// unknown option(s) {', '.join(unknown)}; known: "
-                          f"{', '.join(OPTIONS)}")
+    check_options("rokoko", options, OPTIONS)
     try:
         host, port = _parse_location(location, DEFAULT_PORT)
     except SourceError as exc:
