@@ -161,8 +161,13 @@ def on_wire(expected: list, session: LiveSession) -> list:
 
 def assert_cuts_match(received: list[tuple], expected: list, tk, what: str) -> None:
     """received: /rtseg/cut argument tuples (event, segment, time, conf, latency, delay,
-    label); expected: PipelineCuts.  Same order, same methods, boundary ±2 frames."""
+    label); expected: PipelineCuts.  Same order, same methods, boundary ±2 frames.  A cut's
+    time is on the source's clock when the source has one (rtseg.live: counted from the
+    first frame's arrival), else the boundary frame's receive time."""
     st = tk.meta["session_time"]
+    src = tk.meta["source_time"]
+    if len(src) and np.all(np.isfinite(src)):
+        st = st[0] + (src - src[0])
     got = [(r[6], r[2]) for r in received]
     assert [r[0] for r in received] == list(range(1, len(received) + 1)), f"{what}: event numbers"
     assert len(got) == len(expected), (
@@ -170,7 +175,7 @@ def assert_cuts_match(received: list[tuple], expected: list, tk, what: str) -> N
         f"{got} vs {[(c.cut.method, c.boundary) for c in expected]}")
     for (label, t), exp in zip(got, expected):
         assert label == exp.cut.method, f"{what}: method order differs"
-        # frames whose receive time is the boundary time (several frames can share one)
+        # frames whose time is the boundary time (several frames can share one)
         idx = np.flatnonzero(np.abs(st - t) < 5e-4)
         assert idx.size, f"{what}: no recorded frame at boundary time {t}"
         assert idx.min() - 2 <= exp.boundary <= idx.max() + 2, (
