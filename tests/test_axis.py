@@ -9,7 +9,6 @@ import socket
 import struct
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -21,11 +20,12 @@ from rtseg.drivers import SourceError, open_source
 from rtseg.drivers import codec_axis as A
 from rtseg.drivers.axis_source import AxisFrames, _BinaryAdapter
 from rtseg.drivers.readers.bvh import read_bvh
-from rtseg.live import LiveSession
 from rtseg.profiles import resolve_joints, suit_profile
 from rtseg.session_config import from_dict
 from rtseg.simulators.axis_sender import AxisSender
 from rtseg.simulators.synth import synthesize
+from vendor_helpers import (Counter, assert_same_cuts, free_port, read_all, run_live,
+                            run_simulate, serial_reference)
 
 FIXTURE = Path(__file__).parent / "fixtures" / "axis" / "test.bvh"
 
@@ -39,14 +39,6 @@ def fixture_motion() -> list[str]:
 
 def same_rotation(a: np.ndarray, b: np.ndarray, atol: float = 1e-6) -> bool:
     return bool((np.abs(np.abs(np.sum(a * b, -1)) - 1) <= atol).all())
-
-
-class Counter:
-    def __init__(self) -> None:
-        self.counts: dict[str, int] = {}
-
-    def __call__(self, field: str, n: int = 1, message=None) -> None:
-        self.counts[field] = self.counts.get(field, 0) + n
 
 
 # --------------------------------------------------------------------------- the real BVH
@@ -308,13 +300,6 @@ def test_fuzzed_inputs_never_escape():
 
 # --------------------------------------------------------------------------- sockets
 
-def read_all(src, idle: float = 0.3) -> list:
-    frames = []
-    while (f := src.read(timeout=idle)) is not None:
-        frames.append(f)
-    return frames
-
-
 def test_url_defaults_options_and_errors():
     src = open_source("axis://:0?rate=90&avatar=Avatar01&order=zxy")
     try:
@@ -371,10 +356,7 @@ def test_text_over_tcp_connects_late_and_reconnects_after_the_server_drops():
     """rtseg is the client: started before Axis's server is up it retries with backoff;
     when the server drops the connection it reconnects (counted) and frames resume."""
     take = synthesize("idle:2,walk:2", frame_rate=60.0, seed=9).take
-    probe = socket.socket()
-    probe.bind(("127.0.0.1", 0))
-    port = probe.getsockname()[1]
-    probe.close()
+    port = free_port(socket.SOCK_STREAM)
     src = open_source(f"axis://127.0.0.1:{port}?format=text&rate=60&backoff=0.05&queue=4096")
     sender = AxisSender(take, "text", "127.0.0.1", port, speed=4.0, loop=True)
     try:
@@ -397,20 +379,6 @@ def test_text_over_tcp_connects_late_and_reconnects_after_the_server_drops():
         src.close()
 
 
-class _NoPublish:
-    def publish_cut(self, ev):
-        return ev
-
-    def publish_status(self, ev):
-        pass
-
-    def publish_dropout(self, ev):
-        pass
-
-    def close(self):
-        pass
-
-
 @pytest.mark.parametrize("fmt", ["binary", "text"])
 def test_simulator_through_live_session_gives_valid_joints_and_cuts(fmt):
     """A synthetic take with 3 behaviour changes, sent x4 (UDP binary, or TCP text from the
@@ -426,37 +394,11 @@ def test_simulator_through_live_session_gives_valid_joints_and_cuts(fmt):
     else:
         src = open_source(f"axis://127.0.0.1:0?rate={rate:g}&queue=4096")
         sender = AxisSender(take, "binary", "127.0.0.1", src.port, speed=speed)
-    frames, cuts = [], []
-    orig = src.read
-
-    def read(timeout=None):
-        f = orig(timeout)
-        if f is not None:
-            frames.append(f)
-        return f
-
-    src.read = read
     # text: the axis skeleton profile (whole spine); binary: the default (unity, aliases)
     cfg = from_dict({"features": {"profile": "axis"}} if fmt == "text" else {})
-    session = LiveSession(src, cfg, handle_signals=False, publishers=_NoPublish(),
-                          listeners=[lambda ev: cuts.append(ev) if type(ev).__name__ ==
-                                     "CutEvent" else None])
-    box: dict = {}
-    t = threading.Thread(target=lambda: box.setdefault("s", session.run()), daemon=True)
-    try:
-        t.start()
-        time.sleep(0.2)
-        if fmt == "binary":
-            sender.start()
-        assert sender.wait(take.n_frames / (rate * speed) + 15)
-        time.sleep(0.3)
-        session.stop("test done")
-        t.join(10)
-        assert not t.is_alive()
-    finally:
-        sender.stop()
-        src.close()
-    assert len(frames) == take.n_frames == box["s"].frames_received
+    frames, cuts, summary = run_live(src, sender, take, rate, speed, cfg,
+                                     start=fmt == "binary", slack=15)
+    assert len(frames) == take.n_frames == summary.frames_received
     mapped = resolve_joints("axis" if fmt == "text" else "unity", src.joint_names)
     assert all(f.valid[mapped].all() for f in frames)
     if fmt == "binary":
@@ -469,10 +411,7 @@ def test_simulator_through_live_session_gives_valid_joints_and_cuts(fmt):
 def test_rtseg_simulate_axis_command_reaches_the_source():
     src = open_source("axis://127.0.0.1:0?queue=10000")
     try:
-        proc = subprocess.run(
-            [sys.executable, "-m", "rtseg.cli", "simulate", "axis", "--synth", "idle:2,walk:2",
-             "--rate", "60", "--speed", "10", "--port", str(src.port)],
-            capture_output=True, text=True, timeout=60)
+        proc = run_simulate("axis", src.port, "60")
         assert proc.returncode == 0, proc.stderr
         assert f'rtseg live "axis://127.0.0.1:{src.port}?format=binary&rate=60"' in proc.stdout
         assert "rigid with their parent: RightShoulder, LeftShoulder" in proc.stdout
@@ -519,23 +458,11 @@ def test_real_take_cuts_match_the_serial_suit(data_dir):
     gives the cuts the 17-sensor serial suit gives through its codec, within 0.25 s
     (offline pipeline, the live loop's own).  (With local space and the default
     calibration.mode = auto, the first of 86_01's six cuts moves from frame 530 to 450.)"""
-    from rtseg.drivers.codec_serial import SerialFrameDecoder, encode_frame as ser_encode
-    from rtseg.drivers.readers import read_take
     from rtseg.pipeline import replay_frames
-    from rtseg.simulators.retarget import retarget
 
-    take = read_take(str(data_dir / "cmu" / "86_01.amc"))
+    take, serial, ref = serial_reference(data_dir)
     rate = take.frame_rate
-    suit = suit_profile("default17")
-    rt = retarget(take, suit)
-    ids = list(suit.sensor_ids)
-    dec = SerialFrameDecoder(known_ids=ids)
-    serial = [(f.quats.copy(), f.valid.copy(), i, i / rate, i / rate)
-              for i in range(take.n_frames)
-              for f in dec.feed(ser_encode(i & 0xFFFF, int(i / rate * 1e6), ids, rt.quats[i]))]
     sender = AxisSender(take, "binary")                # encode only: never started
-    ref = replay_frames(serial, list(suit.bones), list(suit.parents), "global", rate)
-    assert len(ref) >= 3, "the reference suit should cut 86_01"
     runs = {}
     for space in ("local", "global"):
         adapter = _BinaryAdapter(AxisFrames(Counter(), rate=rate, space=space))
@@ -550,8 +477,7 @@ def test_real_take_cuts_match_the_serial_suit(data_dir):
     # relative to its T-pose)
     for space, cfg in (("global", None), ("local", from_dict({"calibration": {"mode": "none"}}))):
         got = replay_frames(runs[space], list(A.JOINTS), list(A.PARENTS), space, rate, cfg)
-        assert [c.cut.method for c in got] == [c.cut.method for c in ref], space
-        assert max(abs(a.boundary - b.boundary) for a, b in zip(got, ref)) <= 0.25 * rate, space
+        assert_same_cuts(got, ref, rate, space)
 
 
 def test_rtseg_simulate_axis_take_replays_the_real_bvh():

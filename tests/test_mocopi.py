@@ -5,9 +5,6 @@ from __future__ import annotations
 
 import socket
 import struct
-import subprocess
-import sys
-import threading
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -23,11 +20,11 @@ from rtseg.drivers.codec_mocopi import (
 )
 from rtseg import quat as Q
 from rtseg.drivers.mocopi_source import ForwardKinematics, MocopiSource
-from rtseg.live import LiveSession
 from rtseg.profiles import suit_profile
-from rtseg.session_config import from_dict
 from rtseg.simulators.mocopi_sender import MocopiSender
 from rtseg.simulators.synth import synthesize
+from vendor_helpers import (append_junk, assert_same_cuts, assert_sane_frame, flip_bits,
+                            read_all, run_live, run_simulate, serial_reference, truncate)
 
 FIXTURES = Path(__file__).parent / "fixtures" / "mocopi"
 N = len(BONE_NAMES)
@@ -172,17 +169,16 @@ def fuzz_inputs(n: int, seed: int) -> list[bytes]:
         d = bytearray(seeds[rng.integers(len(seeds))])
         op = rng.integers(5)
         if op == 0:
-            for _ in range(rng.integers(1, 8)):
-                d[rng.integers(len(d))] ^= 1 << int(rng.integers(8))
+            flip_bits(rng, d)
         elif op == 1:
-            d = d[:rng.integers(len(d) + 1)]
+            d = truncate(rng, d)
         elif op == 2:                                    # a length field rewritten
             pos = [i - 4 for i in range(4, len(d) - 4) if d[i:i + 4].isalpha()]
             if pos:
                 p = pos[rng.integers(len(pos))]
                 d[p:p + 4] = struct.pack("<I", int(rng.integers(0, 1 << 32)))
         elif op == 3:
-            d = d + rng.bytes(rng.integers(1, 64))
+            d = append_junk(rng, d)
         else:
             d = bytearray(rng.bytes(rng.integers(0, 400)))
         out.append(bytes(d))
@@ -195,8 +191,7 @@ def test_fuzzed_datagrams_never_escape():
     for k, d in enumerate(fuzz_inputs(10_000, seed=7)):
         for f in asm.feed(d, k * 1e-3):
             frames += 1
-            assert f.quats.shape == (27, 4) and np.isfinite(f.quats).all()
-            assert np.allclose(np.linalg.norm(f.quats[f.valid], axis=1), 1.0, atol=1e-6)
+            assert_sane_frame(f, 27)
     assert frames > 200 and asm.stats.corrupt > 3000      # both paths were exercised
 
 
@@ -263,54 +258,14 @@ def test_sample_packets_over_udp_and_allow_list():
         other.close()
 
 
-class _NoPublish:
-    def publish_cut(self, ev):
-        return ev
-
-    def publish_status(self, ev):
-        pass
-
-    def publish_dropout(self, ev):
-        pass
-
-    def close(self):
-        pass
-
-
 def test_simulator_through_live_session_gives_valid_joints_and_cuts():
     rate, speed = 120.0, 4.0
     take = synthesize("idle:3,walk:4,punch:4,squat:4", frame_rate=rate, seed=3).take
     src = open_source(f"mocopi://127.0.0.1:0?rate={rate:g}&queue=4096")
     sender = MocopiSender(take, "127.0.0.1", src.port, speed=speed, unix_start=1.7e9,
                           skeleton_every=120)
-    frames, cuts = [], []
-    orig_read = src.read
-
-    def read(timeout=None):
-        f = orig_read(timeout)
-        if f is not None:
-            frames.append(f)
-        return f
-
-    src.read = read
-    session = LiveSession(src, from_dict({}), handle_signals=False, publishers=_NoPublish(),
-                          listeners=[lambda ev: cuts.append(ev) if type(ev).__name__ ==
-                                     "CutEvent" else None])
-    box: dict = {}
-    t = threading.Thread(target=lambda: box.setdefault("s", session.run()), daemon=True)
-    try:
-        t.start()
-        time.sleep(0.2)
-        sender.start()
-        assert sender.wait(take.n_frames / (rate * speed) + 10)
-        time.sleep(0.3)
-        session.stop("test done")
-        t.join(10)
-        assert not t.is_alive()
-    finally:
-        sender.stop()
-        src.close()
-    assert len(frames) == take.n_frames == box["s"].frames_received
+    frames, cuts, summary = run_live(src, sender, take, rate, speed)
+    assert len(frames) == take.n_frames == summary.frames_received
     assert all(f.valid.all() for f in frames)
     assert [f.seq for f in frames] == list(range(take.n_frames))
     st = np.array([f.source_time for f in frames]) - 1.7e9
@@ -327,16 +282,11 @@ def test_simulator_through_live_session_gives_valid_joints_and_cuts():
 def test_rtseg_simulate_mocopi_command_reaches_the_source():
     src = open_source("mocopi://127.0.0.1:0?queue=10000")
     try:
-        proc = subprocess.run(
-            [sys.executable, "-m", "rtseg.cli", "simulate", "mocopi", "--synth",
-             "idle:2,walk:2", "--rate", "50", "--speed", "10", "--port", str(src.port)],
-            capture_output=True, text=True, timeout=60)
+        proc = run_simulate("mocopi", src.port, "50")
         assert proc.returncode == 0, proc.stderr
         assert f"rtseg live mocopi://127.0.0.1:{src.port}" in proc.stdout
         assert "filled from their parents: torso_1, torso_3" in proc.stdout
-        frames = []
-        while (f := src.read(timeout=0.3)) is not None:
-            frames.append(f)
+        frames = read_all(src)
         assert len(frames) == 200 and all(f.valid.all() for f in frames)
     finally:
         src.close()
@@ -345,31 +295,18 @@ def test_rtseg_simulate_mocopi_command_reaches_the_source():
 def test_real_take_cuts_match_the_serial_suit(data_dir):
     """86_01 (CMU, 38 s) through the mocopi codec and the source's default global
     conversion gives the cuts the 17-sensor serial suit gives, within 0.25 s."""
-    from rtseg.drivers.codec_serial import SerialFrameDecoder, encode_frame as ser_encode
-    from rtseg.drivers.readers import read_take
     from rtseg.pipeline import replay_frames
-    from rtseg.simulators.retarget import retarget
 
-    take = read_take(str(data_dir / "cmu" / "86_01.amc"))
+    take, serial, ref = serial_reference(data_dir)
     rate = take.frame_rate
-    suit = suit_profile("default17")
-    rt = retarget(take, suit)
-    ids = list(suit.sensor_ids)
-    dec = SerialFrameDecoder(known_ids=ids)
-    serial = [(f.quats.copy(), f.valid.copy(), i, i / rate, i / rate)
-              for i in range(take.n_frames)
-              for f in dec.feed(ser_encode(i & 0xFFFF, int(i / rate * 1e6), ids, rt.quats[i]))]
     sender = MocopiSender(take, "127.0.0.1", 9, unix_start=1.7e9)   # encode only
     asm = MocopiAssembler(sender.bone_ids)
     fk = ForwardKinematics(sender.suit.parents)
     moc = [(fk(f.quats), f.valid, f.seq, i / rate, f.source_time) for i in range(take.n_frames)
            for d in sender.encode(i, i, i / rate) for f in asm.feed(d, i / rate)]
     assert len(serial) == len(moc) == take.n_frames
-    ref = replay_frames(serial, list(suit.bones), list(suit.parents), "global", rate)
     got = replay_frames(moc, list(sender.suit.bones), list(sender.suit.parents), "global", rate)
-    assert len(ref) >= 3, "the reference suit should cut 86_01"
-    assert [c.cut.method for c in got] == [c.cut.method for c in ref]
-    assert max(abs(a.boundary - b.boundary) for a, b in zip(got, ref)) <= 0.25 * rate
+    assert_same_cuts(got, ref, rate)
 
 
 def test_learned_layout_and_general_paths_agree():

@@ -5,9 +5,6 @@ from __future__ import annotations
 
 import socket
 import struct
-import subprocess
-import sys
-import threading
 import time
 
 import numpy as np
@@ -21,11 +18,11 @@ from rtseg.drivers.codec_mvn import (
     to_mvn_quat,
 )
 from rtseg.drivers.mvn_source import MvnSource
-from rtseg.live import LiveSession
 from rtseg.profiles import resolve_joints, suit_profile
-from rtseg.session_config import from_dict
 from rtseg.simulators.mvn_sender import MvnSender
 from rtseg.simulators.synth import synthesize
+from vendor_helpers import (append_junk, assert_same_cuts, assert_sane_frame, flip_bits,
+                            read_all, run_live, run_simulate, serial_reference, truncate)
 
 IDS = list(range(1, BODY_SEGMENTS + 1))
 
@@ -219,14 +216,13 @@ def fuzz_inputs(n: int, seed: int) -> list[bytes]:
         d = bytearray(seeds[rng.integers(len(seeds))])
         op = rng.integers(6)
         if op == 0:
-            for _ in range(rng.integers(1, 8)):
-                d[rng.integers(len(d))] ^= 1 << int(rng.integers(8))
+            flip_bits(rng, d)
         elif op == 1:
-            d = d[:rng.integers(len(d) + 1)]
+            d = truncate(rng, d)
         elif op == 2:
             d[rng.integers(6, 24):rng.integers(6, 24) + 1] = rng.bytes(1)   # header fields
         elif op == 3:
-            d = d + rng.bytes(rng.integers(1, 64))
+            d = append_junk(rng, d)
         elif op == 4:
             d = bytearray(b"MXTP" + rng.bytes(rng.integers(0, 200)))
         else:
@@ -242,8 +238,7 @@ def test_fuzzed_datagrams_never_escape():
     for k, d in enumerate(inputs):
         for f in asm.feed(d, k * 1e-3) + asm.flush(k * 1e-3):
             frames += 1
-            assert f.quats.shape == (23, 4) and np.isfinite(f.quats).all()
-            assert np.allclose(np.linalg.norm(f.quats[f.valid], axis=1), 1.0, atol=1e-6)
+            assert_sane_frame(f, 23)
     st = asm.stats
     assert frames > 100 and st.corrupt > 1000        # both paths were exercised
 
@@ -299,9 +294,7 @@ def test_two_characters_over_udp_into_one_source_each():
         assert all(s.wait(10) for s in senders)
         time.sleep(0.2)
         for src in (a, b):
-            frames = []
-            while (f := src.read(timeout=0.2)) is not None:
-                frames.append(f)
+            frames = read_all(src, 0.2)
             assert len(frames) == take.n_frames
             assert [f.seq for f in frames] == list(range(take.n_frames))
             assert all(f.valid.all() for f in frames)
@@ -323,35 +316,8 @@ def test_simulator_through_live_session_gives_valid_joints_and_cuts(tmp_path):
     take = synthesize("idle:3,walk:4,punch:4,squat:4", frame_rate=rate, seed=3).take
     src = open_source(f"mvn://127.0.0.1:0?rate={rate:g}&queue=4096")
     sender = MvnSender(take, "127.0.0.1", src.port, speed=speed)
-    cuts, frames = [], []
-    orig_read = src.read
-
-    def read(timeout=None):
-        f = orig_read(timeout)
-        if f is not None:
-            frames.append(f)
-        return f
-
-    src.read = read
-    cfg = from_dict({})
-    session = LiveSession(src, cfg, handle_signals=False, publishers=_NoPublish(),
-                          listeners=[lambda ev: cuts.append(ev) if type(ev).__name__ ==
-                                     "CutEvent" else None])
-    box: dict = {}
-    t = threading.Thread(target=lambda: box.setdefault("s", session.run()), daemon=True)
-    try:
-        t.start()
-        time.sleep(0.2)
-        sender.start()
-        assert sender.wait(take.n_frames / (rate * speed) + 10)
-        time.sleep(0.3)
-        session.stop("test done")
-        t.join(10)
-        assert not t.is_alive()
-    finally:
-        sender.stop()
-        src.close()
-    assert len(frames) == take.n_frames == box["s"].frames_received
+    frames, cuts, summary = run_live(src, sender, take, rate, speed)
+    assert len(frames) == take.n_frames == summary.frames_received
     assert all(f.valid.all() for f in frames)
     st = np.array([f.source_time for f in frames])
     assert np.allclose(st, np.round(np.arange(take.n_frames) / rate * 1000) / 1000)
@@ -359,35 +325,14 @@ def test_simulator_through_live_session_gives_valid_joints_and_cuts(tmp_path):
     assert len(cuts) >= 1, "no cut on a take with 3 behaviour changes"
 
 
-class _NoPublish:
-    """Publishers that drop everything (this test reads the listener)."""
-
-    def publish_cut(self, ev):
-        return ev
-
-    def publish_status(self, ev):
-        pass
-
-    def publish_dropout(self, ev):
-        pass
-
-    def close(self):
-        pass
-
-
 def test_rtseg_simulate_mvn_command_reaches_the_source():
     src = open_source("mvn://127.0.0.1:0?queue=10000&character=1")
     try:
-        proc = subprocess.run(
-            [sys.executable, "-m", "rtseg.cli", "simulate", "mvn", "--synth", "idle:2,walk:2",
-             "--rate", "60", "--speed", "10", "--port", str(src.port), "--character", "1"],
-            capture_output=True, text=True, timeout=60)
+        proc = run_simulate("mvn", src.port, "60", "--character", "1")
         assert proc.returncode == 0, proc.stderr
         assert f"rtseg live mvn://127.0.0.1:{src.port}?character=1" in proc.stdout
         assert "filled from their parents: L3, T12, RightShoulder" in proc.stdout
-        frames = []
-        while (f := src.read(timeout=0.3)) is not None:
-            frames.append(f)
+        frames = read_all(src)
         assert len(frames) == 240 and all(f.valid.all() for f in frames)
     finally:
         src.close()
@@ -397,31 +342,18 @@ def test_real_take_cuts_match_the_serial_suit(data_dir):
     """86_01 (CMU, 38 s) through the MVN codec gives the cuts the 17-sensor serial suit
     gives through its codec, within 0.25 s: the suit changes the features only where the
     joints differ (offline pipeline, the live loop's own, no sockets)."""
-    from rtseg.drivers.codec_serial import SerialFrameDecoder, encode_frame as ser_encode
-    from rtseg.drivers.readers import read_take
     from rtseg.pipeline import replay_frames
-    from rtseg.simulators.retarget import retarget
 
-    take = read_take(str(data_dir / "cmu" / "86_01.amc"))
+    take, serial, ref = serial_reference(data_dir)
     rate = take.frame_rate
-    suit = suit_profile("default17")
-    rt = retarget(take, suit)
-    ids = list(suit.sensor_ids)
-    dec = SerialFrameDecoder(known_ids=ids)
-    serial = [(f.quats.copy(), f.valid.copy(), i, i / rate, i / rate)
-              for i in range(take.n_frames)
-              for f in dec.feed(ser_encode(i & 0xFFFF, int(i / rate * 1e6), ids, rt.quats[i]))]
     sender = MvnSender(take, "127.0.0.1", 9)            # encode only: never started
     asm = MvnAssembler(sender.segment_ids)
     mvn = [(f.quats, f.valid, f.seq, i / rate, f.source_time) for i in range(take.n_frames)
            for d in sender.encode(i, i, i / rate) for f in asm.feed(d, i / rate)]
     assert len(serial) == len(mvn) == take.n_frames
     assert all(v.all() for _, v, *_ in mvn)
-    ref = replay_frames(serial, list(suit.bones), list(suit.parents), "global", rate)
     got = replay_frames(mvn, list(sender.suit.bones), list(sender.suit.parents), "global", rate)
-    assert len(ref) >= 3, "the reference suit should cut 86_01"
-    assert [c.cut.method for c in got] == [c.cut.method for c in ref]
-    assert max(abs(a.boundary - b.boundary) for a, b in zip(got, ref)) <= 0.25 * rate
+    assert_same_cuts(got, ref, rate)
 
 
 def test_fast_and_general_paths_agree():

@@ -11,7 +11,6 @@ import random
 import socket
 import subprocess
 import sys
-import threading
 import time
 
 import numpy as np
@@ -23,11 +22,11 @@ from rtseg.drivers import codec_rokoko as C
 from rtseg.drivers.codec_rokoko import (BODY_BONES, BODY_PARENTS, LZ4_MAGIC, RokokoError,
                                         decode_packet, encode_packet, unity_to_rh)
 from rtseg.drivers.rokoko_source import RokokoAssembler
-from rtseg.live import LiveSession
 from rtseg.profiles import resolve_joints, suit_profile
-from rtseg.session_config import from_dict
 from rtseg.simulators.rokoko_sender import RokokoSender
 from rtseg.simulators.synth import synthesize
+from vendor_helpers import (Counter, assert_same_cuts, free_port, read_all, run_live,
+                            run_simulate, serial_reference)
 
 lz4 = pytest.importorskip("lz4.frame", reason="the lz4 package (rtseg[rokoko]) is needed "
                           "for LZ4 payloads")
@@ -38,14 +37,6 @@ def random_pose(seed: int = 0) -> np.ndarray:
     """(21, 4) random unit quaternions rounded to float32, rtseg frame."""
     q = Rotation.random(J, random_state=seed).as_quat()
     return q.astype(np.float32).astype(np.float64)
-
-
-class Counter:
-    def __init__(self) -> None:
-        self.counts: dict[str, int] = {}
-
-    def __call__(self, field: str, n: int = 1, message=None) -> None:
-        self.counts[field] = self.counts.get(field, 0) + n
 
 
 # --------------------------------------------------------------------------- codec
@@ -241,13 +232,6 @@ def udp_out() -> socket.socket:
     return socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
 
 
-def read_all(src, idle: float = 0.3) -> list:
-    frames = []
-    while (f := src.read(timeout=idle)) is not None:
-        frames.append(f)
-    return frames
-
-
 def test_url_defaults_options_and_errors():
     src = open_source("rokoko://:0?actor=Bob&rate=100")
     try:
@@ -318,20 +302,6 @@ def test_allow_list_refuses_other_senders_before_decoding():
         src.close()
 
 
-class _NoPublish:
-    def publish_cut(self, ev):
-        return ev
-
-    def publish_status(self, ev):
-        pass
-
-    def publish_dropout(self, ev):
-        pass
-
-    def close(self):
-        pass
-
-
 def test_simulator_through_live_session_gives_valid_joints_and_cuts():
     """A synthetic take with 3 behaviour changes, sent x4 as Rokoko JSON over 127.0.0.1 into
     a LiveSession: every mapped joint valid in every frame, the take's clock, and at least
@@ -339,35 +309,9 @@ def test_simulator_through_live_session_gives_valid_joints_and_cuts():
     rate, speed = 120.0, 4.0
     take = synthesize("idle:3,walk:4,punch:4,squat:4", frame_rate=rate, seed=3).take
     src = open_source(f"rokoko://127.0.0.1:0?rate={rate:g}&queue=4096")
-    frames, cuts = [], []
-    orig = src.read
-
-    def read(timeout=None):
-        f = orig(timeout)
-        if f is not None:
-            frames.append(f)
-        return f
-
-    src.read = read
-    session = LiveSession(src, from_dict({}), handle_signals=False, publishers=_NoPublish(),
-                          listeners=[lambda ev: cuts.append(ev) if type(ev).__name__ ==
-                                     "CutEvent" else None])
-    box: dict = {}
-    t = threading.Thread(target=lambda: box.setdefault("s", session.run()), daemon=True)
     sender = RokokoSender(take, "127.0.0.1", src.port, speed=speed)
-    try:
-        t.start()
-        time.sleep(0.2)
-        sender.start()
-        assert sender.wait(take.n_frames / (rate * speed) + 10)
-        time.sleep(0.3)
-        session.stop("test done")
-        t.join(10)
-        assert not t.is_alive()
-    finally:
-        sender.stop()
-        src.close()
-    assert len(frames) == take.n_frames == box["s"].frames_received
+    frames, cuts, summary = run_live(src, sender, take, rate, speed)
+    assert len(frames) == take.n_frames == summary.frames_received
     mapped = resolve_joints("unity", src.joint_names)
     assert all(f.valid[mapped].all() for f in frames)
     assert np.allclose([f.source_time for f in frames], np.arange(take.n_frames) / rate)
@@ -378,10 +322,7 @@ def test_simulator_through_live_session_gives_valid_joints_and_cuts():
 def test_rtseg_simulate_rokoko_command_reaches_the_source():
     src = open_source("rokoko://127.0.0.1:0?queue=10000&actor=B")
     try:
-        proc = subprocess.run(
-            [sys.executable, "-m", "rtseg.cli", "simulate", "rokoko", "--synth", "idle:2,walk:2",
-             "--rate", "60", "--speed", "10", "--port", str(src.port), "--actor", "A,B",
-             "--lz4"], capture_output=True, text=True, timeout=60)
+        proc = run_simulate("rokoko", src.port, "60", "--actor", "A,B", "--lz4")
         assert proc.returncode == 0, proc.stderr
         assert f'rtseg live "rokoko://127.0.0.1:{src.port}?rate=60"' in proc.stdout
         assert "rigid with their parent: LeftShoulder, RightShoulder, LeftToes, RightToes" \
@@ -407,10 +348,7 @@ def test_rtseg_live_rokoko_url_prints_cuts():
     the session prints cuts and ends after --duration."""
     rate, speed = 120.0, 4.0
     take = synthesize("idle:3,walk:4,punch:4", frame_rate=rate, seed=5).take
-    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    probe.bind(("127.0.0.1", 0))
-    port = probe.getsockname()[1]
-    probe.close()
+    port = free_port()
     proc = subprocess.Popen(
         [sys.executable, "-m", "rtseg.cli", "live", f"rokoko://127.0.0.1:{port}?rate={rate:g}",
          "--no-osc", "--quiet", "--duration", "7"],
@@ -451,28 +389,15 @@ def test_a_take_with_rokoko_names_replays_unchanged():
 def test_real_take_cuts_match_the_serial_suit(data_dir):
     """86_01 (CMU, 38 s) through the Rokoko codec gives the cuts the 17-sensor serial suit
     gives through its codec, within 0.25 s (offline pipeline, the live loop's own)."""
-    from rtseg.drivers.codec_serial import SerialFrameDecoder, encode_frame as ser_encode
-    from rtseg.drivers.readers import read_take
     from rtseg.pipeline import replay_frames
-    from rtseg.simulators.retarget import retarget
 
-    take = read_take(str(data_dir / "cmu" / "86_01.amc"))
+    take, serial, ref = serial_reference(data_dir)
     rate = take.frame_rate
-    suit = suit_profile("default17")
-    rt = retarget(take, suit)
-    ids = list(suit.sensor_ids)
-    dec = SerialFrameDecoder(known_ids=ids)
-    serial = [(f.quats.copy(), f.valid.copy(), i, i / rate, i / rate)
-              for i in range(take.n_frames)
-              for f in dec.feed(ser_encode(i & 0xFFFF, int(i / rate * 1e6), ids, rt.quats[i]))]
     sender = RokokoSender(take)                         # encode only: never started
     asm = RokokoAssembler(None, Counter())
     rok = [(f.quats, f.valid, f.seq, i / rate, f.source_time) for i in range(take.n_frames)
            for f in asm.feed(sender.payload(i, i / rate), i / rate)]
     assert len(serial) == len(rok) == take.n_frames
     assert all(v.all() for _, v, *_ in rok)
-    ref = replay_frames(serial, list(suit.bones), list(suit.parents), "global", rate)
     got = replay_frames(rok, list(BODY_BONES), list(BODY_PARENTS), "global", rate)
-    assert len(ref) >= 3, "the reference suit should cut 86_01"
-    assert [c.cut.method for c in got] == [c.cut.method for c in ref]
-    assert max(abs(a.boundary - b.boundary) for a, b in zip(got, ref)) <= 0.25 * rate
+    assert_same_cuts(got, ref, rate)
