@@ -193,3 +193,13 @@ def test_frame_rate_scales_the_windows():
 def test_bad_parameters_are_refused(kw):
     with pytest.raises(ValueError):
         ContrastDetector(**kw)
+
+
+def test_distances_equal_the_two_distance_functions():
+    from rtseg.detectors.window_models import distances
+    rng = np.random.default_rng(9)
+    a = fit(WindowStats.of(rng.normal(size=(200, 7)) @ rng.normal(size=(7, 7))))
+    b = fit(WindowStats.of(rng.normal(size=(150, 7)) + 0.5))
+    p, q = distances(a, b)
+    assert p == pytest.approx(pca_distance(a, b), rel=1e-12)
+    assert q == pytest.approx(ppca_distance(a, b), rel=1e-12)

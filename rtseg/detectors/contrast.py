@@ -46,9 +46,7 @@ import numpy as np
 
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.detectors.peaks import CausalPeaks
-from rtseg.detectors.window_models import (
-    WindowModel, WindowStats, fit, pca_distance, ppca_distance,
-)
+from rtseg.detectors.window_models import WindowModel, WindowStats, distances, fit
 
 
 class ContrastDetector(OnlineDetector):
@@ -193,8 +191,9 @@ class ContrastDetector(OnlineDetector):
         w = min(self.wa, c // 2)
         a0, a, b = self._model(c - 2 * w, c - w), self._model(c - w, c), \
             self._model(c, c + self.wb)
-        kp = pca_distance(a, b) / max(pca_distance(a0, a), 1e-300)
-        kq = ppca_distance(a, b) / max(ppca_distance(a0, a), 1e-300)
+        (p_ab, q_ab), (p_0a, q_0a) = distances(a, b), distances(a0, a)
+        kp = p_ab / max(p_0a, 1e-300)
+        kq = q_ab / max(q_0a, 1e-300)
         oldest = c + 1 - 2 * self.wa
         for key in [k for k in self._models if k[0] < oldest]:
             del self._models[key]

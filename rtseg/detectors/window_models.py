@@ -97,10 +97,13 @@ def _moments_about(y: WindowStats, mu: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 def pca_error(y: WindowStats, m: WindowModel) -> float:
     """Mean per-frame projection error of y's frames off m's mean + hyperplane, over m's own."""
-    M, _ = _moments_about(y, m.stats.mean)
+    return _pca_error_m(_moments_about(y, m.stats.mean)[0], y.n, m)
+
+
+def _pca_error_m(M: np.ndarray, n: int, m: WindowModel) -> float:
     B = m.pca_basis
     proj = float(np.einsum("ij,ij->", B, M @ B)) if B.shape[1] else 0.0
-    return (float(np.trace(M)) - proj) / y.n / m.pca_own
+    return (float(np.trace(M)) - proj) / n / m.pca_own
 
 
 def pca_distance(a: WindowModel, b: WindowModel) -> float:
@@ -110,8 +113,11 @@ def pca_distance(a: WindowModel, b: WindowModel) -> float:
 
 def ppca_msq(y: WindowStats, m: WindowModel) -> float:
     """Mean squared Mahalanobis distance of y's frames under m's PPCA Gaussian."""
-    M, _ = _moments_about(y, m.stats.mean)
-    M = M / y.n
+    return _ppca_msq_m(_moments_about(y, m.stats.mean)[0], y.n, m)
+
+
+def _ppca_msq_m(M: np.ndarray, n: int, m: WindowModel) -> float:
+    M = M / n
     B = m.ppca_basis
     P = np.einsum("ij,ij->j", B, M @ B) if B.shape[1] else np.zeros(0)
     return float((P / m.ppca_var).sum() + (float(np.trace(M)) - float(P.sum())) / m.ppca_sigma2)
@@ -120,3 +126,14 @@ def ppca_msq(y: WindowStats, m: WindowModel) -> float:
 def ppca_distance(a: WindowModel, b: WindowModel) -> float:
     """sqrt(max(ppca_msq(b | a), ppca_msq(a | b))): about sqrt(d_eff) within one behaviour."""
     return math.sqrt(max(ppca_msq(b.stats, a), ppca_msq(a.stats, b), 0.0))
+
+
+def distances(a: WindowModel, b: WindowModel) -> tuple[float, float]:
+    """(``pca_distance(a, b)``, ``ppca_distance(a, b)``) with each window's second moments
+    about the other's mean computed once for both models."""
+    Mba = _moments_about(b.stats, a.stats.mean)[0]
+    Mab = _moments_about(a.stats, b.stats.mean)[0]
+    pca = math.sqrt(max(_pca_error_m(Mba, b.stats.n, a), 0.0)
+                    * max(_pca_error_m(Mab, a.stats.n, b), 0.0))
+    ppca = math.sqrt(max(_ppca_msq_m(Mba, b.stats.n, a), _ppca_msq_m(Mab, a.stats.n, b), 0.0))
+    return pca, ppca
