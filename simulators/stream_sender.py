@@ -20,8 +20,6 @@ retargeting policy (``_retarget``).  Every slot is recorded in ``sent_log``.
 from __future__ import annotations
 
 import logging
-import socket
-import threading
 import time
 from dataclasses import dataclass
 
@@ -30,7 +28,7 @@ import numpy as np
 from rtseg import quat as Q
 from rtseg.profiles import SuitProfile, suit_profile
 from rtseg.simulators.retarget import ImuModel, RetargetError, Retargeted, resolve, retarget
-from rtseg.simulators.vmc_sender import UNIT_SCALE
+from rtseg.simulators.vmc_sender import SenderThread, root_metres, take_clock
 from rtseg.take import Take
 
 log = logging.getLogger("rtseg.simulators")
@@ -85,19 +83,9 @@ def retarget_with_optional(take: Take, suit: SuitProfile, optional: set[str],
 FAMILY_UNITS = {"axis": 0.01}
 
 
-def root_metres(take: Take, default: float = 1.0) -> np.ndarray | None:
-    """``take.root_position`` in metres (``meta["metres_per_unit"]`` or ``length_unit``;
-    ``default`` metres per unit when neither says)."""
-    if take.root_position is None:
-        return None
-    scale = take.meta.get("metres_per_unit")
-    if not isinstance(scale, (int, float)) or not scale > 0:
-        scale = UNIT_SCALE.get(str(take.length_unit).lower(), default)
-    return np.asarray(take.root_position, dtype=np.float64) * float(scale)
-
-
-class StreamSender:
-    """Base of the suit simulators (see module docstring).  After construction:
+class StreamSender(SenderThread):
+    """Base of the suit simulators (see module docstring; lifecycle and UDP transport:
+    :class:`rtseg.simulators.vmc_sender.SenderThread`).  After construction:
     ``retargeted``, ``quats`` (frames, bones, 4) global orientations in suit order,
     ``valid`` (frames, bones), ``root`` (frames, 3) metres or None, ``rate``, ``speed``."""
 
@@ -109,12 +97,7 @@ class StreamSender:
                  joint_map: dict[str, str] | None = None, imu: ImuModel | str | None = None,
                  allow_missing: bool = False) -> None:
         self.take = take
-        self.rate = float(rate) if rate is not None else float(take.frame_rate)
-        if not self.rate > 0:
-            raise ValueError(f"rate must be positive, got {rate}")
-        if not (isinstance(speed, (int, float)) and 0 < speed < float("inf")):
-            raise ValueError(f"speed must be a positive number, got {speed!r}")
-        self.speed = float(speed)
+        self.rate, self.speed = take_clock(take, rate, speed)
         self.loop = loop
         self.suit = suit if isinstance(suit, SuitProfile) else suit_profile(suit)
         imu_model = ImuModel.parse(imu) if isinstance(imu, str) or imu is None else imu
@@ -124,12 +107,8 @@ class StreamSender:
         self.valid = rt.valid & rt.present[None, :]
         self.root = self._root_metres()
         self.n_frames = take.n_frames
+        self._init_thread()
         self.sent_log: list[Sent] = []
-        self.send_errors = 0
-        self._stop = threading.Event()
-        self.done = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._sock: socket.socket | None = None
 
     def _retarget(self, skeleton_map: str | None, joint_map: dict[str, str] | None,
                   imu: ImuModel | None, allow_missing: bool) -> Retargeted:
@@ -157,58 +136,9 @@ class StreamSender:
     def encode(self, index: int, slot: int, t: float) -> list[bytes]:
         raise NotImplementedError
 
-    # -- transport (default: UDP datagrams to ``self.host``:``self.port``)
-    def _open(self) -> None:
-        family, _, _, _, self._addr = socket.getaddrinfo(self.host, self.port,
-                                                         type=socket.SOCK_DGRAM)[0]
-        self._sock = socket.socket(family, socket.SOCK_DGRAM)
-
-    def _send(self, parts: list[bytes]) -> None:
-        for p in parts:
-            try:
-                self._sock.sendto(p, self._addr)
-            except OSError as exc:      # e.g. ICMP port unreachable: nobody listening yet
-                self.send_errors += 1
-                self._send_failed(exc)
-
-    def _send_failed(self, exc: OSError) -> None:
-        """Called after each failed datagram (``send_errors`` already counts it)."""
-
-    def _close(self) -> None:
-        if self._sock is not None:
-            self._sock.close()
-            self._sock = None
-
     def _ready(self) -> bool:
         """Called once before the first frame; False ends the run (stopped)."""
         return True
-
-    # -- lifecycle
-    def start(self) -> "StreamSender":
-        if self._thread is not None:
-            raise RuntimeError(f"{type(self).__name__} already started")
-        self._open()
-        self._thread = threading.Thread(target=self._run, name=f"rtseg-{self.name}-sender",
-                                        daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        """Stop sending, join the thread, close the transport.  Safe to call twice."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
-        self._close()
-
-    def wait(self, timeout: float | None = None) -> bool:
-        """Block until a non-looping take has been sent; True if finished."""
-        return self.done.wait(timeout)
-
-    def __enter__(self) -> "StreamSender":
-        return self.start()
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
 
     def _run(self) -> None:
         n = self.n_frames

@@ -57,6 +57,98 @@ UNIT_SCALE = {"m": 1.0, "metre": 1.0, "metres": 1.0, "meter": 1.0, "meters": 1.0
               "cm": 0.01, "mm": 0.001, "in": 0.0254, "inch": 0.0254, "inches": 0.0254}
 
 
+def root_metres(take: Take, default: float = 1.0) -> np.ndarray | None:
+    """``take.root_position`` in metres (``meta["metres_per_unit"]`` or ``length_unit``;
+    ``default`` metres per unit when neither says)."""
+    if take.root_position is None:
+        return None
+    scale = take.meta.get("metres_per_unit")
+    if not isinstance(scale, (int, float)) or not scale > 0:
+        scale = UNIT_SCALE.get(str(take.length_unit).lower(), default)
+    return np.asarray(take.root_position, dtype=np.float64) * float(scale)
+
+
+def take_clock(take: Take, rate: float | None, speed: float) -> tuple[float, float]:
+    """(frames per second of the take's clock: ``rate`` or the take's, send speed factor);
+    ValueError for a non-positive rate or a speed that is not a positive finite number."""
+    out_rate = float(rate) if rate is not None else float(take.frame_rate)
+    if not out_rate > 0:
+        raise ValueError(f"rate must be positive, got {rate}")
+    if not (isinstance(speed, (int, float)) and 0 < speed < float("inf")):
+        raise ValueError(f"speed must be a positive number, got {speed!r}")
+    return out_rate, float(speed)
+
+
+class SenderThread:
+    """Lifecycle of the simulated network senders: ``start()`` opens the transport
+    (default: a UDP socket to ``self.host``:``self.port``) and runs ``_run`` in a daemon
+    thread ``rtseg-<name>-sender``; ``stop()`` ends it and closes the transport; ``wait()``;
+    a context manager.  ``_send`` sends datagrams, counting failures in ``send_errors``
+    (``_send_failed`` is told of each).  Call ``_init_thread()`` in ``__init__``."""
+
+    name = "vmc"
+
+    def _init_thread(self) -> None:
+        self.sent_log: list = []
+        self.send_errors = 0
+        self._stop = threading.Event()
+        self.done = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._sock: socket.socket | None = None
+
+    def _run(self) -> None:
+        raise NotImplementedError
+
+    # -- transport
+    def _open(self) -> None:
+        infos = socket.getaddrinfo(self.host, self.port, type=socket.SOCK_DGRAM)
+        family, _, _, _, self._addr = infos[0]
+        self._sock = socket.socket(family, socket.SOCK_DGRAM)
+
+    def _send(self, dgrams: list[bytes]) -> None:
+        for d in dgrams:
+            try:
+                self._sock.sendto(d, self._addr)
+            except OSError as exc:      # e.g. ICMP port unreachable from a closed port
+                self.send_errors += 1
+                self._send_failed(exc)
+
+    def _send_failed(self, exc: OSError) -> None:
+        """Called after each failed datagram (``send_errors`` already counts it)."""
+
+    def _close(self) -> None:
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
+
+    # -- lifecycle
+    def start(self):
+        if self._thread is not None:
+            raise RuntimeError(f"{type(self).__name__} already started")
+        self._open()
+        self._thread = threading.Thread(target=self._run, name=f"rtseg-{self.name}-sender",
+                                        daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop sending, join the thread, close the transport.  Safe to call twice."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+        self._close()
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Block until a non-looping take has been sent; True if finished."""
+        return self.done.wait(timeout)
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
 @dataclass(slots=True)
 class SentFrame:
     """One scheduled frame slot.  ``slot`` counts from 0 over loops; ``index`` is the take
@@ -73,7 +165,7 @@ class SentFrame:
     corrupted: bool = False
 
 
-class VmcSender:
+class VmcSender(SenderThread):
     """Send ``take`` as VMC to ``host:port`` from a background thread (see module doc).
 
     ``rate``: frames per second of the take's clock (default ``take.frame_rate``);
@@ -96,12 +188,7 @@ class VmcSender:
         self.take = take
         self.host = host
         self.port = int(port)
-        self.rate = float(rate) if rate is not None else float(take.frame_rate)
-        if not self.rate > 0:
-            raise ValueError(f"rate must be positive, got {rate}")
-        if not (isinstance(speed, (int, float)) and 0 < speed < float("inf")):
-            raise ValueError(f"speed must be a positive number, got {speed!r}")
-        self.speed = float(speed)
+        self.rate, self.speed = take_clock(take, rate, speed)
         self.loop = loop
         self.max_datagram = max_datagram
         self.ok = ok
@@ -121,51 +208,14 @@ class VmcSender:
         self.skipped_joints = [n for j, n in enumerate(take.joint_names) if j not in used]
         self._quats = np.ascontiguousarray(rt.local()[:, sent, :])
         self._valid = None if rt.valid[:, sent].all() else rt.valid[:, sent]
-        self._root = None
-        if send_root and take.root_position is not None:
-            scale = take.meta.get("metres_per_unit")
-            if not isinstance(scale, (int, float)) or not scale > 0:
-                scale = UNIT_SCALE.get(take.length_unit.lower(), 1.0)
-            self._root = take.root_position * float(scale)
+        self._root = root_metres(take) if send_root else None
         #: The FaultInjector in use (its ``record`` says what was damaged), or None.
         self.injector = _make_injector(faults)
-        self.sent_log: list[SentFrame] = []
-        self.send_errors = 0
-        self._stop = threading.Event()
-        self.done = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._sock: socket.socket | None = None
+        self._init_thread()
 
-    # -- lifecycle
-
-    def start(self) -> "VmcSender":
-        if self._thread is not None:
-            raise RuntimeError("VmcSender already started")
-        infos = socket.getaddrinfo(self.host, self.port, type=socket.SOCK_DGRAM)
-        family, _, _, _, self._addr = infos[0]
-        self._sock = socket.socket(family, socket.SOCK_DGRAM)
-        self._thread = threading.Thread(target=self._run, name="rtseg-vmc-sender", daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        """Stop sending and join the thread.  Safe to call twice."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
-        if self._sock is not None:
-            self._sock.close()
-            self._sock = None
-
-    def wait(self, timeout: float | None = None) -> bool:
-        """Block until a non-looping take has been sent; True if finished."""
-        return self.done.wait(timeout)
-
-    def __enter__(self) -> "VmcSender":
-        return self.start()
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
+    def _send_failed(self, exc: OSError) -> None:
+        if self.send_errors == 1:
+            log.warning("VMC sender: send to %s:%d failed: %s", self.host, self.port, exc)
 
     # -- encoding
 
@@ -239,14 +289,7 @@ class VmcSender:
                     cuts = np.cumsum([0] + lengths)
                     dgrams = [joined[a:b] for a, b in zip(cuts[:-1], cuts[1:])]
                 sent_at = time.monotonic()
-                for d in dgrams:
-                    try:
-                        self._sock.sendto(d, self._addr)
-                    except OSError as exc:  # e.g. ICMP port unreachable from a closed port
-                        self.send_errors += 1
-                        if self.send_errors == 1:
-                            log.warning("VMC sender: send to %s:%d failed: %s",
-                                        self.host, self.port, exc)
+                self._send(dgrams)
                 self.sent_log.append(SentFrame(slot, index, t_sched, sent_at, len(dgrams),
                                                omitted=omitted, corrupted=corrupted))
                 slot += 1
