@@ -16,15 +16,15 @@ character).  ``python -m rtseg.simulators.mvn_sender --help``.
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 
 from rtseg.drivers.codec_mvn import DEFAULT_MAX_DATAGRAM, DEFAULT_PORT, encode_datagrams, \
     encode_message
 from rtseg.profiles import SuitProfile
 from rtseg.simulators.retarget import ImuModel
-from rtseg.simulators.udp_take_sender import UdpTakeSender
+from rtseg.simulators.udp_take_sender import (UdpTakeSender, cli_arguments, cli_take,
+                                               cli_timing)
+from rtseg.simulators.vmc_sender import send_until_done, take_parser
 from rtseg.take import Take
 
 
@@ -71,32 +71,15 @@ class MvnSender(UdpTakeSender):
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m rtseg.simulators.mvn_sender``: send a synthetic or recorded take."""
-    p = argparse.ArgumentParser(prog="python -m rtseg.simulators.mvn_sender",
-                                description="Send a take as Xsens MVN network streaming.")
-    src = p.add_mutually_exclusive_group()
-    src.add_argument("--take", help="take file (any format rtseg reads)")
-    src.add_argument("--script", default="idle:3,walk:6,punch:4,squat:4",
-                     help="synthesiser script behaviour:seconds,... (default %(default)s)")
-    p.add_argument("--host", default="127.0.0.1")
-    p.add_argument("--port", type=int, default=DEFAULT_PORT)
+    p = take_parser("python -m rtseg.simulators.mvn_sender",
+                    "Send a take as Xsens MVN network streaming.")
+    cli_arguments(p, DEFAULT_PORT)
     p.add_argument("--character", type=int, default=0)
-    p.add_argument("--speed", type=float, default=1.0)
-    p.add_argument("--loop", action="store_true")
-    p.add_argument("--seed", type=int, default=0)
+    cli_timing(p)
     args = p.parse_args(argv)
-    if args.take:
-        from rtseg.drivers.readers import read_take
-        take = read_take(args.take)
-    else:
-        from rtseg.simulators.synth import synthesize
-        take = synthesize(args.script, seed=args.seed).take
-    with MvnSender(take, args.host, args.port, loop=args.loop, speed=args.speed,
-                   character=args.character) as sender:
-        try:
-            while not sender.wait(0.5):
-                pass
-        except KeyboardInterrupt:
-            pass
+    sender = MvnSender(cli_take(args), args.host, args.port, loop=args.loop, speed=args.speed,
+                       character=args.character)
+    send_until_done(sender)
     print(f"sent {len(sender.sent_log)} frames to {args.host}:{args.port}")
     return 0
 

@@ -118,4 +118,28 @@ class UdpTakeSender(StreamSender):
                         self.port, exc)
 
 
-__all__ = ["UdpTakeSender", "SentFrame", "retarget_filled", "feature_bones", "root_metres"]
+def cli_take(args) -> Take:
+    """The take of a sender's command line: ``--take`` read, or ``--script`` synthesised
+    with ``--seed``."""
+    if args.take:
+        from rtseg.drivers.readers import read_take
+        return read_take(args.take)
+    from rtseg.simulators.synth import synthesize
+    return synthesize(args.script, seed=args.seed).take
+
+
+def cli_arguments(p, port: int) -> None:
+    """``--host``, ``--port`` (default ``port``) for :func:`vmc_sender.take_parser`."""
+    p.add_argument("--host", default="127.0.0.1")
+    p.add_argument("--port", type=int, default=port)
+
+
+def cli_timing(p) -> None:
+    """``--speed``, ``--loop``, ``--seed``."""
+    p.add_argument("--speed", type=float, default=1.0)
+    p.add_argument("--loop", action="store_true")
+    p.add_argument("--seed", type=int, default=0)
+
+
+__all__ = ["UdpTakeSender", "SentFrame", "retarget_filled", "feature_bones", "root_metres",
+           "cli_take", "cli_arguments", "cli_timing"]

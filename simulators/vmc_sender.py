@@ -314,14 +314,29 @@ def _make_injector(faults: Any):
 
 # --------------------------------------------------------------------------- command line
 
-def main(argv: list[str] | None = None) -> int:
-    """``python -m rtseg.simulators.vmc_sender``: send a synthetic or recorded take."""
-    p = argparse.ArgumentParser(prog="python -m rtseg.simulators.vmc_sender",
-                                description="Send a take as VMC over OSC/UDP.")
+def take_parser(prog: str, description: str) -> argparse.ArgumentParser:
+    """A sender's command line: ``--take FILE`` or ``--script`` (the synthesiser's)."""
+    p = argparse.ArgumentParser(prog=prog, description=description)
     src = p.add_mutually_exclusive_group()
     src.add_argument("--take", help="take file (any format rtseg reads)")
     src.add_argument("--script", default="idle:3,walk:6,punch:4,squat:4",
                      help="synthesiser script behaviour:seconds,... (default %(default)s)")
+    return p
+
+
+def send_until_done(sender: SenderThread) -> None:
+    """Run ``sender`` until its take is sent (never with loop) or Ctrl-C."""
+    with sender:
+        try:
+            while not sender.wait(0.5):
+                pass
+        except KeyboardInterrupt:
+            pass
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m rtseg.simulators.vmc_sender``: send a synthetic or recorded take."""
+    p = take_parser("python -m rtseg.simulators.vmc_sender", "Send a take as VMC over OSC/UDP.")
     p.add_argument("--skeleton", help="ASF skeleton for --take .amc")
     p.add_argument("--host", default="127.0.0.1")
     p.add_argument("--port", type=int, default=39539)
@@ -338,13 +353,9 @@ def main(argv: list[str] | None = None) -> int:
     else:
         from rtseg.simulators.synth import synthesize
         take = synthesize(args.script, seed=args.seed).take
-    with VmcSender(take, args.host, args.port, rate=args.rate, faults=args.faults,
-                   loop=args.loop, speed=args.speed) as sender:
-        try:
-            while not sender.wait(0.5):
-                pass
-        except KeyboardInterrupt:
-            pass
+    sender = VmcSender(take, args.host, args.port, rate=args.rate, faults=args.faults,
+                       loop=args.loop, speed=args.speed)
+    send_until_done(sender)
     print(f"sent {sum(1 for f in sender.sent_log if not f.dropped)} frames to "
           f"{args.host}:{args.port}")
     return 0
