@@ -227,10 +227,4 @@ def serve(args, take: Take, host) -> tuple[str, list[str]]:
     out(f"  receive it with: rtseg live \"axis://{args.host}:{sender.port}?format={fmt}"
         f"&rate={sender.rate:g}\"")
     reason, elapsed = host.drive(sender, start=False)
-    log = list(sender.sent_log)
-    lines = [f"sent {len(log)} frames ({sum(s.nbytes for s in log)} bytes) in "
-             f"{elapsed:.2f} s; {sender.send_errors} send errors"]
-    if log:
-        lines.append(f"take frames {log[0].index}..{log[-1].index}, last frame index "
-                     f"{log[-1].slot}")
-    return reason, lines
+    return reason, host.summary(sender, elapsed, "frames", "bytes", "frame index")

@@ -89,13 +89,7 @@ def serve(args, take: Take, host) -> tuple[str, list[str]]:
         f"{sender.rate:g} Hz (timestamps in take seconds), sent at x{sender.speed:g}")
     out(f"  receive it with: rtseg live \"rokoko://{args.host}:{port}?rate={sender.rate:g}\"")
     reason, elapsed = host.drive(sender)
-    log = list(sender.sent_log)
-    lines = [f"sent {len(log)} payloads ({sum(s.nbytes for s in log)} bytes) in "
-             f"{elapsed:.2f} s; {sender.send_errors} send errors"]
-    if log:
-        lines.append(f"take frames {log[0].index}..{log[-1].index}, last timestamp "
-                     f"{log[-1].source_time:.3f} s")
-    return reason, lines
+    return reason, host.summary(sender, elapsed, "payloads", "bytes", "timestamp")
 
 
 def main(argv: list[str] | None = None) -> int:

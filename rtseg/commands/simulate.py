@@ -261,6 +261,22 @@ class Host:
             sender.stop()
         return reason, time.monotonic() - t0
 
+    @staticmethod
+    def summary(sender, elapsed: float, unit: str = "frames", size: str = "datagrams",
+                last: str = "take time") -> list[str]:
+        """What a vendor sender sent: ``unit`` (frames, payloads) counted with their
+        ``size`` (datagrams or bytes), the take frames covered and the ``last`` slot's take
+        time (or, for ``last="frame index"``, its slot)."""
+        log = list(sender.sent_log)
+        amount = sum(s.nbytes if size == "bytes" else s.datagrams for s in log)
+        lines = [f"sent {len(log)} {unit} ({amount} {size}) in {elapsed:.2f} s; "
+                 f"{sender.send_errors} send errors"]
+        if log:
+            end = (f"{log[-1].slot}" if last == "frame index"
+                   else f"{log[-1].source_time:.3f} s")
+            lines.append(f"take frames {log[0].index}..{log[-1].index}, last {last} {end}")
+        return lines
+
 
 def _serve_serial(args, take: Take) -> tuple[str, list[str]]:
     from rtseg.simulators.faults import FaultConfig
@@ -347,13 +363,7 @@ def _serve_vendor(args, take: Take) -> tuple[str, list[str]]:
          f"x{sender.speed:g}")
     _out(f"  receive it with: rtseg live {url}")
     reason, elapsed = host.drive(sender)
-    log = list(sender.sent_log)
-    lines = [f"sent {len(log)} frames ({sum(f.datagrams for f in log)} datagrams) in "
-             f"{elapsed:.2f} s; {sender.send_errors} send errors"]
-    if log:
-        lines.append(f"take frames {log[0].index}..{log[-1].index}, last take time "
-                     f"{log[-1].source_time:.3f} s")
-    return reason, lines
+    return reason, host.summary(sender, elapsed)
 
 
 def run(args: argparse.Namespace) -> int:
