@@ -13,7 +13,9 @@ import threading
 import time
 
 import numpy as np
+import pytest
 
+from rtseg.drivers import SourceError, open_source
 from rtseg.live import LiveSession
 from rtseg.session_config import from_dict
 
@@ -107,6 +109,27 @@ def run_simulate(device: str, port: int, rate: str = "60", *extra: str,
         [sys.executable, "-m", "rtseg.cli", "simulate", device, "--synth", synth,
          "--rate", rate, "--speed", "10", "--port", str(port), *extra],
         capture_output=True, text=True, timeout=60)
+
+
+def simulate_into(url: str, device: str, rate: str = "60", *extra: str
+                  ) -> tuple[str, int, list]:
+    """Open the source ``url`` (an ephemeral port), run ``rtseg simulate DEVICE`` into it
+    (:func:`run_simulate`; asserts it exits 0), read what arrived and close the source:
+    (the command's stdout, the port, the frames)."""
+    src = open_source(url)
+    try:
+        proc = run_simulate(device, src.port, rate, *extra)
+        assert proc.returncode == 0, proc.stderr
+        return proc.stdout, src.port, read_all(src)
+    finally:
+        src.close()
+
+
+def assert_refused(cases) -> None:
+    """Each (url, pattern): opening the url raises a SourceError matching the pattern."""
+    for url, pattern in cases:
+        with pytest.raises(SourceError, match=pattern):
+            open_source(url).close()
 
 
 def serial_reference(data_dir):
