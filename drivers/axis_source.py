@@ -64,7 +64,7 @@ from rtseg.drivers.codec_axis import (BINARY_PORT, JOINTS, PARENTS, TEXT_PORT, A
                                       AxisFrame, BinaryAssembler, TextSplitter,
                                       decode_binary, decode_text, global_pose, to_pose)
 from rtseg.drivers.osc_source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
-                                      check_options, number_option, parse_allow)
+                                      allow_option, check_options, number_option, renamed)
 from rtseg.frame import Frame
 
 log = logging.getLogger("rtseg.drivers.axis")
@@ -347,10 +347,8 @@ def open_url(location: str, options: dict[str, str]) -> Source:
     unit = (options.get("unit") or "cm").lower()
     if unit not in UNITS:
         raise SourceError(f"axis:// unit={unit!r}: one of {', '.join(UNITS)}")
-    try:
-        host, port = _parse_location(location, BINARY_PORT if fmt == "binary" else TEXT_PORT)
-    except SourceError as exc:
-        raise SourceError(str(exc).replace("osc://", "axis://")) from None
+    host, port = renamed("axis", _parse_location, location,
+                         BINARY_PORT if fmt == "binary" else TEXT_PORT)
     kw = dict(avatar=options.get("avatar") or None, order=order,
               rate=_num(options, "rate", 60.0), unit_scale=UNITS[unit], space=space,
               queue_size=_num(options, "queue", 256, int))
@@ -360,12 +358,7 @@ def open_url(location: str, options: dict[str, str]) -> Source:
                               "(default 7001)")
         return AxisTextSource(host, port, backoff=_num(options, "backoff", 0.2),
                               max_backoff=_num(options, "max_backoff", 5.0), **kw)
-    allow = None
-    if "allow" in options:
-        try:
-            allow = parse_allow(options["allow"])
-        except SourceError as exc:
-            raise SourceError(str(exc).replace("osc://", "axis://")) from None
+    allow = allow_option(options, "axis")
     return AxisBinarySource(host, port, rcvbuf=_num(options, "rcvbuf", None, int),
                             allow=allow, **kw)
 

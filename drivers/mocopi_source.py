@@ -44,7 +44,7 @@ from rtseg.drivers.base import SourceError
 from rtseg.drivers.codec_mocopi import DEFAULT_PORT, MocopiAssembler
 from rtseg.drivers.mvn_source import (VendorUdpSource, check_options, number_option,
                                       parse_location)
-from rtseg.drivers.osc_source import DEFAULT_HOST, Network, load_suit, parse_allow
+from rtseg.drivers.osc_source import DEFAULT_HOST, Network, allow_option, load_suit
 
 OPTIONS = ("suit", "queue", "rate", "rcvbuf", "tolerance", "allow", "space")
 #: socket poll interval, s (also how soon ``close`` is noticed); no frame waits on it
@@ -138,7 +138,7 @@ class MocopiSource(VendorUdpSource):
 def open_url(location: str, options: dict[str, str]) -> MocopiSource:
     """Open ``mocopi://location?options`` (see module docstring)."""
     check_options("mocopi", options, OPTIONS)
-    allow = parse_allow(options["allow"]) if "allow" in options else None
+    allow = allow_option(options)
     host, port = parse_location("mocopi", location, DEFAULT_PORT)
     num = number_option
     return MocopiSource(

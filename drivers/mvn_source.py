@@ -39,7 +39,7 @@ import math
 from rtseg.drivers.base import SourceError
 from rtseg.drivers.codec_mvn import DEFAULT_PORT, MvnAssembler
 from rtseg.drivers.osc_source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
-                                      check_options, load_suit, parse_allow)
+                                      allow_option, check_options, load_suit)
 from rtseg.drivers.osc_source import number_option as osc_number_option
 
 log = logging.getLogger("rtseg.drivers.mvn")
@@ -98,7 +98,7 @@ class MvnSource(VendorUdpSource):
 def open_url(location: str, options: dict[str, str]) -> MvnSource:
     """Open ``mvn://location?options`` (see module docstring)."""
     check_options("mvn", options, OPTIONS)
-    allow = parse_allow(options["allow"]) if "allow" in options else None
+    allow = allow_option(options)
     host, port = parse_location("mvn", location, DEFAULT_PORT)
     num = number_option
     return MvnSource(

@@ -97,6 +97,26 @@ def parse_allow(text: str) -> tuple[Network, ...]:
     return tuple(nets)
 
 
+def renamed(scheme: str, fn, *args):
+    """``fn(*args)``, a SourceError it raises re-raised with ``osc://`` written
+    ``<scheme>://`` (the vendor sources reuse the OSC parsers)."""
+    try:
+        return fn(*args)
+    except SourceError as exc:
+        raise SourceError(str(exc).replace("osc://", f"{scheme}://")) from None
+
+
+def allow_option(options: dict[str, str], scheme: str | None = None
+                 ) -> tuple[Network, ...] | None:
+    """The ``allow=`` URL option as networks (:func:`parse_allow`), None when absent; with
+    ``scheme``, its errors name that scheme (:func:`renamed`)."""
+    if "allow" not in options:
+        return None
+    if scheme is None:
+        return parse_allow(options["allow"])
+    return renamed(scheme, parse_allow, options["allow"])
+
+
 def sender_allowed(host: str, allow: tuple[Network, ...] | None) -> bool:
     """Whether a datagram from ``host`` (as ``recvfrom`` gives it) passes ``allow``
     (None: everyone).  IPv4-mapped IPv6 senders (``::ffff:a.b.c.d``) match IPv4 entries."""
@@ -387,7 +407,7 @@ def open_url(location: str, options: dict[str, str]) -> OscUdpSource:
         raise SourceError(f"osc:// format {fmt!r} is not supported; supported: "
                           f"{', '.join(FORMATS)}")
     check_options("osc", options, OPTIONS if fmt == "vmc" else VRCHAT_OPTIONS, fmt)
-    allow = parse_allow(options["allow"]) if "allow" in options else None
+    allow = allow_option(options)
     if fmt == "vrchat":
         host, port = _parse_location(location, VRCHAT_PORT)
         return OscVrchatSource(
@@ -406,5 +426,6 @@ def open_url(location: str, options: dict[str, str]) -> OscUdpSource:
 
 
 __all__ = ["OscUdpSource", "OscVmcSource", "OscVrchatSource", "open_url", "load_suit",
-           "parse_allow", "sender_allowed", "number_option", "check_options", "DEFAULT_HOST",
+           "parse_allow", "allow_option", "renamed", "sender_allowed", "number_option",
+           "check_options", "DEFAULT_HOST",
            "DEFAULT_PORT"]

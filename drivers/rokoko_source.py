@@ -41,7 +41,7 @@ from rtseg.drivers.base import SourceError
 from rtseg.drivers.codec_rokoko import (BODY_BONES, BODY_PARENTS, DEFAULT_PORT, RokokoError,
                                         decode_packet)
 from rtseg.drivers.osc_source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
-                                      check_options, number_option, parse_allow)
+                                      allow_option, check_options, number_option, renamed)
 from rtseg.frame import Frame
 
 log = logging.getLogger("rtseg.drivers.rokoko")
@@ -142,16 +142,8 @@ def _num(options: dict[str, str], key: str, default, kind=float):
 def open_url(location: str, options: dict[str, str]) -> RokokoSource:
     """Open ``rokoko://location?options`` (see module docstring)."""
     check_options("rokoko", options, OPTIONS)
-    try:
-        host, port = _parse_location(location, DEFAULT_PORT)
-    except SourceError as exc:
-        raise SourceError(str(exc).replace("osc://", "rokoko://")) from None
-    allow = None
-    if "allow" in options:
-        try:
-            allow = parse_allow(options["allow"])
-        except SourceError as exc:
-            raise SourceError(str(exc).replace("osc://", "rokoko://")) from None
+    host, port = renamed("rokoko", _parse_location, location, DEFAULT_PORT)
+    allow = allow_option(options, "rokoko")
     return RokokoSource(host, port, actor=options.get("actor") or None,
                         rate=_num(options, "rate", 60.0),
                         queue_size=_num(options, "queue", 256, int),
