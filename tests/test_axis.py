@@ -24,8 +24,9 @@ from rtseg.profiles import resolve_joints, suit_profile
 from rtseg.session_config import from_dict
 from rtseg.simulators.axis_sender import AxisSender
 from rtseg.simulators.synth import synthesize
-from vendor_helpers import (Counter, assert_refused, assert_same_cuts, free_port, read_all,
-                            run_live, serial_reference, simulate_into)
+from vendor_helpers import (Counter, assert_refused, assert_same_cuts, free_port,
+                            overwrite_bytes, random_bytes, read_all, run_live, serial_reference,
+                            simulate_into)
 
 FIXTURE = Path(__file__).parent / "fixtures" / "axis" / "test.bvh"
 
@@ -264,17 +265,14 @@ def test_fuzzed_inputs_never_escape():
     def mutate(src: bytes) -> bytes:
         r = rng.random()
         if r < 0.45:
-            b = bytearray(src)
-            for _ in range(rng.randint(1, 6)):
-                b[rng.randrange(len(b))] = rng.randrange(256)
-            return bytes(b)
+            return overwrite_bytes(rng, src, 6)
         if r < 0.65:
             return src[:rng.randrange(len(src))]
         if r < 0.75:
             return src[rng.randrange(len(src)):]
         if r < 0.85:
             return src + src[:rng.randrange(len(src))]
-        return bytes(rng.randrange(256) for _ in range(rng.randrange(80)))
+        return random_bytes(rng, 80)
 
     for k in range(10_000):
         d = mutate(rng.choice(bins))

@@ -25,8 +25,9 @@ from rtseg.drivers.rokoko_source import RokokoAssembler
 from rtseg.profiles import resolve_joints, suit_profile
 from rtseg.simulators.rokoko_sender import RokokoSender
 from rtseg.simulators.synth import synthesize
-from vendor_helpers import (Counter, assert_refused, assert_same_cuts, free_port, read_all,
-                            run_live, serial_reference, simulate_into)
+from vendor_helpers import (Counter, assert_refused, assert_same_cuts, free_port,
+                            overwrite_bytes, random_bytes, read_all, run_live, serial_reference,
+                            simulate_into)
 
 lz4 = pytest.importorskip("lz4.frame", reason="the lz4 package (rtseg[rokoko]) is needed "
                           "for LZ4 payloads")
@@ -172,16 +173,13 @@ def _mutations(rng: random.Random, base: list[bytes], doc: dict):
         r = rng.random()
         src = rng.choice(base)
         if r < 0.35:
-            b = bytearray(src)
-            for _ in range(rng.randint(1, 8)):
-                b[rng.randrange(len(b))] = rng.randrange(256)
-            yield bytes(b)
+            yield overwrite_bytes(rng, src, 8)
         elif r < 0.5:
             yield src[:rng.randrange(len(src))]
         elif r < 0.6:
-            yield bytes(rng.randrange(256) for _ in range(rng.randrange(64)))
+            yield random_bytes(rng, 64)
         elif r < 0.7:
-            yield LZ4_MAGIC + bytes(rng.randrange(256) for _ in range(rng.randrange(64)))
+            yield LZ4_MAGIC + random_bytes(rng, 64)
         else:
             d = json.loads(json.dumps(doc))
             node, path = d, []

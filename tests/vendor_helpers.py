@@ -6,6 +6,7 @@ tests/ on sys.path)."""
 
 from __future__ import annotations
 
+import random
 import socket
 import subprocess
 import sys
@@ -183,3 +184,16 @@ def truncate(rng: np.random.Generator, d: bytearray) -> bytearray:
 def append_junk(rng: np.random.Generator, d: bytearray) -> bytearray:
     """Fuzz: 1 to 63 random bytes appended."""
     return d + rng.bytes(rng.integers(1, 64))
+
+
+def overwrite_bytes(rng: random.Random, src: bytes, most: int) -> bytes:
+    """Fuzz (``random.Random``): 1 to ``most`` bytes of ``src`` set to random values."""
+    b = bytearray(src)
+    for _ in range(rng.randint(1, most)):
+        b[rng.randrange(len(b))] = rng.randrange(256)
+    return bytes(b)
+
+
+def random_bytes(rng: random.Random, below: int) -> bytes:
+    """Fuzz (``random.Random``): 0 to ``below - 1`` random bytes."""
+    return bytes(rng.randrange(256) for _ in range(rng.randrange(below)))
