@@ -25,8 +25,8 @@ from rtseg.session_config import from_dict
 from rtseg.simulators.axis_sender import AxisSender
 from rtseg.simulators.synth import synthesize
 from vendor_helpers import (Counter, assert_refused, assert_same_cuts, free_port,
-                            overwrite_bytes, random_bytes, read_all, run_live, serial_reference,
-                            simulate_into)
+                            overwrite_bytes, random_bytes, read_all, run_live, send_and_read,
+                            serial_reference, simulate_into)
 
 FIXTURE = Path(__file__).parent / "fixtures" / "axis" / "test.bvh"
 
@@ -319,12 +319,7 @@ def test_binary_over_udp_split_datagrams_and_avatar_choice():
     src = open_source("axis://127.0.0.1:0?avatar=Avatar01&queue=4096&rate=60")
     sender = AxisSender(take, "binary", "127.0.0.1", src.port, speed=8.0, split=1024,
                         avatars=[(0, "Avatar00", 0), (1, "Avatar01", 30)])
-    try:
-        with sender:
-            assert sender.wait(10)
-        frames = read_all(src)
-    finally:
-        src.close()
+    frames = send_and_read(src, sender)
     n = take.n_frames
     assert len(frames) == n and src.other_avatars == n
     assert [f.seq for f in frames] == list(range(n))

@@ -26,8 +26,8 @@ from rtseg.profiles import resolve_joints, suit_profile
 from rtseg.simulators.rokoko_sender import RokokoSender
 from rtseg.simulators.synth import synthesize
 from vendor_helpers import (Counter, assert_refused, assert_same_cuts, free_port,
-                            overwrite_bytes, random_bytes, read_all, run_live, serial_reference,
-                            simulate_into)
+                            overwrite_bytes, random_bytes, read_all, run_live, send_and_read,
+                            serial_reference, simulate_into)
 
 lz4 = pytest.importorskip("lz4.frame", reason="the lz4 package (rtseg[rokoko]) is needed "
                           "for LZ4 payloads")
@@ -251,12 +251,7 @@ def test_sender_to_source_round_trip_with_lz4_and_actor_choice():
     offset = 50
     sender = RokokoSender(take, "127.0.0.1", src.port, compress=True, speed=8.0,
                           actors=[("First", 0), ("Second", offset)])
-    try:
-        with sender:
-            assert sender.wait(10)
-        frames = read_all(src)
-    finally:
-        src.close()
+    frames = send_and_read(src, sender)
     n = take.n_frames
     assert len(frames) == n
     assert [f.seq for f in frames] == list(range(n))

@@ -64,6 +64,17 @@ def read_all(src, idle: float = 0.3) -> list:
     return frames
 
 
+def send_and_read(src, sender, timeout: float = 10.0) -> list:
+    """Run ``sender`` (asserting it finishes within ``timeout`` s), read what ``src``
+    received and close ``src``: the frames."""
+    try:
+        with sender:
+            assert sender.wait(timeout)
+        return read_all(src)
+    finally:
+        src.close()
+
+
 def run_live(src, sender, take, rate: float, speed: float, cfg=None, start: bool = True,
              slack: float = 10.0) -> tuple[list, list, object]:
     """Run a LiveSession on ``src`` while ``sender`` sends ``take`` (``start``: start it
