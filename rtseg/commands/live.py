@@ -40,7 +40,8 @@ def add_session_arguments(p: argparse.ArgumentParser, osc_default_note: str = ""
     p.add_argument("--jsonl", metavar="PATH|-", help="also write events as JSON lines ('-': stdout)")
     p.add_argument("--record", metavar="DIR", help="record the session (frames + events) to DIR")
     p.add_argument("--config", metavar="FILE", help="session configuration (default config/live.toml)")
-    p.add_argument("--methods", metavar="LIST", help="online detectors, comma separated (pca,ppca)")
+    p.add_argument("--methods", metavar="LIST",
+                   help="online detectors, comma separated: contrast (the default), pca, ppca")
     p.add_argument("--duration", type=positive_float, metavar="S",
                    help="stop after S seconds (a number > 0)")
     p.add_argument("--quiet", action="store_true", help="no status line on stderr")
