@@ -360,6 +360,19 @@ class IdentityTracker:
         b[2] = b[2] + w.scatter + w.n * np.outer(w.mean, w.mean)
         b[3] = None
 
+    def close(self, frame: int) -> None:
+        """End of the stream (offline use): decide the open segment if it is not decided
+        yet, then finish it as a cut would (its one correction, if any).  The live loop
+        never calls this; its last segment stays open."""
+        seg = self._seg
+        if seg is None or self._d == 0:
+            return
+        end = max(self._complete(), seg.block + 1)
+        if seg.behaviour == 0:
+            self._decide(seg, end, frame)
+        self._finish(seg, end, frame)
+        self._seg = None
+
     # ------------------------------------------------------------------ results
     def frame_labels(self, n_frames: int, corrected: bool = False) -> np.ndarray:
         """Per-frame behaviour ids (0 before the first decision) from the messages sent:
@@ -375,6 +388,47 @@ class IdentityTracker:
             e = segs[i + 1][0] if i + 1 < len(segs) else n_frames
             out[max(0, b if i else 0):max(0, e)] = j
         return out
+
+
+def identify_segments(X: np.ndarray, frame_rate: float,
+                      cuts: Sequence[tuple[int, int]], **tracker_kw: Any) -> list[int]:
+    """Offline: the final behaviour id (1-based, corrections applied) of every segment of
+    a take, as the live tracker gives them.
+
+    X: the take's feature rows (frames, dims), fed in order as frames 0..n-1.
+    cuts: (boundary, detected) per cut - boundary the first frame of the new segment,
+        detected the frame whose arrival revealed it (batch detectors: the boundary; a
+        cut detected after the last frame is delivered at the end).  Segments are those
+        between the sorted boundaries, segment 0 starting at frame 0.
+    tracker_kw: ``IdentityTracker`` keyword arguments (threshold, decide_after_s, ...).
+    After the last frame the open segment is closed (``IdentityTracker.close``).
+    """
+    X = np.asarray(X, dtype=np.float64)
+    n = len(X)
+    bounds = sorted({int(b) for b, _ in cuts if 0 < int(b) < n})
+    if n == 0:
+        return []
+    pending = sorted(((max(int(d), int(b)), int(b)) for b, d in cuts if 0 < int(b) < n),
+                     reverse=True)
+    tr = IdentityTracker(frame_rate, **tracker_kw)
+    for i in range(n):
+        tr.update(i, X[i])
+        while pending and pending[-1][0] <= i:
+            d, b = pending.pop()
+            tr.on_cut(b, d)
+    while pending:
+        d, b = pending.pop()
+        tr.on_cut(b, d)
+    tr.close(n - 1)
+    final: dict[int, int] = {}
+    for m in tr.history:
+        final[m.boundary] = m.behaviour
+    # renumber 1.. in order of first appearance along the take
+    ids = [final.get(b, 0) for b in [0, *bounds]]
+    order: dict[int, int] = {}
+    for j in ids:
+        order.setdefault(j, len(order) + 1)
+    return [order[j] for j in ids]
 
 
 def tracker_from_config(config: Any, frame_rate: float, method: str) -> IdentityTracker | None:

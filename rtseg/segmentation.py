@@ -30,11 +30,17 @@ METHODS: tuple[str, ...] = ("contrast", "pca", "ppca", "gmm")
 
 @dataclass(frozen=True)
 class Segment:
-    """Frames ``[start, end)`` of one behaviour (0-based, end exclusive)."""
+    """Frames ``[start, end)`` of one behaviour (0-based, end exclusive).
+
+    behaviour: its behaviour id (1-based, in order of first appearance in the take) when
+    identities were asked for (``rtseg segment --identify``), else None (left out of
+    ``as_dict``).
+    """
     index: int
     start: int
     end: int
     frame_rate: float
+    behaviour: int | None = None
 
     @property
     def n_frames(self) -> int:
@@ -54,9 +60,13 @@ class Segment:
         return self.n_frames / self.frame_rate
 
     def as_dict(self) -> dict[str, Any]:
-        return {"index": self.index, "start": self.start, "end": self.end,
-                "start_time": round(self.start_time, 6), "end_time": round(self.end_time, 6),
-                "duration": round(self.duration, 6)}
+        d: dict[str, Any] = {"index": self.index, "start": self.start, "end": self.end,
+                             "start_time": round(self.start_time, 6),
+                             "end_time": round(self.end_time, 6),
+                             "duration": round(self.duration, 6)}
+        if self.behaviour is not None:
+            d["behaviour"] = self.behaviour
+        return d
 
 
 @dataclass

@@ -56,6 +56,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--params", metavar="FILE",
                    help="detector parameters, TOML or JSON: flat, or one table per method")
     add_profile_argument(p)
+    p.add_argument("--identify", action="store_true",
+                   help="one take: give each segment a behaviour id (1.. in order of first "
+                        "appearance; same id = same behaviour): gmm its majority mixture "
+                        "component, the other methods the live identity tracker fed the "
+                        "take's features and that method's cuts (final ids, after "
+                        "corrections); a 'behaviour' column / JSON field")
+    p.add_argument("--identity-threshold", type=float, metavar="D", default=None,
+                   help="tracker distance at or below which a segment is an earlier "
+                        "behaviour (default 4.0, chosen on mocap; see docs/identity.md)")
     a = p.add_argument_group("archives (many takes)")
     a.add_argument("--out", metavar="FILE",
                    help="write records to FILE (.jsonl, or .parquet with pyarrow); takes "
@@ -100,12 +109,69 @@ def run(args: argparse.Namespace) -> int:
         from rtseg.take import load_take
         path = args.paths[0]
         take = load_take(path, skeleton=args.skeleton)
-        results = segment_take_methods(take, methods, params, profile=args.profile)
+        if getattr(args, "identify", False):
+            results = identify_take(take, methods, params, profile=args.profile,
+                                    threshold=args.identity_threshold)
+        else:
+            results = segment_take_methods(take, methods, params, profile=args.profile)
         out = {"table": format_table, "json": format_json,
                "csv": format_csv}[args.format or "table"]
         sys.stdout.write(out(path, results))
         return 0
+    if getattr(args, "identify", False):
+        raise ValueError("--identify is for one take (table, JSON or CSV output)")
+    if getattr(args, "identity_threshold", None) is not None:
+        raise ValueError("--identity-threshold goes with --identify")
     return run_many(args, methods, params)
+
+
+def identify_take(take: Any, methods: list[str], params: dict[str, dict[str, Any]],
+                  profile: Any = None, threshold: float | None = None
+                  ) -> dict[str, SegmentationResult]:
+    """Segment ``take`` with each method (features computed once) and give every segment
+    its behaviour id (``Segment.behaviour``): gmm the majority mixture component of the
+    segment's frames, the others ``rtseg.identity.identify_segments`` on the take's
+    features and that method's cuts.  Ids are 1.. in order of first appearance."""
+    import dataclasses
+    import time
+    from rtseg.identity import DEFAULT_THRESHOLD, identify_segments
+    from rtseg.segmentation import compute_features, segment_take
+    if threshold is not None and not threshold > 0:
+        raise ValueError(f"--identity-threshold must be positive, got {threshold}")
+    X = compute_features(take, profile)
+    out: dict[str, SegmentationResult] = {}
+    for m in methods:
+        r = segment_take(take, m, params.get(m), keep_trace=(m == "gmm"), features=X)
+        t0 = time.perf_counter()
+        if m == "gmm":
+            ids = gmm_segment_ids(r)
+        else:
+            ids = identify_segments(X, take.frame_rate,
+                                    [(c.frame, c.detected_at) for c in r.cuts], method=m,
+                                    threshold=DEFAULT_THRESHOLD if threshold is None
+                                    else threshold)
+        r.segments = [dataclasses.replace(s, behaviour=j) for s, j in zip(r.segments, ids)]
+        r.trace = None
+        r.elapsed_s += time.perf_counter() - t0
+        out[m] = r
+    return out
+
+
+def gmm_segment_ids(r: SegmentationResult) -> list[int]:
+    """Per segment of a gmm result kept with its trace (frame, component, confidence):
+    the component most of its frames belong to, renumbered 1.. in order of first
+    appearance (a take too short to cluster: every segment 1)."""
+    import numpy as np
+    tr = np.asarray(r.trace if r.trace is not None else [], dtype=float)
+    if tr.ndim != 2 or len(tr) != r.n_frames:
+        return [1] * len(r.segments)
+    lab = tr[:, 1].astype(np.int64)
+    order: dict[int, int] = {}
+    out = []
+    for s in r.segments:
+        comp = int(np.bincount(lab[s.start:s.end]).argmax())
+        out.append(order.setdefault(comp, len(order) + 1))
+    return out
 
 
 def run_many(args: argparse.Namespace, methods: list[str],
@@ -153,11 +219,13 @@ def format_table(name: str, results: dict[str, SegmentationResult]) -> str:
             for k, c in enumerate(r.cuts, start=1):
                 lines.append(f"  {k:>4} {c.frame:>7} {c.frame / r.frame_rate:>9.3f} "
                              f"{c.confidence:>10.2f}")
+        ident = bool(r.segments) and r.segments[0].behaviour is not None
         lines.append(f"  {'seg':>4} {'start':>7} {'end':>7} {'start_s':>9} {'end_s':>9} "
-                     f"{'duration_s':>10}")
+                     f"{'duration_s':>10}" + (f" {'behaviour':>9}" if ident else ""))
         for s in r.segments:
             lines.append(f"  {s.index:>4} {s.start:>7} {s.end:>7} {s.start_time:>9.3f} "
-                         f"{s.end_time:>9.3f} {s.duration:>10.3f}")
+                         f"{s.end_time:>9.3f} {s.duration:>10.3f}"
+                         + (f" {s.behaviour:>9}" if ident else ""))
     return "\n".join(lines) + "\n"
 
 
@@ -174,15 +242,18 @@ def format_json(name: str, results: dict[str, SegmentationResult]) -> str:
 
 def format_csv(name: str, results: dict[str, SegmentationResult]) -> str:
     """One row per segment; ``cut_confidence`` is that of the cut opening the segment
-    (empty for segment 0, which starts the take)."""
+    (empty for segment 0, which starts the take); with identities (``--identify``) a last
+    ``behaviour`` column."""
+    ident = any(s.behaviour is not None for r in results.values() for s in r.segments)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["method", "segment", "start_frame", "end_frame", "start_s", "end_s",
-                "duration_s", "cut_confidence"])
+                "duration_s", "cut_confidence"] + (["behaviour"] if ident else []))
     for m, r in results.items():
         conf = {c.frame: c.confidence for c in r.cuts}
         for s in r.segments:
             c = conf.get(s.start)
             w.writerow([m, s.index, s.start, s.end, f"{s.start_time:.6f}", f"{s.end_time:.6f}",
-                        f"{s.duration:.6f}", "" if c is None else f"{c:.4f}"])
+                        f"{s.duration:.6f}", "" if c is None else f"{c:.4f}"]
+                       + ([s.behaviour] if ident else []))
     return buf.getvalue()
