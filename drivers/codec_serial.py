@@ -113,10 +113,9 @@ The wire carries **w, x, y, z**; everything this module returns is **scalar-last
 
 from __future__ import annotations
 
-import math
 import struct
 from binascii import crc_hqx
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Iterable, Sequence
 
 import numpy as np

@@ -37,7 +37,6 @@ import math
 
 import numpy as np
 
-from rtseg.drivers.base import SourceError
 from rtseg.drivers.codec_rokoko import (BODY_BONES, BODY_PARENTS, DEFAULT_PORT, RokokoError,
                                         decode_packet)
 from rtseg.drivers.osc_source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,

@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import logging
 import zipfile
 from dataclasses import dataclass

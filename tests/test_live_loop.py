@@ -12,7 +12,6 @@ from rtseg.config import ConfigError
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.drivers.base import Source
 from rtseg.events import CutEvent, DropoutEvent, StatusEvent
-from rtseg.features import PoseFeatures
 from rtseg.frame import Frame
 from rtseg.live import LiveSession, Pipeline
 from rtseg.quat import from_euler

@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from rtseg.drivers import open_source
 from rtseg.drivers.codec_mvn import (
-    BODY_SEGMENTS, HEADER_SIZE, ITEM_SIZE, SEGMENT_NAMES, MvnAssembler, encode_datagrams,
+    BODY_SEGMENTS, HEADER_SIZE, ITEM_SIZE, MvnAssembler, encode_datagrams,
     encode_message, from_mvn_pos, from_mvn_quat, parse_header, parse_meta, to_mvn_pos,
     to_mvn_quat,
 )

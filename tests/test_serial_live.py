@@ -16,7 +16,6 @@ from rtseg.drivers import codec_serial as codec
 from rtseg.drivers.serial_source import SerialSource
 from rtseg.profiles import suit_profile
 from rtseg.quat import global_from_local
-from rtseg.simulators.faults import FaultInjector
 from rtseg.simulators.serial_device import SerialSuit
 from rtseg.take import Take
 

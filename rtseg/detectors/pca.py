@@ -44,9 +44,6 @@ import numpy as np
 
 from rtseg.detectors._linalg import full_eigh, rank_for_energy, subspace_step
 from rtseg.detectors.base import Cut, OnlineDetector
-# the window model under its former private names (tests/test_contrast.py imports them here)
-from rtseg.detectors.pca_distance import cross_error as _cross_error  # noqa: F401
-from rtseg.detectors.pca_distance import pca_model as _pca_model  # noqa: F401
 
 log = logging.getLogger(__name__)
 
