@@ -105,6 +105,9 @@ def _single_take(args: argparse.Namespace) -> bool:
 def run(args: argparse.Namespace) -> int:
     methods = methods_of(args.method)
     params = params_by_method(args.params, methods)
+    if getattr(args, "identity_threshold", None) is not None \
+            and not getattr(args, "identify", False):
+        raise ValueError("--identity-threshold goes with --identify")
     if _single_take(args):
         from rtseg.take import load_take
         path = args.paths[0]
@@ -120,8 +123,6 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if getattr(args, "identify", False):
         raise ValueError("--identify is for one take (table, JSON or CSV output)")
-    if getattr(args, "identity_threshold", None) is not None:
-        raise ValueError("--identity-threshold goes with --identify")
     return run_many(args, methods, params)
 
 

@@ -1,0 +1,156 @@
+"""``rtseg segment TAKE --identify``: a behaviour id per segment, on synthetic takes with
+recurring behaviours written to .npz and read back through the CLI (``rtseg.cli.main``):
+exact ids for the tracker-based methods, repeated GMM components for repeated behaviours,
+the table/JSON/CSV shapes, and unchanged output without the flag."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+
+import numpy as np
+import pytest
+
+from rtseg.cli import main
+from rtseg.drivers.readers import write_take
+from rtseg.identity import identify_segments
+from rtseg.simulators.synth import synthesize
+
+SCRIPT = "walk:6,punch:6,walk:6,punch:6,squat:6"
+TRUTH = ["walk", "punch", "walk", "punch", "squat"]
+#: As in tests/test_identity.py: synthetic instances of one behaviour differ by design
+#: (tempo, amplitude, style), more than real repeats; the mocap-chosen default 4.0 gives
+#: 1,2,1,2,3 on seeds 0, 2, 3 but a new id for seed 1's second walk (measured), so the
+#: exact-id tests use the synthesiser's own threshold.
+SYNTH_THRESHOLD = "7.0"
+
+
+def _take(tmp_path, seed=0, script=SCRIPT):
+    res = synthesize(script, seed=seed)
+    return res, str(write_take(tmp_path / f"synth_{seed}.npz", res.take))
+
+
+def _run(capsys, *argv):
+    rc = main(["segment", *argv])
+    out = capsys.readouterr().out
+    assert rc == 0
+    return out
+
+
+def _majority_truth(res, segments):
+    names = np.array(res.frame_names())
+    out = []
+    for s in segments:
+        v, c = np.unique(names[s["start"]:s["end"]], return_counts=True)
+        out.append(str(v[c.argmax()]))
+    return out
+
+
+@pytest.mark.parametrize("seed", [0, 1, 3])
+def test_contrast_ids_follow_recurring_behaviours(tmp_path, capsys, seed):
+    res, path = _take(tmp_path, seed)
+    doc = json.loads(_run(capsys, path, "--method", "contrast", "--identify",
+                          "--identity-threshold", SYNTH_THRESHOLD, "--format", "json"))
+    segs = doc["methods"]["contrast"]["segments"]
+    assert _majority_truth(res, segs) == TRUTH, "all four changes should be cut"
+    assert [s["behaviour"] for s in segs] == [1, 2, 1, 2, 3]
+
+
+def test_gmm_components_repeat_for_repeated_behaviours(tmp_path, capsys):
+    res, path = _take(tmp_path, 0)
+    doc = json.loads(_run(capsys, path, "--method", "gmm", "--identify", "--format", "json"))
+    segs = doc["methods"]["gmm"]["segments"]
+    assert _majority_truth(res, segs) == TRUTH
+    ids = [s["behaviour"] for s in segs]
+    assert ids[0] == 1 and ids[1] == 2, "renumbered in order of first appearance"
+    assert ids[2] == ids[0] and ids[3] == ids[1] and ids[0] != ids[1]
+    # the majority component, checked against the detector's own frame labels
+    from rtseg.detectors.gmm import GMMDetector
+    from rtseg.detectors import method_params
+    from rtseg.segmentation import compute_features
+    X = compute_features(res.take)
+    det = GMMDetector.from_params(method_params("gmm", {}), res.take.frame_rate)
+    det.segment(X)
+    comps = [int(np.bincount(det.labels_[s["start"]:s["end"]]).argmax()) for s in segs]
+    first: dict[int, int] = {}
+    assert ids == [first.setdefault(c, len(first) + 1) for c in comps]
+
+
+def test_csv_and_table_carry_a_behaviour_column(tmp_path, capsys):
+    _, path = _take(tmp_path, 0)
+    rows = list(csv.DictReader(io.StringIO(_run(
+        capsys, path, "--method", "contrast", "--identify", "--identity-threshold",
+        SYNTH_THRESHOLD, "--format", "csv"))))
+    assert list(rows[0])[-1] == "behaviour"
+    assert [int(r["behaviour"]) for r in rows] == [1, 2, 1, 2, 3]
+    table = _run(capsys, path, "--method", "contrast", "--identify",
+                 "--identity-threshold", SYNTH_THRESHOLD)
+    seg_lines = table[table.index(" seg "):].splitlines()
+    assert seg_lines[0].split()[-1] == "behaviour"
+    assert [int(l.split()[-1]) for l in seg_lines[1:] if l.strip()] == [1, 2, 1, 2, 3]
+
+
+def test_without_identify_output_is_unchanged(tmp_path, capsys):
+    _, path = _take(tmp_path, 0, "walk:5,punch:5")
+    for fmt in ("json", "csv", "table"):
+        plain = _run(capsys, path, "--method", "pca", "--format", fmt)
+        assert "behaviour" not in plain
+        ident = _run(capsys, path, "--method", "pca", "--format", fmt, "--identify")
+        assert "behaviour" in ident
+    doc = json.loads(_run(capsys, path, "--method", "pca", "--format", "json", "--identify"))
+    for s in doc["methods"]["pca"]["segments"]:
+        assert set(s) == {"index", "start", "end", "start_time", "end_time", "duration",
+                          "behaviour"}
+        assert isinstance(s["behaviour"], int) and s["behaviour"] >= 1
+
+
+def test_identify_is_for_one_take_and_needs_a_positive_threshold(tmp_path, capsys):
+    _, path = _take(tmp_path, 0, "walk:4,punch:4")
+    assert main(["segment", str(tmp_path), "--identify"]) != 0
+    assert "--identify is for one take" in capsys.readouterr().err
+    assert main(["segment", path, "--identify", "--identity-threshold", "0"]) != 0
+    assert "must be positive" in capsys.readouterr().err
+    assert main(["segment", path, "--identity-threshold", "5"]) != 0
+    assert "goes with --identify" in capsys.readouterr().err
+
+
+def test_identify_segments_on_features_directly():
+    """The helper alone: no cuts = one segment (id 1); cuts at the true changes of a
+    walk/punch/walk take with batch detection (detected == boundary)."""
+    res = synthesize("walk:6,punch:6,walk:6", seed=0)
+    from rtseg.segmentation import compute_features
+    X = compute_features(res.take)
+    fr = res.take.frame_rate
+    assert identify_segments(X, fr, []) == [1]
+    ids = identify_segments(X, fr, [(720, 720), (1440, 1440)], threshold=7.0)
+    assert ids == [1, 2, 1]
+    assert identify_segments(X[:0], fr, []) == []
+
+
+DATA = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+@pytest.mark.skipif(not (DATA / "cmu" / "86_01.amc").is_file(),
+                    reason="real CMU take 86_01 not in ../shared/data")
+def test_real_86_01_walks_share_one_id_and_punches_another(capsys):
+    """86_01 (walk jump walk punch walk leg_kick punch): with the default threshold the
+    contrast segments' ids follow the labelled behaviours."""
+    from rtseg.labels import read_cmu86_transitions
+    doc = json.loads(_run(capsys, str(DATA / "cmu" / "86_01.amc"), "--method", "contrast",
+                          "--identify", "--format", "json"))
+    segs = doc["methods"]["contrast"]["segments"]
+    tr = read_cmu86_transitions(DATA / "labels" / "cmu86_transitions.txt")
+    ts = tr["86_01"].transitions
+    names = [t.before for t in ts] + [ts[-1].after]
+    bounds = [0] + [t.mid for t in ts]       # behaviour j from bounds[j] on
+    truth = []
+    for s in segs:   # the labelled behaviour at the segment's middle frame
+        mid = (s["start"] + s["end"]) // 2
+        truth.append(names[max(j for j, b in enumerate(bounds) if b <= mid)])
+    ids = [s["behaviour"] for s in segs]
+    by_name: dict[str, set[int]] = {}
+    for n, j in zip(truth, ids):
+        by_name.setdefault(n, set()).add(j)
+    assert all(len(v) == 1 for v in by_name.values()), f"{truth} got {ids}"
+    assert len({next(iter(v)) for v in by_name.values()}) == len(by_name), f"{truth} got {ids}"
