@@ -29,17 +29,25 @@ def pca_model(A: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray, float]
     mu = A.mean(axis=0)
     Z = A - mu
     lam, V = full_eigh(Z.T @ Z)
+    r, own = pca_rank(lam, len(A), tau)
+    return mu, np.ascontiguousarray(V[:, :r].T), own
+
+
+def pca_rank(lam: np.ndarray, n: int, tau: float) -> tuple[int, float]:
+    """(r, own mean per-frame projection error) of a window of n frames whose scatter has
+    the eigenvalues ``lam`` (descending): r the smallest with E_r > tau (Eq. 6), at most n
+    and the number of varying directions less one.
+
+    Leave at least one direction out of the hyperplane: with every varying direction kept
+    (few or noise-like dims) the projection error is 0 for any frames and the error ratios
+    are rounding noise over the floor below.  One varying direction: r = 0, the model is
+    the mean (error = squared distance to it).  A constant (or rank-deficient) window: the
+    error is floored at rounding level of its variance."""
     total = float(lam.sum())
-    # leave at least one direction out of the hyperplane: with every varying direction kept
-    # (few or noise-like dims) the projection error is 0 for any frames and the ratios of
-    # ``cross_error`` are rounding noise over the floor below.  One varying direction:
-    # r = 0, the model is the mean (error = squared distance to it)
     varying = int(np.count_nonzero(lam > 1e-12 * total))
-    r = max(0, min(rank_for_energy(lam, total, tau), len(A), varying - 1))
-    own = float(lam[r:].sum()) / len(A)
-    # a constant (or rank-deficient) segment: floor at rounding level of its variance
-    floor = 1e-12 * total / len(A) + 1e-300
-    return mu, np.ascontiguousarray(V[:, :r].T), max(own, floor)
+    r = max(0, min(rank_for_energy(lam, total, tau), n, varying - 1))
+    own = float(lam[r:].sum()) / n
+    return r, max(own, 1e-12 * total / n + 1e-300)
 
 
 def cross_error(Y: np.ndarray, model: tuple[np.ndarray, np.ndarray, float]) -> float:

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rtseg.detectors._linalg import full_eigh, rank_for_energy
+from rtseg.detectors.pca_distance import pca_rank
 
 
 @dataclass(frozen=True)
@@ -73,11 +74,7 @@ def fit(stats: WindowStats, pca_energy: float = 0.9, ppca_energy: float = 0.95,
     """Both models of a window from one eigen-decomposition of its scatter."""
     n = stats.n
     lam, V = full_eigh(stats.scatter)
-    total = float(lam.sum())
-    # PCA: as rtseg.detectors.pca._pca_model (leave at least one varying direction out)
-    varying = int(np.count_nonzero(lam > 1e-12 * total))
-    r = max(0, min(rank_for_energy(lam, total, pca_energy), n, varying - 1))
-    own = max(float(lam[r:].sum()) / n, 1e-12 * total / n + 1e-300)
+    r, own = pca_rank(lam, n, pca_energy)      # the offline scan's PCA window model
     # PPCA on the covariance S / n; structural null directions (rounding-level
     # eigenvalues) do not dilute sigma^2
     cov = lam / n
