@@ -297,11 +297,11 @@ def evaluate_dir(data_dir: str | Path, methods: Sequence[str], group: str | None
                           workers, scheduler)
 
 
-def _delay_text(r: MethodReport, group: str | None) -> str:
+def _delay_cells(r: MethodReport, delays: list[float]) -> str:
+    """The median and p90 delay columns (online reports only)."""
     if not r.online:
         return ""
-    d = r.delays(group)
-    return (f"  {np.median(d):>5.2f} {np.percentile(d, 90):>5.2f}" if d else
+    return (f"  {np.median(delays):>5.2f} {np.percentile(delays, 90):>5.2f}" if delays else
             f"  {'-':>5} {'-':>5}")
 
 
@@ -317,20 +317,18 @@ def format_table(report: EvaluationReport) -> str:
                      + ("; delay = median/p90 s from the labelled transition to the frame "
                         "that produced the cut" if r.online else ""))
         lines.append(hdr)
-        rows = [(key, t.score, t.strict, t.label_source, [t]) for key, t in r.takes.items()]
-        for key, s, st, src, _ in rows:
-            t = r.takes[key]
-            d = ((f"  {np.median(t.delays_s):>5.2f} {np.percentile(t.delays_s, 90):>5.2f}"
-                  if t.delays_s else f"  {'-':>5} {'-':>5}") if r.online else "")
+        for key, t in r.takes.items():
+            s, st = t.score, t.strict
             lines.append(f"{m:<8} {key:<16} {s.cuts:>5} {s.transitions:>5} {s.tp:>4} "
                          f"{s.precision:>6.3f} {s.recall:>6.3f} {s.f1:>6.3f} "
-                         f"{st.f1 if st else float('nan'):>6.3f}{d}  {src}")
+                         f"{st.f1 if st else float('nan'):>6.3f}"
+                         f"{_delay_cells(r, t.delays_s)}  {t.label_source}")
         groups = r.groups() + ([None] if len(r.groups()) > 1 else [])
         for g in groups:
             s, st = r.pooled(g), r.pooled_strict(g)
             lines.append(f"{m:<8} {'POOLED ' + (g or 'all'):<16} {s.cuts:>5} {s.transitions:>5} "
                          f"{s.tp:>4} {s.precision:>6.3f} {s.recall:>6.3f} {s.f1:>6.3f} "
-                         f"{st.f1:>6.3f}{_delay_text(r, g)}")
+                         f"{st.f1:>6.3f}{_delay_cells(r, r.delays(g))}")
         lines.append("")
     if report.errors:
         lines.append("takes that failed:")
