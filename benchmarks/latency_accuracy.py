@@ -30,7 +30,7 @@ from rtseg.detectors import load_params
 from rtseg.detectors.contrast import ContrastDetector
 from rtseg.evaluation import pooled_tally, tally
 from rtseg.labels import find_labelled_takes
-from rtseg.online_eval import fed_features, live_config
+from rtseg.online_eval import fed_features, live_config, to_take_frames
 
 TOL_S = 0.5
 BUDGETS = [(0.75, 0.25), (1.0, 0.25), (1.0, 0.5), (1.25, 0.5), (1.5, 0.5), (1.5, 0.75),
@@ -62,8 +62,7 @@ def main() -> int:
         rows = []
         for t, take, X, index, _ in fed:
             det = ContrastDetector.from_params(p, take.frame_rate)
-            cuts = [(int(index[c.frame]), int(index[min(c.detected_at, len(index) - 1)]))
-                    for c in det.run(X)]
+            cuts = to_take_frames(((c.frame, c.detected_at) for c in det.run(X)), index)
             rows.append(tally(cuts, t.transitions, take.frame_rate, TOL_S))
         live_rows.append({"after_s": after, "hold_s": hold,
                           "shipped": after == base["after_s"] and hold == base["hold_s"],

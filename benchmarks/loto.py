@@ -35,7 +35,7 @@ from rtseg.detectors.contrast import ContrastDetector
 from rtseg.detectors.peaks import CausalPeaks
 from rtseg.evaluation import pooled_tally, tally
 from rtseg.labels import find_labelled_takes
-from rtseg.online_eval import fed_features, live_config
+from rtseg.online_eval import fed_features, live_config, to_take_frames
 from rtseg.simulators.synth import DEFAULT_SCRIPT, synthesize
 
 TOL_S = 0.5
@@ -100,12 +100,7 @@ def peaks_on_trace(trace, det: ContrastDetector, p: dict, fr: float) -> list[tup
 
 def counts(case: Case, cuts: list[tuple[int, int]]) -> tuple[int, int, int, int, list[float]]:
     """``tally`` of cuts given in fed-row frames, mapped to take frames."""
-    last = len(case.index) - 1
-    return tally([(int(case.index[min(c, last)]), int(case.index[min(d, last)])) for c, d in cuts],
-                 case.transitions, case.frame_rate, TOL_S)
-
-
-summary = pooled_tally
+    return tally(to_take_frames(cuts, case.index), case.transitions, case.frame_rate, TOL_S)
 
 
 def objective(res: dict, cases: list[Case], kind: str = "pooled") -> float:
@@ -113,13 +108,13 @@ def objective(res: dict, cases: list[Case], kind: str = "pooled") -> float:
     group); ``groups``: the mean of the groups' pooled F1.  Minus 1 when the median / p90
     delay over the real takes (else all) exceeds the budget."""
     real = [res[c.key] for c in cases if c.group != "synthetic"] or [res[c.key] for c in cases]
-    allrows = summary(real)
+    allrows = pooled_tally(real)
     ok = (allrows["delay_median"] or 0) <= MAX_MEDIAN_S and (allrows["delay_p90"] or 0) <= MAX_P90_S
     if kind == "pooled":
-        f = summary([res[c.key] for c in cases])["f1"]
+        f = pooled_tally([res[c.key] for c in cases])["f1"]
     else:
         groups = sorted({c.group for c in cases})
-        f = float(np.mean([summary([res[c.key] for c in cases if c.group == g])["f1"]
+        f = float(np.mean([pooled_tally([res[c.key] for c in cases if c.group == g])["f1"]
                            for g in groups]))
     return f - (0 if ok else 1.0)
 
@@ -179,7 +174,7 @@ def main() -> int:
         train = [c for c in cases if c.name != n]
         k = best(train)
         held_rows = [results[k][c.key] for c in cases if c.name == n]
-        folds[n] = {**dict(zip(keys, k)), "held_out_f1": round(summary(held_rows)["f1"], 3)}
+        folds[n] = {**dict(zip(keys, k)), "held_out_f1": round(pooled_tally(held_rows)["f1"], 3)}
         for c in cases:
             if c.name == n:
                 held[c.key] = results[k][c.key]
@@ -188,12 +183,12 @@ def main() -> int:
     report = {
         "tolerance_s": TOL_S,
         "objective": args.objective,
-        "loto": {g: summary([held[c.key] for c in cases if c.group == g]) for g in groups},
+        "loto": {g: pooled_tally([held[c.key] for c in cases if c.group == g]) for g in groups},
         "shipped": {"params": dict(zip(keys, shipped)),
-                    **{g: summary([results[shipped][c.key] for c in cases if c.group == g])
+                    **{g: pooled_tally([results[shipped][c.key] for c in cases if c.group == g])
                        for g in groups}},
         "chosen_on_all": {"params": dict(zip(keys, chosen_all)),
-                          **{g: summary([results[chosen_all][c.key] for c in cases if c.group == g])
+                          **{g: pooled_tally([results[chosen_all][c.key] for c in cases if c.group == g])
                              for g in groups}},
         "folds": folds,
         "sensitivity": {},
@@ -203,7 +198,7 @@ def main() -> int:
         for v in GRID[k]:
             cfgk = tuple(v if j == i else shipped[j] for j in range(len(keys)))
             if cfgk in results:
-                rows.append({"value": v, **{g: summary([results[cfgk][c.key] for c in cases
+                rows.append({"value": v, **{g: pooled_tally([results[cfgk][c.key] for c in cases
                                                         if c.group == g]) for g in groups}})
         report["sensitivity"][k] = rows
     if args.json:

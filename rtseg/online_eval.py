@@ -9,7 +9,7 @@ index / frame rate, so no gap is seen unless the take marks joints invalid.  Cut
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -31,12 +31,18 @@ def live_config(path: str | None = None, methods: Sequence[str] | None = None
     return cfg, default
 
 
-def live_cuts(take: Any, config: SessionConfig) -> dict[str, list[PipelineCut]]:
-    """{method: the cuts the live pipeline gives on ``take``} for every configured method."""
+def take_frames(take: Any) -> Iterator[tuple]:
+    """The take's frames as the live pipeline receives them: (quats, valid, seq = index,
+    receive time, source time = index / frame rate)."""
     n, fr = take.n_frames, float(take.frame_rate)
     valid = take.valid if take.valid is not None else np.ones((n, take.n_joints), dtype=bool)
-    frames = ((take.quats[i], valid[i], i, i / fr, i / fr) for i in range(n))
-    cuts = replay_frames(frames, take.joint_names, take.parents, take.space, fr, config)
+    return ((take.quats[i], valid[i], i, i / fr, i / fr) for i in range(n))
+
+
+def live_cuts(take: Any, config: SessionConfig) -> dict[str, list[PipelineCut]]:
+    """{method: the cuts the live pipeline gives on ``take``} for every configured method."""
+    cuts = replay_frames(take_frames(take), take.joint_names, take.parents, take.space,
+                         float(take.frame_rate), config)
     out: dict[str, list[PipelineCut]] = {m: [] for m in config["detectors.methods"]}
     for c in cuts:
         out[c.cut.method].append(c)
@@ -67,12 +73,17 @@ def fed_features(take: Any, config: SessionConfig) -> tuple[np.ndarray, np.ndarr
     tap = _Tap()
     pipe = Pipeline(take.joint_names, take.parents, take.space, take.frame_rate, config,
                     detectors={"tap": tap})
-    n, fr = take.n_frames, float(take.frame_rate)
-    valid = take.valid if take.valid is not None else np.ones((n, take.n_joints), dtype=bool)
     index: list[int] = []
-    for i in range(n):
+    for i, (q, v, seq, recv, src) in enumerate(take_frames(take)):
         before = len(tap.rows)
-        pipe.process(i, take.quats[i], valid[i], i, i / fr, 0, i / fr)
+        pipe.process(i, q, v, seq, recv, 0, src)
         index.extend([i] * (len(tap.rows) - before))
     X = np.array(tap.rows) if tap.rows else np.zeros((0, 0))
     return X, np.array(index, dtype=np.int64), tap.restarts
+
+
+def to_take_frames(cuts: Iterable[tuple[int, int]], index: np.ndarray) -> list[tuple[int, int]]:
+    """(cut frame, detected frame) pairs counted in rows of ``fed_features`` as take frames
+    (a frame past the last row maps to the last row's take frame)."""
+    last = len(index) - 1
+    return [(int(index[min(c, last)]), int(index[min(d, last)])) for c, d in cuts]
