@@ -190,7 +190,7 @@ def test_frame_rate_scales_the_windows():
 
 @pytest.mark.parametrize("kw", [dict(step=0), dict(before=10), dict(after=5),
                                 dict(min_before=400), dict(threshold=0.0),
-                                dict(threshold=math.nan)])
+                                dict(threshold=math.nan), dict(reference_dims=0)])
 def test_bad_parameters_are_refused(kw):
     with pytest.raises(ValueError):
         ContrastDetector(**kw)
