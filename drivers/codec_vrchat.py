@@ -30,7 +30,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from rtseg.drivers.base import SourceStats
-from rtseg.drivers.codec_vmc import OscParseError, parse_packet
+from rtseg.drivers.codec_osc import OscParseError, parse_packet
 from rtseg.frame import Frame
 
 log = logging.getLogger("rtseg.drivers.vrchat")
