@@ -27,3 +27,32 @@ def test_demo_speed_prints_performance_time():
     # the idle -> walk change is 3.0 s into the performance: the printed time is that, not
     # the ~0.75 s of wall-clock time it took to get there
     assert any(abs(t - 3.0) < 0.6 for t in times), times
+
+
+def test_demo_names_recurring_behaviours():
+    """The demo turns identity on: each cut line is followed by its segment's behaviour id,
+    and a behaviour that recurs (walk, punch, walk, punch) gets its earlier id back."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "rtseg.cli", "demo", "--speed", "4", "--duration", "30",
+         "--script", "walk:6,punch:6,walk:6,punch:6,squat:6", "--no-osc"],
+        capture_output=True, text=True, timeout=90, cwd=REPO)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    ids = {int(m.group(2)): m.group(1) for m in (
+        re.match(r"behaviour\s+(\S+) segment (\d+)", ln) for ln in lines) if m}
+    cut_segments = [int(m.group(1)) for m in (
+        re.match(r"cut .* segment (\d+)", ln) for ln in lines) if m]
+    assert len(cut_segments) == 4, proc.stdout
+    # every segment (the first one and one per cut) gets exactly one behaviour line
+    assert sorted(ids) == [0] + cut_segments, proc.stdout
+    # walk = segments 0 and 2, punch = 1 and 3, squat = 4
+    assert ids[0] == ids[2] and ids[1] == ids[3], proc.stdout
+    assert len({ids[0], ids[1], ids[4]}) == 3, proc.stdout
+    assert re.search(r"^behaviour .* segment 2 .*\(same as segment 0\)", proc.stdout, re.M)
+
+    off = subprocess.run(
+        [sys.executable, "-m", "rtseg.cli", "demo", "--speed", "4", "--duration", "8",
+         "--script", "idle:3,walk:5", "--no-osc", "--no-identity"],
+        capture_output=True, text=True, timeout=60, cwd=REPO)
+    assert off.returncode == 0, off.stderr
+    assert "behaviour" not in off.stdout and "cut #1" in off.stdout

@@ -1,13 +1,15 @@
 """``rtseg demo``: the whole live chain on a simulated suit, no hardware needed.
 
 Synthesises a performance (``rtseg.simulators.synth``, default script: idle, walk, punch,
-squat, run, wave, jump, kick, arm circles), plays it as a 17-sensor IMU suit on a **real
-pseudo-terminal** (``rtseg.simulators.serial_device.SerialSuit``, rtseg's binary serial
-format at 120 Hz), and runs the live session on ``serial://<that pty>`` exactly as
-``rtseg live`` would on a USB suit: pose features, online PCA and PPCA detectors, cuts sent
-over OSC to 127.0.0.1:9123 (listen with ``oscdump 9123``) and printed as they happen.
-The first behaviour change comes 5 s in, so the first cut appears within about 6-7 s; the
-demo ends by itself after ``--duration`` seconds (default 60).  Ctrl-C stops it cleanly.
+squat, walk, punch, wave, squat, kick: walk, punch and squat recur), plays it as a 17-sensor
+IMU suit on a **real pseudo-terminal** (``rtseg.simulators.serial_device.SerialSuit``, rtseg's
+binary serial format at 120 Hz), and runs the live session on ``serial://<that pty>`` exactly
+as ``rtseg live`` would on a USB suit: pose features, the default live detector (contrast),
+cuts sent over OSC to 127.0.0.1:9123 (listen with ``oscdump 9123``) and printed as they
+happen, each followed by its behaviour id (``[identity]``, on in the demo unless
+``--no-identity``): an earlier segment's id when the behaviour recurs, else a new one.
+The first behaviour change comes 5 s in, so the first cut appears about 7 s in; the demo
+ends by itself after ``--duration`` seconds (default 60).  Ctrl-C stops it cleanly.
 """
 
 from __future__ import annotations
@@ -20,6 +22,9 @@ from rtseg.commands.live import add_session_arguments, config_from_args, run_ses
 from rtseg.config import ConfigError
 
 DEFAULT_DURATION = 60.0
+#: The demo's performance: behaviours recur (walk, punch, squat twice) so the behaviour ids
+#: printed beside the cuts show a recurring behaviour getting its earlier id back.
+DEMO_SCRIPT = "idle:5,walk:8,punch:7,squat:8,walk:7,punch:7,wave:7,squat:7,kick:6"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -30,8 +35,10 @@ def run(args: argparse.Namespace) -> int:
         return 2
     from rtseg.simulators.faults import FaultConfig
     from rtseg.simulators.serial_device import SerialSuit
-    from rtseg.simulators.synth import DEFAULT_SCRIPT, ScriptError, synthesize
-    script = args.script or DEFAULT_SCRIPT
+    from rtseg.simulators.synth import ScriptError, synthesize
+    script = args.script or DEMO_SCRIPT
+    if not args.no_identity:
+        cfg["identity.enabled"] = True
     try:
         faults = FaultConfig.parse(args.faults)
         synth = synthesize(script, frame_rate=args.rate, seed=args.seed)
@@ -79,7 +86,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--script", metavar="SCRIPT",
                    help="behaviours and seconds, e.g. 'idle:5,walk:8,punch:6' "
-                        "(default: the synthesiser's default script)")
+                        f"(default: {DEMO_SCRIPT})")
     p.add_argument("--faults", metavar="SPEC",
                    help="inject faults into the serial link, e.g. "
                         "'corrupt=0.01,unplug=20:0.5,dropout=5:10:1'")
@@ -90,6 +97,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="playback speed factor: frames are sent at rate x speed on the "
                         "performance's own clock, so --duration, t= and detector delays are "
                         "performance time (default 1)")
+    p.add_argument("--no-identity", action="store_true",
+                   help="do not name behaviours (by default the demo turns [identity] on: each "
+                        "segment gets a behaviour id, an earlier segment's when it recurs)")
     p.add_argument("--truth", action="store_true",
                    help="print the script's true transition frames before starting")
     add_session_arguments(p)

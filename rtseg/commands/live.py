@@ -15,7 +15,7 @@ from typing import Any, Callable, TextIO
 
 from rtseg.cli import error_text, positive_float
 from rtseg.config import ConfigError
-from rtseg.events import CutEvent, DropoutEvent, StatusEvent
+from rtseg.events import BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
 from rtseg.session_config import SessionConfig, load_session_config
 
 #: seconds between plain status lines when stderr is not a terminal
@@ -120,8 +120,30 @@ def format_cut(ev: CutEvent, time: float | None = None) -> str:
             f"detector delay {ev.detector_delay_ms:4.0f} ms  processing {proc} ms")
 
 
+def format_behaviour(ev: BehaviourEvent, first_segment: int | None,
+                     time: float | None = None) -> str:
+    """One behaviour line (``rtseg.identity``): which behaviour segment ``ev.segment`` is.
+
+    first_segment: the earliest segment of the session with this behaviour id, when that is
+    an earlier one (the behaviour recurs), else None (a new behaviour).  ``time``: when the
+    decision was made, to show (default ``ev.time``, seconds since the session started; the
+    demo at ``--speed`` shows performance time)."""
+    name = f' "{ev.name}"' if ev.name and ev.name != ev.behaviour else ""
+    if ev.correction:
+        what = f"corrected from {ev.previous or '-'}"
+    elif first_segment is None:
+        what = "new behaviour"
+    else:
+        what = f"same as segment {first_segment}"
+    t = ev.time if time is None else time
+    return (f"behaviour {ev.behaviour:>3s}{name} segment {ev.segment:<3d} "
+            f"from frame {ev.frame:<7d} decided t={t:9.3f} s  ({what})  "
+            f"confidence {ev.confidence:.2f}")
+
+
 class Console:
-    """Prints cuts on ``out`` and the status line on ``err`` (an event listener)."""
+    """Prints cuts and behaviour decisions on ``out`` and the status line on ``err``
+    (an event listener)."""
 
     def __init__(self, out: TextIO | None = None, err: TextIO | None = None,
                  print_cuts: bool = True, status: bool = True,
@@ -138,6 +160,9 @@ class Console:
         self.cut_time = cut_time     # None: ev.time (seconds since the session started)
         self._line_shown = False
         self._last_plain = 0.0
+        self.first_segment: dict[str, int] = {}    # behaviour id -> earliest segment
+        self.last_behaviour: BehaviourEvent | None = None
+        self.behaviour_time: Callable[[BehaviourEvent], float] | None = None
 
     def _clear(self) -> None:
         if self.tty and self._line_shown:
@@ -152,6 +177,14 @@ class Console:
                 self._clear()
                 t = self.cut_time(ev) if self.cut_time is not None else None
                 print(format_cut(ev, t), file=self.out, flush=True)
+        elif isinstance(ev, BehaviourEvent):
+            self.last_behaviour = ev
+            first = self.first_segment.setdefault(ev.behaviour, ev.segment)
+            if self.print_cuts:
+                self._clear()
+                t = self.behaviour_time(ev) if self.behaviour_time is not None else None
+                print(format_behaviour(ev, first if first != ev.segment else None, t),
+                      file=self.out, flush=True)
         elif isinstance(ev, DropoutEvent):
             self._clear()
             print(f"rtseg: dropout: {ev.name} {'lost' if ev.lost else 'restored'} "
@@ -169,6 +202,9 @@ class Console:
             c = self.last_cut
             t = self.cut_time(c) if self.cut_time is not None else c.time
             last = f"{c.method} #{c.event} at {t:.2f} s"
+            b = self.last_behaviour
+            if b is not None and b.segment == c.segment:
+                last += f" ({b.label})"
         line = (f"rtseg live: {ev.time:7.1f} s | {ev.frame_rate:6.1f} fps | "
                 f"{ev.dropped} dropped | {ev.stale_joints} stale{lag} | last cut: {last}")
         if any(ev.input_counts().values()):
@@ -201,6 +237,7 @@ def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: 
     console.session_stats = lambda: session.stats
     if performance_time:
         console.cut_time = lambda ev: ev.frame / session.frame_rate
+        console.behaviour_time = lambda ev: ev.decided_frame / session.frame_rate
     try:
         if before_run is not None:
             before_run()
