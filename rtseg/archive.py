@@ -19,7 +19,8 @@ segment, segment ``[start, end)``, times in s from the take start)::
     {"take": "86_01", "path": "/abs/86_01.amc", "method": "pca",
      "frame_rate": 120.0, "n_frames": 10000,
      "cuts": [{"frame", "time", "confidence", "score", "detected_at"}, ...],
-     "segments": [{"index", "start", "end", "start_time", "end_time", "duration"}, ...],
+     "segments": [{"index", "start", "end", "start_time", "end_time", "duration"
+                   [, "behaviour" with --identify]}, ...],
      "elapsed_s": detector s, "take_elapsed_s": read + features + all methods s,
      "error": null | "message"}
 """
@@ -100,22 +101,31 @@ def take_name(path: str) -> str:
 
 def take_records(path: str, methods: Sequence[str],
                  params: Mapping[str, Mapping[str, Any]] | None = None,
-                 profile: str | None = None, skeleton: str | None = None
+                 profile: str | None = None, skeleton: str | None = None,
+                 identify: bool = False, identity_threshold: float | None = None
                  ) -> list[dict[str, Any]]:
     """The task for one take: read ``path``, compute the features once, run ``methods``.
+
+    identify: give each segment its behaviour id (``rtseg.segment_identity.identify_take``;
+    a ``behaviour`` field in each segment of the records), with ``identity_threshold``.
 
     Runs on a worker: reads the file itself; returns small JSON-ready records, one per
     method.  A take that cannot be read or segmented gives records whose ``error`` is the
     message (the exception type prefixed unless it is a reader's or a ValueError).
     """
+    from rtseg.segment_identity import identify_take
     from rtseg.segmentation import segment_take_methods
     from rtseg.take import load_take
     t0 = time.perf_counter()
     base = {"take": take_name(path), "path": path}
     try:
         take = load_take(path, skeleton=skeleton)
-        results = segment_take_methods(take, list(methods), dict(params or {}),
-                                       profile=profile)
+        if identify:
+            results = identify_take(take, list(methods), dict(params or {}), profile=profile,
+                                    threshold=identity_threshold)
+        else:
+            results = segment_take_methods(take, list(methods), dict(params or {}),
+                                           profile=profile)
     except Exception as exc:  # noqa: BLE001 - a failed take is a record, never a crash
         msg = str(exc) if isinstance(exc, (ValueError, OSError)) else \
             f"{type(exc).__name__}: {exc}"
@@ -160,7 +170,8 @@ def run_archive(paths: Sequence[str], methods: Sequence[str], out: str | os.Path
                 profile: str | None = None, skeleton: str | None = None,
                 workers: int | None = None, scheduler: str | None = None,
                 force: bool = False, retry_errors: bool = False, limit: int | None = None,
-                progress: bool = True,
+                progress: bool = True, identify: bool = False,
+                identity_threshold: float | None = None,
                 on_take: Callable[[str, list[dict[str, Any]]], None] | None = None
                 ) -> ArchiveRun:
     """Segment every take of ``paths`` not yet in ``out`` and append its records there
@@ -169,7 +180,9 @@ def run_archive(paths: Sequence[str], methods: Sequence[str], out: str | os.Path
     workers: run on a local Dask cluster of that many processes (``None``/0: in this
     process); scheduler: address of a running Dask scheduler.  force: redo takes already
     done; retry_errors: redo takes whose records hold an error.  limit: run at most this
-    many takes (the rest stay for the next run).  on_take(path, records): called in this
+    many takes (the rest stay for the next run).  identify / identity_threshold: behaviour
+    ids in the records' segments (``take_records``; records made without them count as done,
+    so add ``force`` to redo an archive with ids).  on_take(path, records): called in this
     process after each take's records are written (a callback raising stops the run; the
     records written so far stay).  The output is rewritten sorted at the end, also when
     the run is interrupted.
@@ -192,6 +205,8 @@ def run_archive(paths: Sequence[str], methods: Sequence[str], out: str | os.Path
         todo = todo[:max(0, int(limit))]
     kwargs = {"params": {m: dict(v) for m, v in (params or {}).items()},
               "profile": profile, "skeleton": skeleton}
+    if identify:
+        kwargs.update(identify=True, identity_threshold=identity_threshold)
     bar = Progress(len(todo), skipped=stats.skipped, enabled=progress)
     t0 = time.perf_counter()
     try:

@@ -105,10 +105,9 @@ def test_without_identify_output_is_unchanged(tmp_path, capsys):
         assert isinstance(s["behaviour"], int) and s["behaviour"] >= 1
 
 
-def test_identify_is_for_one_take_and_needs_a_positive_threshold(tmp_path, capsys):
+def test_identify_needs_a_positive_threshold(tmp_path, capsys):
+    # (archives take --identify too: tests/test_archive.py)
     _, path = _take(tmp_path, 0, "walk:4,punch:4")
-    assert main(["segment", str(tmp_path), "--identify"]) != 0
-    assert "--identify is for one take" in capsys.readouterr().err
     assert main(["segment", path, "--identify", "--identity-threshold", "0"]) != 0
     assert "must be positive" in capsys.readouterr().err
     assert main(["segment", path, "--identity-threshold", "5"]) != 0

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from rtseg.archive import SESSION_HEADER
+from rtseg.segment_identity import identify_take
 from rtseg.segmentation import METHODS, SegmentationResult, load_params, segment_take_methods
 
 
@@ -57,11 +58,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="detector parameters, TOML or JSON: flat, or one table per method")
     add_profile_argument(p)
     p.add_argument("--identify", action="store_true",
-                   help="one take: give each segment a behaviour id (1.. in order of first "
-                        "appearance; same id = same behaviour): gmm its majority mixture "
-                        "component, the other methods the live identity tracker fed the "
-                        "take's features and that method's cuts (final ids, after "
-                        "corrections); a 'behaviour' column / JSON field")
+                   help="give each segment a behaviour id (1.. in order of first "
+                        "appearance in its take; same id = same behaviour): gmm its majority "
+                        "mixture component, the other methods the live identity tracker fed "
+                        "the take's features and that method's cuts (final ids, after "
+                        "corrections); a 'behaviour' column / JSON field (one take) or a "
+                        "'behaviour' field in each segment of the records (archives)")
     p.add_argument("--identity-threshold", type=float, metavar="D", default=None,
                    help="tracker distance at or below which a segment is an earlier "
                         "behaviour (default 4.0, chosen on mocap; see docs/identity.md)")
@@ -121,58 +123,7 @@ def run(args: argparse.Namespace) -> int:
                "csv": format_csv}[args.format or "table"]
         sys.stdout.write(out(path, results))
         return 0
-    if getattr(args, "identify", False):
-        raise ValueError("--identify is for one take (table, JSON or CSV output)")
     return run_many(args, methods, params)
-
-
-def identify_take(take: Any, methods: list[str], params: dict[str, dict[str, Any]],
-                  profile: Any = None, threshold: float | None = None
-                  ) -> dict[str, SegmentationResult]:
-    """Segment ``take`` with each method (features computed once) and give every segment
-    its behaviour id (``Segment.behaviour``): gmm the majority mixture component of the
-    segment's frames, the others ``rtseg.identity.identify_segments`` on the take's
-    features and that method's cuts.  Ids are 1.. in order of first appearance."""
-    import dataclasses
-    import time
-    from rtseg.identity import DEFAULT_THRESHOLD, identify_segments
-    from rtseg.segmentation import compute_features, segment_take
-    if threshold is not None and not threshold > 0:
-        raise ValueError(f"--identity-threshold must be positive, got {threshold}")
-    X = compute_features(take, profile)
-    out: dict[str, SegmentationResult] = {}
-    for m in methods:
-        r = segment_take(take, m, params.get(m), keep_trace=(m == "gmm"), features=X)
-        t0 = time.perf_counter()
-        if m == "gmm":
-            ids = gmm_segment_ids(r)
-        else:
-            ids = identify_segments(X, take.frame_rate,
-                                    [(c.frame, c.detected_at) for c in r.cuts], method=m,
-                                    threshold=DEFAULT_THRESHOLD if threshold is None
-                                    else threshold)
-        r.segments = [dataclasses.replace(s, behaviour=j) for s, j in zip(r.segments, ids)]
-        r.trace = None
-        r.elapsed_s += time.perf_counter() - t0
-        out[m] = r
-    return out
-
-
-def gmm_segment_ids(r: SegmentationResult) -> list[int]:
-    """Per segment of a gmm result kept with its trace (frame, component, confidence):
-    the component most of its frames belong to, renumbered 1.. in order of first
-    appearance (a take too short to cluster: every segment 1)."""
-    import numpy as np
-    tr = np.asarray(r.trace if r.trace is not None else [], dtype=float)
-    if tr.ndim != 2 or len(tr) != r.n_frames:
-        return [1] * len(r.segments)
-    lab = tr[:, 1].astype(np.int64)
-    order: dict[int, int] = {}
-    out = []
-    for s in r.segments:
-        comp = int(np.bincount(lab[s.start:s.end]).argmax())
-        out.append(order.setdefault(comp, len(order) + 1))
-    return out
 
 
 def run_many(args: argparse.Namespace, methods: list[str],
@@ -196,7 +147,9 @@ def run_many(args: argparse.Namespace, methods: list[str],
                             skeleton=args.skeleton, workers=args.workers,
                             scheduler=args.scheduler, force=args.force,
                             retry_errors=args.retry_errors, limit=args.limit,
-                            progress=not args.no_progress)
+                            progress=not args.no_progress,
+                            identify=getattr(args, "identify", False),
+                            identity_threshold=getattr(args, "identity_threshold", None))
     for w in caught:
         print(f"rtseg segment: warning: {w.message}", file=sys.stderr)
     if stats.failed:
