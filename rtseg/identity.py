@@ -42,6 +42,16 @@ disagree with the decision clearly - the sent behaviour is now farther than
 than ``threshold / correction_margin`` - one correction is sent (``corrections`` counts
 them); either way the segment's statistics then join its final behaviour's model.
 
+Names (behaviour library)
+-------------------------
+With a ``library`` (``rtseg.library.Library``, ``rtseg learn``) every decision also names
+the segment: the library names the rows [boundary + ``name_skip_s``, decision frame) (the
+first ``name_skip_s`` = 0.5 s, the transition, left out when at least 1 s remains; at most
+``max_window_s``) - the nearest example's name, or ``unknown`` when the segment is unlike
+every example (``IdentityDecision.name``; the id is the unsupervised one either way).  A
+correction keeps the segment's name.  The rows come from a ring of the last
+``max_window_s + name_skip_s + 1`` s of fed rows (one more row copy per frame).
+
 Cost: per frame one row copy into the block buffer; per block one (step x d)^T (step x d)
 product; per decision one eigen-decomposition per changed model (a few per cut).
 ``benchmarks/identity_speed.py`` measures it.
@@ -75,6 +85,8 @@ class IdentityDecision:
         1 - threshold / D; 0 when there was nothing to compare with).
     distance: D to the nearest known behaviour (inf if none).
     new: True when ``behaviour`` was created by this message.
+    name: the library's name for the segment (``unknown`` when rejected; "" without a
+        library); name_distance: the library distance behind it (inf if none).
     """
     segment: int
     boundary: int
@@ -85,6 +97,8 @@ class IdentityDecision:
     correction: bool = False
     previous: int = 0
     new: bool = False
+    name: str = ""
+    name_distance: float = math.inf
 
 
 @dataclass
@@ -98,6 +112,8 @@ class _Segment:
     decide_block: int                 # decide once this many blocks are complete
     behaviour: int = 0                # 0: not decided yet
     created: bool = False
+    name: str = ""
+    name_distance: float = math.inf
 
 
 @dataclass
@@ -118,12 +134,15 @@ class IdentityTracker:
     threshold: D at or below which a segment is an earlier behaviour.
     correction_margin: factor (>= 1) by which the full segment must disagree to correct.
     step: frames per block.  history_s: seconds of block sums kept.
+    library: a behaviour library naming each segment (module doc, Names).
+    name_skip_s: seconds after the boundary left out of the named window.
     """
 
     def __init__(self, frame_rate: float, method: str = "", *,
                  decide_after_s: float = DEFAULT_DECIDE_AFTER_S, max_window_s: float = 3.0,
                  threshold: float = DEFAULT_THRESHOLD, correction_margin: float = 2.0,
-                 step: int = 10, history_s: float = 30.0, reference_dims: int = 8) -> None:
+                 step: int = 10, history_s: float = 30.0, reference_dims: int = 8,
+                 library: Any = None, name_skip_s: float = 0.5) -> None:
         if not frame_rate > 0:
             raise ValueError(f"frame_rate must be positive, got {frame_rate}")
         if not decide_after_s > 0:
@@ -148,6 +167,11 @@ class IdentityTracker:
         self._behaviours: list[list[Any]] = []       # [n, s1, s2, model or None]
         self._seg: _Segment | None = None
         self._next_seg = 0
+        self.library = library
+        self.name_skip = max(0, int(round(name_skip_s * frame_rate)))
+        self._max_window = int(round(max_window_s * frame_rate))
+        self._min_named = max(2, int(round(1.0 * frame_rate)))
+        self._R = self._max_window + self.name_skip + int(round(frame_rate)) + step
 
     # ------------------------------------------------------------------ streaming state
     def _init(self, d: int) -> None:
@@ -164,6 +188,16 @@ class IdentityTracker:
         self._pstart = np.zeros(H, dtype=np.int64)
         self._blocks = 0          # blocks started
         self._index = -1
+        if self.library is not None and self.library.dims != d:
+            import logging
+            logging.getLogger(__name__).warning(
+                "behaviour library has %d feature dims, the session's features have %d: "
+                "segments are not named", self.library.dims, d)
+            self.library = None
+        if self.library is not None:
+            self._rows = np.zeros((self._R, d))
+            self._ridx = np.full(self._R, -1, dtype=np.int64)
+            self._rn = 0
 
     def update(self, index: int, x: np.ndarray) -> None:
         """One fed feature row ``x`` (d,) of session frame ``index``."""
@@ -179,6 +213,11 @@ class IdentityTracker:
         self._buf[self._fill] = x
         self._fill += 1
         self._index = index
+        if self.library is not None:
+            k = self._rn % self._R
+            self._rows[k] = x
+            self._ridx[k] = index
+            self._rn += 1
         if self._seg is None:
             self._open(index, 0, self._blocks - 1)
         if self._fill == self.block:
@@ -320,8 +359,31 @@ class IdentityTracker:
             j = self._new_behaviour()
         seg.behaviour, seg.created = j, not matched
         self.stats.decisions += 1
+        if self.library is not None:
+            self._name(seg, int(frame))
         self._emit(IdentityDecision(seg.index, seg.boundary, j, int(frame),
-                                    self._confidence(matched, dist), dist, new=not matched))
+                                    self._confidence(matched, dist), dist, new=not matched,
+                                    name=seg.name, name_distance=seg.name_distance))
+
+    def named_rows(self, boundary: int, frame: int) -> np.ndarray:
+        """The fed rows the library names for a segment starting at ``boundary`` decided at
+        ``frame`` (module doc, Names), oldest first."""
+        lo, hi = boundary + self.name_skip, frame + 1
+        if hi - lo < self._min_named:
+            lo = boundary
+        hi = min(hi, lo + self._max_window)
+        pos = np.flatnonzero((self._ridx >= lo) & (self._ridx < hi))
+        pos = pos[np.argsort(self._ridx[pos], kind="stable")]
+        return self._rows[pos]
+
+    def _name(self, seg: _Segment, frame: int) -> None:
+        W = self.named_rows(seg.boundary, frame)
+        if len(W) < 2:
+            from rtseg.library import UNKNOWN
+            seg.name, seg.name_distance = UNKNOWN, math.inf
+            return
+        nm = self.library.name(W, self.frame_rate)
+        seg.name, seg.name_distance = nm.name, nm.distance
 
     def _finish(self, seg: _Segment, end: int, frame: int) -> None:
         """The segment ended at block ``end``: correct it if clearly wrong, then pool its
@@ -352,7 +414,8 @@ class IdentityTracker:
             self._emit(IdentityDecision(seg.index, seg.boundary, final, int(frame),
                                         self._confidence(final in dists, d), d,
                                         correction=True, previous=sent,
-                                        new=final not in dists))
+                                        new=final not in dists, name=seg.name,
+                                        name_distance=seg.name_distance))
             seg.behaviour = final
         b = self._behaviours[final - 1]
         b[0] += w.n
@@ -374,6 +437,10 @@ class IdentityTracker:
         self._seg = None
 
     # ------------------------------------------------------------------ results
+    def segment_names(self) -> dict[int, tuple[int, str]]:
+        """{segment: (boundary, library name)} of the decisions sent (library only)."""
+        return {m.segment: (m.boundary, m.name) for m in self.history if not m.correction}
+
     def frame_labels(self, n_frames: int, corrected: bool = False) -> np.ndarray:
         """Per-frame behaviour ids (0 before the first decision) from the messages sent:
         each segment's decided id (``corrected``: its last id) from its boundary on."""
@@ -431,10 +498,20 @@ def identify_segments(X: np.ndarray, frame_rate: float,
     return [order[j] for j in ids]
 
 
-def tracker_from_config(config: Any, frame_rate: float, method: str) -> IdentityTracker | None:
-    """The tracker of a session configuration's ``[identity]`` section (None when off)."""
+def tracker_from_config(config: Any, frame_rate: float, method: str,
+                        profile: str | None = None, dims: int | None = None
+                        ) -> IdentityTracker | None:
+    """The tracker of a session configuration's ``[identity]`` section (None when off).
+    ``identity.behaviours`` (a library file, when the key exists and is set) is loaded and
+    checked against the session's feature ``profile``/``dims`` when given
+    (``rtseg.library.LibraryError``, one line, when it does not match)."""
     if not config["identity.enabled"]:
         return None
+    library = None
+    path = config.values.get("identity", {}).get("behaviours", "")
+    if path:
+        from rtseg.library import load
+        library = load(path, profile, dims)
     return IdentityTracker(frame_rate, method,
                            decide_after_s=float(config["identity.decide_after_s"]),
-                           threshold=float(config["identity.threshold"]))
+                           threshold=float(config["identity.threshold"]), library=library)

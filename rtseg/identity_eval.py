@@ -67,9 +67,10 @@ class IdentityRun:
     cut_frames: list[int]
 
 
-def run_identity(take: Any, config: Any) -> IdentityRun:
+def run_identity(take: Any, config: Any, library: Any = None) -> IdentityRun:
     """Replay ``take`` through the live pipeline (as ``rtseg.online_eval.live_cuts``) with
-    identity on; the ids sent per frame."""
+    identity on; the ids sent per frame.  ``library``: a ``rtseg.library.Library`` naming
+    the segments (``tracker.history`` carries the names)."""
     from rtseg.pipeline import Pipeline
     cfg = config
     if not cfg["identity.enabled"]:
@@ -79,6 +80,8 @@ def run_identity(take: Any, config: Any) -> IdentityRun:
     n, fr = take.n_frames, float(take.frame_rate)
     pipe = Pipeline(take.joint_names, take.parents, take.space, fr, cfg)
     tracker = pipe.identity
+    if library is not None:
+        tracker.library = library
     valid = take.valid if take.valid is not None else np.ones((n, take.n_joints), dtype=bool)
     cuts: list[int] = []
     for i in range(n):

@@ -350,7 +350,8 @@ class LiveSession:
         """A ``rtseg.identity.IdentityDecision`` as the event sent (ids as text)."""
         self._behaviour_no = getattr(self, "_behaviour_no", 0) + 1
         return BehaviourEvent(event=self._behaviour_no, segment=int(d.segment),
-                              behaviour=str(d.behaviour), name=str(d.behaviour),
+                              behaviour=str(d.behaviour),
+                              name=str(getattr(d, "name", "") or d.behaviour),
                               confidence=float(d.confidence), frame=int(d.boundary),
                               decided_frame=int(d.decided_frame), time=self._now(),
                               correction=bool(d.correction),

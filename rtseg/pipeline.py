@@ -116,7 +116,9 @@ class Pipeline:
         if config["identity.enabled"] and self.detectors:
             from rtseg.identity import tracker_from_config
             primary = config["detectors.primary"] or next(iter(self.detectors))
-            self.identity = tracker_from_config(config, self.frame_rate, primary)
+            self.identity = tracker_from_config(config, self.frame_rate, primary,
+                                                getattr(features, "profile", None),
+                                                getattr(features, "dim", None))
         req = config["gaps.required_joints"]
         self.required = (_resolve_joints(req, self.joint_names, "gaps.required_joints")
                          if req else self._feature_joints())

@@ -197,6 +197,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
                               doc="seconds of a new segment summed before its id is decided"),
         "threshold": Key("float", 4.0, _range(1.0, 100.0),
                          doc="distance at or below which a segment is an earlier behaviour"),
+        "behaviours": Key("str", "", doc="behaviour library file naming segments "
+                                         "(rtseg learn; '' = ids only)"),
     },
     "buffer": {
         "capacity": Key("int", 4096, _range(16, MAX_CAPACITY), doc="ring buffer frames"),

@@ -254,6 +254,15 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"rtseg live: configuration error: {error_text(exc)}", file=sys.stderr)
         return 2
+    if getattr(args, "behaviours", None):
+        from rtseg.library import LibraryError, load
+        try:
+            load(args.behaviours)          # format and version now; the profile at start
+        except LibraryError as exc:
+            print(f"rtseg live: {error_text(exc)}", file=sys.stderr)
+            return 2
+        cfg["identity.enabled"] = True
+        cfg["identity.behaviours"] = args.behaviours
     url = args.source or cfg["source.url"]
     if not url:
         print("rtseg live: no source: give SOURCE_URL or set source.url in the configuration",
@@ -282,4 +291,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("source", nargs="?", metavar="SOURCE_URL",
                    help="where frames come from (default: source.url of the configuration)")
     add_session_arguments(p)
+    p.add_argument("--behaviours", metavar="LIB",
+                   help="behaviour library (rtseg learn) naming each segment; turns identity "
+                        "on; a segment unlike every example is named 'unknown'")
     p.set_defaults(func=run)

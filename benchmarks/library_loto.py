@@ -1,0 +1,119 @@
+#!/usr/bin/env python3
+"""Held-out figures of named behaviour libraries (rtseg.library, docs/identity.md).
+
+    python3 benchmarks/library_loto.py mocap6 [DATA_DIR]          # leave-one-take-out
+    python3 benchmarks/library_loto.py single [DATA_DIR/cmu_single] # leave-one-person-out
+    python3 benchmarks/library_loto.py spliced SPLICED_DIR [DATA_DIR/cmu_single]
+
+mocap6: the three mocap6 takes (13_29, 13_31, 14_14; exercise names); for each take a
+library learned from the other two names its live segments (``contrast`` cuts, decided
+names as sent).  Also each exercise of the held-out take left out of the library in turn:
+its segments must come out ``unknown``.
+single: cmu_single, per feature profile (BVH takes: unity; AMC: cmu14; 10_04's Daz
+skeleton has neither): for each person, a library from the other people's takes of that
+profile names the live segments of the person's takes.  Behaviours only this person
+performs are not in the library: they must come out ``unknown``.
+spliced: spliced performances (benchmarks/splice.py) named by a library learned from the
+cmu_single takes of the people NOT in the performance.
+Prints one JSON document; parameters are the library's own (calibrated inside it).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rtseg.identity_eval import truth_labels
+from rtseg.labels import find_labelled_takes
+from rtseg.library_eval import run_folds
+from rtseg.library_learn import MOCAP6_NAMES, examples_from_dir
+from rtseg.online_eval import live_config
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def _progress(msg: str) -> None:
+    print(f"  {msg}", file=sys.stderr, flush=True)
+
+
+def mocap6(data: Path, cfg) -> dict:
+    takes = [t for t in find_labelled_takes(data, ("cmu",)) if "mocap6" in t.labels.source]
+    names = [t.name for t in takes]
+    ex = examples_from_dir(data, cfg, takes=names)
+    tk = {}
+    for lt in takes:
+        take = lt.load()
+        truth = np.array([MOCAP6_NAMES.get(str(v), str(v)) for v in truth_labels(lt, take.n_frames)])
+        tk[lt.name] = (take, truth)
+    units = {n: (lambda e, n=n: e.take == n) for n in names}
+    return run_folds(ex, units, tk, {n: n for n in names}, cfg, True, _progress)
+
+
+def single(src: Path, cfg) -> dict:
+    from rtseg.splice import read_source_index
+    from rtseg.take import load_take
+    rows = read_source_index(src)
+    ex = examples_from_dir(src, cfg)
+    out = {}
+    for profile in sorted({e.profile for e in ex}):
+        exp = [e for e in ex if e.profile == profile]
+        people = sorted({e.person for e in exp})
+        tk, unit = {}, {}
+        for r in rows:
+            if r.subject in people and any(e.take == r.name for e in exp):
+                take = load_take(r.path)
+                tk[r.name] = (take, np.array([r.behaviour] * take.n_frames))
+                unit[r.name] = r.subject
+        units = {p: (lambda e, p=p: e.person == p) for p in people}
+        out[profile] = run_folds(exp, units, tk, unit, cfg, False, _progress)
+        out[profile]["people"] = people
+    return out
+
+
+def spliced(folder: Path, src: Path, cfg) -> dict:
+    from rtseg.features import PoseFeatures
+    from rtseg.take import load_take
+    ex = examples_from_dir(src, cfg)
+    takes = find_labelled_takes(folder, ("spliced",))
+    tk, unit, units = {}, {}, {}
+    for lt in takes:
+        take = load_take(lt.motion)
+        people = sorted(str(p) for p in (take.meta.get("splice") or {}).get("subjects", []))
+        names = list(take.meta["frame_label_names"])
+        truth = np.array([names[int(i)] for i in take.meta["frame_labels"]])
+        if not people:
+            raise ValueError(f"{lt.motion}: no subjects in its meta")
+        tk[lt.name] = (take, np.asarray(truth, dtype=str))
+        unit[lt.name] = lt.name
+        prof = PoseFeatures(take.joint_names, take.parents, take.space,
+                            profile=cfg["features.profile"] or None).profile
+        units[lt.name] = (lambda e, ps=frozenset(people), pr=prof: e.person in ps
+                          or e.profile != pr)
+    return run_folds(ex, units, tk, unit, cfg, False, _progress)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] not in ("mocap6", "single", "spliced"):
+        print(__doc__, file=sys.stderr)
+        return 2
+    cfg, _ = live_config()
+    cfg["identity.enabled"] = True
+    t0 = time.perf_counter()
+    if argv[0] == "mocap6":
+        doc = mocap6(Path(argv[1]) if len(argv) > 1 else DATA, cfg)
+    elif argv[0] == "single":
+        doc = single(Path(argv[1]) if len(argv) > 1 else DATA / "cmu_single", cfg)
+    else:
+        doc = spliced(Path(argv[1]), Path(argv[2]) if len(argv) > 2 else DATA / "cmu_single", cfg)
+    doc = {"protocol": argv[0], "seconds": round(time.perf_counter() - t0, 1), **doc}
+    print(json.dumps(doc, indent=1, default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,126 @@
+"""``rtseg learn LIB``: build (or extend) a named behaviour library from labelled takes.
+
+    rtseg learn LIB --take FILE --label NAME [--frames A:B] [--skeleton ASF] ...
+    rtseg learn LIB --from DATA_DIR [--person S ...] [--exclude-person S ...]
+
+``--take`` starts an example; the ``--label``, ``--frames`` (take frames [A, B), 0-based)
+and ``--skeleton`` after it belong to it.  ``--from``: every labelled take of a folder
+(``rtseg.library_learn.examples_from_dir``).  An existing LIB is extended (its examples
+kept) unless ``--new``.  The library is JSON (``rtseg.library``); ``rtseg live
+--behaviours LIB`` names segments with it.  Exit 2 with one line on bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+
+class _TakeAction(argparse.Action):
+    """--take / --label / --frames / --skeleton grouped per --take, in order."""
+
+    def __call__(self, parser: Any, ns: argparse.Namespace, value: Any,
+                 option: str | None = None) -> None:
+        takes = getattr(ns, "takes", None) or []
+        if self.dest == "take":
+            takes.append({"take": value})
+        else:
+            if not takes:
+                parser.error(f"{option} must follow a --take")
+            if self.dest in takes[-1]:
+                parser.error(f"{option} given twice for --take {takes[-1]['take']}")
+            takes[-1][self.dest] = value
+        ns.takes = takes
+
+
+def parse_frames(text: str) -> tuple[int, int]:
+    """``A:B`` -> (A, B), 0 <= A < B."""
+    try:
+        a, b = (int(v) for v in text.split(":"))
+    except ValueError:
+        raise ValueError(f"--frames {text!r}: expected A:B (take frames, 0-based, B excluded)") from None
+    if not 0 <= a < b:
+        raise ValueError(f"--frames {text!r}: needs 0 <= A < B")
+    return a, b
+
+
+def run(args: argparse.Namespace) -> int:
+    from rtseg.library import load
+    from rtseg.library_learn import example_of_take, examples_from_dir, learn
+    from rtseg.online_eval import live_config
+    takes = getattr(args, "takes", None) or []
+    if not takes and not args.from_dir:
+        raise ValueError("nothing to learn from: give --take FILE --label NAME or --from DATA_DIR")
+    cfg, _ = live_config(args.config)
+    if args.profile:
+        cfg["features.profile"] = args.profile
+    examples = []
+    for t in takes:
+        if not t.get("label"):
+            raise ValueError(f"--take {t['take']}: needs --label NAME")
+        frames = parse_frames(t["frames"]) if t.get("frames") else None
+        examples.append(example_of_take(t["take"], t["label"], cfg, frames, t.get("skeleton")))
+    if args.from_dir:
+        found = examples_from_dir(args.from_dir, cfg, people=args.person or None)
+        drop = set(args.exclude_person or [])
+        examples += [e for e in found if e.person not in drop]
+    old = None
+    path = Path(args.library)
+    if path.exists() and not args.new:
+        old = load(path)
+    lib, notes = learn(examples, args.profile or (old.profile if old else None))
+    if old is not None:
+        lib = old.merged(lib)
+    if args.threshold is not None:
+        lib.threshold = float(args.threshold)
+        lib.calibration["threshold_given"] = True
+    for n in notes:
+        print(f"rtseg learn: note: {n}", file=sys.stderr)
+    lib.save(path)
+    counts: dict[str, int] = {}
+    for e in lib.examples:
+        counts[e["name"]] = counts.get(e["name"], 0) + 1
+    print(f"{path}: {len(counts)} behaviours, {len(lib.examples)} examples, "
+          f"{len(lib.names)} windows; profile {lib.profile} ({lib.dims} dims); "
+          f"unknown beyond distance {lib.threshold:.3f}"
+          + (" (given)" if lib.calibration.get("threshold_given") else " (calibrated)"))
+    for k in sorted(counts):
+        print(f"  {k}: {counts[k]} example(s)")
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "learn", help="build a named behaviour library from labelled takes",
+        description="Build or extend a behaviour library (JSON) from labelled takes, for "
+                    "'rtseg live --behaviours LIB'.  Segments unlike every example are "
+                    "named 'unknown'.")
+    p.add_argument("library", metavar="LIB", help="library file (created, or extended)")
+    p.add_argument("--take", action=_TakeAction, metavar="FILE",
+                   help="a take holding an example (repeatable; .amc needs --skeleton "
+                        "unless SS.asf lies beside it)")
+    p.add_argument("--label", action=_TakeAction, metavar="NAME",
+                   help="behaviour name of the preceding --take")
+    p.add_argument("--frames", action=_TakeAction, metavar="A:B",
+                   help="take frames [A, B) of the preceding --take (default: all but rest "
+                        "frames at the ends)")
+    p.add_argument("--skeleton", action=_TakeAction, metavar="ASF",
+                   help="skeleton of the preceding --take")
+    p.add_argument("--from", dest="from_dir", metavar="DATA_DIR",
+                   help="learn every labelled take of a folder (cmu_single-like index.tsv, "
+                        "or ../shared/data: cmu86 names, mocap6 exercises, tsseg4d ids)")
+    p.add_argument("--person", action="append", metavar="S",
+                   help="with --from: only takes of subject S (repeatable)")
+    p.add_argument("--exclude-person", action="append", metavar="S",
+                   help="with --from: leave out subject S (repeatable)")
+    p.add_argument("--profile", metavar="NAME",
+                   help="feature profile (default: the configuration's, else the most common "
+                        "among the takes; takes of other profiles are left out)")
+    p.add_argument("--threshold", type=float, metavar="D",
+                   help="unknown beyond this distance (default: calibrated on the library)")
+    p.add_argument("--new", action="store_true", help="replace LIB instead of extending it")
+    p.add_argument("--config", metavar="FILE", help="session configuration (features, "
+                   "calibration; default config/live.toml)")
+    p.set_defaults(func=run, takes=None)

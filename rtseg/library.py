@@ -1,0 +1,388 @@
+"""Named behaviour libraries: learn behaviour names from labelled examples, name segments,
+and say ``unknown`` for a segment unlike every example (issue #12 item 2).
+
+A library holds, for one feature profile (``rtseg.features``: profile name and feature
+dims), the *descriptors* of short windows cut from labelled examples, each with its name
+and the example (source) it came from.
+
+Descriptor of a window W (frames, 4J) of pose-feature rows (unit quaternions per joint,
+frame rate ``fr`` Hz), three groups, all logarithms:
+
+- ``spread`` (J): per joint log(sqrt(sum of the 4 components' variances) + 0.01) - about
+  half the joint's angular spread in rad; unchanged by any fixed rotation before or after
+  the joint's rotation (rest pose, axis conventions);
+- ``speed`` (J): per joint log(mean |q[t+1] - q[t]| x fr + 0.05) - about half its mean
+  angular speed in rad/s; unchanged by the same fixed rotations;
+- ``dims`` (4J): per feature dim log(std + 0.005) - which axes each joint moves about.
+
+Distance between a query q and an example e: each dim standardised by the library's
+``scale`` (per-dim std over all its windows, floored at ``SCALE_FLOOR``), then
+``sqrt(mean over groups of mean over the group's dims of z^2)``.
+
+Decision (``Library.name``): the nearest example window's name when its distance is at
+most ``threshold``, else ``unknown``.  The threshold is calibrated INSIDE the library
+(``calibrate``): for every window, its nearest same-name window of another example
+(``same``) and its nearest window of another name (``other`` - what a behaviour missing
+from the library would see); the threshold is the value that best separates the two
+(most of ``same`` at or below, most of ``other`` above).  Nothing held out is looked at.
+
+Windows: ``window_s`` (2 s) long every ``step_s`` (1 s) inside each labelled range after
+``edge_s`` (0.5 s) is cut off each end (transitions); a range shorter than that gives one
+window of what is left if it is at least ``min_s`` (1 s).
+
+File: JSON (data only), ``{"format": "rtseg-behaviour-library", "version": 1, "profile",
+"dims", "frame_rate", "window_s", ..., "threshold", "scale", "names", "sources",
+"descriptors", "examples"}``.  ``load`` refuses another format, version, profile or dims
+with one ``LibraryError`` line.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from rtseg.config import ConfigError
+
+FORMAT = "rtseg-behaviour-library"
+VERSION = 1
+UNKNOWN = "unknown"
+GROUPS = ("spread", "speed", "dims")
+SCALE_FLOOR = 0.05
+
+
+class LibraryError(ConfigError):
+    """A library file that cannot be used (one line: path and reason)."""
+
+
+def descriptor(W: np.ndarray, frame_rate: float) -> np.ndarray:
+    """Descriptor (6J,) of a window W (frames >= 2, 4J) of feature rows (module doc):
+    spread (J), speed (J), dims (4J) concatenated."""
+    W = np.asarray(W, dtype=np.float64)
+    n, d = W.shape
+    if n < 2 or d % 4:
+        raise ValueError(f"a descriptor needs >= 2 frames of 4J features, got {W.shape}")
+    J = d // 4
+    var = W.var(axis=0)
+    spread = np.log(np.sqrt(var.reshape(J, 4).sum(axis=1)) + 0.01)
+    step = np.linalg.norm(np.diff(W, axis=0).reshape(n - 1, J, 4), axis=2)
+    speed = np.log(step.mean(axis=0) * float(frame_rate) + 0.05)
+    dims = np.log(np.sqrt(var) + 0.005)
+    return np.concatenate([spread, speed, dims])
+
+
+def group_slices(dims: int) -> list[slice]:
+    """Slices of the descriptor groups for ``dims`` feature dims (4J)."""
+    J = dims // 4
+    return [slice(0, J), slice(J, 2 * J), slice(2 * J, 6 * J)]
+
+
+def window_bounds(a: int, b: int, frame_rate: float, window_s: float, step_s: float,
+                  edge_s: float, min_s: float) -> list[tuple[int, int]]:
+    """Windows [s, e) (frames) inside the labelled range [a, b) (module doc)."""
+    L = max(2, int(round(window_s * frame_rate)))
+    S = max(1, int(round(step_s * frame_rate)))
+    E = int(round(edge_s * frame_rate))
+    lo, hi = a + E, b - E
+    if hi - lo < L:
+        return [(lo, hi)] if hi - lo >= max(2, int(round(min_s * frame_rate))) else []
+    return [(s, s + L) for s in range(lo, hi - L + 1, S)]
+
+
+@dataclass
+class Naming:
+    """The library's answer for one window: ``name`` (``UNKNOWN`` when rejected), the
+    ``nearest`` name and its ``distance``, and ``confidence`` 0..1 (named:
+    1 - distance / threshold; unknown: 1 - threshold / distance)."""
+    name: str
+    nearest: str
+    distance: float
+    confidence: float
+
+
+@dataclass
+class Library:
+    """Example-window descriptors with names (module doc).  Build with ``LibraryBuilder``
+    or ``load``."""
+    profile: str
+    dims: int
+    frame_rate: float
+    descriptors: np.ndarray                  # (windows, 6J)
+    names: list[str]                         # per window
+    sources: list[int]                       # per window: index into examples
+    examples: list[dict[str, Any]]           # {"name", "source", "frames": [a, b]}
+    scale: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    threshold: float = math.inf
+    window_s: float = 2.0
+    step_s: float = 1.0
+    edge_s: float = 0.5
+    min_s: float = 1.0
+    calibration: dict[str, Any] = field(default_factory=dict)
+    starts: list[float] = field(default_factory=list)   # per window: first frame in its example
+
+    @property
+    def behaviour_names(self) -> list[str]:
+        return sorted(set(self.names))
+
+    def fit_scale(self) -> None:
+        """Per-dim std over all windows, floored at ``SCALE_FLOOR``."""
+        D = self.descriptors
+        s = D.std(axis=0) if len(D) > 1 else np.zeros(D.shape[1])
+        self.scale = np.maximum(s, SCALE_FLOOR)
+
+    def distances(self, q: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """Distance of descriptor q to every example window (or to ``rows`` of them)."""
+        D = self.descriptors if rows is None else self.descriptors[rows]
+        z2 = ((D - q) / self.scale) ** 2
+        g = [z2[:, s].mean(axis=1) for s in group_slices(self.dims)]
+        return np.sqrt(np.mean(g, axis=0))
+
+    def name_descriptor(self, q: np.ndarray) -> Naming:
+        """Name a descriptor (module doc, Decision)."""
+        if not len(self.names):
+            return Naming(UNKNOWN, "", math.inf, 0.0)
+        d = self.distances(q)
+        j = int(np.argmin(d))
+        dist = float(d[j])
+        t = self.threshold
+        if dist <= t:
+            return Naming(self.names[j], self.names[j], dist, float(max(0.0, 1.0 - dist / t)))
+        conf = 1.0 - t / dist if dist > 0 else 0.0
+        return Naming(UNKNOWN, self.names[j], dist, float(min(1.0, max(0.0, conf))))
+
+    def name(self, W: np.ndarray, frame_rate: float | None = None) -> Naming:
+        """Name a window of feature rows (frames, dims) of this library's profile."""
+        W = np.asarray(W, dtype=np.float64)
+        if W.ndim != 2 or W.shape[1] != self.dims:
+            raise ValueError(f"library wants {self.dims} feature dims, got {W.shape}")
+        return self.name_descriptor(descriptor(W, frame_rate or self.frame_rate))
+
+    # ------------------------------------------------------------------ calibration
+    def calibrate(self) -> float:
+        """Set ``threshold`` from the library's own windows (module doc); returns it.
+        ``calibration`` keeps the same/other distance medians and counts."""
+        names = np.array(self.names)
+        src = np.array(self.sources)
+        same, other = [], []
+        for i in range(len(names)):
+            d = self.distances(self.descriptors[i])
+            s = d[(names == names[i]) & (src != src[i])]
+            if not len(s):      # the name's only example: its windows that do not overlap
+                ok = (names == names[i]) & (np.arange(len(d)) != i) & self._apart(i)
+                s = d[ok]
+            if len(s):
+                same.append(float(s.min()))
+            o = d[names != names[i]]
+            if len(o):
+                other.append(float(o.min()))
+        self.threshold = separating_threshold(same, other)
+        self.calibration = {"same_median": _median(same), "other_median": _median(other),
+                            "same": len(same), "other": len(other)}
+        return self.threshold
+
+    def _apart(self, i: int) -> np.ndarray:
+        """Windows of the same example as window i that do not overlap it (others True)."""
+        out = np.ones(len(self.names), dtype=bool)
+        fr = self.frame_rate
+        L = self.window_s * fr
+        starts = self.starts or [0.0] * len(self.names)
+        for j in range(len(self.names)):
+            if self.sources[j] == self.sources[i] and abs(starts[j] - starts[i]) < L:
+                out[j] = False
+        return out
+
+    def merged(self, other: "Library") -> "Library":
+        """This library with ``other``'s examples added (same profile, dims, frame rate and
+        windows), scale refitted and threshold recalibrated."""
+        if (other.profile, other.dims) != (self.profile, self.dims):
+            raise LibraryError(f"cannot add examples of profile {other.profile!r} "
+                               f"({other.dims} dims) to a library of {self.profile!r} "
+                               f"({self.dims} dims)")
+        if abs(other.frame_rate - self.frame_rate) > 1e-6 * self.frame_rate:
+            raise LibraryError(f"cannot add {other.frame_rate:g} Hz examples to a "
+                               f"{self.frame_rate:g} Hz library")
+        k = len(self.examples)
+        lib = Library(self.profile, self.dims, self.frame_rate,
+                      np.concatenate([self.descriptors, other.descriptors]),
+                      self.names + other.names, self.sources + [s + k for s in other.sources],
+                      self.examples + other.examples, window_s=self.window_s,
+                      step_s=self.step_s, edge_s=self.edge_s, min_s=self.min_s,
+                      starts=(self.starts or [0.0] * len(self.names))
+                      + (other.starts or [0.0] * len(other.names)))
+        lib.fit_scale()
+        lib.calibrate()
+        return lib
+
+    # ------------------------------------------------------------------ file
+    def to_dict(self) -> dict[str, Any]:
+        cal = dict(self.calibration)
+        return {"format": FORMAT, "version": VERSION, "profile": self.profile,
+                "dims": int(self.dims), "frame_rate": float(self.frame_rate),
+                "window_s": self.window_s, "step_s": self.step_s, "edge_s": self.edge_s,
+                "min_s": self.min_s, "descriptor": list(GROUPS),
+                "threshold": _finite(self.threshold), "calibration": cal,
+                "scale": [round(float(v), 6) for v in self.scale],
+                "names": list(self.names), "sources": [int(s) for s in self.sources],
+                "starts": [float(s) for s in (self.starts or [0.0] * len(self.names))],
+                "descriptors": [[round(float(v), 6) for v in row] for row in self.descriptors],
+                "examples": self.examples}
+
+    def save(self, path: str | Path) -> Path:
+        """Write the library as JSON (atomically: a temporary file renamed)."""
+        p = Path(path)
+        tmp = p.with_name(p.name + ".tmp")
+        tmp.write_text(json.dumps(self.to_dict(), allow_nan=False) + "\n", encoding="utf-8")
+        tmp.replace(p)
+        return p
+
+
+def separating_threshold(same: Sequence[float], other: Sequence[float]) -> float:
+    """The distance t maximising (share of ``same`` <= t) + (share of ``other`` > t),
+    midway between neighbouring values; ties: the middle of the best run.  Without
+    ``other`` (one name): 1.5 x the largest ``same``; without ``same``: half the smallest
+    ``other``; without either: inf."""
+    s = np.sort(np.asarray(same, dtype=np.float64))
+    o = np.sort(np.asarray(other, dtype=np.float64))
+    if not len(o):
+        return float(1.5 * s[-1]) if len(s) else math.inf
+    if not len(s):
+        return float(0.5 * o[0])
+    vals = np.unique(np.concatenate([s, o]))
+    cands = np.concatenate([[vals[0] / 2], (vals[:-1] + vals[1:]) / 2, [vals[-1] * 1.5]])
+    score = (np.searchsorted(s, cands, side="right") / len(s)
+             + 1.0 - np.searchsorted(o, cands, side="right") / len(o))
+    best = np.flatnonzero(score >= score.max() - 1e-12)
+    return float(cands[best[len(best) // 2]])
+
+
+def _median(v: Sequence[float]) -> float | None:
+    return round(float(np.median(v)), 4) if len(v) else None
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+class LibraryBuilder:
+    """Collects labelled examples (feature rows + name) and builds a ``Library``.
+
+    profile/dims: the feature profile of every example (``add`` refuses other dims).
+    """
+
+    def __init__(self, profile: str, dims: int, frame_rate: float, *, window_s: float = 2.0,
+                 step_s: float = 1.0, edge_s: float = 0.5, min_s: float = 1.0) -> None:
+        if not frame_rate > 0:
+            raise ValueError(f"frame_rate must be positive, got {frame_rate}")
+        self.profile, self.dims, self.frame_rate = profile, int(dims), float(frame_rate)
+        self.window_s, self.step_s, self.edge_s, self.min_s = window_s, step_s, edge_s, min_s
+        self.rows: list[np.ndarray] = []
+        self.names: list[str] = []
+        self.sources: list[int] = []
+        self.starts: list[float] = []
+        self.examples: list[dict[str, Any]] = []
+        self.skipped: list[str] = []
+
+    def add(self, X: np.ndarray, name: str, source: str, frames: tuple[int, int] | None = None,
+            frame_rate: float | None = None, info: dict[str, Any] | None = None) -> int:
+        """Add the labelled range ``frames`` [a, b) (default all) of feature rows X; returns
+        the number of windows it gave (0: too short, noted in ``skipped``).  ``info``:
+        extra fields of the example's record (e.g. take frames, person)."""
+        name = str(name).strip()
+        if not name:
+            raise ValueError(f"{source}: empty behaviour name")
+        if name == UNKNOWN:
+            raise ValueError(f"{source}: {UNKNOWN!r} is reserved for rejected segments")
+        X = np.asarray(X, dtype=np.float64)
+        if X.ndim != 2 or X.shape[1] != self.dims:
+            raise ValueError(f"{source}: {X.shape[1] if X.ndim == 2 else '?'} feature dims, "
+                             f"the library's profile {self.profile!r} has {self.dims}")
+        fr = float(frame_rate or self.frame_rate)
+        if abs(fr - self.frame_rate) > 1e-6 * self.frame_rate:
+            raise ValueError(f"{source}: frame rate {fr:g} Hz, the library's is "
+                             f"{self.frame_rate:g} Hz")
+        a, b = (0, len(X)) if frames is None else (int(frames[0]), int(frames[1]))
+        if not 0 <= a < b <= len(X):
+            raise ValueError(f"{source}: frames {a}:{b} outside the take (0:{len(X)})")
+        wins = window_bounds(a, b, fr, self.window_s, self.step_s, self.edge_s, self.min_s)
+        if not wins:
+            self.skipped.append(f"{source} [{a}:{b}) {name}: shorter than "
+                                f"{self.min_s + 2 * self.edge_s:g} s")
+            return 0
+        k = len(self.examples)
+        self.examples.append({"name": name, "source": str(source), "frames": [a, b],
+                              **(info or {})})
+        for s, e in wins:
+            self.rows.append(descriptor(X[s:e], fr))
+            self.names.append(name)
+            self.sources.append(k)
+            self.starts.append(float(s))
+        return len(wins)
+
+    def build(self, threshold: float | None = None) -> Library:
+        """The library (scale fitted, threshold calibrated unless given)."""
+        if not self.rows:
+            raise ValueError("no example long enough to learn from"
+                             + (f" ({'; '.join(self.skipped[:3])})" if self.skipped else ""))
+        lib = Library(self.profile, self.dims, self.frame_rate, np.array(self.rows),
+                      list(self.names), list(self.sources), list(self.examples),
+                      window_s=self.window_s, step_s=self.step_s, edge_s=self.edge_s,
+                      min_s=self.min_s, starts=list(self.starts))
+        lib.fit_scale()
+        lib.calibrate()
+        if threshold is not None:
+            if not threshold > 0:
+                raise ValueError(f"threshold must be positive, got {threshold}")
+            lib.threshold = float(threshold)
+            lib.calibration["threshold_given"] = True
+        return lib
+
+
+def load(path: str | Path, profile: str | None = None, dims: int | None = None) -> Library:
+    """Read a library file; ``LibraryError`` (one line) when it is not a library of this
+    format and version, or (when given) not of ``profile`` / ``dims``."""
+    p = Path(path)
+    try:
+        raw = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise LibraryError(f"behaviour library {p}: cannot read ({exc.strerror or exc})") from None
+    try:
+        doc = json.loads(raw)
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        raise LibraryError(f"behaviour library {p}: not a JSON behaviour library") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise LibraryError(f"behaviour library {p}: not a behaviour library "
+                           f"(format {doc.get('format') if isinstance(doc, dict) else None!r}, "
+                           f"expected {FORMAT!r})")
+    if doc.get("version") != VERSION:
+        raise LibraryError(f"behaviour library {p}: version {doc.get('version')!r} "
+                           f"(this rtseg reads version {VERSION}; learn it again)")
+    try:
+        lib = Library(str(doc["profile"]), int(doc["dims"]), float(doc["frame_rate"]),
+                      np.asarray(doc["descriptors"], dtype=np.float64),
+                      [str(n) for n in doc["names"]], [int(s) for s in doc["sources"]],
+                      list(doc["examples"]), np.asarray(doc["scale"], dtype=np.float64),
+                      math.inf if doc["threshold"] is None else float(doc["threshold"]),
+                      float(doc["window_s"]), float(doc["step_s"]), float(doc["edge_s"]),
+                      float(doc["min_s"]), dict(doc.get("calibration") or {}),
+                      [float(x) for x in doc.get("starts") or []])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise LibraryError(f"behaviour library {p}: malformed ({type(exc).__name__}: "
+                           f"{exc})") from None
+    k = 6 * (lib.dims // 4)
+    n = len(lib.names)
+    if (lib.dims <= 0 or lib.dims % 4 or lib.descriptors.shape != (n, k)
+            or lib.scale.shape != (k,) or len(lib.sources) != n or not n
+            or (lib.starts and len(lib.starts) != n)
+            or any(not 0 <= x < len(lib.examples) for x in lib.sources)
+            or not np.all(np.isfinite(lib.descriptors)) or not np.all(lib.scale > 0)):
+        raise LibraryError(f"behaviour library {p}: malformed (descriptor, scale or name "
+                           f"counts do not agree with {lib.dims} dims)")
+    if profile is not None and (lib.profile != profile or (dims is not None and lib.dims != dims)):
+        raise LibraryError(f"behaviour library {p}: learned for feature profile "
+                           f"{lib.profile!r} ({lib.dims} dims), this session's features are "
+                           f"{profile!r} ({dims} dims); learn it from takes of this skeleton")
+    return lib

@@ -1,0 +1,128 @@
+"""Held-out scoring of named behaviour libraries (issue #12 item 5, issue #15 item 3).
+
+Every figure names segments of takes the library did not learn from:
+
+- ``name_take``: one take through the live pipeline (``rtseg.identity_eval.run_identity``)
+  with the library on the identity tracker; each live segment of the primary detector gets
+  the name sent at its decision; its truth is the majority of the per-frame labels
+  (``truth``) over the segment.
+- ``tally``: per segment ``known`` (its true name is in the library) or not; ``accuracy`` =
+  known segments named right / known segments, ``unknown_rate`` = known segments named
+  ``unknown`` / known segments, ``unknown_correct`` = not-known segments named ``unknown``
+  / not-known segments.
+
+Protocols (``rtseg.library_learn.Example`` lists in, libraries learned per fold):
+leave-one-take-out (``loto``: learn from the other takes), leave-one-person-out
+(``lopo``: from the other people), and leave-one-name-out inside either (``hide_names``:
+each true name of the held-out take also removed from the library in turn, its segments
+must come out ``unknown``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from rtseg.library import UNKNOWN, Library
+from rtseg.library_learn import Example, learn
+
+
+@dataclass
+class Named:
+    """One live segment: take, segment index, boundary frame, true name, name sent."""
+    take: str
+    segment: int
+    boundary: int
+    truth: str
+    name: str
+    distance: float
+    known: bool = True
+
+
+@dataclass
+class Tally:
+    segments: list[Named] = field(default_factory=list)
+
+    def add(self, rows: Sequence[Named]) -> None:
+        self.segments.extend(rows)
+
+    def summary(self) -> dict[str, Any]:
+        k = [s for s in self.segments if s.known]
+        u = [s for s in self.segments if not s.known]
+        return {"accuracy": _share(sum(s.name == s.truth for s in k), len(k)),
+                "unknown_rate": _share(sum(s.name == UNKNOWN for s in k), len(k)),
+                "unknown_correct": _share(sum(s.name == UNKNOWN for s in u), len(u)),
+                "known_segments": len(k), "unknown_segments": len(u)}
+
+
+def _share(a: int, b: int) -> float | None:
+    return round(a / b, 4) if b else None
+
+
+def name_take(take: Any, truth: np.ndarray, library: Library, config: Any,
+              key: str) -> list[Named]:
+    """The live segments of ``take`` named by ``library`` (module doc)."""
+    from rtseg.identity_eval import run_identity
+    run = run_identity(take, config, library)
+    n = take.n_frames
+    segs = sorted(run.tracker.segment_names().items())
+    known = set(library.names)
+    out = []
+    for i, (seg, (b, name)) in enumerate(segs):
+        e = segs[i + 1][1][0] if i + 1 < len(segs) else n
+        a = 0 if i == 0 else b
+        lab = truth[a:max(e, a + 1)]
+        v, c = np.unique(np.asarray(lab, dtype=str), return_counts=True)
+        t = str(v[c.argmax()])
+        dist = next((m.name_distance for m in run.tracker.history
+                     if m.segment == seg and not m.correction), float("inf"))
+        out.append(Named(key, seg, b, t, name, float(dist), t in known))
+    return out
+
+
+def fold(examples: Sequence[Example], held: Callable[[Example], bool],
+         hide: Sequence[str] = ()) -> tuple[Library | None, list[str]]:
+    """A library of the examples not ``held`` and not named in ``hide``."""
+    use = [e for e in examples if not held(e) and e.name not in hide]
+    if not use:
+        return None, []
+    return learn(use)
+
+
+def run_folds(examples: Sequence[Example], units: dict[str, Callable[[Example], bool]],
+              takes: dict[str, tuple[Any, np.ndarray]], take_unit: dict[str, str],
+              config: Any, hide_names: bool = True, progress: Any = None
+              ) -> dict[str, Any]:
+    """Held-out naming: for each unit (a take or a person), learn from the examples it
+    does not hold, name the live segments of its takes (``takes``: key -> (take, per-frame
+    truth)); with ``hide_names``, also once per true name of the unit with that name left
+    out of the library (its segments count as not-known).  Returns ``{"held_out":
+    summary, "hidden_names": summary, "segments": [...]}``."""
+    main, hidden = Tally(), Tally()
+    for unit, held in units.items():
+        lib, _ = fold(examples, held)
+        if lib is None:
+            continue
+        keys = [k for k, u in take_unit.items() if u == unit]
+        for k in keys:
+            if progress is not None:
+                progress(f"{unit}: {k}")
+            take, truth = takes[k]
+            main.add(name_take(take, truth, lib, config, k))
+        if not hide_names:
+            continue
+        names = sorted({str(v) for k in keys for v in np.unique(takes[k][1])} & set(lib.names))
+        for nm in names:
+            lib_h, _ = fold(examples, held, (nm,))
+            if lib_h is None:
+                continue
+            for k in keys:
+                if progress is not None:
+                    progress(f"{unit}: {k} without {nm}")
+                take, truth = takes[k]
+                rows = name_take(take, truth, lib_h, config, k)
+                hidden.add([r for r in rows if r.truth == nm])
+    return {"held_out": main.summary(), "hidden_names": hidden.summary() if hide_names else None,
+            "segments": [vars(s) for s in main.segments]}

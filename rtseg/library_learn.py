@@ -1,0 +1,153 @@
+"""Labelled examples for a behaviour library (``rtseg learn``), from takes or data folders.
+
+Every example's feature rows are the rows the live pipeline feeds its detectors on the
+take (``rtseg.online_eval.fed_features``: the session configuration's profile and
+calibration), so a library learned here describes what ``rtseg live`` sees.  Frames are
+0-based take frames; a labelled range is [a, b).
+
+Sources of labels (``examples_from_dir``):
+
+- a folder with ``index.tsv`` laid out like ``../shared/data/cmu_single``: each take one
+  behaviour (its ``behaviour`` column), rest frames at the ends dropped
+  (``rtseg.splice_blend.trim_bounds``); the example's source is its subject (``person``);
+- a folder laid out like ``../shared/data``: the labelled takes of ``rtseg.labels``
+  (cmu86 behaviour names, mocap6 exercise names - ``MOCAP6_NAMES`` -, tsseg4d label ids,
+  spliced performances' behaviour names), each run of one label one example.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+from rtseg.library import Library, LibraryBuilder
+
+log = logging.getLogger(__name__)
+
+#: mocap6 exercise numbers -> names (../shared/data/README.md)
+MOCAP6_NAMES = {"1": "JumpJack", "2": "Jog", "3": "Squat", "4": "KneeRaise",
+                "5": "ArmCircle", "6": "Twist", "7": "SideReach", "8": "Box", "9": "UpDown",
+                "10": "ToeTouchOneHand", "11": "SideBend", "12": "ToeTouchTwoHands"}
+
+
+@dataclass
+class Example:
+    """One labelled range of one take's live feature rows.  ``person``: who performs
+    (the subject), ``take``: the take's name, ``frames``: [a, b) in take frames."""
+    name: str
+    take: str
+    person: str
+    X: np.ndarray                    # the take's fed feature rows
+    index: np.ndarray                # take frame of each row
+    frames: tuple[int, int]
+    profile: str
+    frame_rate: float
+
+    def rows(self) -> tuple[int, int]:
+        """[i, j) rows of X covering the take frames [a, b)."""
+        a, b = self.frames
+        return int(np.searchsorted(self.index, a)), int(np.searchsorted(self.index, b))
+
+
+def take_rows(take: Any, config: Any) -> tuple[np.ndarray, np.ndarray, str]:
+    """(fed rows, take frame per row, feature profile) of a take under ``config``."""
+    from rtseg.features import PoseFeatures
+    from rtseg.online_eval import fed_features
+    profile = PoseFeatures(take.joint_names, take.parents, take.space,
+                           profile=config["features.profile"] or None).profile
+    X, index, _ = fed_features(take, config)
+    return X, index, profile
+
+
+def example_of_take(path: str | Path, name: str, config: Any,
+                    frames: tuple[int, int] | None = None, skeleton: str | None = None,
+                    person: str = "") -> Example:
+    """An example from a take file (``rtseg.take.load_take``): frames [a, b) or the whole
+    take without its rest frames at the ends."""
+    from rtseg.splice_blend import trim_bounds
+    from rtseg.take import load_take
+    take = load_take(path, skeleton=skeleton)
+    X, index, profile = take_rows(take, config)
+    n = take.n_frames
+    if frames is None:
+        frames = trim_bounds(take.quats, take.frame_rate) if take.n_joints > 1 else (0, n)
+    a, b = int(frames[0]), int(frames[1])
+    if not 0 <= a < b <= n:
+        raise ValueError(f"{path}: --frames {a}:{b} outside the take (0:{n})")
+    stem = Path(path).stem
+    return Example(name, stem, person or stem.split("_")[0], X, index, (a, b), profile,
+                   float(take.frame_rate))
+
+
+def label_runs(labels: Sequence[Any]) -> list[tuple[int, int, str]]:
+    """[(a, b, label)] runs of equal per-frame labels."""
+    lab = [str(v) for v in labels]
+    ch = [0] + [i for i in range(1, len(lab)) if lab[i] != lab[i - 1]] + [len(lab)]
+    return [(a, b, lab[a]) for a, b in zip(ch[:-1], ch[1:]) if b > a]
+
+
+def examples_from_dir(data_dir: str | Path, config: Any,
+                      people: Iterable[str] | None = None,
+                      takes: Iterable[str] | None = None) -> list[Example]:
+    """Examples of every labelled take in ``data_dir`` (module doc); ``people``/``takes``:
+    keep only these subjects / take names."""
+    root = Path(data_dir)
+    keep_p = None if people is None else {str(p) for p in people}
+    keep_t = None if takes is None else {str(t) for t in takes}
+    out: list[Example] = []
+    if (root / "index.tsv").is_file():
+        from rtseg.splice import read_source_index
+        for r in read_source_index(root):
+            if (keep_p is not None and r.subject not in keep_p) or \
+                    (keep_t is not None and r.name not in keep_t):
+                continue
+            out.append(example_of_take(r.path, r.behaviour, config, person=r.subject))
+        return out
+    from rtseg.identity_eval import truth_labels
+    from rtseg.labels import find_labelled_takes
+    for lt in find_labelled_takes(root, ("cmu", "tsseg4d", "spliced")):
+        if (keep_t is not None and lt.name not in keep_t) or \
+                (keep_p is not None and lt.name.split("_")[0] not in keep_p):
+            continue
+        take = lt.load()
+        X, index, profile = take_rows(take, config)
+        truth = truth_labels(lt, take.n_frames)
+        mocap6 = "mocap6" in lt.labels.source
+        for a, b, lab in label_runs(truth):
+            if lab in ("?", "") or lab.startswith("s") and lab[1:].isdigit():
+                continue
+            name = MOCAP6_NAMES.get(lab, lab) if mocap6 else lab
+            out.append(Example(name, lt.name, lt.name.split("_")[0], X, index, (a, b),
+                               profile, float(take.frame_rate)))
+    return out
+
+
+def learn(examples: Sequence[Example], profile: str | None = None,
+          threshold: float | None = None, **windows: float) -> tuple[Library, list[str]]:
+    """A library from ``examples`` of one feature profile (``profile``, default the most
+    common one among them; examples of other profiles are left out and listed).
+    ``windows``: ``LibraryBuilder`` window options.  Returns (library, notes)."""
+    if not examples:
+        raise ValueError("no labelled examples to learn from")
+    if profile is None:
+        counts: dict[str, int] = {}
+        for e in examples:
+            counts[e.profile] = counts.get(e.profile, 0) + 1
+        profile = max(counts, key=lambda p: (counts[p], p))
+    use = [e for e in examples if e.profile == profile]
+    notes = [f"{e.take} [{e.frames[0]}:{e.frames[1]}) {e.name}: feature profile "
+             f"{e.profile!r}, not {profile!r}; left out" for e in examples if e.profile != profile]
+    if not use:
+        raise ValueError(f"no example has feature profile {profile!r} "
+                         f"(they have {', '.join(sorted({e.profile for e in examples}))})")
+    b = LibraryBuilder(profile, use[0].X.shape[1], use[0].frame_rate, **windows)
+    for e in use:
+        i, j = e.rows()
+        b.add(e.X[i:j], e.name, e.take, None, e.frame_rate,
+              info={"frames": list(e.frames), "person": e.person})
+    notes += b.skipped
+    return b.build(threshold), notes

@@ -1,0 +1,219 @@
+"""Named behaviour libraries (rtseg.library, rtseg learn, rtseg live --behaviours): the
+learn -> file -> load round trip, one-line refusal of another profile / version / garbage,
+null rejection on synthetic performances (a behaviour the library never saw comes out
+``unknown``), and the names on a real UDP socket from a live session."""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from pythonosc.osc_message import OscMessage
+
+from rtseg.drivers.base import Source
+from rtseg.frame import Frame
+from rtseg.identity_eval import run_identity
+from rtseg.library import UNKNOWN, LibraryBuilder, LibraryError, load, separating_threshold
+from rtseg.library_learn import label_runs, take_rows
+from rtseg.live import LiveSession
+from rtseg.online_eval import live_config
+from rtseg.session_config import from_dict
+from rtseg.simulators.synth import synthesize
+
+LEARN = "walk:8,punch:8,squat:8,wave:8"
+#: seed 0 teaches; other seeds (tempo, amplitude, style vary) are named
+PERFORMANCE = "walk:6,kick:6,punch:6,jump:6,squat:6"
+SYNTH_THRESHOLD = 7.0          # the unsupervised ids' threshold on synthetic data (test_identity)
+
+
+def _config():
+    cfg, _ = live_config()
+    cfg["identity.enabled"] = True
+    cfg["identity.threshold"] = SYNTH_THRESHOLD
+    return cfg
+
+
+def _library(script=LEARN, seed=0):
+    res = synthesize(script, seed=seed)
+    X, idx, profile = take_rows(res.take, _config())
+    b = LibraryBuilder(profile, X.shape[1], res.take.frame_rate)
+    for a, e, name in label_runs(res.frame_names()):
+        i, j = np.searchsorted(idx, a), np.searchsorted(idx, e)
+        assert b.add(X[i:j], name, f"synth{seed}") > 0
+    return b.build()
+
+
+@pytest.fixture(scope="module")
+def library():
+    return _library()
+
+
+def test_round_trip_through_the_file(tmp_path, library):
+    path = library.save(tmp_path / "lib.json")
+    doc = json.loads(path.read_text())
+    assert doc["format"] == "rtseg-behaviour-library" and doc["version"] == 1
+    assert doc["profile"] == library.profile and doc["dims"] == library.dims
+    back = load(path, library.profile, library.dims)
+    assert back.names == library.names and back.behaviour_names == ["punch", "squat",
+                                                                    "walk", "wave"]
+    assert np.allclose(back.descriptors, library.descriptors, atol=1e-5)
+    assert back.threshold == pytest.approx(library.threshold)
+    res = synthesize("walk:4", seed=5)
+    X, _, _ = take_rows(res.take, _config())
+    a, b = library.name(X[120:360]), back.name(X[120:360])
+    assert a.name == b.name == "walk" and a.distance == pytest.approx(b.distance, abs=1e-4)
+
+
+def test_refusals_are_one_clear_line(tmp_path, library):
+    path = library.save(tmp_path / "lib.json")
+    with pytest.raises(LibraryError, match="learned for feature profile 'unity'.*'cmu14'"):
+        load(path, "cmu14", 56)
+    doc = json.loads(path.read_text())
+    doc["version"] = 99
+    (tmp_path / "v99.json").write_text(json.dumps(doc))
+    with pytest.raises(LibraryError, match="version 99"):
+        load(tmp_path / "v99.json")
+    (tmp_path / "garbage.json").write_bytes(b"\x00\x01not json")
+    with pytest.raises(LibraryError, match="not a JSON behaviour library"):
+        load(tmp_path / "garbage.json")
+    doc["version"] = 1
+    doc["descriptors"] = doc["descriptors"][:-1]
+    (tmp_path / "short.json").write_text(json.dumps(doc))
+    with pytest.raises(LibraryError, match="malformed"):
+        load(tmp_path / "short.json")
+    for bad in ("v99.json", "garbage.json", "short.json"):
+        p = subprocess.run([sys.executable, "-m", "rtseg.cli", "live", "sim://synth",
+                            "--behaviours", str(tmp_path / bad), "--duration", "1"],
+                           capture_output=True, text=True, timeout=60)
+        assert p.returncode == 2
+        assert len(p.stderr.strip().splitlines()) == 1 and "behaviour library" in p.stderr
+
+
+def test_learn_command_and_its_errors(tmp_path):
+    from rtseg.drivers.readers import write_take
+    res = synthesize("walk:5,punch:5", seed=0)
+    take = tmp_path / "t.npz"
+    write_take(take, res.take)
+    cut = res.segments[0].stop
+    lib = tmp_path / "lib.json"
+    run = lambda *a: subprocess.run([sys.executable, "-m", "rtseg.cli", "learn", str(lib), *a],
+                                    capture_output=True, text=True, timeout=120)
+    p = run("--take", str(take), "--label", "walk", "--frames", f"0:{cut}",
+            "--take", str(take), "--label", "punch", "--frames", f"{cut}:{res.take.n_frames}")
+    assert p.returncode == 0, p.stderr
+    assert "2 behaviours, 2 examples" in p.stdout
+    assert load(lib).behaviour_names == ["punch", "walk"]
+    p = run("--take", str(take), "--label", "walk", "--frames", "50:10")
+    assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1
+    p = run("--label", "walk")
+    assert p.returncode == 2 and "--label must follow a --take" in p.stderr
+    lib.write_text('{"format": "something else"}')
+    p = run("--take", str(take), "--label", "walk")
+    assert p.returncode == 2 and "not a behaviour library" in p.stderr
+
+
+def test_separating_threshold():
+    assert separating_threshold([0.2, 0.3, 0.4], [1.0, 1.2]) == pytest.approx(0.7)
+    t = separating_threshold([0.2, 0.9], [0.5, 1.5])
+    assert 0.2 < t < 1.5
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_unseen_behaviours_come_out_unknown(library, seed):
+    """walk, punch, squat are in the library (learned on seed 0), kick and jump are not."""
+    res = synthesize(PERFORMANCE, seed=seed)
+    run = run_identity(res.take, _config(), library)
+    assert len(run.cut_frames) == 4, "the synthetic changes should all be cut"
+    names = [m.name for m in run.tracker.history if not m.correction]
+    assert names == ["walk", UNKNOWN, "punch", UNKNOWN, "squat"]
+    ids = [m.behaviour for m in run.tracker.history if not m.correction]
+    assert all(i >= 1 for i in ids)    # unknown segments keep their unsupervised id
+
+
+def test_hiding_a_name_turns_its_segments_unknown():
+    lib = _library("walk:8,squat:8,wave:8")       # no punch
+    res = synthesize("walk:6,punch:6,squat:6", seed=2)
+    run = run_identity(res.take, _config(), lib)
+    names = [m.name for m in run.tracker.history if not m.correction]
+    assert names == ["walk", UNKNOWN, "squat"]
+
+
+def _udp_receiver():
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    return s
+
+
+class TakeSource(Source):
+    """A synthetic take's frames as fast as the loop takes them (seq = frame index)."""
+    space = "local"
+    frame_rate = 120.0
+
+    def __init__(self, take):
+        super().__init__()
+        self.take = take
+        self.joint_names = list(take.joint_names)
+        self.parents = list(take.parents)
+        self.i = 0
+        self.valid = np.ones(take.n_joints, dtype=bool)
+
+    def read(self, timeout=None):
+        if self.i >= self.take.n_frames:
+            raise EOFError
+        i = self.i
+        self.i += 1
+        self.stats.frames_ok += 1
+        if i % 200 == 0:
+            time.sleep(0.001)          # let the loop keep up (ring never overwritten)
+        return Frame(time.monotonic(), self.take.quats[i], self.valid, i / 120.0, i)
+
+
+def test_live_session_sends_names_over_udp(tmp_path, library):
+    path = library.save(tmp_path / "lib.json")
+    res = synthesize(PERFORMANCE, seed=1)
+    rx = _udp_receiver()
+    port = rx.getsockname()[1]
+    cfg = from_dict({"identity": {"enabled": True, "threshold": SYNTH_THRESHOLD,
+                                  "behaviours": str(path)},
+                     "output": {"osc": [f"127.0.0.1:{port}"],
+                                "templates": ["/cue/{label}/start"]},
+                     "status": {"interval": 60.0}})
+    session = LiveSession(TakeSource(res.take), cfg, handle_signals=False)
+    session.run()
+    msgs = []
+    rx.settimeout(0.5)
+    try:
+        while True:
+            data, _ = rx.recvfrom(65536)
+            m = OscMessage(data)
+            msgs.append((m.address, list(m.params)))
+    except socket.timeout:
+        pass
+    finally:
+        rx.close()
+    beh = [p for a, p in msgs if a == "/rtseg/behaviour"]
+    assert [p[3] for p in beh] == ["walk", UNKNOWN, "punch", UNKNOWN, "squat"]
+    assert all(int(p[2]) >= 1 for p in beh)       # the ids stay the unsupervised ones
+    cues = [a for a, _ in msgs if a.startswith("/cue/")]
+    assert cues == ["/cue/walk/start", "/cue/unknown/start", "/cue/punch/start",
+                    "/cue/unknown/start", "/cue/squat/start"]
+
+
+def test_live_refuses_a_library_of_another_profile(tmp_path, library):
+    """sim://synth is a 'unity' skeleton: a cmu14 library is refused at start, one line."""
+    doc = library.to_dict()
+    doc["profile"] = "cmu14"
+    doc["dims"] = 56
+    doc["descriptors"] = [r + [0.0] * 12 for r in doc["descriptors"]]
+    doc["scale"] = doc["scale"] + [1.0] * 12
+    (tmp_path / "cmu.json").write_text(json.dumps(doc))
+    p = subprocess.run([sys.executable, "-m", "rtseg.cli", "live", "sim://synth",
+                        "--behaviours", str(tmp_path / "cmu.json"), "--duration", "2",
+                        "--no-osc", "--quiet"], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 2, p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1 and "feature profile 'cmu14'" in p.stderr
