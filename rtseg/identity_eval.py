@@ -160,6 +160,31 @@ def evaluate_identity(takes: Sequence[LabelledTake], config: Any,
             "takes": per}
 
 
+def library_loto(takes: Sequence[LabelledTake], config: Any) -> dict[str, Any] | None:
+    """Named libraries, leave-one-take-out over the mocap6 takes among ``takes`` (shared
+    exercise names): ``{accuracy, unknown_rate, unknown_correct, known_segments,
+    unknown_segments, takes}`` (``rtseg.library_eval``); None with fewer than two."""
+    from rtseg.library_eval import run_folds
+    from rtseg.library_learn import MOCAP6_NAMES, Example, take_rows
+    m6 = [t for t in takes if "mocap6" in t.labels.source]
+    if len(m6) < 2:
+        return None
+    from rtseg.library_learn import label_runs
+    examples: list[Example] = []
+    tk: dict[str, Any] = {}
+    for lt in m6:
+        take = lt.load()
+        truth = np.array([MOCAP6_NAMES.get(str(v), str(v)) for v in truth_labels(lt, take.n_frames)])
+        X, index, profile = take_rows(take, config)
+        for a, b, name in label_runs(truth):
+            examples.append(Example(name, lt.name, lt.name.split("_")[0], X, index, (a, b),
+                                    profile, float(take.frame_rate)))
+        tk[lt.name] = (take, truth)
+    units = {n: (lambda e, n=n: e.take == n) for n in tk}
+    res = run_folds(examples, units, tk, {n: n for n in tk}, config, hide_names=False)
+    return {**res["held_out"], "takes": sorted(tk), "protocol": "leave-one-take-out"}
+
+
 def _delays(run: IdentityRun, frame_rate: float, mids: Sequence[int] = ()
             ) -> dict[str, float | None]:
     """Decision times of the segments after cuts, s: ``median``/``max`` of (decision frame
@@ -199,6 +224,11 @@ def format_identity_table(doc: dict[str, Any]) -> str:
     for g, s in doc["groups"].items():
         lines.append(f"{'pooled ' + g:<16} {s['ari']:6.3f} {s['nmi']:6.3f}")
     lines.append(f"{'pooled':<16} {doc['pooled']['ari']:6.3f} {doc['pooled']['nmi']:6.3f}")
+    lib = doc.get("library")
+    if lib:
+        lines.append(f"library (named, leave-one-take-out over {', '.join(lib['takes'])}): "
+                     f"accuracy {lib['accuracy']}, unknown {lib['unknown_rate']} of "
+                     f"{lib['known_segments']} segments")
     lines.append("ARI+c: with the corrections applied; ids: per take (pooled over the takes' "
                  "frames concatenated); dec_s: median s from segment boundary to its id; "
                  "vs_lab: from the labelled transition")
@@ -230,6 +260,9 @@ def run_evaluate_identity(args: Any) -> int:
     primary = cfg["detectors.primary"] or cfg["detectors.methods"][0]
     doc = {"primary": primary, "threshold": cfg["identity.threshold"],
            "decide_after_s": cfg["identity.decide_after_s"], **doc}
+    lib = library_loto(takes, cfg)
+    if lib is not None:
+        doc["library"] = lib
     if args.json:
         sys.stdout.write(json.dumps({"live_default": default, "identity": doc}, indent=2,
                                     allow_nan=False) + "\n")
