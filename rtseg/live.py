@@ -6,7 +6,9 @@ this module runs it in a threaded session and publishes what it finds.  Where ev
 the summary are ``rtseg.session_stats``.  Their public names (``Pipeline``,
 ``PipelineCut``, ``make_detectors``, ``replay_frames``, ``replay_session``,
 ``build_publishers``, ``wire_methods``, ``LiveStats``, ``SessionSummary``) are re-exported
-here.
+here.  Two parts of ``LiveSession`` live in their own modules: ``rtseg.live_events`` (cut and
+behaviour events built, published, recorded) and ``rtseg.live_health`` (dropouts, status
+events, counters).
 
 Threads and data flow
 ---------------------
@@ -78,7 +80,8 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from rtseg.events import INPUT_COUNTERS, BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
+from rtseg.live_events import Event, SessionEvents
+from rtseg.live_health import SessionHealth
 from rtseg.outputs import build_publishers, log_publishers, wire_methods
 from rtseg.pipeline import (DEFAULT_FRAME_RATE, Pipeline, PipelineCut, PipelineStats,
                             _blas_limit, detector_params, make_detectors, replay_frames,
@@ -89,7 +92,6 @@ from rtseg.session_stats import FloatRing, LiveStats, SessionSummary, percentile
 
 log = logging.getLogger("rtseg.live")
 
-Event = CutEvent | StatusEvent | DropoutEvent | BehaviourEvent
 
 __all__ = ["DEFAULT_FRAME_RATE", "FloatRing", "LiveSession", "LiveStats", "Pipeline",
            "PipelineCut", "PipelineStats", "SessionSummary", "build_publishers",
@@ -111,7 +113,7 @@ def with_suit(url: str, suit: str) -> str:
     return url + ("&" if parts.query else "?") + f"suit={suit}"
 
 
-class LiveSession:
+class LiveSession(SessionEvents, SessionHealth):
     """One live segmentation session.
 
     source: a URL for ``rtseg.drivers.open_source`` or an opened ``Source``.
@@ -268,95 +270,6 @@ class LiveSession:
             log.exception("reader thread failed")
             ring.notify()
 
-    # ---------------------------------------------------------------- events
-    def _now(self) -> float:
-        return time.monotonic() - self.session_start
-
-    def _emit(self, ev: Event) -> Event:
-        """Publish, record and show one event; returns it as sent (cuts: latency stamped)."""
-        try:
-            if isinstance(ev, CutEvent):
-                if ev.wire:
-                    ev = self.publishers.publish_cut(ev) or ev.stamped()
-                else:
-                    ev = ev.stamped()
-                    if self._log_pubs is not None:
-                        self._log_pubs(ev)
-            elif isinstance(ev, StatusEvent):
-                self.publishers.publish_status(ev)
-            elif isinstance(ev, BehaviourEvent):
-                send = getattr(self.publishers, "publish_behaviour", None)
-                if send is not None:
-                    send(ev)
-            else:
-                self.publishers.publish_dropout(ev)
-        except Exception as exc:
-            self.stats.publish_errors += 1
-            self._warn("publish", "publishing %s failed: %s", type(ev).__name__, exc)
-        if self.recorder is not None:
-            with self._rec_lock:
-                try:
-                    if isinstance(ev, CutEvent):
-                        self.recorder.record_cut(ev)
-                    else:
-                        self.recorder.record_event(ev)
-                except Exception as exc:
-                    self.stats.record_errors += 1
-                    self._warn("record_ev", "recording an event failed: %s", exc)
-        for fn in self.listeners:
-            try:
-                fn(ev)
-            except Exception as exc:
-                self._warn("listener", "event listener failed: %s", exc)
-        return ev
-
-    def _cut_event(self, pc: PipelineCut, detected_recv: float) -> CutEvent:
-        ring = self.ring
-        m = pc.cut.method
-        seg = self._segment.get(m, 0) + 1
-        self._segment[m] = seg
-        wire = m in self.wire
-        if wire:
-            self._event_no += 1
-        b_recv = ring.recv_time_at(pc.boundary) if ring is not None else None
-        if b_recv is None:
-            b_recv = detected_recv - (pc.detected - pc.boundary) / self.frame_rate
-        return CutEvent(
-            event=self._event_no if wire else 0, segment=seg, frame=int(pc.boundary),
-            time=self._boundary_time(pc.boundary, b_recv), method=m,
-            label=m,
-            confidence=float(np.clip(pc.cut.confidence, 0.0, 1.0)),
-            detector_delay_ms=float(max(0, pc.detected - pc.boundary) / self.frame_rate * 1000.0),
-            boundary_recv_time=float(b_recv), detected_frame=int(pc.detected),
-            score=float(pc.cut.score), detected_recv_time=float(detected_recv), wire=wire)
-
-    def _boundary_time(self, index: int, b_recv: float) -> float:
-        """Seconds since session start of frame ``index``: on the source's own clock when it
-        has one (a replay sent faster than real time, ``--speed``, keeps the take's clock,
-        so cut times are the take's), counted from the first frame's arrival; else its
-        receive time.  A source clock that runs backwards or over 100x faster than the
-        frames arrive (a wrap, a restarted device) is not used."""
-        recv_t = float(b_recv - self.session_start)
-        src = self.ring.source_time_at(index) if self.ring is not None else None
-        if src is None or self._first_src is None or self._first_recv is None:
-            return recv_t
-        d_src = src - self._first_src
-        d_recv = max(float(b_recv) - self._first_recv, 1.0 / self.frame_rate)
-        if not (0.0 <= d_src <= 100.0 * d_recv + 1.0):
-            return recv_t
-        return float(self._first_recv - self.session_start + d_src)
-
-    def _behaviour_event(self, d: Any) -> BehaviourEvent:
-        """A ``rtseg.identity.IdentityDecision`` as the event sent (ids as text)."""
-        self._behaviour_no = getattr(self, "_behaviour_no", 0) + 1
-        return BehaviourEvent(event=self._behaviour_no, segment=int(d.segment),
-                              behaviour=str(d.behaviour),
-                              name=str(getattr(d, "name", "") or d.behaviour),
-                              confidence=float(d.confidence), frame=int(d.boundary),
-                              decided_frame=int(d.decided_frame), time=self._now(),
-                              correction=bool(d.correction),
-                              previous=str(d.previous) if d.correction else "")
-
     # ---------------------------------------------------------------- processing
     def _process_window(self, w) -> None:
         pipe = self.pipeline
@@ -399,67 +312,6 @@ class LiveSession:
             st.lag_s = now - float(w.recv_time[-1])
             st.max_lag_s = max(st.max_lag_s, st.lag_s)
             self._last_recv = float(w.recv_time[-1])
-
-    def _track_dropouts(self, valid: np.ndarray, recv: float) -> None:
-        if self._source_lost:
-            self._source_lost = False
-            self._emit(DropoutEvent("source", False, self._now()))
-        if self._n_lost == 0 and valid.all():      # fast path: everything reporting
-            self._last_valid.fill(recv)
-            return
-        lim = self._dropout_s
-        np.copyto(self._last_valid, recv, where=valid)
-        lost_now = (recv - self._last_valid) >= lim
-        changed = lost_now != self._joint_lost
-        if changed.any():
-            names = self.pipeline.joint_names
-            for j in np.flatnonzero(changed):
-                self._joint_lost[j] = lost_now[j]
-                self._n_lost += 1 if lost_now[j] else -1
-                if lost_now[j]:
-                    self.stats.dropouts += 1
-                    log.warning("dropout: %s lost", names[j])
-                else:
-                    log.info("dropout: %s restored", names[j])
-                self._emit(DropoutEvent(names[j], bool(lost_now[j]), self._now()))
-
-    def _check_silence(self, now: float) -> None:
-        lim = float(self.config["gaps.dropout_seconds"])
-        last = self._last_recv if self._last_recv is not None else self.session_start
-        if not self._source_lost and now - last >= lim:
-            self._source_lost = True
-            self.stats.dropouts += 1
-            log.warning("dropout: no frames from the source for %.2f s", now - last)
-            self._emit(DropoutEvent("source", True, now - self.session_start))
-
-    def dropped(self) -> int:
-        """Frames lost since start: the source's counters plus frames the session dropped."""
-        s = getattr(self.source, "stats", None)
-        src = int(getattr(s, "dropped", 0)) if s is not None else 0
-        return src + self.stats.bad_frames + self.stats.overruns
-
-    def input_counts(self) -> dict[str, int]:
-        """Input refused since start (``INPUT_COUNTERS``): the source's counters, plus the
-        quaternions the pipeline itself replaced as non-finite/zero in ``bad_values``."""
-        s = getattr(self.source, "stats", None)
-        out = {k: int(getattr(s, k, 0) or 0) for k in INPUT_COUNTERS}
-        if self.pipeline is not None:
-            out["bad_values"] += int(self.pipeline.stats.bad_values)
-        return out
-
-    def _status(self, now: float, alive: int = 1) -> StatusEvent:
-        dt = max(1e-9, now - self._status_t)
-        rate = (self.stats.frames_received - self._status_frames) / dt
-        self._status_t, self._status_frames = now, self.stats.frames_received
-        stale = int(self._joint_lost.sum()) if not self._source_lost else len(self._joint_lost)
-        names = tuple(n for n, l in zip(self.pipeline.joint_names, self._joint_lost) if l)
-        if self._source_lost:
-            names = tuple(self.pipeline.joint_names)
-        self._last_rate = rate
-        return StatusEvent(alive=alive, frame_rate=float(rate), dropped=self.dropped(),
-                           stale_joints=stale, stale_names=names, time=now - self.session_start,
-                           lag_ms=float(self.stats.lag_s * 1000.0),
-                           backlog=int(self.stats.backlog), **self.input_counts())
 
     # ---------------------------------------------------------------- run
     def run(self) -> SessionSummary:
@@ -536,15 +388,6 @@ class LiveSession:
             if blas is not None:
                 blas.restore_original_limits()
         return summary
-
-    def _input_rate(self) -> float:
-        """Frames per second between the first and the last frame received (0 if < 2)."""
-        ring = self.ring
-        if ring is None or self.stats.frames_received < 2 or self._first_recv is None:
-            return 0.0
-        w = ring.window(1)
-        span = float(w.recv_time[-1]) - self._first_recv if len(w) else 0.0
-        return (ring.head - 1) / span if span > 0 else 0.0
 
     def _shutdown(self) -> SessionSummary:
         now = time.monotonic()
