@@ -13,7 +13,7 @@ import threading
 import time
 from pathlib import Path
 
-from pythonosc.osc_message import OscMessage
+from osc_collector import OscCollector
 
 from rtseg.drivers import open_source
 from rtseg.events import INPUT_COUNTERS
@@ -26,40 +26,6 @@ from rtseg.simulators.synth import synthesize
 
 RATE = 120.0
 SPEED = 4.0
-
-
-class UdpReceiver:
-    """A UDP socket on 127.0.0.1 decoding every datagram as one OSC message (with its type
-    tags, so the wire form is checked too)."""
-
-    def __init__(self) -> None:
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-        self.sock.settimeout(0.05)
-        self.port = self.sock.getsockname()[1]
-        self.messages: list[tuple[str, str, list]] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            try:
-                data = self.sock.recv(65536)
-            except socket.timeout:
-                continue
-            m = OscMessage(data)
-            tags = data[len(m.address) // 4 * 4 + 4:].split(b"\0", 1)[0].decode().lstrip(",")
-            self.messages.append((m.address, tags, list(m.params)))
-
-    def close(self) -> None:
-        time.sleep(0.2)
-        self._stop.set()
-        self._thread.join(5)
-        self.sock.close()
-
-    def get(self, address: str) -> list[tuple[str, list]]:
-        return [(t, a) for addr, t, a in self.messages if addr == address]
 
 
 def config(tmp_path: Path, port: int) -> object:
@@ -76,7 +42,7 @@ def run(session: LiveSession) -> tuple[threading.Thread, dict]:
     return t, box
 
 
-def check_shown(summary, rx: UdpReceiver, tmp_path: Path) -> list[int]:
+def check_shown(summary, rx: OscCollector, tmp_path: Path) -> list[int]:
     """The counters agree across summary, OSC, JSON lines and recording; returns them in
     ``INPUT_COUNTERS`` order (the final values)."""
     final = [summary.input[k] for k in INPUT_COUNTERS]
@@ -85,6 +51,7 @@ def check_shown(summary, rx: UdpReceiver, tmp_path: Path) -> list[int]:
             f"{c['bad_messages']} bad messages, {c['bad_values']} bad values, "
             f"{c['unknown_names']} unknown names") in summary.text()
     # OSC: /rtseg/status unchanged (ifii), /rtseg/input iiiii right after it, never falling
+    assert not rx.malformed, "a datagram was not one well-formed OSC message"
     status = rx.get("/rtseg/status")
     assert status and all(t == "ifii" and len(a) == 4 for t, a in status)
     inputs = rx.get("/rtseg/input")
@@ -109,7 +76,7 @@ def test_corrupt_serial_frames_on_a_pty_are_shown(tmp_path):
     take = synthesize("idle:2,walk:2", frame_rate=RATE, seed=1).take
     play_s = take.n_frames / (RATE * SPEED)
     suit = SerialSuit(take, rate=RATE * SPEED, faults="corrupt=0.003,seed=5")
-    rx = UdpReceiver()
+    rx = OscCollector()
     try:
         path = suit.start()
         session = LiveSession(f"serial://{path}?rate={RATE:g}", config(tmp_path, rx.port),
@@ -135,7 +102,7 @@ def test_corrupt_serial_frames_on_a_pty_are_shown(tmp_path):
 
 
 def test_junk_udp_datagrams_are_shown(tmp_path):
-    rx = UdpReceiver()
+    rx = OscCollector()
     source = open_source("osc://127.0.0.1:0?format=vmc")
     n_junk, n_badtype, n_unknown, n_nan = 400, 30, 20, 10
     try:
@@ -170,7 +137,7 @@ def test_junk_udp_datagrams_are_shown(tmp_path):
 
 
 def test_clean_input_sends_no_input_message(tmp_path):
-    rx = UdpReceiver()
+    rx = OscCollector()
     try:
         session = LiveSession("sim://synth?script=idle:2&speed=4", config(tmp_path, rx.port),
                               handle_signals=False)

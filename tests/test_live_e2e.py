@@ -24,8 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from pythonosc.dispatcher import Dispatcher
-from pythonosc.osc_server import BlockingOSCUDPServer
+from osc_collector import OscCollector
 
 from rtseg.drivers import open_source
 from rtseg.live import LiveSession, replay_frames, replay_session
@@ -50,29 +49,6 @@ def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-class OscCollector:
-    """python-osc BlockingOSCUDPServer on 127.0.0.1 collecting /rtseg/* messages."""
-
-    def __init__(self) -> None:
-        self.messages: list[tuple[str, tuple]] = []
-        d = Dispatcher(strict_timing=False)
-        d.set_default_handler(lambda addr, *args: self.messages.append((addr, args)))
-        self.server = BlockingOSCUDPServer(("127.0.0.1", 0), d)
-        self.server.timeout = 0.05
-        self.port = self.server.server_address[1]
-        self.thread = threading.Thread(target=self.server.serve_forever, kwargs={"poll_interval": 0.05},
-                                       daemon=True)
-        self.thread.start()
-
-    def close(self) -> None:
-        self.server.shutdown()
-        self.server.server_close()
-        self.thread.join(5)
-
-    def cuts(self) -> list[tuple]:
-        return [a for addr, a in self.messages if addr == "/rtseg/cut"]
 
 
 class OscDump:
@@ -159,8 +135,8 @@ def on_wire(expected: list, session: LiveSession) -> list:
     return [c for c in expected if c.cut.method in session.wire]
 
 
-def assert_cuts_match(received: list[tuple], expected: list, tk, what: str) -> None:
-    """received: /rtseg/cut argument tuples (event, segment, time, conf, latency, delay,
+def assert_cuts_match(received: list[list], expected: list, tk, what: str) -> None:
+    """received: /rtseg/cut argument lists (event, segment, time, conf, latency, delay,
     label); expected: PipelineCuts.  Same order, same methods, boundary ±2 frames.  A cut's
     time is on the source's clock when the source has one (rtseg.live: counted from the
     first frame's arrival), else the boundary frame's receive time."""
@@ -212,12 +188,13 @@ def test_serial_pty_to_osc_matches_offline(tmp_path, take):
     assert len(expected) >= 4, "the take has 3 behaviour changes; both methods should see some"
     assert session.primary == "contrast"
     assert session.wire == {session.primary}        # default: output.cut_methods = "primary"
+    assert not osc.malformed, "a datagram was not one well-formed OSC message"
     assert_cuts_match(osc.cuts(), on_wire(expected, session), tk, "python-osc")
     assert_cuts_match(dump.cuts(), on_wire(expected, session), tk, "oscdump")
     # the recording's own cut log holds every detector's cuts, marked on or off the wire
     assert [c.frame for c in tk.meta["cuts"]] == [c.boundary for c in expected]
     assert [c.wire for c in tk.meta["cuts"]] == [c.cut.method in session.wire for c in expected]
-    statuses = [a for addr, a in osc.messages if addr == "/rtseg/status"]
+    statuses = osc.args("/rtseg/status")
     assert statuses and statuses[0][0] == 1 and statuses[-1][0] == 0
     # processing latency (arrival of the revealing frame -> send) is small
     assert summary.cut_latency_ms_p50 is not None and summary.cut_latency_ms_p50 < 100
@@ -297,8 +274,8 @@ def test_faults_session_survives_and_records_every_frame(tmp_path, take, corrupt
     expected, tk = offline_cuts(rec, cfg)
     assert len(expected) >= min_cuts
     assert_cuts_match(osc.cuts(), on_wire(expected, session), tk, "with faults")
-    dropouts = [a for addr, a in osc.messages if addr == "/rtseg/dropout"]
-    assert ("source", 1) in dropouts and ("source", 0) in dropouts
+    dropouts = osc.args("/rtseg/dropout")
+    assert ["source", 1] in dropouts and ["source", 0] in dropouts
 
 
 def test_sigterm_ends_rtseg_live_cleanly(tmp_path, take):
@@ -315,7 +292,7 @@ def test_sigterm_ends_rtseg_live_cleanly(tmp_path, take):
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=REPO)
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline:
-            if not any(a == "/rtseg/cut" for a, _ in osc.messages):
+            if not osc.cuts():
                 time.sleep(0.1)
                 continue
             break
@@ -340,7 +317,7 @@ def test_sigterm_ends_rtseg_live_cleanly(tmp_path, take):
     tk = read_session(rec)
     assert tk.meta["closed_cleanly"] and tk.n_frames > 0
     assert len(tk.meta["cuts"]) == len(cut_lines) == len(osc.cuts())
-    assert osc.messages[-1][0] == "/rtseg/status" and osc.messages[-1][1][0] == 0
+    assert osc.messages[-1][0] == "/rtseg/status" and osc.messages[-1][2][0] == 0
 
 
 def test_demo_command_prints_cuts(tmp_path):

@@ -11,13 +11,10 @@ both detectors is in the JSON-lines log and the recording, marked ``wire`` true/
 from __future__ import annotations
 
 import json
-import socket
-import threading
-import time
 from pathlib import Path
 
 import pytest
-from pythonosc.osc_message import OscMessage
+from osc_collector import OscCollector
 
 from rtseg.config import ConfigError
 from rtseg.live import LiveSession, wire_methods
@@ -30,41 +27,9 @@ SOURCE = f"sim://synth?script={SCRIPT}&seed=3&speed=0&space=global"
 TEMPLATE = "/cue/{label}/go segment"
 
 
-class UdpReceiver:
-    """A UDP socket on 127.0.0.1 decoding every datagram as one OSC message."""
-
-    def __init__(self) -> None:
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-        self.sock.settimeout(0.05)
-        self.port = self.sock.getsockname()[1]
-        self.messages: list[tuple[str, list]] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            try:
-                data = self.sock.recv(65536)
-            except socket.timeout:
-                continue
-            m = OscMessage(data)
-            self.messages.append((m.address, list(m.params)))
-
-    def close(self) -> None:
-        time.sleep(0.2)                      # the last datagrams
-        self._stop.set()
-        self._thread.join(5)
-        self.sock.close()
-
-    def args(self, address: str) -> list[list]:
-        return [a for addr, a in self.messages if addr == address]
-
-
-def run_session(tmp_path: Path, **output) -> tuple[LiveSession, UdpReceiver, list[dict]]:
+def run_session(tmp_path: Path, **output) -> tuple[LiveSession, OscCollector, list[dict]]:
     tmp_path.mkdir(parents=True, exist_ok=True)
-    rx = UdpReceiver()
+    rx = OscCollector()
     log = tmp_path / "events.jsonl"
     rec = tmp_path / "rec"
     cfg = from_dict({"detectors": {"methods": ["pca", "ppca"], **output.pop("detectors", {})},
@@ -76,6 +41,7 @@ def run_session(tmp_path: Path, **output) -> tuple[LiveSession, UdpReceiver, lis
         session.run()
     finally:
         rx.close()
+    assert not rx.malformed, "a datagram was not one well-formed OSC message"
     lines = [json.loads(ln) for ln in log.read_text().splitlines()]
     cuts = [d for d in lines if d["type"] == "cut"]
     # the recording's cut log is the JSON-lines log's cuts, wire flags included
