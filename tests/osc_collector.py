@@ -28,6 +28,7 @@ class OscCollector:
 
     ``messages``: ``(address, type_tags, args)`` per datagram, in arrival order;
     ``malformed``: datagrams python-osc could not decode as one message.
+    :meth:`take` returns them in turn, waiting for them (for a test that sends, then reads).
     ``close()`` waits ``linger`` seconds for the last datagrams, then stops.
     """
 
@@ -39,6 +40,7 @@ class OscCollector:
         self.port: int = self.sock.getsockname()[1]
         self.messages: list[tuple[str, str, list]] = []
         self.malformed: list[bytes] = []
+        self._taken = 0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="osc-collector", daemon=True)
         self._thread.start()
@@ -76,6 +78,25 @@ class OscCollector:
     def get(self, address: str) -> list[tuple[str, list]]:
         """``(type_tags, args)`` of the messages sent to ``address``, in order."""
         return [(t, a) for addr, t, a in self.messages if addr == address]
+
+    def take(self, n: int, timeout: float = 2.0) -> list[tuple[str, list]]:
+        """The next ``n`` messages not taken yet, as ``(address, args)``, waiting up to
+        ``timeout`` seconds for them to arrive; AssertionError saying what came if fewer
+        did."""
+        deadline = time.monotonic() + timeout
+        while len(self.messages) < self._taken + n and time.monotonic() < deadline:
+            time.sleep(0.002)
+        got = [(a, args) for a, _, args in self.messages[self._taken:self._taken + n]]
+        if len(got) < n:
+            raise AssertionError(f"{len(got)} of {n} OSC messages arrived within {timeout} s: "
+                                 f"{got}")
+        self._taken += n
+        return got
+
+    @property
+    def untaken(self) -> int:
+        """Messages received and not yet returned by :meth:`take`."""
+        return len(self.messages) - self._taken
 
     def cuts(self) -> list[list]:
         """The ``/rtseg/cut`` argument lists (event, segment, time, confidence, latency,

@@ -16,11 +16,10 @@ import time
 
 import numpy as np
 import pytest
-from pythonosc.dispatcher import Dispatcher
 from pythonosc.osc_message import OscMessage
 from pythonosc.osc_message_builder import OscMessageBuilder
-from pythonosc.osc_server import BlockingOSCUDPServer
 
+from osc_collector import OscCollector
 from rtseg.events import CutEvent, DropoutEvent, StatusEvent, event_from_dict
 from rtseg.publishers import (JsonlPublisher, OscTcpPublisher, OscUdpPublisher, Publisher,
                               PublisherSet, parse_target, sanitize_label)
@@ -45,34 +44,9 @@ def make_cut(**kw) -> CutEvent:
     return CutEvent(**base)
 
 
-class OscReceiver:
-    """python-osc BlockingOSCUDPServer in a thread, collecting (address, args)."""
-
-    def __init__(self) -> None:
-        self.q: queue.Queue = queue.Queue()
-        d = Dispatcher(strict_timing=False)
-        d.set_default_handler(lambda addr, *args: self.q.put((addr, list(args))))
-        self.server = BlockingOSCUDPServer((HOST, 0), d)
-        self.port = self.server.server_address[1]
-        self.thread = threading.Thread(target=self.server.serve_forever, kwargs={"poll_interval": 0.05})
-        self.thread.start()
-
-    def get(self, n: int, timeout: float = 2.0) -> list[tuple[str, list]]:
-        out = []
-        deadline = time.monotonic() + timeout
-        while len(out) < n:
-            out.append(self.q.get(timeout=max(0.01, deadline - time.monotonic())))
-        return out
-
-    def close(self) -> None:
-        self.server.shutdown()
-        self.server.server_close()
-        self.thread.join(2)
-
-
 @pytest.fixture
 def receiver():
-    r = OscReceiver()
+    r = OscCollector(linger=0.0)
     yield r
     r.close()
 
@@ -106,7 +80,7 @@ def test_udp_cut_exact_args_and_types(receiver):
                   confidence=np.float64(0.75), label="High Kick!")
     with OscUdpPublisher(HOST, receiver.port) as pub:
         pub.publish_cut(ev)
-        (a1, args1), (a2, args2) = receiver.get(2)
+        (a1, args1), (a2, args2) = receiver.take(2)
     assert a1 == "/rtseg/cut"
     assert args1 == [3, 4, 3.5, 0.75, 12.5, 100.0, "High Kick!"]
     assert [type(x) for x in args1] == [int, int, float, float, float, float, str]
@@ -119,7 +93,7 @@ def test_udp_latency_stamped_from_boundary_recv_time(receiver):
     ev = make_cut(latency_ms=None, boundary_recv_time=time.monotonic() - 0.25)
     with OscUdpPublisher(HOST, receiver.port) as pub:
         pub.publish_cut(ev)
-        (_, args), _ = receiver.get(2)
+        (_, args), _ = receiver.take(2)
     assert 250.0 <= args[4] < 5000.0
 
 
@@ -130,7 +104,7 @@ def test_udp_status_and_dropout(receiver):
                                        bad_messages=np.int64(4), bad_values=2, unknown_names=1))
         pub.publish_dropout(DropoutEvent("LeftHand", lost=True))
         pub.publish_dropout(DropoutEvent("LeftHand", lost=False))
-        got = receiver.get(4)
+        got = receiver.take(4)
     assert got == [("/rtseg/status", [1, 99.5, 3, 2]), ("/rtseg/input", [7, 5, 4, 2, 1]),
                    ("/rtseg/dropout", ["LeftHand", 1]), ("/rtseg/dropout", ["LeftHand", 0])]
 
@@ -247,11 +221,11 @@ def test_template_only_target_fires_qlab_style_cue(receiver):
         pub.publish_cut(make_cut(label="walk fast"))
         pub.publish_status(StatusEvent())            # standard=off: not sent
         pub.publish_cut(make_cut(label="jump", segment=5))
-        got = receiver.get(2)
+        got = receiver.take(2)
     finally:
         pub.close()
     assert got == [("/cue/walk_fast/start", []), ("/cue/jump/start", [])]
-    assert receiver.q.empty()
+    assert receiver.untaken == 0
 
 
 def test_template_with_arguments_and_fields(receiver):
@@ -259,7 +233,7 @@ def test_template_with_arguments_and_fields(receiver):
                        templates=["/show/{method}/seg{segment:03d} segment confidence label 1 0.5"])
     try:
         pub.publish_cut(make_cut(segment=7, label="punch"))
-        got = receiver.get(3)
+        got = receiver.take(3)
     finally:
         pub.close()
     assert [g[0] for g in got] == ["/rtseg/cut", "/rtseg/cut/punch", "/show/pca/seg007"]
@@ -551,7 +525,7 @@ def test_publisher_set_isolates_failures(receiver, tmp_path):
     with pubs:
         sent = pubs.publish_cut(make_cut(latency_ms=None, boundary_recv_time=time.monotonic()))
         pubs.publish_status(StatusEvent())
-        got = receiver.get(3)
+        got = receiver.take(3)
     assert sent.latency_ms is not None and sent.latency_ms >= 0
     assert [g[0] for g in got] == ["/rtseg/cut", "/rtseg/cut/walk", "/rtseg/status"]
     assert got[0][1][4] == pytest.approx(sent.latency_ms, abs=1e-3)   # one stamp for all
