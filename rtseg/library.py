@@ -19,20 +19,24 @@ Distance between a query q and an example e: each dim standardised by the librar
 ``scale`` (per-dim std over all its windows, floored at ``SCALE_FLOOR``), then
 ``sqrt(mean over groups of mean over the group's dims of z^2)``.
 
-Decision (``Library.name``): the nearest example window's name when its distance is at
-most ``threshold``, else ``unknown``.  The threshold is calibrated INSIDE the library
-(``calibrate``): for every window, its nearest same-name window of another example
-(``same``) and its nearest window of another name (``other`` - what a behaviour missing
-from the library would see); the threshold is the value that best separates the two
-(most of ``same`` at or below, most of ``other`` above).  Nothing held out is looked at.
+Decision (``Library.name``): d1, d2 = the distances of the nearest and second-nearest
+*name* (each name's nearest window).  The segment gets the nearest name when d1 <=
+``threshold`` and d1 / d2 <= ``ratio``, else ``unknown``.  Both are calibrated INSIDE the
+library (``calibrate``, ``separating_rule``): for every window, its known case - the
+nearest same-name window of another example (``same``) against the nearest other name -
+and its unknown case - its own name left out, the nearest two other names (what a
+behaviour missing from the library would see); the rule that accepts the most known and
+rejects the most unknown cases wins.  When the library holds more than one person
+(examples' ``person``), each window is compared only with other people's windows, as a new
+performer would be.  Nothing held out is looked at.
 
 Windows: ``window_s`` (2 s) long every ``step_s`` (1 s) inside each labelled range after
 ``edge_s`` (0.5 s) is cut off each end (transitions); a range shorter than that gives one
 window of what is left if it is at least ``min_s`` (1 s).
 
 File: JSON (data only), ``{"format": "rtseg-behaviour-library", "version": 1, "profile",
-"dims", "frame_rate", "window_s", ..., "threshold", "scale", "names", "sources",
-"descriptors", "examples"}``.  ``load`` refuses another format, version, profile or dims
+"dims", "frame_rate", "window_s", ..., "threshold", "ratio", "scale", "names", "sources",
+"starts", "descriptors", "examples"}``.  ``load`` refuses another format, version, profile or dims
 with one ``LibraryError`` line.
 """
 
@@ -117,6 +121,7 @@ class Library:
     examples: list[dict[str, Any]]           # {"name", "source", "frames": [a, b]}
     scale: np.ndarray = field(default_factory=lambda: np.zeros(0))
     threshold: float = math.inf
+    ratio: float = 1.0                       # named only when d1 / d2 <= ratio
     window_s: float = 2.0
     step_s: float = 1.0
     edge_s: float = 0.5
@@ -145,14 +150,25 @@ class Library:
         """Name a descriptor (module doc, Decision)."""
         if not len(self.names):
             return Naming(UNKNOWN, "", math.inf, 0.0)
-        d = self.distances(q)
-        j = int(np.argmin(d))
-        dist = float(d[j])
-        t = self.threshold
-        if dist <= t:
-            return Naming(self.names[j], self.names[j], dist, float(max(0.0, 1.0 - dist / t)))
-        conf = 1.0 - t / dist if dist > 0 else 0.0
-        return Naming(UNKNOWN, self.names[j], dist, float(min(1.0, max(0.0, conf))))
+        per = self.name_distances(self.distances(q))
+        order = sorted(per, key=per.get)
+        best, dist = order[0], per[order[0]]
+        second = per[order[1]] if len(order) > 1 else math.inf
+        t, r = self.threshold, self.ratio
+        ratio = dist / second if second > 0 else 1.0
+        if dist <= t and ratio <= r:
+            conf = min(1.0 - dist / t, 1.0 - ratio / r if r > 0 else 0.0)
+            return Naming(best, best, dist, float(min(1.0, max(0.0, conf))))
+        conf = max(1.0 - t / dist if dist > t else 0.0, 1.0 - r / ratio if ratio > r else 0.0)
+        return Naming(UNKNOWN, best, dist, float(min(1.0, max(0.0, conf))))
+
+    def name_distances(self, d: np.ndarray) -> dict[str, float]:
+        """{name: its nearest window's distance} from the distances to every window."""
+        out: dict[str, float] = {}
+        for n, v in zip(self.names, d):
+            if v < out.get(n, math.inf):
+                out[n] = float(v)
+        return out
 
     def name(self, W: np.ndarray, frame_rate: float | None = None) -> Naming:
         """Name a window of feature rows (frames, dims) of this library's profile."""
@@ -163,25 +179,35 @@ class Library:
 
     # ------------------------------------------------------------------ calibration
     def calibrate(self) -> float:
-        """Set ``threshold`` from the library's own windows (module doc); returns it.
-        ``calibration`` keeps the same/other distance medians and counts."""
+        """Set ``threshold`` and ``ratio`` from the library's own windows (module doc);
+        returns the threshold.  ``calibration`` keeps the medians and counts."""
         names = np.array(self.names)
         src = np.array(self.sources)
-        same, other = [], []
+        who = [str(e.get("person") or e.get("source", k)) for k, e in enumerate(self.examples)]
+        person = np.array([who[k] for k in self.sources])
+        by_person = len(set(who)) > 1
+        same, other = [], []             # distances: nearest same name / nearest other name
+        o1, o2 = [], []                  # the window's name left out: nearest two other names
         for i in range(len(names)):
             d = self.distances(self.descriptors[i])
+            if by_person:                # as a new person would be met: others' windows only
+                d = np.where(person != person[i], d, np.inf)
             s = d[(names == names[i]) & (src != src[i])]
-            if not len(s):      # the name's only example: its windows that do not overlap
+            s = s[np.isfinite(s)]
+            if not len(s) and not by_person:   # the name's only example: its windows apart
                 ok = (names == names[i]) & (np.arange(len(d)) != i) & self._apart(i)
                 s = d[ok]
+            per = sorted(v for n, v in self.name_distances(d).items()
+                         if n != names[i] and math.isfinite(v))
             if len(s):
                 same.append(float(s.min()))
-            o = d[names != names[i]]
-            if len(o):
-                other.append(float(o.min()))
-        self.threshold = separating_threshold(same, other)
-        self.calibration = {"same_median": _median(same), "other_median": _median(other),
-                            "same": len(same), "other": len(other)}
+                other.append(per[0] if per else math.inf)
+            if per:
+                o1.append(per[0])
+                o2.append(per[1] if len(per) > 1 else math.inf)
+        self.threshold, self.ratio = separating_rule(same, other, o1, o2)
+        self.calibration = {"same_median": _median(same), "other_median": _median(o1),
+                            "same": len(same), "other": len(o1)}
         return self.threshold
 
     def _apart(self, i: int) -> np.ndarray:
@@ -224,7 +250,8 @@ class Library:
                 "dims": int(self.dims), "frame_rate": float(self.frame_rate),
                 "window_s": self.window_s, "step_s": self.step_s, "edge_s": self.edge_s,
                 "min_s": self.min_s, "descriptor": list(GROUPS),
-                "threshold": _finite(self.threshold), "calibration": cal,
+                "threshold": _finite(self.threshold), "ratio": float(self.ratio),
+                "calibration": cal,
                 "scale": [round(float(v), 6) for v in self.scale],
                 "names": list(self.names), "sources": [int(s) for s in self.sources],
                 "starts": [float(s) for s in (self.starts or [0.0] * len(self.names))],
@@ -238,6 +265,32 @@ class Library:
         tmp.write_text(json.dumps(self.to_dict(), allow_nan=False) + "\n", encoding="utf-8")
         tmp.replace(p)
         return p
+
+
+def separating_rule(same: Sequence[float], same_other: Sequence[float],
+                    o1: Sequence[float], o2: Sequence[float]) -> tuple[float, float]:
+    """(threshold, ratio) of the rule "named when d1 <= threshold and d1 / d2 <= ratio"
+    (d1, d2: nearest and second-nearest name's distance) that best tells the library's
+    own known cases (a window's nearest same-name distance ``same`` against its nearest
+    other name ``same_other``) from its unknown ones (the window's name left out: ``o1``,
+    ``o2``): the most known accepted plus unknown rejected (shares).  Ratios tried: 0.5,
+    0.52, ..., 1.0; ties: the largest ratio, then ``separating_threshold``'s middle rule.
+    Without known or unknown cases: ``separating_threshold`` alone, ratio 1."""
+    s = np.asarray(same, dtype=np.float64)
+    so = np.asarray(same_other, dtype=np.float64)
+    a = np.asarray(o1, dtype=np.float64)
+    b = np.asarray(o2, dtype=np.float64)
+    if not len(s) or not len(a):
+        return separating_threshold(s, a), 1.0
+    best = (-1.0, math.inf, 1.0)
+    for r in np.round(np.arange(1.0, 0.4999, -0.02), 4):
+        ks = s[s <= r * so]                      # known windows the ratio test lets through
+        ua = a[a <= r * b]                       # unknown windows it does not reject
+        t = separating_threshold(ks, ua) if len(ks) else 0.0
+        score = (np.sum(ks <= t) / len(s)) + 1.0 - np.sum(ua <= t) / len(a)
+        if score > best[0] + 1e-12:
+            best = (float(score), float(t), float(r))
+    return best[1], best[2]
 
 
 def separating_threshold(same: Sequence[float], other: Sequence[float]) -> float:
@@ -364,11 +417,16 @@ def load(path: str | Path, profile: str | None = None, dims: int | None = None) 
         lib = Library(str(doc["profile"]), int(doc["dims"]), float(doc["frame_rate"]),
                       np.asarray(doc["descriptors"], dtype=np.float64),
                       [str(n) for n in doc["names"]], [int(s) for s in doc["sources"]],
-                      list(doc["examples"]), np.asarray(doc["scale"], dtype=np.float64),
-                      math.inf if doc["threshold"] is None else float(doc["threshold"]),
-                      float(doc["window_s"]), float(doc["step_s"]), float(doc["edge_s"]),
-                      float(doc["min_s"]), dict(doc.get("calibration") or {}),
-                      [float(x) for x in doc.get("starts") or []])
+                      list(doc["examples"]),
+                      scale=np.asarray(doc["scale"], dtype=np.float64),
+                      threshold=math.inf if doc["threshold"] is None else float(doc["threshold"]),
+                      ratio=float(doc.get("ratio", 1.0)),
+                      window_s=float(doc["window_s"]), step_s=float(doc["step_s"]),
+                      edge_s=float(doc["edge_s"]), min_s=float(doc["min_s"]),
+                      calibration=dict(doc.get("calibration") or {}),
+                      starts=[float(x) for x in doc.get("starts") or []])
+        if not 0 < lib.ratio <= 1:
+            raise ValueError(f"ratio {lib.ratio} outside (0, 1]")
     except (KeyError, TypeError, ValueError) as exc:
         raise LibraryError(f"behaviour library {p}: malformed ({type(exc).__name__}: "
                            f"{exc})") from None

@@ -18,7 +18,8 @@ from pythonosc.osc_message import OscMessage
 from rtseg.drivers.base import Source
 from rtseg.frame import Frame
 from rtseg.identity_eval import run_identity
-from rtseg.library import UNKNOWN, LibraryBuilder, LibraryError, load, separating_threshold
+from rtseg.library import (UNKNOWN, LibraryBuilder, LibraryError, load, separating_rule,
+                           separating_threshold)
 from rtseg.library_learn import label_runs, take_rows
 from rtseg.live import LiveSession
 from rtseg.online_eval import live_config
@@ -63,6 +64,9 @@ def test_round_trip_through_the_file(tmp_path, library):
                                                                     "walk", "wave"]
     assert np.allclose(back.descriptors, library.descriptors, atol=1e-5)
     assert back.threshold == pytest.approx(library.threshold)
+    assert back.ratio == pytest.approx(library.ratio) and 0 < back.ratio <= 1
+    assert (back.window_s, back.step_s, back.edge_s, back.min_s) == (2.0, 1.0, 0.5, 1.0)
+    assert back.examples == library.examples and back.starts == library.starts
     res = synthesize("walk:4", seed=5)
     X, _, _ = take_rows(res.take, _config())
     a, b = library.name(X[120:360]), back.name(X[120:360])
@@ -115,6 +119,17 @@ def test_learn_command_and_its_errors(tmp_path):
     lib.write_text('{"format": "something else"}')
     p = run("--take", str(take), "--label", "walk")
     assert p.returncode == 2 and "not a behaviour library" in p.stderr
+
+
+def test_separating_rule_uses_the_ratio_when_distances_overlap():
+    """Known cases: d1 0.5-0.9 with a far second name; unknown cases: d1 0.5-0.9 too,
+    but two other names about as near - only the ratio tells them apart."""
+    same = [0.5, 0.6, 0.7, 0.8, 0.9]
+    same_other = [2.0] * 5
+    o1 = [0.55, 0.65, 0.75, 0.85, 0.95]
+    o2 = [v * 1.05 for v in o1]
+    t, r = separating_rule(same, same_other, o1, o2)
+    assert t >= 0.9 and 0.45 < r < 0.95
 
 
 def test_separating_threshold():

@@ -84,7 +84,8 @@ def run(args: argparse.Namespace) -> int:
         counts[e["name"]] = counts.get(e["name"], 0) + 1
     print(f"{path}: {len(counts)} behaviours, {len(lib.examples)} examples, "
           f"{len(lib.names)} windows; profile {lib.profile} ({lib.dims} dims); "
-          f"unknown beyond distance {lib.threshold:.3f}"
+          f"unknown beyond distance {lib.threshold:.3f} or ratio {lib.ratio:.2f} to the "
+          f"next name"
           + (" (given)" if lib.calibration.get("threshold_given") else " (calibrated)"))
     for k in sorted(counts):
         print(f"  {k}: {counts[k]} example(s)")
