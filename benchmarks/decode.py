@@ -261,27 +261,17 @@ class _CountingStats:
 
 
 class _AxisText:
-    """What the axis text source runs on each TCP read: split on ``||``, decode, convert."""
+    """What the axis text source runs on each TCP read (``axis_source.TextStream``: split
+    on ``||``, decode the frames of the read together, convert)."""
 
-    def __init__(self) -> None:
-        from rtseg.drivers.axis_source import AxisFrames
-        from rtseg.drivers.codec_axis import TextSplitter
+    def __init__(self, space: str = "local") -> None:
+        from rtseg.drivers.axis_source import AxisFrames, TextStream
         self.count = _CountingStats()
         self.stats = self.count.stats
-        self.frames, self.splitter = AxisFrames(self.count), TextSplitter()
+        self.stream = TextStream(AxisFrames(self.count, space=space))
 
     def feed(self, data: bytes, now: float) -> list:
-        from rtseg.drivers.codec_axis import AxisError, decode_text
-        out = []
-        for chunk in self.splitter.feed(data):
-            try:
-                f = self.frames.frame(decode_text(chunk), now)
-            except AxisError as e:
-                self.frames.error(e, now)
-                continue
-            if f is not None:
-                out.append(f)
-        return out
+        return self.stream.feed(data, now)
 
     def flush(self, now: float, force: bool = False) -> list:
         return []

@@ -61,8 +61,9 @@ import numpy as np
 
 from rtseg.drivers.base import FrameQueue, Source, SourceError
 from rtseg.drivers.codec_axis import (BINARY_PORT, JOINTS, PARENTS, TEXT_PORT, AxisError,
-                                      AxisFrame, BinaryAssembler, TextSplitter,
-                                      decode_binary, decode_text, global_pose, to_pose)
+                                      AxisFrame, BinaryAssembler, decode_binary, global_pose,
+                                      to_pose, to_poses)
+from rtseg.drivers.codec_axis_text import TextSplitter, decode_texts
 from rtseg.drivers.osc_source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
                                       allow_option, check_options, number_option, renamed)
 from rtseg.frame import Frame
@@ -76,6 +77,7 @@ BINARY_OPTIONS = ("format", "avatar", "order", "rate", "unit", "space", "queue",
 TEXT_OPTIONS = ("format", "avatar", "order", "rate", "unit", "space", "queue", "backoff",
                 "max_backoff")
 SPACES = ("local", "global")
+_ALL_VALID = np.ones(len(JOINTS), dtype=bool)
 _RANGES = {"rate": (1e-3, 1e5), "queue": (1, 1_000_000), "rcvbuf": (1, 1 << 30),
            "backoff": (1e-3, 60.0), "max_backoff": (1e-3, 600.0)}
 
@@ -117,9 +119,13 @@ class AxisFrames:
         return self.avatar == f.avatar_name or self.avatar == str(f.avatar_index)
 
     def frame(self, f: AxisFrame, now: float) -> Frame | None:
+        """The Frame of ``f``, or None (another avatar's frame, counted)."""
         if not self._selected(f):
             self.other_avatars += 1
             return None
+        return self._convert(f, now)
+
+    def _convert(self, f: AxisFrame, now: float) -> Frame:
         q, valid, pos = to_pose(f, self.order, self.unit_scale)   # fresh arrays
         if not valid.all():
             n = int(np.count_nonzero(~valid))
@@ -134,6 +140,70 @@ class AxisFrames:
         return Frame(recv_time=now, quats=q, valid=valid,
                      source_time=None if f.frame_index is None else f.frame_index / self.rate,
                      seq=seq, root_position=pos)
+
+
+    def many(self, items: list[AxisFrame | AxisError], now: float) -> list[Frame]:
+        """:meth:`frame` of each decoded frame (AxisErrors are counted), in order; runs
+        of frames of one layout with finite values are converted together (one Euler ->
+        quaternion pass and, for ``space=global``, one forward-kinematics pass), giving
+        the same values as frame by frame."""
+        out: list[Frame] = []
+        run: list[AxisFrame] = []
+        for f in items:
+            if isinstance(f, AxisError):
+                self.error(f, now)
+                continue
+            if not self._selected(f):
+                self.other_avatars += 1
+                continue
+            if run and (f.with_disp, f.with_ref, f.values.size) != (
+                    run[0].with_disp, run[0].with_ref, run[0].values.size):
+                self._run(run, now, out)
+                run = []
+            run.append(f)
+        if run:
+            self._run(run, now, out)
+        return out
+
+    def _run(self, run: list[AxisFrame], now: float, out: list[Frame]) -> None:
+        values = np.stack([f.values for f in run]) if len(run) > 1 else None
+        if values is None or not np.isfinite(values).all():
+            out.extend(self._convert(f, now) for f in run)   # one, or non-finite values
+            return
+        f0 = run[0]
+        q, root = to_poses(values, f0.with_disp, f0.with_ref, self.order, self.unit_scale)
+        self._last = q[-1]
+        if self.space == "global":
+            q = global_pose(q)
+        for k, f in enumerate(run):
+            seq = f.frame_index if f.frame_index is not None else self.received
+            self.received += 1
+            out.append(Frame(recv_time=now, quats=q[k], valid=_ALL_VALID.copy(),
+                             source_time=None if f.frame_index is None
+                             else f.frame_index / self.rate, seq=seq,
+                             root_position=root[k]))
+
+
+class TextStream:
+    """What :class:`AxisTextSource` runs on each TCP read: bytes -> frames split on
+    ``||`` -> decoded together (:func:`~rtseg.drivers.codec_axis_text.decode_texts`) ->
+    :meth:`AxisFrames.many`.  A run of 64 KiB without ``||`` is discarded and counted
+    (``corrupt``)."""
+
+    def __init__(self, frames: AxisFrames) -> None:
+        self.frames = frames
+        self.splitter = TextSplitter()
+
+    def feed(self, data: bytes, now: float) -> list[Frame]:
+        before = self.splitter.overflows
+        chunks = self.splitter.feed(data)
+        if self.splitter.overflows != before:
+            self.frames.error(AxisError("corrupt", "no '||' within 64 KiB; discarded"), now)
+        return self.frames.many(decode_texts(chunks), now) if chunks else []
+
+    def reset(self) -> None:
+        """Forget a partial frame (after a reconnect)."""
+        self.splitter.reset()
 
 
 class _BinaryAdapter:
@@ -242,7 +312,7 @@ class AxisTextSource(Source):
 
     def _run(self) -> None:
         delay = self.backoff
-        splitter = TextSplitter()
+        stream = TextStream(self._frames)
         while not self._stop.is_set():
             sock = self._connect()
             if sock is None:
@@ -261,8 +331,8 @@ class AxisTextSource(Source):
             log.info("Axis: connected to tcp %s:%d", self.host, self.port)
             self.connected.set()
             delay = self.backoff
-            splitter.reset()
-            self._read(sock, splitter)
+            stream.reset()
+            self._read(sock, stream)
             self.connected.clear()
             with self._sock_lock:
                 self._sock = None
@@ -272,7 +342,7 @@ class AxisTextSource(Source):
                 if self._stop.wait(delay):
                     break
 
-    def _read(self, sock: socket.socket, splitter: TextSplitter) -> None:
+    def _read(self, sock: socket.socket, stream: TextStream) -> None:
         while not self._stop.is_set():
             try:
                 data = sock.recv(65536)
@@ -283,22 +353,14 @@ class AxisTextSource(Source):
             if not data:
                 return
             now = time.monotonic()
-            before = splitter.overflows
-            chunks = splitter.feed(data)
-            if splitter.overflows != before:
-                self._frames.error(AxisError("corrupt", "no '||' within 64 KiB; discarded"),
-                                   now)
-            for chunk in chunks:
-                try:
-                    fr = self._frames.frame(decode_text(chunk), now)
-                except AxisError as e:
-                    self._frames.error(e, now)
-                    continue
-                except Exception:   # pragma: no cover - a decoder bug must not end the loop
-                    self.count("corrupt")
-                    log.exception("Axis: text frame crashed the decoder; dropped")
-                    continue
-                if fr is not None and self._queue.put(fr):
+            try:
+                frames = stream.feed(data, now)
+            except Exception:   # pragma: no cover - a decoder bug must not end the loop
+                self.count("corrupt")
+                log.exception("Axis: text read crashed the decoder; dropped")
+                continue
+            for fr in frames:
+                if self._queue.put(fr):
                     self.count("dropped")
                     self._frames.warn("drop", now, "Axis: reader too slow, dropped oldest "
                                       "queued frame (%d so far)", self.stats.dropped)
@@ -363,4 +425,4 @@ def open_url(location: str, options: dict[str, str]) -> Source:
                             allow=allow, **kw)
 
 
-__all__ = ["AxisBinarySource", "AxisTextSource", "AxisFrames", "open_url"]
+__all__ = ["AxisBinarySource", "AxisTextSource", "AxisFrames", "TextStream", "open_url"]

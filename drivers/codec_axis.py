@@ -55,7 +55,7 @@ import numpy as np
 __all__ = ["JOINTS", "PARENTS", "TEXT_PORT", "BINARY_PORT", "HEADER", "TOKEN1", "TOKEN2",
            "AxisError", "AxisFrame", "layout", "value_count", "decode_binary",
            "decode_text", "encode_binary", "encode_text", "euler_to_quat", "quat_to_euler",
-           "to_pose", "global_pose", "BinaryAssembler", "TextSplitter", "SUIT_SEGMENTS"]
+           "to_pose", "to_poses", "global_pose", "BinaryAssembler", "TextSplitter", "SUIT_SEGMENTS"]
 
 TEXT_PORT = 7001
 BINARY_PORT = 7002
@@ -198,65 +198,6 @@ def encode_binary(values: np.ndarray, *, with_disp: bool = True, with_ref: bool 
     return head + v.tobytes()
 
 
-# --------------------------------------------------------------------------- text
-
-def decode_text(chunk: bytes | str, joints: int = len(JOINTS)) -> AxisFrame:
-    """One text frame (the part between two ``||``, or one frame ending in ``||``): index,
-    name, values."""
-    try:
-        text = chunk.decode("ascii") if isinstance(chunk, (bytes, bytearray)) else chunk
-    except UnicodeDecodeError:
-        raise AxisError("corrupt", "text frame is not ASCII") from None
-    text = text.strip()
-    if text.endswith("||"):
-        text = text[:-2]
-    parts = text.split()
-    if len(parts) < 3:
-        raise AxisError("corrupt", f"text frame of {len(parts)} fields (index, name, values)")
-    try:
-        index = int(parts[0])
-    except ValueError:
-        raise AxisError("corrupt", f"avatar index {parts[0][:20]!r} is not an integer") from None
-    disp, ref = layout(len(parts) - 2, joints)
-    try:
-        values = np.array(parts[2:], dtype=np.float64)
-    except ValueError:
-        raise AxisError("corrupt", "a value of the text frame is not a number") from None
-    return AxisFrame(index, parts[1], values, disp, ref)
-
-
-def encode_text(values: np.ndarray, avatar_index: int = 0, avatar_name: str = "Avatar00"
-                ) -> bytes:
-    """``<index> <name> v v ... ||`` with each value written as the shortest decimal that
-    gives back its float32 exactly."""
-    v = np.asarray(values, dtype=np.float32)
-    body = " ".join(map(str, v))        # numpy's shortest repr that gives the float32 back
-    return f"{avatar_index} {avatar_name} {body} ||".encode("ascii")
-
-
-class TextSplitter:
-    """Stream bytes -> text frames: splits on ``||``; a run of more than ``max_frame``
-    bytes without a separator is discarded (counted by the caller via ``overflows``)."""
-
-    def __init__(self, max_frame: int = 65536) -> None:
-        self.max_frame = max_frame
-        self._buf = bytearray()
-        self.overflows = 0
-
-    def feed(self, data: bytes) -> list[bytes]:
-        self._buf += data
-        *frames, rest = bytes(self._buf).split(b"||")
-        self._buf = bytearray(rest)
-        if len(self._buf) > self.max_frame:
-            self._buf.clear()
-            self.overflows += 1
-        return [f for f in frames if f.strip()]
-
-    def reset(self) -> None:
-        """Forget a partial frame (after a reconnect)."""
-        self._buf.clear()
-
-
 class BinaryAssembler:
     """Datagrams -> complete binary frames (bytes), joining a frame split over several
     datagrams (header datagram first).  ``feed`` returns (frames, errors) where errors are
@@ -356,21 +297,67 @@ def quat_to_euler(order: str, q: np.ndarray) -> np.ndarray:
         q.shape[:-1] + (3,))
 
 
+def _ancestor_tables(parents: tuple[int, ...]) -> list[np.ndarray]:
+    """Pointer-jumping tables over ``parents``: table r gives each joint's 2^r-th ancestor
+    (row J, the identity, stands for 'none'), as many tables as the hierarchy needs."""
+    J = len(parents)
+    anc = np.array([J if p < 0 else p for p in parents] + [J], dtype=np.intp)
+    links = 1 + max(_depth(parents, j) for j in range(J))       # longest root..leaf chain
+    tables = []
+    while (1 << len(tables)) < links:
+        tables.append(anc)
+        anc = anc[anc]
+    return tables
+
+
+def _depth(parents: tuple[int, ...], j: int) -> int:
+    d = 0
+    while parents[j] >= 0:
+        d, j = d + 1, parents[j]
+    return d
+
+
+#: a ⊗ b = L(a) b for scalar-last quaternions, L[r, c] = _L_SIGN[r, c] * a[_L_INDEX[r, c]]
+#: (rows: x, y, z, w of the product); L(a) L(b) = L(a ⊗ b) and L(a)[:, 3] = a
+_L_INDEX = np.array([[3, 2, 1, 0], [2, 3, 0, 1], [1, 0, 3, 2], [0, 1, 2, 3]], dtype=np.intp)
+_L_SIGN = np.array([[1.0, -1.0, 1.0, 1.0], [1.0, 1.0, -1.0, 1.0], [-1.0, 1.0, 1.0, 1.0],
+                    [-1.0, -1.0, -1.0, 1.0]])
+_ANCESTORS = _ancestor_tables(PARENTS)
+_EYE4 = np.eye(4)
+
+
 def global_pose(local: np.ndarray) -> np.ndarray:
-    """(59, 4) parent-relative rotations -> global orientations (forward kinematics over
-    the Axis hierarchy, global_j = global_parent ⊗ local_j).  A plain loop over Python
-    floats: for one 59-joint frame it beats per-level numpy products several times."""
-    rows = local.tolist()
-    out: list = [None] * len(rows)
-    for j, p in enumerate(PARENTS):
-        if p < 0:
-            out[j] = rows[j]
-            continue
-        ax, ay, az, aw = out[p]
-        bx, by, bz, bw = rows[j]
-        out[j] = (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-                  aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
-    return np.array(out, dtype=np.float64)
+    """(..., 59, 4) parent-relative rotations -> global orientations (forward kinematics
+    over the Axis hierarchy, global_j = global_parent ⊗ local_j; scalar-last float64).
+
+    Pointer jumping on the quaternions' 4x4 left-product matrices, vectorised over all
+    joints (and frames): after round r each joint holds the product of the 2^r links ending
+    at it, so the 13-link chains take 4 rounds of one gather and one batched 4x4 matrix
+    product (equal to joint-by-joint products to a few ulp)."""
+    local = np.asarray(local, dtype=np.float64)
+    lead, J = local.shape[:-2], local.shape[-2]
+    m = np.empty(lead + (J + 1, 4, 4))
+    np.multiply(local[..., _L_INDEX], _L_SIGN, out=m[..., :J, :, :])
+    m[..., J, :, :] = _EYE4
+    for anc in _ANCESTORS:
+        m = m.take(anc, axis=-3) @ m
+    return m[..., :J, :, 3]
+
+
+def to_poses(values: np.ndarray, with_disp: bool, with_ref: bool, order: str = "YXZ",
+             unit_scale: float = 0.01, joints: int = len(JOINTS)
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """Frames of one layout at once: ``values`` (F, count), all finite -> (local quats
+    (F, joints, 4), root positions (F, 3) metres).  Same values as :func:`to_pose` per
+    frame (which handles non-finite values)."""
+    v = values[:, 6:] if with_ref else values
+    F = v.shape[0]
+    if with_disp:
+        ch = v.reshape(F, joints, 6)
+        root, angles = ch[:, 0, :3], ch[:, :, 3:]
+    else:
+        root, angles = v[:, :3], v[:, 3:].reshape(F, joints, 3)
+    return euler_to_quat(order, angles), root * unit_scale
 
 
 def to_pose(frame: AxisFrame, order: str = "YXZ", unit_scale: float = 0.01,
@@ -389,3 +376,15 @@ def to_pose(frame: AxisFrame, order: str = "YXZ", unit_scale: float = 0.01,
     q = euler_to_quat(order, np.where(valid[:, None], angles, 0.0))
     pos = root * unit_scale if np.isfinite(root).all() else None
     return q, valid, pos
+
+
+_TEXT_NAMES = ("TextSplitter", "decode_text", "encode_text")
+
+
+def __getattr__(name: str):
+    """The text encoding lives in :mod:`rtseg.drivers.codec_axis_text`; its names stay
+    importable from here (loaded on first use: that module imports this one)."""
+    if name in _TEXT_NAMES:
+        from rtseg.drivers import codec_axis_text
+        return getattr(codec_axis_text, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

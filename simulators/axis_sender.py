@@ -37,7 +37,8 @@ from scipy.spatial.transform import Rotation
 
 from rtseg import quat as Q
 from rtseg.drivers.codec_axis import (BINARY_PORT, JOINTS, PARENTS, SUIT_SEGMENTS, TEXT_PORT,
-                                      encode_binary, encode_text, quat_to_euler)
+                                      encode_binary, quat_to_euler)
+from rtseg.drivers.codec_axis_text import encode_text
 from rtseg.simulators.stream_sender import StreamSender
 from rtseg.take import Take
 

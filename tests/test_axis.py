@@ -296,6 +296,81 @@ def test_fuzzed_inputs_never_escape():
     assert ok > 1000 and bad > 1000
 
 
+# --------------------------------------------------------------------------- fast paths
+
+def test_text_numbers_parse_to_exactly_what_float_gives():
+    """codec_axis_text's integer fast path (digits / 10^d) against float(), bit for bit
+    (including -0.0), on numpy's shortest float32 forms, printf forms, and random strings
+    of digits, points and minus signs (which must be refused exactly when float() refuses
+    them)."""
+    from rtseg.drivers.codec_axis_text import parse_decimals
+    rng = random.Random(7)
+    nrng = np.random.default_rng(7)
+    for _ in range(300):
+        v = (nrng.standard_normal(40) * 10.0 ** nrng.integers(-8, 8, 40)).astype(np.float32)
+        toks = [str(x) for x in v] + [f"{x:.{rng.randint(0, 9)}f}" for x in v[:20]]
+        toks += ["-0.0", "-0.000", "0.0", "-.5", "1.", "007.50", "-1e-05", "nan"]
+        rng.shuffle(toks)
+        got = parse_decimals(" ".join(toks).encode())
+        ref = np.array([float(t) for t in toks])
+        assert got.view(np.int64).tolist() == ref.view(np.int64).tolist()
+    refused = 0
+    for _ in range(5000):
+        toks = ["".join(rng.choice("0123456789.-") for _ in range(rng.randint(1, 20)))
+                for _ in range(rng.randint(1, 5))]
+        try:
+            ref = np.array([float(t) for t in toks])
+        except ValueError:
+            ref = None
+        try:
+            got = parse_decimals(" ".join(toks).encode())
+        except A.AxisError as e:
+            assert ref is None and e.kind == "corrupt", toks
+            refused += 1
+            continue
+        assert ref is not None and got.view(np.int64).tolist() == ref.view(np.int64).tolist()
+    assert refused > 1000
+
+
+def test_frames_of_one_read_decode_and_convert_as_one_by_one():
+    """decode_texts (one number pass for the frames of a TCP read) and AxisFrames.many
+    (one Euler / forward-kinematics pass) give each frame's values, errors and Frame as
+    decode_text + AxisFrames.frame do, in order, other avatars skipped."""
+    from rtseg.drivers.codec_axis_text import decode_texts
+    rng = np.random.default_rng(3)
+    chunks = [f"0 Avatar00 {ln}".encode() for ln in fixture_motion()]      # 2 real frames
+    chunks += [A.encode_text(rng.uniform(-180, 180, 354))[:-3] for _ in range(4)]
+    chunks.insert(2, b"0 Avatar00 1.0 2.0")                       # no layout: bad_messages
+    chunks.insert(4, chunks[1].replace(b" 0", b" x", 1))           # not a number: corrupt
+    chunks.insert(5, chunks[0].replace(b"Avatar00", b"Avatar01").replace(b"0 ", b"1 ", 1))
+    chunks.append(b"0 Avatar00 " + b" ".join(f"{x:.2e}".encode() for x in range(354)))
+    one = []
+    for c in chunks:
+        try:
+            one.append(A.decode_text(c))
+        except A.AxisError as e:
+            one.append(e)
+    many = decode_texts(chunks)
+    assert [type(x) for x in many] == [type(x) for x in one]
+    for a, b in zip(many, one):
+        if isinstance(a, A.AxisError):
+            assert (a.kind, str(a)) == (b.kind, str(b))
+        else:
+            assert a.values.tobytes() == b.values.tobytes() and a.avatar_name == b.avatar_name
+    for space in ("local", "global"):
+        c1, c2 = Counter(), Counter()
+        f1, f2 = AxisFrames(c1, space=space), AxisFrames(c2, space=space)
+        ref = [f1.frame(x, 0.5) if not isinstance(x, A.AxisError) else f1.error(x, 0.5)
+               for x in one]
+        ref = [f for f in ref if f is not None]
+        got = f2.many(many, 0.5)
+        assert len(got) == len(ref) == 7 and f2.other_avatars == f1.other_avatars == 1
+        assert c2.counts == c1.counts == {"bad_messages": 1, "corrupt": 1}
+        for g, r in zip(got, ref):
+            assert np.allclose(g.quats, r.quats, atol=1e-15, rtol=0) and g.seq == r.seq
+            assert np.array_equal(g.root_position, r.root_position) and g.valid.all()
+
+
 # --------------------------------------------------------------------------- sockets
 
 def test_url_defaults_options_and_errors():

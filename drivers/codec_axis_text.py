@@ -1,0 +1,208 @@
+"""Axis BVH broadcast, **text** encoding: ``||``-separated frames <-> :class:`AxisFrame`.
+
+Each frame is ``<avatar index> <avatar name> <value> <value> ...`` (white space between
+fields) and ends at ``||`` (see :mod:`rtseg.drivers.codec_axis` for the layouts and
+conventions; this module holds the text side: :func:`decode_text`, :func:`encode_text`,
+:class:`TextSplitter` and the number parser :func:`parse_decimals`).
+
+Speed: a frame carries 180-360 decimal numbers, and ``float()`` on each (or numpy's
+string casts, or ``np.fromstring``, which cost the same) is most of a 50 us budget.
+:func:`parse_decimals` reads a frame whose every token is ``[-]digits.digits`` as
+integers instead - the token with its point removed, converted by numpy's integer parser
+(``np.fromstring``, ~10x cheaper than ``float``) - and divides each by 10^(digits after the point), found
+from the point and space positions in one vectorised pass.  The integer M (|M| < 2^53) and
+10^d (d <= 22) are exact doubles, so that one IEEE division is the correctly rounded value
+of the decimal: exactly what ``float()`` returns (Clinger's fast path).  A frame with any
+other token (no point, exponent, ``nan``, more digits, ``_``) is read with ``float()``
+token by token, so the values are always ``float()``'s.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rtseg.drivers.codec_axis import JOINTS, AxisError, AxisFrame, layout
+
+__all__ = ["decode_text", "decode_texts", "encode_text", "TextSplitter", "parse_decimals"]
+
+#: 10^k, exact in float64 for k <= 22
+_POW10 = 10.0 ** np.arange(23)
+#: integers up to this magnitude convert to float64 exactly
+_EXACT_INT = 1 << 53
+#: the bytes of the fast form (anything else: float() token by token)
+_FAST_CHARS = b"0123456789 .-"
+
+
+def _slow(tokens: list[bytes]) -> np.ndarray:
+    """``float()`` of each token; AxisError('corrupt') when one is not a number."""
+    try:
+        return np.array([float(t) for t in tokens], dtype=np.float64)
+    except ValueError:
+        raise AxisError("corrupt", "a value of the text frame is not a number") from None
+
+
+def _fast_values(body: bytes, checked: bool = False) -> np.ndarray | None:
+    """``body``'s numbers if every token is ``[-]digits.digits`` (see the module docstring),
+    else None.  ``checked``: the caller made sure ``body`` holds only :data:`_FAST_CHARS`
+    with single spaces between tokens and none around them.  Never raises."""
+    if not checked and (body.translate(None, _FAST_CHARS) or b"  " in body
+                        or body[:1] == b" " or body[-1:] == b" "):
+        return None
+    if not body or b" -. " in b" " + body + b" ":      # '-.': a token without a digit
+        return None
+    a = np.frombuffer(body, dtype=np.uint8)
+    sp = (a == 32).nonzero()[0]
+    dots = (a == 46).nonzero()[0]
+    k = sp.size + 1
+    if dots.size != k or (k > 1 and ((dots[:-1] >= sp).any() or (dots[1:] <= sp).any())):
+        return None                                    # token i must hold dots[i]
+    minus = body.count(b"-")
+    if minus and minus != body.count(b" -") + (a[0] == 45):
+        return None                                    # a '-' inside a token
+    # every token is now [-]digits.digits: its digits form an integer
+    m = np.fromstring(body.replace(b".", b""), dtype=np.int64, sep=" ")
+    if m.size != k:                                    # a token that was only '.'
+        return None
+    dec = np.empty(k, dtype=np.intp)                   # digits after each point
+    np.subtract(sp, dots[:-1], out=dec[:-1])
+    dec[-1] = a.size - dots[-1]
+    dec -= 1
+    if dec.max() >= _POW10.size or m.max() >= _EXACT_INT or m.min() <= -_EXACT_INT:
+        return None
+    out = m / _POW10[dec]
+    if minus and (b"-0" in body or b"-." in body):     # '-0.0' is -0.0, as float() says
+        zero = (m == 0).nonzero()[0]
+        if zero.size:
+            first = np.concatenate(([0], sp + 1))[zero]
+            out[zero[a[first] == 45]] = -0.0
+    return out
+
+
+def parse_decimals(body: bytes) -> np.ndarray:
+    """Numbers separated by white space -> float64 array, each exactly ``float(token)``
+    (see the module docstring); AxisError('corrupt') if a token is not a number."""
+    out = _fast_values(body)
+    return out if out is not None else _slow(body.split())
+
+
+def _fields(chunk: bytes | str) -> tuple[int, str, bytes]:
+    """(avatar index, avatar name, values text) of one frame; AxisError ``corrupt``."""
+    if isinstance(chunk, str):
+        try:
+            chunk = chunk.encode("ascii")
+        except UnicodeEncodeError:
+            raise AxisError("corrupt", "text frame is not ASCII") from None
+    elif not chunk.isascii():
+        raise AxisError("corrupt", "text frame is not ASCII")
+    text = bytes(chunk).strip()
+    if text.endswith(b"||"):
+        text = text[:-2].rstrip()
+    head = text.split(None, 2)
+    if len(head) < 3:
+        raise AxisError("corrupt", f"text frame of {len(head)} fields (index, name, values)")
+    try:
+        index = int(head[0])
+    except ValueError:
+        raise AxisError("corrupt", f"avatar index {head[0][:20].decode()!r} is not an "
+                        "integer") from None
+    return index, head[1].decode("ascii"), head[2]
+
+
+def _plain(body: bytes) -> bool:
+    """Only :data:`_FAST_CHARS`, single spaces (``body`` comes stripped)."""
+    return not body.translate(None, _FAST_CHARS) and b"  " not in body
+
+
+def decode_text(chunk: bytes | str, joints: int = len(JOINTS)) -> AxisFrame:
+    """One text frame (the part between two ``||``, or one frame ending in ``||``): index,
+    name, values.  AxisError ``corrupt`` (not ASCII, too few fields, a value that is not a
+    number) or ``bad_messages`` (a value count that fits no layout)."""
+    index, name, body = _fields(chunk)
+    if _plain(body):
+        disp, ref = layout(body.count(b" ") + 1, joints)
+        values = _fast_values(body, checked=True)
+        if values is None:
+            values = _slow(body.split())
+    else:
+        tokens = body.split()
+        disp, ref = layout(len(tokens), joints)
+        values = _slow(tokens)
+    return AxisFrame(index, name, values, disp, ref)
+
+
+def decode_texts(chunks: list[bytes], joints: int = len(JOINTS)
+                 ) -> list[AxisFrame | AxisError]:
+    """:func:`decode_text` of each chunk (the AxisFrame, or the AxisError it raised), in
+    order.  The numbers of all plain frames are parsed in one pass (what a TCP read
+    holding several frames costs once); values of frames parsed together are slices of
+    one array."""
+    out: list[AxisFrame | AxisError | None] = [None] * len(chunks)
+    fast: list[tuple[int, int, str, bytes, int, bool, bool]] = []
+    for i, chunk in enumerate(chunks):
+        try:
+            index, name, body = _fields(chunk)
+            if _plain(body):
+                count = body.count(b" ") + 1
+                disp, ref = layout(count, joints)
+                fast.append((i, index, name, body, count, disp, ref))
+            else:
+                out[i] = decode_text(chunk, joints)
+        except AxisError as e:
+            out[i] = e
+    if len(fast) == 1:
+        i, index, name, body, count, disp, ref = fast[0]
+        fast = []
+        try:
+            values = _fast_values(body, checked=True)
+            out[i] = AxisFrame(index, name, values if values is not None
+                               else _slow(body.split()), disp, ref)
+        except AxisError as e:
+            out[i] = e
+    if fast:
+        values = _fast_values(b" ".join(f[3] for f in fast), checked=True)
+        at = 0
+        for i, index, name, body, count, disp, ref in fast:
+            if values is not None:
+                v = values[at:at + count]
+                at += count
+            else:                                      # some frame is not plain numbers
+                v = _fast_values(body, checked=True)
+                if v is None:
+                    try:
+                        v = _slow(body.split())
+                    except AxisError as e:
+                        out[i] = e
+                        continue
+            out[i] = AxisFrame(index, name, v, disp, ref)
+    return out  # type: ignore[return-value]
+
+
+def encode_text(values: np.ndarray, avatar_index: int = 0, avatar_name: str = "Avatar00"
+                ) -> bytes:
+    """``<index> <name> v v ... ||`` with each value written as the shortest decimal that
+    gives back its float32 exactly."""
+    v = np.asarray(values, dtype=np.float32)
+    body = " ".join(map(str, v))        # numpy's shortest repr that gives the float32 back
+    return f"{avatar_index} {avatar_name} {body} ||".encode("ascii")
+
+
+class TextSplitter:
+    """Stream bytes -> text frames: splits on ``||``; a run of more than ``max_frame``
+    bytes without a separator is discarded (counted by the caller via ``overflows``)."""
+
+    def __init__(self, max_frame: int = 65536) -> None:
+        self.max_frame = max_frame
+        self._buf = b""
+        self.overflows = 0
+
+    def feed(self, data: bytes) -> list[bytes]:
+        *frames, rest = (self._buf + data).split(b"||")
+        self._buf = rest
+        if len(rest) > self.max_frame:
+            self._buf = b""
+            self.overflows += 1
+        return [f for f in frames if f.strip()]
+
+    def reset(self) -> None:
+        """Forget a partial frame (after a reconnect)."""
+        self._buf = b""
