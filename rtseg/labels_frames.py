@@ -11,7 +11,8 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from rtseg.labels_types import DEFAULT_TOLERANCE, LabelError, Transition, TransitionLabels
+from rtseg.labels_types import (DEFAULT_TOLERANCE, LabelError, Transition, TransitionLabels,
+                                integer_label)
 
 if TYPE_CHECKING:  # pragma: no cover
     from rtseg.take import Take
@@ -58,16 +59,10 @@ def read_frame_label_column(path: str | Path, column: int = 4) -> np.ndarray:
             if len(parts) <= column:
                 raise LabelError(path, lineno, f"expected at least {column + 1} columns, got {len(parts)}")
             tok = parts[column].strip()
-            try:
-                out.append(int(tok))
-            except ValueError:
-                try:
-                    fv = float(tok)
-                except ValueError:
-                    fv = float("nan")
-                if not np.isfinite(fv) or fv != int(fv):
-                    raise LabelError(path, lineno, f"label must be an integer, got {tok!r}") from None
-                out.append(int(fv))
+            value = integer_label(tok)
+            if value is None:
+                raise LabelError(path, lineno, f"label must be an integer, got {tok!r}")
+            out.append(value)
     if not out:
         raise LabelError(path, None, "no rows")
     return np.asarray(out, dtype=np.int64)

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from rtseg.labels_frames import transitions_from_frame_labels
-from rtseg.labels_types import DEFAULT_TOLERANCE, LabelError, TransitionLabels
+from rtseg.labels_types import DEFAULT_TOLERANCE, LabelError, TransitionLabels, integer_label
 
 #: Frames per label block in ``labels/mocap6`` (10 labels per second at 120 fps).
 MOCAP6_BLOCK = 12
@@ -28,16 +28,10 @@ def _int_tokens(path: Path, text: str) -> np.ndarray:
     values = []
     for lineno, line in enumerate(text.splitlines(), start=1):
         for tok in line.split():
-            try:
-                values.append(int(tok))
-            except ValueError:
-                try:
-                    fv = float(tok)
-                except ValueError:
-                    fv = None
-                if fv is None or fv != int(fv):
-                    raise LabelError(path, lineno, f"expected an integer label, got {tok!r}") from None
-                values.append(int(fv))
+            value = integer_label(tok)
+            if value is None:
+                raise LabelError(path, lineno, f"expected an integer label, got {tok!r}")
+            values.append(value)
     return np.asarray(values, dtype=np.int64)
 
 

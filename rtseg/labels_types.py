@@ -8,6 +8,7 @@ boundary itself.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -23,6 +24,22 @@ class LabelError(ValueError):
         self.line = line
         where = f"{path}:{line}" if line is not None else str(path)
         super().__init__(f"{where}: {message}")
+
+
+def integer_label(token: str) -> int | None:
+    """A label token as an integer (``"3"``, ``"3.0"``, ``"3e0"``), or None when it is not
+    an integral finite number (``"x"``, ``"2.5"``, ``"nan"``, ``"inf"``)."""
+    try:
+        return int(token)
+    except ValueError:
+        pass
+    try:
+        value = float(token)
+    except ValueError:
+        return None
+    if not math.isfinite(value) or value != int(value):
+        return None
+    return int(value)
 
 
 @dataclass(frozen=True)
@@ -80,4 +97,4 @@ class TransitionLabels:
 
 
 
-__all__ = ["DEFAULT_TOLERANCE", "LabelError", "Transition", "TransitionLabels"]
+__all__ = ["DEFAULT_TOLERANCE", "LabelError", "Transition", "TransitionLabels", "integer_label"]

@@ -153,6 +153,20 @@ def test_block_labels_bad_token_names_line(tmp_path):
     assert exc.value.line == 2
 
 
+@pytest.mark.parametrize("token", ["nan", "inf", "-inf", "2.5"])
+def test_non_integral_tokens_raise_label_error_naming_the_line(tmp_path, token):
+    # "nan" / "inf" used to escape as ValueError / OverflowError without file and line
+    blocks = write(tmp_path, f"1 1\n1 {token} 2\n", "13_98.txt")
+    with pytest.raises(LabelError) as exc:
+        read_block_labels(blocks)
+    assert exc.value.line == 2 and repr(token) in str(exc.value)
+    csv = write(tmp_path, f"1,2,3,4,0\n1,2,3,4,{token}\n", "13_98.csv")
+    with pytest.raises(LabelError) as exc:
+        read_frame_labels(csv)
+    assert exc.value.line == 2 and repr(token) in str(exc.value)
+    assert read_block_labels(write(tmp_path, "1 2.0 3e0\n", "13_97.txt")).n_frames == 36
+
+
 def test_frame_labels_changes():
     lab = np.array([0] * 200 + [3] * 100 + [0] * 300)
     tr = transitions_from_frame_labels(lab)
