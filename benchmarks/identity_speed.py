@@ -8,6 +8,10 @@ repeats), and the per-frame distribution (median, p99, max: the frames that deci
 finish a segment).  Also the whole pipeline per frame with identity off and on.
 
     python3 benchmarks/identity_speed.py [--take ../shared/data/cmu/86_01.amc] [--repeat 5]
+                                         [--library LIB]
+
+``--library LIB`` (``rtseg learn``): the tracker also names every decided segment
+(``rtseg.library``); the per-decision naming time is printed too.
 
 Without a take (or when the data folder is absent) a synthetic performance is used.
 """
@@ -58,7 +62,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--take", help="motion file (default: CMU 86_01 when present)")
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--library", help="behaviour library naming the segments (rtseg learn)")
     args = ap.parse_args(argv)
+    library = None
+    if args.library:
+        from rtseg.library import load as load_library
+        library = load_library(args.library)
     take, name = load(args.take)
     cfg, primary = live_config()
     blas = _blas_limit(1)
@@ -70,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     fr = float(take.frame_rate)
     means, per = [], []
     for _ in range(args.repeat):
-        tr = IdentityTracker(fr, primary)
+        tr = IdentityTracker(fr, primary, library=library)
         t = np.empty(len(X))
         t_all = time.perf_counter()
         for k in range(len(X)):
@@ -88,6 +97,18 @@ def main(argv: list[str] | None = None) -> int:
     print(f"identity, amortised us/frame (median of {args.repeat}): {np.median(means):.2f}")
     print(f"identity, per-frame us: median {np.median(allp):.2f}  p99 {np.percentile(allp, 99):.2f}"
           f"  max {allp.max():.0f}")
+    if tr.library is not None:
+        last = int(index[-1])
+        W = tr.named_rows(last - int(fr * 3.0), last)      # the last 2.5 s after the skip
+        reps = []
+        for _ in range(50):
+            t0 = time.perf_counter()
+            library.name(W, fr)
+            reps.append((time.perf_counter() - t0) * 1e6)
+        names = [m.name for m in tr.history if not m.correction]
+        print(f"library: {len(library.names)} windows, {len(library.behaviour_names)} names; "
+              f"one naming (2.5 s window) median {np.median(reps):.0f} us; names sent: "
+              f"{', '.join(names)}")
     off, on = [], []
     for _ in range(3):                  # interleaved: the machine's load drifts
         cfg["identity.enabled"] = False

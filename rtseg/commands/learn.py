@@ -54,8 +54,6 @@ def run(args: argparse.Namespace) -> int:
     if not takes and not args.from_dir:
         raise ValueError("nothing to learn from: give --take FILE --label NAME or --from DATA_DIR")
     cfg, _ = live_config(args.config)
-    if args.profile:
-        cfg["features.profile"] = args.profile
     examples = []
     for t in takes:
         if not t.get("label"):
@@ -117,8 +115,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--exclude-person", action="append", metavar="S",
                    help="with --from: leave out subject S (repeatable)")
     p.add_argument("--profile", metavar="NAME",
-                   help="feature profile (default: the configuration's, else the most common "
-                        "among the takes; takes of other profiles are left out)")
+                   help="keep the examples of this feature profile (the features are the "
+                        "configuration's; default: the most common profile among the "
+                        "examples; the others are left out with a note)")
     p.add_argument("--threshold", type=float, metavar="D",
                    help="unknown beyond this distance (default: calibrated on the library)")
     p.add_argument("--new", action="store_true", help="replace LIB instead of extending it")
