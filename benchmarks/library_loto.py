@@ -15,6 +15,7 @@ profile names the live segments of the person's takes.  Behaviours only this per
 performs are not in the library: they must come out ``unknown``.
 spliced: spliced performances (benchmarks/splice.py) named by a library learned from the
 cmu_single takes of the people NOT in the performance.
+``--no-reject``: no null rejection (every segment its nearest name), the ceiling.
 Prints one JSON document; parameters are the library's own (calibrated inside it).
 """
 
@@ -98,6 +99,10 @@ def spliced(folder: Path, src: Path, cfg) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    if "--no-reject" in argv:              # every segment gets its nearest name
+        import rtseg.library_eval as le
+        le.NO_REJECT = True
+        argv.remove("--no-reject")
     if not argv or argv[0] not in ("mocap6", "single", "spliced"):
         print(__doc__, file=sys.stderr)
         return 2
