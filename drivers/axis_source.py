@@ -46,7 +46,8 @@ world orientations with ``space=global``),
 ``root_position`` = Hips position in metres, ``seq`` = binary frame index (text: count of
 frames received), ``valid`` False for joints whose angles are not finite.  Counters:
 damaged bytes -> ``corrupt``; a frame whose value count fits no layout -> ``bad_messages``;
-non-finite angles -> ``bad_values``.
+non-finite angles -> ``bad_values``; a binary frame index that jumps forward -> 1 in
+``gaps`` and the frames skipped in ``dropped``.
 """
 
 from __future__ import annotations
@@ -66,6 +67,7 @@ from rtseg.drivers.codec_axis import (BINARY_PORT, JOINTS, PARENTS, TEXT_PORT, A
 from rtseg.drivers.codec_axis_text import TextSplitter, decode_texts
 from rtseg.drivers.osc_source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
                                       allow_option, check_options, number_option, renamed)
+from rtseg.drivers.vendor_seq import SeqGaps
 from rtseg.frame import Frame
 
 log = logging.getLogger("rtseg.drivers.axis")
@@ -99,6 +101,7 @@ class AxisFrames:
         self.received = 0
         self._last = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (len(JOINTS), 1))
         self._log_at: dict[str, float] = {}
+        self._gaps = SeqGaps(32)
 
     def warn(self, key: str, now: float, msg: str, *args) -> None:
         if now - self._log_at.get(key, -math.inf) >= 5.0:
@@ -108,6 +111,20 @@ class AxisFrames:
     def error(self, exc: AxisError, now: float) -> None:
         self._count(exc.kind)
         self.warn(exc.kind, now, "Axis: frame dropped (%s): %s", exc.kind, exc)
+
+    def _seq(self, f: AxisFrame, now: float) -> int:
+        """The frame's ``seq``: the binary frame index (a forward jump adds 1 to ``gaps``
+        and the frames skipped to ``dropped``), or for text the count of frames so far."""
+        self.received += 1
+        if f.frame_index is None:
+            return self.received - 1
+        missing = self._gaps.step(f.frame_index)
+        if missing:
+            self._count("gaps")
+            self._count("dropped", missing)
+            self.warn("gap", now, "Axis: %d frame(s) missing before frame index %d",
+                      missing, f.frame_index)
+        return f.frame_index
 
     def _selected(self, f: AxisFrame) -> bool:
         if self.avatar is None:
@@ -135,8 +152,7 @@ class AxisFrames:
         self._last = q
         if self.space == "global":
             q = global_pose(q)
-        seq = f.frame_index if f.frame_index is not None else self.received
-        self.received += 1
+        seq = self._seq(f, now)
         return Frame(recv_time=now, quats=q, valid=valid,
                      source_time=None if f.frame_index is None else f.frame_index / self.rate,
                      seq=seq, root_position=pos)
@@ -176,8 +192,7 @@ class AxisFrames:
         if self.space == "global":
             q = global_pose(q)
         for k, f in enumerate(run):
-            seq = f.frame_index if f.frame_index is not None else self.received
-            self.received += 1
+            seq = self._seq(f, now)
             out.append(Frame(recv_time=now, quats=q[k], valid=_ALL_VALID.copy(),
                              source_time=None if f.frame_index is None
                              else f.frame_index / self.rate, seq=seq,

@@ -41,7 +41,8 @@ from typing import Sequence
 import numpy as np
 
 from rtseg.drivers.base import SourceError
-from rtseg.drivers.codec_mocopi import DEFAULT_PORT, MocopiAssembler
+from rtseg.drivers.codec_mocopi import DEFAULT_PORT
+from rtseg.drivers.codec_mocopi_assembler import MocopiAssembler
 from rtseg.drivers.mvn_source import (VendorUdpSource, check_options, number_option,
                                       parse_location)
 from rtseg.drivers.osc_source import DEFAULT_HOST, Network, allow_option, load_suit
