@@ -10,6 +10,7 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -232,3 +233,43 @@ def test_live_refuses_a_library_of_another_profile(tmp_path, library):
                         "--no-osc", "--quiet"], capture_output=True, text=True, timeout=60)
     assert p.returncode == 2, p.stderr
     assert len(p.stderr.strip().splitlines()) == 1 and "feature profile 'cmu14'" in p.stderr
+
+
+# ------------------------------------------------------------------ real data (optional)
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+@pytest.mark.skipif(not (DATA / "cmu_single" / "index.tsv").is_file(),
+                    reason="needs ../shared/data/cmu_single")
+def test_learn_from_a_folder_and_refuse_another_skeleton(tmp_path):
+    lib = tmp_path / "amc.json"
+    p = subprocess.run([sys.executable, "-m", "rtseg.cli", "learn", str(lib), "--from",
+                        str(DATA / "cmu_single"), "--profile", "cmu14"],
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    got = load(lib)
+    assert got.profile == "cmu14" and got.dims == 56
+    assert got.behaviour_names == ["golf_swing", "jump", "kick"]
+    assert {e["person"] for e in got.examples} == {"10", "16", "64"}
+    assert "feature profile 'unity', not 'cmu14'; left out" in p.stderr   # the BVH takes
+    # a BVH stream (unity profile) is refused at start with one line, exit 2
+    bvh = DATA / "cmu_single" / "bvh" / "02_01.bvh"
+    p = subprocess.run([sys.executable, "-m", "rtseg.cli", "live", f"file://{bvh}",
+                        "--behaviours", str(lib), "--duration", "5", "--no-osc", "--quiet"],
+                       capture_output=True, text=True, timeout=60)
+    assert p.returncode == 2
+    assert len(p.stderr.strip().splitlines()) == 1
+    assert "learned for feature profile 'cmu14' (56 dims)" in p.stderr and "'unity'" in p.stderr
+
+
+@pytest.mark.skipif(not (DATA / "labels" / "mocap6" / "13_29.txt").is_file(),
+                    reason="needs ../shared/data (mocap6 takes)")
+def test_library_leave_one_take_out_report():
+    from rtseg.identity_eval import library_loto
+    from rtseg.labels import find_labelled_takes
+    takes = find_labelled_takes(DATA, ("cmu",))
+    doc = library_loto(takes, _config())
+    assert doc["takes"] == ["13_29", "13_31", "14_14"]
+    assert doc["known_segments"] >= 15 and doc["unknown_segments"] == 0
+    assert 0 <= doc["accuracy"] <= 1 and 0 <= doc["unknown_rate"] <= 1
+    assert doc["accuracy"] + doc["unknown_rate"] <= 1.0 + 1e-9
