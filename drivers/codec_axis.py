@@ -54,8 +54,8 @@ import numpy as np
 
 __all__ = ["JOINTS", "PARENTS", "TEXT_PORT", "BINARY_PORT", "HEADER", "TOKEN1", "TOKEN2",
            "AxisError", "AxisFrame", "layout", "value_count", "decode_binary",
-           "decode_text", "encode_binary", "encode_text", "euler_to_quat", "quat_to_euler",
-           "to_pose", "to_poses", "global_pose", "BinaryAssembler", "TextSplitter", "SUIT_SEGMENTS"]
+           "encode_binary", "euler_to_quat", "quat_to_euler", "to_pose", "to_poses",
+           "global_pose", "BinaryAssembler", "SUIT_SEGMENTS"]
 
 TEXT_PORT = 7001
 BINARY_PORT = 7002

@@ -21,6 +21,9 @@ the Hips carry the take's root position in cm and the other joints zero displace
 (receivers read only the root's); without it, root position + 3 angles per joint.  Suit
 bones not valid in a frame (``allow_missing``) are sent as NaN angles.
 
+Faults (``faults=``, as the other vendor simulators, :mod:`rtseg.simulators.stream_sender`):
+an ``unplug`` window closes the text server's client connections.
+
 Several avatars: ``avatars=[(0, "Avatar00", 0), (1, "Avatar01", 240)]`` sends one frame per
 avatar and take frame, each performing the take from its frame offset (wrapping).  The
 binary frame index is the take frame slot, so ``rate`` on the receiver gives take time.
@@ -196,6 +199,12 @@ class AxisSender(StreamSender):
             c.close()
         return len(gone)
 
+    def _unplug(self) -> None:
+        """An ``unplug`` fault: the text server drops its clients (they reconnect; nothing
+        is sent until the window ends); binary just goes quiet."""
+        if self.fmt == "text":
+            self.disconnect()
+
     @property
     def clients(self) -> int:
         with self._clients_lock:
@@ -215,10 +224,10 @@ def serve(args, take: Take, host) -> tuple[str, list[str]]:
     :class:`rtseg.commands.simulate.Host`); returns (stop reason, summary lines)."""
     out, retarget_kw = host.out, host.retarget_kw
     fmt = args.axis_format
-    port = host.port(BINARY_PORT if fmt == "binary" else TEXT_PORT, lowest=0)
+    port = host.port(BINARY_PORT if fmt == "binary" else TEXT_PORT, lowest=0, faults=True)
     suit = args.suit if args.suit != "default17" else "axis"
     sender = AxisSender(take, fmt, args.host, port, loop=args.loop, speed=args.speed,
-                        suit=suit, **retarget_kw)
+                        suit=suit, faults=args.faults or None, **retarget_kw)
     out(f"  {sender.describe()}")
     sender.start()
     how = (f"udp {args.host}:{sender.port}" if fmt == "binary"

@@ -32,7 +32,8 @@ from rtseg.take import Take
 class MocopiSender(UdpTakeSender):
     """Send ``take`` as mocopi to ``host:port`` from a background thread (see module doc).
     ``unix_start``: ``uttm`` of slot 0 (default: the wall clock when built);
-    ``skeleton_every``: frames between ``skdf`` packets (0: only before the first)."""
+    ``skeleton_every``: frames between ``skdf`` packets (0: only before the first);
+    ``faults``: see :mod:`rtseg.simulators.stream_sender`."""
 
     name = "mocopi"
 
@@ -41,10 +42,10 @@ class MocopiSender(UdpTakeSender):
                  suit: str | SuitProfile = "mocopi", skeleton_map: str | None = None,
                  joint_map: dict[str, str] | None = None, imu: ImuModel | str | None = None,
                  allow_missing: bool = False, unix_start: float | None = None,
-                 skeleton_every: int = 0) -> None:
+                 skeleton_every: int = 0, faults=None) -> None:
         super().__init__(take, host, port, suit, rate=rate, loop=loop, speed=speed,
                          skeleton_map=skeleton_map, joint_map=joint_map, imu=imu,
-                         allow_missing=allow_missing)
+                         allow_missing=allow_missing, faults=faults)
         self.bone_ids = list(self.suit.sensor_ids)
         self.unix_start = time.time() if unix_start is None else float(unix_start)
         self.skeleton_every = int(skeleton_every)

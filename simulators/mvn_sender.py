@@ -10,11 +10,22 @@ segments: 0), orientation w x y z in MVN's Z-up frame (see
 ms (so ``speed`` > 1 sends faster while the time code keeps the take's clock).  Before the
 first frame it sends a type-12 meta datagram (``name:<character_name>``).
 
-Read it with ``rtseg live mvn://127.0.0.1:9763`` (``?character=N`` for another
-character).  ``python -m rtseg.simulators.mvn_sender --help``.
+``transport="tcp"``: MVN's TCP option - the sender is the TCP **client**: it connects to
+``host:port`` (where ``mvn://HOST:PORT?transport=tcp`` listens), sends the meta message then
+the same MXTP messages back to back, and reconnects (every 0.2 s while refused) when the
+connection drops or an ``unplug`` fault closes it; frames due while it is not connected
+are lost (counted in ``send_errors``).
+
+Faults: ``faults=`` as the other vendor simulators
+(:mod:`rtseg.simulators.stream_sender`).  Read it with ``rtseg live mvn://127.0.0.1:9763``
+(``?character=N`` for another character, ``&transport=tcp`` for TCP).
+``python -m rtseg.simulators.mvn_sender --help``.
 """
 
 from __future__ import annotations
+
+import socket
+import time
 
 import numpy as np
 
@@ -32,10 +43,13 @@ class MvnSender(UdpTakeSender):
     """Send ``take`` as MVN to ``host:port`` from a background thread (see module doc).
 
     ``character``: character id in the header; ``max_datagram``: split frames over
-    several datagrams above this size (1472 fits the 23 segments in one); ``rate``/
-    ``speed``/``loop``/retargeting options as :class:`UdpTakeSender`."""
+    several datagrams above this size (1472 fits the 23 segments in one); ``transport``:
+    ``udp`` or ``tcp`` (see module doc); ``rate``/``speed``/``loop``/``faults``/retargeting
+    options as :class:`UdpTakeSender`."""
 
     name = "MVN"
+    #: seconds between connection attempts (TCP)
+    retry = 0.2
 
     def __init__(self, take: Take, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
                  rate: float | None = None, loop: bool = False, *, speed: float = 1.0,
@@ -43,10 +57,17 @@ class MvnSender(UdpTakeSender):
                  suit: str | SuitProfile = "xsens-mvn", skeleton_map: str | None = None,
                  joint_map: dict[str, str] | None = None, imu: ImuModel | str | None = None,
                  allow_missing: bool = False,
-                 max_datagram: int = DEFAULT_MAX_DATAGRAM) -> None:
+                 max_datagram: int = DEFAULT_MAX_DATAGRAM, transport: str = "udp",
+                 faults=None) -> None:
+        if transport not in ("udp", "tcp"):
+            raise ValueError(f"transport must be udp or tcp, not {transport!r}")
+        self.transport = transport
         super().__init__(take, host, port, suit, rate=rate, loop=loop, speed=speed,
                          skeleton_map=skeleton_map, joint_map=joint_map, imu=imu,
-                         allow_missing=allow_missing)
+                         allow_missing=allow_missing, faults=faults)
+        #: TCP connections made so far
+        self.connections = 0
+        self._next_try = 0.0
         if not 0 <= int(character) <= 255:
             raise ValueError(f"character must be 0..255, got {character}")
         self.character = int(character)
@@ -62,6 +83,60 @@ class MvnSender(UdpTakeSender):
     def preamble(self) -> list[bytes]:
         return [encode_message("12", f"name:{self.character_name}\n".encode(),
                                character=self.character)]
+
+    # -- TCP transport (UDP: the base class's)
+    def _open(self) -> None:
+        if self.transport == "udp":
+            super()._open()
+
+    def _ready(self) -> bool:
+        if self.transport == "udp":
+            return super()._ready()
+        self._connect()
+        return True
+
+    def _connect(self) -> bool:
+        """Connect and send the preamble; False (retried later) if refused."""
+        now = time.monotonic()
+        if now < self._next_try:
+            return False
+        try:
+            sock = socket.create_connection((self.host, self.port), timeout=1.0)
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            sock.sendall(b"".join(self.preamble()))
+        except OSError as exc:
+            self._next_try = now + self.retry
+            self.send_errors += 1
+            self._send_failed(exc)
+            return False
+        self._sock = sock
+        self.connections += 1
+        return True
+
+    def _send(self, dgrams: list[bytes]) -> None:
+        if self.transport == "udp":
+            super()._send(dgrams)
+            return
+        if self._sock is None and not self._connect():
+            return
+        try:
+            self._sock.sendall(b"".join(dgrams))
+        except OSError as exc:
+            self.send_errors += 1
+            self._send_failed(exc)
+            self._drop_connection()
+
+    def _drop_connection(self) -> None:
+        if self._sock is not None and self.transport == "tcp":
+            try:
+                self._sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+            self._sock.close()
+            self._sock = None
+
+    def _unplug(self) -> None:
+        self._drop_connection()
 
     def encode(self, index: int, slot: int, source_time: float) -> list[bytes]:
         return encode_datagrams(slot, int(round(source_time * 1000.0)), self.segment_ids,

@@ -76,13 +76,14 @@ def serve(args, take: Take, host) -> tuple[str, list[str]]:
     """``rtseg simulate rokoko``: send ``take`` (``host``: a
     :class:`rtseg.commands.simulate.Host`); returns (stop reason, summary lines)."""
     out, retarget_kw = host.out, host.retarget_kw
-    port = host.port(DEFAULT_PORT)
+    port = host.port(DEFAULT_PORT, faults=True)
     suit = args.suit if args.suit != "default17" else "rokoko"
     names = [n.strip() for n in (args.actor or "Actor1").split(",") if n.strip()]
     # several actors: each performs the take from a different point
     actors = [(n, (k * take.n_frames) // (2 * len(names))) for k, n in enumerate(names)]
     sender = RokokoSender(take, args.host, port, actors=actors, compress=args.lz4,
-                          loop=args.loop, speed=args.speed, suit=suit, **retarget_kw)
+                          loop=args.loop, speed=args.speed, suit=suit,
+                          faults=args.faults or None, **retarget_kw)
     out(f"  {sender.describe()}")
     out(f"Rokoko sender: {len(actors)} actor(s) {', '.join(a for a, _ in actors)}, 21 bones, "
         f"Custom JSON v3{' LZ4' if args.lz4 else ''} to udp {args.host}:{port} at "

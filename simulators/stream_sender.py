@@ -15,6 +15,16 @@ frame indices) stays the take's.  Subclasses implement ``encode(index, slot, t)`
 datagrams or stream chunks of one frame) and may replace the transport (default: UDP
 datagrams to ``host:port``; ``_open``, ``_send``, ``_close``, optionally ``_ready``) or the
 retargeting policy (``_retarget``).  Every slot is recorded in ``sent_log``.
+
+Faults (``faults``: a :class:`rtseg.simulators.faults.FaultConfig`, ``FaultInjector`` or CLI
+spec, as for the serial and VMC simulators): one injector *message* is one frame slot (all
+its datagrams / stream bytes).  ``drop`` leaves the frame out, ``corrupt`` flips bytes
+anywhere in it (datagram boundaries kept), ``jitter`` sends it up to that many seconds
+late (more than a frame period bunches frames into bursts), ``unplug=EVERY:FOR`` stops
+sending during the window - and a TCP transport closes its connection at the start of the
+window (``_unplug``) and reconnects after it.  ``dropout`` (one sensor silent) is refused:
+these formats send whole skeletons.  Each slot's fate is in ``Sent.fault`` (``""``,
+``"dropped"``, ``"corrupted"``, ``"unplugged"``) and the injector's ``record``.
 """
 
 from __future__ import annotations
@@ -28,7 +38,7 @@ import numpy as np
 from rtseg import quat as Q
 from rtseg.profiles import SuitProfile, suit_profile
 from rtseg.simulators.retarget import ImuModel, RetargetError, Retargeted, resolve, retarget
-from rtseg.simulators.vmc_sender import SenderThread, root_metres, take_clock
+from rtseg.simulators.vmc_sender import SenderThread, _make_injector, root_metres, take_clock
 from rtseg.take import Take
 
 log = logging.getLogger("rtseg.simulators")
@@ -39,13 +49,16 @@ __all__ = ["StreamSender", "Sent", "retarget_with_optional", "root_metres", "FAM
 @dataclass(slots=True)
 class Sent:
     """One frame slot: ``slot`` (from 0 over loops), ``index`` take frame, ``source_time``
-    take seconds, ``send_time`` monotonic s, ``parts`` datagrams / chunks sent, ``nbytes``."""
+    take seconds, ``send_time`` monotonic s (None: not sent), ``parts`` datagrams / chunks
+    sent, ``nbytes``, ``fault`` what a fault did to it ("" none, "dropped", "corrupted",
+    "unplugged")."""
     slot: int
     index: int
     source_time: float
-    send_time: float
+    send_time: float | None
     parts: int
     nbytes: int
+    fault: str = ""
 
     @property
     def datagrams(self) -> int:
@@ -95,7 +108,12 @@ class StreamSender(SenderThread):
     def __init__(self, take: Take, suit: str | SuitProfile, *, rate: float | None = None,
                  speed: float = 1.0, loop: bool = False, skeleton_map: str | None = None,
                  joint_map: dict[str, str] | None = None, imu: ImuModel | str | None = None,
-                 allow_missing: bool = False) -> None:
+                 allow_missing: bool = False, faults=None) -> None:
+        #: the FaultInjector in use (its ``record`` says what was damaged), or None
+        self.injector = _make_injector(faults)
+        if self.injector is not None and self.injector.config.dropouts:
+            raise ValueError(f"dropout faults are not supported by the {self.name} simulator "
+                             f"(it sends whole skeletons); use drop, corrupt, jitter, unplug")
         self.take = take
         self.rate, self.speed = take_clock(take, rate, speed)
         self.loop = loop
@@ -140,10 +158,18 @@ class StreamSender(SenderThread):
         """Called once before the first frame; False ends the run (stopped)."""
         return True
 
+    def _unplug(self) -> None:
+        """Start of an ``unplug`` fault window (default: nothing - UDP just goes quiet)."""
+
+    def _replug(self) -> None:
+        """End of an ``unplug`` fault window."""
+
     def _run(self) -> None:
         n = self.n_frames
         period = 1.0 / self.rate
         wall = period / self.speed
+        inj = self.injector
+        unplugged_at: float | None = None
         try:
             if not self._ready():
                 return
@@ -152,16 +178,51 @@ class StreamSender(SenderThread):
             while not self._stop.is_set():
                 if slot >= n and not self.loop:
                     break
-                delay = t0 + slot * wall - time.monotonic()
+                jitter = inj.jitter() if inj else 0.0
+                delay = t0 + slot * wall + jitter - time.monotonic()
                 if delay > 0 and self._stop.wait(delay):
                     break
                 index = slot % n
                 t = slot * period
+                if inj and inj.unplugged(t):
+                    if unplugged_at is None:
+                        unplugged_at = t
+                        self._unplug()
+                    inj.mark_lost(slot, "unplugged")
+                    self.sent_log.append(Sent(slot, index, t, None, 0, 0, "unplugged"))
+                    slot += 1
+                    continue
+                if unplugged_at is not None:
+                    inj.note_unplug(unplugged_at, t)
+                    unplugged_at = None
+                    self._replug()
                 parts = self.encode(index, slot, t)
+                fault = ""
+                if inj:
+                    parts, fault = self._inject(inj, slot, parts)
+                    if fault == "dropped":
+                        self.sent_log.append(Sent(slot, index, t, None, 0, 0, fault))
+                        slot += 1
+                        continue
                 sent_at = time.monotonic()
                 self._send(parts)
                 self.sent_log.append(Sent(slot, index, t, sent_at, len(parts),
-                                          sum(len(p) for p in parts)))
+                                          sum(len(p) for p in parts), fault))
                 slot += 1
         finally:
             self.done.set()
+
+    @staticmethod
+    def _inject(inj, slot: int, parts: list[bytes]) -> tuple[list[bytes], str]:
+        """Drop / corrupt faults on one frame's parts (one injector message); the parts
+        keep their lengths."""
+        joined = inj.process(slot, b"".join(parts))
+        if joined is None:
+            return [], "dropped"
+        if slot not in inj.record.corrupted:
+            return parts, ""
+        out, at = [], 0
+        for p in parts:
+            out.append(joined[at:at + len(p)])
+            at += len(p)
+        return out, "corrupted"

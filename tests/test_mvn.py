@@ -373,3 +373,112 @@ def test_slightly_off_unit_quaternions_are_renormalised():
     assert f.valid.all() and np.allclose(np.linalg.norm(f.quats, axis=1), 1.0, atol=1e-12)
     assert np.allclose(f.quats[2], q[2], atol=1e-7)
     assert np.array_equal(np.delete(f.quats, 2, 0), np.delete(q, 2, 0))   # others untouched
+
+
+# --------------------------------------------------------------------------- TCP, faults
+
+def test_tcp_stream_is_cut_into_messages_and_resynchronised_after_damage():
+    """MxtpStream: the datagrams sent back to back come out whole whatever the read
+    boundaries; bytes that do not start a header are skipped to the next "MXTP" and each
+    such run counts once."""
+    from rtseg.drivers.codec_mvn import MxtpStream
+    q = random_pose(6, seed=4)
+    msgs = [encode_message("12", b"name:tcp\n")]
+    msgs += [d for i in range(6) for d in encode_datagrams(
+        i, i * 8, IDS, q[i], max_datagram=HEADER_SIZE + 10 * ITEM_SIZE)]
+    data = b"".join(msgs)
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        cuts = np.sort(rng.choice(np.arange(1, len(data)), 12, replace=False))
+        st = MxtpStream()
+        got = [m for a, b in zip([0, *cuts], [*cuts, len(data)]) for m in st.feed(data[a:b])]
+        assert got == msgs and st.resyncs == 0
+    st = MxtpStream()
+    damaged = b"xyzMX" + msgs[0] + b"\x00" * 7 + b"".join(msgs[1:4]) + b"MXTP9" + b"".join(msgs[4:])
+    got = st.feed(damaged[:50]) + st.feed(damaged[50:])
+    assert got == msgs and st.resyncs == 3 and st.skipped_bytes == 5 + 7 + 5
+
+
+def test_simulator_over_tcp_gives_the_udp_frames_exactly():
+    """mvn://...?transport=tcp listens, MvnSender(transport="tcp") connects and streams: every
+    frame arrives, bit for bit what the same datagrams give through the assembler, with
+    the meta message (sent on connect) parsed."""
+    take = synthesize("idle:2,walk:2", frame_rate=60.0, seed=2).take
+    src = open_source("mvn://127.0.0.1:0?transport=tcp&queue=10000")
+    sender = MvnSender(take, "127.0.0.1", src.port, transport="tcp", speed=6.0,
+                       max_datagram=HEADER_SIZE + 10 * ITEM_SIZE)
+    ref = MvnAssembler(list(sender.segment_ids))
+    want = [f for i in range(take.n_frames)
+            for f in feed_all(ref, sender.encode(i, i, i / 60.0))] + ref.flush(0, True)
+    try:
+        with sender:
+            assert sender.wait(10)
+        time.sleep(0.2)
+        assert src.connections == 1 and not src.connected.is_set()   # the sender closed it
+        frames = read_all(src)
+        assert src.assembler.meta == {"name": "rtseg"}
+    finally:
+        src.close()
+    assert len(frames) == len(want) == take.n_frames
+    for f, w in zip(frames, want):
+        assert f.seq == w.seq and f.quats.tobytes() == w.quats.tobytes()
+        assert f.root_position.tobytes() == w.root_position.tobytes()
+    assert src.stats.corrupt == src.stats.dropped == src.stats.reconnects == 0
+
+
+def _lost_runs(log) -> tuple[set[int], int]:
+    """(slots not sent, runs of them followed by a sent slot)."""
+    lost = {s.slot for s in log if s.fault in ("dropped", "unplugged") or s.send_time is None}
+    last = max(s.slot for s in log if s.slot not in lost)
+    runs = sum(1 for k in lost if k - 1 not in lost and k < last)
+    return {k for k in lost if k < last}, runs
+
+
+@pytest.mark.parametrize("transport", ["udp", "tcp"])
+def test_faulted_stream_keeps_the_live_loop_up_and_counts_the_lost_frames(transport):
+    """Frames dropped by faults, bunched by jitter and lost in unplug windows (TCP: the
+    connection is closed and made again): the live session runs to the end, every frame
+    that was sent arrives, and the frames that were not are counted - as sequence gaps in
+    the source's counters (gaps, dropped) and as lost frames in the session summary."""
+    rate, speed = 60.0, 4.0
+    take = synthesize("idle:3,walk:3", frame_rate=rate, seed=5).take
+    src = open_source(f"mvn://127.0.0.1:0?transport={transport}&queue=10000"
+                      + ("&rcvbuf=4194304" if transport == "udp" else ""))
+    sender = MvnSender(take, "127.0.0.1", src.port, transport=transport, speed=speed,
+                       faults="drop=0.05,jitter=0.02,unplug=2:0.5,seed=3")
+    frames, _, summary = run_live(src, sender, take, rate, speed)
+    lost, runs = _lost_runs(sender.sent_log)
+    assert sum(1 for s in sender.sent_log if s.fault == "dropped") >= 5
+    assert sum(1 for s in sender.sent_log if s.fault == "unplugged") >= 2 * 0.5 * rate - 1
+    assert [f.seq for f in frames] == [k for k in range(take.n_frames) if k not in lost
+                                       ][:len(frames)]
+    assert len(frames) == summary.frames_received >= take.n_frames - len(lost) - 1
+    assert src.stats.dropped == summary.source_stats["dropped"] == len(lost)
+    assert src.stats.gaps == runs and summary.dropped >= len(lost)
+    if transport == "tcp":
+        assert src.stats.reconnects >= 2 and sender.connections >= 3
+
+
+def test_corrupting_faults_are_counted_as_refused_input_and_never_stop_the_loop():
+    rate, speed = 60.0, 4.0
+    take = synthesize("idle:2,walk:2", frame_rate=rate, seed=6).take
+    src = open_source("mvn://127.0.0.1:0?transport=tcp&queue=10000")
+    sender = MvnSender(take, "127.0.0.1", src.port, transport="tcp", speed=speed,
+                       faults="corrupt=0.002,seed=1")
+    frames, _, summary = run_live(src, sender, take, rate, speed)
+    damaged = sum(1 for s in sender.sent_log if s.fault == "corrupted")
+    assert damaged > 50
+    refused = summary.input
+    assert refused["corrupt"] + refused["bad_values"] + refused["bad_messages"] > 0
+    assert src.stats.corrupt >= 1                    # header damage: stream resynchronised
+    assert take.n_frames - damaged - 5 <= len(frames) <= take.n_frames + 5
+
+
+def test_rtseg_simulate_mvn_over_tcp_with_faults():
+    out, port, frames = simulate_into("mvn://127.0.0.1:0?transport=tcp&queue=10000", "mvn",
+                                      "60", "--transport", "tcp", "--faults", "drop=0.1,seed=2")
+    assert f"rtseg live mvn://127.0.0.1:{port}?transport=tcp" in out
+    dropped = int(out.split(" dropped by faults")[0].rsplit("; ", 1)[1])
+    assert dropped > 5 and len(frames) == 240 - dropped
+    assert_refused([("mvn://127.0.0.1:0?transport=quic", "udp or tcp"),
+                    ("mvn://127.0.0.1:0?transport=tcp&rcvbuf=1000", "unknown option")])

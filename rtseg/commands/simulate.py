@@ -4,7 +4,8 @@
                           [--format rtseg|text] [--faults SPEC] [--loop] [--duration S]
                           [--speed X] [--start S] [--end S] [--imu SPEC] [--map NAME]
     rtseg simulate vmc    [--synth SCRIPT | --take FILE] [--host H] [--port P] ...
-    rtseg simulate mvn    [--synth SCRIPT | --take FILE] [--port 9763] [--character N] ...
+    rtseg simulate mvn    [--synth SCRIPT | --take FILE] [--port 9763] [--character N]
+                          [--transport udp|tcp] ...
     rtseg simulate mocopi [--synth SCRIPT | --take FILE] [--port 12351] ...
     rtseg simulate rokoko [--synth SCRIPT | --take FILE] [--port 14043] [--actor A,B] [--lz4]
     rtseg simulate axis   [--synth SCRIPT | --take FILE] [--axis-format binary|text] [--port P]
@@ -15,7 +16,8 @@ and prints its device path - read it with ``rtseg live serial://PATH``.
 ``--host``:``--port`` (default 127.0.0.1:39539, the VMC receiver port) - read it with
 ``rtseg live "osc://127.0.0.1:39539?format=vmc"``.
 ``mvn`` sends Xsens MVN network streaming (``rtseg.simulators.mvn_sender``, suit
-``xsens-mvn``, default port 9763) - read it with ``rtseg live mvn://127.0.0.1:9763``;
+``xsens-mvn``, default port 9763) - read it with ``rtseg live mvn://127.0.0.1:9763``
+(``--transport tcp``: connects to ``mvn://127.0.0.1:9763?transport=tcp``, which listens);
 ``mocopi`` sends Sony mocopi packets (``rtseg.simulators.mocopi_sender``, suit ``mocopi``,
 default port 12351) - read it with ``rtseg live mocopi://127.0.0.1:12351``.  Their suit
 segments a take has no joint for are filled from the parent segment.
@@ -33,6 +35,10 @@ segment by forward kinematics, optionally with IMU noise and heading drift (``--
 noise=0.5,drift=3,seed=1``: degrees, degrees per minute).  A suit bone the map cannot
 place is an error naming it; ``--joint-map Head=upperneck,...`` places it by hand and
 ``--allow-missing`` sends the suit without it.
+
+``--faults SPEC`` (serial, vmc and the vendor simulators): ``drop``, ``corrupt``,
+``jitter`` and ``unplug`` per frame for mvn/mocopi/rokoko/axis (``dropout`` is serial/VMC
+only: the vendor formats send whole skeletons); see ``rtseg.simulators.faults``.
 
 ``--speed X`` sends X times faster while the stream keeps the take's own clock (serial
 device time and sequence numbers, VMC ``/VMC/Ext/T``); ``--start``/``--end`` (take
@@ -116,6 +122,8 @@ def register(subparsers: Any) -> None:
                    "mvn 9763, mocopi 12351)")
     g = p.add_argument_group("mvn")
     g.add_argument("--character", type=int, default=0, help="MVN character id (default 0)")
+    g.add_argument("--transport", choices=("udp", "tcp"), default="udp",
+                   help="MVN over UDP datagrams (default) or a TCP connection to the receiver")
     g = p.add_argument_group("rokoko")
     g.add_argument("--actor", metavar="NAME,...", help="actor name(s), one actor each in every "
                    "payload (default Actor1)")
@@ -269,8 +277,14 @@ class Host:
         time (or, for ``last="frame index"``, its slot)."""
         log = list(sender.sent_log)
         amount = sum(s.nbytes if size == "bytes" else s.datagrams for s in log)
-        lines = [f"sent {len(log)} {unit} ({amount} {size}) in {elapsed:.2f} s; "
-                 f"{sender.send_errors} send errors"]
+        faults: dict[str, int] = {}
+        for s in log:
+            if s.fault:
+                faults[s.fault] = faults.get(s.fault, 0) + 1
+        sent = len(log) - faults.get("dropped", 0) - faults.get("unplugged", 0)
+        lines = [f"sent {sent} {unit} ({amount} {size}) in {elapsed:.2f} s; "
+                 f"{sender.send_errors} send errors"
+                 + "".join(f"; {v} {k} by faults" for k, v in sorted(faults.items()))]
         if log:
             end = (f"{log[-1].slot}" if last == "frame index"
                    else f"{log[-1].source_time:.3f} s")
@@ -345,22 +359,27 @@ def _serve_vendor(args, take: Take) -> tuple[str, list[str]]:
     """``mvn`` / ``mocopi``: a UDP sender of that format (its own suit unless --suit names
     another whose ids fit the format)."""
     host = Host(args)
-    port = host.port(DEFAULT_PORTS[args.device])
-    kw = dict(speed=args.speed, loop=args.loop, **host.retarget_kw)
+    port = host.port(DEFAULT_PORTS[args.device], faults=True)
+    kw = dict(speed=args.speed, loop=args.loop, faults=args.faults or None,
+              **host.retarget_kw)
     if args.suit != "default17":
         kw["suit"] = args.suit
     if args.device == "mvn":
         from rtseg.simulators.mvn_sender import MvnSender
-        sender = MvnSender(take, args.host, port, character=args.character, **kw)
-        url = f"mvn://{args.host}:{port}" + (f"?character={args.character}" if args.character else "")
+        sender = MvnSender(take, args.host, port, character=args.character,
+                           transport=args.transport, **kw)
+        query = [f"character={args.character}"] if args.character else []
+        query += ["transport=tcp"] if args.transport == "tcp" else []
+        url = f"mvn://{args.host}:{port}" + ("?" + "&".join(query) if query else "")
     else:
         from rtseg.simulators.mocopi_sender import MocopiSender
         sender = MocopiSender(take, args.host, port, **kw)
         url = f"mocopi://{args.host}:{port}"
     _out(f"  {sender.describe()}")
-    _out(f"{sender.name} sender: {len(sender.suit.bones)}-segment suit {sender.suit.name} to udp "
-         f"{args.host}:{port} at {sender.rate:g} Hz (stream clock in take time), sent at "
-         f"x{sender.speed:g}")
+    how = getattr(sender, "transport", "udp")
+    _out(f"{sender.name} sender: {len(sender.suit.bones)}-segment suit {sender.suit.name} to "
+         f"{how} {args.host}:{port} at {sender.rate:g} Hz (stream clock in take time), sent at "
+         f"x{sender.speed:g}" + (f"; faults {args.faults}" if args.faults else ""))
     _out(f"  receive it with: rtseg live {url}")
     reason, elapsed = host.drive(sender)
     return reason, host.summary(sender, elapsed)
