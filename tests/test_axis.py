@@ -559,3 +559,34 @@ def test_rtseg_simulate_axis_take_replays_the_real_bvh():
         assert f.valid.all() and f.source_time == k / 125
         assert same_rotation(f.quats[0], take.quats[k, 0], 1e-6)
         assert np.allclose(f.root_position, take.root_position[k] / 100.0, atol=1e-6)
+
+
+@pytest.mark.parametrize("fmt", ["binary", "text"])
+def test_faulted_axis_stream_keeps_the_live_loop_up(fmt):
+    """--faults on the Axis simulator: binary frames dropped and bunched reach the live
+    loop with the frames not sent counted from the frame index (gaps, dropped); text: an
+    unplug window closes the TCP connection, the source reconnects (counted) and every
+    frame sent while connected arrives."""
+    rate, speed = 60.0, 4.0
+    take = synthesize("idle:3,walk:3", frame_rate=rate, seed=8).take
+    if fmt == "text":
+        sender = AxisSender(take, "text", "127.0.0.1", 0, speed=speed, wait_client=10,
+                            faults="unplug=2:0.5,jitter=0.01,seed=2")
+        sender.start()
+        src = open_source(f"axis://127.0.0.1:{sender.port}?format=text&rate=60&backoff=0.02"
+                          "&queue=4096")
+    else:
+        src = open_source("axis://127.0.0.1:0?rate=60&queue=4096&rcvbuf=4194304")
+        sender = AxisSender(take, "binary", "127.0.0.1", src.port, speed=speed,
+                            faults="drop=0.05,jitter=0.02,unplug=2:0.5,seed=2")
+    frames, _, summary = run_live(src, sender, take, rate, speed, start=fmt == "binary")
+    log = sender.sent_log
+    unplugged = sum(1 for s in log if s.fault == "unplugged")
+    assert unplugged >= 2 * 0.5 * rate - 1 and summary.frames_received == len(frames)
+    if fmt == "binary":
+        sent = [s.slot for s in log if not s.fault]
+        assert [f.seq for f in frames] == sent
+        assert src.stats.dropped == sent[-1] + 1 - len(sent) and src.stats.gaps >= 3
+    else:
+        assert src.stats.reconnects >= 1
+        assert take.n_frames - unplugged - 2 * rate / speed <= len(frames) <= take.n_frames

@@ -324,3 +324,14 @@ def test_slightly_off_unit_rotations_are_renormalised():
     assert f.valid.all() and np.allclose(np.linalg.norm(f.quats, axis=1), 1.0, atol=1e-12)
     assert np.allclose(f.quats[9], q[9], atol=1e-7)
     assert np.array_equal(np.delete(f.quats, 9, 0), np.delete(q, 9, 0))
+
+
+def test_rtseg_simulate_mocopi_with_faults_counts_the_missing_frames():
+    """``--faults drop=...``: the frames the simulator left out are the fnum gaps the
+    source counts."""
+    out, port, frames = simulate_into("mocopi://127.0.0.1:0?queue=10000&rcvbuf=4194304",
+                                      "mocopi", "60", "--faults", "drop=0.1,seed=4")
+    dropped = int(out.split(" dropped by faults")[0].rsplit("; ", 1)[1])
+    seqs = [f.seq for f in frames]
+    assert dropped > 5 and len(frames) == 240 - dropped
+    assert seqs == sorted(seqs) and seqs[-1] + 1 - len(seqs) <= dropped

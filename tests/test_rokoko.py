@@ -386,3 +386,14 @@ def test_real_take_cuts_match_the_serial_suit(data_dir):
     assert all(v.all() for _, v, *_ in rok)
     got = replay_frames(rok, list(BODY_BONES), list(BODY_PARENTS), "global", rate)
     assert_same_cuts(got, ref, rate)
+
+
+def test_rtseg_simulate_rokoko_with_faults():
+    """``--faults``: dropped payloads never arrive, corrupted ones are refused and counted
+    (JSON damage), the rest arrive; the summary says what the faults did."""
+    out, port, frames = simulate_into("rokoko://127.0.0.1:0?queue=10000&rcvbuf=4194304",
+                                      "rokoko", "60", "--faults", "drop=0.1,corrupt=0.0002,seed=4")
+    dropped = int(out.split(" dropped by faults")[0].rsplit("; ", 1)[1])
+    corrupted = int(out.split(" corrupted by faults")[0].rsplit("; ", 1)[1])
+    assert dropped > 5 and corrupted > 5
+    assert 240 - dropped - corrupted <= len(frames) <= 240 - dropped
