@@ -121,3 +121,30 @@ def test_tally_and_pooled_tally():
     assert (p["cuts"], p["transitions"]) == (2, 4)
     assert p["f1"] == pytest.approx(2 * 1 / (2 + 4)) and p["strict_f1"] == 0.0
     assert p["delay_median"] == pytest.approx(250 / 120)
+
+
+def test_loto_objective_counts_every_take_once():
+    """benchmarks/loto.py's selection rule: ``takes`` averages each take's F1 (a short take
+    counts as much as a long one), ``pooled`` pools the transitions, and a set over the
+    delay budget loses 1."""
+    import sys
+    from pathlib import Path
+    bench = str(Path(__file__).resolve().parents[1] / "benchmarks")
+    sys.path.insert(0, bench)
+    try:
+        import loto
+    finally:
+        sys.path.remove(bench)
+
+    def case(key, group):
+        return loto.Case(key, key, group, 120.0, np.zeros((1, 1)), np.zeros(1, int), [], 0)
+
+    short, long_ = case("a", "cmu"), case("b", "cmu")       # one group: groups == pooled
+    # (tp, cuts, transitions, strict tp, delays s): the short take all right, the long one half
+    res = {"a": (2, 2, 2, 2, [2.0, 2.0]), "b": (5, 10, 10, 5, [2.0] * 5)}
+    assert loto.objective(res, [short, long_], "takes") == pytest.approx((1.0 + 0.5) / 2)
+    assert loto.objective(res, [short, long_], "pooled") == pytest.approx(7 / 12)
+    assert loto.objective(res, [short, long_], "groups") == pytest.approx(7 / 12)
+    slow = {"a": (2, 2, 2, 2, [3.0, 3.0]), "b": (5, 10, 10, 5, [3.0] * 5)}
+    assert loto.objective(slow, [short, long_], "takes") == pytest.approx(0.75 - 1.0)
+    assert loto.person(short) == "a" and loto.person(case("13_29", "cmu")) == "13"
