@@ -19,7 +19,7 @@ from rtseg.recording import read_session
 from rtseg.session_config import from_dict
 from rtseg.simulators.serial_device import SerialSuit
 
-SPEED = 8.0
+SPEED = 4.0   # 480 frames/s; at 8x the test failed once with load average 4.5
 
 
 @pytest.mark.realdata
@@ -56,7 +56,7 @@ def test_86_01_through_the_serial_suit_scores_like_evaluate_online(data_dir, tmp
     src = tk.meta["source_time"]
     assert np.allclose(np.diff(src), 1 / take.frame_rate, atol=2e-5)
     to_take = [int(round(src[c.frame] * take.frame_rate)) for c in sent]
-    # cut times are on the take's clock although the frames arrived 8x faster
+    # cut times are on the take's clock although the frames arrived 4x faster
     t0 = float(tk.meta["recv_time"][0]) - float(tk.meta["header"]["start_monotonic"])
     for c in sent:
         assert c.time == pytest.approx(src[c.frame] + t0, abs=0.02), (c.time, src[c.frame])
