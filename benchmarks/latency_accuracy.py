@@ -160,7 +160,7 @@ def main() -> int:
     else:
         print(f"no budget reached a median delay <= {QUICK_S} s")
     if held_quick:
-        print(f"  the same choice left-one-take-out (budget chosen on the other takes, mean "
+        print(f"  the same choice leave-one-take-out (budget chosen on the other takes, mean "
               f"per-take F1): F1 {held_quick['f1']:.3f} (strict {held_quick['strict_f1']:.3f}; "
               f"delay {held_quick['delay_median'] or float('nan'):.2f}/"
               f"{held_quick['delay_p90'] or float('nan'):.2f} s)")
@@ -177,9 +177,11 @@ def draw(doc: dict, path: str) -> None:
     live = sorted((r for r in doc["live"] if r["delay_median"] is not None),
                   key=lambda r: r["delay_median"])
     x = [r["delay_median"] for r in live]
-    ax.plot(x, [r["f1"] for r in live], "o-", color="C0", label="contrast (live), F1 +-0.5 s")
-    ax.plot(x, [r["strict_f1"] for r in live], "o--", color="C0", alpha=0.5,
+    ax.plot(x, [r["f1"] for r in live], "o", color="C0", label="contrast (live), F1 +-0.5 s")
+    ax.plot(x, [r["strict_f1"] for r in live], "o", color="C0", alpha=0.4,
             label="contrast (live), strict")
+    front = np.maximum.accumulate([r["f1"] for r in live])     # best F1 at this delay or less
+    ax.step(x, front, where="post", color="C0", lw=1, label="best F1 at this median delay")
     for r in live:
         ax.errorbar(r["delay_median"], r["f1"], xerr=[[0], [r["delay_p90"] - r["delay_median"]]],
                     color="C0", alpha=0.3, capsize=2)
