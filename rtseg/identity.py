@@ -60,7 +60,7 @@ product; per decision one eigen-decomposition per changed model (a few per cut).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np

@@ -1,0 +1,71 @@
+"""Reading a behaviour library file (``rtseg.library``; written by ``Library.save``).
+
+The file is JSON, data only: ``format`` (``rtseg-behaviour-library``), ``version`` (1),
+``profile`` and ``dims`` (the pose-feature profile and its dims), the window settings,
+``threshold`` and ``ratio`` (the rejection rule), ``scale`` (per descriptor dim), per
+window its ``names`` / ``sources`` (example index) / ``starts`` / ``descriptors``, and the
+``examples`` (name, source, frames, person).  Everything is checked on load; any problem
+is one ``LibraryError`` line naming the file.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from rtseg.library import FORMAT, VERSION, Library, LibraryError
+
+
+def load(path: str | Path, profile: str | None = None, dims: int | None = None) -> Library:
+    """Read a library file; ``LibraryError`` (one line) when it is not a library of this
+    format and version, or (when given) not of ``profile`` / ``dims``."""
+    p = Path(path)
+    try:
+        raw = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise LibraryError(f"behaviour library {p}: cannot read ({exc.strerror or exc})") from None
+    try:
+        doc = json.loads(raw)
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        raise LibraryError(f"behaviour library {p}: not a JSON behaviour library") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise LibraryError(f"behaviour library {p}: not a behaviour library "
+                           f"(format {doc.get('format') if isinstance(doc, dict) else None!r}, "
+                           f"expected {FORMAT!r})")
+    if doc.get("version") != VERSION:
+        raise LibraryError(f"behaviour library {p}: version {doc.get('version')!r} "
+                           f"(this rtseg reads version {VERSION}; learn it again)")
+    try:
+        lib = Library(str(doc["profile"]), int(doc["dims"]), float(doc["frame_rate"]),
+                      np.asarray(doc["descriptors"], dtype=np.float64),
+                      [str(n) for n in doc["names"]], [int(s) for s in doc["sources"]],
+                      list(doc["examples"]),
+                      scale=np.asarray(doc["scale"], dtype=np.float64),
+                      threshold=math.inf if doc["threshold"] is None else float(doc["threshold"]),
+                      ratio=float(doc.get("ratio", 1.0)),
+                      window_s=float(doc["window_s"]), step_s=float(doc["step_s"]),
+                      edge_s=float(doc["edge_s"]), min_s=float(doc["min_s"]),
+                      calibration=dict(doc.get("calibration") or {}),
+                      starts=[float(x) for x in doc.get("starts") or []])
+        if not 0 < lib.ratio <= 1:
+            raise ValueError(f"ratio {lib.ratio} outside (0, 1]")
+    except (KeyError, TypeError, ValueError) as exc:
+        raise LibraryError(f"behaviour library {p}: malformed ({type(exc).__name__}: "
+                           f"{exc})") from None
+    k = 6 * (lib.dims // 4)
+    n = len(lib.names)
+    if (lib.dims <= 0 or lib.dims % 4 or lib.descriptors.shape != (n, k)
+            or lib.scale.shape != (k,) or len(lib.sources) != n or not n
+            or (lib.starts and len(lib.starts) != n)
+            or any(not 0 <= x < len(lib.examples) for x in lib.sources)
+            or not np.all(np.isfinite(lib.descriptors)) or not np.all(lib.scale > 0)):
+        raise LibraryError(f"behaviour library {p}: malformed (descriptor, scale or name "
+                           f"counts do not agree with {lib.dims} dims)")
+    if profile is not None and (lib.profile != profile or (dims is not None and lib.dims != dims)):
+        raise LibraryError(f"behaviour library {p}: learned for feature profile "
+                           f"{lib.profile!r} ({lib.dims} dims), this session's features are "
+                           f"{profile!r} ({dims} dims); learn it from takes of this skeleton")
+    return lib
