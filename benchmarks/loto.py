@@ -19,7 +19,8 @@ Leave-one-take-out: for each take name (86_01 holds out its cmu and tsseg4d vers
 together), the best set on the other takes is scored on it; the held-out cuts are pooled
 per group.  Leave-one-person-out likewise holds out every take of one subject (86, 13, 14;
 the synthetic performances always train).  Also printed: the set chosen on every take
-(what should ship), and the F1 of the shipped defaults as each parameter moves alone.
+(what should ship), each fold's choice with its margin over the runner-up, and the F1 of
+the shipped defaults as each parameter moves alone.
 """
 
 from __future__ import annotations
@@ -179,6 +180,11 @@ def main() -> int:
         return max(results, key=lambda k: (objective(results[k], train, args.objective),
                                            -k[keys.index("after_s")]))
 
+    def margin(train: list[Case], k: tuple) -> float:
+        """How far the chosen set's objective leads the best other set's (0: a tie)."""
+        top = objective(results[k], train, args.objective)
+        return top - max(objective(results[o], train, args.objective) for o in results if o != k)
+
     chosen_all = best(cases)
     names = sorted({c.name for c in cases})
     held: dict[str, tuple] = {}
@@ -187,7 +193,8 @@ def main() -> int:
         train = [c for c in cases if c.name != n]
         k = best(train)
         held_rows = [results[k][c.key] for c in cases if c.name == n]
-        folds[n] = {**dict(zip(keys, k)), "held_out_f1": round(pooled_tally(held_rows)["f1"], 3)}
+        folds[n] = {**dict(zip(keys, k)), "held_out_f1": round(pooled_tally(held_rows)["f1"], 3),
+                    "margin": round(margin(train, k), 4)}
         for c in cases:
             if c.name == n:
                 held[c.key] = results[k][c.key]
