@@ -32,11 +32,16 @@ only, on one core, median of ``--repeat`` runs:
   JSON v3 payloads (one actor, 21 bones; JSON parsed with orjson when installed, else the
   json module - the row says which); ``rokoko_lz4``: the same payloads LZ4-compressed;
   ``rokoko_json_module``: plain payloads parsed with the standard json module.
+- ``mvn_tcp``: the ``mvn`` frames as MVN's TCP stream (messages back to back) in 4096-byte
+  reads, cut by ``codec_mvn.MxtpStream`` and assembled.
 - ``axis_binary``: Axis BVH binary datagrams (64-byte header + 354 float32, 1480 bytes)
-  through the axis source's datagram joiner, decoder and Euler -> quaternion conversion;
-  ``axis_binary_global``: the same with ``space=global`` (forward kinematics per frame);
-  ``axis_text``: the same frames as the TCP text stream (``||``-separated), fed in 4096-byte
-  reads.
+  through the axis source's datagram joiner, decoder and Euler -> quaternion conversion
+  (``space=local``); ``axis_binary_global``: the same with ``space=global`` (the sources'
+  default: forward kinematics per frame); ``axis_text``: the same frames as the TCP text
+  stream (``||``-separated), fed in 4096-byte reads through ``axis_source.TextStream`` (the
+  frames of one read are parsed and converted together); ``axis_text_global`` the same in
+  global space; ``axis_text_64k`` in 65536-byte reads (what the source reads when it has
+  fallen behind: the catch-up rate).
 
 Targets: >= 20 000 frames/s for VMC, MVN, mocopi, Rokoko and Axis (a suit sends 60-240).
 
@@ -323,14 +328,44 @@ def bench_rokoko(n: int, repeat: int, compress: bool = False, json_module: bool 
             "json_parser": "json" if json_module else codec_rokoko.JSON_PARSER}
 
 
-def bench_axis(n: int, repeat: int, text: bool = False, space: str = "local") -> dict:
-    from rtseg.drivers.codec_axis import encode_binary, encode_text
+def bench_mvn_tcp(n: int, repeat: int) -> dict:
+    """MVN over TCP: the type-02 messages back to back, in 4096-byte reads, cut by
+    MxtpStream and fed to the assembler (what MvnTcpSource runs per read)."""
+    from rtseg.drivers.codec_mvn import MxtpStream, encode_datagrams
+    from rtseg.drivers.codec_mvn_assembler import MvnAssembler
+    q = vendor_motion(n, 23)
+    ids = list(range(1, 24))
+    stream = b"".join(d for i in range(n) for d in encode_datagrams(i, i * 8, ids, q[i],
+                                                                     np.zeros((23, 3))))
+    reads = [stream[k:k + SERIAL_CHUNK] for k in range(0, len(stream), SERIAL_CHUNK)]
+
+    class _Tcp:
+        def __init__(self) -> None:
+            self.cut, self.asm = MxtpStream(), MvnAssembler(ids)
+
+        def feed(self, data: bytes, now: float) -> list:
+            return [f for m in self.cut.feed(data) for f in self.asm.feed(m, now)]
+
+        def flush(self, now: float, force: bool = False) -> list:
+            return self.asm.flush(now, force)
+
+    rates = _time_feed(_Tcp, reads, n, repeat, "MVN TCP")
+    return {"frames_per_s": round(statistics.median(rates)), "runs": [round(r) for r in rates],
+            "bytes_per_frame": len(stream) / n}
+
+
+def bench_axis(n: int, repeat: int, text: bool = False, space: str = "local",
+               chunk: int = SERIAL_CHUNK) -> dict:
+    """``chunk``: bytes per TCP read of the text stream (4096; 65536 is what the source
+    asks for, and gets when it has fallen behind)."""
+    from rtseg.drivers.codec_axis import encode_binary
+    from rtseg.drivers.codec_axis_text import encode_text
     v = _axis_values(n)
     if text:
         stream = b"".join(encode_text(v[i]) for i in range(n))
-        dgrams = [stream[k:k + SERIAL_CHUNK] for k in range(0, len(stream), SERIAL_CHUNK)]
+        dgrams = [stream[k:k + chunk] for k in range(0, len(stream), chunk)]
         dgrams.append(b"||")          # the stream's last frame ends at the next separator
-        make = _AxisText
+        make = lambda: _AxisText(space)  # noqa: E731
     else:
         dgrams = [encode_binary(v[i], frame_index=i) for i in range(n)]
         stream = b"".join(dgrams)
@@ -404,6 +439,7 @@ def main(argv: list[str] | None = None) -> int:
     result["vmc_55_bones"] = bench_vmc(q, args.repeat, full=True)
     result["mvn"] = bench_mvn(args.frames, args.repeat)
     result["mvn_3_datagrams"] = bench_mvn(args.frames, args.repeat, parts=3)
+    result["mvn_tcp"] = bench_mvn_tcp(args.frames, args.repeat)
     result["mocopi"] = bench_mocopi(args.frames, args.repeat)
     result["rokoko"] = bench_rokoko(args.frames, args.repeat)
     result["rokoko_lz4"] = bench_rokoko(args.frames, args.repeat, compress=True)
@@ -411,6 +447,8 @@ def main(argv: list[str] | None = None) -> int:
     result["axis_binary"] = bench_axis(args.frames, args.repeat)
     result["axis_binary_global"] = bench_axis(args.frames, args.repeat, space="global")
     result["axis_text"] = bench_axis(args.frames, args.repeat, text=True)
+    result["axis_text_global"] = bench_axis(args.frames, args.repeat, text=True, space="global")
+    result["axis_text_64k"] = bench_axis(args.frames, args.repeat, text=True, chunk=65536)
     pyosc = bench_python_osc(q[: max(10, args.frames // 5)], max(1, min(args.repeat, 3)))
     if pyosc is not None:
         result["python_osc_parse"] = pyosc
@@ -433,13 +471,16 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  VMC, 55 bones ({f['datagrams_per_frame']:.0f} datagrams, {f['bytes_per_frame']:.0f} B/frame):"
           f"       {f['frames_per_s']:>9,} frames/s")
     for key, label in (("mvn", "Xsens MVN, 23 segments"), ("mvn_3_datagrams", "Xsens MVN, 3 datagrams/frame"),
+                       ("mvn_tcp", "Xsens MVN over TCP, 4 KiB reads"),
                        ("mocopi", "Sony mocopi, 27 bones"),
                        ("rokoko", f"Rokoko JSON v3 ({result['rokoko']['json_parser']})"),
                        ("rokoko_lz4", f"Rokoko JSON v3 LZ4 ({result['rokoko']['json_parser']})"),
                        ("rokoko_json_module", "Rokoko JSON v3 (json module)"),
                        ("axis_binary", "Axis BVH binary, 59 joints"),
                        ("axis_binary_global", "Axis BVH binary, space=global"),
-                       ("axis_text", "Axis BVH text (TCP)")):
+                       ("axis_text", "Axis BVH text (TCP)"),
+                       ("axis_text_global", "Axis BVH text, space=global"),
+                       ("axis_text_64k", "Axis BVH text, 64 KiB reads")):
         r = result[key]
         print(f"  {label} ({r['bytes_per_frame']:.0f} B/frame): ".ljust(47)
               + f"{r['frames_per_s']:>9,} frames/s")

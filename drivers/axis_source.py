@@ -29,22 +29,25 @@ URL options
 ``rate``     nominal frame rate in Hz (default 60; Axis does not announce it).
              ``source_time`` = binary frame index / rate.
 ``unit``     length unit of positions: ``cm`` (default, Axis's BVH unit), ``m`` or ``mm``.
-``space``    ``local`` (default: the BVH's parent-relative rotations, as sent) or
-             ``global`` (world orientations by forward kinematics in the source, about 6x
-             the decode cost).  The live loop calibrates local sources against their
-             first frames (``calibration.mode = "auto"``) and not global ones; Axis's
-             rotations are already relative to its calibrated T-pose, so ``space=global``
-             or ``calibration.mode = "none"`` skip that step (docs/protocols.md).
+``space``    ``global`` (default: world orientations, the BVH rotations chained by
+             forward kinematics in the source) or ``local`` (the BVH's parent-relative
+             rotations, as sent).  Axis's rotations are relative to the T-pose it
+             calibrated (its BVH rest pose), so its world orientations are the features of
+             a global IMU suit as they stand; the live loop calibrates *local* sources
+             again against their first frames (``calibration.mode = "auto"``), which here
+             would re-reference to whatever pose the performer holds when rtseg starts
+             (docs/protocols.md, "Default space").
 ``queue``    frames held for ``read`` (default 256; the oldest is dropped when full,
              counted in ``stats.dropped``).
 ``rcvbuf``   SO_RCVBUF bytes (binary).  ``allow``: accepted senders (binary).
 ``backoff``, ``max_backoff``  reconnect delays in seconds (text; default 0.2 and 5).
 
 Frames: the 59 Axis joints (:data:`~rtseg.drivers.codec_axis.JOINTS`) with their hierarchy,
-``space = "local"`` (BVH parent-relative rotations, right-handed Y-up, scalar-last; or
-world orientations with ``space=global``),
-``root_position`` = Hips position in metres, ``seq`` = binary frame index (text: count of
-frames received), ``valid`` False for joints whose angles are not finite.  Counters:
+``space = "global"`` (world orientations, right-handed Y-up, scalar-last; BVH
+parent-relative rotations with ``space=local``), ``root_position`` = Hips position in
+metres, ``seq`` = binary frame index (text: count of frames received), ``valid`` False for
+joints whose angles are not finite (in global space also for their descendants, whose
+world orientation chains through them).  Counters:
 damaged bytes -> ``corrupt``; a frame whose value count fits no layout -> ``bad_messages``;
 non-finite angles -> ``bad_values``; a binary frame index that jumps forward -> 1 in
 ``gaps`` and the frames skipped in ``dropped``.
@@ -90,6 +93,8 @@ class AxisFrames:
 
     def __init__(self, count, avatar: str | None = None, order: str = "YXZ",
                  unit_scale: float = 0.01, rate: float = 60.0, space: str = "local") -> None:
+        """``space``: what this converter returns (the sources pass ``global`` by
+        default)."""
         self._count = count
         self.space = space
         self.avatar = avatar
@@ -152,6 +157,10 @@ class AxisFrames:
         self._last = q
         if self.space == "global":
             q = global_pose(q)
+            if not valid.all():               # a world orientation chains its ancestors'
+                for j, p in enumerate(PARENTS):
+                    if p >= 0 and not valid[p]:
+                        valid[j] = False
         seq = self._seq(f, now)
         return Frame(recv_time=now, quats=q, valid=valid,
                      source_time=None if f.frame_index is None else f.frame_index / self.rate,
@@ -254,11 +263,11 @@ class AxisBinarySource(OscUdpSource):
     """Axis binary BVH frames on a UDP socket (see module docstring).  ``.port``: bound
     port."""
 
-    space = "local"
+    space = "global"
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = BINARY_PORT, *,
                  avatar: str | None = None, order: str = "YXZ", rate: float = 60.0,
-                 unit_scale: float = 0.01, space: str = "local", queue_size: int = 256,
+                 unit_scale: float = 0.01, space: str = "global", queue_size: int = 256,
                  rcvbuf: int | None = None, allow: tuple[Network, ...] | None = None) -> None:
         super().__init__()
         self.joint_names = list(JOINTS)
@@ -283,11 +292,11 @@ class AxisBinarySource(OscUdpSource):
 class AxisTextSource(Source):
     """TCP client of Axis's text BVH server (see module docstring)."""
 
-    space = "local"
+    space = "global"
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = TEXT_PORT, *,
                  avatar: str | None = None, order: str = "YXZ", rate: float = 60.0,
-                 unit_scale: float = 0.01, space: str = "local", queue_size: int = 256,
+                 unit_scale: float = 0.01, space: str = "global", queue_size: int = 256,
                  backoff: float = 0.2, max_backoff: float = 5.0,
                  connect_timeout: float = 2.0) -> None:
         super().__init__()
@@ -418,7 +427,7 @@ def open_url(location: str, options: dict[str, str]) -> Source:
     if len(order) != 3 or set(order) != set("XYZ"):
         raise SourceError(f"axis:// order={options.get('order')!r}: a permutation of XYZ "
                           f"(as set in Axis's BVH output, default YXZ)")
-    space = (options.get("space") or "local").lower()
+    space = (options.get("space") or "global").lower()
     if space not in SPACES:
         raise SourceError(f"axis:// space={space!r}: local or global")
     unit = (options.get("unit") or "cm").lower()

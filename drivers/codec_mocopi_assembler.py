@@ -113,7 +113,7 @@ class MocopiAssembler:
         if missing:                                   # frames the sender numbered, lost
             self.stats.gaps += 1
             self._count("dropped", missing, f"{missing} frame(s) missing before fnum "
-                        f"{fr.fnum} (further gaps counted in gaps / dropped, not logged)")
+                        f"{fr.fnum} (gaps also counted in gaps)")
         fast = self._frame_fast(fr, now)
         if fast is not None:
             return fast

@@ -37,8 +37,8 @@ import math
 
 import numpy as np
 
-from rtseg.drivers.codec_rokoko import (BODY_BONES, BODY_PARENTS, DEFAULT_PORT, RokokoError,
-                                        decode_packet)
+from rtseg.drivers.codec_rokoko import (BODY_BONES, BODY_PARENTS, DEFAULT_PORT, JSON_PARSER,
+                                        RokokoError, decode_packet)
 from rtseg.drivers.osc_source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
                                       allow_option, check_options, number_option, renamed)
 from rtseg.frame import Frame
@@ -126,6 +126,9 @@ class RokokoSource(OscUdpSource):
         self.parents = list(BODY_PARENTS)
         self.frame_rate = float(rate)
         self._asm = RokokoAssembler(actor, self.count, tolerance)
+        if JSON_PARSER != "orjson":
+            log.info("Rokoko: orjson is not installed; payloads are parsed with the json "
+                     "module (about half the decode rate; pip install 'rtseg[rokoko]')")
         self._start(host, port, 0.05, queue_size, rcvbuf, allow)
 
     @property

@@ -239,6 +239,15 @@ def test_non_finite_angles_make_joints_invalid():
     f = frames.frame(A.decode_binary(A.encode_binary(v.ravel())), 0.0)
     assert [A.JOINTS[j] for j in np.flatnonzero(~f.valid)] == ["Head"]
     assert f.root_position is None and count.counts == {"bad_values": 1}
+    # in world space a joint's orientation chains its ancestors': a bad RightArm makes the
+    # whole right arm (and hand) invalid, counted once
+    v[12, 4] = 0.0
+    v[14, 3] = np.nan                          # RightArm
+    count = Counter()
+    g = AxisFrames(count, space="global").frame(A.decode_binary(A.encode_binary(v.ravel())), 0)
+    bad = [A.JOINTS[j] for j in np.flatnonzero(~g.valid)]
+    assert bad[:3] == ["RightArm", "RightForeArm", "RightHand"] and len(bad) == 22
+    assert count.counts == {"bad_values": 1}
 
 
 def test_text_splitter_bounds_its_buffer():
@@ -376,8 +385,13 @@ def test_frames_of_one_read_decode_and_convert_as_one_by_one():
 def test_url_defaults_options_and_errors():
     src = open_source("axis://:0?rate=90&avatar=Avatar01&order=zxy")
     try:
-        assert src.host == "127.0.0.1" and src.port > 0 and src.space == "local"
+        assert src.host == "127.0.0.1" and src.port > 0 and src.space == "global"
         assert src.joint_names == list(A.JOINTS) and src.frame_rate == 90.0
+    finally:
+        src.close()
+    src = open_source("axis://:0?space=local")
+    try:
+        assert src.space == "local"
     finally:
         src.close()
     assert_refused([("axis://:0?format=csv", "not supported"),
@@ -391,7 +405,7 @@ def test_url_defaults_options_and_errors():
 
 def test_binary_over_udp_split_datagrams_and_avatar_choice():
     take = synthesize("idle:2,walk:2", frame_rate=60.0, seed=8).take
-    src = open_source("axis://127.0.0.1:0?avatar=Avatar01&queue=4096&rate=60")
+    src = open_source("axis://127.0.0.1:0?avatar=Avatar01&queue=4096&rate=60&space=local")
     sender = AxisSender(take, "binary", "127.0.0.1", src.port, speed=8.0, split=1024,
                         avatars=[(0, "Avatar00", 0), (1, "Avatar01", 30)])
     frames = send_and_read(src, sender)
@@ -514,10 +528,11 @@ def test_the_real_axis_bvh_replays_through_the_simulators():
 
 def test_real_take_cuts_match_the_serial_suit(data_dir):
     """86_01 (CMU, 38 s) through the Axis binary codec, as the axis:// source delivers it
-    (59 joints; space=global, or the default local space without the calibration step),
+    (59 joints; the default space=global, or space=local without the calibration step),
     gives the cuts the 17-sensor serial suit gives through its codec, within 0.25 s
-    (offline pipeline, the live loop's own).  (With local space and the default
-    calibration.mode = auto, the first of 86_01's six cuts moves from frame 530 to 450.)"""
+    (offline pipeline, the live loop's own).  (With space=local and the default
+    calibration.mode = auto, the first of 86_01's six cuts moves from frame 530 to 450:
+    why global is the default.)"""
     from rtseg.pipeline import replay_frames
 
     take, serial, ref = serial_reference(data_dir)
