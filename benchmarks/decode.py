@@ -47,7 +47,7 @@ Targets: >= 20 000 frames/s for VMC, MVN, mocopi, Rokoko and Axis (a suit sends 
 
     python3 benchmarks/decode.py --fuzz [--fuzz-inputs 100000]
 
-feeds, per format (mvn, mocopi, rokoko, axis binary, axis text), that many mutated datagrams (bit flips, truncation,
+feeds, per format (mvn, mvn_tcp: stream reads, mocopi, rokoko, axis binary, axis text), that many mutated datagrams (bit flips, truncation,
 rewritten header/length fields, appended bytes, random bytes; seeded) to the assembler
 and reports how many raised (must be 0), frames produced, counters, and inputs/s.
 """
@@ -201,7 +201,8 @@ def mutate(seeds: list[bytes], n: int, seed: int, magic: bytes = b""):
 
 
 def fuzz(fmt: str, n: int, seed: int = 1) -> dict:
-    """Feed ``n`` mutated datagrams of ``fmt`` (mvn | mocopi); count escaped exceptions."""
+    """Feed ``n`` mutated datagrams (TCP reads for mvn_tcp, axis_text) of ``fmt``; count
+    escaped exceptions."""
     import struct
     if fmt == "mvn":
         from rtseg.drivers.codec_mvn import (HEADER_SIZE, ITEM_SIZE, MvnAssembler,
@@ -214,6 +215,14 @@ def fuzz(fmt: str, n: int, seed: int = 1) -> dict:
                   encode_message("13", struct.pack(">II", 1, 2) + b"L5" + bytes(12)),
                   encode_message("24", bytes(12)), encode_message("25", b"01:02:03.004")]
         asm, magic = MvnAssembler(ids, quiet=0.0), b"MXTP"
+    elif fmt == "mvn_tcp":
+        from rtseg.drivers.codec_mvn import HEADER_SIZE, ITEM_SIZE, encode_datagrams
+        q = vendor_motion(4, 23)
+        ids = list(range(1, 24))
+        stream = b"".join(d for i in range(4) for d in encode_datagrams(
+            i, i, ids, q[i], max_datagram=HEADER_SIZE + 8 * ITEM_SIZE))
+        seeds = [stream[k:k + 700] for k in range(0, len(stream), 700)]   # TCP reads
+        asm, magic = _MvnTcp(ids), b"MXTP"
     elif fmt == "rokoko":
         from rtseg.drivers.codec_rokoko import LZ4_MAGIC
         seeds = _rokoko_payloads(3, False) + _rokoko_payloads(2, True)
@@ -251,6 +260,26 @@ def fuzz(fmt: str, n: int, seed: int = 1) -> dict:
     return {"inputs": n, "escaped": escaped, "frames": frames, "corrupt": st.corrupt,
             "bad_values": st.bad_values, "bad_messages": st.bad_messages,
             "dropped": st.dropped, "inputs_per_s": round(n / dt)}
+
+
+class _MvnTcp:
+    """What MvnTcpSource runs per TCP read: MxtpStream -> MvnAssembler (its ``corrupt``
+    also counts the stream's resynchronisations)."""
+
+    def __init__(self, ids: list[int]) -> None:
+        from rtseg.drivers.codec_mvn import MxtpStream
+        from rtseg.drivers.codec_mvn_assembler import MvnAssembler
+        self.cut, self.asm = MxtpStream(), MvnAssembler(ids, quiet=0.0)
+        self.stats = self.asm.stats
+
+    def feed(self, data: bytes, now: float) -> list:
+        before = self.cut.resyncs
+        out = [f for m in self.cut.feed(data) for f in self.asm.feed(m, now)]
+        self.stats.corrupt += self.cut.resyncs - before
+        return out
+
+    def flush(self, now: float, force: bool = False) -> list:
+        return self.asm.flush(now, force)
 
 
 class _CountingStats:
@@ -418,7 +447,7 @@ def main(argv: list[str] | None = None) -> int:
         _clock = time.process_time
     if args.fuzz:
         out = {fmt: fuzz(fmt, args.fuzz_inputs)
-               for fmt in ("mvn", "mocopi", "rokoko", "axis", "axis_text")}
+               for fmt in ("mvn", "mvn_tcp", "mocopi", "rokoko", "axis", "axis_text")}
         if args.json:
             print(json.dumps(out))
         else:

@@ -149,7 +149,7 @@ class AxisFrames:
 
     def _convert(self, f: AxisFrame, now: float) -> Frame:
         q, valid, pos = to_pose(f, self.order, self.unit_scale)   # fresh arrays
-        if not valid.all():
+        if np.count_nonzero(valid) != valid.size:
             n = int(np.count_nonzero(~valid))
             self._count("bad_values", n)
             self.warn("bad", now, "Axis: %d joint(s) with non-finite angles; marked invalid", n)

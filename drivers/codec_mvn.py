@@ -260,10 +260,12 @@ def encode_message(msg_type: str, payload: bytes, *, sample: int = 0, time_ms: i
 class MxtpStream:
     """TCP byte stream -> MXTP messages.  Over TCP (MVN's optional transport) the messages
     are the UDP datagrams sent back to back, each 24-byte header + ``payload size`` bytes
-    (a type-02 message whose size field is 0 takes ``items`` x 32 bytes).  ``feed`` returns
-    the complete messages; bytes that do not start a header (damage, a partial message
-    after a reconnect) are skipped up to the next ``"MXTP"`` + two digits, and each such
-    resynchronisation is counted in ``resyncs`` / ``skipped_bytes``."""
+    (a type-02 message whose size field is 0 takes ``items`` x 32 bytes; one whose size is
+    neither 0 nor that is a damaged header).  ``feed`` returns the complete messages;
+    bytes that do not start a header (damage, a partial message after a reconnect) are
+    skipped up to the next ``"MXTP"`` + two digits, and each such resynchronisation is
+    counted in ``resyncs`` / ``skipped_bytes``.  A damaged size field of another type can
+    swallow up to 64 KiB (its u16 limit) before the stream is in step again."""
 
     def __init__(self) -> None:
         self._buf = bytearray()
@@ -283,8 +285,15 @@ class MxtpStream:
                 pos = nxt
                 continue
             size = int.from_bytes(buf[pos + 22:pos + 24], "big")
-            if size == 0 and buf[pos + 4:pos + 6] == b"02":
-                size = buf[pos + 11] * ITEM_SIZE
+            if buf[pos + 4:pos + 6] == b"02":
+                items = buf[pos + 11] * ITEM_SIZE
+                if size not in (0, items):         # a damaged header: do not trust it
+                    nxt = self._next_magic(buf, pos + 1)
+                    self.resyncs += 1
+                    self.skipped_bytes += nxt - pos
+                    pos = nxt
+                    continue
+                size = items
             end = pos + HEADER_SIZE + size
             if end > len(buf):
                 break

@@ -397,6 +397,11 @@ def test_tcp_stream_is_cut_into_messages_and_resynchronised_after_damage():
     damaged = b"xyzMX" + msgs[0] + b"\x00" * 7 + b"".join(msgs[1:4]) + b"MXTP9" + b"".join(msgs[4:])
     got = st.feed(damaged[:50]) + st.feed(damaged[50:])
     assert got == msgs and st.resyncs == 3 and st.skipped_bytes == 5 + 7 + 5
+    bad = bytearray(msgs[2])
+    bad[22:24] = (len(bad) - HEADER_SIZE + ITEM_SIZE).to_bytes(2, "big")   # size != items
+    st = MxtpStream()
+    assert st.feed(b"".join([msgs[1], bytes(bad), *msgs[3:]])) == [msgs[1], *msgs[3:]]
+    assert st.resyncs == 1 and st.skipped_bytes == len(bad)
 
 
 def test_simulator_over_tcp_gives_the_udp_frames_exactly():
