@@ -2,7 +2,9 @@
 
 The file is JSON, data only: ``format`` (``rtseg-behaviour-library``), ``version`` (1),
 ``profile`` and ``dims`` (the pose-feature profile and its dims), the window settings,
-``threshold`` and ``ratio`` (the rejection rule), ``scale`` (per descriptor dim), per
+``threshold`` and ``ratio`` (the rejection rule), ``k_nearest`` (a name's distance is the
+mean of its k nearest windows'; files written before it existed have none and read as 1,
+the rule their threshold was calibrated for), ``scale`` (per descriptor dim), per
 window its ``names`` / ``sources`` (example index) / ``starts`` / ``descriptors``, and the
 ``examples`` (name, source, frames, person).  Everything is checked on load; any problem
 is one ``LibraryError`` line naming the file.
@@ -49,9 +51,12 @@ def load(path: str | Path, profile: str | None = None, dims: int | None = None) 
                       window_s=float(doc["window_s"]), step_s=float(doc["step_s"]),
                       edge_s=float(doc["edge_s"]), min_s=float(doc["min_s"]),
                       calibration=dict(doc.get("calibration") or {}),
-                      starts=[float(x) for x in doc.get("starts") or []])
+                      starts=[float(x) for x in doc.get("starts") or []],
+                      k_nearest=int(doc.get("k_nearest", 1)))
         if not 0 < lib.ratio <= 1:
             raise ValueError(f"ratio {lib.ratio} outside (0, 1]")
+        if lib.k_nearest < 1:
+            raise ValueError(f"k_nearest {lib.k_nearest} below 1")
     except (KeyError, TypeError, ValueError) as exc:
         raise LibraryError(f"behaviour library {p}: malformed ({type(exc).__name__}: "
                            f"{exc})") from None

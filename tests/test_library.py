@@ -19,8 +19,8 @@ from pythonosc.osc_message import OscMessage
 from rtseg.drivers.base import Source
 from rtseg.frame import Frame
 from rtseg.identity_eval import run_identity
-from rtseg.library import (UNKNOWN, LibraryBuilder, LibraryError, load, separating_rule,
-                           separating_threshold)
+from rtseg.library import (UNKNOWN, Library, LibraryBuilder, LibraryError, load,
+                           separating_rule, separating_threshold)
 from rtseg.library_learn import label_runs, take_rows
 from rtseg.live import LiveSession
 from rtseg.online_eval import live_config
@@ -120,6 +120,48 @@ def test_learn_command_and_its_errors(tmp_path):
     lib.write_text('{"format": "something else"}')
     p = run("--take", str(take), "--label", "walk")
     assert p.returncode == 2 and "not a behaviour library" in p.stderr
+
+
+def _points_library(rows, names, k):
+    """A 1-joint library (4 feature dims, 6 descriptor dims) whose windows are ``rows``
+    (first descriptor coordinate; the rest 0), unit scale, no rejection."""
+    D = np.zeros((len(rows), 6))
+    D[:, 0] = rows
+    return Library("test", 4, 120.0, D, list(names), list(range(len(rows))),
+                   [{"name": n, "source": str(i), "frames": [0, 1]} for i, n in enumerate(names)],
+                   scale=np.ones(6), k_nearest=k)
+
+
+def test_a_name_is_as_near_as_its_k_nearest_windows():
+    """One stray 'jump' window next to the query, three 'walk' windows a little farther:
+    the nearest window says jump, the mean of the 3 nearest per name says walk."""
+    lib = _points_library([0.1, 3.0, 3.2, 0.4, 0.45, 0.5], ["jump"] * 3 + ["walk"] * 3, 3)
+    q = np.zeros(6)
+    per = lib.name_distances(lib.distances(q))
+    scale = np.sqrt(1 / 3)                 # only the spread group (1 of 3) differs
+    assert per["walk"] == pytest.approx(0.45 * scale)
+    assert per["jump"] == pytest.approx((0.1 + 3.0 + 3.2) / 3 * scale)
+    assert lib.name_descriptor(q).name == "walk"
+    lib.k_nearest = 1
+    assert lib.name_descriptor(q).name == "jump"
+    lib.k_nearest = 10                     # more than a name has: all of its windows
+    assert lib.name_distances(lib.distances(q))["walk"] == pytest.approx(0.45 * scale)
+    d = lib.distances(q)
+    d[:3] = np.inf                         # windows another person's calibration skips
+    assert set(lib.name_distances(d)) == {"walk"}
+
+
+def test_k_nearest_in_the_file(tmp_path, library):
+    assert library.k_nearest == 3
+    doc = json.loads(library.save(tmp_path / "lib.json").read_text())
+    assert doc["k_nearest"] == 3 and load(tmp_path / "lib.json").k_nearest == 3
+    del doc["k_nearest"]                   # a file from before k-NN: its rule was 1-NN
+    (tmp_path / "old.json").write_text(json.dumps(doc))
+    assert load(tmp_path / "old.json").k_nearest == 1
+    doc["k_nearest"] = 0
+    (tmp_path / "zero.json").write_text(json.dumps(doc))
+    with pytest.raises(LibraryError, match="k_nearest 0"):
+        load(tmp_path / "zero.json")
 
 
 def test_separating_rule_uses_the_ratio_when_distances_overlap():
