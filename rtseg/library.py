@@ -61,6 +61,11 @@ UNKNOWN = "unknown"
 GROUPS = ("spread", "speed", "dims")
 SCALE_FLOOR = 0.05
 K_NEAREST = 3
+#: a library of one name has no unknown cases to calibrate against: its threshold is this
+#: many times its median same-name distance - the largest threshold / median ratio the
+#: calibration chose in the 25 multi-name libraries of benchmarks/library_loto.py's mocap6
+#: and cmu_single folds (median 1.15, range 0.87-1.30); it was 1.5 x the largest one
+ONE_NAME_FACTOR = 1.3
 
 
 class LibraryError(ConfigError):
@@ -315,12 +320,12 @@ def separating_rule(same: Sequence[float], same_other: Sequence[float],
 def separating_threshold(same: Sequence[float], other: Sequence[float]) -> float:
     """The distance t maximising (share of ``same`` <= t) + (share of ``other`` > t),
     midway between neighbouring values; ties: the middle of the best run.  Without
-    ``other`` (one name): 1.5 x the largest ``same``; without ``same``: half the smallest
+    ``other`` (one name): ``ONE_NAME_FACTOR`` x the median ``same``; without ``same``: half the smallest
     ``other``; without either: inf."""
     s = np.sort(np.asarray(same, dtype=np.float64))
     o = np.sort(np.asarray(other, dtype=np.float64))
     if not len(o):
-        return float(1.5 * s[-1]) if len(s) else math.inf
+        return float(ONE_NAME_FACTOR * np.median(s)) if len(s) else math.inf
     if not len(s):
         return float(0.5 * o[0])
     vals = np.unique(np.concatenate([s, o]))

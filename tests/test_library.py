@@ -177,6 +177,8 @@ def test_separating_rule_uses_the_ratio_when_distances_overlap():
 
 def test_separating_threshold():
     assert separating_threshold([0.2, 0.3, 0.4], [1.0, 1.2]) == pytest.approx(0.7)
+    # one name, no unknown cases: 1.3 x the median, one far same-name pair does not loosen it
+    assert separating_threshold([0.2, 0.3, 0.4, 3.0], []) == pytest.approx(1.3 * 0.35)
     t = separating_threshold([0.2, 0.9], [0.5, 1.5])
     assert 0.2 < t < 1.5
 
