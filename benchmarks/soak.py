@@ -82,6 +82,7 @@ DEFAULT_FAULTS = ("corrupt=0.01,drop=0.001,jitter=0.002,unplug=10:0.3,"
 IN_FLIGHT_S = 0.1            # intact frames written this soon before a pull may die in the pty
 REPLUG_S = 1.0               # overflow this soon after a replug: the reader is reopening
 BINS_PER_E = 1000            # log-spaced histogram bins per factor e (0.1 % wide)
+N_BINS = int(math.log(10e9) * BINS_PER_E) + 1   # durations up to 10 s (longer: last bin)
 
 
 # ============================================================================ suit process
@@ -148,24 +149,40 @@ class Meter:
     """Per-window histograms of ``Pipeline.process`` time and RSS samples, by session
     time (the unwrapped sequence number of the last frame processed = messages the suit
     sent, so destroyed frames still advance it); the same number bounds the lost-frame
-    count.  ``wrap(pipeline)`` installs the timer."""
+    count.  ``wrap(pipeline)`` installs the timer.
 
-    def __init__(self, window_frames: int) -> None:
+    Every array is allocated and touched here, before the session starts, so the meter
+    itself adds nothing to the RSS growth it measures (per-window dicts of histogram bins
+    grew by about 0.5 MB a session hour, as much as a leak would)."""
+
+    def __init__(self, window_frames: int, n_windows: int, n_seen: int,
+                 max_rss_samples: int = 200_000) -> None:
         self.window_frames = window_frames
-        self.hist: dict[int, dict[int, int]] = {}
-        self.cpu_hist: dict[int, dict[int, int]] = {}   # same, thread CPU time
-        self.rss: dict[int, list[float]] = {}
+        self.n_windows = n_windows
+        # [window, bin] counts of log-binned durations (ns), wall and thread CPU time;
+        # frames past the last window count in it
+        self.hist = np.ones((n_windows, N_BINS), dtype=np.int64)
+        self.cpu_hist = np.ones((n_windows, N_BINS), dtype=np.int64)
+        self.hist[:] = 0
+        self.cpu_hist[:] = 0
+        self.rss_mb_samples = np.full(max_rss_samples, np.nan)
+        self.rss_window = np.full(max_rss_samples, -1, dtype=np.int64)
+        self.n_rss = 0
         self.processed = 0
         self.last_abs = -1            # unwrapped sequence number of the last frame processed
-        self.seen = np.zeros(0, dtype=bool)   # received message indices (preallocated)
+        self.seen = np.ones(n_seen, dtype=bool)   # received message indices
+        self.seen[:] = False
+
+    def window(self) -> int:
+        return min(max(self.last_abs, 0) // self.window_frames, self.n_windows - 1)
 
     def wrap(self, pipeline) -> None:
         process = pipeline.process
         perf = time.perf_counter_ns
         cpu = time.thread_time_ns
         log = math.log
-        hist = self.hist
-        cpu_hist = self.cpu_hist
+        hist, cpu_hist = self.hist, self.cpu_hist
+        top = N_BINS - 1
 
         def timed(index, quats, valid, seq=None, recv_time=None, lost=0, source_time=None):
             c0 = cpu()
@@ -178,23 +195,17 @@ class Meter:
                 self.last_abs = seq if prev < 0 else prev + ((seq - prev) & 0xFFFF)
                 if self.last_abs < self.seen.size:
                     self.seen[self.last_abs] = True
-            w = max(self.last_abs, 0) // self.window_frames
-            h = hist.get(w)
-            if h is None:
-                h = hist[w] = {}
-            b = int(log(max(dt, 1)) * BINS_PER_E)
-            h[b] = h.get(b, 0) + 1
-            hc = cpu_hist.get(w)
-            if hc is None:
-                hc = cpu_hist[w] = {}
-            b = int(log(max(dc, 1)) * BINS_PER_E)
-            hc[b] = hc.get(b, 0) + 1
+            w = self.window()
+            hist[w, min(int(log(max(dt, 1)) * BINS_PER_E), top)] += 1
+            cpu_hist[w, min(int(log(max(dc, 1)) * BINS_PER_E), top)] += 1
             self.processed += 1
             return out
 
         pipeline.process = timed
 
     def sample_rss(self) -> None:
+        if self.n_rss >= self.rss_mb_samples.size:
+            return
         with open("/proc/self/status") as fh:
             for line in fh:
                 if line.startswith("VmRSS:"):
@@ -202,22 +213,24 @@ class Meter:
                     break
             else:
                 return
-        w = max(self.last_abs, 0) // self.window_frames
-        self.rss.setdefault(w, []).append(kb / 1024.0)
+        self.rss_mb_samples[self.n_rss] = kb / 1024.0
+        self.rss_window[self.n_rss] = self.window()
+        self.n_rss += 1
+
+    def has_window(self, window: int) -> bool:
+        return bool(self.hist[window].any())
 
     def p99_us(self, window: int, cpu: bool = False) -> float | None:
-        h = (self.cpu_hist if cpu else self.hist).get(window)
-        if not h:
+        h = (self.cpu_hist if cpu else self.hist)[window]
+        c = np.cumsum(h)
+        if c[-1] == 0:
             return None
-        bins = np.array(sorted(h))
-        counts = np.array([h[b] for b in bins], dtype=np.float64)
-        c = np.cumsum(counts)
-        b = bins[np.searchsorted(c, 0.99 * c[-1])]
+        b = int(np.searchsorted(c, 0.99 * c[-1]))
         return float(math.exp((b + 0.5) / BINS_PER_E) / 1000.0)
 
     def rss_mb(self, window: int) -> float | None:
-        v = self.rss.get(window)
-        return float(np.median(v)) if v else None
+        v = self.rss_mb_samples[:self.n_rss][self.rss_window[:self.n_rss] == window]
+        return float(np.median(v)) if v.size else None
 
 
 def soak(hours: float, speed: float, faults: str, log) -> dict:
@@ -246,9 +259,8 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
 
     drainer = threading.Thread(target=drain, daemon=True)
     drainer.start()
-    meter = Meter(window_frames)
-    meter.seen = np.zeros(n_frames + n_frames // 50 + 100_000, dtype=bool)  # + info messages
-    meter.seen[:] = False                  # touch every page now: RSS does not grow later
+    meter = Meter(window_frames, n_windows,
+                  n_seen=n_frames + n_frames // 50 + 100_000)   # + info messages
     crashes = 0
     summary = None
     result: dict = {}
@@ -289,7 +301,7 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
             if now >= next_report:
                 next_report = now + 30
                 log(f"  {attempted / FRAMES_PER_HOUR:5.2f} session h sent, "
-                    f"{meter.processed} frames processed, RSS {meter.rss_mb(max(meter.rss)):.1f} MB, "
+                    f"{meter.processed} frames processed, RSS {meter.rss_mb_samples[max(meter.n_rss - 1, 0)]:.1f} MB, "
                     f"{now - t_start:.0f} s")
             time.sleep(1.0)
         # the suit has stopped: let the session finish what it received
@@ -328,7 +340,7 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
         lost = (max(0, intact - processed_matched - in_flight) + overruns
                 + fates.get("overflow", 0))
         first, lastw = 0, n_windows - 1
-        while lastw > 0 and lastw not in meter.hist:
+        while lastw > 0 and not meter.has_window(lastw):
             lastw -= 1
         p_first, p_last = meter.p99_us(first), meter.p99_us(lastw)
         c_first, c_last = meter.p99_us(first, cpu=True), meter.p99_us(lastw, cpu=True)
