@@ -7,6 +7,12 @@ for each take of an archive).
 - ``gmm_segment_ids(result)``: for the GMM, the mixture component most of a segment's
   frames belong to; the other methods use ``rtseg.identity.identify_segments`` on their
   cuts (what the live tracker would send, without its corrections).
+- ``name_take(take, results, library, config)``: with a behaviour library
+  (``rtseg segment --identify --behaviours LIB``), the library's name of every segment
+  (``unknown`` when unlike every example), as the live tracker names it: the rows the live
+  pipeline feeds its detectors (``rtseg.library_learn.take_rows``: the configuration's
+  profile and calibration, the rows the library was learned from), each method's cuts
+  delivered at their ``detected_at`` frame, each segment named at its identity decision.
 """
 
 from __future__ import annotations
@@ -45,6 +51,53 @@ def identify_take(take: Any, methods: list[str], params: dict[str, dict[str, Any
         r.trace = None
         r.elapsed_s += time.perf_counter() - t0
         out[m] = r
+    return out
+
+
+def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,
+              config: Any) -> dict[str, list[str]]:
+    """{method: the library name of each segment of ``results[method]``} (module doc).
+    Raises ``rtseg.library.LibraryError`` (one line) when the library was learned for
+    another feature profile or dims than this take's live features."""
+    from rtseg.identity import DEFAULT_DECIDE_AFTER_S, IdentityTracker
+    from rtseg.library import UNKNOWN, LibraryError
+    from rtseg.library_learn import take_rows
+    X, index, profile = take_rows(take, config)
+    if X.ndim != 2 or not len(X):
+        return {m: [UNKNOWN] * len(r.segments) for m, r in results.items()}
+    if (library.profile, library.dims) != (profile, X.shape[1]):
+        raise LibraryError(f"behaviour library learned for feature profile "
+                           f"{library.profile!r} ({library.dims} dims), this take's features "
+                           f"are {profile!r} ({X.shape[1]} dims)")
+    fr = float(take.frame_rate)
+    decide = float(config.values.get("identity", {}).get("decide_after_s",
+                                                         DEFAULT_DECIDE_AFTER_S))
+    out: dict[str, list[str]] = {}
+    for m, r in results.items():
+        first, last = int(index[0]), int(index[-1])
+        pending = sorted((max(int(c.detected_at if c.detected_at is not None else c.frame),
+                              int(c.frame)), int(c.frame)) for c in r.cuts
+                         if first < int(c.frame) <= last)
+        tr = IdentityTracker(fr, m, decide_after_s=decide, library=library)
+        k = 0
+        for i, f in zip(range(len(X)), index):
+            tr.update(int(f), X[i])
+            while k < len(pending) and pending[k][0] <= f:
+                tr.on_cut(pending[k][1], pending[k][0])
+                k += 1
+        for d, b in pending[k:]:
+            tr.on_cut(b, d)
+        tr.close(last)
+        named = sorted((b, n) for b, n in tr.segment_names().values())
+        names = []
+        for s in r.segments:
+            if not named:
+                names.append(UNKNOWN)
+                continue
+            j = min(range(len(named)), key=lambda q: abs(named[q][0] - max(s.start, first)))
+            hit = abs(named[j][0] - max(s.start, first)) <= max(tr.block, 1) + 1
+            names.append(named[j][1] or UNKNOWN if hit else UNKNOWN)
+        out[m] = names
     return out
 
 

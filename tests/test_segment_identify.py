@@ -1,7 +1,9 @@
 """``rtseg segment TAKE --identify``: a behaviour id per segment, on synthetic takes with
 recurring behaviours written to .npz and read back through the CLI (``rtseg.cli.main``):
 exact ids for the tracker-based methods, repeated GMM components for repeated behaviours,
-the table/JSON/CSV shapes, and unchanged output without the flag."""
+the table/JSON/CSV shapes, unchanged output without the flag, and names from a behaviour
+library (``--behaviours LIB``: a library learned on one seed names another seed's segments,
+``unknown`` for the behaviour it lacks; refusals)."""
 
 from __future__ import annotations
 
@@ -153,3 +155,58 @@ def test_real_86_01_walks_share_one_id_and_punches_another(capsys):
         by_name.setdefault(n, set()).add(j)
     assert all(len(v) == 1 for v in by_name.values()), f"{truth} got {ids}"
     assert len({next(iter(v)) for v in by_name.values()}) == len(by_name), f"{truth} got {ids}"
+
+
+def _synth_library(tmp_path, script="walk:8,punch:8,wave:8", seed=0):
+    """A library learned (as rtseg learn does: the live fed rows) from a synthetic take;
+    its file path."""
+    from rtseg.library import LibraryBuilder
+    from rtseg.library_learn import label_runs, take_rows
+    from rtseg.online_eval import live_config
+    res = synthesize(script, seed=seed)
+    X, idx, profile = take_rows(res.take, live_config()[0])
+    b = LibraryBuilder(profile, X.shape[1], res.take.frame_rate)
+    for a, e, name in label_runs(res.frame_names()):
+        b.add(X[np.searchsorted(idx, a):np.searchsorted(idx, e)], name, f"synth{seed}")
+    return str(b.build().save(tmp_path / "lib.json"))
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_behaviours_name_the_segments(tmp_path, capsys, seed):
+    """walk and punch are in the library (learned on seed 0), squat is not: the contrast
+    segments of another seed's take are named walk, punch, walk, punch, unknown - in the
+    JSON, the CSV and the table."""
+    res, path = _take(tmp_path, seed)
+    lib = _synth_library(tmp_path)
+    args = [path, "--method", "contrast", "--identify", "--identity-threshold",
+            SYNTH_THRESHOLD, "--behaviours", lib]
+    doc = json.loads(_run(capsys, *args, "--format", "json"))
+    segs = doc["methods"]["contrast"]["segments"]
+    assert _majority_truth(res, segs) == TRUTH
+    want = ["walk", "punch", "walk", "punch", "unknown"]
+    assert [s["name"] for s in segs] == want
+    assert [s["behaviour"] for s in segs] == [1, 2, 1, 2, 3]   # ids unchanged
+    rows = list(csv.DictReader(io.StringIO(_run(capsys, *args, "--format", "csv"))))
+    assert list(rows[0])[-2:] == ["behaviour", "name"] and [r["name"] for r in rows] == want
+    table = _run(capsys, *args)
+    seg_lines = table[table.index(" seg "):].splitlines()
+    assert seg_lines[0].split()[-1] == "name"
+    assert [l.split()[-1] for l in seg_lines[1:] if l.strip()] == want
+
+
+def test_behaviours_refusals(tmp_path, capsys):
+    _, path = _take(tmp_path, 0, "walk:4,punch:4")
+    lib = _synth_library(tmp_path, "walk:4,punch:4")
+    assert main(["segment", path, "--behaviours", lib]) != 0
+    assert "goes with --identify" in capsys.readouterr().err
+    doc = json.loads(open(lib).read())
+    doc["profile"], doc["dims"] = "cmu14", 56       # another skeleton's library
+    doc["scale"] = [1.0] * 84
+    doc["descriptors"] = [[0.0] * 84 for _ in doc["descriptors"]]
+    other = tmp_path / "cmu14.json"
+    other.write_text(json.dumps(doc))
+    assert main(["segment", path, "--identify", "--behaviours", str(other)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'cmu14' (56 dims)" in err[0]
+    assert main(["segment", path, "--identify", "--behaviours", str(tmp_path / "none.json")]) == 2
+    assert "cannot read" in capsys.readouterr().err

@@ -64,6 +64,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "the take's features and that method's cuts (final ids, after "
                         "corrections); a 'behaviour' column / JSON field (one take) or a "
                         "'behaviour' field in each segment of the records (archives)")
+    p.add_argument("--behaviours", metavar="LIB", default=None,
+                   help="with --identify (one take): also name each segment with this "
+                        "behaviour library (rtseg learn), as 'rtseg live --behaviours' would: "
+                        "a 'name' column / JSON field, 'unknown' for a segment unlike every "
+                        "example")
     p.add_argument("--identity-threshold", type=float, metavar="D", default=None,
                    help="tracker distance at or below which a segment is an earlier "
                         "behaviour (default 4.0, chosen on mocap; see docs/identity.md)")
@@ -110,6 +115,11 @@ def run(args: argparse.Namespace) -> int:
     if getattr(args, "identity_threshold", None) is not None \
             and not getattr(args, "identify", False):
         raise ValueError("--identity-threshold goes with --identify")
+    lib_path = getattr(args, "behaviours", None)
+    if lib_path and not getattr(args, "identify", False):
+        raise ValueError("--behaviours goes with --identify")
+    if lib_path and not _single_take(args):
+        raise ValueError("--behaviours names the segments of one take (not archives)")
     if _single_take(args):
         from rtseg.take import load_take
         path = args.paths[0]
@@ -119,9 +129,15 @@ def run(args: argparse.Namespace) -> int:
                                     threshold=args.identity_threshold)
         else:
             results = segment_take_methods(take, methods, params, profile=args.profile)
+        names = None
+        if lib_path:
+            from rtseg.library import load as load_library
+            from rtseg.online_eval import live_config
+            from rtseg.segment_identity import name_take
+            names = name_take(take, results, load_library(lib_path), live_config()[0])
         out = {"table": format_table, "json": format_json,
                "csv": format_csv}[args.format or "table"]
-        sys.stdout.write(out(path, results))
+        sys.stdout.write(out(path, results, names))
         return 0
     return run_many(args, methods, params)
 
@@ -159,7 +175,9 @@ def run_many(args: argparse.Namespace, methods: list[str],
     return 1 if stats.failed else 0
 
 
-def format_table(name: str, results: dict[str, SegmentationResult]) -> str:
+def format_table(name: str, results: dict[str, SegmentationResult],
+                 names: dict[str, list[str]] | None = None) -> str:
+    """Cuts and segments per method; ``names`` (``--behaviours``): a last ``name`` column."""
     lines = []
     first = next(iter(results.values()))
     lines.append(f"{name}: {first.n_frames} frames at {first.frame_rate:g} fps "
@@ -174,40 +192,52 @@ def format_table(name: str, results: dict[str, SegmentationResult]) -> str:
                 lines.append(f"  {k:>4} {c.frame:>7} {c.frame / r.frame_rate:>9.3f} "
                              f"{c.confidence:>10.2f}")
         ident = bool(r.segments) and r.segments[0].behaviour is not None
+        nm = (names or {}).get(method)
         lines.append(f"  {'seg':>4} {'start':>7} {'end':>7} {'start_s':>9} {'end_s':>9} "
-                     f"{'duration_s':>10}" + (f" {'behaviour':>9}" if ident else ""))
-        for s in r.segments:
+                     f"{'duration_s':>10}" + (f" {'behaviour':>9}" if ident else "")
+                     + ("  name" if nm is not None else ""))
+        for k, s in enumerate(r.segments):
             lines.append(f"  {s.index:>4} {s.start:>7} {s.end:>7} {s.start_time:>9.3f} "
                          f"{s.end_time:>9.3f} {s.duration:>10.3f}"
-                         + (f" {s.behaviour:>9}" if ident else ""))
+                         + (f" {s.behaviour:>9}" if ident else "")
+                         + (f"  {nm[k]}" if nm is not None else ""))
     return "\n".join(lines) + "\n"
 
 
-def format_json(name: str, results: dict[str, SegmentationResult]) -> str:
+def format_json(name: str, results: dict[str, SegmentationResult],
+                names: dict[str, list[str]] | None = None) -> str:
+    """One document; ``names`` (``--behaviours``): a ``name`` field in each segment."""
     first = next(iter(results.values()))
     doc = {"take": name, "n_frames": first.n_frames, "frame_rate": first.frame_rate,
            "methods": {}}
     for m, r in results.items():
         d = r.as_dict()
+        nm = (names or {}).get(m)
+        if nm is not None:
+            d["segments"] = [{**seg, "name": n} for seg, n in zip(d["segments"], nm)]
         doc["methods"][m] = {"cuts": d["cuts"], "segments": d["segments"],
                              "elapsed_s": round(r.elapsed_s, 4)}
     return json.dumps(doc, indent=2, allow_nan=False) + "\n"
 
 
-def format_csv(name: str, results: dict[str, SegmentationResult]) -> str:
+def format_csv(name: str, results: dict[str, SegmentationResult],
+               names: dict[str, list[str]] | None = None) -> str:
     """One row per segment; ``cut_confidence`` is that of the cut opening the segment
-    (empty for segment 0, which starts the take); with identities (``--identify``) a last
-    ``behaviour`` column."""
+    (empty for segment 0, which starts the take); with identities (``--identify``) a
+    ``behaviour`` column, with ``names`` (``--behaviours``) a last ``name`` column."""
     ident = any(s.behaviour is not None for r in results.values() for s in r.segments)
+    named = names is not None
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["method", "segment", "start_frame", "end_frame", "start_s", "end_s",
-                "duration_s", "cut_confidence"] + (["behaviour"] if ident else []))
+                "duration_s", "cut_confidence"] + (["behaviour"] if ident else [])
+               + (["name"] if named else []))
     for m, r in results.items():
         conf = {c.frame: c.confidence for c in r.cuts}
-        for s in r.segments:
+        nm = (names or {}).get(m) or [""] * len(r.segments)
+        for k, s in enumerate(r.segments):
             c = conf.get(s.start)
             w.writerow([m, s.index, s.start, s.end, f"{s.start_time:.6f}", f"{s.end_time:.6f}",
                         f"{s.duration:.6f}", "" if c is None else f"{c:.4f}"]
-                       + ([s.behaviour] if ident else []))
+                       + ([s.behaviour] if ident else []) + ([nm[k]] if named else []))
     return buf.getvalue()
