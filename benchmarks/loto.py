@@ -43,6 +43,7 @@ from rtseg.online_eval import fed_features, live_config, to_take_frames
 from rtseg.simulators.synth import DEFAULT_SCRIPT, synthesize
 
 TOL_S = 0.5
+OBJECTIVES = ("takes", "pooled", "groups")   # objective() kinds; --nested chooses among them
 MAX_MEDIAN_S, MAX_P90_S = 2.5, 3.5
 GRID = {                       # the candidates: grid step, after window, the peak picker
     "step_s": [0.0833333333, 0.125],
@@ -136,10 +137,16 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("data", nargs="?", default=str(Path(__file__).resolve().parents[2] / "shared" / "data"))
     ap.add_argument("--synth-seeds", type=int, nargs="*", default=[0, 1, 2, 3, 4, 5])
-    ap.add_argument("--objective", choices=["takes", "pooled", "groups"], default="takes",
+    ap.add_argument("--objective", choices=list(OBJECTIVES), default="takes",
                     help="what a parameter set maximises on the training takes: the mean of "
                          "the takes' F1 (default), F1 over all their transitions pooled, or "
                          "the mean of the groups' F1")
+    ap.add_argument("--nested", action="store_true",
+                    help="also choose the objective itself inside each fold: an inner "
+                         "leave-one-take-out over the fold's training takes scores each "
+                         "objective (pooled F1 of its inner held-out real takes) and the "
+                         "best one picks the fold's set (the held-out figure of the whole "
+                         "procedure, rule choice included)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     data = Path(args.data)
@@ -176,9 +183,26 @@ def main() -> int:
         full = [(c.frame, c.detected_at) for c in detector(base, case.frame_rate).run(case.X)]
         assert counts(case, full)[:4] == results[tuple(base[k] for k in keys)][case.key][:4], case.key
 
-    def best(train: list[Case]) -> tuple:
-        return max(results, key=lambda k: (objective(results[k], train, args.objective),
+    def best(train: list[Case], kind: str | None = None) -> tuple:
+        kind = kind or args.objective
+        return max(results, key=lambda k: (objective(results[k], train, kind),
                                            -k[keys.index("after_s")]))
+
+    def nested_choice(train: list[Case]) -> tuple[str, tuple]:
+        """The objective whose inner leave-one-take-out over ``train`` scores best (pooled
+        F1 of the inner held-out real takes; ties: the order of OBJECTIVES), and the set it
+        chooses on all of ``train``."""
+        inner_names = sorted({c.name for c in train})
+        scores = {}
+        for kind in OBJECTIVES:
+            rows = []
+            for m in inner_names:
+                k = best([c for c in train if c.name != m], kind)
+                rows += [results[k][c.key] for c in train
+                         if c.name == m and c.group != "synthetic"]
+            scores[kind] = pooled_tally(rows)["f1"] if rows else 0.0
+        kind = max(OBJECTIVES, key=lambda o: scores[o])
+        return kind, best(train, kind)
 
     def margin(train: list[Case], k: tuple) -> float:
         """How far the chosen set's objective leads the best other set's (0: a tie)."""
@@ -199,6 +223,15 @@ def main() -> int:
             if c.name == n:
                 held[c.key] = results[k][c.key]
     groups = sorted({c.group for c in cases})
+    nested_held: dict[str, tuple] = {}
+    nested_folds = {}
+    if args.nested:
+        for n in names:
+            kind, k = nested_choice([c for c in cases if c.name != n])
+            nested_folds[n] = {"objective": kind, **dict(zip(keys, k))}
+            for c in cases:
+                if c.name == n:
+                    nested_held[c.key] = results[k][c.key]
     lopo_held: dict[str, tuple] = {}
     lopo_folds = {}
     for subject in sorted({person(c) for c in cases if c.group != "synthetic"}):
@@ -222,6 +255,9 @@ def main() -> int:
         "lopo": {g: pooled_tally([lopo_held[c.key] for c in cases if c.group == g])
                  for g in groups if any(c.key in lopo_held for c in cases if c.group == g)},
         "lopo_folds": lopo_folds,
+        "nested": {g: pooled_tally([nested_held[c.key] for c in cases if c.group == g])
+                   for g in groups} if args.nested else None,
+        "nested_folds": nested_folds or None,
         "sensitivity": {},
     }
     for i, k in enumerate(keys):
@@ -243,6 +279,12 @@ def main() -> int:
           f"{len(results)} parameter sets, objective {args.objective}, F1 at +-{TOL_S} s:")
     for g in groups:
         print(f"  held-out {g:<10} {fmt(report['loto'][g])}")
+    if args.nested:
+        print("nested (objective chosen inside each fold by an inner leave-one-take-out):")
+        for g in groups:
+            print(f"  held-out {g:<10} {fmt(report['nested'][g])}")
+        for n, f in nested_folds.items():
+            print(f"  fold without {n:<8} chose {f}")
     if report["lopo"]:
         print("leave-one-person-out (subjects " + ", ".join(lopo_folds) + "):")
         for g, row in report["lopo"].items():
