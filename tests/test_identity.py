@@ -8,27 +8,25 @@ from __future__ import annotations
 import json
 import math
 import os
-import socket
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from pythonosc.osc_message import OscMessage
 
-from rtseg.drivers.base import Source
 from rtseg.events import BehaviourEvent, CutEvent, event_from_dict
-from rtseg.frame import Frame
 from rtseg.identity import IdentityTracker
 from rtseg.identity_eval import replay_session_identities, run_identity
 from rtseg.live import LiveSession
 from rtseg.online_eval import live_config
-from rtseg.publishers import OscUdpPublisher, PublisherSet, parse_target
+from rtseg.publishers import PublisherSet, parse_target
 from rtseg.recording import read_session_behaviours
 from rtseg.session_config import from_dict
 from rtseg.simulators.synth import synthesize
+
+from osc_collector import OscCollector
+from take_source import TakeSource
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 SCRIPT = "walk:6,punch:6,walk:6,punch:6,squat:6"
@@ -172,31 +170,15 @@ def test_bad_parameters_are_refused():
 
 
 # ------------------------------------------------------------------------ on the wire
-def _udp_receiver():
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    s.settimeout(2.0)
-    return s
-
-
-def _recv_all(s, n):
-    out = []
-    for _ in range(n):
-        data, _ = s.recvfrom(65536)
-        m = OscMessage(data)
-        out.append((m.address, list(m.params)))
-    return out
-
-
 def test_behaviour_messages_over_udp_with_templates():
-    rx = _udp_receiver()
-    port = rx.getsockname()[1]
+    rx = OscCollector()
+    port = rx.port
     pub = parse_target(f"udp:127.0.0.1:{port},template=/cue/{{label}}/start")
     pubs = PublisherSet([pub])
     try:
         cut = CutEvent(event=1, segment=1, frame=700, time=5.8, method="contrast")
         pubs.publish_cut(cut)
-        before = _recv_all(rx, 3)          # identity off: /rtseg/cut, /rtseg/cut/<label>, cue
+        before = rx.take(3)          # identity off: /rtseg/cut, /rtseg/cut/<label>, cue
         assert [a for a, _ in before] == ["/rtseg/cut", "/rtseg/cut/contrast",
                                           "/cue/contrast/start"]
         pubs.templates_on_behaviour()
@@ -208,13 +190,11 @@ def test_behaviour_messages_over_udp_with_templates():
                              frame=700, decided_frame=1500, time=12.5, correction=True,
                              previous="2")
         pubs.publish_behaviour(cor)
-        got = _recv_all(rx, 6)
-        rx.settimeout(0.2)
-        with pytest.raises(socket.timeout):
-            rx.recvfrom(65536)
+        got = rx.take(6)
     finally:
         pubs.close()
-        rx.close()
+        rx.close()               # waits for stragglers: nothing more may have come
+    assert rx.untaken == 0 and not rx.malformed
     addrs = [a for a, _ in got]
     # identity on: the cut no longer fires the template; the behaviour messages do
     assert addrs == ["/rtseg/cut", "/rtseg/cut/contrast", "/rtseg/behaviour", "/cue/2/start",
@@ -232,34 +212,10 @@ def test_behaviour_event_json_round_trip():
     assert isinstance(back, BehaviourEvent) and back.previous == "4" and back.correction
 
 
-class TakeSource(Source):
-    """A synthetic take's frames as fast as the loop takes them (seq = frame index)."""
-    space = "local"
-    frame_rate = 120.0
-
-    def __init__(self, take):
-        super().__init__()
-        self.take = take
-        self.joint_names = list(take.joint_names)
-        self.parents = list(take.parents)
-        self.i = 0
-        self.valid = np.ones(take.n_joints, dtype=bool)
-
-    def read(self, timeout=None):
-        if self.i >= self.take.n_frames:
-            raise EOFError
-        i = self.i
-        self.i += 1
-        self.stats.frames_ok += 1
-        if i % 200 == 0:
-            time.sleep(0.001)          # let the loop keep up (ring never overwritten)
-        return Frame(time.monotonic(), self.take.quats[i], self.valid, i / 120.0, i)
-
-
 def test_live_session_sends_records_and_logs_identities(tmp_path):
     res = synthesize(SCRIPT, seed=0)
-    rx = _udp_receiver()
-    port = rx.getsockname()[1]
+    rx = OscCollector(linger=0.5)
+    port = rx.port
     rec = tmp_path / "session"
     log = tmp_path / "events.jsonl"
     cfg = from_dict({"identity": {"enabled": True, "threshold": SYNTH_THRESHOLD},
@@ -267,18 +223,12 @@ def test_live_session_sends_records_and_logs_identities(tmp_path):
                                 "templates": ["/cue/{label}/start"]},
                      "recording": {"dir": str(rec)}, "status": {"interval": 60.0}})
     session = LiveSession(TakeSource(res.take), cfg, handle_signals=False)
-    summary = session.run()
-    msgs = []
-    rx.settimeout(0.5)
     try:
-        while True:
-            data, _ = rx.recvfrom(65536)
-            m = OscMessage(data)
-            msgs.append((m.address, list(m.params)))
-    except socket.timeout:
-        pass
+        summary = session.run()
     finally:
         rx.close()
+    assert not rx.malformed
+    msgs = [(a, args) for a, _, args in rx.messages]
     assert summary.frames_processed == res.take.n_frames and summary.overruns == 0
     beh = [p for a, p in msgs if a == "/rtseg/behaviour"]
     assert [p[2] for p in beh] == ["1", "2", "1", "2", "3"]

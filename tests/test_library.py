@@ -6,18 +6,13 @@ null rejection on synthetic performances (a behaviour the library never saw come
 from __future__ import annotations
 
 import json
-import socket
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from pythonosc.osc_message import OscMessage
 
-from rtseg.drivers.base import Source
-from rtseg.frame import Frame
 from rtseg.identity_eval import run_identity
 from rtseg.library import (UNKNOWN, Library, LibraryBuilder, LibraryError, load,
                            separating_rule, separating_threshold)
@@ -26,6 +21,9 @@ from rtseg.live import LiveSession
 from rtseg.online_eval import live_config
 from rtseg.session_config import from_dict
 from rtseg.simulators.synth import synthesize
+
+from osc_collector import OscCollector
+from take_source import TakeSource
 
 LEARN = "walk:8,punch:8,squat:8,wave:8"
 #: seed 0 teaches; other seeds (tempo, amplitude, style vary) are named
@@ -203,59 +201,23 @@ def test_hiding_a_name_turns_its_segments_unknown():
     assert names == ["walk", UNKNOWN, "squat"]
 
 
-def _udp_receiver():
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    return s
-
-
-class TakeSource(Source):
-    """A synthetic take's frames as fast as the loop takes them (seq = frame index)."""
-    space = "local"
-    frame_rate = 120.0
-
-    def __init__(self, take):
-        super().__init__()
-        self.take = take
-        self.joint_names = list(take.joint_names)
-        self.parents = list(take.parents)
-        self.i = 0
-        self.valid = np.ones(take.n_joints, dtype=bool)
-
-    def read(self, timeout=None):
-        if self.i >= self.take.n_frames:
-            raise EOFError
-        i = self.i
-        self.i += 1
-        self.stats.frames_ok += 1
-        if i % 200 == 0:
-            time.sleep(0.001)          # let the loop keep up (ring never overwritten)
-        return Frame(time.monotonic(), self.take.quats[i], self.valid, i / 120.0, i)
-
-
 def test_live_session_sends_names_over_udp(tmp_path, library):
     path = library.save(tmp_path / "lib.json")
     res = synthesize(PERFORMANCE, seed=1)
-    rx = _udp_receiver()
-    port = rx.getsockname()[1]
+    rx = OscCollector(linger=0.5)
+    port = rx.port
     cfg = from_dict({"identity": {"enabled": True, "threshold": SYNTH_THRESHOLD,
                                   "behaviours": str(path)},
                      "output": {"osc": [f"127.0.0.1:{port}"],
                                 "templates": ["/cue/{label}/start"]},
                      "status": {"interval": 60.0}})
     session = LiveSession(TakeSource(res.take), cfg, handle_signals=False)
-    session.run()
-    msgs = []
-    rx.settimeout(0.5)
     try:
-        while True:
-            data, _ = rx.recvfrom(65536)
-            m = OscMessage(data)
-            msgs.append((m.address, list(m.params)))
-    except socket.timeout:
-        pass
+        session.run()
     finally:
         rx.close()
+    assert not rx.malformed
+    msgs = [(a, args) for a, _, args in rx.messages]
     beh = [p for a, p in msgs if a == "/rtseg/behaviour"]
     assert [p[3] for p in beh] == ["walk", UNKNOWN, "punch", UNKNOWN, "squat"]
     assert all(int(p[2]) >= 1 for p in beh)       # the ids stay the unsupervised ones
