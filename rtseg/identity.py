@@ -66,7 +66,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from rtseg.detectors.window_models import WindowModel, WindowStats, fit, pca_distance, ppca_distance
+from rtseg.detectors.window_models import WindowModel, WindowStats, distances, fit
 
 #: defaults (also the ``[identity]`` keys of ``config/live.toml``)
 DEFAULT_DECIDE_AFTER_S = 1.5
@@ -311,8 +311,8 @@ class IdentityTracker:
     def distance(self, a: WindowModel, b: WindowModel) -> float:
         """D(a, b) of the module docstring."""
         deff = max(a.nonnull, b.nonnull, 1)
-        p = pca_distance(a, b)
-        q = ppca_distance(a, b) / math.sqrt(deff)
+        p, q = distances(a, b)
+        q /= math.sqrt(deff)
         v = p * q
         if not (v >= 0 and math.isfinite(v)):
             return math.inf
