@@ -66,7 +66,7 @@ import numpy as np
 from rtseg.drivers.base import FrameQueue, Source, SourceError
 from rtseg.drivers.codec_axis import (BINARY_PORT, JOINTS, PARENTS, TEXT_PORT, AxisError,
                                       AxisFrame, BinaryAssembler, decode_binary, global_pose,
-                                      to_pose, to_poses)
+                                      poses, to_pose)
 from rtseg.drivers.codec_axis_text import TextSplitter, decode_texts
 from rtseg.drivers.osc_source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
                                       allow_option, check_options, number_option, renamed)
@@ -148,6 +148,17 @@ class AxisFrames:
         return self._convert(f, now)
 
     def _convert(self, f: AxisFrame, now: float) -> Frame:
+        if not np.isfinite(f.values).all():
+            return self._convert_bad(f, now)
+        q, self._last, pos = poses(f.values, f.with_disp, f.with_ref, self.order,
+                                   self.unit_scale, self.space)
+        return Frame(recv_time=now, quats=q, valid=_ALL_VALID.copy(),
+                     source_time=None if f.frame_index is None else f.frame_index / self.rate,
+                     seq=self._seq(f, now), root_position=pos)
+
+    def _convert_bad(self, f: AxisFrame, now: float) -> Frame:
+        """A frame with non-finite values: those joints invalid (their last good local
+        rotation kept; in global space their descendants invalid too), counted."""
         q, valid, pos = to_pose(f, self.order, self.unit_scale)   # fresh arrays
         if np.count_nonzero(valid) != valid.size:
             n = int(np.count_nonzero(~valid))
@@ -165,7 +176,6 @@ class AxisFrames:
         return Frame(recv_time=now, quats=q, valid=valid,
                      source_time=None if f.frame_index is None else f.frame_index / self.rate,
                      seq=seq, root_position=pos)
-
 
     def many(self, items: list[AxisFrame | AxisError], now: float) -> list[Frame]:
         """:meth:`frame` of each decoded frame (AxisErrors are counted), in order; runs
@@ -191,15 +201,17 @@ class AxisFrames:
         return out
 
     def _run(self, run: list[AxisFrame], now: float, out: list[Frame]) -> None:
-        values = np.stack([f.values for f in run]) if len(run) > 1 else None
-        if values is None or not np.isfinite(values).all():
-            out.extend(self._convert(f, now) for f in run)   # one, or non-finite values
+        if len(run) == 1:
+            out.append(self._convert(run[0], now))
+            return
+        values = np.stack([f.values for f in run])
+        if not np.isfinite(values).all():
+            out.extend(self._convert(f, now) for f in run)   # some non-finite values
             return
         f0 = run[0]
-        q, root = to_poses(values, f0.with_disp, f0.with_ref, self.order, self.unit_scale)
-        self._last = q[-1]
-        if self.space == "global":
-            q = global_pose(q)
+        q, local, root = poses(values, f0.with_disp, f0.with_ref, self.order,
+                               self.unit_scale, self.space)
+        self._last = local[-1]
         for k, f in enumerate(run):
             seq = self._seq(f, now)
             out.append(Frame(recv_time=now, quats=q[k], valid=_ALL_VALID.copy(),

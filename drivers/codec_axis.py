@@ -55,7 +55,7 @@ import numpy as np
 __all__ = ["JOINTS", "PARENTS", "TEXT_PORT", "BINARY_PORT", "HEADER", "TOKEN1", "TOKEN2",
            "AxisError", "AxisFrame", "layout", "value_count", "decode_binary",
            "encode_binary", "euler_to_quat", "quat_to_euler", "to_pose", "to_poses",
-           "global_pose", "BinaryAssembler", "SUIT_SEGMENTS"]
+           "poses", "global_pose", "BinaryAssembler", "SUIT_SEGMENTS"]
 
 TEXT_PORT = 7001
 BINARY_PORT = 7002
@@ -259,33 +259,70 @@ def _check_order(order: str) -> str:
     return o
 
 
+#: half-angle radians per degree
+_HALF_RAD = np.pi / 360.0
+_EULER_TABLES: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _euler_tables(order: str) -> tuple[np.ndarray, np.ndarray]:
+    """(T (8, 4), TL (8, 16)) of ``order`` = "abc": the 8 products u_a[i] u_b[j] u_c[k] of
+    the half-angle (cos, sin) pairs of its three angles (term (2i + j) 2 + k) -> the
+    quaternion's x, y, z, w (T) and -> the 16 entries of its left-product matrix L (TL,
+    row-major; see :func:`global_pose`).  Each column has two +-1 entries, so ``terms @ T``
+    is the closed form of :func:`euler_to_quat` rounded the same way."""
+    o = _check_order(order)
+    hit = _EULER_TABLES.get(o)
+    if hit is not None:
+        return hit
+    a, b, c = (_AXIS[x] for x in o)
+    e = 1.0 if (a, b, c) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0   # parity eps
+    T = np.zeros((8, 4))
+    T[0, 3], T[7, 3] = 1.0, -e          # w = ca cb cc - eps sa sb sc
+    T[4, a], T[3, a] = 1.0, e           # a = sa cb cc + eps ca sb sc
+    T[2, b], T[5, b] = 1.0, -e          # b = ca sb cc - eps sa cb sc
+    T[1, c], T[6, c] = 1.0, e           # c = ca cb sc + eps sa sb cc
+    TL = (T[:, _L_INDEX] * _L_SIGN).reshape(8, 16)
+    hit = _EULER_TABLES[o] = (T, TL)
+    return hit
+
+
+def _euler_terms(angles: np.ndarray, identity_row: bool = False) -> np.ndarray:
+    """(..., 3) degrees (the order's three angles) -> (8, N) products of the half-angle
+    cosines and sines of the N triples (see :func:`_euler_tables`), triples along the last
+    axis (long contiguous loops: the numpy calls cost about the same for 1 frame or 100).
+    ``identity_row``: ``angles`` is (..., J, 3) and each group of J gets a triple of zero
+    angles after it (the identity, which :func:`global_pose`'s pointer jumping uses as
+    'no ancestor'): N = (J + 1) x the groups."""
+    ang = np.asarray(angles, dtype=np.float64)
+    if identity_row:
+        ang = ang.reshape(-1, ang.shape[-2], 3)                  # (F, J, 3)
+        half = np.empty((3, ang.shape[0], ang.shape[1] + 1))
+        np.multiply(ang.transpose(2, 0, 1), _HALF_RAD, out=half[:, :, :-1])
+        half[:, :, -1] = 0.0
+        half = half.reshape(3, -1)
+    else:
+        ang = ang.reshape(-1, 3)
+        half = np.multiply(ang.T, _HALF_RAD, order="C")
+    u = np.empty((2, 3, half.shape[1]))              # cos, sin of each angle
+    np.cos(half, out=u[0])
+    np.sin(half, out=u[1])
+    p = u[:, 0, None] * u[None, :, 1]                 # (2, 2, N): ca cb, ca sb, sa cb, sa sb
+    return (p[:, :, None] * u[:, 2]).reshape(8, -1)
+
+
 def euler_to_quat(order: str, angles: np.ndarray) -> np.ndarray:
     """(..., 3) angles in degrees about ``order``'s axes -> (..., 4) scalar-last quaternions
     of R = R_order[0] R_order[1] R_order[2] (intrinsic; = ``rtseg.quat.from_euler``).
 
     Closed form of e_a(alpha) * e_b(beta) * e_c(gamma) for a permutation (a, b, c) of the
     axes with parity eps (+1 cyclic): w = ca cb cc - eps sa sb sc, a = sa cb cc + eps ca sb
-    sc, b = ca sb cc - eps sa cb sc, c = ca cb sc + eps sa sb cc (half-angle sines/cosines),
-    vectorised without SciPy's per-call overhead."""
-    o = _check_order(order)
-    a, b, c = (_AXIS[x] for x in o)
-    half = np.asarray(angles, dtype=np.float64) * (np.pi / 360.0)
-    s, co = np.sin(half), np.cos(half)
-    sa, sb, sc = s[..., 0], s[..., 1], s[..., 2]
-    ca, cb, cc = co[..., 0], co[..., 1], co[..., 2]
-    cacb, sasb, sacb, casb = ca * cb, sa * sb, sa * cb, ca * sb
-    out = np.empty(half.shape[:-1] + (4,))
-    if (a, b, c) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):       # eps = +1
-        out[..., 3] = cacb * cc - sasb * sc
-        out[..., a] = sacb * cc + casb * sc
-        out[..., b] = casb * cc - sacb * sc
-        out[..., c] = cacb * sc + sasb * cc
-    else:                                                      # eps = -1
-        out[..., 3] = cacb * cc + sasb * sc
-        out[..., a] = sacb * cc - casb * sc
-        out[..., b] = casb * cc + sacb * sc
-        out[..., c] = cacb * sc - sasb * cc
-    return out
+    sc, b = ca sb cc - eps sa cb sc, c = ca cb sc + eps sa sb cc (half-angle sines/cosines):
+    the 8 products of one (cos, sin) per axis, then one matrix product with +-1 / 0
+    coefficients (exact: each component is the rounded sum of its two products), a few
+    numpy calls whatever the batch."""
+    angles = np.asarray(angles, dtype=np.float64)
+    q = _euler_terms(angles).T @ _euler_tables(order)[0]
+    return q.reshape(angles.shape[:-1] + (4,))
 
 
 def quat_to_euler(order: str, q: np.ndarray) -> np.ndarray:
@@ -339,9 +376,51 @@ def global_pose(local: np.ndarray) -> np.ndarray:
     m = np.empty(lead + (J + 1, 4, 4))
     np.multiply(local[..., _L_INDEX], _L_SIGN, out=m[..., :J, :, :])
     m[..., J, :, :] = _EYE4
+    return _jump(m)
+
+
+def _jump(m: np.ndarray) -> np.ndarray:
+    """(..., J + 1, 4, 4) left-product matrices of the local rotations, row J the identity
+    -> (..., J, 4) global quaternions (the pointer-jumping rounds of :func:`global_pose`)."""
     for anc in _ANCESTORS:
         m = m.take(anc, axis=-3) @ m
-    return m[..., :J, :, 3]
+    return m[..., :-1, :, 3]
+
+
+def _channels(values: np.ndarray, with_disp: bool, with_ref: bool, joints: int
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """(root position (..., 3) as sent, angles (..., joints, 3) degrees): views of
+    ``values`` (..., count)."""
+    v = values[..., 6:] if with_ref else values
+    lead = v.shape[:-1]
+    if with_disp:
+        ch = v.reshape(lead + (joints, 6))
+        return ch[..., 0, :3], ch[..., :, 3:]
+    return v[..., :3], v[..., 3:].reshape(lead + (joints, 3))
+
+
+def poses(values: np.ndarray, with_disp: bool, with_ref: bool, order: str = "YXZ",
+          unit_scale: float = 0.01, space: str = "local", joints: int = len(JOINTS)
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Frames of one layout, all values finite: ``values`` (..., count) -> (quats (...,
+    joints, 4) in ``space``, local quats (..., joints, 4), root positions (..., 3) metres).
+
+    ``space="global"`` (59 Axis joints only) builds the left-product matrices of the local
+    rotations straight from the Euler angles' half-angle products (one matrix product with
+    the order's +-1 table, :func:`_euler_tables`) and runs :func:`global_pose`'s pointer
+    jumping on them: the same values as ``global_pose(euler_to_quat(...))``, a dozen numpy
+    calls per batch.  Local quats come back as a view when ``space="global"``."""
+    root, angles = _channels(values, with_disp, with_ref, joints)
+    T, TL = _euler_tables(order)
+    lead = angles.shape[:-1]
+    if space == "local":
+        q = (_euler_terms(angles).T @ T).reshape(lead + (4,))
+        return q, q, root * unit_scale
+    if joints != len(JOINTS):
+        raise ValueError(f"space=global needs the {len(JOINTS)} Axis joints, got {joints}")
+    t = _euler_terms(angles, identity_row=True)         # (8, F (J + 1))
+    m = (t.T @ TL).reshape(lead[:-1] + (joints + 1, 4, 4))  # L of each joint, identity
+    return _jump(m), m[..., :-1, :, 3], root * unit_scale
 
 
 def to_poses(values: np.ndarray, with_disp: bool, with_ref: bool, order: str = "YXZ",
@@ -350,26 +429,15 @@ def to_poses(values: np.ndarray, with_disp: bool, with_ref: bool, order: str = "
     """Frames of one layout at once: ``values`` (F, count), all finite -> (local quats
     (F, joints, 4), root positions (F, 3) metres).  Same values as :func:`to_pose` per
     frame (which handles non-finite values)."""
-    v = values[:, 6:] if with_ref else values
-    F = v.shape[0]
-    if with_disp:
-        ch = v.reshape(F, joints, 6)
-        root, angles = ch[:, 0, :3], ch[:, :, 3:]
-    else:
-        root, angles = v[:, :3], v[:, 3:].reshape(F, joints, 3)
-    return euler_to_quat(order, angles), root * unit_scale
+    q, _, root = poses(values, with_disp, with_ref, order, unit_scale, "local", joints)
+    return q, root
 
 
 def to_pose(frame: AxisFrame, order: str = "YXZ", unit_scale: float = 0.01,
             joints: int = len(JOINTS)) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """(quats (joints, 4) local, valid (joints,), root position (3,) metres or None)."""
-    v = frame.values[6:] if frame.with_ref else frame.values
-    if frame.with_disp:
-        ch = v.reshape(joints, 6)
-        root, angles = ch[0, :3], ch[:, 3:]
-    else:
-        root, angles = v[:3], v[3:].reshape(joints, 3)
-    if np.isfinite(v).all():
+    root, angles = _channels(frame.values, frame.with_disp, frame.with_ref, joints)
+    if np.isfinite(frame.values[6:] if frame.with_ref else frame.values).all():
         valid = _ALL_VALID.copy() if joints == len(JOINTS) else np.ones(joints, dtype=bool)
         return euler_to_quat(order, angles), valid, root * unit_scale
     valid = np.isfinite(angles).all(axis=1)

@@ -23,6 +23,11 @@ import numpy as np
 
 from rtseg.drivers.codec_axis import JOINTS, AxisError, AxisFrame, layout
 
+try:  # a core dependency; where it is missing the integer fast path below does the work
+    from orjson import loads as _json_loads
+except ImportError:  # pragma: no cover - exercised only where orjson is absent
+    _json_loads = None
+
 __all__ = ["decode_text", "decode_texts", "encode_text", "TextSplitter", "parse_decimals"]
 
 #: 10^k, exact in float64 for k <= 22
@@ -31,6 +36,8 @@ _POW10 = 10.0 ** np.arange(23)
 _EXACT_INT = 1 << 53
 #: the bytes of the fast form (anything else: float() token by token)
 _FAST_CHARS = b"0123456789 .-"
+#: the bytes a frame read as JSON numbers may hold (no brackets, quotes or literals)
+_JSON_CHARS = b"0123456789 .-+eE"
 
 
 def _slow(tokens: list[bytes]) -> np.ndarray:
@@ -39,6 +46,34 @@ def _slow(tokens: list[bytes]) -> np.ndarray:
         return np.array([float(t) for t in tokens], dtype=np.float64)
     except ValueError:
         raise AxisError("corrupt", "a value of the text frame is not a number") from None
+
+
+def _json_rows(bodies: list[bytes]) -> list[np.ndarray] | None:
+    """The numbers of each body, parsed as JSON by orjson in one call for all of them, or
+    None (orjson absent, or some token is not a JSON number - a double space, ``1.``,
+    ``.5``, ``nan``, ``+1``, ``007``, ``1e999`` ... - or may be the integer ``-0``): then
+    the caller reads them with :func:`_fast_values` / :func:`_slow`.
+
+    The caller made sure each body holds only :data:`_JSON_CHARS`, so the text
+    ``[[b0],[b1],...]`` with spaces turned into commas can only parse to one list of
+    numbers per body.  JSON's number grammar is a subset of ``float()``'s, and orjson
+    rounds correctly (its values are ``float()``'s bit for bit, tests/test_axis.py), except
+    that it reads the integer token ``-0`` as 0 (``float('-0')`` is -0.0): a body with a
+    token without a point is refused when the text holds ``-0,`` or ``-0]``."""
+    if _json_loads is None:
+        return None
+    text = b"[[" + b"],[".join(bodies).replace(b" ", b",") + b"]]"
+    try:
+        rows = _json_loads(text)
+    except ValueError:                     # orjson.JSONDecodeError
+        return None
+    tokens = sum(map(len, rows))
+    if text.count(b".") != tokens and (b"-0," in text or b"-0]" in text):
+        return None                        # (a token with two points is not JSON)
+    try:
+        return [np.fromiter(r, np.float64, len(r)) for r in rows]
+    except (OverflowError, TypeError, ValueError):   # pragma: no cover - not JSON numbers
+        return None
 
 
 def _fast_values(body: bytes, checked: bool = False) -> np.ndarray | None:
@@ -81,6 +116,10 @@ def _fast_values(body: bytes, checked: bool = False) -> np.ndarray | None:
 def parse_decimals(body: bytes) -> np.ndarray:
     """Numbers separated by white space -> float64 array, each exactly ``float(token)``
     (see the module docstring); AxisError('corrupt') if a token is not a number."""
+    if not body.translate(None, _JSON_CHARS):
+        rows = _json_rows([body])
+        if rows is not None:
+            return rows[0]
     out = _fast_values(body)
     return out if out is not None else _slow(body.split())
 
@@ -113,11 +152,9 @@ def _plain(body: bytes) -> bool:
     return not body.translate(None, _FAST_CHARS) and b"  " not in body
 
 
-def decode_text(chunk: bytes | str, joints: int = len(JOINTS)) -> AxisFrame:
-    """One text frame (the part between two ``||``, or one frame ending in ``||``): index,
-    name, values.  AxisError ``corrupt`` (not ASCII, too few fields, a value that is not a
-    number) or ``bad_messages`` (a value count that fits no layout)."""
-    index, name, body = _fields(chunk)
+def _exact(index: int, name: str, body: bytes, joints: int) -> AxisFrame:
+    """The frame of a body orjson did not read: layout from the token count, numbers by
+    the integer fast path or ``float()`` token by token."""
     if _plain(body):
         disp, ref = layout(body.count(b" ") + 1, joints)
         values = _fast_values(body, checked=True)
@@ -130,50 +167,45 @@ def decode_text(chunk: bytes | str, joints: int = len(JOINTS)) -> AxisFrame:
     return AxisFrame(index, name, values, disp, ref)
 
 
+def decode_text(chunk: bytes | str, joints: int = len(JOINTS)) -> AxisFrame:
+    """One text frame (the part between two ``||``, or one frame ending in ``||``): index,
+    name, values.  AxisError ``corrupt`` (not ASCII, too few fields, a value that is not a
+    number) or ``bad_messages`` (a value count that fits no layout)."""
+    got = decode_texts([chunk], joints)[0]
+    if isinstance(got, AxisError):
+        raise got
+    return got
+
+
 def decode_texts(chunks: list[bytes], joints: int = len(JOINTS)
                  ) -> list[AxisFrame | AxisError]:
     """:func:`decode_text` of each chunk (the AxisFrame, or the AxisError it raised), in
-    order.  The numbers of all plain frames are parsed in one pass (what a TCP read
-    holding several frames costs once); values of frames parsed together are slices of
-    one array."""
+    order.  The numbers of all the chunks that hold only JSON number characters are parsed
+    by one orjson call (:func:`_json_rows`: what a TCP read holding several frames costs
+    once); if it refuses them, each chunk is read by the exact paths (:func:`_exact`)."""
     out: list[AxisFrame | AxisError | None] = [None] * len(chunks)
-    fast: list[tuple[int, int, str, bytes, int, bool, bool]] = []
+    json: list[tuple[int, int, str, bytes]] = []
     for i, chunk in enumerate(chunks):
         try:
             index, name, body = _fields(chunk)
-            if _plain(body):
-                count = body.count(b" ") + 1
-                disp, ref = layout(count, joints)
-                fast.append((i, index, name, body, count, disp, ref))
+            if body.translate(None, _JSON_CHARS):
+                out[i] = _exact(index, name, body, joints)
             else:
-                out[i] = decode_text(chunk, joints)
+                json.append((i, index, name, body))
         except AxisError as e:
             out[i] = e
-    if len(fast) == 1:
-        i, index, name, body, count, disp, ref = fast[0]
-        fast = []
+    if not json:
+        return out  # type: ignore[return-value]
+    rows = _json_rows([j[3] for j in json])
+    for k, (i, index, name, body) in enumerate(json):
         try:
-            values = _fast_values(body, checked=True)
-            out[i] = AxisFrame(index, name, values if values is not None
-                               else _slow(body.split()), disp, ref)
+            if rows is None:
+                out[i] = _exact(index, name, body, joints)
+            else:
+                disp, ref = layout(rows[k].size, joints)
+                out[i] = AxisFrame(index, name, rows[k], disp, ref)
         except AxisError as e:
             out[i] = e
-    if fast:
-        values = _fast_values(b" ".join(f[3] for f in fast), checked=True)
-        at = 0
-        for i, index, name, body, count, disp, ref in fast:
-            if values is not None:
-                v = values[at:at + count]
-                at += count
-            else:                                      # some frame is not plain numbers
-                v = _fast_values(body, checked=True)
-                if v is None:
-                    try:
-                        v = _slow(body.split())
-                    except AxisError as e:
-                        out[i] = e
-                        continue
-            out[i] = AxisFrame(index, name, v, disp, ref)
     return out  # type: ignore[return-value]
 
 
@@ -188,21 +220,40 @@ def encode_text(values: np.ndarray, avatar_index: int = 0, avatar_name: str = "A
 
 class TextSplitter:
     """Stream bytes -> text frames: splits on ``||``; a run of more than ``max_frame``
-    bytes without a separator is discarded (counted by the caller via ``overflows``)."""
+    bytes without a separator is discarded (counted by the caller via ``overflows``).
+
+    A read without a separator is only kept (no copy, no scan of what came before); a read
+    that completes frames is joined once with the kept partial frame and split once."""
 
     def __init__(self, max_frame: int = 65536) -> None:
         self.max_frame = max_frame
-        self._buf = b""
+        self._parts: list[bytes] = []
+        self._size = 0
         self.overflows = 0
 
     def feed(self, data: bytes) -> list[bytes]:
-        *frames, rest = (self._buf + data).split(b"||")
-        self._buf = rest
-        if len(rest) > self.max_frame:
-            self._buf = b""
+        data = bytes(data)
+        if b"||" not in data and not (data[:1] == b"|" and self._parts
+                                      and self._parts[-1][-1:] == b"|"):
+            if data:
+                self._parts.append(data)
+                self._size += len(data)
+                if self._size > self.max_frame:
+                    self.reset()
+                    self.overflows += 1
+            return []
+        if self._parts:
+            self._parts.append(data)
+            data = b"".join(self._parts)
+        *frames, rest = data.split(b"||")
+        self._parts = [rest] if rest else []
+        self._size = len(rest)
+        if self._size > self.max_frame:
+            self.reset()
             self.overflows += 1
-        return [f for f in frames if f.strip()]
+        return [f for f in frames if f and not f.isspace()]
 
     def reset(self) -> None:
         """Forget a partial frame (after a reconnect)."""
-        self._buf = b""
+        self._parts = []
+        self._size = 0
