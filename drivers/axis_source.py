@@ -148,7 +148,7 @@ class AxisFrames:
         return self._convert(f, now)
 
     def _convert(self, f: AxisFrame, now: float) -> Frame:
-        if not np.isfinite(f.values).all():
+        if not (f.finite or (f.finite is None and np.isfinite(f.values).all())):
             return self._convert_bad(f, now)
         q, self._last, pos = poses(f.values, f.with_disp, f.with_ref, self.order,
                                    self.unit_scale, self.space)
@@ -205,7 +205,7 @@ class AxisFrames:
             out.append(self._convert(run[0], now))
             return
         values = np.stack([f.values for f in run])
-        if not np.isfinite(values).all():
+        if not (all(f.finite for f in run) or np.isfinite(values).all()):
             out.extend(self._convert(f, now) for f in run)   # some non-finite values
             return
         f0 = run[0]

@@ -122,7 +122,8 @@ class AxisError(ValueError):
 class AxisFrame:
     """One decoded frame: ``values`` (data count,) float64 as sent (float32 exact for
     binary), ``with_disp``/``with_ref`` layout flags, ``frame_index`` (binary only),
-    ``version`` (major, minor, revision, build) (binary only)."""
+    ``version`` (major, minor, revision, build) (binary only), ``finite``: whether every
+    value is finite when the decoder knows it (None: not checked)."""
     avatar_index: int
     avatar_name: str
     values: np.ndarray
@@ -130,6 +131,7 @@ class AxisFrame:
     with_ref: bool
     frame_index: int | None = None
     version: tuple[int, int, int, int] | None = None
+    finite: bool | None = None
 
 
 def value_count(with_disp: bool, with_ref: bool, joints: int = len(JOINTS)) -> int:
@@ -176,13 +178,14 @@ def decode_binary(data: bytes, joints: int = len(JOINTS)) -> AxisFrame:
         raise AxisError("bad_messages", f"{count} values with displacement={disp}, "
                         f"reference={ref}: expected {want} for {joints} joints")
     values = np.frombuffer(data, dtype="<f4", count=count, offset=HEADER.size)
-    if np.isfinite(values).all():
+    finite = bool(np.isfinite(values).all())
+    if finite:
         values = values.astype(np.float64)
     else:
         with np.errstate(invalid="ignore"):   # signalling NaNs stay NaN, quietly
             values = values.astype(np.float64)
     return AxisFrame(avatar, name.split(b"\0", 1)[0].decode("ascii", "replace"),
-                     values, bool(disp), bool(ref), frame, (major, minor, rev, build))
+                     values, bool(disp), bool(ref), frame, (major, minor, rev, build), finite)
 
 
 def encode_binary(values: np.ndarray, *, with_disp: bool = True, with_ref: bool = False,

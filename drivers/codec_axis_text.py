@@ -58,6 +58,7 @@ def _json_rows(rows: list[bytes]) -> list[np.ndarray] | None:
     ``.5``, ``nan``, ``+1``, ``007``, ``1e999`` ... - or may be the integer ``-0``): then
     the caller reads them with :func:`_fast_values` / :func:`_slow`.
 
+    The values are finite (orjson refuses ``1e999`` and has no NaN or Infinity literal).
     A row is a body translated by :data:`_TO_JSON` (its tokens separated by commas) that
     held only :data:`_JSON_CHARS`, so the text ``[[row0],[row1],...]`` can only parse to
     one list of numbers per row.  JSON's number grammar is a subset of ``float()``'s, and
@@ -211,7 +212,7 @@ def decode_texts(chunks: list[bytes], joints: int = len(JOINTS)
                 out[i] = _exact(index, name, body, joints)
             else:
                 disp, ref = layout(values[k].size, joints)
-                out[i] = AxisFrame(index, name, values[k], disp, ref)
+                out[i] = AxisFrame(index, name, values[k], disp, ref, finite=True)
         except AxisError as e:
             out[i] = e
     return out  # type: ignore[return-value]
