@@ -188,7 +188,8 @@ def decode_texts(chunks: list[bytes], joints: int = len(JOINTS)
     """:func:`decode_text` of each chunk (the AxisFrame, or the AxisError it raised), in
     order.  The numbers of all the chunks that hold only JSON number characters are parsed
     by one orjson call (:func:`_json_rows`: what a TCP read holding several frames costs
-    once); if it refuses them, each chunk is read by the exact paths (:func:`_exact`)."""
+    once); if it refuses them, each is tried alone, and a chunk orjson refuses is read by
+    the exact paths (:func:`_exact`)."""
     out: list[AxisFrame | AxisError | None] = [None] * len(chunks)
     json: list[tuple[int, int, str, bytes]] = []
     rows: list[bytes] = []
@@ -206,13 +207,16 @@ def decode_texts(chunks: list[bytes], joints: int = len(JOINTS)
     if not json:
         return out  # type: ignore[return-value]
     values = _json_rows(rows)
+    if values is None and len(rows) > 1:           # some row is not JSON: the others are
+        values = [(_json_rows([r]) or [None])[0] for r in rows]
     for k, (i, index, name, body) in enumerate(json):
         try:
-            if values is None:
+            v = None if values is None else values[k]
+            if v is None:
                 out[i] = _exact(index, name, body, joints)
             else:
-                disp, ref = layout(values[k].size, joints)
-                out[i] = AxisFrame(index, name, values[k], disp, ref, finite=True)
+                disp, ref = layout(v.size, joints)
+                out[i] = AxisFrame(index, name, v, disp, ref, finite=True)
         except AxisError as e:
             out[i] = e
     return out  # type: ignore[return-value]

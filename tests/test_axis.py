@@ -341,6 +341,148 @@ def test_text_numbers_parse_to_exactly_what_float_gives():
     assert refused > 1000
 
 
+def _random_number_token(rng: random.Random) -> str:
+    """A token float() reads, in the forms a BVH writer or a fuzzer could produce: numpy's
+    shortest float32 and float64 forms, printf forms, long mantissas, exponents (subnormal,
+    overflowing), integers (beyond 2^53 and 2^64), signed zeros."""
+    k = rng.random()
+    if k < 0.2:
+        x = struct.unpack("<d", struct.pack("<Q", rng.getrandbits(64)))[0]
+        return repr(x) if np.isfinite(x) else "1.5"
+    if k < 0.4:
+        return str(np.float32(rng.uniform(-1000, 1000)))
+    if k < 0.55:
+        return f"{rng.uniform(-200, 200):.{rng.randint(0, 9)}f}"
+    if k < 0.97:
+        digits = "".join(rng.choice("0123456789") for _ in range(rng.randint(1, 28)))
+        tok = (digits.lstrip("0") or "0") if rng.random() < 0.97 else digits
+        if rng.random() < 0.7:
+            tok += "." + "".join(rng.choice("0123456789") for _ in range(rng.randint(1, 25)))
+        if rng.random() < 0.3:
+            tok += rng.choice("eE") + rng.choice(["", "+", "-"]) + str(rng.randint(0, 340))
+        return rng.choice(["", "-"]) + tok
+    return rng.choice(["-0", "0", "-0.0", "0.0", "-0e5", "-0.000", "1e-400", "-1e-400",
+                       "1e400", "18446744073709551615", "18446744073709551616",
+                       "-9223372036854775809", "9007199254740993", "4.9e-324", "1.", ".5",
+                       "-.5", "+1", "007.5", "nan", "inf", "-Infinity", "1_0"])
+
+
+def test_json_number_path_is_bit_exact_to_float():
+    """The orjson path (_json_rows, what decode_texts uses) against float(), bit for bit,
+    -0.0 included, on every token form of _random_number_token; rows where some token is
+    not a JSON number (or could be the integer -0) are refused as a whole (None) and then
+    read exactly by parse_decimals' other paths."""
+    from rtseg.drivers import codec_axis_text as T
+    if T._json_loads is None:
+        pytest.skip("orjson is not installed (a dependency of rtseg)")
+    rng = random.Random(11)
+    parsed = refused = 0
+    for _ in range(3000):
+        rows_tok = [[_random_number_token(rng) for _ in range(rng.randint(1, 30))]
+                    for _ in range(rng.randint(1, 3))]
+        bodies = [" ".join(r).encode() for r in rows_tok]
+        ref = [np.array([float(t) for t in r]) for r in rows_tok]
+        rows = [b.translate(T._TO_JSON, T._NOT_JSON) for b in bodies]
+        json = [k for k, (r, b) in enumerate(zip(rows, bodies)) if len(r) == len(b)]
+        got = T._json_rows([rows[k] for k in json]) if json else None
+        if got is None:                           # (letters, '_': decode_texts' exact path)
+            refused += 1
+        else:
+            parsed += 1
+            assert [g.view(np.int64).tolist() for g in got] == \
+                [ref[k].view(np.int64).tolist() for k in json], rows_tok
+        for b, r in zip(bodies, ref):              # whichever path parse_decimals takes
+            assert T.parse_decimals(b).view(np.int64).tolist() == r.view(np.int64).tolist()
+    assert parsed > 1000 and refused > 300
+    assert T._json_rows([b"-0"]) is None and T._json_rows([b"1,-0"]) is None
+    zeros = T._json_rows([b"-0.0,-0e1"])[0]
+    assert (zeros == 0).all() and np.signbit(zeros).all()
+    assert T._json_rows([b"1,,2"]) is None and T._json_rows([b"1e999"]) is None
+
+
+def test_text_frames_with_non_json_tokens_keep_float_values_and_counters():
+    """A frame whose numbers orjson refuses (printf's '1.', exponents beyond range, 'nan')
+    decodes through the exact path: float()'s values, non-finite ones counted as bad
+    values, and the other frames of the read unaffected."""
+    from rtseg.drivers.codec_axis_text import decode_texts
+    rng = np.random.default_rng(5)
+    good = [A.encode_text(rng.uniform(-90, 90, 354))[:-3] for _ in range(2)]
+    toks = good[0].split()
+    odd = b" ".join(toks[:5] + [b"7."] + toks[6:])                 # not JSON, float() reads it
+    huge = b" ".join(toks[:5] + [b"1e999"] + toks[6:])             # inf: a bad value
+    got = decode_texts([good[0], odd, huge, good[1]])
+    for chunk, f in zip([good[0], odd, huge, good[1]], got):
+        ref = np.array([float(t) for t in chunk.split()[2:]])
+        assert f.values.view(np.int64).tolist() == ref.view(np.int64).tolist()
+    assert got[0].finite and got[3].finite and got[1].finite is got[2].finite is None
+    count = Counter()
+    frames = AxisFrames(count, space="global").many(got, 0.0)
+    assert len(frames) == 4 and count.counts == {"bad_values": 1}
+    assert frames[2].valid.sum() < 59 and frames[3].valid.all()
+
+
+def test_text_splitter_cuts_any_read_boundaries_like_one_split():
+    """Random streams of frames, '|', '||', '|||' and spaces, cut into random reads: the
+    splitter gives exactly the non-blank pieces of ``stream.split(b"||")`` (the last one
+    when the stream ends with '||'), whatever the read sizes."""
+    rng = random.Random(3)
+    for _ in range(2000):
+        stream = b"".join(rng.choice([b"0 a 1.5 ", b"|", b"||", b"|||", b" ", b"2 b 3"])
+                          for _ in range(rng.randint(0, 30))) + b"||"
+        sp = A.TextSplitter()
+        got, at = [], 0
+        while at < len(stream):
+            n = rng.randint(1, 12)
+            got += sp.feed(stream[at:at + n])
+            at += n
+        assert got == [f for f in stream.split(b"||")[:-1] if f.strip()], stream
+    sp = A.TextSplitter(max_frame=10)
+    assert sp.feed(b"0 a 1.5 |") == [] and sp.feed(b"| 0 b") == [b"0 a 1.5 "]
+    assert sp.feed(b"x" * 11) == [] and sp.overflows == 1 and sp.feed(b"||") == []
+
+
+def _closed_form_quat(order: str, angles: np.ndarray) -> np.ndarray:
+    """The closed form of euler_to_quat term by term (the code before its matrix form)."""
+    a, b, c = ("XYZ".index(x) for x in order)
+    half = angles * (np.pi / 360.0)
+    s, co = np.sin(half), np.cos(half)
+    sa, sb, sc, ca, cb, cc = s[..., 0], s[..., 1], s[..., 2], co[..., 0], co[..., 1], co[..., 2]
+    cacb, sasb, sacb, casb = ca * cb, sa * sb, sa * cb, ca * sb
+    e = 1.0 if (a, b, c) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0
+    out = np.empty(half.shape[:-1] + (4,))
+    out[..., 3] = cacb * cc - e * sasb * sc
+    out[..., a] = sacb * cc + e * casb * sc
+    out[..., b] = casb * cc - e * sacb * sc
+    out[..., c] = cacb * sc + e * sasb * cc
+    return out
+
+
+def test_euler_and_global_pose_are_bit_identical_to_the_term_by_term_forms():
+    """euler_to_quat (8 half-angle products times a +-1 table) equals the closed form term
+    by term, bit for bit; poses(space='global') (FK matrices built from the Euler terms)
+    equals global_pose(euler_to_quat(...)) bit for bit, for one frame and a batch, and its
+    local quaternions are euler_to_quat's."""
+    rng = np.random.default_rng(9)
+    for order in ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"):
+        x = rng.uniform(-180, 180, (4, 59, 3)) * 10.0 ** rng.integers(-5, 2, (4, 59, 1))
+        q = A.euler_to_quat(order, x)
+        assert q.view(np.int64).tolist() == _closed_form_quat(order, x).view(np.int64).tolist()
+        v = np.zeros((4, 59, 6))
+        v[..., :3] = rng.uniform(-50, 50, (4, 59, 3))
+        v[..., 3:] = x
+        v = v.reshape(4, 354)
+        g, loc, root = A.poses(v, True, False, order, 0.01, "global")
+        assert np.array_equal(loc, q) and np.array_equal(root, v[:, :3] * 0.01)
+        assert g.view(np.int64).tolist() == A.global_pose(q).view(np.int64).tolist()
+        g1, loc1, _ = A.poses(v[1], True, False, order, 0.01, "global")
+        assert np.array_equal(g1, g[1]) and np.array_equal(loc1, q[1])
+        with_ref = np.concatenate([rng.uniform(-9, 9, (4, 6)), v], axis=1)   # 360 values
+        no_disp = np.concatenate([v[:, :3], x.reshape(4, 177)], axis=1)       # 180 values
+        for vals, disp, ref in ((with_ref, True, True), (no_disp, False, False)):
+            g2, l2, r2 = A.poses(vals, disp, ref, order, 0.01, "global")
+            assert np.array_equal(l2, q) and np.array_equal(g2, g) and np.array_equal(r2, root)
+
+
 def test_frames_of_one_read_decode_and_convert_as_one_by_one():
     """decode_texts (one number pass for the frames of a TCP read) and AxisFrames.many
     (one Euler / forward-kinematics pass) give each frame's values, errors and Frame as
