@@ -33,10 +33,12 @@ Body bones (:data:`BODY_BONES`, Rokoko's names, parents in :data:`BODY_PARENTS`)
 spine, chest, neck, head, left/right Shoulder, UpperArm, LowerArm, Hand, left/right UpLeg,
 Leg, Foot, Toe.  Finger bones (gloves) and faces are ignored.
 
-JSON is parsed with ``orjson`` when it is installed (the ``rokoko`` extra; about 5x faster
-than the standard ``json`` module on these payloads, see ``benchmarks/decode.py``), else
-with ``json``; both give the same values (``JSON_PARSER`` says which is in use; a payload
-orjson refuses is retried with ``json``, which also reads ``NaN``/``Infinity`` literals).
+JSON is parsed with ``orjson`` (a core dependency of rtseg: about 5x faster than the
+standard ``json`` module on these payloads, twice the decode rate, see
+``benchmarks/decode.py``).  Only in an environment without it is the ``json`` module used
+(the source logs that once); both give the same values (``JSON_PARSER`` says which is in
+use; a payload orjson refuses is retried with ``json``, which also reads
+``NaN``/``Infinity`` literals).
 
 Errors: :func:`decode_packet` raises :class:`RokokoError` whose ``kind`` names the counter
 a source adds it to: ``corrupt`` (not LZ4/UTF-8/JSON), ``bad_messages`` (JSON of the wrong
@@ -59,11 +61,11 @@ try:  # optional dependency (pip install 'rtseg[rokoko]'); plain JSON works with
     import lz4.frame as _lz4frame
 except ImportError:  # pragma: no cover - exercised only where lz4 is absent
     _lz4frame = None
-try:  # optional (rtseg[rokoko]): parses Studio's payloads ~5x faster than the json module
+try:  # a core dependency (parses Studio's payloads ~5x faster than the json module)
     import orjson as _orjson
     _loads = _orjson.loads
     JSON_PARSER = "orjson"
-except ImportError:  # pragma: no cover - exercised only where orjson is absent
+except ImportError:  # pragma: no cover - only where orjson is missing (not installed by pip)
     _loads = json.loads
     JSON_PARSER = "json"
 

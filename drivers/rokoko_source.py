@@ -110,6 +110,19 @@ class RokokoAssembler:
         return []
 
 
+_told_parser = False
+
+
+def _tell_parser() -> None:
+    """Log once per process when payloads are parsed by the json module (orjson, a
+    dependency of rtseg, missing from this environment)."""
+    global _told_parser
+    if JSON_PARSER != "orjson" and not _told_parser:
+        _told_parser = True
+        log.warning("Rokoko: orjson (a dependency of rtseg) is missing; payloads are parsed "
+                    "with the json module, about half the decode rate (pip install orjson)")
+
+
 class RokokoSource(OscUdpSource):
     """Rokoko Studio Live receiver on a UDP socket (see module docstring)."""
 
@@ -126,9 +139,7 @@ class RokokoSource(OscUdpSource):
         self.parents = list(BODY_PARENTS)
         self.frame_rate = float(rate)
         self._asm = RokokoAssembler(actor, self.count, tolerance)
-        if JSON_PARSER != "orjson":
-            log.info("Rokoko: orjson is not installed; payloads are parsed with the json "
-                     "module (about half the decode rate; pip install 'rtseg[rokoko]')")
+        _tell_parser()
         self._start(host, port, 0.05, queue_size, rcvbuf, allow)
 
     @property

@@ -165,6 +165,34 @@ def test_both_json_parsers_agree(monkeypatch):
     assert np.array_equal(a.actors[0].hip_position, b.actors[0].hip_position)
 
 
+def test_orjson_is_the_parser_and_the_json_fallback_is_logged_once(monkeypatch, caplog):
+    """orjson is a core dependency: installed rtseg parses with it.  Where it is missing
+    (simulated here) every Rokoko source still works and one warning says so per process,
+    not one per source."""
+    import tomllib
+    from pathlib import Path
+    from rtseg.drivers import rokoko_source as S
+    assert C.JSON_PARSER == "orjson"
+    project = tomllib.loads((Path(__file__).parent.parent / "pyproject.toml").read_text())
+    assert any(r.startswith("orjson") for r in project["project"]["dependencies"])
+    monkeypatch.setattr(S, "JSON_PARSER", "json")
+    monkeypatch.setattr(S, "_told_parser", False)
+    monkeypatch.setattr(C, "_loads", json.loads)
+    caplog.set_level("WARNING", logger="rtseg.drivers.rokoko")
+    sources = [open_source("rokoko://127.0.0.1:0") for _ in range(2)]
+    try:
+        data = encode_packet([("A", random_pose(3), None, None)], 1.0)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.sendto(data, ("127.0.0.1", sources[0].port))
+        frame = sources[0].read(timeout=2.0)
+        assert frame is not None and np.array_equal(frame.quats, decode_packet(data).actors[0].quats)
+    finally:
+        for src in sources:
+            src.close()
+    told = [r for r in caplog.records if "orjson" in r.getMessage()]
+    assert len(told) == 1 and "json module" in told[0].getMessage()
+
+
 def _mutations(rng: random.Random, base: list[bytes], doc: dict):
     """Fuzzed payloads: byte flips / truncations / splices of valid JSON and LZ4 payloads,
     random bytes, and structurally valid JSON with values swapped for other JSON types."""
