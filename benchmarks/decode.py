@@ -29,19 +29,22 @@ only, on one core, median of ``--repeat`` runs:
   (27 bones, one datagram per frame).
 
 - ``rokoko``: ``rtseg.drivers.rokoko_source.RokokoAssembler`` fed Rokoko Studio Custom
-  JSON v3 payloads (one actor, 21 bones; JSON parsed with orjson when installed, else the
-  json module - the row says which); ``rokoko_lz4``: the same payloads LZ4-compressed;
-  ``rokoko_json_module``: plain payloads parsed with the standard json module.
+  JSON v3 payloads (one actor, 21 bones; JSON parsed with orjson, a core dependency - the
+  row says which parser ran, the json module only where orjson is missing);
+  ``rokoko_lz4``: the same payloads LZ4-compressed; ``rokoko_json_module``: plain payloads
+  parsed with the standard json module (the fallback, for comparison).
 - ``mvn_tcp``: the ``mvn`` frames as MVN's TCP stream (messages back to back) in 4096-byte
   reads, cut by ``codec_mvn.MxtpStream`` and assembled.
 - ``axis_binary``: Axis BVH binary datagrams (64-byte header + 354 float32, 1480 bytes)
   through the axis source's datagram joiner, decoder and Euler -> quaternion conversion
   (``space=local``); ``axis_binary_global``: the same with ``space=global`` (the sources'
   default: forward kinematics per frame); ``axis_text``: the same frames as the TCP text
-  stream (``||``-separated), fed in 4096-byte reads through ``axis_source.TextStream`` (the
-  frames of one read are parsed and converted together); ``axis_text_global`` the same in
-  global space; ``axis_text_64k`` in 65536-byte reads (what the source reads when it has
-  fallen behind: the catch-up rate).
+  stream (``||``-separated, 354 numbers, ~2.5 KB a frame here: zero bone offsets), fed in
+  4096-byte reads through ``axis_source.TextStream`` (the numbers of the frames a read
+  completes are parsed by one orjson call and the frames converted together; a read
+  completes 1 or 2 frames);
+  ``axis_text_global`` the same in global space; ``axis_text_64k`` in 65536-byte reads
+  (what the source reads when it has fallen behind: the catch-up rate).
 
 Targets: >= 20 000 frames/s for VMC, MVN, mocopi, Rokoko and Axis (a suit sends 60-240).
 
@@ -504,7 +507,7 @@ def main(argv: list[str] | None = None) -> int:
                        ("mocopi", "Sony mocopi, 27 bones"),
                        ("rokoko", f"Rokoko JSON v3 ({result['rokoko']['json_parser']})"),
                        ("rokoko_lz4", f"Rokoko JSON v3 LZ4 ({result['rokoko']['json_parser']})"),
-                       ("rokoko_json_module", "Rokoko JSON v3 (json module)"),
+                       ("rokoko_json_module", "Rokoko JSON v3 (json module fallback)"),
                        ("axis_binary", "Axis BVH binary, 59 joints"),
                        ("axis_binary_global", "Axis BVH binary, space=global"),
                        ("axis_text", "Axis BVH text (TCP)"),
