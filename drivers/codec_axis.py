@@ -273,10 +273,10 @@ def _euler_tables(order: str) -> tuple[np.ndarray, np.ndarray]:
     quaternion's x, y, z, w (T) and -> the 16 entries of its left-product matrix L (TL,
     row-major; see :func:`global_pose`).  Each column has two +-1 entries, so ``terms @ T``
     is the closed form of :func:`euler_to_quat` rounded the same way."""
-    o = _check_order(order)
-    hit = _EULER_TABLES.get(o)
+    hit = _EULER_TABLES.get(order)
     if hit is not None:
         return hit
+    o = _check_order(order)
     a, b, c = (_AXIS[x] for x in o)
     e = 1.0 if (a, b, c) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0   # parity eps
     T = np.zeros((8, 4))
@@ -285,7 +285,7 @@ def _euler_tables(order: str) -> tuple[np.ndarray, np.ndarray]:
     T[2, b], T[5, b] = 1.0, -e          # b = ca sb cc - eps sa cb sc
     T[1, c], T[6, c] = 1.0, e           # c = ca cb sc + eps sa sb cc
     TL = (T[:, _L_INDEX] * _L_SIGN).reshape(8, 16)
-    hit = _EULER_TABLES[o] = (T, TL)
+    hit = _EULER_TABLES[order] = (T, TL)
     return hit
 
 
