@@ -306,6 +306,11 @@ def _euler_terms(angles: np.ndarray, identity_row: bool = False) -> np.ndarray:
     else:
         ang = ang.reshape(-1, 3)
         half = np.multiply(ang.T, _HALF_RAD, order="C")
+    return _half_terms(half)
+
+
+def _half_terms(half: np.ndarray) -> np.ndarray:
+    """(3, N) half angles (radians) -> (8, N) products of their cosines and sines."""
     u = np.empty((2, 3, half.shape[1]))              # cos, sin of each angle
     np.cos(half, out=u[0])
     np.sin(half, out=u[1])
@@ -402,6 +407,20 @@ def _channels(values: np.ndarray, with_disp: bool, with_ref: bool, joints: int
     return v[..., :3], v[..., 3:].reshape(lead + (joints, 3))
 
 
+_ANGLE_INDEX: dict[tuple[bool, bool, int], np.ndarray] = {}
+
+
+def _angle_index(with_disp: bool, with_ref: bool, joints: int) -> np.ndarray:
+    """(3, joints): where each joint's three angles are in a frame's values."""
+    key = (with_disp, with_ref, joints)
+    idx = _ANGLE_INDEX.get(key)
+    if idx is None:
+        j = np.arange(joints)
+        first = (6 if with_ref else 0) + (6 * j + 3 if with_disp else 3 + 3 * j)
+        idx = _ANGLE_INDEX[key] = first[None, :] + np.arange(3)[:, None]
+    return idx
+
+
 def poses(values: np.ndarray, with_disp: bool, with_ref: bool, order: str = "YXZ",
           unit_scale: float = 0.01, space: str = "local", joints: int = len(JOINTS)
           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -421,7 +440,14 @@ def poses(values: np.ndarray, with_disp: bool, with_ref: bool, order: str = "YXZ
         return q, q, root * unit_scale
     if joints != len(JOINTS):
         raise ValueError(f"space=global needs the {len(JOINTS)} Axis joints, got {joints}")
-    t = _euler_terms(angles, identity_row=True)         # (8, F (J + 1))
+    if values.ndim == 1:          # one frame (the live case): the angles in one gather
+        half = np.empty((3, joints + 1))
+        np.multiply(values.take(_angle_index(with_disp, with_ref, joints)), _HALF_RAD,
+                    out=half[:, :-1])
+        half[:, -1] = 0.0
+        t = _half_terms(half)
+    else:
+        t = _euler_terms(angles, identity_row=True)     # (8, F (J + 1))
     m = (t.T @ TL).reshape(lead[:-1] + (joints + 1, 4, 4))  # L of each joint, identity
     return _jump(m), m[..., :-1, :, 3], root * unit_scale
 

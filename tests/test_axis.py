@@ -481,6 +481,9 @@ def test_euler_and_global_pose_are_bit_identical_to_the_term_by_term_forms():
         for vals, disp, ref in ((with_ref, True, True), (no_disp, False, False)):
             g2, l2, r2 = A.poses(vals, disp, ref, order, 0.01, "global")
             assert np.array_equal(l2, q) and np.array_equal(g2, g) and np.array_equal(r2, root)
+            g3, l3, r3 = A.poses(vals[2], disp, ref, order, 0.01, "global")     # one frame
+            assert np.array_equal(l3, q[2]) and np.array_equal(g3, g[2])
+            assert np.array_equal(r3, root[2])
 
 
 def test_frames_of_one_read_decode_and_convert_as_one_by_one():
