@@ -44,7 +44,8 @@ only, on one core, median of ``--repeat`` runs:
   completes are parsed by one orjson call and the frames converted together; a read
   completes 1 or 2 frames);
   ``axis_text_global`` the same in global space; ``axis_text_64k`` in 65536-byte reads
-  (what the source reads when it has fallen behind: the catch-up rate).
+  (what the source reads when it has fallen behind: the catch-up rate) and
+  ``axis_text_global_64k`` the same in global space (the sources' default).
 
 Targets: >= 20 000 frames/s for VMC, MVN, mocopi, Rokoko and Axis (a suit sends 60-240).
 
@@ -481,6 +482,8 @@ def main(argv: list[str] | None = None) -> int:
     result["axis_text"] = bench_axis(args.frames, args.repeat, text=True)
     result["axis_text_global"] = bench_axis(args.frames, args.repeat, text=True, space="global")
     result["axis_text_64k"] = bench_axis(args.frames, args.repeat, text=True, chunk=65536)
+    result["axis_text_global_64k"] = bench_axis(args.frames, args.repeat, text=True,
+                                                space="global", chunk=65536)
     pyosc = bench_python_osc(q[: max(10, args.frames // 5)], max(1, min(args.repeat, 3)))
     if pyosc is not None:
         result["python_osc_parse"] = pyosc
@@ -512,7 +515,8 @@ def main(argv: list[str] | None = None) -> int:
                        ("axis_binary_global", "Axis BVH binary, space=global"),
                        ("axis_text", "Axis BVH text (TCP)"),
                        ("axis_text_global", "Axis BVH text, space=global"),
-                       ("axis_text_64k", "Axis BVH text, 64 KiB reads")):
+                       ("axis_text_64k", "Axis BVH text, 64 KiB reads"),
+                       ("axis_text_global_64k", "Axis BVH text, global, 64 KiB reads")):
         r = result[key]
         print(f"  {label} ({r['bytes_per_frame']:.0f} B/frame): ".ljust(47)
               + f"{r['frames_per_s']:>9,} frames/s")
