@@ -8,7 +8,12 @@ other takes is chosen and the held-out take scored with it.  Prints the ARI pool
 group at every threshold, the LOTO choices and the LOTO-pooled ARI/NMI per group (each
 take scored with a threshold chosen without it).
 
-    python3 benchmarks/identity_loto.py [DATA_DIR] [--grid 2,2.5,...]
+``--synth-seeds`` adds synthetic performances with recurring behaviours (group
+``synthetic``, one take per seed: 8 behaviours of 6-8 s drawn from the synthesiser's, each
+recurring at least once, consecutive ones different; exact per-frame truth), held out one
+at a time like the real takes.  ``--synth-seeds`` with no value: real takes only.
+
+    python3 benchmarks/identity_loto.py [DATA_DIR] [--grid 2,2.5,...] [--synth-seeds 0 1 2]
 """
 
 from __future__ import annotations
@@ -41,10 +46,27 @@ def replay(d: dict, threshold: float, method: str) -> np.ndarray:
     return tr.frame_labels(d["n"])
 
 
+def recurring_script(seed: int, n: int = 8) -> str:
+    """A script of ``n`` behaviours (6-8 s) from 4 distinct ones of the synthesiser, drawn
+    with ``seed``: consecutive behaviours differ and every one of the 4 recurs."""
+    from rtseg.simulators.synth_behaviours import BEHAVIOURS
+    rng = np.random.default_rng([seed, 12])
+    names = sorted(BEHAVIOURS)
+    pick = list(rng.choice(names, size=4, replace=False))
+    while True:
+        seq = [pick[i % 4] for i in range(n)]
+        order = rng.permutation(n)
+        seq = [seq[i] for i in order]
+        if all(a != b for a, b in zip(seq, seq[1:])):
+            break
+    return ",".join(f"{b}:{int(rng.integers(6, 9))}" for b in seq)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("data_dir", nargs="?", default=str(DATA))
     ap.add_argument("--grid", default="2,2.5,3,3.5,4,4.5,5,5.5,6")
+    ap.add_argument("--synth-seeds", type=int, nargs="*", default=[0, 1, 2, 3, 4, 5])
     args = ap.parse_args(argv)
     grid = [float(v) for v in args.grid.split(",")]
     cfg, method = live_config()
@@ -60,6 +82,15 @@ def main(argv: list[str] | None = None) -> int:
         D[f"{lt.group}/{lt.name}"] = dict(X=X, idx=idx, cuts=cuts, n=tk.n_frames,
                                           fr=float(tk.frame_rate),
                                           truth=truth_labels(lt, tk.n_frames))
+    from rtseg.simulators.synth import synthesize
+    for seed in args.synth_seeds:
+        res = synthesize(recurring_script(seed), seed=seed)
+        tk = res.take
+        X, idx, _ = fed_features(tk, cfg)
+        cuts = [(c.boundary, c.detected) for c in live_cuts(tk, cfg)[method]]
+        D[f"synthetic/s{seed}"] = dict(X=X, idx=idx, cuts=cuts, n=tk.n_frames,
+                                       fr=float(tk.frame_rate),
+                                       truth=np.array(res.frame_names()))
     pred = {(k, t): replay(d, t, method) for k, d in D.items() for t in grid}
     groups = sorted({k.split("/")[0] for k in D})
 

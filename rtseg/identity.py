@@ -29,7 +29,7 @@ known behaviour's model (all its finished segments pooled) by
 (both factors are about 1 for two windows of one motion; d_eff = the larger number of
 varying directions of the two), stated for ``reference_dims`` (8) effective dimensions:
 1 + (D - 1) x sqrt(reference_dims / d_eff), so that one threshold serves the 4-channel
-(d_eff 8) and the 14-joint (d_eff 48) features.  The default threshold, 4.0, was chosen by
+(d_eff 8) and the 14-joint (d_eff 48) features.  The default threshold, 3.5, was chosen by
 leave-one-take-out over the labelled cmu and tsseg4d takes (docs/identity.md).  The nearest behaviour is taken when D <= ``threshold``,
 else a new id is made.  The first segment of the session (before any cut) gets id 1 after
 ``decide_after_s`` seconds of frames.
@@ -70,7 +70,7 @@ from rtseg.detectors.window_models import WindowModel, WindowStats, distances, f
 
 #: defaults (also the ``[identity]`` keys of ``config/live.toml``)
 DEFAULT_DECIDE_AFTER_S = 1.5
-DEFAULT_THRESHOLD = 4.0
+DEFAULT_THRESHOLD = 3.5
 
 
 @dataclass

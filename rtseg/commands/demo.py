@@ -1,7 +1,7 @@
 """``rtseg demo``: the whole live chain on a simulated suit, no hardware needed.
 
 Synthesises a performance (``rtseg.simulators.synth``, default script: idle, walk, punch,
-squat, walk, punch, wave, squat, kick: walk, punch and squat recur), plays it as a 17-sensor
+walk, squat, punch, wave, squat, kick: walk, punch and squat recur), plays it as a 17-sensor
 IMU suit on a **real pseudo-terminal** (``rtseg.simulators.serial_device.SerialSuit``, rtseg's
 binary serial format at 120 Hz), and runs the live session on ``serial://<that pty>`` exactly
 as ``rtseg live`` would on a USB suit: pose features, the default live detector (contrast),
@@ -24,7 +24,7 @@ from rtseg.config import ConfigError
 DEFAULT_DURATION = 60.0
 #: The demo's performance: behaviours recur (walk, punch, squat twice) so the behaviour ids
 #: printed beside the cuts show a recurring behaviour getting its earlier id back.
-DEMO_SCRIPT = "idle:5,walk:8,punch:7,squat:8,walk:7,punch:7,wave:7,squat:7,kick:6"
+DEMO_SCRIPT = "idle:5,walk:7,punch:7,walk:7,squat:7,punch:7,wave:7,squat:7,kick:6"
 
 
 def run(args: argparse.Namespace) -> int:
