@@ -38,7 +38,9 @@ only, on one core, median of ``--repeat`` runs:
 - ``axis_binary``: Axis BVH binary datagrams (64-byte header + 354 float32, 1480 bytes)
   through the axis source's datagram joiner, decoder and Euler -> quaternion conversion
   (``space=local``); ``axis_binary_global``: the same with ``space=global`` (the sources'
-  default: forward kinematics per frame); ``axis_text``: the same frames as the TCP text
+  default: forward kinematics per frame); ``axis_binary_global_burst``: the same fed 16
+  datagrams at a time to ``_BinaryAdapter.feed_many`` (what the binary source decodes at
+  once when datagrams wait in its socket: the catch-up rate); ``axis_text``: the same frames as the TCP text
   stream (``||``-separated, 354 numbers, ~2.5 KB a frame here: zero bone offsets), fed in
   4096-byte reads through ``axis_source.TextStream`` (the numbers of the frames a read
   completes are parsed by one orjson call and the frames converted together; a read
@@ -408,6 +410,30 @@ def bench_axis(n: int, repeat: int, text: bool = False, space: str = "local",
             "bytes_per_frame": len(stream) / n}
 
 
+def bench_axis_burst(n: int, repeat: int, burst: int = 16, space: str = "global") -> dict:
+    """Axis binary datagrams ``burst`` at a time through ``_BinaryAdapter.feed_many``: what
+    the binary source decodes when datagrams wait in its socket (a reader catching up)."""
+    from rtseg.drivers.codec_axis import encode_binary
+    v = _axis_values(n)
+    dgrams = [encode_binary(v[i], frame_index=i) for i in range(n)]
+    groups = [dgrams[k:k + burst] for k in range(0, n, burst)]
+    rates = []
+    for _ in range(repeat):
+        asm = _axis_binary_assembler(space)
+        if not hasattr(asm, "feed_many"):       # code before feed_many: one at a time
+            asm.feed_many = lambda g, now, a=asm: [f for d in g for f in a.feed(d, now)]
+        got = 0
+        t0 = _clock()
+        for k, g in enumerate(groups):
+            got += len(asm.feed_many(g, k * 1e-3))
+        dt = _clock() - t0
+        if got != n:
+            raise RuntimeError(f"Axis burst decoded {got} of {n} frames")
+        rates.append(n / dt)
+    return {"frames_per_s": round(statistics.median(rates)), "runs": [round(r) for r in rates],
+            "bytes_per_frame": len(dgrams[0]), "burst": burst}
+
+
 def bench_serial(q: np.ndarray, repeat: int) -> dict | None:
     try:
         from rtseg.drivers.codec_serial import SerialFrameDecoder, encode_frame as ser_encode
@@ -479,6 +505,7 @@ def main(argv: list[str] | None = None) -> int:
     result["rokoko_json_module"] = bench_rokoko(args.frames, args.repeat, json_module=True)
     result["axis_binary"] = bench_axis(args.frames, args.repeat)
     result["axis_binary_global"] = bench_axis(args.frames, args.repeat, space="global")
+    result["axis_binary_global_burst"] = bench_axis_burst(args.frames, args.repeat)
     result["axis_text"] = bench_axis(args.frames, args.repeat, text=True)
     result["axis_text_global"] = bench_axis(args.frames, args.repeat, text=True, space="global")
     result["axis_text_64k"] = bench_axis(args.frames, args.repeat, text=True, chunk=65536)
@@ -513,6 +540,7 @@ def main(argv: list[str] | None = None) -> int:
                        ("rokoko_json_module", "Rokoko JSON v3 (json module fallback)"),
                        ("axis_binary", "Axis BVH binary, 59 joints"),
                        ("axis_binary_global", "Axis BVH binary, space=global"),
+                       ("axis_binary_global_burst", "Axis binary, global, 16 pending"),
                        ("axis_text", "Axis BVH text (TCP)"),
                        ("axis_text_global", "Axis BVH text, space=global"),
                        ("axis_text_64k", "Axis BVH text, 64 KiB reads"),

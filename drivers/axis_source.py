@@ -69,7 +69,8 @@ from rtseg.drivers.codec_axis import (BINARY_PORT, JOINTS, PARENTS, TEXT_PORT, A
                                       poses, to_pose)
 from rtseg.drivers.codec_axis_text import TextSplitter, decode_texts
 from rtseg.drivers.osc_source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
-                                      allow_option, check_options, number_option, renamed)
+                                      allow_option, check_options, number_option, renamed,
+                                      sender_allowed)
 from rtseg.drivers.vendor_seq import SeqGaps
 from rtseg.frame import Frame
 
@@ -83,6 +84,9 @@ TEXT_OPTIONS = ("format", "avatar", "order", "rate", "unit", "space", "queue", "
                 "max_backoff")
 SPACES = ("local", "global")
 _ALL_VALID = np.ones(len(JOINTS), dtype=bool)
+#: most datagrams an Axis binary source takes from its socket in one go (see
+#: :meth:`AxisBinarySource._run`)
+BURST = 64
 _RANGES = {"rate": (1e-3, 1e5), "queue": (1, 1_000_000), "rcvbuf": (1, 1 << 30),
            "backoff": (1e-3, 60.0), "max_backoff": (1e-3, 600.0)}
 
@@ -243,26 +247,29 @@ class TextStream:
 
 
 class _BinaryAdapter:
-    """``feed``/``flush`` for :class:`OscUdpSource`: datagrams -> Frames."""
+    """``feed``/``flush`` for :class:`OscUdpSource`: datagrams -> Frames; ``feed_many``
+    decodes several datagrams and converts their frames together (one Euler and one
+    forward-kinematics pass per run of same-layout frames, as for the frames of a text
+    read)."""
 
     def __init__(self, frames: AxisFrames) -> None:
         self.frames = frames
         self.joiner = BinaryAssembler()
 
     def feed(self, data: bytes, now: float) -> list[Frame]:
-        out: list[Frame] = []
-        chunks, errors = self.joiner.feed(data, now)
-        for e in errors:
-            self.frames.error(e, now)
-        for chunk in chunks:
-            try:
-                fr = self.frames.frame(decode_binary(chunk), now)
-            except AxisError as e:
-                self.frames.error(e, now)
-                continue
-            if fr is not None:
-                out.append(fr)
-        return out
+        return self.feed_many((data,), now)
+
+    def feed_many(self, datagrams, now: float) -> list[Frame]:
+        items: list[AxisFrame | AxisError] = []
+        for data in datagrams:
+            chunks, errors = self.joiner.feed(data, now)
+            items.extend(errors)
+            for chunk in chunks:
+                try:
+                    items.append(decode_binary(chunk))
+                except AxisError as e:
+                    items.append(e)
+        return self.frames.many(items, now) if items else []
 
     def flush(self, now: float, force: bool = False) -> list[Frame]:
         e = self.joiner.flush(now)
@@ -293,6 +300,56 @@ class AxisBinarySource(OscUdpSource):
     @property
     def other_avatars(self) -> int:
         return self._frames.other_avatars
+
+    def _run(self) -> None:
+        """:class:`OscUdpSource`'s reader loop, except that the datagrams already waiting
+        in the socket buffer when one arrives (up to :data:`BURST`) are taken with it and
+        decoded as one batch (:meth:`_BinaryAdapter.feed_many`): a reader that fell behind
+        catches up at the batch rate; one that keeps up sees batches of one."""
+        sock, asm, timeout = self._sock, self._asm, self._sock.gettimeout()
+        while not self._stop.is_set():
+            try:
+                data, sender = sock.recvfrom(65536)
+            except (socket.timeout, BlockingIOError, InterruptedError):
+                try:
+                    asm.flush(time.monotonic())
+                except Exception:  # pragma: no cover - a decoder bug must not end the loop
+                    log.exception("Axis: flushing the open frame failed")
+                continue
+            except OSError as exc:
+                if self._stop.is_set():
+                    break
+                log.warning("Axis: receive error on port %d: %s", self.port, exc)
+                time.sleep(0.01)
+                continue
+            batch = []
+            try:
+                sock.settimeout(0.0)                  # take only what is already there
+                while True:
+                    if self.allow is not None and not sender_allowed(sender[0], self.allow):
+                        self._refuse(sender[0])
+                    else:
+                        batch.append(data)
+                    if len(batch) >= BURST:
+                        break
+                    data, sender = sock.recvfrom(65536)
+            except OSError:                           # BlockingIOError: nothing more
+                pass
+            finally:
+                try:
+                    sock.settimeout(timeout)
+                except OSError:                       # closed meanwhile
+                    pass
+            if not batch:
+                continue
+            try:
+                frames = asm.feed_many(batch, time.monotonic())
+            except Exception:  # a decoder bug must not kill the live loop
+                self.count("corrupt")
+                log.exception("Axis: %d datagram(s) crashed the decoder; dropped", len(batch))
+                continue
+            for frame in frames:
+                self._put(frame)
 
     def _put(self, frame: Frame) -> None:
         if self._queue.put(frame):

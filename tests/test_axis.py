@@ -548,6 +548,69 @@ def test_url_defaults_options_and_errors():
                     ("axis://:0?allow=x", "axis:// allow=")])
 
 
+def test_binary_datagrams_fed_together_give_the_frames_fed_one_by_one():
+    """_BinaryAdapter.feed_many (what the source runs on the datagrams pending in its
+    socket) against feed one datagram at a time: the same Frames bit for bit (quats,
+    valid, seq, source_time, root) and the same counters, through split frames, a lost
+    continuation, another avatar, a bad layout, a frame index jump and non-finite angles."""
+    rng = np.random.default_rng(4)
+    v = np.zeros((8, 59, 6))
+    v[..., 3:] = rng.uniform(-170, 170, (8, 59, 3))
+    v[..., 0, :3] = rng.uniform(-50, 150, (8, 3))
+    v = v.reshape(8, 354)
+    v[5, 40] = np.nan
+    d = [A.encode_binary(v[k], frame_index=k if k < 6 else k + 3) for k in range(8)]
+    datagrams = [d[0], d[1][:1024], d[1][1024:], d[2][:1024], d[3],
+                 A.encode_binary(v[4], avatar_index=1, avatar_name="Other", frame_index=4),
+                 A.encode_binary(v[4][:300], frame_index=4), d[4], d[5], d[6], d[7]]
+    for space in ("local", "global"):
+        c1, c2 = Counter(), Counter()
+        one, many = _BinaryAdapter(AxisFrames(c1, space=space)), _BinaryAdapter(
+            AxisFrames(c2, space=space))
+        ref = [f for k, g in enumerate(datagrams) for f in one.feed(g, 0.5)]
+        got = many.feed_many(datagrams, 0.5)
+        assert len(got) == len(ref) == 7 and c1.counts == c2.counts
+        assert c1.counts == {"corrupt": 1, "bad_messages": 1, "bad_values": 1, "gaps": 2,
+                             "dropped": 4}                  # index 2, then 6, 7, 8
+        for g, r in zip(got, ref):
+            assert g.quats.tobytes() == r.quats.tobytes() and np.array_equal(g.valid, r.valid)
+            assert (g.seq, g.source_time) == (r.seq, r.source_time)
+            assert np.array_equal(g.root_position, r.root_position)
+
+
+def test_binary_source_takes_pending_datagrams_as_one_batch():
+    """Datagrams sent faster than the reader decodes them wait in the socket buffer; the
+    source takes them together (batches of more than one datagram), and every frame still
+    arrives in order with the values of frame-by-frame decoding."""
+    rng = np.random.default_rng(6)
+    n = 60
+    v = np.zeros((n, 59, 6))
+    v[..., 3:] = rng.uniform(-170, 170, (n, 59, 3))
+    v = v.reshape(n, 354)
+    src = open_source("axis://127.0.0.1:0?queue=1024")
+    sizes: list[int] = []
+    feed_many = src._asm.feed_many
+
+    def counting(batch, now):
+        sizes.append(len(batch))
+        return feed_many(batch, now)
+
+    src._asm.feed_many = counting
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            for k in range(n):
+                s.sendto(A.encode_binary(v[k], frame_index=k), ("127.0.0.1", src.port))
+        frames = read_all(src)
+    finally:
+        src.close()
+    assert [f.seq for f in frames] == list(range(n)) and sum(sizes) == n
+    assert max(sizes) > 1 and src.stats.dropped == src.stats.corrupt == 0
+    ref = _BinaryAdapter(AxisFrames(Counter(), space="global"))
+    for k, f in enumerate(frames):
+        want = ref.feed(A.encode_binary(v[k], frame_index=k), 0.0)[0]
+        assert f.quats.tobytes() == want.quats.tobytes()
+
+
 def test_binary_over_udp_split_datagrams_and_avatar_choice():
     take = synthesize("idle:2,walk:2", frame_rate=60.0, seed=8).take
     src = open_source("axis://127.0.0.1:0?avatar=Avatar01&queue=4096&rate=60&space=local")
