@@ -257,7 +257,20 @@ class _BinaryAdapter:
         self.joiner = BinaryAssembler()
 
     def feed(self, data: bytes, now: float) -> list[Frame]:
-        return self.feed_many((data,), now)
+        """One datagram (the frame-by-frame path: no batch bookkeeping)."""
+        out: list[Frame] = []
+        chunks, errors = self.joiner.feed(data, now)
+        for e in errors:
+            self.frames.error(e, now)
+        for chunk in chunks:
+            try:
+                fr = self.frames.frame(decode_binary(chunk), now)
+            except AxisError as e:
+                self.frames.error(e, now)
+                continue
+            if fr is not None:
+                out.append(fr)
+        return out
 
     def feed_many(self, datagrams, now: float) -> list[Frame]:
         items: list[AxisFrame | AxisError] = []
@@ -343,7 +356,8 @@ class AxisBinarySource(OscUdpSource):
             if not batch:
                 continue
             try:
-                frames = asm.feed_many(batch, time.monotonic())
+                frames = (asm.feed(batch[0], time.monotonic()) if len(batch) == 1
+                          else asm.feed_many(batch, time.monotonic()))
             except Exception:  # a decoder bug must not kill the live loop
                 self.count("corrupt")
                 log.exception("Axis: %d datagram(s) crashed the decoder; dropped", len(batch))

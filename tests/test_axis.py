@@ -589,13 +589,17 @@ def test_binary_source_takes_pending_datagrams_as_one_batch():
     v = v.reshape(n, 354)
     src = open_source("axis://127.0.0.1:0?queue=1024")
     sizes: list[int] = []
-    feed_many = src._asm.feed_many
+    feed, feed_many = src._asm.feed, src._asm.feed_many
 
-    def counting(batch, now):
+    def one(data, now):
+        sizes.append(1)
+        return feed(data, now)
+
+    def many(batch, now):
         sizes.append(len(batch))
         return feed_many(batch, now)
 
-    src._asm.feed_many = counting
+    src._asm.feed, src._asm.feed_many = one, many
     try:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             for k in range(n):
