@@ -19,7 +19,7 @@ integers - the token with its point removed, converted by numpy's integer parser
 found from the point and space positions in one vectorised pass.  The integer M
 (|M| < 2^53) and 10^d (d <= 22) are exact doubles, so that one IEEE division is the
 correctly rounded value of the decimal: exactly what ``float()`` returns (Clinger's fast
-path).  A frame with any other token (``1.``, ``.5``, ``nan``, more digits, ``_``) is read
+path).  A frame with any other token (exponents, ``nan``, more digits, ``_``) is read
 with ``float()`` token by token, so the values are always ``float()``'s.
 """
 
