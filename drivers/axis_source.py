@@ -60,7 +60,7 @@ import socket
 import threading
 import time
 
-from rtseg.drivers.base import FrameQueue, Source, SourceError
+from rtseg.drivers.base import FrameQueue, QueuedSource, Source, SourceError
 from rtseg.drivers.codec_axis import BINARY_PORT, JOINTS, PARENTS, TEXT_PORT
 from rtseg.drivers.codec_axis_frames import AxisFrames, TextStream, _BinaryAdapter
 from rtseg.drivers.osc_source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
@@ -165,7 +165,7 @@ class AxisBinarySource(OscUdpSource):
                               "oldest queued frame (%d so far)", self.stats.dropped)
 
 
-class AxisTextSource(Source):
+class AxisTextSource(QueuedSource):
     """TCP client of Axis's text BVH server (see module docstring)."""
 
     space = "global"
@@ -265,12 +265,6 @@ class AxisTextSource(Source):
                     self._frames.warn("drop", now, "Axis: reader too slow, dropped oldest "
                                       "queued frame (%d so far)", self.stats.dropped)
 
-    def read(self, timeout: float | None = None) -> Frame | None:
-        frame = self._queue.get(timeout)
-        if frame is None:
-            return None
-        self.count("frames_ok")
-        return frame
 
     def close(self) -> None:
         if self._closed:

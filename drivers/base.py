@@ -140,3 +140,19 @@ class Source:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class QueuedSource(Source):
+    """A source whose reader thread puts decoded frames on ``self._queue`` (a ``FrameQueue``,
+    the oldest frame dropped when full); ``read`` takes them in arrival order."""
+
+    _queue: FrameQueue
+
+    def read(self, timeout: float | None = None) -> Frame | None:
+        """Next frame in arrival order, or None if none within ``timeout`` s (None: wait
+        until one arrives or the source is closed).  Never raises because of the device."""
+        frame = self._queue.get(timeout)
+        if frame is None:
+            return None
+        self.count("frames_ok")
+        return frame

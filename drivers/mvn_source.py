@@ -50,7 +50,7 @@ import socket
 import threading
 import time
 
-from rtseg.drivers.base import FrameQueue, Source, SourceError
+from rtseg.drivers.base import FrameQueue, QueuedSource, SourceError
 from rtseg.drivers.codec_mvn import DEFAULT_PORT, MxtpStream
 from rtseg.drivers.codec_mvn_assembler import MvnAssembler
 from rtseg.drivers.osc_source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
@@ -119,7 +119,7 @@ def _suit_ids(suit: str) -> tuple[list[str], list[int], list[int]]:
     return bones, parents, list(suit_profile(suit).sensor_ids)
 
 
-class MvnTcpSource(Source):
+class MvnTcpSource(QueuedSource):
     """Xsens MVN receiver over TCP (see module docstring): listens on ``host:port``
     (``.port``: the bound port), one connection at a time."""
 
@@ -259,12 +259,6 @@ class MvnTcpSource(Source):
                 self._warn("drop", "MVN: reader too slow, dropped oldest queued frame (%d "
                            "so far)", self.stats.dropped)
 
-    def read(self, timeout: float | None = None) -> Frame | None:
-        frame = self._queue.get(timeout)
-        if frame is None:
-            return None
-        self.count("frames_ok")
-        return frame
 
     def close(self) -> None:
         if self._closed:

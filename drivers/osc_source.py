@@ -57,7 +57,7 @@ import threading
 import time
 from typing import Any, Sequence
 
-from rtseg.drivers.base import FrameQueue, Source, SourceError
+from rtseg.drivers.base import FrameQueue, QueuedSource, SourceError
 from rtseg.drivers.codec_vmc import VmcAssembler
 from rtseg.drivers.codec_vrchat import DEFAULT_PORT as VRCHAT_PORT
 from rtseg.drivers.codec_vrchat import JOINT_NAMES as VRCHAT_JOINTS
@@ -161,7 +161,7 @@ def load_suit(name: str) -> tuple[list[str], list[int]]:
         raise SourceError(f"suit {name!r}: {exc}") from None
 
 
-class OscUdpSource(Source):
+class OscUdpSource(QueuedSource):
     """Shared machinery of the OSC sources: a UDP socket read by one thread that feeds an
     assembler (``feed(data, now)`` / ``flush(now)`` returning frames) and a bounded queue
     (drop-oldest).  ``.port`` is the bound port."""
@@ -259,14 +259,6 @@ class OscUdpSource(Source):
                 self._log.warning("%s: reader too slow, dropped oldest queued frame "
                                   "(%d dropped so far)", self._fmt, self.stats.dropped)
 
-    def read(self, timeout: float | None = None) -> Frame | None:
-        """Next frame in arrival order, or None if none within ``timeout`` s (None: wait
-        until one arrives or the source is closed)."""
-        frame = self._queue.get(timeout)
-        if frame is None:
-            return None
-        self.count("frames_ok")
-        return frame
 
     def close(self) -> None:
         """Stop the reader thread, wake blocked readers and close the socket.  Safe to call

@@ -71,7 +71,7 @@ import numpy as np
 import serial
 
 from rtseg.drivers import codec_serial as codec
-from rtseg.drivers.base import FrameQueue, Source, SourceError
+from rtseg.drivers.base import FrameQueue, QueuedSource, SourceError
 from rtseg.frame import Frame
 from rtseg.profiles import SuitProfile, suit_profile
 
@@ -121,7 +121,7 @@ _STAT_MAP = {  # decoder counter -> SourceStats field
 }
 
 
-class SerialSource(Source):
+class SerialSource(QueuedSource):
     """See the module docstring.  ``path``: device path or any pyserial URL."""
 
     space = "global"
@@ -218,14 +218,6 @@ class SerialSource(Source):
                 break
         return out
 
-    def read(self, timeout: float | None = None) -> Frame | None:
-        """Next frame, or None if none within ``timeout`` seconds (None: wait forever).
-        Never raises because of the device."""
-        frame = self._queue.get(timeout)
-        if frame is None:
-            return None
-        self.count("frames_ok")
-        return frame
 
     def close(self) -> None:
         """Stop the reader thread and close the port.  Safe to call twice."""
