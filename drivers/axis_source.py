@@ -265,7 +265,6 @@ class AxisTextSource(QueuedSource):
                     self._frames.warn("drop", now, "Axis: reader too slow, dropped oldest "
                                       "queued frame (%d so far)", self.stats.dropped)
 
-
     def close(self) -> None:
         if self._closed:
             return

@@ -259,7 +259,6 @@ class MvnTcpSource(QueuedSource):
                 self._warn("drop", "MVN: reader too slow, dropped oldest queued frame (%d "
                            "so far)", self.stats.dropped)
 
-
     def close(self) -> None:
         if self._closed:
             return

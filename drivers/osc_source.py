@@ -259,7 +259,6 @@ class OscUdpSource(QueuedSource):
                 self._log.warning("%s: reader too slow, dropped oldest queued frame "
                                   "(%d dropped so far)", self._fmt, self.stats.dropped)
 
-
     def close(self) -> None:
         """Stop the reader thread, wake blocked readers and close the socket.  Safe to call
         twice."""

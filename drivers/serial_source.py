@@ -218,7 +218,6 @@ class SerialSource(QueuedSource):
                 break
         return out
 
-
     def close(self) -> None:
         """Stop the reader thread and close the port.  Safe to call twice."""
         self._stop.set()
