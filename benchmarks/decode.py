@@ -101,18 +101,7 @@ def bench_vmc(q: np.ndarray, repeat: int, fast: bool = True, full: bool = False)
         names, qq = BONES, q
     dgrams = [d for i in range(n) for d in vmc_encode(
         qq[i], names, time=i / 120.0, root_position=(0.0, 1.0, 0.01 * i))]
-    rates = []
-    for _ in range(repeat):
-        asm = VmcAssembler(BONES, fast=fast)
-        got = 0
-        t0 = _clock()
-        for k, d in enumerate(dgrams):
-            got += len(asm.feed(d, k * 1e-3))
-        dt = _clock() - t0
-        got += len(asm.flush(1e9, force=True))
-        if got != n:
-            raise RuntimeError(f"VMC decoded {got} of {n} frames")
-        rates.append(n / dt)
+    rates = _time_feed(lambda: VmcAssembler(BONES, fast=fast), dgrams, n, repeat, "VMC")
     return {"frames_per_s": round(statistics.median(rates)),
             "runs": [round(r) for r in rates],
             "datagrams_per_frame": len(dgrams) / n,
