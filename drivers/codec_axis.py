@@ -411,12 +411,15 @@ _ANGLE_INDEX: dict[tuple[bool, bool, int], np.ndarray] = {}
 
 
 def _angle_index(with_disp: bool, with_ref: bool, joints: int) -> np.ndarray:
-    """(3, joints): where each joint's three angles are in a frame's values."""
+    """(3, joints + 1): where each joint's three angles are in a frame's values; the last
+    column (any index: its values are overwritten with the identity's zero angles) makes
+    room for :func:`global_pose`'s identity row."""
     key = (with_disp, with_ref, joints)
     idx = _ANGLE_INDEX.get(key)
     if idx is None:
-        j = np.arange(joints)
+        j = np.arange(joints + 1)
         first = (6 if with_ref else 0) + (6 * j + 3 if with_disp else 3 + 3 * j)
+        first[-1] = 0
         idx = _ANGLE_INDEX[key] = first[None, :] + np.arange(3)[:, None]
     return idx
 
@@ -432,22 +435,24 @@ def poses(values: np.ndarray, with_disp: bool, with_ref: bool, order: str = "YXZ
     the order's +-1 table, :func:`_euler_tables`) and runs :func:`global_pose`'s pointer
     jumping on them: the same values as ``global_pose(euler_to_quat(...))``, a dozen numpy
     calls per batch.  Local quats come back as a view when ``space="global"``."""
-    root, angles = _channels(values, with_disp, with_ref, joints)
     T, TL = _euler_tables(order)
+    if values.ndim == 1 and space == "global" and joints == len(JOINTS):
+        # one frame (the live case): the angles in one gather, contiguous, the identity's
+        # zero angles in the last column
+        half = values.take(_angle_index(with_disp, with_ref, joints))     # (3, J + 1)
+        np.multiply(half, _HALF_RAD, out=half)
+        half[:, -1] = 0.0
+        m = (_half_terms(half).T @ TL).reshape(joints + 1, 4, 4)
+        r = 6 if with_ref else 0
+        return _jump(m), m[:-1, :, 3], values[r:r + 3] * unit_scale
+    root, angles = _channels(values, with_disp, with_ref, joints)
     lead = angles.shape[:-1]
     if space == "local":
         q = (_euler_terms(angles).T @ T).reshape(lead + (4,))
         return q, q, root * unit_scale
     if joints != len(JOINTS):
         raise ValueError(f"space=global needs the {len(JOINTS)} Axis joints, got {joints}")
-    if values.ndim == 1:          # one frame (the live case): the angles in one gather
-        half = np.empty((3, joints + 1))
-        np.multiply(values.take(_angle_index(with_disp, with_ref, joints)), _HALF_RAD,
-                    out=half[:, :-1])
-        half[:, -1] = 0.0
-        t = _half_terms(half)
-    else:
-        t = _euler_terms(angles, identity_row=True)     # (8, F (J + 1))
+    t = _euler_terms(angles, identity_row=True)         # (8, F (J + 1))
     m = (t.T @ TL).reshape(lead[:-1] + (joints + 1, 4, 4))  # L of each joint, identity
     return _jump(m), m[..., :-1, :, 3], root * unit_scale
 
