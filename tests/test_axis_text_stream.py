@@ -112,3 +112,56 @@ def test_a_read_of_many_frames_is_converted_as_one_batch():
     finally:
         F.poses = real
     assert len(got) == data[:65536].count(b"||") == sum(calls) and calls == [len(got)]
+
+
+def test_text_source_behind_its_server_takes_many_frames_per_read():
+    """A real TCP server on 127.0.0.1 writes 300 frames at once (a reader that fell
+    behind): the source reads them in large reads (64 KiB), converts several frames per
+    read, and every frame arrives in order with the values of one frame per read."""
+    import socket
+    import threading
+
+    from rtseg.drivers import axis_source, open_source
+    from vendor_helpers import read_all
+
+    rng = np.random.default_rng(8)
+    v = np.zeros((300, 59, 6))
+    v[..., 3:] = rng.uniform(-180, 180, (300, 59, 3))
+    v[:, 0, :3] = rng.uniform(-50, 150, (300, 3))
+    frames = [A.encode_text(x) for x in v.reshape(300, 354)]
+    per_read: list[int] = []
+
+    class Recording(TextStream):
+        def feed(self, data, now):
+            out = super().feed(data, now)
+            per_read.append(len(out))
+            return out
+
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+
+    def serve():
+        conn, _ = server.accept()
+        with conn:
+            conn.sendall(b"".join(frames))
+            conn.recv(1)                        # hold the connection until the client goes
+
+    threading.Thread(target=serve, daemon=True).start()
+    real = axis_source.TextStream
+    axis_source.TextStream = Recording
+    try:
+        src = open_source(f"axis://127.0.0.1:{server.getsockname()[1]}?format=text"
+                          "&queue=1024")
+        try:
+            got = read_all(src, idle=0.5)
+        finally:
+            src.close()
+    finally:
+        axis_source.TextStream = real
+        server.close()
+    ref, count, _ = _one_by_one(frames, "global")
+    assert len(got) == len(ref) == 300
+    assert [f.quats.tobytes() for f in got] == [f.quats.tobytes() for f in ref]
+    assert [f.seq for f in got] == list(range(300)) and max(per_read) > 5
+    assert src.stats.corrupt == src.stats.dropped == 0 and count.counts == {}
