@@ -6,6 +6,10 @@
                                                    #  "vmc": {"frames_per_s": N}, ...}
     python3 benchmarks/decode.py --frames 5000 --repeat 7
     python3 benchmarks/decode.py --cpu-time        # process CPU time instead of wall clock
+    python3 benchmarks/decode.py --only axis       # only the rows named axis...
+    git worktree add /tmp/before <commit>          # the code before a change, timed by
+    python3 benchmarks/decode.py --tree /tmp/before   # these loops (PYTHONPATH alone is not
+                                                   # enough: see _use_tree)
 
 Bytes are encoded **before** timing (encoding is not counted); the timed loop is decoding
 only, on one core, median of ``--repeat`` runs:
@@ -70,7 +74,40 @@ import time
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rtseg.drivers.codec_vmc import HUMAN_BODY_BONES, VmcAssembler, encode_frame as vmc_encode
+
+def _use_tree(argv: list[str]) -> str | None:
+    """``--tree DIR`` on the command line: import rtseg (rtseg, rtseg.drivers,
+    rtseg.simulators, rtseg.defaults) from the source tree DIR - e.g. a ``git worktree`` of
+    an older commit - instead of the installed package.  ``PYTHONPATH=DIR`` alone is not
+    enough: the editable install maps ``rtseg.drivers`` to this checkout's ``drivers/``
+    whatever comes first on the path.  Returns DIR (or None)."""
+    if "--tree" not in argv or argv.index("--tree") + 1 >= len(argv):
+        return None
+    import importlib.util
+    import types
+    from pathlib import Path
+    root = Path(argv[argv.index("--tree") + 1]).resolve()
+    sys.meta_path[:] = [f for f in sys.meta_path if "editable" not in
+                        (getattr(f, "__module__", "") + getattr(f, "__name__", "")).lower()]
+    for name, sub in (("rtseg", "rtseg"), ("rtseg.drivers", "drivers"),
+                      ("rtseg.simulators", "simulators"), ("rtseg.defaults", "config")):
+        path, init = root / sub, root / sub / "__init__.py"
+        if init.exists():
+            spec = importlib.util.spec_from_file_location(
+                name, init, submodule_search_locations=[str(path)])
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[name] = module
+            spec.loader.exec_module(module)
+        else:
+            module = types.ModuleType(name)
+            module.__path__ = [str(path)]
+            sys.modules[name] = module
+    return str(root)
+
+
+TREE = _use_tree(sys.argv) if __name__ == "__main__" else None
+
+from rtseg.drivers.codec_vmc import HUMAN_BODY_BONES, VmcAssembler, encode_frame as vmc_encode  # noqa: E402
 
 BONES = ["Hips", "Spine", "Chest", "Neck", "Head", "LeftUpperArm", "LeftLowerArm", "LeftHand",
          "RightUpperArm", "RightLowerArm", "RightHand", "LeftUpperLeg", "LeftLowerLeg",
@@ -460,6 +497,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cpu-time", action="store_true", help="time with this process's CPU "
                    "time (time.process_time) instead of the wall clock: steadier on a "
                    "machine shared with other jobs (frames per CPU-second)")
+    p.add_argument("--only", metavar="PREFIXES", help="time only the rows whose name starts "
+                   "with one of these comma-separated prefixes (e.g. --only axis)")
+    p.add_argument("--tree", metavar="DIR", help="import rtseg from the source tree DIR (a git "
+                   "worktree of another commit: the code before a change) instead of the "
+                   "installed package; command line only")
     args = p.parse_args(argv)
     if args.cpu_time:
         global _clock
@@ -479,53 +521,70 @@ def main(argv: list[str] | None = None) -> int:
     if args.frames < 10 or args.repeat < 1:
         p.error("--frames must be >= 10 and --repeat >= 1")
     q = motion(args.frames)
+    n, rep = args.frames, args.repeat
+    rows = {
+        "serial": lambda: bench_serial(q, rep) or {"frames_per_s": None},
+        "vmc": lambda: bench_vmc(q, rep),
+        "vmc_general_path": lambda: bench_vmc(q, rep, fast=False),
+        "vmc_55_bones": lambda: bench_vmc(q, rep, full=True),
+        "mvn": lambda: bench_mvn(n, rep),
+        "mvn_3_datagrams": lambda: bench_mvn(n, rep, parts=3),
+        "mvn_tcp": lambda: bench_mvn_tcp(n, rep),
+        "mocopi": lambda: bench_mocopi(n, rep),
+        "rokoko": lambda: bench_rokoko(n, rep),
+        "rokoko_lz4": lambda: bench_rokoko(n, rep, compress=True),
+        "rokoko_json_module": lambda: bench_rokoko(n, rep, json_module=True),
+        "axis_binary": lambda: bench_axis(n, rep),
+        "axis_binary_global": lambda: bench_axis(n, rep, space="global"),
+        "axis_binary_global_burst": lambda: bench_axis_burst(n, rep),
+        "axis_text": lambda: bench_axis(n, rep, text=True),
+        "axis_text_global": lambda: bench_axis(n, rep, text=True, space="global"),
+        "axis_text_64k": lambda: bench_axis(n, rep, text=True, chunk=65536),
+        "axis_text_global_64k": lambda: bench_axis(n, rep, text=True, space="global",
+                                                   chunk=65536),
+        "python_osc_parse": lambda: bench_python_osc(q[: max(10, n // 5)],
+                                                     max(1, min(rep, 3))),
+    }
+    only = tuple(x for x in (args.only or "").split(",") if x)
     result: dict = {}
-    serial = bench_serial(q, args.repeat)
-    result["serial"] = serial if serial is not None else {"frames_per_s": None}
-    result["vmc"] = bench_vmc(q, args.repeat)
-    result["vmc_general_path"] = bench_vmc(q, args.repeat, fast=False)
-    result["vmc_55_bones"] = bench_vmc(q, args.repeat, full=True)
-    result["mvn"] = bench_mvn(args.frames, args.repeat)
-    result["mvn_3_datagrams"] = bench_mvn(args.frames, args.repeat, parts=3)
-    result["mvn_tcp"] = bench_mvn_tcp(args.frames, args.repeat)
-    result["mocopi"] = bench_mocopi(args.frames, args.repeat)
-    result["rokoko"] = bench_rokoko(args.frames, args.repeat)
-    result["rokoko_lz4"] = bench_rokoko(args.frames, args.repeat, compress=True)
-    result["rokoko_json_module"] = bench_rokoko(args.frames, args.repeat, json_module=True)
-    result["axis_binary"] = bench_axis(args.frames, args.repeat)
-    result["axis_binary_global"] = bench_axis(args.frames, args.repeat, space="global")
-    result["axis_binary_global_burst"] = bench_axis_burst(args.frames, args.repeat)
-    result["axis_text"] = bench_axis(args.frames, args.repeat, text=True)
-    result["axis_text_global"] = bench_axis(args.frames, args.repeat, text=True, space="global")
-    result["axis_text_64k"] = bench_axis(args.frames, args.repeat, text=True, chunk=65536)
-    result["axis_text_global_64k"] = bench_axis(args.frames, args.repeat, text=True,
-                                                space="global", chunk=65536)
-    pyosc = bench_python_osc(q[: max(10, args.frames // 5)], max(1, min(args.repeat, 3)))
-    if pyosc is not None:
-        result["python_osc_parse"] = pyosc
+    for key, run in rows.items():
+        if not only or key.startswith(only):
+            r = run()
+            if r is not None:
+                result[key] = r
     result["config"] = {"frames": args.frames, "repeat": args.repeat, "sensors": 17,
                         "clock": "process_time" if args.cpu_time else "perf_counter",
-                        "python": platform.python_version(), "machine": platform.machine()}
+                        "python": platform.python_version(), "machine": platform.machine(),
+                        "tree": TREE or "installed",
+                        "codec_axis": sys.modules["rtseg.drivers.codec_axis"].__file__
+                        if "rtseg.drivers.codec_axis" in sys.modules else None}
     if args.json:
         print(json.dumps(result))
         return 0
     print(f"decode throughput, 17-sensor suit, {args.frames} frames, median of {args.repeat} runs"
-          + (" (frames per CPU-second)" if args.cpu_time else ""))
-    if serial is not None:
+          + (" (frames per CPU-second)" if args.cpu_time else "")
+          + (f", code from {TREE}" if TREE else ""))
+    serial = result.get("serial")
+    if serial is not None and serial["frames_per_s"] is not None:
         print(f"  serial (COBS+CRC, {serial['bytes_per_frame']:.0f} B/frame, "
               f"{SERIAL_CHUNK} B reads): {serial['frames_per_s']:>9,} frames/s")
-    v = result["vmc"]
-    print(f"  VMC (OSC/UDP, {v['datagrams_per_frame']:.1f} datagrams, {v['bytes_per_frame']:.0f} "
-          f"B/frame):    {v['frames_per_s']:>9,} frames/s")
-    g, f = result["vmc_general_path"], result["vmc_55_bones"]
-    print(f"  VMC, message-by-message path only:           {g['frames_per_s']:>9,} frames/s")
-    print(f"  VMC, 55 bones ({f['datagrams_per_frame']:.0f} datagrams, {f['bytes_per_frame']:.0f} B/frame):"
-          f"       {f['frames_per_s']:>9,} frames/s")
+    if "vmc" in result:
+        v = result["vmc"]
+        print(f"  VMC (OSC/UDP, {v['datagrams_per_frame']:.1f} datagrams, "
+              f"{v['bytes_per_frame']:.0f} B/frame):    {v['frames_per_s']:>9,} frames/s")
+    if "vmc_general_path" in result:
+        print(f"  VMC, message-by-message path only:           "
+              f"{result['vmc_general_path']['frames_per_s']:>9,} frames/s")
+    if "vmc_55_bones" in result:
+        f = result["vmc_55_bones"]
+        print(f"  VMC, 55 bones ({f['datagrams_per_frame']:.0f} datagrams, "
+              f"{f['bytes_per_frame']:.0f} B/frame):       {f['frames_per_s']:>9,} frames/s")
+    parser = result.get("rokoko", {}).get("json_parser", "")
     for key, label in (("mvn", "Xsens MVN, 23 segments"), ("mvn_3_datagrams", "Xsens MVN, 3 datagrams/frame"),
                        ("mvn_tcp", "Xsens MVN over TCP, 4 KiB reads"),
                        ("mocopi", "Sony mocopi, 27 bones"),
-                       ("rokoko", f"Rokoko JSON v3 ({result['rokoko']['json_parser']})"),
-                       ("rokoko_lz4", f"Rokoko JSON v3 LZ4 ({result['rokoko']['json_parser']})"),
+                       ("rokoko", f"Rokoko JSON v3 ({parser})"),
+                       ("rokoko_lz4", f"Rokoko JSON v3 LZ4 ({parser})"),
                        ("rokoko_json_module", "Rokoko JSON v3 (json module fallback)"),
                        ("axis_binary", "Axis BVH binary, 59 joints"),
                        ("axis_binary_global", "Axis BVH binary, space=global"),
@@ -534,11 +593,14 @@ def main(argv: list[str] | None = None) -> int:
                        ("axis_text_global", "Axis BVH text, space=global"),
                        ("axis_text_64k", "Axis BVH text, 64 KiB reads"),
                        ("axis_text_global_64k", "Axis BVH text, global, 64 KiB reads")):
+        if key not in result:
+            continue
         r = result[key]
         print(f"  {label} ({r['bytes_per_frame']:.0f} B/frame): ".ljust(47)
               + f"{r['frames_per_s']:>9,} frames/s")
-    if pyosc is not None:
-        print(f"  python-osc parse only (comparison):          {pyosc['frames_per_s']:>9,} frames/s")
+    if "python_osc_parse" in result:
+        print(f"  python-osc parse only (comparison):          "
+              f"{result['python_osc_parse']['frames_per_s']:>9,} frames/s")
     return 0
 
 
