@@ -497,8 +497,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cpu-time", action="store_true", help="time with this process's CPU "
                    "time (time.process_time) instead of the wall clock: steadier on a "
                    "machine shared with other jobs (frames per CPU-second)")
-    p.add_argument("--only", metavar="PREFIXES", help="time only the rows whose name starts "
-                   "with one of these comma-separated prefixes (e.g. --only axis)")
+    p.add_argument("--only", metavar="PREFIXES", help="time (or fuzz) only the rows (formats) whose "
+                   "name starts with one of these comma-separated prefixes (e.g. --only axis)")
     p.add_argument("--tree", metavar="DIR", help="import rtseg from the source tree DIR (a git "
                    "worktree of another commit: the code before a change) instead of the "
                    "installed package; command line only")
@@ -507,8 +507,10 @@ def main(argv: list[str] | None = None) -> int:
         global _clock
         _clock = time.process_time
     if args.fuzz:
+        only = tuple(x for x in (args.only or "").split(",") if x)
         out = {fmt: fuzz(fmt, args.fuzz_inputs)
-               for fmt in ("mvn", "mvn_tcp", "mocopi", "rokoko", "axis", "axis_text")}
+               for fmt in ("mvn", "mvn_tcp", "mocopi", "rokoko", "axis", "axis_text")
+               if not only or fmt.startswith(only)}
         if args.json:
             print(json.dumps(out))
         else:
