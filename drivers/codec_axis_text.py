@@ -9,11 +9,12 @@ Speed: a frame carries 180-360 decimal numbers, and ``float()`` on each (or nump
 string casts, or ``np.fromstring``, which cost the same) is most of a 50 us budget.
 :func:`decode_texts` first checks a frame's values with one ``bytes.translate`` pass (only
 ``0-9 . - + e E`` and spaces, which become commas) and parses the frames of a read as
-``[[...],[...]]`` with orjson in one call (:func:`_json_rows`, ~6 us for 354 numbers):
-JSON's number grammar is a subset of ``float()``'s and orjson rounds correctly, so the
-values are ``float()``'s bit for bit (the integer token ``-0``, which orjson reads as 0, is
-refused).  What orjson refuses, frame by frame, takes the previous exact paths:
-:func:`parse_decimals` reads a frame whose every token is ``[-]digits.digits`` as
+``[[...],[...]]`` with orjson in one call (:func:`_json_lists`, ~7 us for 354 numbers),
+then packs each list into a float64 array with ``struct`` (:func:`_array`, ~2.5 us; numpy's
+``fromiter`` on the list took ~5): JSON's number grammar is a subset of ``float()``'s and
+orjson rounds correctly, so the values are ``float()``'s bit for bit (the integer token
+``-0``, which orjson reads as 0, is refused).  What orjson refuses, frame by frame, takes
+the previous exact paths: :func:`parse_decimals` reads a frame whose every token is ``[-]digits.digits`` as
 integers - the token with its point removed, converted by numpy's integer parser
 (``np.fromstring``, ~10x cheaper than ``float``) - divided by 10^(digits after the point),
 found from the point and space positions in one vectorised pass.  The integer M
