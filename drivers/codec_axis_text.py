@@ -14,10 +14,10 @@ then packs each list into a float64 array with ``struct`` (:func:`_array`, ~2.5 
 ``fromiter`` on the list took ~5): JSON's number grammar is a subset of ``float()``'s and
 orjson rounds correctly, so the values are ``float()``'s bit for bit (the integer token
 ``-0``, which orjson reads as 0, is refused).  What orjson refuses, frame by frame, takes
-the previous exact paths: :func:`parse_decimals` reads a frame whose every token is ``[-]digits.digits`` as
-integers - the token with its point removed, converted by numpy's integer parser
-(``np.fromstring``, ~10x cheaper than ``float``) - divided by 10^(digits after the point),
-found from the point and space positions in one vectorised pass.  The integer M
+the previous exact paths: :func:`parse_decimals` reads a frame whose every token is
+``[-]digits.digits`` as integers - the token with its point removed, converted by numpy's
+integer parser (``np.fromstring``, ~10x cheaper than ``float``) - divided by 10^(digits
+after the point), found from the point and space positions in one vectorised pass.  The integer M
 (|M| < 2^53) and 10^d (d <= 22) are exact doubles, so that one IEEE division is the
 correctly rounded value of the decimal: exactly what ``float()`` returns (Clinger's fast
 path).  A frame with any other token (exponents, ``nan``, more digits, ``_``) is read
