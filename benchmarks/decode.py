@@ -107,7 +107,8 @@ def _use_tree(argv: list[str]) -> str | None:
 
 TREE = _use_tree(sys.argv) if __name__ == "__main__" else None
 
-from rtseg.drivers.codec_vmc import HUMAN_BODY_BONES, VmcAssembler, encode_frame as vmc_encode  # noqa: E402
+from rtseg.drivers.codec_vmc import (HUMAN_BODY_BONES, VmcAssembler,  # noqa: E402
+                                      encode_frame as vmc_encode)
 
 BONES = ["Hips", "Spine", "Chest", "Neck", "Head", "LeftUpperArm", "LeftLowerArm", "LeftHand",
          "RightUpperArm", "RightLowerArm", "RightHand", "LeftUpperLeg", "LeftLowerLeg",
