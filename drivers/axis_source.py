@@ -15,9 +15,10 @@ several datagrams (Axis Neuron on macOS) is joined.
 
 ``format=text``: Axis is the TCP server; rtseg connects to ``host:port`` (default
 127.0.0.1:7001) and reads frames separated by ``||``, in reads of up to 64 KiB: a reader
-that keeps up gets one frame a read (the direct path), one that fell behind gets ~25 and
-decodes them as one batch (:class:`~rtseg.drivers.codec_axis_frames.TextStream`: one
-orjson call, one Euler and one forward-kinematics pass; the same Frames bit for bit).  A refused connection or a closed
+that keeps up gets one frame a read (the direct path), one that fell behind gets many (~25
+of the simulator's 2.5 KB frames) and decodes them as one batch
+(:class:`~rtseg.drivers.codec_axis_frames.TextStream`: one orjson call, one Euler and one
+forward-kinematics pass; the same Frames bit for bit).  A refused connection or a closed
 stream is retried with exponential backoff (``backoff`` s doubling up to ``max_backoff``),
 as the serial source does after an unplug; each new connection after the first counts in
 ``stats.reconnects`` and the partial frame before it is discarded.
