@@ -92,26 +92,32 @@ def test_any_read_boundaries_give_the_frames_of_one_by_one(space):
 
 def test_a_read_of_many_frames_is_converted_as_one_batch():
     """A 64 KiB read completing ~25 frames makes one pass of the converter (poses called
-    once), where one frame per read makes one pass per frame."""
+    once on a (frames, values) block); a read completing one frame keeps the direct path
+    (poses on that frame's values alone)."""
     rng = np.random.default_rng(2)
     v = np.zeros((30, 59, 6))
     v[..., 3:] = rng.uniform(-180, 180, (30, 59, 3))
     data = b"".join(A.encode_text(x) for x in v.reshape(30, 354))
-    calls: list[int] = []
+    shapes: list[tuple] = []
     from rtseg.drivers import codec_axis_frames as F
     real = F.poses
 
-    def counting(values, *a, **k):
-        calls.append(1 if values.ndim == 1 else values.shape[0])
+    def recording(values, *a, **k):
+        shapes.append(values.shape)
         return real(values, *a, **k)
 
-    F.poses = counting
+    F.poses = recording
     try:
         stream = TextStream(AxisFrames(Counter(), space="global"))
         got = stream.feed(data[:65536], 0.0)
+        n = len(got)
+        assert n == data[:65536].count(b"||") > 20 and shapes == [(n, 354)]
+        one = data[65536:].split(b"||")
+        assert len(stream.feed(one[0] + b"||", 0.0)) == 1       # completes frame n + 1
+        assert len(stream.feed(one[1] + b"||", 0.0)) == 1       # one whole frame
+        assert shapes[1:] == [(354,), (354,)]
     finally:
         F.poses = real
-    assert len(got) == data[:65536].count(b"||") == sum(calls) and calls == [len(got)]
 
 
 def test_text_source_behind_its_server_takes_many_frames_per_read():
