@@ -2,6 +2,7 @@
 sensitivity.
 
     python3 benchmarks/loto.py [DATA] [--synth-seeds 0 1 2 3 4 5] [--json]
+    python3 benchmarks/loto.py [DATA] --select-on SPLICED_DIR [...]   # chosen on other people
 
 Every take of DATA (a folder laid out like ../shared/data: its cmu and tsseg4d groups) and
 the synthetic performances (``rtseg.simulators.synth``, the default script, one per seed)
@@ -21,6 +22,11 @@ per group.  Leave-one-person-out likewise holds out every take of one subject (8
 the synthetic performances always train).  Also printed: the set chosen on every take
 (what should ship), each fold's choice with its margin over the runner-up, and the F1 of
 the shipped defaults as each parameter moves alone.
+
+``--select-on DIR ...`` adds a choice made on other people only: the spliced performances
+of each DIR (``benchmarks/splice.py`` output from ``cmu_single``, people other than 86, 13
+and 14) and the synthetic ones pick the set by the same objective and delay budget, and it
+is scored on every take of DATA, none of which took part in the choice.
 """
 
 from __future__ import annotations
@@ -81,6 +87,22 @@ def load_cases(data: Path | None, seeds: list[int]) -> list[Case]:
         X, idx, rs = fed_features(res.take, cfg)
         cases.append(Case(f"synthetic/seed{s}", f"synth{s}", "synthetic", res.take.frame_rate,
                           X, idx, list(res.transitions), rs))
+    return cases
+
+
+def load_other_people(folders: list[Path]) -> list[Case]:
+    """The spliced performances of each folder (``benchmarks/splice.py`` output: people
+    other than those of the labelled takes), group ``spliced``; each performance is a take."""
+    cfg, _ = live_config(methods=["contrast"])
+    cases = []
+    for folder in folders:
+        for t in find_labelled_takes(folder, ("spliced",)):
+            take = t.load()
+            X, idx, rs = fed_features(take, cfg)
+            cases.append(Case(f"spliced/{folder.name}/{t.name}", f"{folder.name}/{t.name}",
+                              "spliced", take.frame_rate, X, idx, list(t.transitions), rs))
+        if not any(c.key.startswith(f"spliced/{folder.name}/") for c in cases):
+            print(f"loto: no spliced performances in {folder}", file=sys.stderr)
     return cases
 
 
@@ -147,6 +169,10 @@ def main() -> int:
                          "objective (pooled F1 of its inner held-out real takes) and the "
                          "best one picks the fold's set (the held-out figure of the whole "
                          "procedure, rule choice included)")
+    ap.add_argument("--select-on", type=Path, nargs="+", metavar="DIR", default=[],
+                    help="also choose the set on other people only: the spliced performances "
+                         "of each DIR (benchmarks/splice.py output) and the synthetic ones, "
+                         "then score it on every take of DATA, none of which took part")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     data = Path(args.data)
@@ -154,6 +180,7 @@ def main() -> int:
         print(f"loto: no labelled takes in {data}; synthetic performances only", file=sys.stderr)
         data = None
     cases = load_cases(data, args.synth_seeds)
+    others = load_other_people(args.select_on)
     base = load_params()["contrast"]
     keys = list(GRID)
     configs = [dict(zip(keys, v)) for v in itertools.product(*GRID.values())]
@@ -165,7 +192,7 @@ def main() -> int:
         p = {**base, **cfgv}
         geo = (p["step_s"], p["after_s"])
         res = {}
-        for case in cases:
+        for case in cases + others:
             if (geo, case.key) not in traces:
                 det = detector(p, case.frame_rate)
                 det.run(case.X)
@@ -179,7 +206,7 @@ def main() -> int:
             res[case.key] = counts(case, cuts)
         results[tuple(cfgv[k] for k in keys)] = res
     # the shortcut equals a full detector run for the shipped defaults
-    for case in cases:
+    for case in cases + others:
         full = [(c.frame, c.detected_at) for c in detector(base, case.frame_rate).run(case.X)]
         assert counts(case, full)[:4] == results[tuple(base[k] for k in keys)][case.key][:4], case.key
 
@@ -259,7 +286,17 @@ def main() -> int:
                    for g in groups} if args.nested else None,
         "nested_folds": nested_folds or None,
         "sensitivity": {},
+        "other_people": None,
     }
+    if others:
+        train = others + [c for c in cases if c.group == "synthetic"]
+        k = best(train)
+        tested = [g for g in groups if g != "synthetic"]
+        report["other_people"] = {
+            "chose": dict(zip(keys, k)), "margin": round(margin(train, k), 4),
+            "performances": len(others),
+            "spliced (in sample)": pooled_tally([results[k][c.key] for c in others]),
+            **{g: pooled_tally([results[k][c.key] for c in cases if c.group == g]) for g in tested}}
     for i, k in enumerate(keys):
         rows = []
         for v in GRID[k]:
@@ -297,6 +334,14 @@ def main() -> int:
     print(f"chosen on all takes {report['chosen_on_all']['params']}")
     for n, f in folds.items():
         print(f"  fold without {n:<8} chose {f}")
+    if others:
+        o = report["other_people"]
+        print(f"chosen on other people only ({o['performances']} spliced performances of "
+              f"{', '.join(str(d) for d in args.select_on)} + synthetic): {o['chose']}, "
+              f"margin {o['margin']}")
+        for g, row in o.items():
+            if isinstance(row, dict) and "f1" in row:
+                print(f"  {g:<19} {fmt(row)}")
     print("sensitivity (one parameter moved from the shipped defaults):")
     for k, rows in report["sensitivity"].items():
         for r in rows:
