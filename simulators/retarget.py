@@ -21,6 +21,8 @@ Skeleton families (:data:`MAPS`; the family is detected from the joint names, or
                and recorded suit sessions): the identity, Chest falls back to UpperChest
 ``rokoko``     Rokoko Studio body bones: hip, spine, chest, leftUpperArm, leftUpLeg, leftLeg,
                leftToe, ... (sessions recorded from ``rokoko://``)
+``daz``        Daz / Poser BVH (CMU's Daz-friendly conversion): hip, abdomen, chest, neck,
+               head, l/rCollar, l/rShldr, l/rForeArm, l/rHand, l/rThigh, l/rShin, l/rFoot
 ``axis``       Axis Neuron / Axis Studio BVH: Hips, Spine, Spine1..3 (Chest = Spine3),
                LeftArm, LeftForeArm, LeftUpLeg, LeftLeg, ... and finger joints
 =============  ==========================================================================
@@ -179,6 +181,18 @@ MAPS: dict[str, SkeletonMap] = {m.name: m for m in (
             "{Side}Foot": ("{Side}Foot",), "{Side}Toes": ("{Side}Toe",),
         }),
         signature=("hip", "leftUpLeg", "rightUpLeg", "leftToe", "rightToe")),
+    SkeletonMap(
+        "daz", "Daz / Poser BVH rigs (CMU's Daz-friendly conversion: hip, abdomen, chest, "
+        "lShldr, lForeArm, lThigh, lShin, ...)",
+        _sides({
+            "Hips": ("hip",), "Spine": ("abdomen",), "Chest": ("chest",),
+            "UpperChest": ("chest",), "Neck": ("neck",), "Head": ("head",),
+            "{Side}Shoulder": ("{s}Collar",), "{Side}UpperArm": ("{s}Shldr",),
+            "{Side}LowerArm": ("{s}ForeArm",), "{Side}Hand": ("{s}Hand",),
+            "{Side}UpperLeg": ("{s}Thigh",), "{Side}LowerLeg": ("{s}Shin",),
+            "{Side}Foot": ("{s}Foot",),
+        }),
+        signature=("abdomen", "lShldr", "rShldr", "lThigh", "rShin")),
     SkeletonMap(
         "axis", "Noitom Axis Neuron / Axis Studio BVH (59 joints: Spine..Spine3, fingers)",
         _sides({

@@ -46,6 +46,12 @@ MIXAMO_NAMES = ["mixamorig:Hips", "mixamorig:Spine", "mixamorig:Spine1", "mixamo
                 "mixamorig:RightToeBase"]
 MIXAMO_PARENTS = [-1, 0, 1, 2, 3, 4, 5, 3, 7, 8, 9, 3, 11, 12, 13, 0, 15, 16, 17, 0, 19, 20, 21]
 
+#: The Daz / Poser rig of CMU's Daz-friendly BVH conversion (10_04), fingers left out
+DAZ_NAMES = ["hip", "abdomen", "chest", "neck", "head", "lCollar", "lShldr", "lForeArm",
+             "lHand", "rCollar", "rShldr", "rForeArm", "rHand", "lButtock", "lThigh",
+             "lShin", "lFoot", "rButtock", "rThigh", "rShin", "rFoot"]
+DAZ_PARENTS = [-1, 0, 1, 2, 3, 2, 5, 6, 7, 2, 9, 10, 11, 0, 13, 14, 15, 0, 17, 18, 19]
+
 #: What each family must give each suit bone (the segment the sensor is strapped to).
 EXPECTED = {
     "cmu-asf": ["root", "lowerback", "thorax", "lowerneck", "head", "lhumerus", "lradius",
@@ -58,6 +64,9 @@ EXPECTED = {
         "Hips", "Spine", "Spine2", "Neck", "Head", "LeftArm", "LeftForeArm", "LeftHand",
         "RightArm", "RightForeArm", "RightHand", "LeftUpLeg", "LeftLeg", "LeftFoot",
         "RightUpLeg", "RightLeg", "RightFoot"]],
+    "daz": ["hip", "abdomen", "chest", "neck", "head", "lShldr", "lForeArm", "lHand",
+            "rShldr", "rForeArm", "rHand", "lThigh", "lShin", "lFoot", "rThigh", "rShin",
+            "rFoot"],
 }
 
 
@@ -78,6 +87,7 @@ def angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     ("cmu-asf", CMU_ASF_NAMES, CMU_PARENTS),
     ("cmu-bvh", CMU_BVH_NAMES, CMU_PARENTS),
     ("mixamo", MIXAMO_NAMES, MIXAMO_PARENTS),
+    ("daz", DAZ_NAMES, DAZ_PARENTS),
 ])
 def test_each_family_is_detected_and_places_every_sensor(family, names, parents):
     take = random_take(names, parents, n=5)
@@ -124,6 +134,18 @@ def test_real_cmu_bvh_take_places_every_sensor():
     res = resolve(take, SUIT)
     assert res.family == "cmu-bvh" and not res.missing
     assert [take.joint_names[c] for c in res.columns] == EXPECTED["cmu-bvh"]
+
+
+DAZ_BVH = CMU_BVH.parent / "10_04.bvh"
+
+
+@pytest.mark.skipif(not DAZ_BVH.exists(), reason=f"CMU Daz-style BVH not found at {DAZ_BVH}")
+def test_real_daz_bvh_take_places_every_sensor():
+    from rtseg.drivers.readers import read_take
+    take = read_take(DAZ_BVH)
+    rt = retarget(take, SUIT)
+    assert rt.family == "daz" and rt.present.all() and rt.valid.all()
+    assert [take.joint_names[c] for c in rt.columns] == EXPECTED["daz"]
 
 
 def test_unmapped_bones_are_a_clear_error_naming_them():

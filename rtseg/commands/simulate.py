@@ -29,8 +29,8 @@ on 7001 - read it with ``rtseg live "axis://127.0.0.1:7002?rate=R"`` or
 ``"axis://127.0.0.1:7001?format=text&rate=R"`` (R: the take's frame rate, printed).
 
 A recorded take is retargeted to the suit (``rtseg.simulators.retarget``): the skeleton
-family (CMU ASF/AMC, CMU BVH, Mixamo, Unity humanoid) is detected from the joint names
-(or named with ``--map``), each suit sensor gets the global orientation of its body
+family (CMU ASF/AMC, CMU BVH, Mixamo, Daz/Poser, Unity humanoid, the vendor rigs) is
+detected from the joint names (or named with ``--map``), each suit sensor gets the global orientation of its body
 segment by forward kinematics, optionally with IMU noise and heading drift (``--imu
 noise=0.5,drift=3,seed=1``: degrees, degrees per minute).  A suit bone the map cannot
 place is an error naming it; ``--joint-map Head=upperneck,...`` places it by hand and
@@ -94,7 +94,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--start", type=float, metavar="S", help="send the take from S seconds")
     p.add_argument("--end", type=float, metavar="S", help="send the take up to S seconds")
     p.add_argument("--map", dest="skeleton_map", metavar="NAME",
-                   help="skeleton map of a take (cmu-asf, cmu-bvh, mixamo, unity; "
+                   help="skeleton map of a take (cmu-asf, cmu-bvh, mixamo, daz, unity, "
+                   "xsens-mvn, mocopi, rokoko, axis; "
                    "default: detected from the joint names)")
     p.add_argument("--joint-map", metavar="BONE=JOINT,...", default="",
                    help="place suit bones on take joints by hand, e.g. Head=upperneck")
