@@ -148,3 +148,24 @@ def test_loto_objective_counts_every_take_once():
     slow = {"a": (2, 2, 2, 2, [3.0, 3.0]), "b": (5, 10, 10, 5, [3.0] * 5)}
     assert loto.objective(slow, [short, long_], "takes") == pytest.approx(0.75 - 1.0)
     assert loto.person(short) == "a" and loto.person(case("13_29", "cmu")) == "13"
+
+
+def test_recall_by_length_bins_each_transition_by_its_neighbouring_segments(tmp_path, capsys):
+    """benchmarks/recall_by_length.py: a transition counts in the bin of the segment before
+    it (and, separately, after it); empty bins say None; a missing folder is exit 2."""
+    import sys
+    from pathlib import Path
+    bench = str(Path(__file__).resolve().parents[1] / "benchmarks")
+    sys.path.insert(0, bench)
+    try:
+        import recall_by_length as rbl
+    finally:
+        sys.path.remove(bench)
+    rows = [("spliced", False, 2.0, 6.0), ("spliced", True, 3.0, 8.0),
+            ("spliced", True, 6.0, 2.5), ("spliced", True, 9.0, 4.0)]
+    before = rbl.binned(rows, 2)
+    assert [(b["transitions"], b["recall"]) for b in before] == [(2, 0.5), (0, None), (1, 1.0), (1, 1.0)]
+    after = rbl.binned(rows, 3)
+    assert [(b["transitions"], b["recall"]) for b in after] == [(1, 1.0), (1, 1.0), (1, 0.0), (1, 1.0)]
+    assert rbl.main([str(tmp_path / "absent")]) == 2
+    assert "is not a folder" in capsys.readouterr().err
