@@ -2,8 +2,15 @@
 and say ``unknown`` for a segment unlike every example (issue #12 item 2).
 
 A library holds, for one feature profile (``rtseg.features``: profile name and feature
-dims), the *descriptors* of short windows cut from labelled examples, each with its name
-and the example (source) it came from.
+dims), short windows cut from labelled examples, each with its name and the example
+(source) it came from, and per window what its distance (``metric``) needs:
+
+- ``model`` (the default since 2026-12-01; ``rtseg.library_models``): the statistics of
+  the window's per-joint body-frame angular velocities, compared with the segmenter's own
+  PCA / PPCA window models - the identity tracker's distance D (1 for two windows of one
+  motion).  A name's distance is its nearest window's (``k_nearest`` 1).
+- ``descriptor`` (version-1 files): a hand-made descriptor, below; a name's distance is
+  the mean of its 3 nearest windows' (``k_nearest`` 3).
 
 Descriptor of a window W (frames, 4J) of pose-feature rows (unit quaternions per joint,
 frame rate ``fr`` Hz), three groups, all logarithms:
@@ -15,16 +22,15 @@ frame rate ``fr`` Hz), three groups, all logarithms:
   angular speed in rad/s; unchanged by the same fixed rotations;
 - ``dims`` (4J): per feature dim log(std + 0.005) - which axes each joint moves about.
 
-Distance between a query q and an example e: each dim standardised by the library's
-``scale`` (per-dim std over all its windows, floored at ``SCALE_FLOOR``), then
+Descriptor distance between a query q and an example e: each dim standardised by the
+library's ``scale`` (per-dim std over all its windows, floored at ``SCALE_FLOOR``), then
 ``sqrt(mean over groups of mean over the group's dims of z^2)``.
 
 Decision (``Library.name``): d1, d2 = the distances of the nearest and second-nearest
-*name*; a name's distance is the mean distance of its ``k_nearest`` (3) nearest windows
-(k-NN: one stray window of another name no longer decides; 3 won over 1, 2, 4 and 5 on
-the pooled mocap6 + cmu_single held-out figures, docs/identity.md).  The segment gets the nearest name when d1 <=
-``threshold`` and d1 / d2 <= ``ratio``, else ``unknown``.  Both are calibrated INSIDE the
-library (``calibrate``, ``separating_rule``): for every window, its known case - the
+*name* (a name's distance: the mean of its ``k_nearest`` nearest windows').  The segment
+gets the nearest name when d1 <= ``threshold`` and d1 / d2 <= ``ratio``, else
+``unknown``.  Both are calibrated INSIDE the library, for either metric
+(``calibrate``, ``separating_rule``): for every window, its known case - the
 nearest same-name window of another example (``same``) against the nearest other name -
 and its unknown case - its own name left out, the nearest two other names (what a
 behaviour missing from the library would see); the rule that accepts the most known and
@@ -37,10 +43,11 @@ Windows: ``window_s`` (2 s) long every ``step_s`` (1 s) inside each labelled ran
 ``edge_s`` (0.5 s) is cut off each end (transitions); a range shorter than that gives one
 window of what is left if it is at least ``min_s`` (1 s).
 
-File: JSON (data only), ``{"format": "rtseg-behaviour-library", "version": 1, "profile",
-"dims", "frame_rate", "window_s", ..., "threshold", "ratio", "scale", "names", "sources",
-"starts", "descriptors", "examples"}``.  ``load`` refuses another format, version, profile or dims
-with one ``LibraryError`` line.
+File: JSON (data only), ``{"format": "rtseg-behaviour-library", "version": 2, "profile",
+"dims", "frame_rate", "window_s", ..., "threshold", "ratio", "k_nearest", "metric",
+"lag_s", "scale", "names", "sources", "starts", "descriptors", "window_stats",
+"examples"}`` (``rtseg.library_file``).  ``load`` refuses another format, version (1 and
+2 are read), profile or dims with one ``LibraryError`` line.
 """
 
 from __future__ import annotations
@@ -54,9 +61,20 @@ from typing import Any, Sequence
 import numpy as np
 
 from rtseg.config import ConfigError
+from rtseg.library_models import LAG_S, stats_to_json, window_stats
 
 FORMAT = "rtseg-behaviour-library"
-VERSION = 1
+VERSION = 2
+#: versions this rtseg reads: 1 (descriptor distance only), 2 (window statistics: model distance)
+READS = (1, 2)
+METRICS = ("model", "descriptor")
+#: the distance a library is learned with: "model" (``rtseg.library_models``) since
+#: 2026-12-01 (held out: mocap6 0.80 -> 0.90, cmu_single BVH walk 0.67 -> 1.00, spliced
+#: 0.81 -> 0.94; docs/identity.md); "descriptor" is the earlier one
+DEFAULT_METRIC = "model"
+#: a name's distance under the model metric: its nearest window (k = 1; k = 3, the
+#: descriptor's, let 3 more left-out mocap6 exercises through, docs/identity.md)
+MODEL_K_NEAREST = 1
 UNKNOWN = "unknown"
 GROUPS = ("spread", "speed", "dims")
 SCALE_FLOOR = 0.05
@@ -138,6 +156,9 @@ class Library:
     calibration: dict[str, Any] = field(default_factory=dict)
     starts: list[float] = field(default_factory=list)   # per window: first frame in its example
     k_nearest: int = K_NEAREST               # a name's distance: mean of its k nearest windows
+    metric: str = "descriptor"               # "model" (window models) or "descriptor"
+    window_stats: list[Any] = field(default_factory=list)   # per window (model metric)
+    lag_s: float = LAG_S                     # angular-velocity lag (model metric), s
 
     @property
     def behaviour_names(self) -> list[str]:
@@ -157,10 +178,31 @@ class Library:
         return np.sqrt(np.mean(g, axis=0))
 
     def name_descriptor(self, q: np.ndarray) -> Naming:
-        """Name a descriptor (module doc, Decision)."""
+        """Name a descriptor (module doc, Decision; descriptor metric)."""
         if not len(self.names):
             return Naming(UNKNOWN, "", math.inf, 0.0)
-        per = self.name_distances(self.distances(q))
+        return self.decide(self.distances(q))
+
+    @property
+    def bank(self) -> Any:
+        """The windows' models (``rtseg.library_models.ModelBank``; built once)."""
+        b = getattr(self, "_bank", None)
+        if b is None or len(b) != len(self.window_stats):
+            from rtseg.library_models import ModelBank
+            b = self._bank = ModelBank(self.window_stats)
+        return b
+
+    def window_distances(self, i: int) -> np.ndarray:
+        """Distances of window i to every window (the library's metric)."""
+        if self.metric == "model":
+            return self.bank.pairwise()[i].copy()
+        return self.distances(self.descriptors[i])
+
+    def decide(self, d: np.ndarray) -> Naming:
+        """Name from the distances ``d`` to every window (module doc, Decision)."""
+        per = self.name_distances(d)
+        if not per:
+            return Naming(UNKNOWN, "", math.inf, 0.0)
         order = sorted(per, key=per.get)
         best, dist = order[0], per[order[0]]
         second = per[order[1]] if len(order) > 1 else math.inf
@@ -198,7 +240,12 @@ class Library:
         W = np.asarray(W, dtype=np.float64)
         if W.ndim != 2 or W.shape[1] != self.dims:
             raise ValueError(f"library wants {self.dims} feature dims, got {W.shape}")
-        return self.name_descriptor(descriptor(W, frame_rate or self.frame_rate))
+        fr = frame_rate or self.frame_rate
+        if self.metric == "model":
+            if not len(self.names):
+                return Naming(UNKNOWN, "", math.inf, 0.0)
+            return self.decide(self.bank.distances(self.bank.query(W, fr, self.lag_s)))
+        return self.name_descriptor(descriptor(W, fr))
 
     # ------------------------------------------------------------------ calibration
     def calibrate(self) -> float:
@@ -212,7 +259,7 @@ class Library:
         same, other = [], []             # distances: nearest same name / nearest other name
         o1, o2 = [], []                  # the window's name left out: nearest two other names
         for i in range(len(names)):
-            d = self.distances(self.descriptors[i])
+            d = self.window_distances(i)
             if by_person:                # as a new person would be met: others' windows only
                 d = np.where(person != person[i], d, np.inf)
             s = d[(names == names[i]) & (src != src[i])]
@@ -254,6 +301,11 @@ class Library:
         if abs(other.frame_rate - self.frame_rate) > 1e-6 * self.frame_rate:
             raise LibraryError(f"cannot add {other.frame_rate:g} Hz examples to a "
                                f"{self.frame_rate:g} Hz library")
+        if (self.metric, self.lag_s) != (other.metric, other.lag_s) or (
+                self.metric == "model" and not (self.window_stats and other.window_stats)):
+            raise LibraryError(f"cannot add examples learned with the {other.metric!r} "
+                               f"distance to a library of the {self.metric!r} distance (a "
+                               f"file of an earlier rtseg): learn it again with --new")
         k = len(self.examples)
         lib = Library(self.profile, self.dims, self.frame_rate,
                       np.concatenate([self.descriptors, other.descriptors]),
@@ -261,7 +313,10 @@ class Library:
                       self.examples + other.examples, window_s=self.window_s,
                       step_s=self.step_s, edge_s=self.edge_s, min_s=self.min_s,
                       starts=(self.starts or [0.0] * len(self.names))
-                      + (other.starts or [0.0] * len(other.names)))
+                      + (other.starts or [0.0] * len(other.names)),
+                      k_nearest=self.k_nearest, metric=self.metric,
+                      window_stats=list(self.window_stats) + list(other.window_stats),
+                      lag_s=self.lag_s)
         lib.fit_scale()
         lib.calibrate()
         return lib
@@ -275,11 +330,14 @@ class Library:
                 "min_s": self.min_s, "descriptor": list(GROUPS),
                 "threshold": _finite(self.threshold), "ratio": float(self.ratio),
                 "k_nearest": int(self.k_nearest),
+                "metric": self.metric, "lag_s": float(self.lag_s),
                 "calibration": cal,
                 "scale": [round(float(v), 6) for v in self.scale],
                 "names": list(self.names), "sources": [int(s) for s in self.sources],
                 "starts": [float(s) for s in (self.starts or [0.0] * len(self.names))],
                 "descriptors": [[round(float(v), 6) for v in row] for row in self.descriptors],
+                **({"window_stats": stats_to_json(self.window_stats)}
+                   if self.metric == "model" else {}),
                 "examples": self.examples}
 
     def save(self, path: str | Path) -> Path:
@@ -366,6 +424,7 @@ class LibraryBuilder:
         self.names: list[str] = []
         self.sources: list[int] = []
         self.starts: list[float] = []
+        self.stats: list[Any] = []           # per window: angular-velocity statistics
         self.examples: list[dict[str, Any]] = []
         self.skipped: list[str] = []
 
@@ -403,17 +462,23 @@ class LibraryBuilder:
             self.names.append(name)
             self.sources.append(k)
             self.starts.append(float(s))
+            self.stats.append(window_stats(X[s:e], fr))
         return len(wins)
 
-    def build(self, threshold: float | None = None) -> Library:
-        """The library (scale fitted, threshold calibrated unless given)."""
+    def build(self, threshold: float | None = None, metric: str = DEFAULT_METRIC) -> Library:
+        """The library of distance ``metric`` (``METRICS``; scale fitted, threshold
+        calibrated unless given)."""
+        if metric not in METRICS:
+            raise ValueError(f"metric {metric!r}: expected one of {', '.join(METRICS)}")
         if not self.rows:
             raise ValueError("no example long enough to learn from"
                              + (f" ({'; '.join(self.skipped[:3])})" if self.skipped else ""))
         lib = Library(self.profile, self.dims, self.frame_rate, np.array(self.rows),
                       list(self.names), list(self.sources), list(self.examples),
                       window_s=self.window_s, step_s=self.step_s, edge_s=self.edge_s,
-                      min_s=self.min_s, starts=list(self.starts))
+                      min_s=self.min_s, starts=list(self.starts), metric=metric,
+                      k_nearest=MODEL_K_NEAREST if metric == "model" else K_NEAREST,
+                      window_stats=list(self.stats))
         lib.fit_scale()
         lib.calibrate()
         if threshold is not None:

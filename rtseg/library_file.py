@@ -1,11 +1,15 @@
 """Reading a behaviour library file (``rtseg.library``; written by ``Library.save``).
 
-The file is JSON, data only: ``format`` (``rtseg-behaviour-library``), ``version`` (1),
+The file is JSON, data only: ``format`` (``rtseg-behaviour-library``), ``version`` (2;
+version-1 files, written before the model distance, are read as descriptor libraries),
 ``profile`` and ``dims`` (the pose-feature profile and its dims), the window settings,
 ``threshold`` and ``ratio`` (the rejection rule), ``k_nearest`` (a name's distance is the
 mean of its k nearest windows'; files written before it existed have none and read as 1,
 the rule their threshold was calibrated for), ``scale`` (per descriptor dim), per
-window its ``names`` / ``sources`` (example index) / ``starts`` / ``descriptors``, and the
+window its ``names`` / ``sources`` (example index) / ``starts`` / ``descriptors``, the
+distance ``metric`` (``model`` or ``descriptor``) and, for ``model``, ``lag_s`` and per
+window its ``window_stats`` (``rtseg.library_models.stats_to_json``: frame count, mean and
+upper-triangle scatter of the joints' angular velocities, 3J dims), and the
 ``examples`` (name, source, frames, person).  Everything is checked on load; any problem
 is one ``LibraryError`` line naming the file.
 """
@@ -18,7 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rtseg.library import FORMAT, VERSION, Library, LibraryError
+from rtseg.library import FORMAT, METRICS, READS, Library, LibraryError
+from rtseg.library_models import LAG_S, stats_from_json
 
 
 def load(path: str | Path, profile: str | None = None, dims: int | None = None) -> Library:
@@ -37,9 +42,11 @@ def load(path: str | Path, profile: str | None = None, dims: int | None = None) 
         raise LibraryError(f"behaviour library {p}: not a behaviour library "
                            f"(format {doc.get('format') if isinstance(doc, dict) else None!r}, "
                            f"expected {FORMAT!r})")
-    if doc.get("version") != VERSION:
+    if doc.get("version") not in READS:
         raise LibraryError(f"behaviour library {p}: version {doc.get('version')!r} "
-                           f"(this rtseg reads version {VERSION}; learn it again)")
+                           f"(this rtseg reads versions {', '.join(map(str, READS))}; "
+                           f"learn it again)")
+    metric = str(doc.get("metric", "descriptor")) if doc["version"] >= 2 else "descriptor"
     try:
         lib = Library(str(doc["profile"]), int(doc["dims"]), float(doc["frame_rate"]),
                       np.asarray(doc["descriptors"], dtype=np.float64),
@@ -52,7 +59,10 @@ def load(path: str | Path, profile: str | None = None, dims: int | None = None) 
                       edge_s=float(doc["edge_s"]), min_s=float(doc["min_s"]),
                       calibration=dict(doc.get("calibration") or {}),
                       starts=[float(x) for x in doc.get("starts") or []],
-                      k_nearest=int(doc.get("k_nearest", 1)))
+                      k_nearest=int(doc.get("k_nearest", 1)), metric=metric,
+                      lag_s=float(doc.get("lag_s", LAG_S)))
+        if metric not in METRICS:
+            raise ValueError(f"metric {metric!r} not one of {', '.join(METRICS)}")
         if not 0 < lib.ratio <= 1:
             raise ValueError(f"ratio {lib.ratio} outside (0, 1]")
         if lib.k_nearest < 1:
@@ -73,4 +83,16 @@ def load(path: str | Path, profile: str | None = None, dims: int | None = None) 
         raise LibraryError(f"behaviour library {p}: learned for feature profile "
                            f"{lib.profile!r} ({lib.dims} dims), this session's features are "
                            f"{profile!r} ({dims} dims); learn it from takes of this skeleton")
+    if metric == "model":
+        try:
+            lib.window_stats = stats_from_json(doc["window_stats"], 3 * (lib.dims // 4))
+            if len(lib.window_stats) != len(lib.names):
+                raise ValueError(f"{len(lib.window_stats)} window statistics for "
+                                 f"{len(lib.names)} windows")
+            if not lib.lag_s > 0:
+                raise ValueError(f"lag_s {lib.lag_s} not positive")
+            lib.bank                     # the windows' models, fitted once here (not live)
+        except (KeyError, TypeError, ValueError, np.linalg.LinAlgError) as exc:
+            raise LibraryError(f"behaviour library {p}: malformed ({type(exc).__name__}: "
+                               f"{exc})") from None
     return lib

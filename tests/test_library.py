@@ -38,14 +38,14 @@ def _config():
     return cfg
 
 
-def _library(script=LEARN, seed=0):
+def _library(script=LEARN, seed=0, metric="model"):
     res = synthesize(script, seed=seed)
     X, idx, profile = take_rows(res.take, _config())
     b = LibraryBuilder(profile, X.shape[1], res.take.frame_rate)
     for a, e, name in label_runs(res.frame_names()):
         i, j = np.searchsorted(idx, a), np.searchsorted(idx, e)
         assert b.add(X[i:j], name, f"synth{seed}") > 0
-    return b.build()
+    return b.build(metric=metric)
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +56,8 @@ def library():
 def test_round_trip_through_the_file(tmp_path, library):
     path = library.save(tmp_path / "lib.json")
     doc = json.loads(path.read_text())
-    assert doc["format"] == "rtseg-behaviour-library" and doc["version"] == 1
+    assert doc["format"] == "rtseg-behaviour-library" and doc["version"] == 2
+    assert doc["metric"] == "model" and len(doc["window_stats"]["n"]) == len(library.names)
     assert doc["profile"] == library.profile and doc["dims"] == library.dims
     back = load(path, library.profile, library.dims)
     assert back.names == library.names and back.behaviour_names == ["punch", "squat",
@@ -66,6 +67,8 @@ def test_round_trip_through_the_file(tmp_path, library):
     assert back.ratio == pytest.approx(library.ratio) and 0 < back.ratio <= 1
     assert (back.window_s, back.step_s, back.edge_s, back.min_s) == (2.0, 1.0, 0.5, 1.0)
     assert back.examples == library.examples and back.starts == library.starts
+    assert back.metric == "model" and back.k_nearest == library.k_nearest == 1
+    assert np.allclose(back.bank.pairwise(), library.bank.pairwise(), rtol=1e-4, atol=1e-4)
     res = synthesize("walk:4", seed=5)
     X, _, _ = take_rows(res.take, _config())
     a, b = library.name(X[120:360]), back.name(X[120:360])
@@ -84,7 +87,13 @@ def test_refusals_are_one_clear_line(tmp_path, library):
     (tmp_path / "garbage.json").write_bytes(b"\x00\x01not json")
     with pytest.raises(LibraryError, match="not a JSON behaviour library"):
         load(tmp_path / "garbage.json")
-    doc["version"] = 1
+    doc["version"] = 2
+    stats = doc["window_stats"]
+    doc["window_stats"] = {k: v[:-1] for k, v in stats.items()}
+    (tmp_path / "few_stats.json").write_text(json.dumps(doc))
+    with pytest.raises(LibraryError, match="malformed.*window statistics"):
+        load(tmp_path / "few_stats.json")
+    doc["window_stats"] = stats
     doc["descriptors"] = doc["descriptors"][:-1]
     (tmp_path / "short.json").write_text(json.dumps(doc))
     with pytest.raises(LibraryError, match="malformed"):
@@ -150,9 +159,25 @@ def test_a_name_is_as_near_as_its_k_nearest_windows():
 
 
 def test_k_nearest_in_the_file(tmp_path, library):
-    assert library.k_nearest == 3
-    doc = json.loads(library.save(tmp_path / "lib.json").read_text())
+    """Model libraries name by the nearest window; descriptor libraries by the 3 nearest;
+    a version-1 file (before the model distance) reads as a descriptor library, and one
+    without ``k_nearest`` (before k-NN) as 1-NN, the rules their thresholds were set for."""
+    assert library.k_nearest == 1
+    desc = _library(metric="descriptor")
+    assert desc.metric == "descriptor" and desc.k_nearest == 3 and not json.loads(
+        desc.save(tmp_path / "d.json").read_text()).get("window_stats")
+    doc = json.loads(desc.save(tmp_path / "lib.json").read_text())
     assert doc["k_nearest"] == 3 and load(tmp_path / "lib.json").k_nearest == 3
+    doc["version"] = 1
+    del doc["metric"]
+    (tmp_path / "v1.json").write_text(json.dumps(doc))
+    v1 = load(tmp_path / "v1.json")
+    assert v1.metric == "descriptor" and v1.k_nearest == 3
+    res = synthesize("walk:4", seed=5)
+    X, _, _ = take_rows(res.take, _config())
+    assert v1.name(X[120:360]).name == desc.name(X[120:360]).name == "walk"
+    with pytest.raises(LibraryError, match="learn it again with --new"):
+        v1.merged(library)              # a model library cannot grow from descriptor windows
     del doc["k_nearest"]                   # a file from before k-NN: its rule was 1-NN
     (tmp_path / "old.json").write_text(json.dumps(doc))
     assert load(tmp_path / "old.json").k_nearest == 1
@@ -160,6 +185,65 @@ def test_k_nearest_in_the_file(tmp_path, library):
     (tmp_path / "zero.json").write_text(json.dumps(doc))
     with pytest.raises(LibraryError, match="k_nearest 0"):
         load(tmp_path / "zero.json")
+
+
+def _rotate_left(X, seed):
+    """Rows X (frames, 4J) with each joint's quaternion (x, y, z, w) left-multiplied by a
+    fixed random rotation: a rest-pose / axis offset on the parent side."""
+    rng = np.random.default_rng(seed)
+    n, d = X.shape
+    Q = X.reshape(n, d // 4, 4)
+    R = rng.normal(size=(d // 4, 4))
+    R /= np.linalg.norm(R, axis=1, keepdims=True)
+    rx, ry, rz, rw = R.T
+    x, y, z, w = np.moveaxis(Q, -1, 0)
+    out = np.stack([rw * x + rx * w + ry * z - rz * y, rw * y - rx * z + ry * w + rz * x,
+                    rw * z + rx * y - ry * x + rz * w, rw * w - rx * x - ry * y - rz * z], -1)
+    return out.reshape(n, d)
+
+
+def test_angular_velocity_units_and_rest_pose_offsets():
+    from rtseg.library_models import angular_velocity
+    fr, omega = 120.0, 2.0                        # one joint turning about z at 2 rad/s
+    t = np.arange(60) / fr
+    X = np.stack([0 * t, 0 * t, np.sin(omega * t / 2), np.cos(omega * t / 2)], axis=1)
+    w = angular_velocity(X, fr)
+    assert w.shape == (60 - 4, 3)
+    assert np.allclose(w[:, 2], omega, rtol=1e-3) and np.allclose(w[:, :2], 0, atol=1e-9)
+    res = synthesize("walk:4", seed=5)
+    Y, _, _ = take_rows(res.take, _config())
+    assert np.allclose(angular_velocity(_rotate_left(Y, 1), fr), angular_velocity(Y, fr),
+                       atol=1e-9)
+    with pytest.raises(ValueError, match="4J features"):
+        angular_velocity(Y[:1], fr)
+
+
+def test_a_performer_with_other_rest_pose_offsets_is_named_alike(library):
+    """The same walk with every joint offset by a fixed rotation (another rig's rest pose):
+    the model distance names it as before, at the same distance."""
+    res = synthesize("walk:4", seed=5)
+    X, _, _ = take_rows(res.take, _config())
+    a = library.name(X[120:360])
+    b = library.name(_rotate_left(X, 2)[120:360])
+    assert a.name == b.name == "walk" and b.distance == pytest.approx(a.distance, rel=1e-6)
+
+
+def test_model_bank_is_the_trackers_window_distance(library):
+    """The vectorised distances of a query to every library window are the identity
+    tracker's D (rtseg.identity.IdentityTracker.distance) pair by pair."""
+    from rtseg.detectors.window_models import fit
+    from rtseg.identity import IdentityTracker
+    from rtseg.library_models import window_stats
+    res = synthesize("punch:4", seed=3)
+    X, _, _ = take_rows(res.take, _config())
+    q = fit(window_stats(X[100:400], 120.0))
+    got = library.bank.distances(q)
+    tr = IdentityTracker(120.0)
+    want = np.array([tr.distance(q, m) for m in library.bank.models])
+    assert got.shape == (len(library.names),)
+    assert np.allclose(got, want, rtol=1e-9, atol=1e-9)
+    M = library.bank.pairwise()
+    assert np.allclose(M, M.T) and np.all(np.diag(M) == 0)
 
 
 def test_separating_rule_uses_the_ratio_when_distances_overlap():
@@ -233,6 +317,8 @@ def test_live_refuses_a_library_of_another_profile(tmp_path, library):
     doc["dims"] = 56
     doc["descriptors"] = [r + [0.0] * 12 for r in doc["descriptors"]]
     doc["scale"] = doc["scale"] + [1.0] * 12
+    doc["window_stats"]["mean"] = [m + [0.0] * 6 for m in doc["window_stats"]["mean"]]
+    doc["window_stats"]["scatter"] = [[0.0] * (42 * 43 // 2)] * len(doc["names"])
     (tmp_path / "cmu.json").write_text(json.dumps(doc))
     p = subprocess.run([sys.executable, "-m", "rtseg.cli", "live", "sim://synth",
                         "--behaviours", str(tmp_path / "cmu.json"), "--duration", "2",

@@ -203,6 +203,7 @@ def test_behaviours_refusals(tmp_path, capsys):
     doc["profile"], doc["dims"] = "cmu14", 56       # another skeleton's library
     doc["scale"] = [1.0] * 84
     doc["descriptors"] = [[0.0] * 84 for _ in doc["descriptors"]]
+    doc["metric"] = "descriptor"      # a model library would need 42-dim window stats too
     other = tmp_path / "cmu14.json"
     other.write_text(json.dumps(doc))
     assert main(["segment", path, "--identify", "--behaviours", str(other)]) == 2
