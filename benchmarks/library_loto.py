@@ -4,6 +4,7 @@
     python3 benchmarks/library_loto.py mocap6 [DATA_DIR]          # leave-one-take-out
     python3 benchmarks/library_loto.py single [DATA_DIR/cmu_single] # leave-one-person-out
     python3 benchmarks/library_loto.py spliced SPLICED_DIR [DATA_DIR/cmu_single]
+    (options: --no-reject, --metric model|descriptor)
 
 mocap6: the three mocap6 takes (13_29, 13_31, 14_14; exercise names); for each take a
 library learned from the other two names its live segments (``contrast`` cuts, decided
@@ -16,6 +17,7 @@ performs are not in the library: they must come out ``unknown``.
 spliced: spliced performances (benchmarks/splice.py) named by a library learned from the
 cmu_single takes of the people NOT in the performance.
 ``--no-reject``: no null rejection (every segment its nearest name), the ceiling.
+``--metric descriptor``: libraries of the earlier descriptor distance (default: model).
 Prints one JSON document; parameters are the library's own (calibrated inside it).
 """
 
@@ -103,6 +105,15 @@ def main(argv: list[str] | None = None) -> int:
         import rtseg.library_eval as le
         le.NO_REJECT = True
         argv.remove("--no-reject")
+    if "--metric" in argv:                 # the libraries' distance (rtseg.library.METRICS)
+        import rtseg.library_eval as le
+        from rtseg.library import METRICS
+        k = argv.index("--metric")
+        if k + 1 >= len(argv) or argv[k + 1] not in METRICS:
+            print(f"--metric: one of {', '.join(METRICS)}", file=sys.stderr)
+            return 2
+        le.METRIC = argv[k + 1]
+        del argv[k:k + 2]
     if not argv or argv[0] not in ("mocap6", "single", "spliced"):
         print(__doc__, file=sys.stderr)
         return 2

@@ -84,6 +84,9 @@ K_NEAREST = 3
 #: calibration chose in the 25 multi-name libraries of benchmarks/library_loto.py's mocap6
 #: and cmu_single folds (median 1.15, range 0.87-1.30); it was 1.5 x the largest one
 ONE_NAME_FACTOR = 1.3
+#: the same re-derived for the model metric: the largest ratio in the 25 multi-name
+#: libraries of those folds under the model distance (median 1.23, range 1.01-1.45)
+MODEL_ONE_NAME_FACTOR = 1.45
 
 
 class LibraryError(ConfigError):
@@ -219,6 +222,12 @@ class Library:
         distances ``d`` to every window (inf entries skipped; a name without a finite one
         is left out)."""
         out: dict[str, float] = {}
+        if self.k_nearest == 1:                  # the nearest window: one pass
+            for n, idx in self._name_rows().items():
+                m = float(d[idx].min())
+                if math.isfinite(m):
+                    out[n] = m
+            return out
         for n, idx in self._name_rows().items():
             v = d[idx]
             v = v[np.isfinite(v)]
@@ -275,7 +284,8 @@ class Library:
             if per:
                 o1.append(per[0])
                 o2.append(per[1] if len(per) > 1 else math.inf)
-        self.threshold, self.ratio = separating_rule(same, other, o1, o2)
+        factor = MODEL_ONE_NAME_FACTOR if self.metric == "model" else ONE_NAME_FACTOR
+        self.threshold, self.ratio = separating_rule(same, other, o1, o2, factor)
         self.calibration = {"same_median": _median(same), "other_median": _median(o1),
                             "same": len(same), "other": len(o1)}
         return self.threshold
@@ -350,7 +360,8 @@ class Library:
 
 
 def separating_rule(same: Sequence[float], same_other: Sequence[float],
-                    o1: Sequence[float], o2: Sequence[float]) -> tuple[float, float]:
+                    o1: Sequence[float], o2: Sequence[float],
+                    one_name_factor: float = ONE_NAME_FACTOR) -> tuple[float, float]:
     """(threshold, ratio) of the rule "named when d1 <= threshold and d1 / d2 <= ratio"
     (d1, d2: nearest and second-nearest name's distance) that best tells the library's
     own known cases (a window's nearest same-name distance ``same`` against its nearest
@@ -363,27 +374,28 @@ def separating_rule(same: Sequence[float], same_other: Sequence[float],
     a = np.asarray(o1, dtype=np.float64)
     b = np.asarray(o2, dtype=np.float64)
     if not len(s) or not len(a):
-        return separating_threshold(s, a), 1.0
+        return separating_threshold(s, a, one_name_factor), 1.0
     best = (-1.0, math.inf, 1.0)
     for r in np.round(np.arange(1.0, 0.4999, -0.02), 4):
         ks = s[s <= r * so]                      # known windows the ratio test lets through
         ua = a[a <= r * b]                       # unknown windows it does not reject
-        t = separating_threshold(ks, ua) if len(ks) else 0.0
+        t = separating_threshold(ks, ua, one_name_factor) if len(ks) else 0.0
         score = (np.sum(ks <= t) / len(s)) + 1.0 - np.sum(ua <= t) / len(a)
         if score > best[0] + 1e-12:
             best = (float(score), float(t), float(r))
     return best[1], best[2]
 
 
-def separating_threshold(same: Sequence[float], other: Sequence[float]) -> float:
+def separating_threshold(same: Sequence[float], other: Sequence[float],
+                         one_name_factor: float = ONE_NAME_FACTOR) -> float:
     """The distance t maximising (share of ``same`` <= t) + (share of ``other`` > t),
     midway between neighbouring values; ties: the middle of the best run.  Without
-    ``other`` (one name): ``ONE_NAME_FACTOR`` x the median ``same``; without ``same``: half the smallest
+    ``other`` (one name): ``one_name_factor`` x the median ``same``; without ``same``: half the smallest
     ``other``; without either: inf."""
     s = np.sort(np.asarray(same, dtype=np.float64))
     o = np.sort(np.asarray(other, dtype=np.float64))
     if not len(o):
-        return float(ONE_NAME_FACTOR * np.median(s)) if len(s) else math.inf
+        return float(one_name_factor * np.median(s)) if len(s) else math.inf
     if not len(s):
         return float(0.5 * o[0])
     vals = np.unique(np.concatenate([s, o]))

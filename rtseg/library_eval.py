@@ -85,6 +85,8 @@ def name_take(take: Any, truth: np.ndarray, library: Library, config: Any,
 #: set True (benchmarks/library_loto.py --no-reject) to name every segment by its
 #: nearest name: the ceiling the rejection rule works under
 NO_REJECT = False
+#: the libraries' distance (benchmarks/library_loto.py --metric; None: the default)
+METRIC: str | None = None
 
 
 def fold(examples: Sequence[Example], held: Callable[[Example], bool],
@@ -93,7 +95,7 @@ def fold(examples: Sequence[Example], held: Callable[[Example], bool],
     use = [e for e in examples if not held(e) and e.name not in hide]
     if not use:
         return None, []
-    lib, notes = learn(use)
+    lib, notes = learn(use, metric=METRIC)
     if NO_REJECT:
         lib.threshold, lib.ratio = float("inf"), 1.0
     return lib, notes

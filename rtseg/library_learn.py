@@ -24,7 +24,7 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from rtseg.library import Library, LibraryBuilder
+from rtseg.library import DEFAULT_METRIC, Library, LibraryBuilder
 
 log = logging.getLogger(__name__)
 
@@ -127,10 +127,13 @@ def examples_from_dir(data_dir: str | Path, config: Any,
 
 
 def learn(examples: Sequence[Example], profile: str | None = None,
-          threshold: float | None = None, **windows: float) -> tuple[Library, list[str]]:
+          threshold: float | None = None, metric: str | None = None,
+          **windows: float) -> tuple[Library, list[str]]:
     """A library from ``examples`` of one feature profile (``profile``, default the most
     common one among them; examples of other profiles are left out and listed).
-    ``windows``: ``LibraryBuilder`` window options.  Returns (library, notes)."""
+    ``metric``: the library's distance (``rtseg.library.METRICS``; default
+    ``DEFAULT_METRIC``).  ``windows``: ``LibraryBuilder`` window options.  Returns
+    (library, notes)."""
     if not examples:
         raise ValueError("no labelled examples to learn from")
     if profile is None:
@@ -150,4 +153,4 @@ def learn(examples: Sequence[Example], profile: str | None = None,
         b.add(e.X[i:j], e.name, e.take, None, e.frame_rate,
               info={"frames": list(e.frames), "person": e.person})
     notes += b.skipped
-    return b.build(threshold), notes
+    return b.build(threshold, metric or DEFAULT_METRIC), notes
