@@ -20,7 +20,9 @@ stated for 8 dimensions: 1 + (D - 1) x sqrt(8 / d_eff), d_eff the larger number 
 directions.  ``ModelBank`` holds the library windows' models stacked so that a query's
 distances to all of them cost a few matrix-vector products: every quadratic form
 sum_c b_c^T M b_c over a model's columns is the Frobenius product <M, B B^T>, so each
-window keeps its projectors flattened (N x d^2) and its scatter flattened.
+window keeps its three projectors (PCA, PPCA, PPCA over the variances) and its scatter as
+upper triangles (N x d(d+1)/2), and the query's mean term expands into products with the
+windows' P m and m^T P m.  About 0.15-0.25 ms for 75 windows of 42 dims.
 """
 
 from __future__ import annotations
@@ -80,7 +82,11 @@ class ModelBank:
         self.n = np.array([s.n for s in self.stats], dtype=np.float64)
         self.mean = np.array([s.mean for s in self.stats])
         S = np.array([s.scatter for s in self.stats])
-        self.S = S.reshape(N, d * d)
+        # symmetric matrices as their upper triangles: <A, B> = sum over i <= j of
+        # A_ij B_ij x (2 off the diagonal), the factor folded into the stored side
+        self._iu = np.triu_indices(d)
+        w = np.where(self._iu[0] == self._iu[1], 1.0, 2.0)
+        self.S = S[:, self._iu[0], self._iu[1]] * w
         self.trS = np.trace(S, axis1=1, axis2=2)
         self.own = np.array([m.pca_own for m in models])
         self.sigma2 = np.array([m.ppca_sigma2 for m in models])
@@ -88,8 +94,11 @@ class ModelBank:
         self.P = np.array([m.pca_basis @ m.pca_basis.T for m in models])          # PCA projector
         self.Q = np.array([m.ppca_basis @ m.ppca_basis.T for m in models])        # PPCA projector
         self.Qw = np.array([(m.ppca_basis / m.ppca_var) @ m.ppca_basis.T for m in models])
-        self._stack = np.stack([self.P, self.Q, self.Qw])                         # (3, N, d, d)
-        self._flat = self._stack.reshape(3 * N, d * d)
+        stack = np.stack([self.P, self.Q, self.Qw])                               # (3, N, d, d)
+        self._flat = stack[:, :, self._iu[0], self._iu[1]].reshape(3 * N, len(w)) * w
+        # dm^T P dm = mu^T P mu - 2 mu^T (P m) + m^T P m (dm = mu - m): all matrix-vector
+        self._Pm = np.einsum("knde,ne->knd", stack, self.mean).reshape(3 * N, d)
+        self._mPm = np.einsum("knd,nd->kn", self._Pm.reshape(3, N, d), self.mean)
         self.models = models
         self._pairwise: np.ndarray | None = None
 
@@ -103,16 +112,19 @@ class ModelBank:
         dm2 = np.einsum("nd,nd->n", dm, dm)
         N = len(dm)
         # the query's frames under each window's model: M = S_y + n_y dm dm^T;
-        # <M, P> = <S_y, P> + n_y dm^T P dm for the three projectors at once
-        quad = np.einsum("knd,nd->kn", (self._stack @ dm[None, :, :, None])[..., 0], dm)
-        pq, qq, qw = (self._flat @ y.scatter.ravel()).reshape(3, N) + y.n * quad
+        # <M, P> = <S_y + n_y mu mu^T, P> - 2 n_y mu^T P m + n_y m^T P m, for the three
+        # projectors of every window at once
+        mu = y.mean
+        iu = self._iu
+        pq, qq, qw = ((self._flat @ (y.scatter + y.n * np.outer(mu, mu))[iu]).reshape(3, N)
+                      + y.n * (self._mPm - 2.0 * (self._Pm @ mu).reshape(3, N)))
         tr1 = float(np.trace(y.scatter)) + y.n * dm2
         err1 = (tr1 - pq) / y.n / self.own
         msq1 = (qw + (tr1 - qq) / self.sigma2) / y.n
         # each window's frames under the query's model: M = S_j + n_j dm dm^T
         Bp, Bq = q.pca_basis, q.ppca_basis
-        proj = np.stack([(Bp @ Bp.T).ravel(), (Bq @ Bq.T).ravel(),
-                         ((Bq / q.ppca_var) @ Bq.T).ravel()], axis=1)            # (d^2, 3)
+        proj = np.stack([(Bp @ Bp.T)[iu], (Bq @ Bq.T)[iu],
+                         ((Bq / q.ppca_var) @ Bq.T)[iu]], axis=1)                # (d(d+1)/2, 3)
         tr2 = self.trS + self.n * dm2
         a = dm @ Bp
         b = dm @ Bq
