@@ -263,6 +263,16 @@ def test_separating_threshold():
     assert separating_threshold([0.2, 0.3, 0.4, 3.0], []) == pytest.approx(1.3 * 0.35)
     t = separating_threshold([0.2, 0.9], [0.5, 1.5])
     assert 0.2 < t < 1.5
+    # the model distance's own factor (re-derived the same way)
+    assert separating_threshold([0.2, 0.3, 0.4, 3.0], [], 1.45) == pytest.approx(1.45 * 0.35)
+
+
+def test_a_still_or_tiny_window_is_unknown_not_an_error(library):
+    """No motion at all (a frozen stream) or the 2-row minimum: degenerate models, the
+    answer is ``unknown``, not an exception or a name."""
+    still = np.tile([0.0, 0.0, 0.0, 1.0], (300, library.dims // 4))
+    for W in (still, still[:2]):
+        assert library.name(W).name == UNKNOWN
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
