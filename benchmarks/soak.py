@@ -48,6 +48,10 @@ Measured
   back-off, 50-400 ms, which at 20x speed is up to 8 s of session frames; at 120 Hz the
   pty's 4 KB buffer covers it); any other ``overflow`` (pty full: the reader too slow)
   counts as lost.
+- ``overflow_at_s``: session seconds at which frames met a full pty (the first 100), and
+  ``overflows_near_gc_pause``: how many came within 50 ms of a garbage-collector pause of
+  >= 2 ms in the session process (``gc``: collections per generation, pauses >= 2 ms, the
+  longest), to tell a stalled reader from a slow one.
 Bar (issue 11): 0 crashes, RSS growth < 5 MB, p99 last window within 10 % of the first,
 lost_frames 0.  ``pass`` says whether all hold.
 """
@@ -55,6 +59,7 @@ lost_frames 0.  ``pass`` says whether all hold.
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import logging
 import math
@@ -107,6 +112,8 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int) ->
 
     near_unplug: list[int] = []          # intact frames written just before a pull or
                                          # just after a replug (reader reconnecting)
+    overflow_at: list[float] = []        # time.monotonic() of each frame that met a full
+                                         # pty (the clock is the machine's, shared)
 
     def tally(chunk: list, upto: int | None = None) -> None:
         log_ = list(suit.unplug_log)
@@ -118,6 +125,8 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int) ->
             fate = m.fate
             if fate == "overflow" and any(0 <= m.send_time - r < REPLUG_S for r in replugs):
                 fate = "overflow_after_replug"
+            elif fate == "overflow" and len(overflow_at) < 10_000:
+                overflow_at.append(m.send_time)
             elif fate == "intact" and (
                     any(0 <= u - m.send_time < IN_FLIGHT_S for u in pulls)
                     or any(0 <= m.send_time - r < REPLUG_S for r in replugs)):
@@ -140,11 +149,51 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int) ->
     first_kept = next((c[0].index for c in recent if c), None)
     for c in recent:
         tally(c, upto)
-    conn.send(("done", totals, first_kept, near_unplug))
+    conn.send(("done", totals, first_kept, near_unplug, overflow_at))
     conn.close()
 
 
 # ============================================================================ measuring
+class GcPauses:
+    """Garbage-collector pauses of this process at least ``min_ms`` long: (start
+    ``time.monotonic()``, milliseconds, generation), at most ``cap`` of them, through
+    ``gc.callbacks``.  A collection holds the GIL, so the serial reader thread cannot drain
+    the pty meanwhile."""
+
+    def __init__(self, min_ms: float = 2.0, cap: int = 100_000) -> None:
+        self.min_ms, self.cap = min_ms, cap
+        self.pauses: list[tuple[float, float, int]] = []
+        self.counts = [0, 0, 0]
+        self._t0 = 0.0
+        gc.callbacks.append(self._cb)
+
+    def _cb(self, phase: str, info: dict) -> None:
+        if phase == "start":
+            self._t0 = time.monotonic()
+            return
+        ms = (time.monotonic() - self._t0) * 1e3
+        gen = int(info.get("generation", 0))
+        self.counts[gen] += 1
+        if ms >= self.min_ms and len(self.pauses) < self.cap:
+            self.pauses.append((self._t0, ms, gen))
+
+    def close(self) -> None:
+        if self._cb in gc.callbacks:
+            gc.callbacks.remove(self._cb)
+
+    def near(self, times: list[float], before_s: float = 0.05) -> int:
+        """How many of ``times`` fall within ``before_s`` after the end of a pause."""
+        ends = np.array(sorted(t + ms / 1e3 for t, ms, _ in self.pauses))
+        if not ends.size:
+            return 0
+        n = 0
+        for t in times:
+            k = np.searchsorted(ends, t)
+            if k > 0 and t - ends[k - 1] <= before_s or k < ends.size and abs(ends[k] - t) <= before_s:
+                n += 1
+        return n
+
+
 class Meter:
     """Per-window histograms of ``Pipeline.process`` time and RSS samples, by session
     time (the unwrapped sequence number of the last frame processed = messages the suit
@@ -286,6 +335,7 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
                 box["error"] = exc
 
         runner = threading.Thread(target=body, name="soak-session", daemon=True)
+        gc_pauses = GcPauses()
         t_start = time.monotonic()
         runner.start()
         attempted = 0
@@ -315,7 +365,7 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
                 raise RuntimeError("the suit process did not report")
             msg = parent.recv()
             if msg[0] == "done":
-                _, fates, first_kept, near_unplug = msg
+                _, fates, first_kept, near_unplug, overflow_at = msg
                 break
         wall = time.monotonic() - t_start
         session.stop("soak done")
@@ -366,7 +416,16 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
             "input": summary.input if summary is not None else None,
             "cuts": summary.cuts if summary is not None else None,
             "detector_restarts": session.pipeline.stats.restarts if session.pipeline else None,
+            # where the overflows fell: session seconds after the start, and how many came
+            # within 50 ms of a garbage-collector pause of >= 2 ms in this process
+            "overflow_at_s": [round(t - t_start, 3) for t in overflow_at[:100]],
+            "overflows_near_gc_pause": gc_pauses.near(overflow_at),
+            "gc": {"collections": gc_pauses.counts,
+                   "pauses_2ms": len(gc_pauses.pauses),
+                   "max_pause_ms": round(max((ms for _, ms, _ in gc_pauses.pauses), default=0.0), 2),
+                   "gen2_pauses_2ms": sum(1 for *_, g in gc_pauses.pauses if g == 2)},
         }
+        gc_pauses.close()
         result["pass"] = bool(crashes == 0 and growth is not None and growth < 5.0
                               and result["p99_change"] is not None
                               and result["p99_change"] <= 0.10 and lost == 0)
