@@ -47,8 +47,10 @@ Names (behaviour library)
 With a ``library`` (``rtseg.library.Library``, ``rtseg learn``) every decision also names
 the segment: the library names the rows [boundary + ``name_skip_s``, decision frame) (the
 first ``name_skip_s`` = 0.5 s, the transition, left out when at least 1 s remains; at most
-``max_window_s``) - the nearest name (``rtseg.library``: a name is as near as its 3 nearest
-example windows), or ``unknown`` when the segment is unlike
+``max_window_s``) - the nearest name (``rtseg.library``: by default the window-model
+distance of the segment's per-joint angular velocities to each example window, a name as
+near as its nearest window; libraries written before that keep their descriptor and 3
+nearest windows), or ``unknown`` when the segment is unlike
 every example (``IdentityDecision.name``; the id is the unsupervised one either way).  A
 correction keeps the segment's name.  The rows come from a ring of the last
 ``max_window_s + name_skip_s + 1`` s of fed rows (one more row copy per frame).
