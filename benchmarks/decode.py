@@ -7,6 +7,7 @@
     python3 benchmarks/decode.py --frames 5000 --repeat 7
     python3 benchmarks/decode.py --cpu-time        # process CPU time instead of wall clock
     python3 benchmarks/decode.py --only axis       # only the rows named axis...
+    python3 benchmarks/decode.py --axis-steps      # an Axis text frame's time, step by step
     git worktree add /tmp/before <commit>          # the code before a change, timed by
     python3 benchmarks/decode.py --tree /tmp/before   # these loops (PYTHONPATH alone is not
                                                    # enough: see _use_tree)
@@ -437,6 +438,88 @@ def bench_axis(n: int, repeat: int, text: bool = False, space: str = "local",
             "bytes_per_frame": len(stream) / n}
 
 
+def bench_axis_steps(n: int, repeat: int) -> dict:
+    """Where an Axis text frame's time goes: the text source's pipeline (``TextStream``)
+    taken apart into its steps, each timed with ``_clock`` around it, for 4 KiB and
+    64 KiB reads in local and global space; the minimum over ``repeat`` passes of each
+    step, in microseconds per frame.  The steps call the same functions as the pipeline
+    (the frames' values are checked against ``TextStream``'s bit for bit)."""
+    from rtseg.drivers import codec_axis as A
+    from rtseg.drivers import codec_axis_text as T
+    from rtseg.drivers.axis_source import AxisFrames, TextStream
+    from rtseg.frame import Frame
+    v = _axis_values(n)
+    stream = b"".join(T.encode_text(v[i]) for i in range(n))
+    out: dict = {}
+    for chunk in (SERIAL_CHUNK, 65536):
+        reads = [stream[k:k + chunk] for k in range(0, len(stream), chunk)] + [b"||"]
+        for space in ("local", "global"):
+            best: dict[str, float] = {}
+            for _ in range(repeat):
+                acc = dict.fromkeys(("split", "fields_check", "orjson", "array",
+                                     "axisframe_stack", "euler", "fk", "frame"), 0.0)
+                split, conv = T.TextSplitter(), AxisFrames(lambda *a: None, space=space)
+                frames = []
+                for d in reads:
+                    t0 = _clock()
+                    chunks = split.feed(d)
+                    t1 = _clock()
+                    acc["split"] += t1 - t0
+                    if not chunks:
+                        continue
+                    heads, rows = [], []
+                    for c in chunks:
+                        index, name, body = T._fields(c)
+                        heads.append((index, name))
+                        rows.append(body.translate(T._TO_JSON, T._NOT_JSON))
+                    t2 = _clock()
+                    lists = T._json_lists(rows)
+                    t3 = _clock()
+                    arrays = [T._array(x) for x in lists]
+                    t4 = _clock()
+                    fs = [A.AxisFrame(i, nm, x, *A.layout(x.size), finite=True)
+                          for (i, nm), x in zip(heads, arrays)]
+                    vals = arrays[0] if len(fs) == 1 else np.array(arrays)
+                    t5 = _clock()
+                    if space == "local" or vals.ndim == 2:
+                        root, angles = A._channels(vals, True, False, 59)
+                        tt = A._euler_terms(angles, identity_row=space == "global")
+                    else:
+                        half = vals.take(A._angle_index(True, False, 59))
+                        np.multiply(half, A._HALF_RAD, out=half)
+                        half[:, -1] = 0.0
+                        tt = A._half_terms(half)
+                        root = vals[:3]
+                    T_, TL = A._euler_tables("YXZ")
+                    if space == "local":
+                        q = (tt.T @ T_).reshape(angles.shape[:-1] + (4,))
+                        t6 = t7 = _clock()
+                    else:
+                        m = (tt.T @ TL).reshape(vals.shape[:-1] + (60, 4, 4))
+                        t6 = _clock()
+                        q = A._jump(m)
+                        t7 = _clock()
+                    pos = root * 0.01
+                    qs, ps = ([q], [pos]) if vals.ndim == 1 else (list(q), list(pos))
+                    frames += [Frame(0.0, qs[k], A._ALL_VALID.copy(), None, conv._seq(f, 0.0),
+                                     ps[k]) for k, f in enumerate(fs)]
+                    t8 = _clock()
+                    for key, dt in (("fields_check", t2 - t1), ("orjson", t3 - t2),
+                                    ("array", t4 - t3), ("axisframe_stack", t5 - t4),
+                                    ("euler", t6 - t5), ("fk", t7 - t6), ("frame", t8 - t7)):
+                        acc[key] += dt
+                for key, dt in acc.items():
+                    best[key] = min(best.get(key, dt), dt)
+            ref = TextStream(AxisFrames(lambda *a: None, space=space))
+            want = [f for d in reads for f in ref.feed(d, 0.0)]
+            if [f.quats.tobytes() for f in want] != [f.quats.tobytes() for f in frames]:
+                raise RuntimeError("Axis steps: frames differ from TextStream's")
+            row = {k: round(x / n * 1e6, 2) for k, x in best.items()}
+            row["total"] = round(sum(best.values()) / n * 1e6, 2)
+            out[f"{'4k' if chunk == SERIAL_CHUNK else '64k'}_{space}"] = row
+    return out
+
+
 def bench_axis_burst(n: int, repeat: int, burst: int = 16, space: str = "global") -> dict:
     """Axis binary datagrams ``burst`` at a time through ``_BinaryAdapter.feed_many``: what
     the binary source decodes when datagrams wait in its socket (a reader catching up)."""
@@ -503,10 +586,21 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--tree", metavar="DIR", help="import rtseg from the source tree DIR (a git "
                    "worktree of another commit: the code before a change) instead of the "
                    "installed package; command line only")
+    p.add_argument("--axis-steps", action="store_true", help="instead of the rows: where an "
+                   "Axis text frame's time goes, step by step (microseconds per frame)")
     args = p.parse_args(argv)
     if args.cpu_time:
         global _clock
         _clock = time.process_time
+    if args.axis_steps:
+        steps = bench_axis_steps(max(10, args.frames), args.repeat)
+        if args.json:
+            print(json.dumps(steps))
+        else:
+            for key, row in steps.items():
+                print(f"axis text {key}: " + ", ".join(f"{k} {x}" for k, x in row.items())
+                      + " us/frame")
+        return 0
     if args.fuzz:
         only = tuple(x for x in (args.only or "").split(",") if x)
         out = {fmt: fuzz(fmt, args.fuzz_inputs)
