@@ -24,11 +24,11 @@ from rtseg.simulators.synth import synthesize
 
 from osc_collector import OscCollector
 from take_source import TakeSource
+from synth_identity import SYNTH_THRESHOLD
 
 LEARN = "walk:8,punch:8,squat:8,wave:8"
 #: seed 0 teaches; other seeds (tempo, amplitude, style vary) are named
 PERFORMANCE = "walk:6,kick:6,punch:6,jump:6,squat:6"
-SYNTH_THRESHOLD = 7.0          # the unsupervised ids' threshold on synthetic data (test_identity)
 
 
 def _config():

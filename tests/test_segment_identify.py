@@ -19,13 +19,14 @@ from rtseg.drivers.readers import write_take
 from rtseg.identity import identify_segments
 from rtseg.simulators.synth import synthesize
 
+from synth_identity import SYNTH_THRESHOLD
+
 SCRIPT = "walk:6,punch:6,walk:6,punch:6,squat:6"
 TRUTH = ["walk", "punch", "walk", "punch", "squat"]
 #: As in tests/test_identity.py: synthetic instances of one behaviour differ by design
 #: (tempo, amplitude, style), more than real repeats; the mocap-chosen default 4.0 gives
 #: 1,2,1,2,3 on seeds 0, 2, 3 but a new id for seed 1's second walk (measured), so the
 #: exact-id tests use the synthesiser's own threshold.
-SYNTH_THRESHOLD = "7.0"
 
 
 def _take(tmp_path, seed=0, script=SCRIPT):
@@ -53,7 +54,7 @@ def _majority_truth(res, segments):
 def test_contrast_ids_follow_recurring_behaviours(tmp_path, capsys, seed):
     res, path = _take(tmp_path, seed)
     doc = json.loads(_run(capsys, path, "--method", "contrast", "--identify",
-                          "--identity-threshold", SYNTH_THRESHOLD, "--format", "json"))
+                          "--identity-threshold", str(SYNTH_THRESHOLD), "--format", "json"))
     segs = doc["methods"]["contrast"]["segments"]
     assert _majority_truth(res, segs) == TRUTH, "all four changes should be cut"
     assert [s["behaviour"] for s in segs] == [1, 2, 1, 2, 3]
@@ -83,11 +84,11 @@ def test_csv_and_table_carry_a_behaviour_column(tmp_path, capsys):
     _, path = _take(tmp_path, 0)
     rows = list(csv.DictReader(io.StringIO(_run(
         capsys, path, "--method", "contrast", "--identify", "--identity-threshold",
-        SYNTH_THRESHOLD, "--format", "csv"))))
+        str(SYNTH_THRESHOLD), "--format", "csv"))))
     assert list(rows[0])[-1] == "behaviour"
     assert [int(r["behaviour"]) for r in rows] == [1, 2, 1, 2, 3]
     table = _run(capsys, path, "--method", "contrast", "--identify",
-                 "--identity-threshold", SYNTH_THRESHOLD)
+                 "--identity-threshold", str(SYNTH_THRESHOLD))
     seg_lines = table[table.index(" seg "):].splitlines()
     assert seg_lines[0].split()[-1] == "behaviour"
     assert [int(l.split()[-1]) for l in seg_lines[1:] if l.strip()] == [1, 2, 1, 2, 3]
@@ -179,7 +180,7 @@ def test_behaviours_name_the_segments(tmp_path, capsys, seed):
     res, path = _take(tmp_path, seed)
     lib = _synth_library(tmp_path)
     args = [path, "--method", "contrast", "--identify", "--identity-threshold",
-            SYNTH_THRESHOLD, "--behaviours", lib]
+            str(SYNTH_THRESHOLD), "--behaviours", lib]
     doc = json.loads(_run(capsys, *args, "--format", "json"))
     segs = doc["methods"]["contrast"]["segments"]
     assert _majority_truth(res, segs) == TRUTH
