@@ -490,12 +490,18 @@ def bench_axis_steps(n: int, repeat: int) -> dict:
                         half[:, -1] = 0.0
                         tt = A._half_terms(half)
                         root = vals[:3]
-                    T_, TL = A._euler_tables("YXZ")
+                    tables = A._euler_tables("YXZ")
+                    T_ = tables[0]
                     if space == "local":
                         q = (tt.T @ T_).reshape(angles.shape[:-1] + (4,))
                         t6 = t7 = _clock()
-                    else:
-                        m = (tt.T @ TL).reshape(vals.shape[:-1] + (60, 4, 4))
+                    elif hasattr(A, "_fk"):          # quaternion pointer jumping
+                        q = (tt.T @ tables[1]).reshape(vals.shape[:-1] + (60, 16))
+                        t6 = _clock()
+                        q = A._fk(q)
+                        t7 = _clock()
+                    else:                            # the 4x4 matrix form before it
+                        m = (tt.T @ tables[1]).reshape(vals.shape[:-1] + (60, 4, 4))
                         t6 = _clock()
                         q = A._jump(m)
                         t7 = _clock()

@@ -268,11 +268,11 @@ _EULER_TABLES: dict[str, tuple[np.ndarray, np.ndarray]] = {}
 
 
 def _euler_tables(order: str) -> tuple[np.ndarray, np.ndarray]:
-    """(T (8, 4), TL (8, 16)) of ``order`` = "abc": the 8 products u_a[i] u_b[j] u_c[k] of
+    """(T (8, 4), T4 (8, 16)) of ``order`` = "abc": the 8 products u_a[i] u_b[j] u_c[k] of
     the half-angle (cos, sin) pairs of its three angles (term (2i + j) 2 + k) -> the
-    quaternion's x, y, z, w (T) and -> the 16 entries of its left-product matrix L (TL,
-    row-major; see :func:`global_pose`).  Each column has two +-1 entries, so ``terms @ T``
-    is the closed form of :func:`euler_to_quat` rounded the same way."""
+    quaternion's x, y, z, w (T), and the same repeated 4 times (T4: :func:`_fk`'s tiled
+    form).  Each column has two +-1 entries, so ``terms.T @ T`` is the closed form of
+    :func:`euler_to_quat` rounded the same way."""
     hit = _EULER_TABLES.get(order)
     if hit is not None:
         return hit
@@ -284,8 +284,7 @@ def _euler_tables(order: str) -> tuple[np.ndarray, np.ndarray]:
     T[4, a], T[3, a] = 1.0, e           # a = sa cb cc + eps ca sb sc
     T[2, b], T[5, b] = 1.0, -e          # b = ca sb cc - eps sa cb sc
     T[1, c], T[6, c] = 1.0, e           # c = ca cb sc + eps sa sb cc
-    TL = (T[:, _L_INDEX] * _L_SIGN).reshape(8, 16)
-    hit = _EULER_TABLES[order] = (T, TL)
+    hit = _EULER_TABLES[order] = (T, np.tile(T, (1, 4)))
     return hit
 
 
@@ -309,13 +308,25 @@ def _euler_terms(angles: np.ndarray, identity_row: bool = False) -> np.ndarray:
     return _half_terms(half)
 
 
+#: rows of _half_terms' (6, N) cosines and sines (cos a, cos b, cos c, sin a, sin b, sin c):
+#: the pairs ca cb, ca sb, sa cb, sa sb, then each pair times cc and sc
+_PAIR_A = np.array([0, 0, 3, 3], dtype=np.intp)
+_PAIR_B = np.array([1, 4, 1, 4], dtype=np.intp)
+_TERM_PAIR = np.repeat(np.arange(4, dtype=np.intp), 2)
+_TERM_C = np.tile(np.array([2, 5], dtype=np.intp), 4)
+
+
 def _half_terms(half: np.ndarray) -> np.ndarray:
-    """(3, N) half angles (radians) -> (8, N) products of their cosines and sines."""
-    u = np.empty((2, 3, half.shape[1]))              # cos, sin of each angle
-    np.cos(half, out=u[0])
-    np.sin(half, out=u[1])
-    p = u[:, 0, None] * u[None, :, 1]                 # (2, 2, N): ca cb, ca sb, sa cb, sa sb
-    return (p[:, :, None] * u[:, 2]).reshape(8, -1)
+    """(3, N) half angles (radians) -> (8, N) products of their cosines and sines (rows
+    gathered with take: cheaper than broadcasting's small outer loops)."""
+    u = np.empty((6, half.shape[1]))                 # cos, sin of each angle
+    np.cos(half, out=u[:3])
+    np.sin(half, out=u[3:])
+    p = u.take(_PAIR_A, axis=0)
+    p *= u.take(_PAIR_B, axis=0)                      # (4, N): ca cb, ca sb, sa cb, sa sb
+    t = p.take(_TERM_PAIR, axis=0)
+    t *= u.take(_TERM_C, axis=0)
+    return t
 
 
 def euler_to_quat(order: str, angles: np.ndarray) -> np.ndarray:
@@ -363,36 +374,74 @@ def _depth(parents: tuple[int, ...], j: int) -> int:
 
 
 #: a ⊗ b = L(a) b for scalar-last quaternions, L[r, c] = _L_SIGN[r, c] * a[_L_INDEX[r, c]]
-#: (rows: x, y, z, w of the product); L(a) L(b) = L(a ⊗ b) and L(a)[:, 3] = a
+#: (rows: x, y, z, w of the product)
 _L_INDEX = np.array([[3, 2, 1, 0], [2, 3, 0, 1], [1, 0, 3, 2], [0, 1, 2, 3]], dtype=np.intp)
 _L_SIGN = np.array([[1.0, -1.0, 1.0, 1.0], [1.0, 1.0, -1.0, 1.0], [-1.0, 1.0, 1.0, 1.0],
                     [-1.0, -1.0, -1.0, 1.0]])
-_ANCESTORS = _ancestor_tables(PARENTS)
-_EYE4 = np.eye(4)
+
+
+def _hamilton_table() -> np.ndarray:
+    """H (16, 4): (a ⊗ b)[r] = sum over i, k of a[i] b[k] H[4 i + k, r] (:data:`_L_INDEX`
+    and :data:`_L_SIGN` rearranged; each column: four +-1 entries, the rest 0)."""
+    H = np.zeros((16, 4))
+    for r in range(4):
+        for c in range(4):
+            H[4 * _L_INDEX[r, c] + c, r] = _L_SIGN[r, c]
+    return H
+
+
+_HAMILTON = _hamilton_table()
+
+
+#: (16, 16): the Hamilton table with its 4 columns repeated 4 times, so a product comes
+#: out in :func:`_fk`'s tiled form (column 4 m + k: component k)
+_HAMILTON_TILED = np.tile(_HAMILTON, (1, 4))
+
+
+def _fk_tables(parents: tuple[int, ...]) -> list[np.ndarray]:
+    """Per pointer-jumping round of :func:`_fk`, (J + 1, 16) indices into a frame's flat
+    tiled quaternions (J + 1, 16) (row J the identity): column 4 i + k of joint j takes
+    component i of j's current ancestor (its tiled row's column i)."""
+    comp = np.arange(16) // 4
+    return [(anc[:, None] * 16 + comp).astype(np.intp) for anc in _ancestor_tables(parents)]
+
+
+_FK_ANCESTOR = _fk_tables(PARENTS)
+_IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 
 
 def global_pose(local: np.ndarray) -> np.ndarray:
     """(..., 59, 4) parent-relative rotations -> global orientations (forward kinematics
     over the Axis hierarchy, global_j = global_parent ⊗ local_j; scalar-last float64).
-
-    Pointer jumping on the quaternions' 4x4 left-product matrices, vectorised over all
-    joints (and frames): after round r each joint holds the product of the 2^r links ending
-    at it, so the 13-link chains take 4 rounds of one gather and one batched 4x4 matrix
-    product (equal to joint-by-joint products to a few ulp)."""
+    See :func:`_fk` (equal to joint-by-joint products to a few ulp)."""
     local = np.asarray(local, dtype=np.float64)
     lead, J = local.shape[:-2], local.shape[-2]
-    m = np.empty(lead + (J + 1, 4, 4))
-    np.multiply(local[..., _L_INDEX], _L_SIGN, out=m[..., :J, :, :])
-    m[..., J, :, :] = _EYE4
-    return _jump(m)
+    q = np.empty(lead + (J + 1, 4))
+    q[..., :J, :] = local
+    q[..., J, :] = _IDENTITY
+    return _fk(np.tile(q, 4))
 
 
-def _jump(m: np.ndarray) -> np.ndarray:
-    """(..., J + 1, 4, 4) left-product matrices of the local rotations, row J the identity
-    -> (..., J, 4) global quaternions (the pointer-jumping rounds of :func:`global_pose`)."""
-    for anc in _ANCESTORS:
-        m = m.take(anc, axis=-3) @ m
-    return m[..., :-1, :, 3]
+def _fk(x: np.ndarray) -> np.ndarray:
+    """(..., J + 1, 16) local quaternions tiled (column 4 m + k: component k; row J the
+    identity) -> (..., J, 4) global ones.
+
+    Pointer jumping on the quaternions, vectorised over all joints (and frames): after
+    round r each joint holds the product of the 2^r links ending at it (the identity,
+    row J, stands for 'no ancestor'), so the 13-link chains take 4 rounds.  A round is the
+    Hamilton product of every joint's ancestor a and itself b: one gather puts a[i] at
+    column 4 i + k next to the tiled b[k], one multiply makes the 16 products, one
+    (J + 1, 16) @ (16, 16) matrix product per frame with the +-1 table
+    :data:`_HAMILTON_TILED` sums them (each component the sum of 4 exact products) back
+    into the tiled form.  Per frame, not one product over all frames: BLAS sums a large
+    product in another order, and a frame must come out the same alone or in a batch.
+    The 4x4 matrix products this replaced differ in the last bits only."""
+    flat = x.shape[:-2] + (-1,)
+    for anc in _FK_ANCESTOR:
+        p = x.reshape(flat).take(anc, axis=-1)
+        p *= x
+        x = p @ _HAMILTON_TILED
+    return x[..., :-1, :4]
 
 
 def _channels(values: np.ndarray, with_disp: bool, with_ref: bool, joints: int
@@ -430,21 +479,22 @@ def poses(values: np.ndarray, with_disp: bool, with_ref: bool, order: str = "YXZ
     """Frames of one layout, all values finite: ``values`` (..., count) -> (quats (...,
     joints, 4) in ``space``, local quats (..., joints, 4), root positions (..., 3) metres).
 
-    ``space="global"`` (59 Axis joints only) builds the left-product matrices of the local
-    rotations straight from the Euler angles' half-angle products (one matrix product with
-    the order's +-1 table, :func:`_euler_tables`) and runs :func:`global_pose`'s pointer
-    jumping on them: the same values as ``global_pose(euler_to_quat(...))``, a dozen numpy
-    calls per batch.  Local quats come back as a view when ``space="global"``."""
-    T, TL = _euler_tables(order)
+    ``space="global"`` (59 Axis joints only) builds the local quaternions straight from the
+    Euler angles' half-angle products (one matrix product with the order's +-1 table,
+    :func:`_euler_tables`, tiled 4 times), with an identity row after each frame's joints,
+    and runs :func:`_fk`'s pointer jumping on them: the same values as
+    ``global_pose(euler_to_quat(...))``, about twenty numpy calls per batch.  Local quats
+    come back as a view when ``space="global"``."""
+    T, T4 = _euler_tables(order)
     if values.ndim == 1 and space == "global" and joints == len(JOINTS):
         # one frame (the live case): the angles in one gather, contiguous, the identity's
         # zero angles in the last column
         half = values.take(_angle_index(with_disp, with_ref, joints))     # (3, J + 1)
         np.multiply(half, _HALF_RAD, out=half)
         half[:, -1] = 0.0
-        m = (_half_terms(half).T @ TL).reshape(joints + 1, 4, 4)
+        x = _half_terms(half).T @ T4                          # (J + 1, 16) tiled
         r = 6 if with_ref else 0
-        return _jump(m), m[:-1, :, 3], values[r:r + 3] * unit_scale
+        return _fk(x), x[:-1, :4], values[r:r + 3] * unit_scale
     root, angles = _channels(values, with_disp, with_ref, joints)
     lead = angles.shape[:-1]
     if space == "local":
@@ -453,8 +503,8 @@ def poses(values: np.ndarray, with_disp: bool, with_ref: bool, order: str = "YXZ
     if joints != len(JOINTS):
         raise ValueError(f"space=global needs the {len(JOINTS)} Axis joints, got {joints}")
     t = _euler_terms(angles, identity_row=True)         # (8, F (J + 1))
-    m = (t.T @ TL).reshape(lead[:-1] + (joints + 1, 4, 4))  # L of each joint, identity
-    return _jump(m), m[..., :-1, :, 3], root * unit_scale
+    x = (t.T @ T4).reshape(lead[:-1] + (joints + 1, 16))  # locals tiled, the identity
+    return _fk(x), x[..., :-1, :4], root * unit_scale
 
 
 def to_poses(values: np.ndarray, with_disp: bool, with_ref: bool, order: str = "YXZ",
