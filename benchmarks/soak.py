@@ -48,6 +48,10 @@ Measured
   back-off, 50-400 ms, which at 20x speed is up to 8 s of session frames; at 120 Hz the
   pty's 4 KB buffer covers it); any other ``overflow`` (pty full: the reader too slow)
   counts as lost.
+- ``p99_by_window_us`` / ``p99_cpu_by_window_us``: the same p99 for every window, to tell a
+  trend from a step; ``suit_cpu_s_by_window`` / ``suit_rss_mb_by_window``: CPU seconds the
+  suit process (which shares the machine's cores) used in each window and its resident set
+  size at the window's end (``/proc/<pid>``).
 - ``overflow_at_s``: session seconds at which frames met a full pty (the first 100), and
   ``overflows_near_gc_pause``: how many came within 50 ms of a garbage-collector pause of
   >= 2 ms in the session process (``gc``: collections per generation, pauses >= 2 ms, the
@@ -59,6 +63,7 @@ lost_frames 0.  ``pass`` says whether all hold.
 from __future__ import annotations
 
 import argparse
+import bisect
 import gc
 import json
 import logging
@@ -115,27 +120,39 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int) ->
     overflow_at: list[float] = []        # time.monotonic() of each frame that met a full
                                          # pty (the clock is the machine's, shared)
 
+    pulls: list[float] = []              # suit.unplug_log split, in time order (it is
+    replugs: list[float] = []            # appended as it happens), extended as it grows
+
+    def after_replug(t: float) -> bool:
+        k = bisect.bisect_right(replugs, t)
+        return k > 0 and t - replugs[k - 1] < REPLUG_S
+
+    def before_pull(t: float) -> bool:
+        k = bisect.bisect_left(pulls, t)
+        return k < len(pulls) and pulls[k] - t < IN_FLIGHT_S
+
     def tally(chunk: list, upto: int | None = None) -> None:
-        log_ = list(suit.unplug_log)
-        replugs = [r for _, r in log_]
-        pulls = [u for u, _ in log_]
+        # each message is looked up by bisection: a scan of every unplug so far made the
+        # suit's CPU time grow through the run (2 880 unplugs in 8 session hours)
+        for u, r in suit.unplug_log[len(pulls):]:
+            pulls.append(u)
+            replugs.append(r)
         for m in chunk:
             if m.frame < 0 or (upto is not None and m.index > upto):
                 continue
             fate = m.fate
-            if fate == "overflow" and any(0 <= m.send_time - r < REPLUG_S for r in replugs):
+            if fate == "overflow" and after_replug(m.send_time):
                 fate = "overflow_after_replug"
             elif fate == "overflow" and len(overflow_at) < 10_000:
                 overflow_at.append(m.send_time)
-            elif fate == "intact" and (
-                    any(0 <= u - m.send_time < IN_FLIGHT_S for u in pulls)
-                    or any(0 <= m.send_time - r < REPLUG_S for r in replugs)):
+            elif fate == "intact" and (before_pull(m.send_time) or after_replug(m.send_time)):
                 near_unplug.append(m.index)
             totals[fate] = totals.get(fate, 0) + 1
 
     while attempted < n_frames and not conn.poll(0):
         time.sleep(0.05 if n_frames - attempted < send_rate else 0.5)
         chunk, suit.sent_log = suit.sent_log, []
+        suit.injector.take_record()       # fates are in sent_log; keep the heap flat
         attempted += sum(1 for m in chunk if m.frame >= 0)
         recent.append(chunk)
         conn.send(("progress", attempted))
@@ -221,6 +238,8 @@ class Meter:
         self.last_abs = -1            # unwrapped sequence number of the last frame processed
         self.seen = np.ones(n_seen, dtype=bool)   # received message indices
         self.seen[:] = False
+        self.suit_cpu_end = np.full(n_windows, np.nan)
+        self.suit_rss_end = np.full(n_windows, np.nan)
 
     def window(self) -> int:
         return min(max(self.last_abs, 0) // self.window_frames, self.n_windows - 1)
@@ -265,6 +284,30 @@ class Meter:
         self.rss_mb_samples[self.n_rss] = kb / 1024.0
         self.rss_window[self.n_rss] = self.window()
         self.n_rss += 1
+
+    def sample_suit(self, pid: int) -> None:
+        """The suit process's cumulative CPU seconds and RSS, kept per window (the last
+        sample in each): a sender that slows through the run loads the shared cores."""
+        try:
+            with open(f"/proc/{pid}/stat") as fh:
+                fields = fh.read().rsplit(")", 1)[1].split()
+            with open(f"/proc/{pid}/status") as fh:
+                rss = next((float(ln.split()[1]) / 1024.0 for ln in fh if ln.startswith("VmRSS:")),
+                           math.nan)
+        except (OSError, ValueError, IndexError):
+            return
+        w = self.window()
+        self.suit_cpu_end[w] = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+        self.suit_rss_end[w] = rss
+
+    def suit_by_window(self) -> tuple[list[float | None], list[float | None]]:
+        """(CPU seconds the suit used in each window, its RSS MB at the window's end)."""
+        cpu: list[float | None] = []
+        prev = 0.0
+        for c in self.suit_cpu_end:
+            cpu.append(None if math.isnan(c) else round(c - prev, 2))
+            prev = prev if math.isnan(c) else c
+        return cpu, [None if math.isnan(r) else round(r, 1) for r in self.suit_rss_end]
 
     def has_window(self, window: int) -> bool:
         return bool(self.hist[window].any())
@@ -347,6 +390,7 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
                 attempted = msg[1]
                 stopped = msg[0] == "stopped"
             meter.sample_rss()
+            meter.sample_suit(proc.pid)
             now = time.monotonic()
             if now >= next_report:
                 next_report = now + 30
@@ -396,6 +440,8 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
         c_first, c_last = meter.p99_us(first, cpu=True), meter.p99_us(lastw, cpu=True)
         r_first, r_last = meter.rss_mb(first), meter.rss_mb(lastw)
         growth = (r_last - r_first) if r_first is not None and r_last is not None else None
+        windows = range(lastw + 1)
+        suit_cpu, suit_rss = meter.suit_by_window()
         sent = sum(fates.values())
         result = {
             "hours": hours, "speed": speed, "faults": faults,
@@ -408,6 +454,10 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
             "p99_change": (p_last / p_first - 1.0) if p_first and p_last else None,
             "p99_cpu_first_hour_us": c_first, "p99_cpu_last_hour_us": c_last,
             "p99_cpu_change": (c_last / c_first - 1.0) if c_first and c_last else None,
+            "p99_by_window_us": [meter.p99_us(w) for w in windows],
+            "p99_cpu_by_window_us": [meter.p99_us(w, cpu=True) for w in windows],
+            "suit_cpu_s_by_window": suit_cpu[:lastw + 1],
+            "suit_rss_mb_by_window": suit_rss[:lastw + 1],
             "lost_frames": lost,
             "destroyed_by_faults": sum(fates.get(k, 0) for k in (
                 "corrupted", "dropped", "unplugged", "overflow_after_replug")) + in_flight,
@@ -485,6 +535,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  thread CPU time p99: first {fmt(r['p99_cpu_first_hour_us'], '.1f')} us, "
               f"last {fmt(r['p99_cpu_last_hour_us'], '.1f')} us "
               f"({fmt(r['p99_cpu_change'] and 100 * r['p99_cpu_change'], '+.1f')} %)")
+        print("  p99 by window (wall / thread CPU, us): " + ", ".join(
+            f"{fmt(a, '.0f')}/{fmt(b, '.0f')}"
+            for a, b in zip(r["p99_by_window_us"], r["p99_cpu_by_window_us"])))
+        print("  suit process CPU s by window: " + ", ".join(
+            fmt(c, '.1f') for c in r["suit_cpu_s_by_window"])
+              + f"; its RSS at the end {fmt(r['suit_rss_mb_by_window'][-1], '.1f')} MB")
         print(f"wall time {r['wall_s']} s; {'PASS' if r['pass'] else 'FAIL'}")
     return 0 if r["pass"] else 1
 
