@@ -87,14 +87,14 @@ def test_mark_lost_moves_the_record():
 def test_take_record_hands_over_and_starts_empty():
     inj = FaultInjector("corrupt=0.2,drop=0.1,seed=3")
     for i in range(200):
-        inj.process(i, bytes(40))
+        inj.process(i, bytes(4))
     whole = inj.snapshot()
     first = inj.take_record()
     assert (first.intact, first.corrupted, first.dropped) == (whole.intact, whole.corrupted, whole.dropped)
     assert first.intact and first.corrupted and first.dropped
     assert inj.record.intact == [] and inj.record.corrupted == {} and inj.record.dropped == []
     for i in range(200, 260):
-        inj.process(i, bytes(40))
+        inj.process(i, bytes(4))
     later = inj.take_record()
     seen = set(later.intact) | set(later.corrupted) | set(later.dropped)
     assert seen == set(range(200, 260))
