@@ -120,10 +120,21 @@ def _freeze_heap(collect: bool) -> None:
     ``collect``.  A full collection holds the GIL while it walks every tracked object: with
     numpy and scipy loaded that is about 30 ms, during which the reader thread cannot drain
     the serial port or socket (a pty holds ~4 KB: 10 ms of a 17-sensor suit at 20x its
-    120 Hz).  Frozen, later collections walk only what the session itself allocates."""
+    120 Hz).  Frozen, later collections walk only what the session itself allocates.
+    ``LiveSession.run`` undoes it when the session ends (:func:`_thaw_heap`)."""
     if collect:
         gc.collect()
     gc.freeze()
+
+
+def _thaw_heap(frozen_before: int) -> None:
+    """Return what :func:`_freeze_heap` froze to the collector (``gc.unfreeze``) when
+    nothing was frozen before the session (``frozen_before``, ``gc.get_freeze_count()``
+    then), so a host that runs many sessions in one process still collects the cycles that
+    were alive when each started.  A host that froze objects itself keeps them frozen
+    (``gc.unfreeze`` cannot release only the session's)."""
+    if frozen_before == 0:
+        gc.unfreeze()
 
 
 class LiveSession(SessionEvents, SessionHealth):
@@ -336,6 +347,7 @@ class LiveSession(SessionEvents, SessionHealth):
                 old_handlers[sig] = signal.signal(sig, self._on_signal)
         reader = None
         blas = _blas_limit(int(self.config["buffer.blas_threads"]))
+        frozen_before = gc.get_freeze_count()
         try:
             # the time origin precedes the source's first frame (CutEvent.time >= 0)
             self.session_start = time.monotonic()
@@ -402,6 +414,7 @@ class LiveSession(SessionEvents, SessionHealth):
                 signal.signal(sig, h)
             if blas is not None:
                 blas.restore_original_limits()
+            _thaw_heap(frozen_before)
         return summary
 
     def _shutdown(self) -> SessionSummary:
