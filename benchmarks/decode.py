@@ -67,6 +67,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import statistics
 import sys
@@ -481,7 +482,22 @@ def bench_axis_steps(n: int, repeat: int) -> dict:
                           for (i, nm), x in zip(heads, arrays)]
                     vals = arrays[0] if len(fs) == 1 else np.array(arrays)
                     t5 = _clock()
-                    if space == "local" or vals.ndim == 2:
+                    kernel = getattr(A, "axis_kernel", None)
+                    if space == "global" and kernel is not None and kernel.ENABLED:
+                        # the compiled kernel: half-angle cosines and sines in numpy
+                        # ("euler"), products and forward kinematics in C ("fk")
+                        if vals.ndim == 1:
+                            half = vals.take(A._angle_index(True, False, 59)[:, :-1])
+                            np.multiply(half, A._HALF_RAD, out=half)
+                        else:
+                            half = A._half_angles(A._channels(vals, True, False, 59)[1])
+                        u = A._cos_sin(half)
+                        root = vals[..., :3]
+                        t6 = _clock()
+                        _, q = kernel.euler_fk(u, 59, A._order_axes("YXZ"), A.PARENTS)
+                        q = q.reshape(vals.shape[:-1] + (59, 4))
+                        t7 = _clock()
+                    elif space == "local" or vals.ndim == 2:
                         root, angles = A._channels(vals, True, False, 59)
                         tt = A._euler_terms(angles, identity_row=space == "global")
                     else:
@@ -492,7 +508,9 @@ def bench_axis_steps(n: int, repeat: int) -> dict:
                         root = vals[:3]
                     tables = A._euler_tables("YXZ")
                     T_ = tables[0]
-                    if space == "local":
+                    if space == "global" and kernel is not None and kernel.ENABLED:
+                        pass
+                    elif space == "local":
                         q = (tt.T @ T_).reshape(angles.shape[:-1] + (4,))
                         t6 = t7 = _clock()
                     elif hasattr(A, "_fk"):          # quaternion pointer jumping
@@ -592,9 +610,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--tree", metavar="DIR", help="import rtseg from the source tree DIR (a git "
                    "worktree of another commit: the code before a change) instead of the "
                    "installed package; command line only")
+    p.add_argument("--no-kernel", action="store_true", help="Axis global poses through the "
+                   "numpy path even where the compiled kernel (rtseg.drivers._axis_kernel) "
+                   "is built, to compare the two in one tree (RTSEG_NO_KERNEL=1)")
     p.add_argument("--axis-steps", action="store_true", help="instead of the rows: where an "
                    "Axis text frame's time goes, step by step (microseconds per frame)")
     args = p.parse_args(argv)
+    if args.no_kernel:
+        os.environ["RTSEG_NO_KERNEL"] = "1"
+        if "rtseg.drivers.axis_kernel" in sys.modules:
+            sys.modules["rtseg.drivers.axis_kernel"].ENABLED = False
     if args.cpu_time:
         global _clock
         _clock = time.process_time

@@ -52,6 +52,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rtseg.drivers import axis_kernel
+
 __all__ = ["JOINTS", "PARENTS", "TEXT_PORT", "BINARY_PORT", "HEADER", "TOKEN1", "TOKEN2",
            "AxisError", "AxisFrame", "layout", "value_count", "decode_binary",
            "encode_binary", "euler_to_quat", "quat_to_euler", "to_pose", "to_poses",
@@ -285,13 +287,33 @@ def _euler_tables(order: str) -> tuple[np.ndarray, np.ndarray]:
     T[2, b], T[5, b] = 1.0, -e          # b = ca sb cc - eps sa cb sc
     T[1, c], T[6, c] = 1.0, e           # c = ca cb sc + eps sa sb cc
     hit = _EULER_TABLES[order] = (T, np.tile(T, (1, 4)))
+    _ORDER_AXES[order] = (a, b, c, e)
+    return hit
+
+
+_ORDER_AXES: dict[str, tuple[int, int, int, float]] = {}
+
+
+def _order_axes(order: str) -> tuple[int, int, int, float]:
+    """(a, b, c, parity) of ``order`` (axes 0 x, 1 y, 2 z; parity +1.0 when cyclic)."""
+    hit = _ORDER_AXES.get(order)
+    if hit is None:
+        _euler_tables(order)
+        hit = _ORDER_AXES[order]
     return hit
 
 
 def _euler_terms(angles: np.ndarray, identity_row: bool = False) -> np.ndarray:
     """(..., 3) degrees (the order's three angles) -> (8, N) products of the half-angle
-    cosines and sines of the N triples (see :func:`_euler_tables`), triples along the last
-    axis (long contiguous loops: the numpy calls cost about the same for 1 frame or 100).
+    cosines and sines of the N triples (see :func:`_euler_tables`); see
+    :func:`_half_angles`."""
+    return _half_terms(_half_angles(angles, identity_row))
+
+
+def _half_angles(angles: np.ndarray, identity_row: bool = False) -> np.ndarray:
+    """(..., 3) degrees (the order's three angles) -> (3, N) half angles in radians,
+    triples along the last axis (long contiguous loops: the numpy calls cost about the same
+    for 1 frame or 100).
     ``identity_row``: ``angles`` is (..., J, 3) and each group of J gets a triple of zero
     angles after it (the identity, which :func:`global_pose`'s pointer jumping uses as
     'no ancestor'): N = (J + 1) x the groups."""
@@ -305,7 +327,7 @@ def _euler_terms(angles: np.ndarray, identity_row: bool = False) -> np.ndarray:
     else:
         ang = ang.reshape(-1, 3)
         half = np.multiply(ang.T, _HALF_RAD, order="C")
-    return _half_terms(half)
+    return half
 
 
 #: rows of _half_terms' (6, N) cosines and sines (cos a, cos b, cos c, sin a, sin b, sin c):
@@ -316,12 +338,18 @@ _TERM_PAIR = np.repeat(np.arange(4, dtype=np.intp), 2)
 _TERM_C = np.tile(np.array([2, 5], dtype=np.intp), 4)
 
 
+def _cos_sin(half: np.ndarray) -> np.ndarray:
+    """(3, N) half angles (radians) -> (6, N): their cosines, then their sines."""
+    u = np.empty((6, half.shape[1]))
+    np.cos(half, out=u[:3])
+    np.sin(half, out=u[3:])
+    return u
+
+
 def _half_terms(half: np.ndarray) -> np.ndarray:
     """(3, N) half angles (radians) -> (8, N) products of their cosines and sines (rows
     gathered with take: cheaper than broadcasting's small outer loops)."""
-    u = np.empty((6, half.shape[1]))                 # cos, sin of each angle
-    np.cos(half, out=u[:3])
-    np.sin(half, out=u[3:])
+    u = _cos_sin(half)
     p = u.take(_PAIR_A, axis=0)
     p *= u.take(_PAIR_B, axis=0)                      # (4, N): ca cb, ca sb, sa cb, sa sb
     t = p.take(_TERM_PAIR, axis=0)
@@ -413,8 +441,11 @@ _IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 def global_pose(local: np.ndarray) -> np.ndarray:
     """(..., 59, 4) parent-relative rotations -> global orientations (forward kinematics
     over the Axis hierarchy, global_j = global_parent ⊗ local_j; scalar-last float64).
-    See :func:`_fk` (equal to joint-by-joint products to a few ulp)."""
+    See :func:`_fk` (equal to joint-by-joint products to a few ulp), or the compiled
+    kernel's joint-by-joint products (:mod:`rtseg.drivers.axis_kernel`)."""
     local = np.asarray(local, dtype=np.float64)
+    if axis_kernel.ENABLED:
+        return axis_kernel.fk(local, PARENTS)
     lead, J = local.shape[:-2], local.shape[-2]
     q = np.empty(lead + (J + 1, 4))
     q[..., :J, :] = local
@@ -484,8 +515,21 @@ def poses(values: np.ndarray, with_disp: bool, with_ref: bool, order: str = "YXZ
     :func:`_euler_tables`, tiled 4 times), with an identity row after each frame's joints,
     and runs :func:`_fk`'s pointer jumping on them: the same values as
     ``global_pose(euler_to_quat(...))``, about twenty numpy calls per batch.  Local quats
-    come back as a view when ``space="global"``."""
+    come back as a view when ``space="global"``.  With the compiled kernel
+    (:mod:`rtseg.drivers.axis_kernel`) the half-angle cosines and sines go to it and it
+    does the rest (the same local quaternions, global ones joint by joint)."""
     T, T4 = _euler_tables(order)
+    if space == "global" and joints == len(JOINTS) and axis_kernel.ENABLED:
+        r = 6 if with_ref else 0
+        if values.ndim == 1:
+            half = values.take(_angle_index(with_disp, with_ref, joints)[:, :-1])  # (3, J)
+            np.multiply(half, _HALF_RAD, out=half)
+        else:
+            half = _half_angles(_channels(values, with_disp, with_ref, joints)[1])
+        loc, glob = axis_kernel.euler_fk(_cos_sin(half), joints, _order_axes(order), PARENTS)
+        lead = values.shape[:-1]
+        return (glob.reshape(lead + (joints, 4)), loc.reshape(lead + (joints, 4)),
+                values[..., r:r + 3] * unit_scale)
     if values.ndim == 1 and space == "global" and joints == len(JOINTS):
         # one frame (the live case): the angles in one gather, contiguous, the identity's
         # zero angles in the last column

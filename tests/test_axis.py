@@ -476,7 +476,17 @@ def _matrix_jump_global(local: np.ndarray) -> np.ndarray:
     return m[..., :-1, :, 3]
 
 
-def test_global_pose_matches_the_matrix_form_to_float32():
+@pytest.fixture(params=["kernel", "numpy"])
+def pose_backend(request, monkeypatch):
+    """Each pose path of codec_axis: the compiled kernel and the numpy one."""
+    from rtseg.drivers import axis_kernel
+    if request.param == "kernel" and not axis_kernel.AVAILABLE:
+        pytest.skip("the C kernel is not built (no compiler at install): numpy path only")
+    monkeypatch.setattr(axis_kernel, "ENABLED", request.param == "kernel")
+    return request.param
+
+
+def test_global_pose_matches_the_matrix_form_to_float32(pose_backend):
     """The quaternion pointer jumping (global_pose, poses(space='global')) against the 4x4
     matrix form it replaced: within 1e-12 in float64 and the same float32 values (what
     the decoder + simulator round trips are exact to), for random angles of every order
@@ -497,7 +507,7 @@ def test_global_pose_matches_the_matrix_form_to_float32():
         assert np.array_equal(g.astype(np.float32), want.astype(np.float32))
 
 
-def test_euler_and_global_pose_are_bit_identical_to_the_term_by_term_forms():
+def test_euler_and_global_pose_are_bit_identical_to_the_term_by_term_forms(pose_backend):
     """euler_to_quat (8 half-angle products times a +-1 table) equals the closed form term
     by term, bit for bit; poses(space='global') (FK matrices built from the Euler terms)
     equals global_pose(euler_to_quat(...)) bit for bit, for one frame and a batch, and its
@@ -526,7 +536,7 @@ def test_euler_and_global_pose_are_bit_identical_to_the_term_by_term_forms():
             assert np.array_equal(r3, root[2])
 
 
-def test_frames_of_one_read_decode_and_convert_as_one_by_one():
+def test_frames_of_one_read_decode_and_convert_as_one_by_one(pose_backend):
     """decode_texts (one number pass for the frames of a TCP read) and AxisFrames.many
     (one Euler / forward-kinematics pass) give each frame's values, errors and Frame as
     decode_text + AxisFrames.frame do, in order, other avatars skipped."""
@@ -857,3 +867,42 @@ def test_faulted_axis_stream_keeps_the_live_loop_up(fmt):
     else:
         assert src.stats.reconnects >= 1
         assert take.n_frames - unplugged - 2 * rate / speed <= len(frames) <= take.n_frames
+
+
+def test_kernel_and_numpy_paths_agree():
+    """The compiled kernel's local quaternions are numpy's bit for bit (zeros, -0.0, angles
+    past +-180 included), its global ones within 1e-15 of the pointer jumping's with the
+    same float32 values, for every Euler order, one frame and a batch; bad shapes and
+    parents are refused with ValueError."""
+    from rtseg.drivers import axis_kernel
+    if not axis_kernel.AVAILABLE:
+        pytest.skip("the C kernel is not built (no compiler at install)")
+    rng = np.random.default_rng(5)
+    for order in ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"):
+        x = rng.uniform(-180, 180, (50, 59, 3)) * 10.0 ** rng.integers(-5, 2, (50, 59, 1))
+        m = rng.random(x.shape)
+        x[m < 0.2] = 0.0
+        x[(m >= 0.2) & (m < 0.3)] = -0.0
+        x[(m >= 0.3) & (m < 0.4)] = rng.choice([180.0, -360.0, 540.0])
+        v = np.zeros((50, 59, 6))
+        v[..., 3:] = x
+        v = v.reshape(50, 354)
+        out = {}
+        for en in (True, False):
+            axis_kernel.ENABLED = en
+            try:
+                out[en] = (A.poses(v, True, False, order, 0.01, "global"),
+                           A.poses(v[7], True, False, order, 0.01, "global"),
+                           A.global_pose(A.euler_to_quat(order, x)))
+            finally:
+                axis_kernel.ENABLED = axis_kernel.AVAILABLE
+        (gk, lk, _), (g1k, l1k, _), gqk = out[True]
+        (gn, ln, _), _, _ = out[False]
+        assert lk.tobytes() == ln.tobytes() and l1k.tobytes() == ln[7].tobytes()
+        assert g1k.tobytes() == gk[7].tobytes() and gqk.tobytes() == gk.tobytes()
+        assert np.abs(gk - gn).max() < 1e-15
+        assert np.array_equal(gk.astype(np.float32), gn.astype(np.float32))
+    with pytest.raises(ValueError):
+        axis_kernel.fk(np.zeros((3, 4)), A.PARENTS)
+    with pytest.raises(ValueError):
+        axis_kernel.fk(np.zeros((2, 4)), (-1, 2))
