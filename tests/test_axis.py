@@ -734,7 +734,9 @@ def test_simulator_through_live_session_gives_valid_joints_and_cuts(fmt):
         sender.start()
         src = open_source(f"axis://127.0.0.1:{sender.port}?format=text&rate={rate:g}&queue=4096")
     else:
-        src = open_source(f"axis://127.0.0.1:0?rate={rate:g}&queue=4096")
+        # a 4 MB socket buffer (up to the system's rmem_max): seconds of these datagrams, so
+        # a reader starved by a loaded machine loses none (the default holds ~0.3 s)
+        src = open_source(f"axis://127.0.0.1:0?rate={rate:g}&queue=4096&rcvbuf=4194304")
         sender = AxisSender(take, "binary", "127.0.0.1", src.port, speed=speed)
     # text: the axis skeleton profile (whole spine); binary: the default (unity, aliases)
     cfg = from_dict({"features": {"profile": "axis"}} if fmt == "text" else {})
