@@ -516,10 +516,11 @@ def poses(values: np.ndarray, with_disp: bool, with_ref: bool, order: str = "YXZ
     and runs :func:`_fk`'s pointer jumping on them: the same values as
     ``global_pose(euler_to_quat(...))``, about twenty numpy calls per batch.  Local quats
     come back as a view when ``space="global"``.  With the compiled kernel
-    (:mod:`rtseg.drivers.axis_kernel`) the half-angle cosines and sines go to it and it
-    does the rest (the same local quaternions, global ones joint by joint)."""
+    (:mod:`rtseg.drivers.axis_kernel`, 59 joints, either space) the half-angle cosines
+    and sines go to it and it does the rest (the same local quaternions, global ones joint
+    by joint)."""
     T, T4 = _euler_tables(order)
-    if space == "global" and joints == len(JOINTS) and axis_kernel.ENABLED:
+    if joints == len(JOINTS) and axis_kernel.ENABLED:
         r = 6 if with_ref else 0
         if values.ndim == 1:
             half = values.take(_angle_index(with_disp, with_ref, joints)[:, :-1])  # (3, J)
@@ -527,8 +528,9 @@ def poses(values: np.ndarray, with_disp: bool, with_ref: bool, order: str = "YXZ
         else:
             half = _half_angles(_channels(values, with_disp, with_ref, joints)[1])
         loc, glob = axis_kernel.euler_fk(_cos_sin(half), joints, _order_axes(order), PARENTS)
-        lead = values.shape[:-1]
-        return (glob.reshape(lead + (joints, 4)), loc.reshape(lead + (joints, 4)),
+        shape = values.shape[:-1] + (joints, 4)
+        loc = loc.reshape(shape)
+        return (loc if space == "local" else glob.reshape(shape), loc,
                 values[..., r:r + 3] * unit_scale)
     if values.ndim == 1 and space == "global" and joints == len(JOINTS):
         # one frame (the live case): the angles in one gather, contiguous, the identity's
