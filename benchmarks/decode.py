@@ -483,9 +483,10 @@ def bench_axis_steps(n: int, repeat: int) -> dict:
                     vals = arrays[0] if len(fs) == 1 else np.array(arrays)
                     t5 = _clock()
                     kernel = getattr(A, "axis_kernel", None)
-                    if space == "global" and kernel is not None and kernel.ENABLED:
+                    if kernel is not None and kernel.ENABLED:
                         # the compiled kernel: half-angle cosines and sines in numpy
-                        # ("euler"), products and forward kinematics in C ("fk")
+                        # ("euler"), products and forward kinematics in C ("fk"; the
+                        # local quaternions come out of the same call)
                         if vals.ndim == 1:
                             half = vals.take(A._angle_index(True, False, 59)[:, :-1])
                             np.multiply(half, A._HALF_RAD, out=half)
@@ -494,8 +495,8 @@ def bench_axis_steps(n: int, repeat: int) -> dict:
                         u = A._cos_sin(half)
                         root = vals[..., :3]
                         t6 = _clock()
-                        _, q = kernel.euler_fk(u, 59, A._order_axes("YXZ"), A.PARENTS)
-                        q = q.reshape(vals.shape[:-1] + (59, 4))
+                        loc, q = kernel.euler_fk(u, 59, A._order_axes("YXZ"), A.PARENTS)
+                        q = (loc if space == "local" else q).reshape(vals.shape[:-1] + (59, 4))
                         t7 = _clock()
                     elif space == "local" or vals.ndim == 2:
                         root, angles = A._channels(vals, True, False, 59)
@@ -508,7 +509,7 @@ def bench_axis_steps(n: int, repeat: int) -> dict:
                         root = vals[:3]
                     tables = A._euler_tables("YXZ")
                     T_ = tables[0]
-                    if space == "global" and kernel is not None and kernel.ENABLED:
+                    if kernel is not None and kernel.ENABLED:
                         pass
                     elif space == "local":
                         q = (tt.T @ T_).reshape(angles.shape[:-1] + (4,))
