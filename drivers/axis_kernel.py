@@ -36,12 +36,11 @@ _PARENTS: dict[tuple[int, ...], np.ndarray] = {}
 
 
 def _parents(parents: tuple[int, ...]) -> np.ndarray:
+    """``parents`` as the kernel's int64 buffer (kept per tuple; the kernel checks that
+    each is -1 or precedes its joint, ValueError otherwise)."""
     arr = _PARENTS.get(parents)
     if arr is None:
-        arr = np.array(parents, dtype=np.int64)
-        if any(not -1 <= p < j for j, p in enumerate(parents)):
-            raise ValueError("each parent must be -1 or precede its joint")
-        _PARENTS[parents] = arr
+        arr = _PARENTS[parents] = np.array(parents, dtype=np.int64)
     return arr
 
 

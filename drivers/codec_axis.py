@@ -267,6 +267,18 @@ def _check_order(order: str) -> str:
 #: half-angle radians per degree
 _HALF_RAD = np.pi / 360.0
 _EULER_TABLES: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+_ORDER_AXES: dict[str, tuple[int, int, int, float]] = {}
+
+
+def _order_axes(order: str) -> tuple[int, int, int, float]:
+    """(a, b, c, parity) of ``order`` = "abc" (axes 0 x, 1 y, 2 z; parity eps +1.0 when the
+    order is cyclic, else -1.0)."""
+    hit = _ORDER_AXES.get(order)
+    if hit is None:
+        a, b, c = (_AXIS[x] for x in _check_order(order))
+        e = 1.0 if (a, b, c) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0
+        hit = _ORDER_AXES[order] = (a, b, c, e)
+    return hit
 
 
 def _euler_tables(order: str) -> tuple[np.ndarray, np.ndarray]:
@@ -278,28 +290,13 @@ def _euler_tables(order: str) -> tuple[np.ndarray, np.ndarray]:
     hit = _EULER_TABLES.get(order)
     if hit is not None:
         return hit
-    o = _check_order(order)
-    a, b, c = (_AXIS[x] for x in o)
-    e = 1.0 if (a, b, c) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0   # parity eps
+    a, b, c, e = _order_axes(order)
     T = np.zeros((8, 4))
     T[0, 3], T[7, 3] = 1.0, -e          # w = ca cb cc - eps sa sb sc
     T[4, a], T[3, a] = 1.0, e           # a = sa cb cc + eps ca sb sc
     T[2, b], T[5, b] = 1.0, -e          # b = ca sb cc - eps sa cb sc
     T[1, c], T[6, c] = 1.0, e           # c = ca cb sc + eps sa sb cc
     hit = _EULER_TABLES[order] = (T, np.tile(T, (1, 4)))
-    _ORDER_AXES[order] = (a, b, c, e)
-    return hit
-
-
-_ORDER_AXES: dict[str, tuple[int, int, int, float]] = {}
-
-
-def _order_axes(order: str) -> tuple[int, int, int, float]:
-    """(a, b, c, parity) of ``order`` (axes 0 x, 1 y, 2 z; parity +1.0 when cyclic)."""
-    hit = _ORDER_AXES.get(order)
-    if hit is None:
-        _euler_tables(order)
-        hit = _ORDER_AXES[order]
     return hit
 
 
