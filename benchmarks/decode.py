@@ -498,32 +498,30 @@ def bench_axis_steps(n: int, repeat: int) -> dict:
                         loc, q = kernel.euler_fk(u, 59, A._order_axes("YXZ"), A.PARENTS)
                         q = (loc if space == "local" else q).reshape(vals.shape[:-1] + (59, 4))
                         t7 = _clock()
-                    elif space == "local" or vals.ndim == 2:
-                        root, angles = A._channels(vals, True, False, 59)
-                        tt = A._euler_terms(angles, identity_row=space == "global")
                     else:
-                        half = vals.take(A._angle_index(True, False, 59))
-                        np.multiply(half, A._HALF_RAD, out=half)
-                        half[:, -1] = 0.0
-                        tt = A._half_terms(half)
-                        root = vals[:3]
-                    tables = A._euler_tables("YXZ")
-                    T_ = tables[0]
-                    if kernel is not None and kernel.ENABLED:
-                        pass
-                    elif space == "local":
-                        q = (tt.T @ T_).reshape(angles.shape[:-1] + (4,))
-                        t6 = t7 = _clock()
-                    elif hasattr(A, "_fk"):          # quaternion pointer jumping
-                        q = (tt.T @ tables[1]).reshape(vals.shape[:-1] + (60, 16))
-                        t6 = _clock()
-                        q = A._fk(q)
-                        t7 = _clock()
-                    else:                            # the 4x4 matrix form before it
-                        m = (tt.T @ tables[1]).reshape(vals.shape[:-1] + (60, 4, 4))
-                        t6 = _clock()
-                        q = A._jump(m)
-                        t7 = _clock()
+                        if space == "local" or vals.ndim == 2:
+                            root, angles = A._channels(vals, True, False, 59)
+                            tt = A._euler_terms(angles, identity_row=space == "global")
+                        else:
+                            half = vals.take(A._angle_index(True, False, 59))
+                            np.multiply(half, A._HALF_RAD, out=half)
+                            half[:, -1] = 0.0
+                            tt = A._half_terms(half)
+                            root = vals[:3]
+                        T_, T4 = A._euler_tables("YXZ")
+                        if space == "local":
+                            q = (tt.T @ T_).reshape(angles.shape[:-1] + (4,))
+                            t6 = t7 = _clock()
+                        elif hasattr(A, "_fk"):          # quaternion pointer jumping
+                            q = (tt.T @ T4).reshape(vals.shape[:-1] + (60, 16))
+                            t6 = _clock()
+                            q = A._fk(q)
+                            t7 = _clock()
+                        else:                            # the 4x4 matrix form before it
+                            m = (tt.T @ T4).reshape(vals.shape[:-1] + (60, 4, 4))
+                            t6 = _clock()
+                            q = A._jump(m)
+                            t7 = _clock()
                     pos = root * 0.01
                     qs, ps = ([q], [pos]) if vals.ndim == 1 else (list(q), list(pos))
                     frames += [Frame(0.0, qs[k], A._ALL_VALID.copy(), None, conv._seq(f, 0.0),
@@ -611,7 +609,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--tree", metavar="DIR", help="import rtseg from the source tree DIR (a git "
                    "worktree of another commit: the code before a change) instead of the "
                    "installed package; command line only")
-    p.add_argument("--no-kernel", action="store_true", help="Axis global poses through the "
+    p.add_argument("--no-kernel", action="store_true", help="Axis poses through the "
                    "numpy path even where the compiled kernel (rtseg.drivers._axis_kernel) "
                    "is built, to compare the two in one tree (RTSEG_NO_KERNEL=1)")
     p.add_argument("--axis-steps", action="store_true", help="instead of the rows: where an "

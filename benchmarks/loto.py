@@ -138,8 +138,7 @@ def objective(res: dict, cases: list[Case], kind: str = "takes") -> float:
     whatever its take, so long takes weigh more); ``groups``: the mean of the groups' pooled
     F1.  Minus 1 when the median / p90 delay over the real takes (else all) exceeds the
     budget."""
-    real = [res[c.key] for c in cases if c.group != "synthetic"] or [res[c.key] for c in cases]
-    allrows = pooled_tally(real)
+    allrows = pooled_tally(_real_rows(res, cases))
     ok = (allrows["delay_median"] or 0) <= MAX_MEDIAN_S and (allrows["delay_p90"] or 0) <= MAX_P90_S
     if kind == "takes":
         f = float(np.mean([pooled_tally([res[c.key]])["f1"] for c in cases]))
@@ -152,11 +151,15 @@ def objective(res: dict, cases: list[Case], kind: str = "takes") -> float:
     return f - (0 if ok else 1.0)
 
 
+def _real_rows(res: dict, cases: list[Case]) -> list:
+    """The tallies of the real takes of ``cases`` (all of them, when none is real)."""
+    return [res[c.key] for c in cases if c.group != "synthetic"] or [res[c.key] for c in cases]
+
+
 def real_delay(res: dict, cases: list[Case]) -> float:
     """Median delay over the real takes of ``cases`` (all, when none is real); the last
     tie-break of a choice: of equally good sets, the one that cuts sooner."""
-    real = [res[c.key] for c in cases if c.group != "synthetic"] or [res[c.key] for c in cases]
-    return pooled_tally(real)["delay_median"] or 0.0
+    return pooled_tally(_real_rows(res, cases))["delay_median"] or 0.0
 
 
 def person(case: Case) -> str:

@@ -171,6 +171,19 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int) ->
 
 
 # ============================================================================ measuring
+def _rss_mb(pid: int | str = "self") -> float | None:
+    """Resident set size of process ``pid`` in MB (``/proc/<pid>/status``), None when it
+    cannot be read."""
+    try:
+        with open(f"/proc/{pid}/status") as fh:
+            for line in fh:
+                if line.startswith("VmRSS:"):
+                    return float(line.split()[1]) / 1024.0
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
 class GcPauses:
     """Garbage-collector pauses of this process at least ``min_ms`` long: (start
     ``time.monotonic()``, milliseconds, generation), at most ``cap`` of them, through
@@ -199,7 +212,8 @@ class GcPauses:
             gc.callbacks.remove(self._cb)
 
     def near(self, times: list[float], before_s: float = 0.05) -> int:
-        """How many of ``times`` fall within ``before_s`` after the end of a pause."""
+        """How many of ``times`` fall within ``before_s`` of the end of a pause, after it or
+        before it (a time before the end may lie inside the pause itself)."""
         ends = np.array(sorted(t + ms / 1e3 for t, ms, _ in self.pauses))
         if not ends.size:
             return 0
@@ -274,14 +288,10 @@ class Meter:
     def sample_rss(self) -> None:
         if self.n_rss >= self.rss_mb_samples.size:
             return
-        with open("/proc/self/status") as fh:
-            for line in fh:
-                if line.startswith("VmRSS:"):
-                    kb = float(line.split()[1])
-                    break
-            else:
-                return
-        self.rss_mb_samples[self.n_rss] = kb / 1024.0
+        mb = _rss_mb()
+        if mb is None:
+            return
+        self.rss_mb_samples[self.n_rss] = mb
         self.rss_window[self.n_rss] = self.window()
         self.n_rss += 1
 
@@ -291,14 +301,13 @@ class Meter:
         try:
             with open(f"/proc/{pid}/stat") as fh:
                 fields = fh.read().rsplit(")", 1)[1].split()
-            with open(f"/proc/{pid}/status") as fh:
-                rss = next((float(ln.split()[1]) / 1024.0 for ln in fh if ln.startswith("VmRSS:")),
-                           math.nan)
+            cpu_s = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
         except (OSError, ValueError, IndexError):
             return
+        rss = _rss_mb(pid)
         w = self.window()
-        self.suit_cpu_end[w] = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-        self.suit_rss_end[w] = rss
+        self.suit_cpu_end[w] = cpu_s
+        self.suit_rss_end[w] = math.nan if rss is None else rss
 
     def suit_by_window(self) -> tuple[list[float | None], list[float | None]]:
         """(CPU seconds the suit used in each window, its RSS MB at the window's end)."""

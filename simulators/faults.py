@@ -233,8 +233,9 @@ class FaultInjector:
 
     def take_record(self) -> FaultRecord:
         """Hand over the record so far and start an empty one (atomically).  A device that
-        runs for hours keeps one entry per message otherwise: a soak's 3.5 M messages grew
-        the sender's heap by hundreds of MB and its garbage collections with it."""
+        runs for hours keeps one entry per message otherwise: an 8-hour soak's 3.5 M
+        messages left 2.8 M corrupted-byte lists in it, growing the sender's heap and its
+        garbage collections with it."""
         with self._lock:
             r, self.record = self.record, FaultRecord()
             return r
