@@ -871,7 +871,7 @@ def test_faulted_axis_stream_keeps_the_live_loop_up(fmt):
         assert take.n_frames - unplugged - 2 * rate / speed <= len(frames) <= take.n_frames
 
 
-def test_kernel_and_numpy_paths_agree():
+def test_kernel_and_numpy_paths_agree(monkeypatch):
     """The compiled kernel's local quaternions are numpy's bit for bit (zeros, -0.0, angles
     past +-180 included), its global ones within 1e-15 of the pointer jumping's with the
     same float32 values, for every Euler order, one frame and a batch; bad shapes and
@@ -891,13 +891,10 @@ def test_kernel_and_numpy_paths_agree():
         v = v.reshape(50, 354)
         out = {}
         for en in (True, False):
-            axis_kernel.ENABLED = en
-            try:
-                out[en] = (A.poses(v, True, False, order, 0.01, "global"),
-                           A.poses(v[7], True, False, order, 0.01, "global"),
-                           A.global_pose(A.euler_to_quat(order, x)))
-            finally:
-                axis_kernel.ENABLED = axis_kernel.AVAILABLE
+            monkeypatch.setattr(axis_kernel, "ENABLED", en)   # undone after the test
+            out[en] = (A.poses(v, True, False, order, 0.01, "global"),
+                       A.poses(v[7], True, False, order, 0.01, "global"),
+                       A.global_pose(A.euler_to_quat(order, x)))
         (gk, lk, _), (g1k, l1k, _), gqk = out[True]
         (gn, ln, _), _, _ = out[False]
         assert lk.tobytes() == ln.tobytes() and l1k.tobytes() == ln[7].tobytes()
