@@ -7,9 +7,10 @@ passes and the offline methods: a table and a PNG.
 DATA is a folder laid out like ../shared/data.  Every take goes once through the live
 pipeline (``rtseg.online_eval.fed_features``: the features ``rtseg live`` computes); the
 default live detector (``contrast``) then runs on them at several delay budgets — its after
-window (how long after a change it looks) and hold (how long it may wait to confirm a
-maximum), and for the short budgets a finer grid step and an earlier confirmation (drop) —
-with every other parameter at the shipped defaults.  For each: F1 at +-0.5 s and
+window (how long after a change it looks), hold (how long it may wait to confirm a
+maximum) and early look (on, as shipped, or off), and for the short budgets a finer grid
+step and an earlier confirmation (drop) — with every other parameter at the shipped
+defaults.  For each: F1 at +-0.5 s and
 strict, median and p90 detection delay (frame that produced the cut - labelled transition
 mid).  Beside them: the paper's online PCA and PPCA forward passes through the same live
 pipeline (``rtseg evaluate --online``), and the offline methods on whole takes
@@ -36,14 +37,32 @@ from rtseg.online_eval import fed_features, live_config, to_take_frames
 
 TOL_S = 0.5
 QUICK_S = 1.5                  # the short budget: median delay at most this
-# (after_s, hold_s, step_s, drop); step_s / drop None = the shipped value.  A finer grid
-# step and an earlier confirmation (drop 0.75) help the short budgets.
-BUDGETS = [(0.75, 0.25, None, None), (1.0, 0.25, None, None), (1.0, 0.5, None, None),
-           (1.25, 0.5, None, None), (1.5, 0.5, None, None), (1.5, 0.75, None, None),
-           (1.75, 0.5, None, None), (1.75, 1.0, None, None), (2.0, 1.0, None, None),
-           (2.5, 1.0, None, None),
-           (0.75, 0.5, 1 / 12, None), (1.0, 0.25, 1 / 12, None), (1.0, 0.5, 1 / 12, 0.75),
-           (1.25, 0.25, 1 / 12, None), (1.25, 0.5, 1 / 12, 0.75)]
+# (after_s, hold_s, step_s, drop, early_after_s); step_s / drop None = the shipped value; a
+# finer grid step and an earlier confirmation (drop 0.75) help the short budgets.
+# early_after_s None = the shipped early look (off where the after window is not longer
+# than it), 0 = off.
+BUDGETS = [(0.75, 0.25, None, None, None), (1.0, 0.25, None, None, None),
+           (1.0, 0.5, None, None, None), (1.25, 0.5, None, None, None),
+           (1.5, 0.5, None, None, None), (1.5, 0.75, None, None, None),
+           (1.75, 0.5, None, None, None), (1.75, 1.0, None, None, None),
+           (2.0, 1.0, None, None, None), (2.5, 1.0, None, None, None),
+           (1.75, 1.0, None, None, 0.0), (2.0, 1.0, None, None, 0.0),
+           (1.25, 0.5, None, None, 0.75), (1.5, 0.5, None, None, 0.75),
+           (1.5, 0.5, None, None, 1.0),
+           (0.75, 0.5, 1 / 12, None, None), (1.0, 0.25, 1 / 12, None, None),
+           (1.0, 0.5, 1 / 12, 0.75, None), (1.25, 0.25, 1 / 12, None, None),
+           (1.25, 0.5, 1 / 12, 0.75, None), (1.25, 0.5, 1 / 12, None, 0.75),
+           (1.5, 0.5, 1 / 12, None, 0.75)]
+KEYS = ("after_s", "hold_s", "step_s", "drop", "early_after_s")
+
+
+def budget_params(base: dict, budget: tuple) -> dict:
+    """The shipped parameters with one budget's values (see BUDGETS)."""
+    after, hold, step, drop, early = budget
+    if early is None:
+        early = base["early_after_s"] if base["early_after_s"] < after else 0.0
+    return {**base, "after_s": after, "hold_s": hold, "step_s": step or base["step_s"],
+            "drop": drop if drop is not None else base["drop"], "early_after_s": early}
 
 
 def held_out_quick(per_take: list[list[tuple]], names: list[str]) -> dict | None:
@@ -89,19 +108,16 @@ def main() -> int:
     loaded = [(t, t.load()) for t in takes]
     fed = [(t, take, *fed_features(take, cfg)) for t, take in loaded]
     live_rows, per_take = [], []
-    for after, hold, step, drop in BUDGETS:
-        p = {**base, "after_s": after, "hold_s": hold, "step_s": step or base["step_s"],
-             "drop": drop if drop is not None else base["drop"]}
+    for budget in BUDGETS:
+        p = budget_params(base, budget)
         rows = []
         for t, take, X, index, _ in fed:
             det = ContrastDetector.from_params(p, take.frame_rate)
             cuts = to_take_frames(((c.frame, c.detected_at) for c in det.run(X)), index)
             rows.append(tally(cuts, t.transitions, take.frame_rate, TOL_S))
         per_take.append(rows)
-        live_rows.append({"after_s": after, "hold_s": hold, "step_s": p["step_s"],
-                          "drop": p["drop"],
-                          "shipped": all(p[k] == base[k] for k in
-                                         ("after_s", "hold_s", "step_s", "drop")),
+        live_rows.append({**{k: p[k] for k in KEYS},
+                          "shipped": all(p[k] == base[k] for k in KEYS),
                           **pooled_tally(rows)})
     paper_cfg, _ = live_config(methods=["pca", "ppca"])
     paper = evaluate_takes(takes, ["pca", "ppca"], online=paper_cfg, tolerance_s=TOL_S)
@@ -119,8 +135,7 @@ def main() -> int:
     best_quick = max(quick, key=lambda r: r["f1"]) if quick else None
     held_quick = held_out_quick(per_take, [f"{t.group}/{t.name}" for t, *_ in fed])
     if held_quick is not None:     # budget index -> its parameters
-        held_quick["chosen"] = {k: {x: live_rows[b][x] for x in ("after_s", "hold_s", "step_s",
-                                                                "drop")}
+        held_quick["chosen"] = {k: {x: live_rows[b][x] for x in KEYS}
                                 for k, b in held_quick["chosen"].items()}
     doc = {"tolerance_s": TOL_S, "groups": list(groups), "live_default": default,
            "live": live_rows,
@@ -138,24 +153,25 @@ def main() -> int:
         return 0
     print(f"{len(takes)} takes ({', '.join(groups)}), F1 at +-{TOL_S} s / strict, delay = "
           f"median/p90 s from the labelled transition to the frame that produced the cut")
-    print(f"{'detector':<50} {'F1':>6} {'strict':>6} {'median':>7} {'p90':>6}")
+    print(f"{'detector':<62} {'F1':>6} {'strict':>6} {'median':>7} {'p90':>6}")
     for r in live_rows:
         name = (f"contrast after {r['after_s']:.2f} hold {r['hold_s']:.2f} step "
-                f"1/{round(1 / r['step_s'])} drop {r['drop']}")
-        print(f"{name + (' *' if r['shipped'] else ''):<50} {r['f1']:>6.3f} {r['strict_f1']:>6.3f} "
+                f"1/{round(1 / r['step_s'])} drop {r['drop']} early "
+                f"{r['early_after_s'] or 'off'}")
+        print(f"{name + (' *' if r['shipped'] else ''):<62} {r['f1']:>6.3f} {r['strict_f1']:>6.3f} "
               f"{r['delay_median'] or float('nan'):>7.2f} {r['delay_p90'] or float('nan'):>6.2f}")
     for m, r in doc["paper_online"].items():
-        print(f"{'paper ' + m + ' forward pass (live)':<50} {r['f1']:>6.3f} {r['strict_f1']:>6.3f} "
+        print(f"{'paper ' + m + ' forward pass (live)':<62} {r['f1']:>6.3f} {r['strict_f1']:>6.3f} "
               f"{r['delay_median'] or float('nan'):>7.2f} {r['delay_p90'] or float('nan'):>6.2f}")
     for m, r in doc["offline"].items():
-        print(f"{'offline ' + m + ' (whole take)':<50} {r['f1']:>6.3f} {r['strict_f1']:>6.3f} "
+        print(f"{'offline ' + m + ' (whole take)':<62} {r['f1']:>6.3f} {r['strict_f1']:>6.3f} "
               f"{'-':>7} {'-':>6}")
     print("* shipped defaults")
     if best_quick:
         print(f"best F1 with median delay <= {QUICK_S} s: {best_quick['f1']:.3f} (strict "
               f"{best_quick['strict_f1']:.3f}; after {best_quick['after_s']} s, hold "
               f"{best_quick['hold_s']} s, step {best_quick['step_s']:.4f} s, drop "
-              f"{best_quick['drop']}; delay {best_quick['delay_median']:.2f}/"
+              f"{best_quick['drop']}, early look {best_quick['early_after_s'] or 'off'}; delay {best_quick['delay_median']:.2f}/"
               f"{best_quick['delay_p90']:.2f} s)")
     else:
         print(f"no budget reached a median delay <= {QUICK_S} s")

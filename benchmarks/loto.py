@@ -44,7 +44,7 @@ import numpy as np
 
 from rtseg.detectors import load_params
 from rtseg.detectors.contrast import ContrastDetector
-from rtseg.detectors.peaks import CausalPeaks
+from rtseg.detectors.early import EarlyCuts
 from rtseg.evaluation import pooled_tally, tally
 from rtseg.labels import find_labelled_takes
 from rtseg.online_eval import fed_features, live_config, to_take_frames
@@ -53,13 +53,30 @@ from rtseg.simulators.synth import DEFAULT_SCRIPT, synthesize
 TOL_S = 0.5
 OBJECTIVES = ("takes", "pooled", "groups")   # objective() kinds; --nested chooses among them
 MAX_MEDIAN_S, MAX_P90_S = 2.5, 3.5
-GRID = {                       # the candidates: grid step, after window, the peak picker
-    "step_s": [0.0833333333, 0.125],
+GRID = {                       # the candidates: grid step, after window, the peak picker,
+    "step_s": [0.0833333333, 0.125],             # the early look (off when early_after_s = 0)
     "after_s": [1.5, 1.75, 2.0],
     "threshold": [1.5, 2.0, 2.5, 3.0],
     "hold_s": [0.5, 0.75, 1.0],
     "drop": [0.5, 0.75],
+    "early_after_s": [0.0, 1.0],
+    "early_threshold": [1.25, 1.5, 2.0],
+    "early_hold_s": [0.25, 0.5],
 }
+
+
+def grid_configs() -> list[dict]:
+    """Every combination of GRID, once: with the early look off its threshold and hold
+    do not matter, so only their first values are kept."""
+    keys = list(GRID)
+    out = []
+    for v in itertools.product(*GRID.values()):
+        c = dict(zip(keys, v))
+        if c["early_after_s"] == 0 and (c["early_threshold"] != GRID["early_threshold"][0]
+                                        or c["early_hold_s"] != GRID["early_hold_s"][0]):
+            continue
+        out.append(c)
+    return out
 
 
 @dataclass
@@ -112,18 +129,30 @@ def detector(p: dict, fr: float) -> ContrastDetector:
     return ContrastDetector.from_params(p, fr, keep_trace=True)
 
 
-def peaks_on_trace(trace, det: ContrastDetector, p: dict, fr: float) -> list[tuple[int, int]]:
-    """(cut frame, detected frame) of the causal peak picker with ``p`` on a profile
-    (clean take: the value at c is known at c + after - 1)."""
+def peaks_on_trace(det: ContrastDetector, p: dict, fr: float) -> list[tuple[int, int]]:
+    """(cut frame, detected frame) of the cut picker (``EarlyCuts``) with ``p`` replayed on
+    a run's profiles (clean take: the full look's value at c is known at c + after - 1, the
+    early look's when its trace says; in one block the full look comes first, and a second
+    cut of the same block goes out with the next frame, as in the detector)."""
     from rtseg.detectors import frames
-    pk = CausalPeaks(p["threshold"], hold=frames(p["hold_s"], fr),
-                     min_gap=frames(p["min_gap_s"], fr), drop=p["drop"])
+    ea = frames(p["early_after_s"], fr) if p["early_after_s"] else 0
+    pk = EarlyCuts(p["threshold"], hold=frames(p["hold_s"], fr),
+                   min_gap=frames(p["min_gap_s"], fr), drop=p["drop"],
+                   early_threshold=p["early_threshold"] if ea else None,
+                   early_hold=frames(p["early_hold_s"], fr), early_after=det.we * det.step)
     lag = det.wb * det.step - 1
+    events = [(pos + lag, 0, pos, v) for pos, v, _ in det.trace]
+    if ea:
+        events += [(now, 1, pos, v) for pos, v, now in det.trace_early]
+    events.sort()
     out = []
-    for pos, v, _ in trace:
-        peak = pk.update(pos, v, pos + lag)
-        if peak is not None:
-            out.append((peak.position, peak.confirmed_at))
+    last_now = None
+    for now, early, pos, v in events:
+        sent = (pk.update_early if early else pk.update_full)(pos, v, now)
+        if sent is not None:
+            at = now + 1 if now == last_now else now
+            out.append((sent.peak.position, at))
+            last_now = now
     return out
 
 
@@ -190,8 +219,16 @@ def main() -> int:
                     help=f"delay budget: a set counts only when its median delay over the "
                          f"real takes is at most S seconds (default {MAX_MEDIAN_S}; p90 at most "
                          f"S + 1)")
+    ap.add_argument("--fix", action="append", default=[], metavar="KEY=VALUE",
+                    help="hold one grid parameter at one value (repeatable), e.g. "
+                         "step_s=0.125 when a speed target rules the finer step out")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
+    for item in args.fix:
+        key, _, value = item.partition("=")
+        if key not in GRID:
+            ap.error(f"--fix: {key!r} is not a grid parameter ({', '.join(GRID)})")
+        GRID[key] = [float(value)]
     MAX_MEDIAN_S, MAX_P90_S = args.max_median, args.max_median + 1.0
     data = Path(args.data)
     if not (data / "cmu").is_dir() and not (data / "tsseg4d").is_dir():
@@ -201,32 +238,36 @@ def main() -> int:
     others = load_other_people(args.select_on)
     base = load_params()["contrast"]
     keys = list(GRID)
-    configs = [dict(zip(keys, v)) for v in itertools.product(*GRID.values())]
+    configs = grid_configs()
     if not any(all(base[k] == c[k] for k in keys) for c in configs):
         configs.append({k: base[k] for k in keys})
     results: dict[tuple, dict] = {}
-    traces: dict[tuple, tuple] = {}
+    traces: dict[tuple, ContrastDetector] = {}
     for cfgv in configs:
         p = {**base, **cfgv}
-        geo = (p["step_s"], p["after_s"])
+        geo = (p["step_s"], p["after_s"], p["early_after_s"])
         res = {}
         for case in cases + others:
             if (geo, case.key) not in traces:
                 det = detector(p, case.frame_rate)
                 det.run(case.X)
-                traces[(geo, case.key)] = (det.trace, det)
-            trace, det = traces[(geo, case.key)]
+                traces[(geo, case.key)] = det
+            det = traces[(geo, case.key)]
             if case.restarts:
                 d2 = detector(p, case.frame_rate)
                 cuts = [(c.frame, c.detected_at) for c in d2.run(case.X)]
             else:
-                cuts = peaks_on_trace(trace, det, p, case.frame_rate)
+                cuts = peaks_on_trace(det, p, case.frame_rate)
             res[case.key] = counts(case, cuts)
         results[tuple(cfgv[k] for k in keys)] = res
-    # the shortcut equals a full detector run for the shipped defaults
-    for case in cases + others:
-        full = [(c.frame, c.detected_at) for c in detector(base, case.frame_rate).run(case.X)]
-        assert counts(case, full)[:4] == results[tuple(base[k] for k in keys)][case.key][:4], case.key
+    # the shortcut equals a full detector run for the shipped defaults (the same cuts, sent
+    # on the same frames), with and without the early look
+    for p in (base, {**base, "early_after_s": 0.0}):
+        for case in cases + others:
+            full = [(c.frame, c.detected_at) for c in detector(p, case.frame_rate).run(case.X)]
+            det = traces[((p["step_s"], p["after_s"], p["early_after_s"]), case.key)]
+            if not case.restarts:
+                assert full == peaks_on_trace(det, p, case.frame_rate), case.key
 
     def best(train: list[Case], kind: str | None = None) -> tuple:
         kind = kind or args.objective
@@ -320,7 +361,11 @@ def main() -> int:
         rows = []
         for v in GRID[k]:
             cfgk = tuple(v if j == i else shipped[j] for j in range(len(keys)))
-            if cfgk in results:
+            if dict(zip(keys, cfgk))["early_after_s"] == 0:   # early look off: one set
+                cfgk = tuple(GRID[kk][0] if kk in ("early_threshold", "early_hold_s") else x
+                             for kk, x in zip(keys, cfgk))
+            if cfgk in results and (k not in ("early_threshold", "early_hold_s")
+                                    or shipped[keys.index("early_after_s")] > 0):
                 rows.append({"value": v, **{g: pooled_tally([results[cfgk][c.key] for c in cases
                                                         if c.group == g]) for g in groups}})
         report["sensitivity"][k] = rows

@@ -18,19 +18,24 @@ block start.
 Decision
 --------
 A cut reaches the tracker when the detector reveals it, ``detected - boundary`` frames
-after the boundary (~2.4 s for ``contrast``), so the new segment's first frames are
-already summed.  The segment is decided when at least ``decide_after_s`` seconds of it are
-summed (at once when the cut arrives that late): its window [boundary, decision frame),
-at most ``max_window_s`` long, is fitted (``window_models.fit``) and compared with every
-known behaviour's model (all its finished segments pooled) by
+after the boundary (1-3 s for ``contrast``: about 1.2 s when its early look sends it), so
+the new segment's first frames are already summed.  The segment is decided when at least
+``decide_after_s`` seconds of it are summed (at once when the cut arrives that late; with a
+library at least ``name_after_s``): its window [boundary + ``id_skip_s``, decision frame)
+(the first 0.5 s, where a cut within the human tolerance may still hold the previous
+behaviour, left out when at least 1 s remains), at most ``max_window_s`` long, is fitted
+(``window_models.fit``) and compared with every known behaviour's model (all its finished
+segments pooled) by
 
     D(a, b) = sqrt( pca_distance(a, b) x ppca_distance(a, b) / sqrt(d_eff) )
 
 (both factors are about 1 for two windows of one motion; d_eff = the larger number of
 varying directions of the two), stated for ``reference_dims`` (8) effective dimensions:
 1 + (D - 1) x sqrt(reference_dims / d_eff), so that one threshold serves the 4-channel
-(d_eff 8) and the 14-joint (d_eff 48) features.  The default threshold, 3.5, was chosen by
-leave-one-take-out over the labelled cmu and tsseg4d takes (docs/identity.md).  The nearest behaviour is taken when D <= ``threshold``,
+(d_eff 8) and the 14-joint (d_eff 48) features.  The default threshold, 4.5 (with
+``decide_after_s`` 1.5), was chosen by leave-one-take-out over the labelled cmu and tsseg4d
+takes and synthetic performances (docs/identity.md).  The nearest behaviour is taken when
+D <= ``threshold``,
 else a new id is made.  The first segment of the session (before any cut) gets id 1 after
 ``decide_after_s`` seconds of frames.
 
@@ -72,7 +77,9 @@ from rtseg.detectors.window_models import WindowModel, WindowStats, distances, f
 
 #: defaults (also the ``[identity]`` keys of ``config/live.toml``)
 DEFAULT_DECIDE_AFTER_S = 1.5
-DEFAULT_THRESHOLD = 3.5
+DEFAULT_NAME_AFTER_S = 2.0
+DEFAULT_ID_SKIP_S = 0.5
+DEFAULT_THRESHOLD = 4.5
 
 
 @dataclass
@@ -139,13 +146,20 @@ class IdentityTracker:
     step: frames per block.  history_s: seconds of block sums kept.
     library: a behaviour library naming each segment (module doc, Names).
     name_skip_s: seconds after the boundary left out of the named window.
+    name_after_s: with a library, seconds of the new segment summed before its decision
+        (the later of this and decide_after_s): naming needs a longer window than the id.
+    id_skip_s: seconds after the boundary left out of the decision window when at least
+        1 s remains (a cut may lie that far from the change, so its first frames may still
+        be the previous behaviour).
     """
 
     def __init__(self, frame_rate: float, method: str = "", *,
                  decide_after_s: float = DEFAULT_DECIDE_AFTER_S, max_window_s: float = 3.0,
                  threshold: float = DEFAULT_THRESHOLD, correction_margin: float = 2.0,
                  step: int = 10, history_s: float = 30.0, reference_dims: int = 8,
-                 library: Any = None, name_skip_s: float = 0.5) -> None:
+                 library: Any = None, name_skip_s: float = 0.5,
+                 name_after_s: float = DEFAULT_NAME_AFTER_S,
+                 id_skip_s: float = DEFAULT_ID_SKIP_S) -> None:
         if not frame_rate > 0:
             raise ValueError(f"frame_rate must be positive, got {frame_rate}")
         if not decide_after_s > 0:
@@ -160,8 +174,9 @@ class IdentityTracker:
         self.block = int(step)
         self.threshold = float(threshold)
         self.margin = float(correction_margin)
-        self.decide_blocks = max(2, int(math.ceil(decide_after_s * frame_rate / step)))
-        self.max_blocks = max(self.decide_blocks, int(round(max_window_s * frame_rate / step)))
+        self._id_blocks = max(2, int(math.ceil(decide_after_s * frame_rate / step)))
+        self._named_blocks = max(self._id_blocks, int(math.ceil(name_after_s * frame_rate / step)))
+        self.max_blocks = max(self._named_blocks, int(round(max_window_s * frame_rate / step)))
         self.H = max(self.max_blocks + 4, int(math.ceil(history_s * frame_rate / step)))
         self.stats = IdentityStats()
         self.events: list[IdentityDecision] = []
@@ -175,6 +190,13 @@ class IdentityTracker:
         self._max_window = int(round(max_window_s * frame_rate))
         self._min_named = max(2, int(round(1.0 * frame_rate)))
         self._R = self._max_window + self.name_skip + int(round(frame_rate)) + step
+        self._skip_blocks = max(0, int(round(id_skip_s * frame_rate / step)))
+        self._min_blocks = max(2, int(round(1.0 * frame_rate / step)))
+
+    @property
+    def decide_blocks(self) -> int:
+        """Blocks of a new segment summed before its decision (longer with a library)."""
+        return self._named_blocks if self.library is not None else self._id_blocks
 
     # ------------------------------------------------------------------ streaming state
     def _init(self, d: int) -> None:
@@ -289,12 +311,17 @@ class IdentityTracker:
         i = k % self.H
         return int(self._pn[i]), self._p1[i], self._p2[i]
 
-    def _window(self, seg: _Segment, end: int) -> WindowStats | None:
+    def _window(self, seg: _Segment, end: int, skip: int = 0) -> WindowStats | None:
+        """Statistics of the segment's blocks [start, end): start = its first block, or
+        ``skip`` blocks later when at least ``_min_blocks`` remain after them."""
+        n0, s10, s20 = seg.n0, seg.s10, seg.s20
+        if skip and end - (seg.block + skip) >= self._min_blocks:
+            n0, s10, s20 = self._prefix(seg.block + skip)
         n, s1, s2 = self._prefix(end)
-        n -= seg.n0
+        n -= n0
         if n < 2:
             return None
-        return WindowStats.from_sums(n, s1 - seg.s10, s2 - seg.s20)
+        return WindowStats.from_sums(n, s1 - s10, s2 - s20)
 
     # ------------------------------------------------------------------ segments
     def _open(self, boundary: int, index: int, blk: int) -> None:
@@ -354,8 +381,8 @@ class IdentityTracker:
         self.history.append(msg)
 
     def _decide(self, seg: _Segment, end: int, frame: int) -> None:
-        end = min(end, seg.block + self.max_blocks)
-        w = self._window(seg, end)
+        end = min(end, seg.block + self.max_blocks + self._skip_blocks)
+        w = self._window(seg, end, self._skip_blocks)
         j, dist = self._nearest(w) if w is not None else (0, math.inf)
         matched = j > 0 and dist <= self.threshold
         if not matched:
@@ -517,4 +544,5 @@ def tracker_from_config(config: Any, frame_rate: float, method: str,
         library = load(path, profile, dims)
     return IdentityTracker(frame_rate, method,
                            decide_after_s=float(config["identity.decide_after_s"]),
-                           threshold=float(config["identity.threshold"]), library=library)
+                           threshold=float(config["identity.threshold"]), library=library,
+                           name_after_s=float(config["identity.name_after_s"]))

@@ -59,7 +59,7 @@ def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,
     """{method: the library name of each segment of ``results[method]``} (module doc).
     Raises ``rtseg.library.LibraryError`` (one line) when the library was learned for
     another feature profile or dims than this take's live features."""
-    from rtseg.identity import DEFAULT_DECIDE_AFTER_S, IdentityTracker
+    from rtseg.identity import DEFAULT_DECIDE_AFTER_S, DEFAULT_NAME_AFTER_S, IdentityTracker
     from rtseg.library import UNKNOWN, LibraryError
     from rtseg.library_learn import take_rows
     X, index, profile = take_rows(take, config)
@@ -72,13 +72,16 @@ def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,
     fr = float(take.frame_rate)
     decide = float(config.values.get("identity", {}).get("decide_after_s",
                                                          DEFAULT_DECIDE_AFTER_S))
+    name_after = float(config.values.get("identity", {}).get("name_after_s",
+                                                             DEFAULT_NAME_AFTER_S))
     out: dict[str, list[str]] = {}
     for m, r in results.items():
         first, last = int(index[0]), int(index[-1])
         pending = sorted((max(int(c.detected_at if c.detected_at is not None else c.frame),
                               int(c.frame)), int(c.frame)) for c in r.cuts
                          if first < int(c.frame) <= last)
-        tr = IdentityTracker(fr, m, decide_after_s=decide, library=library)
+        tr = IdentityTracker(fr, m, decide_after_s=decide, library=library,
+                             name_after_s=name_after)
         k = 0
         for i, f in zip(range(len(X)), index):
             tr.update(int(f), X[i])

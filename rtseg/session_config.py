@@ -195,8 +195,11 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "enabled": Key("bool", False, doc="send each segment's behaviour id (rtseg.identity)"),
         "decide_after_s": Key("float", 1.5, _range(0.0, 60.0, strict_lo=True),
                               doc="seconds of a new segment summed before its id is decided"),
-        "threshold": Key("float", 3.5, _range(1.0, 100.0),
+        "threshold": Key("float", 4.5, _range(1.0, 100.0),
                          doc="distance at or below which a segment is an earlier behaviour"),
+        "name_after_s": Key("float", 2.0, _range(0.0, 60.0, strict_lo=True),
+                            doc="with a behaviour library: seconds of a new segment summed "
+                                "before it is named (the later of this and decide_after_s)"),
         "behaviours": Key("str", "", doc="behaviour library file naming segments "
                                          "(rtseg learn; '' = ids only)"),
     },

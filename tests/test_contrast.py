@@ -183,9 +183,10 @@ def test_non_finite_frame_restarts_and_is_counted(perf):
 
 def test_frame_rate_scales_the_windows():
     det = make_online("contrast", 60.0)
-    # 0.125 s -> 8 frames (7.5 rounded half to even); 3 s -> 22 blocks; 1.75 s -> 13 blocks
-    assert (det.step, det.wa, det.wb) == (8, 22, 13)
-    assert det.delay_frames == 13 * 8 + 60 + 8
+    # 0.125 s -> 8 frames (7.5 rounded half to even); 3 s -> 22 blocks; 2 s -> 15 blocks;
+    # the early look's 1 s -> 8 blocks
+    assert (det.step, det.wa, det.wb, det.we) == (8, 22, 15, 8)
+    assert det.delay_frames == 15 * 8 + 60 + 8
 
 
 @pytest.mark.parametrize("kw", [dict(step=0), dict(before=10), dict(after=5),
@@ -204,3 +205,83 @@ def test_distances_equal_the_two_distance_functions():
     p, q = distances(a, b)
     assert p == pytest.approx(pca_distance(a, b), rel=1e-12)
     assert q == pytest.approx(ppca_distance(a, b), rel=1e-12)
+
+
+# ---------------------------------------------------------------- early look
+def test_one_sided_equals_the_two_one_way_functions():
+    from rtseg.detectors.window_models import one_sided
+    rng = np.random.default_rng(11)
+    m = fit(WindowStats.of(rng.normal(size=(200, 6)) @ rng.normal(size=(6, 6))))
+    y = WindowStats.of(rng.normal(size=(90, 6)) + 0.4)
+    p, q = one_sided(y, m)
+    assert p == pytest.approx(pca_error(y, m), rel=1e-12)
+    assert q == pytest.approx(math.sqrt(ppca_msq(y, m)), rel=1e-12)
+
+
+def _early_cuts():
+    from rtseg.detectors.early import EarlyCuts
+    # full look: threshold 2, hold 20; early look: threshold 1.5, hold 10; corroboration
+    # from 30 frames before an early maximum; cuts at least 50 frames apart
+    return EarlyCuts(2.0, hold=20, min_gap=50, drop=0.5, early_threshold=1.5, early_hold=10,
+                     early_after=30)
+
+
+def test_early_maximum_backed_by_the_full_look_is_sent_once():
+    ec = _early_cuts()
+    # the full look (known later) rises past its threshold at 190 while the early look peaks at 200
+    for pos in range(100, 200, 5):
+        assert ec.update_full(pos, 2.5 if pos >= 190 else 1.0, pos + 70) is None
+    sent = None
+    for pos, v in ((195, 1.8), (200, 3.0), (205, 2.0), (210, 1.0)):
+        sent = ec.update_early(pos, v, pos + 40) or sent
+    assert sent is not None and sent.early and sent.peak.position == 200
+    assert sent.peak.confirmed_at == 250              # the drop below half, known at 210 + 40
+    # the full look's own maximum of the same change comes later and is not sent again
+    out = [ec.update_full(pos, v, pos + 70) for pos, v in ((200, 4.0), (205, 1.0), (230, 1.0))]
+    assert out == [None, None, None]
+
+
+def test_early_maximum_without_the_full_look_is_dropped_and_the_full_one_sent():
+    ec = _early_cuts()
+    for pos in range(100, 200, 5):
+        ec.update_full(pos, 1.0, pos + 70)           # the full look sees nothing yet
+    assert [ec.update_early(p, v, p + 40) for p, v in ((200, 3.0), (205, 1.0))] == [None, None]
+    sent = [ec.update_full(p, v, p + 70) for p, v in ((200, 3.0), (205, 3.5), (210, 1.0))]
+    assert sent[:2] == [None, None] and sent[2] is not None
+    assert not sent[2].early and sent[2].peak.position == 205
+
+
+def test_early_look_off_is_the_full_look_alone():
+    from rtseg.detectors.early import EarlyCuts
+    ec = EarlyCuts(2.0, hold=20, min_gap=50, drop=0.5, early_threshold=None, early_hold=10,
+                   early_after=30)
+    assert ec.update_early(200, 9.0, 240) is None
+    assert ec.update_full(200, 3.0, 270) is None
+    assert ec.update_full(205, 1.0, 275).peak.position == 200
+
+
+def test_early_look_sends_the_same_changes_sooner(perf):
+    """On clean synthetic changes the early look sends every change, each within 0.5 s of
+    the labelled middle, and sooner than the full look alone."""
+    res, X = perf
+    with_early = make_online("contrast", FR).run(X)
+    det = make_online("contrast", FR)
+    assert det.we > 0
+    alone = ContrastDetector(step=det.step, before=det.wa * det.step, after=det.wb * det.step,
+                             min_before=det.wmin * det.step, threshold=det.threshold,
+                             hold=det.peaks.full.hold, min_gap=det.peaks.min_gap,
+                             drop=det.peaks.full.drop, early_after=0).run(X)
+    mids = [t.mid for t in res.transitions]
+    assert len(with_early) == len(alone) == len(mids)
+    for c, m in zip(with_early, mids):
+        assert abs(c.frame - m) <= 0.5 * FR
+    d_early = np.median([c.detected_at - c.frame for c in with_early])
+    d_alone = np.median([c.detected_at - c.frame for c in alone])
+    assert d_early < d_alone - 0.25 * FR, (d_early, d_alone)
+
+
+@pytest.mark.parametrize("kw", [dict(early_after=15), dict(early_after=210),
+                                dict(early_after=7)])
+def test_bad_early_window_is_refused(kw):
+    with pytest.raises(ValueError):
+        ContrastDetector(**kw)

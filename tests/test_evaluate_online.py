@@ -77,7 +77,8 @@ def test_evaluate_online_json(synth_dir, capsys):
     assert sorted(m["delay_s"] for m in take["matched"]) == pytest.approx(expect, abs=1e-4)
     assert p["delay_s"]["median"] == pytest.approx(float(np.median(expect)))
     assert p["delay_s"]["p90"] == pytest.approx(float(np.percentile(expect, 90)))
-    assert 1.0 < p["delay_s"]["median"] < 3.5
+    # no cut is known before the early look's 1 s after window has arrived
+    assert 0.5 < p["delay_s"]["median"] < 3.5
 
 
 def test_evaluate_tolerance_zero_equals_strict(synth_dir, capsys):

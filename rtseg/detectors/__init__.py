@@ -53,6 +53,9 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "ppca_energy": ((int, float), _unit),
         "noise_floor": ((int, float), _nonneg),
         "reference_dims": ((int,), _posint),
+        "early_after_s": ((int, float), _nonneg),
+        "early_threshold": ((int, float), _pos),
+        "early_hold_s": ((int, float), _nonneg),
     },
     "pca": {
         "window_s": ((int, float), _pos),

@@ -35,18 +35,32 @@ segment: the grid, the windows and the peak picker begin again from the next fra
 ``Cut.frame`` = c, ``detected_at`` = the frame whose arrival confirmed it, ``score`` = the
 contrast at c, ``confidence`` = 1 - threshold / contrast (0 at the threshold, -> 1 for a
 change far above it; the same meaning as every rtseg detector's confidence).
+
+Early look (``early_after`` > 0 frames): each position is also scored as soon as the
+``early_after`` frames from c on have arrived, one-sided and without fitting that window:
+
+    early(c) = sqrt( Epca(B'|A) / Epca(A|A0)  x  Mppca(B'|A) / Mppca(A|A0) ),  B' = [c, c+early_after)
+
+(E: PCA projection error off the model of the second window, M: root mean squared
+Mahalanobis distance under its PPCA Gaussian), stated for ``reference_dims`` like the
+contrast.  Its maxima (at least ``early_threshold``, confirmed within ``early_hold``) are
+sent when the full contrast corroborates them (``rtseg.detectors.early``): so a clear
+change is sent about ``after - early_after`` frames sooner, and a change the early look
+misses or that the full look does not back is still sent from the full look.
+``Cut.score`` and ``confidence`` then come from the early look and its threshold.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from typing import Any, Mapping
 
 import numpy as np
 
 from rtseg.detectors.base import Cut, OnlineDetector
-from rtseg.detectors.peaks import CausalPeaks
-from rtseg.detectors.window_models import WindowModel, WindowStats, distances, fit
+from rtseg.detectors.early import EarlyCut, EarlyCuts
+from rtseg.detectors.window_models import WindowModel, WindowStats, distances, fit, one_sided
 
 
 class ContrastDetector(OnlineDetector):
@@ -59,7 +73,9 @@ class ContrastDetector(OnlineDetector):
                  min_before: int = 180, threshold: float = 2.0, hold: int = 120,
                  min_gap: int = 240, drop: float = 0.5, pca_energy: float = 0.9,
                  ppca_energy: float = 0.95, noise_floor: float = 1e-6,
-                 reference_dims: int = 48, keep_trace: bool = False) -> None:
+                 reference_dims: int = 48, early_after: int = 0,
+                 early_threshold: float = 1.5, early_hold: int = 60,
+                 keep_trace: bool = False) -> None:
         if step < 1:
             raise ValueError(f"step must be >= 1 frame, got {step}")
         for key, v in (("before", before), ("after", after), ("min_before", min_before)):
@@ -79,9 +95,17 @@ class ContrastDetector(OnlineDetector):
         self.reference_dims = int(reference_dims)
         self.fit_args = dict(pca_energy=float(pca_energy), ppca_energy=float(ppca_energy),
                              noise_floor=float(noise_floor))
-        self.peaks = CausalPeaks(threshold, hold=int(hold), min_gap=int(min_gap), drop=drop)
+        if early_after and not 2 * step <= early_after < after:
+            raise ValueError(f"early_after must be 0 (off) or at least two steps and shorter "
+                             f"than after ({after} frames), got {early_after}")
+        self.we = int(round(early_after / step)) if early_after else 0   # early window, blocks
+        self.peaks = EarlyCuts(threshold, hold=int(hold), min_gap=int(min_gap), drop=drop,
+                               early_threshold=float(early_threshold) if self.we else None,
+                               early_hold=int(early_hold), early_after=self.we * self.step)
         self.keep_trace = keep_trace
         self.trace: list[tuple[int, float, float]] = []
+        #: early-look profile when keep_trace: (position, value, frame that made it known)
+        self.trace_early: list[tuple[int, float, int]] = []
         self.rejected_frames = 0
         self._t = 0
         self._dim: int | None = None
@@ -101,12 +125,14 @@ class ContrastDetector(OnlineDetector):
                    min_gap=frames(p["min_gap_s"], frame_rate), drop=p["drop"],
                    pca_energy=p["pca_energy"], ppca_energy=p["ppca_energy"],
                    noise_floor=p["noise_floor"], reference_dims=p["reference_dims"],
-                   keep_trace=keep_trace)
+                   early_after=frames(p["early_after_s"], frame_rate) if p["early_after_s"] else 0,
+                   early_threshold=p["early_threshold"],
+                   early_hold=frames(p["early_hold_s"], frame_rate), keep_trace=keep_trace)
 
     @property
     def delay_frames(self) -> int:
         """Longest delay from a cut's frame to the frame that sends it."""
-        return self.wb * self.step + self.peaks.hold + self.step
+        return self.wb * self.step + self.peaks.full.hold + self.step
 
     # ------------------------------------------------------------------ state
     def restart(self) -> None:
@@ -118,6 +144,7 @@ class ContrastDetector(OnlineDetector):
         self._models: dict[tuple[int, int], WindowModel] = {}
         self._pending: tuple[int, int] | None = None   # a window to fit with the next frame
         self.peaks.reset()
+        self._out: deque[EarlyCut] = deque()  # cuts to send (a queued one is dropped)
         if self._dim is not None:              # the ring restarts at block 0
             self._P1[0] = 0.0
             self._P2[0] = 0.0
@@ -146,11 +173,14 @@ class ContrastDetector(OnlineDetector):
             if self._pending is not None:      # spread the work: see _block_done
                 self._model(*self._pending)
                 self._pending = None
+        else:
+            self._fill = 0
+            self._block_done()
+        if not self._out:
             return None
-        self._fill = 0
-        return self._block_done()
+        return self._cut(self._out.popleft(), self._t - 1)
 
-    def _block_done(self) -> Cut | None:
+    def _block_done(self) -> None:
         B = self._buf
         k, cap = self._nb, self._cap
         self._P1[(k + 1) % cap] = self._P1[k % cap] + B.sum(axis=0)
@@ -160,21 +190,34 @@ class ContrastDetector(OnlineDetector):
         # fitted with the next frame, so no frame fits two windows (per-frame p99 <= 1 ms)
         w = min(self.wa, self._nb // 2)
         self._pending = (self._nb - w, self._nb) if self._nb >= 2 * self.wmin else None
-        c = self._nb - self.wb                       # newest position with a whole B
-        if c < 2 * self.wmin:
-            return None
-        value = self._contrast(c)
-        position = self._seg0 + c * self.step
         now = self._t - 1                            # the frame that completed the block
-        if self.keep_trace:
-            self.trace.append((position, value, self.threshold))
-        peak = self.peaks.update(position, value, now)
-        if peak is None:
-            return None
-        conf = 1.0 - self.threshold / peak.value if peak.value > 0 else 0.0
+        full = early = None
+        c = self._nb - self.wb                       # newest position with a whole B
+        if c >= 2 * self.wmin:
+            value = self._contrast(c)
+            position = self._seg0 + c * self.step
+            if self.keep_trace:
+                self.trace.append((position, value, self.threshold))
+            full = self.peaks.update_full(position, value, now)
+        ce = self._nb - self.we                      # newest position with a whole B'
+        if self.we and ce >= 2 * self.wmin:
+            value = self._early(ce)
+            position = self._seg0 + ce * self.step
+            if self.keep_trace:
+                self.trace_early.append((position, value, now))
+            early = self.peaks.update_early(position, value, now)
+        # both looks may send in one block (two changes >= min_gap apart): the second cut
+        # goes out with the next frame, and its detected_at says so
+        self._out.extend(e for e in (full, early) if e is not None)
+
+    def _cut(self, sent: EarlyCut, at: int) -> Cut:
+        """The Cut for a peak sent on frame ``at`` (confidence: see the module docstring)."""
+        peak = sent.peak
+        thr = self.peaks.early.threshold if sent.early else self.threshold
+        conf = 1.0 - thr / peak.value if peak.value > 0 else 0.0
         return Cut(frame=peak.position, method=self.name,
                    confidence=float(min(max(conf, 0.0), 1.0)),
-                   detected_at=peak.confirmed_at, score=float(peak.value))
+                   detected_at=at, score=float(peak.value))
 
     def _model(self, lo: int, hi: int) -> WindowModel:
         m = self._models.get((lo, hi))
@@ -198,6 +241,19 @@ class ContrastDetector(OnlineDetector):
         for key in [k for k in self._models if k[0] < oldest]:
             del self._models[key]
         k = math.sqrt(max(kp, 0.0) * max(kq, 0.0))
+        return 1.0 + (k - 1.0) * math.sqrt(a.nonnull / self.reference_dims)
+
+    def _early(self, c: int) -> float:
+        """The early look at block position c (module docstring): B' = [c, c + we) under
+        the models of A, over A under those of A0 (both already fitted)."""
+        w = min(self.wa, c // 2)
+        a0, a = self._model(c - 2 * w, c - w), self._model(c - w, c)
+        cap = self._cap
+        hi = c + self.we
+        b = WindowStats.from_sums(self.we * self.step, self._P1[hi % cap] - self._P1[c % cap],
+                                  self._P2[hi % cap] - self._P2[c % cap])
+        (p_b, q_b), (p_a, q_a) = one_sided(b, a), one_sided(a.stats, a0)
+        k = math.sqrt((p_b / max(p_a, 1e-300)) * (q_b / max(q_a, 1e-300)))
         return 1.0 + (k - 1.0) * math.sqrt(a.nonnull / self.reference_dims)
 
 

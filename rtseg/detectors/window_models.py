@@ -134,3 +134,12 @@ def distances(a: WindowModel, b: WindowModel) -> tuple[float, float]:
                     * max(_pca_error_m(Mab, a.stats.n, b), 0.0))
     ppca = math.sqrt(max(_ppca_msq_m(Mba, b.stats.n, a), _ppca_msq_m(Mab, a.stats.n, b), 0.0))
     return pca, ppca
+
+
+def one_sided(y: WindowStats, m: WindowModel) -> tuple[float, float]:
+    """(``pca_error(y | m)``, root of ``ppca_msq(y | m)``): y's frames under m's models only,
+    with y's second moments about m's mean computed once.  Needs no model of y, so a window
+    can be scored before (or without) its own eigen-decomposition."""
+    M = _moments_about(y, m.stats.mean)[0]
+    return (max(_pca_error_m(M, y.n, m), 0.0),
+            math.sqrt(max(_ppca_msq_m(M, y.n, m), 0.0)))

@@ -1,0 +1,103 @@
+"""Cuts from two looks at one contrast: a full look and an early one that must agree with it.
+
+The contrast detector (``rtseg.detectors.contrast``) scores every grid position c twice:
+
+- the **full look**, the two-window contrast with the whole after window (1.75 s at the
+  defaults), known ``after`` frames after c;
+- the **early look**, a one-sided contrast with a shorter after window (``early_after``,
+  1 s), known sooner.  Alone it is noisy: a short window over a slow cycle differs from the
+  3 s before it without any change of behaviour.
+
+``EarlyCuts`` picks causal maxima (``CausalPeaks``) on each profile separately and merges
+them into one stream of cuts:
+
+- a full-look maximum is a cut, as it always was;
+- an early-look maximum (at least ``early_threshold``) is a cut only when the full look
+  *corroborates* it: some full-look value at or after ``early_after`` frames before its
+  position, known by the time the early maximum is confirmed, has reached the full
+  ``threshold``.  One that is not corroborated then is dropped (the full look may still
+  find the change later);
+- every cut lies at least ``min_gap`` frames from every cut already sent, whichever look
+  sent it, so one change is sent once.
+
+A cut found by the early look arrives up to ``after - early_after`` frames sooner.  The
+two pickers are independent (each keeps its own last maximum); only the sending is merged.
+Frame numbers are the caller's (positions and ``now``: the frame whose arrival made a value
+known); nothing here depends on the frame rate.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+from rtseg.detectors.peaks import CausalPeaks, Peak
+
+
+@dataclass(frozen=True)
+class EarlyCut:
+    """A cut to send: the peak (position, value, confirming frame) and which look found it."""
+    peak: Peak
+    early: bool
+
+
+class EarlyCuts:
+    """Merge the full and early contrast profiles into cuts (module docstring).
+
+    ``threshold``, ``hold``, ``drop``: the full look's peak picker; ``early_threshold``,
+    ``early_hold``: the early look's (same ``drop``); ``early_after``: how far before an
+    early maximum the corroborating full-look values may lie (frames); ``min_gap``: frames
+    between any two cuts.  ``early_threshold`` None turns the early look off.
+    """
+
+    def __init__(self, threshold: float, hold: int, min_gap: int, drop: float,
+                 early_threshold: float | None, early_hold: int, early_after: int) -> None:
+        self.threshold = float(threshold)
+        self.min_gap = int(min_gap)
+        self.early_after = int(early_after)
+        # full-look values kept: those an early maximum (at most early_hold behind the
+        # early look, which runs ahead of the full one) may still need
+        self._keep = int(early_after) + int(early_hold) + int(min_gap)
+        self.full = CausalPeaks(threshold, hold=hold, min_gap=min_gap, drop=drop)
+        self.early = (CausalPeaks(early_threshold, hold=early_hold, min_gap=min_gap, drop=drop)
+                      if early_threshold is not None else None)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget both profiles and the cuts sent (after a gap)."""
+        self.full.reset()
+        if self.early is not None:
+            self.early.reset()
+        self._full_recent: deque[tuple[int, float]] = deque()   # (position, full value)
+        self._sent: deque[int] = deque()                        # positions of sent cuts
+
+    def update_full(self, position: int, value: float, now: int) -> EarlyCut | None:
+        """The full look's value at ``position``, known since frame ``now``."""
+        if self.early is not None:
+            recent = self._full_recent
+            recent.append((position, value))
+            while recent and recent[0][0] < position - self._keep:
+                recent.popleft()
+        peak = self.full.update(position, value, now)
+        return self._send(peak, early=False) if peak is not None else None
+
+    def update_early(self, position: int, value: float, now: int) -> EarlyCut | None:
+        """The early look's value at ``position``, known since frame ``now``."""
+        if self.early is None:
+            return None
+        peak = self.early.update(position, value, now)
+        if peak is None:
+            return None
+        since = peak.position - self.early_after
+        if not any(v >= self.threshold for p, v in self._full_recent if p >= since):
+            return None
+        return self._send(peak, early=True)
+
+    def _send(self, peak: Peak, early: bool) -> EarlyCut | None:
+        sent = self._sent
+        if any(abs(peak.position - p) < self.min_gap for p in sent):
+            return None
+        sent.append(peak.position)
+        while len(sent) > 4:
+            sent.popleft()
+        return EarlyCut(peak, early)
