@@ -143,6 +143,7 @@ def evaluate_identity(takes: Sequence[LabelledTake], config: Any,
     names = [t.name for t in takes]
     per: dict[str, Any] = {}
     pairs: dict[str, list] = {}
+    after_by: dict[str, list[float]] = {}     # decision delays after the transitions, s
     for lt in takes:
         key = lt.name if names.count(lt.name) == 1 else f"{lt.group}/{lt.name}"
         if progress is not None:
@@ -151,16 +152,26 @@ def evaluate_identity(takes: Sequence[LabelledTake], config: Any,
         run = run_identity(take, config)
         truth = truth_labels(lt, take.n_frames)
         st = run.tracker.stats
+        after: list[float] = []
         per[key] = {"group": lt.group, **scores(truth, run.decided),
                     "corrected": scores(truth, run.corrected),
                     "segments": st.segments, "behaviours": st.new_behaviours,
                     "corrections": st.corrections, "true_behaviours": len(set(truth)),
                     "decision_delay_s": _delays(run, take.frame_rate,
-                                                [t.mid for t in lt.transitions])}
+                                                [t.mid for t in lt.transitions], after),
+                    }
         pairs.setdefault(lt.group, []).append((key, truth, run.decided))
+        after_by.setdefault(lt.group, []).extend(after)
     allp = [p for g in pairs.values() for p in g]
-    return {"pooled": pooled_scores(allp),
-            "groups": {g: pooled_scores(v) for g, v in pairs.items()},
+
+    def pooled_delay(d: list[float]) -> dict[str, float | None]:
+        return {"after_transition_median": round(float(np.median(d)), 3) if d else None,
+                "after_transition_p90": round(float(np.percentile(d, 90)), 3) if d else None,
+                "decisions": len(d)}
+    return {"pooled": {**pooled_scores(allp),
+                       "decision_delay_s": pooled_delay([x for v in after_by.values() for x in v])},
+            "groups": {g: {**pooled_scores(v), "decision_delay_s": pooled_delay(after_by[g])}
+                       for g, v in pairs.items()},
             "takes": per}
 
 
@@ -189,11 +200,12 @@ def library_loto(takes: Sequence[LabelledTake], config: Any) -> dict[str, Any] |
     return {**res["held_out"], "takes": sorted(tk), "protocol": "leave-one-take-out"}
 
 
-def _delays(run: IdentityRun, frame_rate: float, mids: Sequence[int] = ()
-            ) -> dict[str, float | None]:
+def _delays(run: IdentityRun, frame_rate: float, mids: Sequence[int] = (),
+            after: list[float] | None = None) -> dict[str, float | None]:
     """Decision times of the segments after cuts, s: ``median``/``max`` of (decision frame
     - segment boundary); ``after_transition_median``: of (decision frame - labelled
-    transition mid) for the segments whose boundary lies within 1 s of one."""
+    transition mid) for the segments whose boundary lies within 1 s of one (each of those
+    also appended to ``after``, for the pooled figures)."""
     dec = [m for m in run.tracker.history if not m.correction and m.segment > 0]
     d = [(m.decided_frame - m.boundary) / frame_rate for m in dec]
     out: dict[str, float | None] = {"median": None, "max": None, "after_transition_median": None}
@@ -209,6 +221,8 @@ def _delays(run: IdentityRun, frame_rate: float, mids: Sequence[int] = ()
                 t.append((m.decided_frame - int(mids_a[j])) / frame_rate)
     if t:
         out["after_transition_median"] = round(float(np.median(t)), 3)
+    if after is not None:
+        after.extend(t)
     return out
 
 
@@ -225,9 +239,14 @@ def format_identity_table(doc: dict[str, Any]) -> str:
                      f"{t['segments']:4d} {t['behaviours']:4d} {t['true_behaviours']:4d} "
                      f"{t['corrections']:4d}  {'-' if d is None else f'{d:.2f}':>6} "
                      f"{'-' if dl is None else f'{dl:.2f}':>6}")
+    def vs_lab(s: dict) -> str:
+        d = s.get("decision_delay_s", {}).get("after_transition_median")
+        return f"{'-' if d is None else f'{d:.2f}':>6}"
+    pad = " " * 35
     for g, s in doc["groups"].items():
-        lines.append(f"{'pooled ' + g:<16} {s['ari']:6.3f} {s['nmi']:6.3f}")
-    lines.append(f"{'pooled':<16} {doc['pooled']['ari']:6.3f} {doc['pooled']['nmi']:6.3f}")
+        lines.append(f"{'pooled ' + g:<16} {s['ari']:6.3f} {s['nmi']:6.3f}{pad}{vs_lab(s)}")
+    lines.append(f"{'pooled':<16} {doc['pooled']['ari']:6.3f} {doc['pooled']['nmi']:6.3f}"
+                 f"{pad}{vs_lab(doc['pooled'])}")
     lib = doc.get("library")
     if lib:
         lines.append(f"library (named, leave-one-take-out over {', '.join(lib['takes'])}): "

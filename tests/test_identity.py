@@ -262,7 +262,12 @@ def test_evaluate_identity_json(tmp_path):
     assert out.returncode == 0, out.stderr
     doc = json.loads(out.stdout)
     ident = doc["identity"]
-    assert set(ident["pooled"]) == {"ari", "nmi"}
+    assert set(ident["pooled"]) == {"ari", "nmi", "decision_delay_s"}
+    # pooled decision delay: one take, so its decisions' median is the take's
+    d = ident["pooled"]["decision_delay_s"]
+    assert d["after_transition_median"] == ident["takes"]["86_01"]["decision_delay_s"][
+        "after_transition_median"]
+    assert d["decisions"] >= 5 and 0 < d["after_transition_median"] <= d["after_transition_p90"]
     assert list(ident["takes"]) == ["86_01"]
     t = ident["takes"]["86_01"]
     assert t["true_behaviours"] == 4             # walk, jump, punch, leg_kick
