@@ -8,7 +8,10 @@ as ``rtseg live`` would on a USB suit: pose features, the default live detector 
 cuts sent over OSC to 127.0.0.1:9123 (listen with ``oscdump 9123``) and printed as they
 happen, each followed by its behaviour id (``[identity]``, on in the demo unless
 ``--no-identity``): an earlier segment's id when the behaviour recurs, else a new one.
-The first behaviour change comes 5 s in, so the first cut appears about 7 s in; the demo
+Without ``--config`` the identity threshold is the synthesiser's
+(``rtseg.simulators.synth.IDENTITY_THRESHOLD``, 7.0: its instances of one behaviour differ
+more than real repeats), not the mocap default.
+The first behaviour change comes 5 s in, so the first cut appears about 6 s in; the demo
 ends by itself after ``--duration`` seconds (default 60).  Ctrl-C stops it cleanly.
 """
 
@@ -39,6 +42,9 @@ def run(args: argparse.Namespace) -> int:
     script = args.script or DEMO_SCRIPT
     if not args.no_identity:
         cfg["identity.enabled"] = True
+        if args.config is None:       # the synthesiser's own spread sets its threshold
+            from rtseg.simulators.synth import IDENTITY_THRESHOLD
+            cfg["identity.threshold"] = IDENTITY_THRESHOLD
     try:
         faults = FaultConfig.parse(args.faults)
         synth = synthesize(script, frame_rate=args.rate, seed=args.seed)
