@@ -23,7 +23,8 @@ picked causally (``rtseg.detectors.peaks.CausalPeaks``: at least ``threshold``,
 below ``drop`` x the maximum) and each is sent once, as a cut at c.
 
 Delay: a cut at c is known ``after`` frames later plus the confirmation (at most ``hold``
-frames): 1.75 + <= 1 s at the defaults.  The statistics of every ``step``-frame block are
+frames): 2 + <= 1 s at the defaults; about 1 + <= 0.5 s when the early look (below) sends
+it.  The statistics of every ``step``-frame block are
 summed once (one BLAS call); windows are differences of their prefix sums, and each
 window's models are fitted once (``window_models.fit``: one 56x56 eigen-decomposition) and
 reused while the window is in use (A becomes A0 w frames later).  A position's before
@@ -47,7 +48,9 @@ contrast.  Its maxima (at least ``early_threshold``, confirmed within ``early_ho
 sent when the full contrast corroborates them (``rtseg.detectors.early``): so a clear
 change is sent about ``after - early_after`` frames sooner, and a change the early look
 misses or that the full look does not back is still sent from the full look.
-``Cut.score`` and ``confidence`` then come from the early look and its threshold.
+``Cut.score`` and ``confidence`` then come from the early look and its threshold.  When
+both looks send a cut on the same frame (two changes at least ``min_gap`` apart), the
+second goes out with the next frame (its ``detected_at`` says so); a restart drops it.
 """
 
 from __future__ import annotations
