@@ -59,6 +59,7 @@ class WindowModel:
     window's own mean per-frame projection error; ppca_var (r_ppca,): the kept variances;
     ppca_sigma2: the variance of every other direction; nonnull: the number of directions
     that vary at all (d less the structural null space: the input's effective dimension).
+    basis (d, max(r_pca, r_ppca)): the eigenvectors both bases are leading columns of.
     """
     stats: WindowStats
     pca_basis: np.ndarray
@@ -67,6 +68,7 @@ class WindowModel:
     ppca_var: np.ndarray
     ppca_sigma2: float
     nonnull: int
+    basis: np.ndarray
 
 
 def fit(stats: WindowStats, pca_energy: float = 0.9, ppca_energy: float = 0.95,
@@ -83,24 +85,32 @@ def fit(stats: WindowStats, pca_energy: float = 0.9, ppca_energy: float = 0.95,
     rest = cov[q:nonnull]
     sigma2 = max(float(rest.mean()) if len(rest) else noise_floor, noise_floor)
     return WindowModel(stats, V[:, :r], own, V[:, :q], np.maximum(cov[:q], noise_floor), sigma2,
-                       nonnull)
+                       nonnull, V[:, :max(r, q)])
 
 
-def _moments_about(y: WindowStats, mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(second-moment matrix sum (x - mu)(x - mu)^T of y's frames, y.mean - mu)."""
-    dm = y.mean - mu
-    return y.scatter + y.n * np.outer(dm, dm), dm
+def _errors(y: WindowStats, m: WindowModel) -> tuple[float, float]:
+    """(``pca_error(y | m)``, ``ppca_msq(y | m)``) from y's statistics, without forming y's
+    second moments about m's mean: with dm = y.mean - m's mean, M = S_y + n dm dm^T, so
+    tr M = tr S_y + n |dm|^2 and v^T M v = v^T S_y v + n (v^T dm)^2 for every basis column v
+    (one product S_y W for both models)."""
+    n = y.n
+    dm = y.mean - m.stats.mean
+    W = m.basis
+    if W.shape[1]:
+        quad = np.einsum("ij,ij->j", W, y.scatter @ W) + n * (W.T @ dm) ** 2
+    else:
+        quad = np.zeros(0)
+    tr = float(np.trace(y.scatter)) + n * float(dm @ dm)
+    r, q = m.pca_basis.shape[1], m.ppca_basis.shape[1]
+    pca = (tr - float(quad[:r].sum())) / n / m.pca_own
+    P = quad[:q] / n
+    ppca = float((P / m.ppca_var).sum() + (tr / n - float(P.sum())) / m.ppca_sigma2)
+    return pca, ppca
 
 
 def pca_error(y: WindowStats, m: WindowModel) -> float:
     """Mean per-frame projection error of y's frames off m's mean + hyperplane, over m's own."""
-    return _pca_error_m(_moments_about(y, m.stats.mean)[0], y.n, m)
-
-
-def _pca_error_m(M: np.ndarray, n: int, m: WindowModel) -> float:
-    B = m.pca_basis
-    proj = float(np.einsum("ij,ij->", B, M @ B)) if B.shape[1] else 0.0
-    return (float(np.trace(M)) - proj) / n / m.pca_own
+    return _errors(y, m)[0]
 
 
 def pca_distance(a: WindowModel, b: WindowModel) -> float:
@@ -110,14 +120,7 @@ def pca_distance(a: WindowModel, b: WindowModel) -> float:
 
 def ppca_msq(y: WindowStats, m: WindowModel) -> float:
     """Mean squared Mahalanobis distance of y's frames under m's PPCA Gaussian."""
-    return _ppca_msq_m(_moments_about(y, m.stats.mean)[0], y.n, m)
-
-
-def _ppca_msq_m(M: np.ndarray, n: int, m: WindowModel) -> float:
-    M = M / n
-    B = m.ppca_basis
-    P = np.einsum("ij,ij->j", B, M @ B) if B.shape[1] else np.zeros(0)
-    return float((P / m.ppca_var).sum() + (float(np.trace(M)) - float(P.sum())) / m.ppca_sigma2)
+    return _errors(y, m)[1]
 
 
 def ppca_distance(a: WindowModel, b: WindowModel) -> float:
@@ -126,20 +129,16 @@ def ppca_distance(a: WindowModel, b: WindowModel) -> float:
 
 
 def distances(a: WindowModel, b: WindowModel) -> tuple[float, float]:
-    """(``pca_distance(a, b)``, ``ppca_distance(a, b)``) with each window's second moments
-    about the other's mean computed once for both models."""
-    Mba = _moments_about(b.stats, a.stats.mean)[0]
-    Mab = _moments_about(a.stats, b.stats.mean)[0]
-    pca = math.sqrt(max(_pca_error_m(Mba, b.stats.n, a), 0.0)
-                    * max(_pca_error_m(Mab, a.stats.n, b), 0.0))
-    ppca = math.sqrt(max(_ppca_msq_m(Mba, b.stats.n, a), _ppca_msq_m(Mab, a.stats.n, b), 0.0))
-    return pca, ppca
+    """(``pca_distance(a, b)``, ``ppca_distance(a, b)``), each direction's two errors from
+    one pass (``_errors``)."""
+    pb, qb = _errors(b.stats, a)
+    pa, qa = _errors(a.stats, b)
+    return math.sqrt(max(pb, 0.0) * max(pa, 0.0)), math.sqrt(max(qb, qa, 0.0))
 
 
 def one_sided(y: WindowStats, m: WindowModel) -> tuple[float, float]:
-    """(``pca_error(y | m)``, root of ``ppca_msq(y | m)``): y's frames under m's models only,
-    with y's second moments about m's mean computed once.  Needs no model of y, so a window
-    can be scored before (or without) its own eigen-decomposition."""
-    M = _moments_about(y, m.stats.mean)[0]
-    return (max(_pca_error_m(M, y.n, m), 0.0),
-            math.sqrt(max(_ppca_msq_m(M, y.n, m), 0.0)))
+    """(``pca_error(y | m)``, root of ``ppca_msq(y | m)``): y's frames under m's models only.
+    Needs no model of y, so a window can be scored before (or without) its own
+    eigen-decomposition."""
+    p, q = _errors(y, m)
+    return max(p, 0.0), math.sqrt(max(q, 0.0))
