@@ -3,14 +3,20 @@ sensitivity.
 
     python3 benchmarks/loto.py [DATA] [--synth-seeds 0 1 2 3 4 5] [--json]
     python3 benchmarks/loto.py [DATA] --select-on SPLICED_DIR [...]   # chosen on other people
+    python3 benchmarks/loto.py ../shared/data --nested --max-median 2.0 --fix step_s=0.125
+                                                                      # what chose the shipped set
 
 Every take of DATA (a folder laid out like ../shared/data: its cmu and tsseg4d groups) and
 the synthetic performances (``rtseg.simulators.synth``, the default script, one per seed)
 goes once through the live pipeline (``rtseg.online_eval``: the same features as
 ``rtseg live``); the features fed to the detector are kept, and every candidate parameter
-set runs the real ``ContrastDetector`` on them (the contrast profile is computed once per
-window geometry; the causal peak picker runs per threshold/hold/drop, and the script
-checks that this equals a full detector run for the shipped defaults).
+set runs the real ``ContrastDetector`` on them (the full and early profiles are computed
+once per window geometry - step, after window, early window; the cut picker
+``EarlyCuts`` is replayed on them per threshold/hold/drop/early threshold/early hold, and
+the script checks that this gives the same cuts, sent on the same frames, as full detector
+runs of the shipped defaults with and without the early look).  ``--fix KEY=VALUE`` holds
+one grid parameter at one value (the shipped set holds the step at 1/8 s: the speed target
+leaves no room for the 1/12 s step's 1.5x window fits).
 
 A parameter set is scored on a set of takes by the mean over those takes of each take's F1
 at +-0.5 s (``--objective takes``: every performance counts once, as it does when it is the
