@@ -300,7 +300,9 @@ def _wait_bound(port: int, proc: subprocess.Popen, timeout: float = 20.0) -> Non
 @needs_cmu
 def test_cmu_take_replays_as_vmc_into_rtseg_live(tmp_path):
     port = _free_udp_port()
-    live = _live(f"osc://127.0.0.1:{port}?format=vmc", tmp_path)
+    # a 4 MB socket buffer and a deep queue: the 10x-speed burst must survive a loaded
+    # machine (with the OS default buffer, 1/3 of the datagrams were lost once under load)
+    live = _live(f"osc://127.0.0.1:{port}?format=vmc&rcvbuf=4194304&queue=10000", tmp_path)
     sim = None
     try:
         _wait_bound(port, live)
