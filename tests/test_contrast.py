@@ -285,3 +285,49 @@ def test_early_look_sends_the_same_changes_sooner(perf):
 def test_bad_early_window_is_refused(kw):
     with pytest.raises(ValueError):
         ContrastDetector(**kw)
+
+
+def test_two_cuts_confirmed_on_one_frame_go_out_one_frame_apart(perf):
+    """When both looks send a cut on the same frame (two changes >= min_gap apart), the
+    detector returns the first on that frame and the second on the next, whose
+    detected_at says so; none is lost."""
+    from rtseg.detectors.early import EarlyCut
+    from rtseg.detectors.peaks import Peak
+    _, X = perf
+    det = make_online("contrast", FR)
+
+    class BothAtOnce:
+        """Stands in for EarlyCuts: the full look confirms a peak on its first value, the
+        early look on the same frame."""
+        early = det.peaks.early
+        full = det.peaks.full
+
+        def __init__(self):
+            self.full_at = None
+            self.early_sent = False
+
+        def reset(self):
+            pass
+
+        def update_full(self, position, value, now):
+            if self.full_at is None:
+                self.full_at = now
+                return EarlyCut(Peak(position, 9.0, now), False)
+            return None
+
+        def update_early(self, position, value, now):
+            if now == self.full_at and not self.early_sent:
+                self.early_sent = True
+                return EarlyCut(Peak(position, 9.0, now), True)
+            return None
+
+    det.peaks = BothAtOnce()
+    out = [(i, det.update(x)) for i, x in enumerate(X[:1500])]
+    cuts = [(i, c) for i, c in out if c is not None]
+    assert len(cuts) == 2, cuts
+    (i1, c1), (i2, c2) = cuts
+    assert i2 == i1 + 1 and c1.detected_at == i1 and c2.detected_at == i2
+    # the full look's cut first (an earlier position), then the early look's
+    assert c1.frame < c2.frame
+    assert c1.confidence == pytest.approx(1 - det.threshold / 9.0)
+    assert c2.confidence == pytest.approx(1 - det.peaks.early.threshold / 9.0)
