@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from rtseg.identity import IdentityTracker
-from rtseg.identity_eval import pooled_scores, truth_labels
+from rtseg.identity_eval import decision_delays_after, pooled_scores, truth_labels
 from rtseg.labels import find_labelled_takes
 from rtseg.online_eval import fed_features, live_config, live_cuts
 
@@ -48,15 +48,7 @@ def replay(d: dict, threshold: float, method: str, decide_after_s: float
         tr.update(f, X[k])
         for b in by.get(f, ()):
             tr.on_cut(b, f, method)
-    mids = np.asarray(d["mids"], dtype=np.int64)
-    delays = []
-    for m in tr.history:
-        if m.correction or m.segment == 0 or not len(mids):
-            continue
-        j = int(np.argmin(np.abs(mids - m.boundary)))
-        if abs(int(mids[j]) - m.boundary) <= d["fr"]:
-            delays.append((m.decided_frame - int(mids[j])) / d["fr"])
-    return tr.frame_labels(d["n"]), delays
+    return tr.frame_labels(d["n"]), decision_delays_after(tr.history, d["fr"], d["mids"])
 
 
 def recurring_script(seed: int, n: int = 8) -> str:

@@ -152,14 +152,13 @@ def evaluate_identity(takes: Sequence[LabelledTake], config: Any,
         run = run_identity(take, config)
         truth = truth_labels(lt, take.n_frames)
         st = run.tracker.stats
-        after: list[float] = []
+        after = decision_delays_after(run.tracker.history, take.frame_rate,
+                                      [t.mid for t in lt.transitions])
         per[key] = {"group": lt.group, **scores(truth, run.decided),
                     "corrected": scores(truth, run.corrected),
                     "segments": st.segments, "behaviours": st.new_behaviours,
                     "corrections": st.corrections, "true_behaviours": len(set(truth)),
-                    "decision_delay_s": _delays(run, take.frame_rate,
-                                                [t.mid for t in lt.transitions], after),
-                    }
+                    "decision_delay_s": _delays(run, take.frame_rate, after)}
         pairs.setdefault(lt.group, []).append((key, truth, run.decided))
         after_by.setdefault(lt.group, []).extend(after)
     allp = [p for g in pairs.values() for p in g]
@@ -200,29 +199,37 @@ def library_loto(takes: Sequence[LabelledTake], config: Any) -> dict[str, Any] |
     return {**res["held_out"], "takes": sorted(tk), "protocol": "leave-one-take-out"}
 
 
-def _delays(run: IdentityRun, frame_rate: float, mids: Sequence[int] = (),
-            after: list[float] | None = None) -> dict[str, float | None]:
+def decision_delays_after(history: Sequence[Any], frame_rate: float,
+                          mids: Sequence[int]) -> list[float]:
+    """For each decision (``IdentityDecision``, not a correction, not segment 0) whose
+    segment boundary lies within 1 s of a labelled transition mid: decision frame - that
+    mid, in seconds."""
+    mids_a = np.asarray(mids, dtype=np.int64)
+    out: list[float] = []
+    if not len(mids_a):
+        return out
+    for m in history:
+        if m.correction or m.segment == 0:
+            continue
+        j = int(np.argmin(np.abs(mids_a - m.boundary)))
+        if abs(int(mids_a[j]) - m.boundary) <= frame_rate:
+            out.append((m.decided_frame - int(mids_a[j])) / frame_rate)
+    return out
+
+
+def _delays(run: IdentityRun, frame_rate: float, after: Sequence[float]
+            ) -> dict[str, float | None]:
     """Decision times of the segments after cuts, s: ``median``/``max`` of (decision frame
-    - segment boundary); ``after_transition_median``: of (decision frame - labelled
-    transition mid) for the segments whose boundary lies within 1 s of one (each of those
-    also appended to ``after``, for the pooled figures)."""
-    dec = [m for m in run.tracker.history if not m.correction and m.segment > 0]
-    d = [(m.decided_frame - m.boundary) / frame_rate for m in dec]
+    - segment boundary); ``after_transition_median``: the median of ``after``
+    (``decision_delays_after``)."""
+    d = [(m.decided_frame - m.boundary) / frame_rate for m in run.tracker.history
+         if not m.correction and m.segment > 0]
     out: dict[str, float | None] = {"median": None, "max": None, "after_transition_median": None}
     if d:
         out["median"] = round(float(np.median(d)), 3)
         out["max"] = round(float(np.max(d)), 3)
-    mids_a = np.asarray(mids, dtype=np.int64)
-    t = []
-    for m in dec:
-        if len(mids_a):
-            j = int(np.argmin(np.abs(mids_a - m.boundary)))
-            if abs(int(mids_a[j]) - m.boundary) <= frame_rate:
-                t.append((m.decided_frame - int(mids_a[j])) / frame_rate)
-    if t:
-        out["after_transition_median"] = round(float(np.median(t)), 3)
-    if after is not None:
-        after.extend(t)
+    if after:
+        out["after_transition_median"] = round(float(np.median(after)), 3)
     return out
 
 
