@@ -222,42 +222,45 @@ class ContrastDetector(OnlineDetector):
                    confidence=float(min(max(conf, 0.0), 1.0)),
                    detected_at=at, score=float(peak.value))
 
+    def _stats(self, lo: int, hi: int) -> WindowStats:
+        """Statistics of blocks [lo, hi), from the prefix-sum ring."""
+        cap = self._cap
+        return WindowStats.from_sums((hi - lo) * self.step,
+                                     self._P1[hi % cap] - self._P1[lo % cap],
+                                     self._P2[hi % cap] - self._P2[lo % cap])
+
     def _model(self, lo: int, hi: int) -> WindowModel:
         m = self._models.get((lo, hi))
         if m is None:
-            cap = self._cap
-            stats = WindowStats.from_sums((hi - lo) * self.step,
-                                          self._P1[hi % cap] - self._P1[lo % cap],
-                                          self._P2[hi % cap] - self._P2[lo % cap])
-            m = self._models[(lo, hi)] = fit(stats, **self.fit_args)
+            m = self._models[(lo, hi)] = fit(self._stats(lo, hi), **self.fit_args)
         return m
+
+    def _before(self, c: int) -> tuple[WindowModel, WindowModel]:
+        """The models of A0 and A at block position c (w shorter at a segment's start)."""
+        w = min(self.wa, c // 2)
+        return self._model(c - 2 * w, c - w), self._model(c - w, c)
+
+    def _stated(self, kp: float, kq: float, a: WindowModel) -> float:
+        """sqrt(kp x kq), stated for ``reference_dims`` effective dimensions (module doc)."""
+        k = math.sqrt(max(kp, 0.0) * max(kq, 0.0))
+        return 1.0 + (k - 1.0) * math.sqrt(a.nonnull / self.reference_dims)
 
     def _contrast(self, c: int) -> float:
         """The contrast at block position c (see the module docstring)."""
-        w = min(self.wa, c // 2)
-        a0, a, b = self._model(c - 2 * w, c - w), self._model(c - w, c), \
-            self._model(c, c + self.wb)
+        a0, a = self._before(c)
+        b = self._model(c, c + self.wb)
         (p_ab, q_ab), (p_0a, q_0a) = distances(a, b), distances(a0, a)
-        kp = p_ab / max(p_0a, 1e-300)
-        kq = q_ab / max(q_0a, 1e-300)
         oldest = c + 1 - 2 * self.wa
         for key in [k for k in self._models if k[0] < oldest]:
             del self._models[key]
-        k = math.sqrt(max(kp, 0.0) * max(kq, 0.0))
-        return 1.0 + (k - 1.0) * math.sqrt(a.nonnull / self.reference_dims)
+        return self._stated(p_ab / max(p_0a, 1e-300), q_ab / max(q_0a, 1e-300), a)
 
     def _early(self, c: int) -> float:
         """The early look at block position c (module docstring): B' = [c, c + we) under
         the models of A, over A under those of A0 (both already fitted)."""
-        w = min(self.wa, c // 2)
-        a0, a = self._model(c - 2 * w, c - w), self._model(c - w, c)
-        cap = self._cap
-        hi = c + self.we
-        b = WindowStats.from_sums(self.we * self.step, self._P1[hi % cap] - self._P1[c % cap],
-                                  self._P2[hi % cap] - self._P2[c % cap])
-        (p_b, q_b), (p_a, q_a) = one_sided(b, a), one_sided(a.stats, a0)
-        k = math.sqrt((p_b / max(p_a, 1e-300)) * (q_b / max(q_a, 1e-300)))
-        return 1.0 + (k - 1.0) * math.sqrt(a.nonnull / self.reference_dims)
+        a0, a = self._before(c)
+        (p_b, q_b), (p_a, q_a) = one_sided(self._stats(c, c + self.we), a), one_sided(a.stats, a0)
+        return self._stated(p_b / max(p_a, 1e-300), q_b / max(q_a, 1e-300), a)
 
 
 def segment_contrast(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,

@@ -2,7 +2,7 @@
 
 The contrast detector (``rtseg.detectors.contrast``) scores every grid position c twice:
 
-- the **full look**, the two-window contrast with the whole after window (1.75 s at the
+- the **full look**, the two-window contrast with the whole after window (2 s at the
   defaults), known ``after`` frames after c;
 - the **early look**, a one-sided contrast with a shorter after window (``early_after``,
   1 s), known sooner.  Alone it is noisy: a short window over a slow cycle differs from the
@@ -98,6 +98,8 @@ class EarlyCuts:
         if any(abs(peak.position - p) < self.min_gap for p in sent):
             return None
         sent.append(peak.position)
+        # cuts are >= min_gap apart, so at most 3 lie within min_gap of any position, and a
+        # new peak lies near the newest ones (within the longest delay): 4 are enough
         while len(sent) > 4:
             sent.popleft()
         return EarlyCut(peak, early)
