@@ -140,15 +140,10 @@ def peaks_on_trace(det: ContrastDetector, p: dict, fr: float) -> list[tuple[int,
     a run's profiles (clean take: the full look's value at c is known at c + after - 1, the
     early look's when its trace says; in one block the full look comes first, and a second
     cut of the same block goes out with the next frame, as in the detector)."""
-    from rtseg.detectors import frames
-    ea = frames(p["early_after_s"], fr) if p["early_after_s"] else 0
-    pk = EarlyCuts(p["threshold"], hold=frames(p["hold_s"], fr),
-                   min_gap=frames(p["min_gap_s"], fr), drop=p["drop"],
-                   early_threshold=p["early_threshold"] if ea else None,
-                   early_hold=frames(p["early_hold_s"], fr), early_after=det.we * det.step)
+    pk: EarlyCuts = detector(p, fr).peaks      # the picker a detector with p would use
     lag = det.wb * det.step - 1
     events = [(pos + lag, 0, pos, v) for pos, v, _ in det.trace]
-    if ea:
+    if pk.early is not None:
         events += [(now, 1, pos, v) for pos, v, now in det.trace_early]
     events.sort()
     out = []
@@ -234,7 +229,10 @@ def main() -> int:
         key, _, value = item.partition("=")
         if key not in GRID:
             ap.error(f"--fix: {key!r} is not a grid parameter ({', '.join(GRID)})")
-        GRID[key] = [float(value)]
+        try:
+            GRID[key] = [float(value)]
+        except ValueError:
+            ap.error(f"--fix {item!r}: the value must be a number")
     MAX_MEDIAN_S, MAX_P90_S = args.max_median, args.max_median + 1.0
     data = Path(args.data)
     if not (data / "cmu").is_dir() and not (data / "tsseg4d").is_dir():
