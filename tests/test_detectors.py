@@ -328,6 +328,8 @@ def test_load_params_user_file_overrides(tmp_path):
     ("[gmm]\nn_components = \"four\"\n", "n_components"),
     ("[gmm]\ninit = \"best\"\n", "init"),
     ("[pca]\nk_sigma = true\n", "k_sigma"),
+    ("[contrast]\nearly_after_s = -1.0\n", "early_after_s"),
+    ("[contrast]\nearly_threshold = 0\n", "early_threshold"),
 ])
 def test_load_params_rejects_bad_keys_naming_them(tmp_path, text, word):
     f = tmp_path / "bad.toml"

@@ -161,6 +161,9 @@ def test_bad_parameters_are_refused():
         IdentityTracker(120.0, threshold=0)
     with pytest.raises(ValueError, match="decide_after_s"):
         IdentityTracker(120.0, decide_after_s=0)
+    from rtseg.config import ConfigError
+    with pytest.raises(ConfigError, match="name_after_s"):
+        from_dict({"identity": {"name_after_s": 0.0}})
     with pytest.raises(Exception, match="identity.threshold"):
         from_dict({"identity": {"threshold": 0.5}})
 
