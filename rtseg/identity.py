@@ -21,7 +21,8 @@ A cut reaches the tracker when the detector reveals it, ``detected - boundary`` 
 after the boundary (1-3 s for ``contrast``: about 1.2 s when its early look sends it), so
 the new segment's first frames are already summed.  The segment is decided when at least
 ``decide_after_s`` seconds of it are summed (at once when the cut arrives that late; with a
-library at least ``name_after_s``): its window [boundary + ``id_skip_s``, decision frame)
+library, a segment the library would call ``unknown`` then waits until ``name_after_s`` are
+summed, and is decided then whatever the answer): its window [boundary + ``id_skip_s``, decision frame)
 (the first 0.5 s, where a cut within the human tolerance may still hold the previous
 behaviour, left out when at least 1 s remains), at most ``max_window_s`` long, is fitted
 (``window_models.fit``) and compared with every known behaviour's model (all its finished
@@ -133,6 +134,7 @@ class IdentityStats:
     corrections: int = 0
     new_behaviours: int = 0
     clamped: int = 0                  # boundaries older than the history (window shortened)
+    name_waits: int = 0               # decisions put off to name_after_s: `unknown` sooner
 
 
 class IdentityTracker:
@@ -146,8 +148,9 @@ class IdentityTracker:
     step: frames per block.  history_s: seconds of block sums kept.
     library: a behaviour library naming each segment (module doc, Names).
     name_skip_s: seconds after the boundary left out of the named window.
-    name_after_s: with a library, seconds of the new segment summed before its decision
-        (the later of this and decide_after_s): naming needs a longer window than the id.
+    name_after_s: with a library, seconds of the new segment summed before the decision
+        of a segment the library would call ``unknown`` at decide_after_s (a longer window
+        names more segments; a name given at decide_after_s is sent then).
     id_skip_s: seconds after the boundary left out of the decision window when at least
         1 s remains (a cut may lie that far from the change, so its first frames may still
         be the previous behaviour).
@@ -195,8 +198,14 @@ class IdentityTracker:
 
     @property
     def decide_blocks(self) -> int:
-        """Blocks of a new segment summed before its decision (longer with a library)."""
-        return self._named_blocks if self.library is not None else self._id_blocks
+        """Blocks of a new segment summed before its first decision attempt."""
+        return self._id_blocks
+
+    @property
+    def named_blocks(self) -> int:
+        """With a library: blocks of a new segment summed before a segment the library
+        would call ``unknown`` is decided (a named one is decided at ``decide_blocks``)."""
+        return self._named_blocks
 
     # ------------------------------------------------------------------ streaming state
     def _init(self, d: int) -> None:
@@ -253,7 +262,7 @@ class IdentityTracker:
             self._fill = 0
             seg = self._seg
             if seg.behaviour == 0 and self._blocks >= seg.decide_block:
-                self._decide(seg, self._blocks, index)
+                self._attempt(seg, self._blocks, index)
 
     def on_cut(self, boundary: int, detected: int, method: str = "") -> None:
         """A cut of the primary detector (``boundary`` = first frame of the new segment)."""
@@ -271,7 +280,7 @@ class IdentityTracker:
         self._open(boundary, self._next_seg, blk)
         new = self._seg
         if self._complete() >= new.decide_block:
-            self._decide(new, min(self._complete(), new.block + self.max_blocks), detected)
+            self._attempt(new, min(self._complete(), new.block + self.max_blocks), detected)
 
     def step(self, index: int, x: np.ndarray | None, cuts: Sequence[Any]) -> None:
         """The pipeline hook: the fed row (None when the frame was not fed) and the cuts its
@@ -380,7 +389,23 @@ class IdentityTracker:
         self.events.append(msg)
         self.history.append(msg)
 
-    def _decide(self, seg: _Segment, end: int, frame: int) -> None:
+    def _attempt(self, seg: _Segment, end: int, frame: int) -> None:
+        """Decide ``seg`` at block ``end`` - unless a library would call it ``unknown``
+        before ``name_after_s`` of it are summed: then the decision waits for them (a
+        longer window names more segments; a name given sooner stands)."""
+        if self.library is None or end - seg.block >= self._named_blocks:
+            self._decide(seg, end, frame)
+            return
+        from rtseg.library import UNKNOWN
+        naming = self._naming(seg.boundary, frame)
+        if naming[0] == UNKNOWN:
+            seg.decide_block = seg.block + self._named_blocks
+            self.stats.name_waits += 1
+            return
+        self._decide(seg, end, frame, naming)
+
+    def _decide(self, seg: _Segment, end: int, frame: int,
+                naming: tuple[str, float] | None = None) -> None:
         end = min(end, seg.block + self.max_blocks + self._skip_blocks)
         w = self._window(seg, end, self._skip_blocks)
         j, dist = self._nearest(w) if w is not None else (0, math.inf)
@@ -390,7 +415,7 @@ class IdentityTracker:
         seg.behaviour, seg.created = j, not matched
         self.stats.decisions += 1
         if self.library is not None:
-            self._name(seg, int(frame))
+            seg.name, seg.name_distance = naming or self._naming(seg.boundary, int(frame))
         self._emit(IdentityDecision(seg.index, seg.boundary, j, int(frame),
                                     self._confidence(matched, dist), dist, new=not matched,
                                     name=seg.name, name_distance=seg.name_distance))
@@ -406,14 +431,15 @@ class IdentityTracker:
         pos = pos[np.argsort(self._ridx[pos], kind="stable")]
         return self._rows[pos]
 
-    def _name(self, seg: _Segment, frame: int) -> None:
-        W = self.named_rows(seg.boundary, frame)
+    def _naming(self, boundary: int, frame: int) -> tuple[str, float]:
+        """(name, distance) the library gives the segment starting at ``boundary`` when
+        decided at ``frame``."""
+        W = self.named_rows(boundary, frame)
         if len(W) < 2:
             from rtseg.library import UNKNOWN
-            seg.name, seg.name_distance = UNKNOWN, math.inf
-            return
+            return UNKNOWN, math.inf
         nm = self.library.name(W, self.frame_rate)
-        seg.name, seg.name_distance = nm.name, nm.distance
+        return nm.name, nm.distance
 
     def _finish(self, seg: _Segment, end: int, frame: int) -> None:
         """The segment ended at block ``end``: correct it if clearly wrong, then pool its

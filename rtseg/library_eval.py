@@ -9,7 +9,9 @@ Every figure names segments of takes the library did not learn from:
 - ``tally``: per segment ``known`` (its true name is in the library) or not; ``accuracy`` =
   known segments named right / known segments, ``unknown_rate`` = known segments named
   ``unknown`` / known segments, ``unknown_correct`` = not-known segments named ``unknown``
-  / not-known segments.
+  / not-known segments; ``decision_delay_s``: the median and p90 over the known segments
+  that start within 1 s of a change of the per-frame truth of (decision frame - that
+  change) / frame rate, the time from the labelled transition to the name on the wire.
 
 Protocols (``rtseg.library_learn.Example`` lists in, libraries learned per fold):
 leave-one-take-out (``loto``: learn from the other takes), leave-one-person-out
@@ -39,6 +41,7 @@ class Named:
     name: str
     distance: float
     known: bool = True
+    delay_s: float | None = None      # decision frame - the truth's change it follows, s
 
 
 @dataclass
@@ -51,10 +54,15 @@ class Tally:
     def summary(self) -> dict[str, Any]:
         k = [s for s in self.segments if s.known]
         u = [s for s in self.segments if not s.known]
+        d = [s.delay_s for s in k if s.delay_s is not None]
         return {"accuracy": _share(sum(s.name == s.truth for s in k), len(k)),
                 "unknown_rate": _share(sum(s.name == UNKNOWN for s in k), len(k)),
                 "unknown_correct": _share(sum(s.name == UNKNOWN for s in u), len(u)),
-                "known_segments": len(k), "unknown_segments": len(u)}
+                "known_segments": len(k), "unknown_segments": len(u),
+                "decision_delay_s": {
+                    "after_transition_median": round(float(np.median(d)), 3) if d else None,
+                    "after_transition_p90": round(float(np.percentile(d, 90)), 3) if d else None,
+                    "decisions": len(d)}}
 
 
 def _share(a: int, b: int) -> float | None:
@@ -64,21 +72,26 @@ def _share(a: int, b: int) -> float | None:
 def name_take(take: Any, truth: np.ndarray, library: Library, config: Any,
               key: str) -> list[Named]:
     """The live segments of ``take`` named by ``library`` (module doc)."""
-    from rtseg.identity_eval import run_identity
+    from rtseg.identity_eval import decision_delays_after, run_identity
     run = run_identity(take, config, library)
-    n = take.n_frames
+    n, fr = take.n_frames, float(take.frame_rate)
     segs = sorted(run.tracker.segment_names().items())
     known = set(library.names)
+    t = np.asarray(truth, dtype=str)
+    changes = np.flatnonzero(t[1:] != t[:-1]) + 1
     out = []
     for i, (seg, (b, name)) in enumerate(segs):
         e = segs[i + 1][1][0] if i + 1 < len(segs) else n
         a = 0 if i == 0 else b
         lab = truth[a:max(e, a + 1)]
         v, c = np.unique(np.asarray(lab, dtype=str), return_counts=True)
-        t = str(v[c.argmax()])
-        dist = next((m.name_distance for m in run.tracker.history
-                     if m.segment == seg and not m.correction), float("inf"))
-        out.append(Named(key, seg, b, t, name, float(dist), t in known))
+        top = str(v[c.argmax()])
+        sent = next((m for m in run.tracker.history
+                     if m.segment == seg and not m.correction), None)
+        dist = sent.name_distance if sent is not None else float("inf")
+        after = decision_delays_after([sent], fr, changes) if sent is not None else []
+        out.append(Named(key, seg, b, top, name, float(dist), top in known,
+                         after[0] if after else None))
     return out
 
 

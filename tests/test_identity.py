@@ -278,3 +278,45 @@ def test_evaluate_identity_json(tmp_path):
     assert t["ari"] == pytest.approx(ident["pooled"]["ari"])   # one take: pooled = the take
     assert t["segments"] >= 6
     assert doc["live_default"] == "contrast"
+
+
+class _LengthLibrary:
+    """Stands in for a behaviour library: names a window ``name`` once it holds at least
+    ``rows`` rows, else ``unknown`` (as a real library rejects windows too short to say)."""
+
+    def __init__(self, dims: int, rows: int, name: str = "walk") -> None:
+        self.dims, self.rows, self.label = dims, rows, name
+        self.calls: list[int] = []
+
+    def name(self, W, frame_rate=None):
+        from rtseg.library import UNKNOWN, Naming
+        self.calls.append(len(W))
+        nm = self.label if len(W) >= self.rows else UNKNOWN
+        return Naming(nm, self.label, 1.0, 0.5)
+
+
+@pytest.mark.parametrize("rows, decided_after, name, waits", [
+    (60, 180, "walk", 0),       # named at the first attempt: 1.5 s of the segment
+    (150, 240, "walk", 2),      # unknown at 1.5 s, named at 2.0 s: the decision waited
+    (10_000, 240, "unknown", 2),    # unknown either way: decided at name_after_s, unknown
+])
+def test_a_library_decision_waits_only_for_segments_it_cannot_name_yet(rows, decided_after,
+                                                                        name, waits):
+    """With a library the segment is decided at decide_after_s (1.5 s) when the library
+    names it then; a segment it would call ``unknown`` waits for name_after_s (2.0 s) and
+    is decided then whatever the answer (named window: boundary + 0.5 s on)."""
+    fr, d = 120.0, 8
+    lib = _LengthLibrary(d, rows)
+    tr = IdentityTracker(fr, library=lib, decide_after_s=1.5, name_after_s=2.0)
+    rng = np.random.default_rng(0)
+    boundary = 1200
+    for i in range(boundary + 400):
+        tr.update(i, rng.normal(size=d))
+        if i == boundary + 60:                      # the cut is revealed 0.5 s late
+            tr.on_cut(boundary, i)
+    seg1 = [m for m in tr.history if m.segment == 1]
+    assert len(seg1) == 1
+    assert seg1[0].decided_frame - boundary == decided_after - 1
+    assert seg1[0].name == name
+    # segment 0 (120 named rows at its first attempt) waits as segment 1 does
+    assert tr.stats.name_waits == waits

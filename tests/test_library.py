@@ -375,3 +375,22 @@ def test_library_leave_one_take_out_report():
     assert doc["known_segments"] >= 15 and doc["unknown_segments"] == 0
     assert 0 <= doc["accuracy"] <= 1 and 0 <= doc["unknown_rate"] <= 1
     assert doc["accuracy"] + doc["unknown_rate"] <= 1.0 + 1e-9
+    # the name goes out after the labelled change (its cut comes after the change), and
+    # within a few seconds of it; only segments starting near a change are counted
+    dd = doc["decision_delay_s"]
+    assert 0 < dd["decisions"] <= doc["known_segments"]
+    assert 0.5 < dd["after_transition_median"] <= dd["after_transition_p90"] < 5.0
+
+
+def test_library_decision_delay_counts_only_segments_near_a_change():
+    """library_eval.Tally: the delay median is over the known segments that have one (a
+    boundary within 1 s of a truth change); the others and not-known segments are left out."""
+    from rtseg.library_eval import Named, Tally
+    t = Tally()
+    t.add([Named("a", 1, 100, "walk", "walk", 1.0, True, 1.5),
+           Named("a", 2, 900, "jump", "jump", 1.0, True, 2.5),
+           Named("a", 3, 2000, "walk", "unknown", 1.0, True, None),
+           Named("a", 4, 3000, "kick", "unknown", 1.0, False, 9.0)])
+    dd = t.summary()["decision_delay_s"]
+    assert dd["decisions"] == 2
+    assert dd["after_transition_median"] == 2.0
