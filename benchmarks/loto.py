@@ -68,12 +68,14 @@ GRID = {                       # the candidates: grid step, after window, the pe
     "early_after_s": [0.0, 1.0],
     "early_threshold": [1.25, 1.5, 2.0],
     "early_hold_s": [0.25, 0.5],
+    "gate_threshold": [0.0, 3.5, 4.5, 5.5],      # the same-behaviour gate (0: off)
 }
 
 
 def grid_configs() -> list[dict]:
     """Every combination of GRID, once: with the early look off its threshold and hold
-    do not matter, so only their first values are kept."""
+    do not matter, so only their first values are kept.  The gate threshold varies
+    fastest (``main`` replays the gate on each cut list)."""
     keys = list(GRID)
     out = []
     for v in itertools.product(*GRID.values()):
@@ -155,6 +157,17 @@ def peaks_on_trace(det: ContrastDetector, p: dict, fr: float) -> list[tuple[int,
             out.append((sent.peak.position, at))
             last_now = now
     return out
+
+
+def gated(p: dict, case: Case, cuts: list[tuple[int, int]], memo: dict) -> list[tuple[int, int]]:
+    """The cuts that pass the same-behaviour gate of a detector with ``p`` (all of them
+    when its threshold is 0), replayed on the case's rows (``SameBehaviourGate.replay``);
+    ``memo`` keeps each case's window distances across thresholds."""
+    if not p["gate_threshold"]:
+        return cuts
+    gate = detector(p, case.frame_rate).gate
+    gate.memo = memo.setdefault(case.key, {})
+    return gate.replay(case.X, cuts)
 
 
 def counts(case: Case, cuts: list[tuple[int, int]]) -> tuple[int, int, int, int, list[float]]:
@@ -247,31 +260,37 @@ def main() -> int:
         configs.append({k: base[k] for k in keys})
     results: dict[tuple, dict] = {}
     traces: dict[tuple, ContrastDetector] = {}
+    ungated: dict[str, tuple] = {}           # case -> (set without the gate, its cuts)
+    memo: dict[str, dict] = {}               # case -> the gate's window distances
     for cfgv in configs:
         p = {**base, **cfgv}
         geo = (p["step_s"], p["after_s"], p["early_after_s"])
         res = {}
         for case in cases + others:
+            if case.restarts:                     # a gap: the detector itself, gate and all
+                d2 = detector(p, case.frame_rate)
+                res[case.key] = counts(case, [(c.frame, c.detected_at) for c in d2.run(case.X)])
+                continue
             if (geo, case.key) not in traces:
-                det = detector(p, case.frame_rate)
+                det = detector({**p, "gate_threshold": 0.0}, case.frame_rate)
                 det.run(case.X)
                 traces[(geo, case.key)] = det
-            det = traces[(geo, case.key)]
-            if case.restarts:
-                d2 = detector(p, case.frame_rate)
-                cuts = [(c.frame, c.detected_at) for c in d2.run(case.X)]
-            else:
-                cuts = peaks_on_trace(det, p, case.frame_rate)
-            res[case.key] = counts(case, cuts)
+            plain = tuple(v for k, v in cfgv.items() if k != "gate_threshold")
+            if ungated.get(case.key, (None,))[0] != plain:
+                ungated[case.key] = (plain, peaks_on_trace(traces[(geo, case.key)], p,
+                                                           case.frame_rate))
+            res[case.key] = counts(case, gated(p, case, ungated[case.key][1], memo))
         results[tuple(cfgv[k] for k in keys)] = res
     # the shortcut equals a full detector run for the shipped defaults (the same cuts, sent
-    # on the same frames), with and without the early look
-    for p in (base, {**base, "early_after_s": 0.0}):
+    # on the same frames), with and without the early look, with and without the gate
+    for p in (base, {**base, "early_after_s": 0.0}, {**base, "gate_threshold": 0.0}):
         for case in cases + others:
             full = [(c.frame, c.detected_at) for c in detector(p, case.frame_rate).run(case.X)]
-            det = traces[((p["step_s"], p["after_s"], p["early_after_s"]), case.key)]
+            det = traces[((p["step_s"], p["after_s"], p["early_after_s"]), case.key)] \
+                if not case.restarts else None
             if not case.restarts:
-                assert full == peaks_on_trace(det, p, case.frame_rate), case.key
+                cuts = gated(p, case, peaks_on_trace(det, p, case.frame_rate), {})
+                assert full == cuts, case.key
 
     def best(train: list[Case], kind: str | None = None) -> tuple:
         kind = kind or args.objective

@@ -74,7 +74,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from rtseg.detectors.window_models import WindowModel, WindowStats, distances, fit
+from rtseg.detectors.window_models import WindowModel, WindowStats, behaviour_distance, fit
 
 #: defaults (also the ``[identity]`` keys of ``config/live.toml``)
 DEFAULT_DECIDE_AFTER_S = 1.5
@@ -347,17 +347,8 @@ class IdentityTracker:
         return b[3]
 
     def distance(self, a: WindowModel, b: WindowModel) -> float:
-        """D(a, b) of the module docstring."""
-        deff = max(a.nonnull, b.nonnull, 1)
-        p, q = distances(a, b)
-        q /= math.sqrt(deff)
-        v = p * q
-        if not (v >= 0 and math.isfinite(v)):
-            return math.inf
-        dist = math.sqrt(v)
-        if self.reference_dims > 0:
-            dist = 1.0 + (dist - 1.0) * math.sqrt(self.reference_dims / deff)
-        return dist
+        """D(a, b) of the module docstring (``window_models.behaviour_distance``)."""
+        return behaviour_distance(a, b, self.reference_dims)
 
     def _nearest(self, stats: WindowStats) -> tuple[int, float]:
         """(behaviour id, D) of the nearest known behaviour; (0, inf) if none."""

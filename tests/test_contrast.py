@@ -264,8 +264,9 @@ def test_early_look_sends_the_same_changes_sooner(perf):
     """On clean synthetic changes the early look sends every change, each within 0.5 s of
     the labelled middle, and sooner than the full look alone."""
     res, X = perf
-    with_early = make_online("contrast", FR).run(X)
-    det = make_online("contrast", FR)
+    ungated = {"gate_threshold": 0}          # the gate holds every cut 1.5 s: the looks alone
+    with_early = make_online("contrast", FR, ungated).run(X)
+    det = make_online("contrast", FR, ungated)
     assert det.we > 0
     alone = ContrastDetector(step=det.step, before=det.wa * det.step, after=det.wb * det.step,
                              min_before=det.wmin * det.step, threshold=det.threshold,
@@ -294,7 +295,7 @@ def test_two_cuts_confirmed_on_one_frame_go_out_one_frame_apart(perf):
     from rtseg.detectors.early import EarlyCut
     from rtseg.detectors.peaks import Peak
     _, X = perf
-    det = make_online("contrast", FR)
+    det = make_online("contrast", FR, {"gate_threshold": 0})   # the picker alone
 
     class BothAtOnce:
         """Stands in for EarlyCuts: the full look confirms a peak on its first value, the

@@ -56,6 +56,7 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "early_after_s": ((int, float), _nonneg),
         "early_threshold": ((int, float), _pos),
         "early_hold_s": ((int, float), _nonneg),
+        "gate_threshold": ((int, float), _nonneg),
     },
     "pca": {
         "window_s": ((int, float), _pos),

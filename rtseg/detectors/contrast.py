@@ -51,6 +51,11 @@ misses or that the full look does not back is still sent from the full look.
 ``Cut.score`` and ``confidence`` then come from the early look and its threshold.  When
 both looks send a cut on the same frame (two changes at least ``min_gap`` apart), the
 second goes out with the next frame (its ``detected_at`` says so); a restart drops it.
+
+Same-behaviour gate (``gate_threshold`` > 0, ``rtseg.detectors.gate``): every cut is then
+held until ``gate_decide`` frames of its new segment have arrived and sent only when the
+motion after it is another behaviour than the motion before it (the identity tracker's
+window distance above ``gate_threshold``); ``detected_at`` is the deciding frame.
 """
 
 from __future__ import annotations
@@ -63,6 +68,7 @@ import numpy as np
 
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.detectors.early import EarlyCut, EarlyCuts
+from rtseg.detectors.gate import GATE_DECIDE_S, GATE_SKIP_S, GATE_WINDOW_S, SameBehaviourGate
 from rtseg.detectors.window_models import WindowModel, WindowStats, distances, fit, one_sided
 
 
@@ -78,6 +84,8 @@ class ContrastDetector(OnlineDetector):
                  ppca_energy: float = 0.95, noise_floor: float = 1e-6,
                  reference_dims: int = 48, early_after: int = 0,
                  early_threshold: float = 1.5, early_hold: int = 60,
+                 gate_threshold: float = 0.0, gate_decide: int = 180, gate_skip: int = 60,
+                 gate_window: int = 360, gate_min_after: int = 120,
                  keep_trace: bool = False) -> None:
         if step < 1:
             raise ValueError(f"step must be >= 1 frame, got {step}")
@@ -110,6 +118,14 @@ class ContrastDetector(OnlineDetector):
         #: early-look profile when keep_trace: (position, value, frame that made it known)
         self.trace_early: list[tuple[int, float, int]] = []
         self.rejected_frames = 0
+        #: the same-behaviour gate (``rtseg.detectors.gate``), None when off
+        self.gate: SameBehaviourGate | None = None
+        if gate_threshold > 0:
+            self.gate = SameBehaviourGate(
+                gate_threshold, decide_after=gate_decide, skip=gate_skip,
+                max_window=gate_window, min_after=gate_min_after,
+                ring=self.delay_frames + gate_decide + gate_window + 2 * self.step,
+                fit_args=self.fit_args)
         self._t = 0
         self._dim: int | None = None
         self._buf: np.ndarray | None = None
@@ -130,12 +146,18 @@ class ContrastDetector(OnlineDetector):
                    noise_floor=p["noise_floor"], reference_dims=p["reference_dims"],
                    early_after=frames(p["early_after_s"], frame_rate) if p["early_after_s"] else 0,
                    early_threshold=p["early_threshold"],
-                   early_hold=frames(p["early_hold_s"], frame_rate), keep_trace=keep_trace)
+                   early_hold=frames(p["early_hold_s"], frame_rate),
+                   gate_threshold=p["gate_threshold"],
+                   gate_decide=frames(GATE_DECIDE_S, frame_rate),
+                   gate_skip=frames(GATE_SKIP_S, frame_rate),
+                   gate_window=frames(GATE_WINDOW_S, frame_rate),
+                   gate_min_after=frames(1.0, frame_rate), keep_trace=keep_trace)
 
     @property
     def delay_frames(self) -> int:
         """Longest delay from a cut's frame to the frame that sends it."""
-        return self.wb * self.step + self.peaks.full.hold + self.step
+        d = self.wb * self.step + self.peaks.full.hold + self.step
+        return d if self.gate is None else max(d, self.gate.decide_after)
 
     # ------------------------------------------------------------------ state
     def restart(self) -> None:
@@ -151,6 +173,8 @@ class ContrastDetector(OnlineDetector):
         if self._dim is not None:              # the ring restarts at block 0
             self._P1[0] = 0.0
             self._P2[0] = 0.0
+        if getattr(self, "gate", None) is not None:
+            self.gate.restart()
 
     def _alloc(self, dim: int) -> None:
         self._dim = dim
@@ -179,9 +203,13 @@ class ContrastDetector(OnlineDetector):
         else:
             self._fill = 0
             self._block_done()
-        if not self._out:
-            return None
-        return self._cut(self._out.popleft(), self._t - 1)
+        cut = self._cut(self._out.popleft(), self._t - 1) if self._out else None
+        if self.gate is None:
+            return cut
+        self.gate.push(self._t - 1, x)
+        if cut is not None:
+            self.gate.hold(cut)
+        return self.gate.poll()
 
     def _block_done(self) -> None:
         B = self._buf

@@ -142,3 +142,22 @@ def one_sided(y: WindowStats, m: WindowModel) -> tuple[float, float]:
     eigen-decomposition."""
     p, q = _errors(y, m)
     return max(p, 0.0), math.sqrt(max(q, 0.0))
+
+
+def behaviour_distance(a: WindowModel, b: WindowModel, reference_dims: int = 8) -> float:
+    """How far apart two windows' behaviours are: D = sqrt(pca_distance x ppca_distance /
+    sqrt(d_eff)), d_eff = the larger number of varying directions (both factors are about
+    1 for two windows of one motion), then stated for ``reference_dims`` effective
+    dimensions, 1 + (D - 1) x sqrt(reference_dims / d_eff), so that one threshold serves
+    few and many input dims (0: not restated).  inf when undefined.  The behaviour
+    identity (``rtseg.identity``) and the same-behaviour gate (``rtseg.detectors.gate``)
+    compare windows with it."""
+    deff = max(a.nonnull, b.nonnull, 1)
+    p, q = distances(a, b)
+    v = p * q / math.sqrt(deff)
+    if not (v >= 0 and math.isfinite(v)):
+        return math.inf
+    dist = math.sqrt(v)
+    if reference_dims > 0:
+        dist = 1.0 + (dist - 1.0) * math.sqrt(reference_dims / deff)
+    return dist

@@ -1,0 +1,168 @@
+"""Same-behaviour gate: a detector's cut is sent only when the motion after it is another
+behaviour than the motion just before it.
+
+A change detector fires wherever the motion's statistics change.  Inside one behaviour
+that has phases - an arm raised and lowered, a pause in a drink, the arm circles of an
+exercise reversing - that is not a behaviour change, and the identity tracker
+(``rtseg.identity``) then gives the new segment the id of the one before it.  The gate asks
+that question of every cut before it goes out:
+
+- a cut at boundary b (frame numbers of the detector: frames since its creation) is held
+  until ``decide_after`` frames from b have arrived (at once when it arrives later, as
+  most full-look cuts do);
+- the window after it, [b + ``skip``, decision frame] (from b when fewer than 1 s would
+  remain), at most ``max_window`` frames, is compared with the ``max_window`` frames
+  before b (no further back than the last cut sent or the last restart) by the identity
+  tracker's distance (``window_models.behaviour_distance``: PCA x PPCA window models,
+  stated for 8 dimensions);
+- at or below ``threshold`` the two windows are one behaviour: the cut is dropped
+  (``dropped`` counts it, the log says so); above it the cut is sent with ``detected_at``
+  = the deciding frame.
+
+The defaults are the identity tracker's own (threshold 4.5, decision after 1.5 s, 0.5 s
+skipped, windows of at most 3 s): the gate adds no parameter of its own.  Cost: one row
+copy per frame into a ring of ``ring`` frames; per held cut two window statistics and two
+model fits (about 0.5 ms, once per cut).  A restart (gap) decides the held cuts on the
+frames that arrived before it.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import deque
+from dataclasses import replace
+
+import numpy as np
+
+from rtseg.detectors.base import Cut
+from rtseg.detectors.window_models import WindowStats, behaviour_distance, fit
+
+log = logging.getLogger("rtseg.detectors")
+
+#: the identity tracker's decision time, skipped start and longest window (rtseg.identity), s
+GATE_DECIDE_S, GATE_SKIP_S, GATE_WINDOW_S = 1.5, 0.5, 3.0
+
+
+class SameBehaviourGate:
+    """Holds a detector's cuts and sends those that change behaviour (module docstring).
+    Lengths in frames; frame numbers are the detector's (0-based, since its creation).
+
+    min_after: frames that must remain after ``skip`` for the skip to apply (1 s at 120 Hz).
+    ring: frames of rows kept (at least the detector's longest delay + ``max_window``).
+    """
+
+    def __init__(self, threshold: float = 4.5, decide_after: int = 180, skip: int = 60,
+                 max_window: int = 360, min_after: int = 120, ring: int = 1200,
+                 reference_dims: int = 8, fit_args: dict | None = None) -> None:
+        if not threshold > 0:
+            raise ValueError(f"gate threshold must be positive, got {threshold}")
+        if ring < max_window + decide_after:
+            raise ValueError(f"gate ring ({ring} frames) shorter than its windows")
+        self.threshold = float(threshold)
+        self.decide_after = int(decide_after)
+        self.skip = int(skip)
+        self.max_window = int(max_window)
+        self.min_after = max(2, int(min_after))
+        self.reference_dims = int(reference_dims)
+        self.fit_args = dict(fit_args or {})
+        self.ring = int(ring)
+        self._rows: np.ndarray | None = None
+        self._t = 0                      # frames pushed (the next frame's number)
+        self._held: deque[Cut] = deque()
+        self._out: deque[Cut] = deque()
+        self._floor = 0                  # before windows start no earlier than this frame
+        self.dropped = 0
+        self.sent = 0
+        #: (boundary, distance, sent) of every decision, for plots and benchmarks
+        self.decisions: list[tuple[int, float, bool]] = []
+
+    def push(self, t: int, x: np.ndarray) -> None:
+        """The row of frame ``t`` (frames come in order)."""
+        if self._rows is None:
+            self._rows = np.zeros((self.ring, len(x)))
+        self._rows[t % self.ring] = x
+        self._t = t + 1
+
+    def hold(self, cut: Cut) -> None:
+        """A cut of the detector, to be decided once its new segment has arrived."""
+        self._held.append(cut)
+
+    def poll(self) -> Cut | None:
+        """After each frame: decide the held cuts whose time has come (in order); the next
+        cut to send, if any (two in one frame: the second goes out with the next)."""
+        while self._held and self._t - 1 >= self._held[0].frame + self.decide_after:
+            self._decide(self._held.popleft(), self._t - 1)
+        if not self._out:
+            return None
+        cut = self._out.popleft()
+        return replace(cut, detected_at=max(cut.detected_at, self._t - 1))
+
+    def restart(self) -> None:
+        """A gap: decide every held cut on the frames so far; later windows start after."""
+        while self._held:
+            self._decide(self._held.popleft(), self._t - 1)
+        self._floor = self._t
+
+    def replay(self, X: np.ndarray, cuts: list[tuple[int, int]]) -> list[tuple[int, int]]:
+        """Offline, for benchmarks that try many cut lists on one take: the (frame,
+        sent-at frame) of the cuts that go through, given every row X the detector was fed
+        and its cuts as (frame, detected_at) in the order it made them - the same
+        decisions as feeding the frames one by one, without the per-frame loop (the
+        detector must not have restarted)."""
+        self._source = np.asarray(X, dtype=np.float64)
+        self._rows = self._source[:1]
+        self._t, out, last, sent_at = len(X), [], -1, -1
+        try:
+            for frame, detected in cuts:
+                now = max(detected, frame + self.decide_after, last)
+                if now >= len(X):
+                    break
+                last = now
+                self._t = now + 1
+                self._decide(Cut(frame, "replay", detected_at=detected), now)
+                while self._out:             # one cut a frame, as poll() sends them
+                    c = self._out.popleft()
+                    sent_at = max(c.detected_at, sent_at + 1)
+                    out.append((c.frame, sent_at))
+        finally:
+            self._source = None
+        return out
+
+    # ------------------------------------------------------------------ internals
+    _source: np.ndarray | None = None          # all rows (``replay``), else the ring
+    #: window distances by (lo, hi, a, b), shared by replays of one take (benchmarks)
+    memo: dict | None = None
+
+    def _stats(self, lo: int, hi: int) -> WindowStats:
+        if self._source is not None:
+            return WindowStats.of(self._source[lo:hi])
+        idx = np.arange(lo, hi) % self.ring
+        return WindowStats.of(self._rows[idx])
+
+    def _decide(self, cut: Cut, now: int) -> None:
+        b = cut.frame
+        oldest = self._floor if self._source is not None else max(self._floor, self._t - self.ring)
+        lo = b + self.skip if now + 1 - (b + self.skip) >= self.min_after else b
+        hi = min(now + 1, lo + self.max_window)
+        a = max(b - self.max_window, self._floor, oldest)
+        d = math.inf
+        if self._rows is not None and hi - lo >= 2 and b - a >= 2 and lo >= oldest:
+            d = self.memo.get((lo, hi, a, b)) if self.memo is not None else None
+            if d is None:
+                d = behaviour_distance(fit(self._stats(lo, hi), **self.fit_args),
+                                       fit(self._stats(a, b), **self.fit_args),
+                                       self.reference_dims)
+                if self.memo is not None:
+                    self.memo[(lo, hi, a, b)] = d
+        same = d <= self.threshold
+        self.decisions.append((b, d, not same))
+        if same:
+            self.dropped += 1
+            log.info("%s cut at frame %d dropped: the motion after it is the behaviour "
+                     "before it (distance %.2f <= %.2f; %d dropped so far)",
+                     cut.method, b, d, self.threshold, self.dropped)
+            return
+        self.sent += 1
+        self._floor = max(self._floor, b)
+        self._out.append(replace(cut, detected_at=max(cut.detected_at, now)))

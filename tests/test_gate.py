@@ -1,0 +1,110 @@
+"""The same-behaviour gate (rtseg.detectors.gate): a cut inside one behaviour is dropped, a
+cut between two behaviours is sent after the decision time; the offline replay equals
+feeding the frames; a restart decides held cuts; the contrast detector with the gate stays
+causal."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rtseg.detectors import make_online
+from rtseg.detectors.base import Cut
+from rtseg.detectors.gate import SameBehaviourGate
+from rtseg.features import take_features
+from rtseg.simulators.synth import synthesize
+
+FR = 120.0
+
+
+def _motion(kind: int, n: int, rng: np.random.Generator, d: int = 8) -> np.ndarray:
+    """n frames of one 'behaviour': a periodic motion with its own axes and tempo."""
+    t = np.arange(n) / FR
+    axes = np.random.default_rng(100 + kind).normal(size=(3, d))
+    freq = (0.8, 1.7, 2.9)[kind]
+    waves = np.stack([np.sin(2 * np.pi * freq * t), np.cos(2 * np.pi * freq * t),
+                      np.sin(4 * np.pi * freq * t)], axis=1)
+    return waves @ axes + 0.05 * rng.normal(size=(n, d))
+
+
+def _feed(gate: SameBehaviourGate, X: np.ndarray, cuts: dict[int, Cut]) -> list[Cut]:
+    out = []
+    for t, x in enumerate(X):
+        gate.push(t, x)
+        if t in cuts:
+            gate.hold(cuts[t])
+        c = gate.poll()
+        if c is not None:
+            out.append(c)
+    return out
+
+
+def test_a_cut_inside_one_behaviour_is_dropped_and_one_between_two_is_sent():
+    rng = np.random.default_rng(0)
+    X = np.vstack([_motion(0, 1200, rng), _motion(0, 600, rng), _motion(1, 1200, rng)])
+    # a false cut at 1200 (same motion on both sides), a true one at 1800, each revealed
+    # 0.5 s after its frame
+    cuts = {1260: Cut(1200, "contrast", detected_at=1260),
+            1860: Cut(1800, "contrast", detected_at=1860)}
+    gate = SameBehaviourGate()
+    sent = _feed(gate, X, cuts)
+    assert [c.frame for c in sent] == [1800]
+    assert sent[0].detected_at == 1800 + gate.decide_after      # held for 1.5 s of it
+    assert gate.dropped == 1 and gate.sent == 1
+    (b1, d1, s1), (b2, d2, s2) = gate.decisions
+    assert (b1, s1, b2, s2) == (1200, False, 1800, True)
+    assert d1 <= gate.threshold < d2
+
+
+def test_a_cut_revealed_after_the_decision_time_goes_out_at_once():
+    rng = np.random.default_rng(1)
+    X = np.vstack([_motion(0, 1200, rng), _motion(2, 1200, rng)])
+    late = 1200 + 300                                           # 2.5 s after the change
+    sent = _feed(SameBehaviourGate(), X, {late: Cut(1200, "contrast", detected_at=late)})
+    assert [(c.frame, c.detected_at) for c in sent] == [(1200, late)]
+
+
+def test_restart_decides_the_held_cuts_on_the_frames_so_far():
+    rng = np.random.default_rng(2)
+    X = np.vstack([_motion(0, 1200, rng), _motion(1, 150, rng)])
+    gate = SameBehaviourGate()
+    for t, x in enumerate(X):
+        gate.push(t, x)
+    gate.hold(Cut(1200, "contrast", detected_at=1300))
+    assert gate.poll() is None                       # 1.5 s of the segment not in yet
+    gate.restart()                           # a gap: decide on the 1.25 s that came
+    c = gate.poll()
+    assert c is not None and c.frame == 1200 and gate.sent == 1
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_replay_equals_feeding_the_frames(seed):
+    """benchmarks/loto.py replays the gate on the ungated detector's cuts: the same cuts,
+    sent on the same frames, as the detector with its gate fed frame by frame."""
+    res = synthesize("walk:6,punch:6,walk:6,squat:6,walk:6", seed=seed)
+    X = take_features(res.take)
+    gated = make_online("contrast", FR)
+    assert gated.gate is not None
+    streamed = [(c.frame, c.detected_at) for c in gated.run(X)]
+    ungated = [(c.frame, c.detected_at)
+               for c in make_online("contrast", FR, {"gate_threshold": 0}).run(X)]
+    replayed = make_online("contrast", FR).gate.replay(X, ungated)
+    assert streamed == replayed
+    assert len(streamed) >= 3
+
+
+def test_the_gated_detector_is_causal():
+    """A prefix of the frames gives exactly the gated cuts sent within it."""
+    res = synthesize("walk:6,punch:6,walk:6,squat:6", seed=2)
+    X = take_features(res.take)
+    cuts = make_online("contrast", FR).run(X)
+    assert cuts
+    for n in sorted({c.detected_at + 1 for c in cuts} | {1500, len(X) - 7}):
+        assert make_online("contrast", FR).run(X[:n]) == [c for c in cuts if c.detected_at < n]
+
+
+def test_bad_gate_settings_are_refused():
+    with pytest.raises(ValueError, match="threshold"):
+        SameBehaviourGate(threshold=0)
+    with pytest.raises(ValueError, match="ring"):
+        SameBehaviourGate(ring=100)
