@@ -452,6 +452,8 @@ class LiveSession(SessionEvents, SessionHealth):
             cut_latency_ms_p99=percentile(st.cut_latency_ms, 99),
             recording=str(rec) if rec else None,
             stop_reason=self.stop_reason, wire_cuts=st.wire_cuts,
-            input=self.input_counts() if self.pipeline is not None else {})
+            input=self.input_counts() if self.pipeline is not None else {},
+            gated={m: d.gate.dropped for m, d in self.pipeline.detectors.items()
+                   if getattr(d, "gate", None) is not None} if self.pipeline else {})
         log.info("%s", summary.text())
         return summary

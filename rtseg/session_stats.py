@@ -92,6 +92,8 @@ class SessionSummary:
     stop_reason: str
     wire_cuts: int = 0
     input: dict[str, int] = field(default_factory=dict)
+    #: per method, cuts its same-behaviour gate held back (``rtseg.detectors.gate``)
+    gated: dict[str, int] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -104,7 +106,9 @@ class SessionSummary:
                 f"{self.frames_received} frames received ({self.frame_rate:.1f}/s), "
                 f"{self.frames_processed} processed, {self.dropped} dropped, "
                 f"{input_text(self.input)}, "
-                f"{self.cuts} cuts ({methods}; {self.wire_cuts} sent over OSC), "
+                f"{self.cuts} cuts ({methods}; {self.wire_cuts} sent over OSC"
+                + "".join(f"; {k} gate held back {v}" for k, v in sorted(self.gated.items()))
+                + "), "
                 f"processing latency {lat}, "
                 f"max lag {self.max_lag_ms:.1f} ms"
                 + (f", recording {self.recording}" if self.recording else ""))

@@ -108,3 +108,14 @@ def test_bad_gate_settings_are_refused():
         SameBehaviourGate(threshold=0)
     with pytest.raises(ValueError, match="ring"):
         SameBehaviourGate(ring=100)
+
+
+def test_session_summary_counts_the_cuts_the_gate_held_back():
+    from rtseg.session_stats import SessionSummary
+    s = SessionSummary(duration_s=1.0, frames_received=120, frames_processed=120,
+                       frame_rate=120.0, cuts=2, cuts_by_method={"contrast": 2}, dropped=0,
+                       source_stats={}, pipeline={}, overruns=0, bad_frames=0, max_lag_ms=0.0,
+                       cut_latency_ms_p50=None, cut_latency_ms_p99=None, recording=None,
+                       stop_reason="test", wire_cuts=2, gated={"contrast": 3})
+    assert "2 cuts (contrast 2; 2 sent over OSC; contrast gate held back 3)" in s.text()
+    assert s.as_dict()["gated"] == {"contrast": 3}
