@@ -109,9 +109,8 @@ class SameBehaviourGate:
         sent-at frame) of the cuts that go through, given every row X the detector was fed
         and its cuts as (frame, detected_at) in the order it made them - the same
         decisions as feeding the frames one by one, without the per-frame loop (the
-        detector must not have restarted)."""
+        detector must not have restarted).  Use a fresh gate: it keeps the decisions."""
         self._source = np.asarray(X, dtype=np.float64)
-        self._rows = self._source[:1]
         self._t, out, last, sent_at = len(X), [], -1, -1
         try:
             for frame, detected in cuts:
@@ -147,7 +146,8 @@ class SameBehaviourGate:
         hi = min(now + 1, lo + self.max_window)
         a = max(b - self.max_window, self._floor, oldest)
         d = math.inf
-        if self._rows is not None and hi - lo >= 2 and b - a >= 2 and lo >= oldest:
+        have_rows = self._source is not None or self._rows is not None
+        if have_rows and hi - lo >= 2 and b - a >= 2:
             d = self.memo.get((lo, hi, a, b)) if self.memo is not None else None
             if d is None:
                 d = behaviour_distance(fit(self._stats(lo, hi), **self.fit_args),
