@@ -81,6 +81,9 @@ DEFAULT_DECIDE_AFTER_S = 1.5
 DEFAULT_NAME_AFTER_S = 2.0
 DEFAULT_ID_SKIP_S = 0.5
 DEFAULT_THRESHOLD = 4.5
+#: the longest decision window, and the least that must remain after a skipped start, s
+DEFAULT_MAX_WINDOW_S = 3.0
+MIN_WINDOW_S = 1.0
 
 
 @dataclass
@@ -157,7 +160,8 @@ class IdentityTracker:
     """
 
     def __init__(self, frame_rate: float, method: str = "", *,
-                 decide_after_s: float = DEFAULT_DECIDE_AFTER_S, max_window_s: float = 3.0,
+                 decide_after_s: float = DEFAULT_DECIDE_AFTER_S,
+                 max_window_s: float = DEFAULT_MAX_WINDOW_S,
                  threshold: float = DEFAULT_THRESHOLD, correction_margin: float = 2.0,
                  step: int = 10, history_s: float = 30.0, reference_dims: int = 8,
                  library: Any = None, name_skip_s: float = 0.5,
@@ -191,21 +195,15 @@ class IdentityTracker:
         self.library = library
         self.name_skip = max(0, int(round(name_skip_s * frame_rate)))
         self._max_window = int(round(max_window_s * frame_rate))
-        self._min_named = max(2, int(round(1.0 * frame_rate)))
+        self._min_named = max(2, int(round(MIN_WINDOW_S * frame_rate)))
         self._R = self._max_window + self.name_skip + int(round(frame_rate)) + step
         self._skip_blocks = max(0, int(round(id_skip_s * frame_rate / step)))
-        self._min_blocks = max(2, int(round(1.0 * frame_rate / step)))
+        self._min_blocks = max(2, int(round(MIN_WINDOW_S * frame_rate / step)))
 
     @property
     def decide_blocks(self) -> int:
         """Blocks of a new segment summed before its first decision attempt."""
         return self._id_blocks
-
-    @property
-    def named_blocks(self) -> int:
-        """With a library: blocks of a new segment summed before a segment the library
-        would call ``unknown`` is decided (a named one is decided at ``decide_blocks``)."""
-        return self._named_blocks
 
     # ------------------------------------------------------------------ streaming state
     def _init(self, d: int) -> None:

@@ -162,14 +162,10 @@ def evaluate_identity(takes: Sequence[LabelledTake], config: Any,
         pairs.setdefault(lt.group, []).append((key, truth, run.decided))
         after_by.setdefault(lt.group, []).extend(after)
     allp = [p for g in pairs.values() for p in g]
-
-    def pooled_delay(d: list[float]) -> dict[str, float | None]:
-        return {"after_transition_median": round(float(np.median(d)), 3) if d else None,
-                "after_transition_p90": round(float(np.percentile(d, 90)), 3) if d else None,
-                "decisions": len(d)}
     return {"pooled": {**pooled_scores(allp),
-                       "decision_delay_s": pooled_delay([x for v in after_by.values() for x in v])},
-            "groups": {g: {**pooled_scores(v), "decision_delay_s": pooled_delay(after_by[g])}
+                       "decision_delay_s": delay_summary(
+                           [x for v in after_by.values() for x in v])},
+            "groups": {g: {**pooled_scores(v), "decision_delay_s": delay_summary(after_by[g])}
                        for g, v in pairs.items()},
             "takes": per}
 
@@ -215,6 +211,13 @@ def decision_delays_after(history: Sequence[Any], frame_rate: float,
         if abs(int(mids_a[j]) - m.boundary) <= frame_rate:
             out.append((m.decided_frame - int(mids_a[j])) / frame_rate)
     return out
+
+
+def delay_summary(after: Sequence[float]) -> dict[str, float | int | None]:
+    """Median and p90 (s) of decision delays after the labelled transitions, and how many."""
+    return {"after_transition_median": round(float(np.median(after)), 3) if after else None,
+            "after_transition_p90": round(float(np.percentile(after, 90)), 3) if after else None,
+            "decisions": len(after)}
 
 
 def _delays(run: IdentityRun, frame_rate: float, after: Sequence[float]

@@ -27,6 +27,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from rtseg.identity_eval import decision_delays_after, delay_summary, run_identity
 from rtseg.library import UNKNOWN, Library
 from rtseg.library_learn import Example, learn
 
@@ -59,10 +60,7 @@ class Tally:
                 "unknown_rate": _share(sum(s.name == UNKNOWN for s in k), len(k)),
                 "unknown_correct": _share(sum(s.name == UNKNOWN for s in u), len(u)),
                 "known_segments": len(k), "unknown_segments": len(u),
-                "decision_delay_s": {
-                    "after_transition_median": round(float(np.median(d)), 3) if d else None,
-                    "after_transition_p90": round(float(np.percentile(d, 90)), 3) if d else None,
-                    "decisions": len(d)}}
+                "decision_delay_s": delay_summary(d)}
 
 
 def _share(a: int, b: int) -> float | None:
@@ -72,7 +70,6 @@ def _share(a: int, b: int) -> float | None:
 def name_take(take: Any, truth: np.ndarray, library: Library, config: Any,
               key: str) -> list[Named]:
     """The live segments of ``take`` named by ``library`` (module doc)."""
-    from rtseg.identity_eval import decision_delays_after, run_identity
     run = run_identity(take, config, library)
     n, fr = take.n_frames, float(take.frame_rate)
     segs = sorted(run.tracker.segment_names().items())

@@ -68,7 +68,8 @@ import numpy as np
 
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.detectors.early import EarlyCut, EarlyCuts
-from rtseg.detectors.gate import GATE_DECIDE_S, GATE_SKIP_S, GATE_WINDOW_S, SameBehaviourGate
+from rtseg.detectors.gate import (GATE_DECIDE_S, GATE_MIN_AFTER_S, GATE_SKIP_S, GATE_WINDOW_S,
+                                  SameBehaviourGate)
 from rtseg.detectors.window_models import WindowModel, WindowStats, distances, fit, one_sided
 
 
@@ -151,7 +152,7 @@ class ContrastDetector(OnlineDetector):
                    gate_decide=frames(GATE_DECIDE_S, frame_rate),
                    gate_skip=frames(GATE_SKIP_S, frame_rate),
                    gate_window=frames(GATE_WINDOW_S, frame_rate),
-                   gate_min_after=frames(1.0, frame_rate), keep_trace=keep_trace)
+                   gate_min_after=frames(GATE_MIN_AFTER_S, frame_rate), keep_trace=keep_trace)
 
     @property
     def delay_frames(self) -> int:
@@ -173,7 +174,7 @@ class ContrastDetector(OnlineDetector):
         if self._dim is not None:              # the ring restarts at block 0
             self._P1[0] = 0.0
             self._P2[0] = 0.0
-        if getattr(self, "gate", None) is not None:
+        if self.gate is not None:
             self.gate.restart()
 
     def _alloc(self, dim: int) -> None:

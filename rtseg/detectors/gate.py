@@ -37,11 +37,15 @@ import numpy as np
 
 from rtseg.detectors.base import Cut
 from rtseg.detectors.window_models import WindowStats, behaviour_distance, fit
+from rtseg.identity import (DEFAULT_DECIDE_AFTER_S, DEFAULT_ID_SKIP_S, DEFAULT_MAX_WINDOW_S,
+                            DEFAULT_THRESHOLD, MIN_WINDOW_S)
 
 log = logging.getLogger("rtseg.detectors")
 
-#: the identity tracker's decision time, skipped start and longest window (rtseg.identity), s
-GATE_DECIDE_S, GATE_SKIP_S, GATE_WINDOW_S = 1.5, 0.5, 3.0
+#: the identity tracker's decision time, skipped start, longest window and the least that
+#: must remain after the skip (rtseg.identity), s
+GATE_DECIDE_S, GATE_SKIP_S = DEFAULT_DECIDE_AFTER_S, DEFAULT_ID_SKIP_S
+GATE_WINDOW_S, GATE_MIN_AFTER_S = DEFAULT_MAX_WINDOW_S, MIN_WINDOW_S
 
 
 class SameBehaviourGate:
@@ -52,8 +56,8 @@ class SameBehaviourGate:
     ring: frames of rows kept (at least the detector's longest delay + ``max_window``).
     """
 
-    def __init__(self, threshold: float = 4.5, decide_after: int = 180, skip: int = 60,
-                 max_window: int = 360, min_after: int = 120, ring: int = 1200,
+    def __init__(self, threshold: float = DEFAULT_THRESHOLD, decide_after: int = 180,
+                 skip: int = 60, max_window: int = 360, min_after: int = 120, ring: int = 1200,
                  reference_dims: int = 8, fit_args: dict | None = None) -> None:
         if not threshold > 0:
             raise ValueError(f"gate threshold must be positive, got {threshold}")
@@ -111,14 +115,13 @@ class SameBehaviourGate:
         decisions as feeding the frames one by one, without the per-frame loop (the
         detector must not have restarted).  Use a fresh gate: it keeps the decisions."""
         self._source = np.asarray(X, dtype=np.float64)
-        self._t, out, last, sent_at = len(X), [], -1, -1
+        out, last, sent_at = [], -1, -1
         try:
             for frame, detected in cuts:
                 now = max(detected, frame + self.decide_after, last)
                 if now >= len(X):
                     break
                 last = now
-                self._t = now + 1
                 self._decide(Cut(frame, "replay", detected_at=detected), now)
                 while self._out:             # one cut a frame, as poll() sends them
                     c = self._out.popleft()
@@ -144,7 +147,7 @@ class SameBehaviourGate:
         oldest = self._floor if self._source is not None else max(self._floor, self._t - self.ring)
         lo = b + self.skip if now + 1 - (b + self.skip) >= self.min_after else b
         hi = min(now + 1, lo + self.max_window)
-        a = max(b - self.max_window, self._floor, oldest)
+        a = max(b - self.max_window, oldest)
         d = math.inf
         have_rows = self._source is not None or self._rows is not None
         if have_rows and hi - lo >= 2 and b - a >= 2:
