@@ -330,6 +330,8 @@ def test_load_params_user_file_overrides(tmp_path):
     ("[pca]\nk_sigma = true\n", "k_sigma"),
     ("[contrast]\nearly_after_s = -1.0\n", "early_after_s"),
     ("[contrast]\nearly_threshold = 0\n", "early_threshold"),
+    ("[contrast]\ngate_threshold = -1.0\n", "gate_threshold"),
+    ("[contrast]\ngate_threshold = \"on\"\n", "gate_threshold"),
 ])
 def test_load_params_rejects_bad_keys_naming_them(tmp_path, text, word):
     f = tmp_path / "bad.toml"
