@@ -78,7 +78,7 @@ from rtseg.detectors.window_models import WindowModel, WindowStats, behaviour_di
 
 #: defaults (also the ``[identity]`` keys of ``config/live.toml``)
 DEFAULT_DECIDE_AFTER_S = 1.5
-DEFAULT_NAME_AFTER_S = 2.0
+DEFAULT_NAME_AFTER_S = 1.75
 DEFAULT_ID_SKIP_S = 0.5
 DEFAULT_THRESHOLD = 4.5
 #: the longest decision window, and the least that must remain after a skipped start, s

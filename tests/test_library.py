@@ -65,7 +65,7 @@ def test_round_trip_through_the_file(tmp_path, library):
     assert np.allclose(back.descriptors, library.descriptors, atol=1e-5)
     assert back.threshold == pytest.approx(library.threshold)
     assert back.ratio == pytest.approx(library.ratio) and 0 < back.ratio <= 1
-    assert (back.window_s, back.step_s, back.edge_s, back.min_s) == (2.0, 1.0, 0.5, 1.0)
+    assert (back.window_s, back.step_s, back.edge_s, back.min_s) == (2.0, 0.5, 0.5, 1.0)
     assert back.examples == library.examples and back.starts == library.starts
     assert back.metric == "model" and back.k_nearest == library.k_nearest == 1
     assert np.allclose(back.bank.pairwise(), library.bank.pairwise(), rtol=1e-4, atol=1e-4)
