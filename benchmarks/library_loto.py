@@ -4,7 +4,7 @@
     python3 benchmarks/library_loto.py mocap6 [DATA_DIR]          # leave-one-take-out
     python3 benchmarks/library_loto.py single [DATA_DIR/cmu_single] # leave-one-person-out
     python3 benchmarks/library_loto.py spliced SPLICED_DIR [DATA_DIR/cmu_single]
-    (options: --no-reject, --metric model|descriptor)
+    (options: --no-reject, --metric model|descriptor, --step S, --name-after S)
 
 mocap6: the three mocap6 takes (13_29, 13_31, 14_14; exercise names); for each take a
 library learned from the other two names its live segments (``contrast`` cuts, decided
@@ -18,6 +18,8 @@ spliced: spliced performances (benchmarks/splice.py) named by a library learned 
 cmu_single takes of the people NOT in the performance.
 ``--no-reject``: no null rejection (every segment its nearest name), the ceiling.
 ``--metric descriptor``: libraries of the earlier descriptor distance (default: model).
+``--step S``: example windows every S seconds (default ``rtseg.library.DEFAULT_STEP_S``);
+``--name-after S``: the tracker's ``name_after_s`` (default: config/live.toml's).
 Prints one JSON document; parameters are the library's own (calibrated inside it).
 ``decision_delay_s`` (per summary): median / p90 seconds from a labelled change to the name
 on the wire, over the known segments that start within 1 s of one.
@@ -116,11 +118,29 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         le.METRIC = argv[k + 1]
         del argv[k:k + 2]
+    opts = {}
+    for flag in ("--step", "--name-after"):
+        if flag in argv:
+            k = argv.index(flag)
+            try:
+                opts[flag] = float(argv[k + 1])
+            except (IndexError, ValueError):
+                print(f"{flag}: seconds, a number", file=sys.stderr)
+                return 2
+            if not opts[flag] > 0:
+                print(f"{flag}: seconds, > 0", file=sys.stderr)
+                return 2
+            del argv[k:k + 2]
+    if "--step" in opts:
+        import rtseg.library_eval as le
+        le.WINDOWS["step_s"] = opts["--step"]
     if not argv or argv[0] not in ("mocap6", "single", "spliced"):
         print(__doc__, file=sys.stderr)
         return 2
     cfg, _ = live_config()
     cfg["identity.enabled"] = True
+    if "--name-after" in opts:
+        cfg["identity.name_after_s"] = opts["--name-after"]
     t0 = time.perf_counter()
     if argv[0] == "mocap6":
         doc = mocap6(Path(argv[1]) if len(argv) > 1 else DATA, cfg)
@@ -128,7 +148,10 @@ def main(argv: list[str] | None = None) -> int:
         doc = single(Path(argv[1]) if len(argv) > 1 else DATA / "cmu_single", cfg)
     else:
         doc = spliced(Path(argv[1]), Path(argv[2]) if len(argv) > 2 else DATA / "cmu_single", cfg)
-    doc = {"protocol": argv[0], "seconds": round(time.perf_counter() - t0, 1), **doc}
+    from rtseg.library import DEFAULT_STEP_S
+    doc = {"protocol": argv[0], "seconds": round(time.perf_counter() - t0, 1),
+           "step_s": opts.get("--step", DEFAULT_STEP_S),
+           "name_after_s": cfg["identity.name_after_s"], **doc}
     print(json.dumps(doc, indent=1, default=str))
     return 0
 

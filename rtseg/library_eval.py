@@ -97,6 +97,8 @@ def name_take(take: Any, truth: np.ndarray, library: Library, config: Any,
 NO_REJECT = False
 #: the libraries' distance (benchmarks/library_loto.py --metric; None: the default)
 METRIC: str | None = None
+#: the libraries' window options (benchmarks/library_loto.py --step; ``LibraryBuilder``'s)
+WINDOWS: dict[str, float] = {}
 
 
 def fold(examples: Sequence[Example], held: Callable[[Example], bool],
@@ -105,7 +107,7 @@ def fold(examples: Sequence[Example], held: Callable[[Example], bool],
     use = [e for e in examples if not held(e) and e.name not in hide]
     if not use:
         return None, []
-    lib, notes = learn(use, metric=METRIC)
+    lib, notes = learn(use, metric=METRIC, **WINDOWS)
     if NO_REJECT:
         lib.threshold, lib.ratio = float("inf"), 1.0
     return lib, notes
