@@ -8,11 +8,13 @@ repeats), and the per-frame distribution (median, p99, max: the frames that deci
 finish a segment).  Also the whole pipeline per frame with identity off and on.
 
     python3 benchmarks/identity_speed.py [--take ../shared/data/cmu/86_01.amc] [--repeat 5]
-                                         [--library LIB]
+                                         [--library LIB [--compare LIB2]]
 
 ``--library LIB`` (``rtseg learn``): the tracker also names every decided segment
 (``rtseg.library``, the library's distance: ``model`` or, version-1 files, ``descriptor``);
 the per-decision naming time is printed too (median of 50 namings of one 2.5 s window).
+``--compare LIB2``: the same window named by LIB and LIB2 alternately, 300 times each (one
+BLAS thread): medians, p90s and their ratio, side by side in one run.
 
 Without a take (or when the data folder is absent) a synthetic performance is used.
 """
@@ -59,16 +61,39 @@ def pipeline_per_frame(take, cfg) -> float:
     return (time.perf_counter() - t0) / take.n_frames * 1e6
 
 
+def compare_naming(a, b, W: np.ndarray, fr: float, name_a: str, name_b: str,
+                   reps: int = 300) -> None:
+    """Name W with libraries a and b alternately ``reps`` times each; print both medians,
+    p90s and the ratio b / a."""
+    ta, tb = [], []
+    a.name(W, fr)
+    b.name(W, fr)
+    for _ in range(reps):
+        for lib, out in ((a, ta), (b, tb)):
+            t0 = time.perf_counter()
+            lib.name(W, fr)
+            out.append((time.perf_counter() - t0) * 1e6)
+    for lib, t, n in ((a, ta, name_a), (b, tb, name_b)):
+        print(f"naming with {n}: {len(lib.names)} windows, median {np.median(t):.0f} us, "
+              f"p90 {np.percentile(t, 90):.0f} us")
+    print(f"ratio {name_b} / {name_a}: median x{np.median(tb) / np.median(ta):.2f}")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--take", help="motion file (default: CMU 86_01 when present)")
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--library", help="behaviour library naming the segments (rtseg learn)")
+    ap.add_argument("--compare", metavar="LIB2",
+                    help="with --library: time LIB2's naming against LIB's, alternately")
     args = ap.parse_args(argv)
-    library = None
+    library = other = None
+    if args.compare and not args.library:
+        ap.error("--compare needs --library")
     if args.library:
         from rtseg.library import load as load_library
         library = load_library(args.library)
+        other = load_library(args.compare, library.profile, library.dims) if args.compare else None
     take, name = load(args.take)
     cfg, primary = live_config()
     blas = _blas_limit(1)
@@ -111,6 +136,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{library.metric} distance; "
               f"one naming (2.5 s window) median {np.median(reps):.0f} us; names sent: "
               f"{', '.join(names)}")
+        if other is not None:
+            compare_naming(library, other, W, fr, args.library, args.compare)
     off, on = [], []
     for _ in range(3):                  # interleaved: the machine's load drifts
         cfg["identity.enabled"] = False

@@ -129,6 +129,47 @@ def test_learn_command_and_its_errors(tmp_path):
     assert p.returncode == 2 and "not a behaviour library" in p.stderr
 
 
+def test_learn_windows_every_step_and_an_extended_library_keeps_its_own(tmp_path):
+    """``--step`` sets how often example windows start (default 0.5 s): consecutive
+    windows of one example start 1 s (120 frames) apart with --step 1, 0.5 s apart by
+    default; extending keeps the file's step, another one is refused."""
+    from rtseg.drivers.readers import write_take
+    res = synthesize("walk:5,punch:5", seed=0)
+    take = tmp_path / "t.npz"
+    write_take(take, res.take)
+    cut = res.segments[0].stop
+    run = lambda lib, *a: subprocess.run([sys.executable, "-m", "rtseg.cli", "learn",
+                                          str(lib), *a], capture_output=True, text=True,
+                                         timeout=120)
+    walk = ("--take", str(take), "--label", "walk", "--frames", f"0:{cut}")
+    punch = ("--take", str(take), "--label", "punch", "--frames", f"{cut}:{res.take.n_frames}")
+    fr = res.take.frame_rate
+
+    def spacing(lib, name):
+        st = [s for s, n in zip(lib.starts, lib.names) if n == name]
+        return set(np.diff(st) / fr), len(st)
+
+    p = run(tmp_path / "one.json", *walk, "--step", "1")
+    assert p.returncode == 0, p.stderr
+    one = load(tmp_path / "one.json")
+    assert one.step_s == 1.0 and spacing(one, "walk")[0] == {1.0}
+    p = run(tmp_path / "half.json", *walk)
+    assert p.returncode == 0, p.stderr
+    half = load(tmp_path / "half.json")
+    assert half.step_s == 0.5 and spacing(half, "walk")[0] == {0.5}
+    n1, n05 = spacing(one, "walk")[1], spacing(half, "walk")[1]
+    assert n05 in (2 * n1 - 1, 2 * n1)
+    p = run(tmp_path / "one.json", *punch)                 # extended: its own step
+    assert p.returncode == 0, p.stderr
+    ext = load(tmp_path / "one.json")
+    assert ext.step_s == 1.0 and ext.behaviour_names == ["punch", "walk"]
+    assert spacing(ext, "punch")[0] == {1.0} and spacing(ext, "walk") == spacing(one, "walk")
+    p = run(tmp_path / "one.json", *punch, "--step", "0.5")
+    assert p.returncode == 2 and "windows every 1 s" in p.stderr
+    p = run(tmp_path / "bad.json", *walk, "--step", "0")
+    assert p.returncode == 2 and "--step" in p.stderr
+
+
 def _points_library(rows, names, k):
     """A 1-joint library (4 feature dims, 6 descriptor dims) whose windows are ``rows``
     (first descriptor coordinate; the rest 0), unit scale, no rejection."""

@@ -2,11 +2,13 @@
 
     rtseg learn LIB --take FILE --label NAME [--frames A:B] [--skeleton ASF] ...
     rtseg learn LIB --from DATA_DIR [--person S ...] [--exclude-person S ...]
+    (options: --step S, --profile NAME, --threshold D, --new, --config FILE)
 
 ``--take`` starts an example; the ``--label``, ``--frames`` (take frames [A, B), 0-based)
 and ``--skeleton`` after it belong to it.  ``--from``: every labelled take of a folder
 (``rtseg.library_learn.examples_from_dir``).  An existing LIB is extended (its examples
-kept) unless ``--new``.  The library is JSON (``rtseg.library``); ``rtseg live
+kept, and its window step) unless ``--new``.  ``--step``: example windows start every S
+seconds (default ``rtseg.library.DEFAULT_STEP_S``, 0.5).  The library is JSON (``rtseg.library``); ``rtseg live
 --behaviours LIB`` names segments with it.  Exit 2 with one line on bad input.
 """
 
@@ -47,7 +49,7 @@ def parse_frames(text: str) -> tuple[int, int]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rtseg.library import load
+    from rtseg.library import DEFAULT_STEP_S, load
     from rtseg.library_learn import example_of_take, examples_from_dir, learn
     from rtseg.online_eval import live_config
     takes = getattr(args, "takes", None) or []
@@ -68,7 +70,13 @@ def run(args: argparse.Namespace) -> int:
     path = Path(args.library)
     if path.exists() and not args.new:
         old = load(path)
-    lib, notes = learn(examples, args.profile or (old.profile if old else None))
+    step = args.step if args.step is not None else (old.step_s if old else DEFAULT_STEP_S)
+    if not step > 0:
+        raise ValueError(f"--step {step:g}: seconds, > 0")
+    if old is not None and abs(step - old.step_s) > 1e-9:
+        raise ValueError(f"--step {step:g}: {path} has windows every {old.step_s:g} s; "
+                         f"give --new to learn it again with another step")
+    lib, notes = learn(examples, args.profile or (old.profile if old else None), step_s=step)
     if old is not None:
         lib = old.merged(lib)
     if args.threshold is not None:
@@ -120,6 +128,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "examples; the others are left out with a note)")
     p.add_argument("--threshold", type=float, metavar="D",
                    help="unknown beyond this distance (default: calibrated on the library)")
+    p.add_argument("--step", type=float, metavar="S",
+                   help="example windows (2 s) start every S seconds (default 0.5; an "
+                        "extended library keeps its own)")
     p.add_argument("--new", action="store_true", help="replace LIB instead of extending it")
     p.add_argument("--config", metavar="FILE", help="session configuration (features, "
                    "calibration; default config/live.toml)")
