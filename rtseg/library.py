@@ -52,16 +52,17 @@ File: JSON (data only), ``{"format": "rtseg-behaviour-library", "version": 2, "p
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
 from rtseg.config import ConfigError
-from rtseg.library_models import LAG_S, stats_to_json, window_stats
+from rtseg.library_calibration import (MODEL_ONE_NAME_FACTOR, ONE_NAME_FACTOR, k_mean,
+                                       median_or_none, separating_rule)
+from rtseg.library_models import LAG_S, window_stats
 
 FORMAT = "rtseg-behaviour-library"
 VERSION = 2
@@ -79,19 +80,10 @@ UNKNOWN = "unknown"
 GROUPS = ("spread", "speed", "dims")
 SCALE_FLOOR = 0.05
 K_NEAREST = 3
-#: a library of one name has no unknown cases to calibrate against: its threshold is this
-#: many times its median same-name distance - the largest threshold / median ratio the
-#: calibration chose in the 25 multi-name libraries of benchmarks/library_loto.py's mocap6
-#: and cmu_single folds (median 1.15, range 0.87-1.30); it was 1.5 x the largest one
-ONE_NAME_FACTOR = 1.3
-#: the same re-derived for the model metric: the largest ratio in the 25 multi-name
-#: libraries of those folds under the model distance, with windows every
-#: ``DEFAULT_STEP_S`` (median 1.24, range 1.09-1.565; 1.45 with windows every 1 s)
-MODEL_ONE_NAME_FACTOR = 1.57
 #: example windows start every this many seconds (0.5 since 2026-12-02; 1 s before): the
-#: nearest window is likelier to meet a query's phase of the movement - held out, left-out
-#: exercises `unknown` mocap6 12 -> 13 of 17, spliced 28 -> 29 of 35, nothing lost
-#: (docs/identity.md, "Held-out figures")
+#: nearest window is likelier to meet a query's phase of the movement - held out, with the
+#: 1.75 s name wait, left-out exercises `unknown` mocap6 12 -> 13 of 17, spliced 28 -> 30
+#: of 35, nothing lost (docs/identity.md, "Held-out figures ... session 11")
 DEFAULT_STEP_S = 0.5
 
 
@@ -238,7 +230,7 @@ class Library:
             v = d[idx]
             v = v[np.isfinite(v)]
             if len(v):
-                out[n] = _k_mean(v, self.k_nearest)
+                out[n] = k_mean(v, self.k_nearest)
         return out
 
     def _name_rows(self) -> dict[str, np.ndarray]:
@@ -285,14 +277,15 @@ class Library:
             per = sorted(v for n, v in self.name_distances(d).items()
                          if n != names[i] and math.isfinite(v))
             if len(s):
-                same.append(_k_mean(s, self.k_nearest))
+                same.append(k_mean(s, self.k_nearest))
                 other.append(per[0] if per else math.inf)
             if per:
                 o1.append(per[0])
                 o2.append(per[1] if len(per) > 1 else math.inf)
         factor = MODEL_ONE_NAME_FACTOR if self.metric == "model" else ONE_NAME_FACTOR
         self.threshold, self.ratio = separating_rule(same, other, o1, o2, factor)
-        self.calibration = {"same_median": _median(same), "other_median": _median(o1),
+        self.calibration = {"same_median": median_or_none(same),
+                            "other_median": median_or_none(o1),
                             "same": len(same), "other": len(o1)}
         return self.threshold
 
@@ -339,91 +332,14 @@ class Library:
 
     # ------------------------------------------------------------------ file
     def to_dict(self) -> dict[str, Any]:
-        cal = dict(self.calibration)
-        return {"format": FORMAT, "version": VERSION, "profile": self.profile,
-                "dims": int(self.dims), "frame_rate": float(self.frame_rate),
-                "window_s": self.window_s, "step_s": self.step_s, "edge_s": self.edge_s,
-                "min_s": self.min_s, "descriptor": list(GROUPS),
-                "threshold": _finite(self.threshold), "ratio": float(self.ratio),
-                "k_nearest": int(self.k_nearest),
-                "metric": self.metric, "lag_s": float(self.lag_s),
-                "calibration": cal,
-                "scale": [round(float(v), 6) for v in self.scale],
-                "names": list(self.names), "sources": [int(s) for s in self.sources],
-                "starts": [float(s) for s in (self.starts or [0.0] * len(self.names))],
-                "descriptors": [[round(float(v), 6) for v in row] for row in self.descriptors],
-                **({"window_stats": stats_to_json(self.window_stats)}
-                   if self.metric == "model" else {}),
-                "examples": self.examples}
+        """The library as a JSON-ready dict (``rtseg.library_file.to_dict``)."""
+        from rtseg.library_file import to_dict
+        return to_dict(self)
 
     def save(self, path: str | Path) -> Path:
-        """Write the library as JSON (atomically: a temporary file renamed)."""
-        p = Path(path)
-        tmp = p.with_name(p.name + ".tmp")
-        tmp.write_text(json.dumps(self.to_dict(), allow_nan=False) + "\n", encoding="utf-8")
-        tmp.replace(p)
-        return p
-
-
-def separating_rule(same: Sequence[float], same_other: Sequence[float],
-                    o1: Sequence[float], o2: Sequence[float],
-                    one_name_factor: float = ONE_NAME_FACTOR) -> tuple[float, float]:
-    """(threshold, ratio) of the rule "named when d1 <= threshold and d1 / d2 <= ratio"
-    (d1, d2: nearest and second-nearest name's distance) that best tells the library's
-    own known cases (a window's nearest same-name distance ``same`` against its nearest
-    other name ``same_other``) from its unknown ones (the window's name left out: ``o1``,
-    ``o2``): the most known accepted plus unknown rejected (shares).  Ratios tried: 0.5,
-    0.52, ..., 1.0; ties: the largest ratio, then ``separating_threshold``'s middle rule.
-    Without known or unknown cases: ``separating_threshold`` alone, ratio 1."""
-    s = np.asarray(same, dtype=np.float64)
-    so = np.asarray(same_other, dtype=np.float64)
-    a = np.asarray(o1, dtype=np.float64)
-    b = np.asarray(o2, dtype=np.float64)
-    if not len(s) or not len(a):
-        return separating_threshold(s, a, one_name_factor), 1.0
-    best = (-1.0, math.inf, 1.0)
-    for r in np.round(np.arange(1.0, 0.4999, -0.02), 4):
-        ks = s[s <= r * so]                      # known windows the ratio test lets through
-        ua = a[a <= r * b]                       # unknown windows it does not reject
-        t = separating_threshold(ks, ua, one_name_factor) if len(ks) else 0.0
-        score = (np.sum(ks <= t) / len(s)) + 1.0 - np.sum(ua <= t) / len(a)
-        if score > best[0] + 1e-12:
-            best = (float(score), float(t), float(r))
-    return best[1], best[2]
-
-
-def separating_threshold(same: Sequence[float], other: Sequence[float],
-                         one_name_factor: float = ONE_NAME_FACTOR) -> float:
-    """The distance t maximising (share of ``same`` <= t) + (share of ``other`` > t),
-    midway between neighbouring values; ties: the middle of the best run.  Without
-    ``other`` (one name): ``one_name_factor`` x the median ``same``; without ``same``: half the smallest
-    ``other``; without either: inf."""
-    s = np.sort(np.asarray(same, dtype=np.float64))
-    o = np.sort(np.asarray(other, dtype=np.float64))
-    if not len(o):
-        return float(one_name_factor * np.median(s)) if len(s) else math.inf
-    if not len(s):
-        return float(0.5 * o[0])
-    vals = np.unique(np.concatenate([s, o]))
-    cands = np.concatenate([[vals[0] / 2], (vals[:-1] + vals[1:]) / 2, [vals[-1] * 1.5]])
-    score = (np.searchsorted(s, cands, side="right") / len(s)
-             + 1.0 - np.searchsorted(o, cands, side="right") / len(o))
-    best = np.flatnonzero(score >= score.max() - 1e-12)
-    return float(cands[best[len(best) // 2]])
-
-
-def _k_mean(v: np.ndarray, k: int) -> float:
-    """Mean of the k smallest values of v (all of them when fewer)."""
-    k = max(1, min(int(k), len(v)))
-    return float(np.partition(v, k - 1)[:k].mean()) if k < len(v) else float(np.mean(v))
-
-
-def _median(v: Sequence[float]) -> float | None:
-    return round(float(np.median(v)), 4) if len(v) else None
-
-
-def _finite(x: float) -> float | None:
-    return float(x) if math.isfinite(x) else None
+        """Write the library as JSON, atomically (``rtseg.library_file.save``)."""
+        from rtseg.library_file import save
+        return save(self, path)
 
 
 class LibraryBuilder:

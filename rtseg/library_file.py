@@ -1,4 +1,5 @@
-"""Reading a behaviour library file (``rtseg.library``; written by ``Library.save``).
+"""A behaviour library file (``rtseg.library``): writing (``to_dict``, ``save``; also
+``Library.to_dict`` / ``Library.save``) and reading (``load``).
 
 The file is JSON, data only: ``format`` (``rtseg-behaviour-library``), ``version`` (2;
 version-1 files, written before the model distance, are read as descriptor libraries),
@@ -19,11 +20,40 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from rtseg.library import FORMAT, METRICS, READS, Library, LibraryError
-from rtseg.library_models import LAG_S, stats_from_json
+from rtseg.library import FORMAT, GROUPS, METRICS, READS, VERSION, Library, LibraryError
+from rtseg.library_models import LAG_S, stats_from_json, stats_to_json
+
+
+def to_dict(lib: Library) -> dict[str, Any]:
+    """The library as a JSON-ready dict (module doc; floats rounded to 6-7 digits)."""
+    return {"format": FORMAT, "version": VERSION, "profile": lib.profile,
+            "dims": int(lib.dims), "frame_rate": float(lib.frame_rate),
+            "window_s": lib.window_s, "step_s": lib.step_s, "edge_s": lib.edge_s,
+            "min_s": lib.min_s, "descriptor": list(GROUPS),
+            "threshold": float(lib.threshold) if math.isfinite(lib.threshold) else None,
+            "ratio": float(lib.ratio), "k_nearest": int(lib.k_nearest),
+            "metric": lib.metric, "lag_s": float(lib.lag_s),
+            "calibration": dict(lib.calibration),
+            "scale": [round(float(v), 6) for v in lib.scale],
+            "names": list(lib.names), "sources": [int(s) for s in lib.sources],
+            "starts": [float(s) for s in (lib.starts or [0.0] * len(lib.names))],
+            "descriptors": [[round(float(v), 6) for v in row] for row in lib.descriptors],
+            **({"window_stats": stats_to_json(lib.window_stats)}
+               if lib.metric == "model" else {}),
+            "examples": lib.examples}
+
+
+def save(lib: Library, path: str | Path) -> Path:
+    """Write the library as JSON, atomically (a temporary file renamed)."""
+    p = Path(path)
+    tmp = p.with_name(p.name + ".tmp")
+    tmp.write_text(json.dumps(to_dict(lib), allow_nan=False) + "\n", encoding="utf-8")
+    tmp.replace(p)
+    return p
 
 
 def load(path: str | Path, profile: str | None = None, dims: int | None = None) -> Library:

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from rtseg.identity_eval import run_identity
-from rtseg.library import (UNKNOWN, Library, LibraryBuilder, LibraryError, load,
-                           separating_rule, separating_threshold)
+from rtseg.library import UNKNOWN, Library, LibraryBuilder, LibraryError, load
+from rtseg.library_calibration import separating_rule, separating_threshold
 from rtseg.library_learn import label_runs, take_rows
 from rtseg.live import LiveSession
 from rtseg.online_eval import live_config
