@@ -14,14 +14,17 @@ set runs the real ``ContrastDetector`` on them (the full and early profiles are 
 once per window geometry - step, after window, early window; the cut picker
 ``EarlyCuts`` is replayed on them per threshold/hold/drop/early threshold/early hold, and
 the script checks that this gives the same cuts, sent on the same frames, as full detector
-runs of the shipped defaults with and without the early look).  ``--fix KEY=VALUE`` holds
+runs of the shipped defaults with and without the early look).  Sets whose before windows
+are bounded by the last cut sent (``bound_before``) depend on their own cuts: they are
+full detector runs, about a minute each over the takes - hold the other grid parameters
+with ``--fix`` to keep such a grid small.  ``--fix KEY=VALUE`` holds
 one grid parameter at one value (the shipped set holds the step at 1/8 s: the speed target
 leaves no room for the 1/12 s step's 1.5x window fits).
 
 A parameter set is scored on a set of takes by the mean over those takes of each take's F1
 at +-0.5 s (``--objective takes``: every performance counts once, as it does when it is the
 one held out; ``pooled`` and ``groups`` are the earlier rules, kept for comparison), and
-only counts when its median / p90 detection delay over the real takes is <= 2.5 / 3.5 s
+only counts when its median / p90 detection delay over the labelled takes (cmu, tsseg4d) is <= 2.5 / 3.5 s
 (``--max-median S``: <= S / S + 1 s).  Ties go to the shorter after window, then to the
 lower median delay over the training takes, then to the first set in grid order.
 Leave-one-take-out: for each take name (86_01 holds out its cmu and tsseg4d versions
@@ -69,6 +72,7 @@ GRID = {                       # the candidates: grid step, after window, the pe
     "early_threshold": [1.25, 1.5, 2.0],
     "early_hold_s": [0.25, 0.5],
     "gate_threshold": [0.0, 3.5, 4.5, 5.5],      # the same-behaviour gate (0: off)
+    "bound_before": [0.0, 1.0],                  # before windows bounded by the last cut sent
 }
 
 
@@ -195,8 +199,11 @@ def objective(res: dict, cases: list[Case], kind: str = "takes") -> float:
 
 
 def _real_rows(res: dict, cases: list[Case]) -> list:
-    """The tallies of the real takes of ``cases`` (all of them, when none is real)."""
-    return [res[c.key] for c in cases if c.group != "synthetic"] or [res[c.key] for c in cases]
+    """The tallies of the labelled takes of ``cases`` (cmu, tsseg4d); without any, of the
+    other non-synthetic ones (spliced); without those, of all."""
+    return ([res[c.key] for c in cases if c.group in ("cmu", "tsseg4d")]
+            or [res[c.key] for c in cases if c.group != "synthetic"]
+            or [res[c.key] for c in cases])
 
 
 def real_delay(res: dict, cases: list[Case]) -> float:
@@ -206,8 +213,9 @@ def real_delay(res: dict, cases: list[Case]) -> float:
 
 
 def person(case: Case) -> str:
-    """The subject of a real take (CMU names SS_TT), the performance itself for synthetic."""
-    return case.name if case.group == "synthetic" else case.name.split("_")[0]
+    """The subject of a real take (CMU names SS_TT), the performance itself for synthetic
+    and spliced ones."""
+    return case.name if case.group in ("synthetic", "spliced") else case.name.split("_")[0]
 
 
 def main() -> int:
@@ -229,6 +237,10 @@ def main() -> int:
                     help="also choose the set on other people only: the spliced performances "
                          "of each DIR (benchmarks/splice.py output) and the synthetic ones, "
                          "then score it on every take of DATA, none of which took part")
+    ap.add_argument("--loto-spliced", type=Path, nargs="+", metavar="DIR", default=[],
+                    help="spliced performances (benchmarks/splice.py output) that join the "
+                         "leave-one-take-out as takes of their own (group spliced; the delay "
+                         "budget stays on the labelled takes)")
     ap.add_argument("--max-median", type=float, default=MAX_MEDIAN_S, metavar="S",
                     help=f"delay budget: a set counts only when its median delay over the "
                          f"real takes is at most S seconds (default {MAX_MEDIAN_S}; p90 at most "
@@ -252,6 +264,7 @@ def main() -> int:
         print(f"loto: no labelled takes in {data}; synthetic performances only", file=sys.stderr)
         data = None
     cases = load_cases(data, args.synth_seeds)
+    cases += load_other_people(args.loto_spliced)
     others = load_other_people(args.select_on)
     base = load_params()["contrast"]
     keys = list(GRID)
@@ -267,7 +280,8 @@ def main() -> int:
         geo = (p["step_s"], p["after_s"], p["early_after_s"])
         res = {}
         for case in cases + others:
-            if case.restarts:                     # a gap: the detector itself, gate and all
+            if case.restarts or p["bound_before"]:   # a gap, or windows that depend on the
+                # cuts sent: the detector itself, gate and all
                 d2 = detector(p, case.frame_rate)
                 res[case.key] = counts(case, [(c.frame, c.detected_at) for c in d2.run(case.X)])
                 continue
@@ -286,9 +300,13 @@ def main() -> int:
     for p in (base, {**base, "early_after_s": 0.0}, {**base, "gate_threshold": 0.0}):
         for case in cases + others:
             full = [(c.frame, c.detected_at) for c in detector(p, case.frame_rate).run(case.X)]
-            det = traces[((p["step_s"], p["after_s"], p["early_after_s"]), case.key)] \
-                if not case.restarts else None
             if not case.restarts:
+                geo = (p["step_s"], p["after_s"], p["early_after_s"])
+                if (geo, case.key) not in traces:      # a geometry --fix left out
+                    traces[(geo, case.key)] = detector({**p, "gate_threshold": 0.0},
+                                                       case.frame_rate)
+                    traces[(geo, case.key)].run(case.X)
+                det = traces[(geo, case.key)]
                 cuts = gated(p, case, peaks_on_trace(det, p, case.frame_rate), {})
                 assert full == cuts, case.key
 
@@ -344,7 +362,7 @@ def main() -> int:
                     nested_held[c.key] = results[k][c.key]
     lopo_held: dict[str, tuple] = {}
     lopo_folds = {}
-    for subject in sorted({person(c) for c in cases if c.group != "synthetic"}):
+    for subject in sorted({person(c) for c in cases if c.group not in ("synthetic", "spliced")}):
         k = best([c for c in cases if person(c) != subject])
         lopo_folds[subject] = dict(zip(keys, k))
         for c in cases:

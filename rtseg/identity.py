@@ -80,7 +80,7 @@ from rtseg.detectors.window_models import WindowModel, WindowStats, behaviour_di
 DEFAULT_DECIDE_AFTER_S = 1.5
 DEFAULT_NAME_AFTER_S = 1.75
 DEFAULT_ID_SKIP_S = 0.5
-DEFAULT_THRESHOLD = 4.5
+DEFAULT_THRESHOLD = 4.0
 #: the longest decision window, and the least that must remain after a skipped start, s
 DEFAULT_MAX_WINDOW_S = 3.0
 MIN_WINDOW_S = 1.0

@@ -195,7 +195,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "enabled": Key("bool", False, doc="send each segment's behaviour id (rtseg.identity)"),
         "decide_after_s": Key("float", 1.5, _range(0.0, 60.0, strict_lo=True),
                               doc="seconds of a new segment summed before its id is decided"),
-        "threshold": Key("float", 4.5, _range(1.0, 100.0),
+        "threshold": Key("float", 4.0, _range(1.0, 100.0),
                          doc="distance at or below which a segment is an earlier behaviour"),
         "name_after_s": Key("float", 1.75, _range(0.0, 60.0, strict_lo=True),
                             doc="with a behaviour library: a segment the library cannot "

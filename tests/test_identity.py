@@ -26,7 +26,7 @@ from rtseg.session_config import from_dict
 from rtseg.simulators.synth import synthesize
 
 from osc_collector import OscCollector
-from synth_identity import SYNTH_THRESHOLD
+from synth_identity import SYNTH_DETECTOR, SYNTH_THRESHOLD
 from take_source import TakeSource
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -34,8 +34,11 @@ SCRIPT = "walk:6,punch:6,walk:6,punch:6,squat:6"
 
 
 def _config(**identity):
+    """The live configuration with identity on, ``identity`` keys set, and the detector
+    settings of the synthetic tests (``SYNTH_DETECTOR``)."""
     cfg, _ = live_config()
     cfg["identity.enabled"] = True
+    cfg["detectors.contrast"] = dict(SYNTH_DETECTOR)
     for k, v in identity.items():
         cfg[f"identity.{k}"] = v
     return cfg

@@ -24,7 +24,7 @@ from rtseg.simulators.synth import synthesize
 
 from osc_collector import OscCollector
 from take_source import TakeSource
-from synth_identity import SYNTH_THRESHOLD
+from synth_identity import SYNTH_DETECTOR, SYNTH_THRESHOLD
 
 LEARN = "walk:8,punch:8,squat:8,wave:8"
 #: seed 0 teaches; other seeds (tempo, amplitude, style vary) are named
@@ -35,6 +35,7 @@ def _config():
     cfg, _ = live_config()
     cfg["identity.enabled"] = True
     cfg["identity.threshold"] = SYNTH_THRESHOLD
+    cfg["detectors.contrast"] = dict(SYNTH_DETECTOR)
     return cfg
 
 

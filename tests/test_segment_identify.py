@@ -19,7 +19,7 @@ from rtseg.drivers.readers import write_take
 from rtseg.identity import identify_segments
 from rtseg.simulators.synth import synthesize
 
-from synth_identity import SYNTH_THRESHOLD
+from synth_identity import SYNTH_DETECTOR, SYNTH_THRESHOLD
 
 SCRIPT = "walk:6,punch:6,walk:6,punch:6,squat:6"
 TRUTH = ["walk", "punch", "walk", "punch", "squat"]
@@ -32,6 +32,14 @@ TRUTH = ["walk", "punch", "walk", "punch", "squat"]
 def _take(tmp_path, seed=0, script=SCRIPT):
     res = synthesize(script, seed=seed)
     return res, str(write_take(tmp_path / f"synth_{seed}.npz", res.take))
+
+
+def _unbounded(tmp_path) -> str:
+    """A ``--params`` file with the synthetic tests' detector settings (``SYNTH_DETECTOR``)."""
+    f = tmp_path / "synth_detector.toml"
+    f.write_text("[contrast]\n" + "".join(f"{k} = {str(v).lower()}\n"
+                                         for k, v in SYNTH_DETECTOR.items()))
+    return str(f)
 
 
 def _run(capsys, *argv):
@@ -54,7 +62,8 @@ def _majority_truth(res, segments):
 def test_contrast_ids_follow_recurring_behaviours(tmp_path, capsys, seed):
     res, path = _take(tmp_path, seed)
     doc = json.loads(_run(capsys, path, "--method", "contrast", "--identify",
-                          "--identity-threshold", str(SYNTH_THRESHOLD), "--format", "json"))
+                          "--identity-threshold", str(SYNTH_THRESHOLD), "--format", "json",
+                          "--params", _unbounded(tmp_path)))
     segs = doc["methods"]["contrast"]["segments"]
     assert _majority_truth(res, segs) == TRUTH, "all four changes should be cut"
     assert [s["behaviour"] for s in segs] == [1, 2, 1, 2, 3]
@@ -180,7 +189,7 @@ def test_behaviours_name_the_segments(tmp_path, capsys, seed):
     res, path = _take(tmp_path, seed)
     lib = _synth_library(tmp_path)
     args = [path, "--method", "contrast", "--identify", "--identity-threshold",
-            str(SYNTH_THRESHOLD), "--behaviours", lib]
+            str(SYNTH_THRESHOLD), "--behaviours", lib, "--params", _unbounded(tmp_path)]
     doc = json.loads(_run(capsys, *args, "--format", "json"))
     segs = doc["methods"]["contrast"]["segments"]
     assert _majority_truth(res, segs) == TRUTH

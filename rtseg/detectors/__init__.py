@@ -57,6 +57,7 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "early_threshold": ((int, float), _pos),
         "early_hold_s": ((int, float), _nonneg),
         "gate_threshold": ((int, float), _nonneg),
+        "bound_before": ((bool,), (lambda v: True, "true or false")),
     },
     "pca": {
         "window_s": ((int, float), _pos),

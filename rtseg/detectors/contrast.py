@@ -87,7 +87,7 @@ class ContrastDetector(OnlineDetector):
                  early_threshold: float = 1.5, early_hold: int = 60,
                  gate_threshold: float = 0.0, gate_decide: int = 180, gate_skip: int = 60,
                  gate_window: int = 360, gate_min_after: int = 120,
-                 keep_trace: bool = False) -> None:
+                 bound_before: bool = False, keep_trace: bool = False) -> None:
         if step < 1:
             raise ValueError(f"step must be >= 1 frame, got {step}")
         for key, v in (("before", before), ("after", after), ("min_before", min_before)):
@@ -114,6 +114,8 @@ class ContrastDetector(OnlineDetector):
         self.peaks = EarlyCuts(threshold, hold=int(hold), min_gap=int(min_gap), drop=drop,
                                early_threshold=float(early_threshold) if self.we else None,
                                early_hold=int(early_hold), early_after=self.we * self.step)
+        #: before windows never reach back past the last cut sent (module doc)
+        self.bound_before = bool(bound_before)
         self.keep_trace = keep_trace
         self.trace: list[tuple[int, float, float]] = []
         #: early-look profile when keep_trace: (position, value, frame that made it known)
@@ -152,7 +154,8 @@ class ContrastDetector(OnlineDetector):
                    gate_decide=frames(GATE_DECIDE_S, frame_rate),
                    gate_skip=frames(GATE_SKIP_S, frame_rate),
                    gate_window=frames(GATE_WINDOW_S, frame_rate),
-                   gate_min_after=frames(GATE_MIN_AFTER_S, frame_rate), keep_trace=keep_trace)
+                   gate_min_after=frames(GATE_MIN_AFTER_S, frame_rate),
+                   bound_before=bool(p.get("bound_before", False)), keep_trace=keep_trace)
 
     @property
     def delay_frames(self) -> int:
@@ -169,6 +172,7 @@ class ContrastDetector(OnlineDetector):
         self._ref: np.ndarray | None = None  # the segment's first frame (sums are about it)
         self._models: dict[tuple[int, int], WindowModel] = {}
         self._pending: tuple[int, int] | None = None   # a window to fit with the next frame
+        self._last_sent: int | None = None   # block position of the last cut sent
         self.peaks.reset()
         self._out: deque[EarlyCut] = deque()  # cuts to send (a queued one is dropped)
         if self._dim is not None:              # the ring restarts at block 0
@@ -205,12 +209,14 @@ class ContrastDetector(OnlineDetector):
             self._fill = 0
             self._block_done()
         cut = self._cut(self._out.popleft(), self._t - 1) if self._out else None
-        if self.gate is None:
-            return cut
-        self.gate.push(self._t - 1, x)
+        if self.gate is not None:
+            self.gate.push(self._t - 1, x)
+            if cut is not None:
+                self.gate.hold(cut)
+            cut = self.gate.poll()
         if cut is not None:
-            self.gate.hold(cut)
-        return self.gate.poll()
+            self._last_sent = (cut.frame - self._seg0) // self.step
+        return cut
 
     def _block_done(self) -> None:
         B = self._buf
@@ -220,7 +226,7 @@ class ContrastDetector(OnlineDetector):
         self._nb = k + 1
         # the before window of position nb (used once its after window is complete) is
         # fitted with the next frame, so no frame fits two windows (per-frame p99 <= 1 ms)
-        w = min(self.wa, self._nb // 2)
+        w = self._width(self._nb)
         self._pending = (self._nb - w, self._nb) if self._nb >= 2 * self.wmin else None
         now = self._t - 1                            # the frame that completed the block
         full = early = None
@@ -264,9 +270,20 @@ class ContrastDetector(OnlineDetector):
             m = self._models[(lo, hi)] = fit(self._stats(lo, hi), **self.fit_args)
         return m
 
-    def _before(self, c: int) -> tuple[WindowModel, WindowModel]:
-        """The models of A0 and A at block position c (w shorter at a segment's start)."""
+    def _width(self, c: int) -> int:
+        """w (blocks) of the before windows at block position c: ``before``, or half the
+        blocks so far near a segment's start; with ``bound_before``, also at most half the
+        blocks since the last cut sent when that is at least ``min_before`` (closer to the
+        cut the windows straddle it, as without the bound)."""
         w = min(self.wa, c // 2)
+        L = self._last_sent
+        if self.bound_before and L is not None and (c - L) // 2 >= self.wmin:
+            w = min(w, (c - L) // 2)
+        return w
+
+    def _before(self, c: int) -> tuple[WindowModel, WindowModel]:
+        """The models of A0 and A at block position c (``_width``)."""
+        w = self._width(c)
         return self._model(c - 2 * w, c - w), self._model(c - w, c)
 
     def _stated(self, kp: float, kq: float, a: WindowModel) -> float:

@@ -19,8 +19,10 @@ that question of every cut before it goes out:
   (``dropped`` counts it, the log says so); above it the cut is sent with ``detected_at``
   = the deciding frame.
 
-The defaults are the identity tracker's own (threshold 4.5, decision after 1.5 s, 0.5 s
-skipped, windows of at most 3 s): the gate adds no parameter of its own.  Cost: one row
+The windows and decision time are the identity tracker's own (decision after 1.5 s, 0.5 s
+skipped, windows of at most 3 s); the threshold is the detector's ``gate_threshold``
+(3.5, ``GATE_THRESHOLD``, chosen leave-one-take-out in benchmarks/loto.py's grid; the
+tracker's own is 4.0).  Cost: one row
 copy per frame into a ring of ``ring`` frames; per held cut two window statistics and two
 model fits (about 0.5 ms, once per cut).  A restart (gap) decides the held cuts on the
 frames that arrived before it.
@@ -38,7 +40,7 @@ import numpy as np
 from rtseg.detectors.base import Cut
 from rtseg.detectors.window_models import WindowStats, behaviour_distance, fit
 from rtseg.identity import (DEFAULT_DECIDE_AFTER_S, DEFAULT_ID_SKIP_S, DEFAULT_MAX_WINDOW_S,
-                            DEFAULT_THRESHOLD, MIN_WINDOW_S)
+                            MIN_WINDOW_S)
 
 log = logging.getLogger("rtseg.detectors")
 
@@ -46,6 +48,9 @@ log = logging.getLogger("rtseg.detectors")
 #: must remain after the skip (rtseg.identity), s
 GATE_DECIDE_S, GATE_SKIP_S = DEFAULT_DECIDE_AFTER_S, DEFAULT_ID_SKIP_S
 GATE_WINDOW_S, GATE_MIN_AFTER_S = DEFAULT_MAX_WINDOW_S, MIN_WINDOW_S
+#: the shipped ``[contrast] gate_threshold`` (config/detectors.toml; chosen in
+#: benchmarks/loto.py's grid, docs/live_detector.md)
+GATE_THRESHOLD = 3.5
 
 
 class SameBehaviourGate:
@@ -56,7 +61,7 @@ class SameBehaviourGate:
     ring: frames of rows kept (at least the detector's longest delay + ``max_window``).
     """
 
-    def __init__(self, threshold: float = DEFAULT_THRESHOLD, decide_after: int = 180,
+    def __init__(self, threshold: float = GATE_THRESHOLD, decide_after: int = 180,
                  skip: int = 60, max_window: int = 360, min_after: int = 120, ring: int = 1200,
                  reference_dims: int = 8, fit_args: dict | None = None) -> None:
         if not threshold > 0:
@@ -113,7 +118,9 @@ class SameBehaviourGate:
         sent-at frame) of the cuts that go through, given every row X the detector was fed
         and its cuts as (frame, detected_at) in the order it made them - the same
         decisions as feeding the frames one by one, without the per-frame loop (the
-        detector must not have restarted).  Use a fresh gate: it keeps the decisions."""
+        detector must not have restarted, and its cuts must not depend on the cuts sent:
+        with ``bound_before`` the gate's drops change the windows, so such a detector is
+        run whole).  Use a fresh gate: it keeps the decisions."""
         self._source = np.asarray(X, dtype=np.float64)
         out, last, sent_at = [], -1, -1
         try:
