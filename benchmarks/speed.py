@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Speed of the detectors on one take (default: CMU 86_01, 56-dim features).
 
-    python benchmarks/speed.py [--data DIR] [--repeat N] [--json]
+    python benchmarks/speed.py [--data DIR] [--repeat N] [--json] [--versus FILE]
 
 The default live detector (``contrast``) runs ONLINE, one ``update()`` per frame; besides
 its frames/s the per-frame cost is timed call by call over one pass (median, p99, max in
@@ -14,6 +14,9 @@ timed.  Each figure is the median of ``--repeat`` runs.  Without the data folder
 and the output says so.  Targets: contrast, PCA and PPCA online >= 20 000 frames/s on one
 core (8000 frames < 0.4 s), contrast per-frame p99 <= 1 ms; GMM < 2 s for 8000 frames.
 Run with OMP_NUM_THREADS=1 (one core, as the live loop's blas_threads = 1).
+``--versus FILE`` (detector parameters, TOML or JSON, flat or a ``[contrast]`` table, as
+``rtseg evaluate --params``): the contrast detector with those overrides and the shipped one
+run alternately ``--repeat`` times each in this process; both medians and their ratio.
 """
 
 from __future__ import annotations
@@ -81,6 +84,8 @@ def main(argv: list[str] | None = None) -> int:
                     default=Path(os.environ.get("RTSEG_DATA", REPO.parent / "shared" / "data")))
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--json", action="store_true", help="print one JSON object")
+    ap.add_argument("--versus", type=Path, metavar="FILE",
+                    help="contrast parameter overrides timed alternately with the shipped set")
     a = ap.parse_args(argv)
     from rtseg.detectors import make_online, segment_features
 
@@ -105,18 +110,45 @@ def main(argv: list[str] | None = None) -> int:
         res[name] = {"frames_per_s": round(n / med, 1), "median_s": round(med, 4),
                      "frames": n, "cuts": cuts}
     res["contrast"]["per_frame_us"] = per_frame(make_online("contrast", fps), rows)
+    if a.versus is not None:
+        res["versus"] = versus(a.versus, rows, fps, a.repeat)
     if a.json:
         print(json.dumps(res))
     else:
         print(f"input: {what}; {n} frames, {X.shape[1]} dims, median of {a.repeat} runs")
         for name, r in res.items():
+            if name == "versus":
+                continue
             per8k = r["median_s"] * 8000 / n
             print(f"  {name:13s} {r['frames_per_s']:>10.0f} frames/s  {r['median_s']:.3f} s "
                   f"({per8k:.3f} s per 8000 frames, {r['cuts']} cuts)")
         pf = res["contrast"]["per_frame_us"]
         print(f"  contrast per frame: median {pf['median']:.1f} us, p99 {pf['p99']:.1f} us, "
               f"max {pf['max']:.1f} us (one pass, {n} calls)")
+        if "versus" in res:
+            v = res["versus"]
+            print(f"  contrast, alternately {a.repeat}x each: shipped {v['shipped']:.0f} frames/s, "
+                  f"{a.versus.name} {v['other']:.0f} frames/s; shipped / other x{v['ratio']:.2f}")
     return 0
+
+
+def versus(path: Path, rows: list[np.ndarray], fps: float, repeat: int) -> dict[str, float]:
+    """Frames/s (medians) of the shipped contrast detector and one with ``path``'s
+    overrides, run alternately; ``ratio`` = shipped / other."""
+    from rtseg.detectors import make_online
+    from rtseg.segmentation import load_params
+    over = load_params(path, "contrast")
+    speeds: dict[str, list[float]] = {"shipped": [], "other": []}
+    for _ in range(repeat + 1):                 # the first round warms up
+        for key, p in (("shipped", {}), ("other", over)):
+            det = make_online("contrast", fps, p)
+            upd = det.update
+            t0 = time.perf_counter()
+            for x in rows:
+                upd(x)
+            speeds[key].append(len(rows) / (time.perf_counter() - t0))
+    s, o = statistics.median(speeds["shipped"][1:]), statistics.median(speeds["other"][1:])
+    return {"shipped": round(s, 1), "other": round(o, 1), "ratio": round(s / o, 3)}
 
 
 if __name__ == "__main__":
