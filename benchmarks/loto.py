@@ -3,8 +3,12 @@ sensitivity.
 
     python3 benchmarks/loto.py [DATA] [--synth-seeds 0 1 2 3 4 5] [--json]
     python3 benchmarks/loto.py [DATA] --select-on SPLICED_DIR [...]   # chosen on other people
-    python3 benchmarks/loto.py ../shared/data --nested --max-median 2.0 --fix step_s=0.125
-                                                                      # what chose the shipped set
+    python3 benchmarks/loto.py ../shared/data --nested --max-median 2.0 --fix step_s=0.125 \
+        --fix bound_before=0                          # what chose session 10's set (~15 min)
+    python3 benchmarks/loto.py ../shared/data --max-median 2.0 --fix step_s=0.125 \
+        --fix after_s=2.0 --fix hold_s=1.0 --fix drop=0.5 --fix early_after_s=1.0 \
+        --fix early_hold_s=0.5 --loto-spliced SPLICED_SAME SPLICED_MIXED
+                                                      # what chose the shipped set (~16 min)
 
 Every take of DATA (a folder laid out like ../shared/data: its cmu and tsseg4d groups) and
 the synthetic performances (``rtseg.simulators.synth``, the default script, one per seed)
@@ -16,16 +20,17 @@ once per window geometry - step, after window, early window; the cut picker
 the script checks that this gives the same cuts, sent on the same frames, as full detector
 runs of the shipped defaults with and without the early look).  Sets whose before windows
 are bounded by the last cut sent (``bound_before``) depend on their own cuts: they are
-full detector runs, about a minute each over the takes - hold the other grid parameters
-with ``--fix`` to keep such a grid small.  ``--fix KEY=VALUE`` holds
+full detector runs (about 7 s per set over the labelled and synthetic takes, 20 s more with
+40 spliced performances) - hold the other grid parameters with ``--fix`` to keep such a
+grid small.  ``--fix KEY=VALUE`` holds
 one grid parameter at one value (the shipped set holds the step at 1/8 s: the speed target
 leaves no room for the 1/12 s step's 1.5x window fits).
 
 A parameter set is scored on a set of takes by the mean over those takes of each take's F1
 at +-0.5 s (``--objective takes``: every performance counts once, as it does when it is the
 one held out; ``pooled`` and ``groups`` are the earlier rules, kept for comparison), and
-only counts when its median / p90 detection delay over the labelled takes (cmu, tsseg4d) is <= 2.5 / 3.5 s
-(``--max-median S``: <= S / S + 1 s).  Ties go to the shorter after window, then to the
+only counts when its median / p90 detection delay over the labelled takes (cmu, tsseg4d)
+is <= 2.5 / 3.5 s (``--max-median S``: <= S / S + 1 s).  Ties go to the shorter after window, then to the
 lower median delay over the training takes, then to the first set in grid order.
 Leave-one-take-out: for each take name (86_01 holds out its cmu and tsseg4d versions
 together), the best set on the other takes is scored on it; the held-out cuts are pooled
