@@ -20,7 +20,7 @@ once per window geometry - step, after window, early window; the cut picker
 the script checks that this gives the same cuts, sent on the same frames, as full detector
 runs of the shipped defaults with and without the early look).  Sets whose before windows
 are bounded by the last cut sent (``bound_before``) depend on their own cuts: they are
-full detector runs (about 7 s per set over the labelled and synthetic takes, 20 s more with
+full detector runs (about 7 s per set over the labelled and synthetic takes, 20 s with the
 40 spliced performances) - hold the other grid parameters with ``--fix`` to keep such a
 grid small.  ``--fix KEY=VALUE`` holds
 one grid parameter at one value (the shipped set holds the step at 1/8 s: the speed target
