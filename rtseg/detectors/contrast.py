@@ -52,6 +52,14 @@ misses or that the full look does not back is still sent from the full look.
 both looks send a cut on the same frame (two changes at least ``min_gap`` apart), the
 second goes out with the next frame (its ``detected_at`` says so); a restart drops it.
 
+Bounded before windows (``bound_before``): once the last cut sent lies at least
+``2 x min_before`` frames before c, w is at most half the frames since it, so A0 and A
+hold only the behaviour since that cut (a behaviour of 3-6 s is compared with itself, not
+with itself and the one before it); closer to the cut they straddle it as without the
+bound.  The windows then depend on the cuts sent (after the gate), and a bounded window is
+fitted afresh at each position for a while after every cut (docs/live_detector.md,
+session 11: x0.83 frames/s).
+
 Same-behaviour gate (``gate_threshold`` > 0, ``rtseg.detectors.gate``): every cut is then
 held until ``gate_decide`` frames of its new segment have arrived and sent only when the
 motion after it is another behaviour than the motion before it (the identity tracker's
