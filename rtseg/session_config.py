@@ -19,6 +19,7 @@ from typing import Any, Callable
 
 from rtseg.config import ConfigError, config_dir, load_toml
 from rtseg.detectors import ONLINE_METHODS as KNOWN_METHODS
+from rtseg.identity import DEFAULT_DECIDE_AFTER_S, DEFAULT_NAME_AFTER_S, DEFAULT_THRESHOLD
 
 CALIBRATION_MODES = ("auto", "first", "average", "none")
 #: largest ring buffer: 2^20 frames (2.4 h at 120 Hz; 570 MB for 17 joints of 4 float64)
@@ -193,11 +194,13 @@ SCHEMA: dict[str, dict[str, Key]] = {
     },
     "identity": {
         "enabled": Key("bool", False, doc="send each segment's behaviour id (rtseg.identity)"),
-        "decide_after_s": Key("float", 1.5, _range(0.0, 60.0, strict_lo=True),
+        "decide_after_s": Key("float", DEFAULT_DECIDE_AFTER_S,
+                              _range(0.0, 60.0, strict_lo=True),
                               doc="seconds of a new segment summed before its id is decided"),
-        "threshold": Key("float", 4.0, _range(1.0, 100.0),
+        "threshold": Key("float", DEFAULT_THRESHOLD, _range(1.0, 100.0),
                          doc="distance at or below which a segment is an earlier behaviour"),
-        "name_after_s": Key("float", 1.75, _range(0.0, 60.0, strict_lo=True),
+        "name_after_s": Key("float", DEFAULT_NAME_AFTER_S,
+                            _range(0.0, 60.0, strict_lo=True),
                             doc="with a behaviour library: a segment the library cannot "
                                 "name after decide_after_s waits this many seconds of it"),
         "behaviours": Key("str", "", doc="behaviour library file naming segments "
