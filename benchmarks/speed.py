@@ -64,6 +64,17 @@ def _time(fn, repeat: int) -> tuple[float, int]:
     return statistics.median(times), len(out)
 
 
+def online(method: str, fps: float, rows: list[np.ndarray], params: dict | None = None):
+    """A run of the ``method`` detector (``params`` overrides) fed every row, one
+    ``update()`` per frame; the run returns its cuts."""
+    from rtseg.detectors import make_online
+
+    def run():
+        upd = make_online(method, fps, params or {}).update
+        return [c for c in map(upd, rows) if c is not None]
+    return run
+
+
 def per_frame(det, rows: list[np.ndarray]) -> dict[str, float]:
     """Microseconds of each ``update()`` call over one pass: median, p99, max."""
     t = np.empty(len(rows))
@@ -93,15 +104,9 @@ def main(argv: list[str] | None = None) -> int:
     n = len(X)
     rows = [np.ascontiguousarray(x) for x in X]
 
-    def online(method: str):
-        def run():
-            det = make_online(method, fps)
-            upd = det.update
-            return [c for c in map(upd, rows) if c is not None]
-        return run
-
     res: dict[str, dict] = {}
-    for name, fn in (("contrast", online("contrast")), ("pca", online("pca")), ("ppca", online("ppca")),
+    for name, fn in (("contrast", online("contrast", fps, rows)), ("pca", online("pca", fps, rows)),
+                     ("ppca", online("ppca", fps, rows)),
                      ("gmm", lambda: segment_features(X, "gmm", fps)),
                      ("pca_offline", lambda: segment_features(X, "pca", fps)),
                      ("ppca_offline", lambda: segment_features(X, "ppca", fps))):
@@ -135,17 +140,14 @@ def main(argv: list[str] | None = None) -> int:
 def versus(path: Path, rows: list[np.ndarray], fps: float, repeat: int) -> dict[str, float]:
     """Frames/s (medians) of the shipped contrast detector and one with ``path``'s
     overrides, run alternately; ``ratio`` = shipped / other."""
-    from rtseg.detectors import make_online
     from rtseg.segmentation import load_params
-    over = load_params(path, "contrast")
+    runs = {"shipped": online("contrast", fps, rows),
+            "other": online("contrast", fps, rows, load_params(path, "contrast"))}
     speeds: dict[str, list[float]] = {"shipped": [], "other": []}
     for _ in range(repeat + 1):                 # the first round warms up
-        for key, p in (("shipped", {}), ("other", over)):
-            det = make_online("contrast", fps, p)
-            upd = det.update
+        for key, run in runs.items():
             t0 = time.perf_counter()
-            for x in rows:
-                upd(x)
+            run()
             speeds[key].append(len(rows) / (time.perf_counter() - t0))
     s, o = statistics.median(speeds["shipped"][1:]), statistics.median(speeds["other"][1:])
     return {"shipped": round(s, 1), "other": round(o, 1), "ratio": round(s / o, 3)}
