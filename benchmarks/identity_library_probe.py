@@ -31,7 +31,11 @@ EDGE = 60           # frames cut off each end of a labelled segment (0.5 s)
 
 
 def main(argv: list[str] | None = None) -> int:
-    data = (argv or sys.argv[1:] or [str(DATA)])[0]
+    args = argv or sys.argv[1:]
+    if args and args[0] in ("-h", "--help"):
+        print(__doc__)
+        return 0
+    data = (args or [str(DATA)])[0]
     cfg, method = live_config()
     takes = [t for t in find_labelled_takes(data, ("cmu",)) if "mocap6" in t.labels.source]
     if len(takes) < 2:

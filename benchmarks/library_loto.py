@@ -105,6 +105,9 @@ def spliced(folder: Path, src: Path, cfg) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] in ("-h", "--help"):
+        print(__doc__)
+        return 0
     if "--no-reject" in argv:              # every segment gets its nearest name
         import rtseg.library_eval as le
         le.NO_REJECT = True
