@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
           f"  max {allp.max():.0f}")
     if tr.library is not None:
         last = int(index[-1])
-        W = tr.named_rows(last - int(fr * 3.0), last)      # the last 2.5 s after the skip
+        W = tr.namer.rows(last - int(fr * 3.0), last)      # the last 2.5 s after the skip
         reps = []
         for _ in range(50):
             t0 = time.perf_counter()

@@ -51,15 +51,10 @@ them); either way the segment's statistics then join its final behaviour's model
 Names (behaviour library)
 -------------------------
 With a ``library`` (``rtseg.library.Library``, ``rtseg learn``) every decision also names
-the segment: the library names the rows [boundary + ``name_skip_s``, decision frame) (the
-first ``name_skip_s`` = 0.5 s, the transition, left out when at least 1 s remains; at most
-``max_window_s``) - the nearest name (``rtseg.library``: by default the window-model
-distance of the segment's per-joint angular velocities to each example window, a name as
-near as its nearest window; libraries written before that keep their descriptor and 3
-nearest windows), or ``unknown`` when the segment is unlike
-every example (``IdentityDecision.name``; the id is the unsupervised one either way).  A
-correction keeps the segment's name.  The rows come from a ring of the last
-``max_window_s + name_skip_s + 1`` s of fed rows (one more row copy per frame).
+the segment (``IdentityDecision.name``; the id is the unsupervised one either way):
+``rtseg.identity_names.SegmentNamer`` names the rows [boundary + ``name_skip_s``, decision
+frame] with the library's nearest name, or ``unknown`` when the segment is unlike every
+example.  A correction keeps the segment's name.
 
 Cost: per frame one row copy into the block buffer; per block one (step x d)^T (step x d)
 product; per decision one eigen-decomposition per changed model (a few per cut).
@@ -75,6 +70,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from rtseg.detectors.window_models import WindowModel, WindowStats, behaviour_distance, fit
+from rtseg.identity_names import SegmentNamer
 
 #: defaults (also the ``[identity]`` keys of ``config/live.toml``)
 DEFAULT_DECIDE_AFTER_S = 1.5
@@ -192,13 +188,23 @@ class IdentityTracker:
         self._behaviours: list[list[Any]] = []       # [n, s1, s2, model or None]
         self._seg: _Segment | None = None
         self._next_seg = 0
+        self._namer_kw = {"skip_s": name_skip_s, "max_window_s": max_window_s,
+                          "min_window_s": MIN_WINDOW_S, "block": step}
         self.library = library
-        self.name_skip = max(0, int(round(name_skip_s * frame_rate)))
-        self._max_window = int(round(max_window_s * frame_rate))
-        self._min_named = max(2, int(round(MIN_WINDOW_S * frame_rate)))
-        self._R = self._max_window + self.name_skip + int(round(frame_rate)) + step
         self._skip_blocks = max(0, int(round(id_skip_s * frame_rate / step)))
         self._min_blocks = max(2, int(round(MIN_WINDOW_S * frame_rate / step)))
+
+    @property
+    def library(self) -> Any:
+        """The behaviour library naming segments (None: ids only)."""
+        return None if self.namer is None else self.namer.library
+
+    @library.setter
+    def library(self, library: Any) -> None:
+        if self._d:
+            raise RuntimeError("the library is set before the first fed row")
+        self.namer = None if library is None else SegmentNamer(
+            library, self.frame_rate, **self._namer_kw)
 
     @property
     def decide_blocks(self) -> int:
@@ -220,16 +226,8 @@ class IdentityTracker:
         self._pstart = np.zeros(H, dtype=np.int64)
         self._blocks = 0          # blocks started
         self._index = -1
-        if self.library is not None and self.library.dims != d:
-            import logging
-            logging.getLogger(__name__).warning(
-                "behaviour library has %d feature dims, the session's features have %d: "
-                "segments are not named", self.library.dims, d)
-            self.library = None
-        if self.library is not None:
-            self._rows = np.zeros((self._R, d))
-            self._ridx = np.full(self._R, -1, dtype=np.int64)
-            self._rn = 0
+        if self.namer is not None and not self.namer.start(d):
+            self.namer = None
 
     def update(self, index: int, x: np.ndarray) -> None:
         """One fed feature row ``x`` (d,) of session frame ``index``."""
@@ -245,11 +243,8 @@ class IdentityTracker:
         self._buf[self._fill] = x
         self._fill += 1
         self._index = index
-        if self.library is not None:
-            k = self._rn % self._R
-            self._rows[k] = x
-            self._ridx[k] = index
-            self._rn += 1
+        if self.namer is not None:
+            self.namer.update(index, x)
         if self._seg is None:
             self._open(index, 0, self._blocks - 1)
         if self._fill == self.block:
@@ -382,11 +377,11 @@ class IdentityTracker:
         """Decide ``seg`` at block ``end`` - unless a library would call it ``unknown``
         before ``name_after_s`` of it are summed: then the decision waits for them (a
         longer window names more segments; a name given sooner stands)."""
-        if self.library is None or end - seg.block >= self._named_blocks:
+        if self.namer is None or end - seg.block >= self._named_blocks:
             self._decide(seg, end, frame)
             return
         from rtseg.library import UNKNOWN
-        naming = self._naming(seg.boundary, frame)
+        naming = self.namer.name(seg.boundary, frame)
         if naming[0] == UNKNOWN:
             seg.decide_block = seg.block + self._named_blocks
             self.stats.name_waits += 1
@@ -403,32 +398,11 @@ class IdentityTracker:
             j = self._new_behaviour()
         seg.behaviour, seg.created = j, not matched
         self.stats.decisions += 1
-        if self.library is not None:
-            seg.name, seg.name_distance = naming or self._naming(seg.boundary, int(frame))
+        if self.namer is not None:
+            seg.name, seg.name_distance = naming or self.namer.name(seg.boundary, int(frame))
         self._emit(IdentityDecision(seg.index, seg.boundary, j, int(frame),
                                     self._confidence(matched, dist), dist, new=not matched,
                                     name=seg.name, name_distance=seg.name_distance))
-
-    def named_rows(self, boundary: int, frame: int) -> np.ndarray:
-        """The fed rows the library names for a segment starting at ``boundary`` decided at
-        ``frame`` (module doc, Names), oldest first."""
-        lo, hi = boundary + self.name_skip, frame + 1
-        if hi - lo < self._min_named:
-            lo = boundary
-        hi = min(hi, lo + self._max_window)
-        pos = np.flatnonzero((self._ridx >= lo) & (self._ridx < hi))
-        pos = pos[np.argsort(self._ridx[pos], kind="stable")]
-        return self._rows[pos]
-
-    def _naming(self, boundary: int, frame: int) -> tuple[str, float]:
-        """(name, distance) the library gives the segment starting at ``boundary`` when
-        decided at ``frame``."""
-        W = self.named_rows(boundary, frame)
-        if len(W) < 2:
-            from rtseg.library import UNKNOWN
-            return UNKNOWN, math.inf
-        nm = self.library.name(W, self.frame_rate)
-        return nm.name, nm.distance
 
     def _finish(self, seg: _Segment, end: int, frame: int) -> None:
         """The segment ended at block ``end``: correct it if clearly wrong, then pool its
@@ -500,47 +474,6 @@ class IdentityTracker:
             e = segs[i + 1][0] if i + 1 < len(segs) else n_frames
             out[max(0, b if i else 0):max(0, e)] = j
         return out
-
-
-def identify_segments(X: np.ndarray, frame_rate: float,
-                      cuts: Sequence[tuple[int, int]], **tracker_kw: Any) -> list[int]:
-    """Offline: the final behaviour id (1-based, corrections applied) of every segment of
-    a take, as the live tracker gives them.
-
-    X: the take's feature rows (frames, dims), fed in order as frames 0..n-1.
-    cuts: (boundary, detected) per cut - boundary the first frame of the new segment,
-        detected the frame whose arrival revealed it (batch detectors: the boundary; a
-        cut detected after the last frame is delivered at the end).  Segments are those
-        between the sorted boundaries, segment 0 starting at frame 0.
-    tracker_kw: ``IdentityTracker`` keyword arguments (threshold, decide_after_s, ...).
-    After the last frame the open segment is closed (``IdentityTracker.close``).
-    """
-    X = np.asarray(X, dtype=np.float64)
-    n = len(X)
-    bounds = sorted({int(b) for b, _ in cuts if 0 < int(b) < n})
-    if n == 0:
-        return []
-    pending = sorted(((max(int(d), int(b)), int(b)) for b, d in cuts if 0 < int(b) < n),
-                     reverse=True)
-    tr = IdentityTracker(frame_rate, **tracker_kw)
-    for i in range(n):
-        tr.update(i, X[i])
-        while pending and pending[-1][0] <= i:
-            d, b = pending.pop()
-            tr.on_cut(b, d)
-    while pending:
-        d, b = pending.pop()
-        tr.on_cut(b, d)
-    tr.close(n - 1)
-    final: dict[int, int] = {}
-    for m in tr.history:
-        final[m.boundary] = m.behaviour
-    # renumber 1.. in order of first appearance along the take
-    ids = [final.get(b, 0) for b in [0, *bounds]]
-    order: dict[int, int] = {}
-    for j in ids:
-        order.setdefault(j, len(order) + 1)
-    return [order[j] for j in ids]
 
 
 def tracker_from_config(config: Any, frame_rate: float, method: str,

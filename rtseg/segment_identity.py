@@ -5,8 +5,9 @@ for each take of an archive).
   computed once) and give every segment its behaviour id (``Segment.behaviour``, 1.. in
   order of first appearance; the same id = the same behaviour).
 - ``gmm_segment_ids(result)``: for the GMM, the mixture component most of a segment's
-  frames belong to; the other methods use ``rtseg.identity.identify_segments`` on their
-  cuts (what the live tracker would send, without its corrections).
+  frames belong to; the other methods use ``identify_segments`` on their cuts: the live
+  tracker (``rtseg.identity.IdentityTracker``) fed the take's rows and cuts, corrections
+  applied.
 - ``name_take(take, results, library, config)``: with a behaviour library
   (``rtseg segment --identify --behaviours LIB``), the library's name of every segment
   (``unknown`` when unlike every example), as the live tracker names it: the rows the live
@@ -17,7 +18,9 @@ for each take of an archive).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Sequence
+
+import numpy as np
 
 from rtseg.segmentation import SegmentationResult
 
@@ -27,11 +30,11 @@ def identify_take(take: Any, methods: list[str], params: dict[str, dict[str, Any
                   ) -> dict[str, SegmentationResult]:
     """Segment ``take`` with each method (features computed once) and give every segment
     its behaviour id (``Segment.behaviour``): gmm the majority mixture component of the
-    segment's frames, the others ``rtseg.identity.identify_segments`` on the take's
+    segment's frames, the others ``identify_segments`` on the take's
     features and that method's cuts.  Ids are 1.. in order of first appearance."""
     import dataclasses
     import time
-    from rtseg.identity import DEFAULT_THRESHOLD, identify_segments
+    from rtseg.identity import DEFAULT_THRESHOLD
     from rtseg.segmentation import compute_features, segment_take
     if threshold is not None and not threshold > 0:
         raise ValueError(f"--identity-threshold must be positive, got {threshold}")
@@ -52,6 +55,48 @@ def identify_take(take: Any, methods: list[str], params: dict[str, dict[str, Any
         r.elapsed_s += time.perf_counter() - t0
         out[m] = r
     return out
+
+
+def identify_segments(X: np.ndarray, frame_rate: float,
+                      cuts: Sequence[tuple[int, int]], **tracker_kw: Any) -> list[int]:
+    """Offline: the final behaviour id (1-based, corrections applied) of every segment of
+    a take, as the live tracker gives them.
+
+    X: the take's feature rows (frames, dims), fed in order as frames 0..n-1.
+    cuts: (boundary, detected) per cut - boundary the first frame of the new segment,
+        detected the frame whose arrival revealed it (batch detectors: the boundary; a
+        cut detected after the last frame is delivered at the end).  Segments are those
+        between the sorted boundaries, segment 0 starting at frame 0.
+    tracker_kw: ``IdentityTracker`` keyword arguments (threshold, decide_after_s, ...).
+    After the last frame the open segment is closed (``IdentityTracker.close``).
+    """
+    X = np.asarray(X, dtype=np.float64)
+    n = len(X)
+    bounds = sorted({int(b) for b, _ in cuts if 0 < int(b) < n})
+    if n == 0:
+        return []
+    pending = sorted(((max(int(d), int(b)), int(b)) for b, d in cuts if 0 < int(b) < n),
+                     reverse=True)
+    from rtseg.identity import IdentityTracker
+    tr = IdentityTracker(frame_rate, **tracker_kw)
+    for i in range(n):
+        tr.update(i, X[i])
+        while pending and pending[-1][0] <= i:
+            d, b = pending.pop()
+            tr.on_cut(b, d)
+    while pending:
+        d, b = pending.pop()
+        tr.on_cut(b, d)
+    tr.close(n - 1)
+    final: dict[int, int] = {}
+    for m in tr.history:
+        final[m.boundary] = m.behaviour
+    # renumber 1.. in order of first appearance along the take
+    ids = [final.get(b, 0) for b in [0, *bounds]]
+    order: dict[int, int] = {}
+    for j in ids:
+        order.setdefault(j, len(order) + 1)
+    return [order[j] for j in ids]
 
 
 def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,

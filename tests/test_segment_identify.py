@@ -16,7 +16,7 @@ import pytest
 
 from rtseg.cli import main
 from rtseg.drivers.readers import write_take
-from rtseg.identity import identify_segments
+from rtseg.segment_identity import identify_segments
 from rtseg.simulators.synth import synthesize
 
 from synth_identity import SYNTH_DETECTOR, SYNTH_THRESHOLD
