@@ -4,6 +4,7 @@
     python3 benchmarks/library_loto.py mocap6 [DATA_DIR]          # leave-one-take-out
     python3 benchmarks/library_loto.py single [DATA_DIR/cmu_single] # leave-one-person-out
     python3 benchmarks/library_loto.py spliced SPLICED_DIR [DATA_DIR/cmu_single]
+    python3 benchmarks/library_loto.py fewshot [DATA_DIR] [--seconds S]  # short examples
     (options: --no-reject, --metric model|descriptor, --step S, --name-after S)
 
 mocap6: the three mocap6 takes (13_29, 13_31, 14_14; exercise names); for each take a
@@ -16,6 +17,13 @@ profile names the live segments of the person's takes.  Behaviours only this per
 performs are not in the library: they must come out ``unknown``.
 spliced: spliced performances (benchmarks/splice.py) named by a library learned from the
 cmu_single takes of the people NOT in the performance.
+fewshot: what ``rtseg learn LIB --take FILE --label NAME --frames A:B`` builds from a few
+seconds of each behaviour.  Each mocap6 take is named by a library learned from ONE other
+take, each exercise's example cut to its middle ``--seconds`` S (default 4; longer ones
+kept whole), so that no behaviour has a second example (``held_out``, and each exercise
+left out in turn: ``hidden_names``); and by one-name libraries, each exercise of the other
+take alone (``one_name``: that exercise's segments must get its name, every other segment
+``unknown``).
 ``--no-reject``: no null rejection (every segment its nearest name), the ceiling.
 ``--metric descriptor``: libraries of the earlier descriptor distance (default: model).
 ``--step S``: example windows every S seconds (default ``rtseg.library.DEFAULT_STEP_S``);
@@ -58,6 +66,42 @@ def mocap6(data: Path, cfg) -> dict:
         tk[lt.name] = (take, truth)
     units = {n: (lambda e, n=n: e.take == n) for n in names}
     return run_folds(ex, units, tk, {n: n for n in names}, cfg, True, _progress)
+
+
+def fewshot(data: Path, cfg, seconds: float) -> dict:
+    import dataclasses
+    takes = [t for t in find_labelled_takes(data, ("cmu",)) if "mocap6" in t.labels.source]
+    names = [t.name for t in takes]
+    ex = []
+    for e in examples_from_dir(data, cfg, takes=names):
+        a, b = e.frames
+        n = int(round(seconds * e.frame_rate))
+        if b - a > n:
+            m = (a + b) // 2
+            e = dataclasses.replace(e, frames=(m - n // 2, m - n // 2 + n))
+        ex.append(e)
+    tk, unit, units, unit1, units1 = {}, {}, {}, {}, {}
+    for lt in takes:
+        take = lt.load()
+        truth = np.array([MOCAP6_NAMES.get(str(v), str(v)) for v in truth_labels(lt, take.n_frames)])
+        for src in names:
+            if src == lt.name:
+                continue
+            k = f"{lt.name} by {src}"
+            tk[k] = (take, truth)
+            unit[k] = k
+            units[k] = (lambda e, s=src: e.take != s)
+            for nm in sorted({e.name for e in ex if e.take == src}):
+                u = f"{k}: {nm}"
+                unit1[f"{u} "] = u
+                units1[u] = (lambda e, s=src, n=nm: e.take != s or e.name != n)
+    tk1 = {k: tk[u.split(": ")[0]] for k, u in unit1.items()}
+    doc = run_folds(ex, units, tk, unit, cfg, True, _progress)
+    one = run_folds(ex, units1, tk1, unit1, cfg, False, _progress)
+    doc["one_name"] = one["held_out"]
+    doc["libraries"] += one["libraries"]
+    doc["seconds"] = seconds
+    return doc
 
 
 def single(src: Path, cfg) -> dict:
@@ -122,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
         le.METRIC = argv[k + 1]
         del argv[k:k + 2]
     opts = {}
-    for flag in ("--step", "--name-after"):
+    for flag in ("--step", "--name-after", "--seconds"):
         if flag in argv:
             k = argv.index(flag)
             try:
@@ -137,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     if "--step" in opts:
         import rtseg.library_eval as le
         le.WINDOWS["step_s"] = opts["--step"]
-    if not argv or argv[0] not in ("mocap6", "single", "spliced"):
+    if not argv or argv[0] not in ("mocap6", "single", "spliced", "fewshot"):
         print(__doc__, file=sys.stderr)
         return 2
     cfg, _ = live_config()
@@ -147,6 +191,8 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     if argv[0] == "mocap6":
         doc = mocap6(Path(argv[1]) if len(argv) > 1 else DATA, cfg)
+    elif argv[0] == "fewshot":
+        doc = fewshot(Path(argv[1]) if len(argv) > 1 else DATA, cfg, opts.get("--seconds", 4.0))
     elif argv[0] == "single":
         doc = single(Path(argv[1]) if len(argv) > 1 else DATA / "cmu_single", cfg)
     else:

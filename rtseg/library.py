@@ -37,7 +37,11 @@ behaviour missing from the library would see); the rule that accepts the most kn
 rejects the most unknown cases wins (its same-name distance is likewise the mean of the k
 nearest same-name windows).  When the library holds more than one person
 (examples' ``person``), each window is compared only with other people's windows, as a new
-performer would be.  Nothing held out is looked at.
+performer would be.  Nothing held out is looked at.  A known case needs a second example
+of the name (another take or recording; another person's when the library holds several):
+windows of one example lie nearer each other than a new performance does.  A library where
+no behaviour has a second example cannot be calibrated: its threshold is
+``DEFAULT_THRESHOLD`` of its metric and its ratio 1 (``calibration["calibrated"]`` False).
 
 Windows: ``window_s`` (2 s) long every ``step_s`` (0.5 s) inside each labelled range after
 ``edge_s`` (0.5 s) is cut off each end (transitions); a range shorter than that gives one
@@ -60,8 +64,9 @@ from typing import Any
 import numpy as np
 
 from rtseg.config import ConfigError
-from rtseg.library_calibration import (MODEL_ONE_NAME_FACTOR, ONE_NAME_FACTOR, k_mean,
-                                       median_or_none, separating_rule)
+from rtseg.library_calibration import (DEFAULT_THRESHOLD, MODEL_ONE_NAME_FACTOR,
+                                       ONE_NAME_FACTOR, k_mean, median_or_none,
+                                       separating_rule)
 from rtseg.library_models import LAG_S, window_stats
 
 FORMAT = "rtseg-behaviour-library"
@@ -257,7 +262,9 @@ class Library:
     # ------------------------------------------------------------------ calibration
     def calibrate(self) -> float:
         """Set ``threshold`` and ``ratio`` from the library's own windows (module doc);
-        returns the threshold.  ``calibration`` keeps the medians and counts."""
+        returns the threshold.  ``calibration`` keeps the medians and counts, and
+        ``calibrated``: False when no behaviour has a second example (the threshold is then
+        ``DEFAULT_THRESHOLD``)."""
         names = np.array(self.names)
         src = np.array(self.sources)
         who = [str(e.get("person") or e.get("source", k)) for k, e in enumerate(self.examples)]
@@ -271,9 +278,6 @@ class Library:
                 d = np.where(person != person[i], d, np.inf)
             s = d[(names == names[i]) & (src != src[i])]
             s = s[np.isfinite(s)]
-            if not len(s) and not by_person:   # the name's only example: its windows apart
-                ok = (names == names[i]) & (np.arange(len(d)) != i) & self._apart(i)
-                s = d[ok]
             per = sorted(v for n, v in self.name_distances(d).items()
                          if n != names[i] and math.isfinite(v))
             if len(s):
@@ -282,23 +286,15 @@ class Library:
             if per:
                 o1.append(per[0])
                 o2.append(per[1] if len(per) > 1 else math.inf)
-        factor = MODEL_ONE_NAME_FACTOR if self.metric == "model" else ONE_NAME_FACTOR
-        self.threshold, self.ratio = separating_rule(same, other, o1, o2, factor)
+        if same:
+            factor = MODEL_ONE_NAME_FACTOR if self.metric == "model" else ONE_NAME_FACTOR
+            self.threshold, self.ratio = separating_rule(same, other, o1, o2, factor)
+        else:                            # nothing tells how near a new performance lies
+            self.threshold, self.ratio = DEFAULT_THRESHOLD[self.metric], 1.0
         self.calibration = {"same_median": median_or_none(same),
                             "other_median": median_or_none(o1),
-                            "same": len(same), "other": len(o1)}
+                            "same": len(same), "other": len(o1), "calibrated": bool(same)}
         return self.threshold
-
-    def _apart(self, i: int) -> np.ndarray:
-        """Windows of the same example as window i that do not overlap it (others True)."""
-        out = np.ones(len(self.names), dtype=bool)
-        fr = self.frame_rate
-        L = self.window_s * fr
-        starts = self.starts or [0.0] * len(self.names)
-        for j in range(len(self.names)):
-            if self.sources[j] == self.sources[i] and abs(starts[j] - starts[i]) < L:
-                out[j] = False
-        return out
 
     def merged(self, other: "Library") -> "Library":
         """This library with ``other``'s examples added (same profile, dims, frame rate and

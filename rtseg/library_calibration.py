@@ -22,6 +22,11 @@ ONE_NAME_FACTOR = 1.3
 #: libraries of those folds under the model distance, with windows every
 #: ``DEFAULT_STEP_S`` (median 1.24, range 1.09-1.565; 1.45 with windows every 1 s)
 MODEL_ONE_NAME_FACTOR = 1.57
+#: the threshold of a library that cannot be calibrated (no behaviour has a second example,
+#: so no known case): per metric, the median threshold the calibration chose in the
+#: libraries of benchmarks/library_loto.py's mocap6 and cmu_single folds that could be
+#: calibrated (its JSON ``libraries``; docs/identity.md)
+DEFAULT_THRESHOLD = {"model": 2.43, "descriptor": 0.85}
 
 
 def separating_rule(same: Sequence[float], same_other: Sequence[float],
@@ -55,8 +60,8 @@ def separating_threshold(same: Sequence[float], other: Sequence[float],
                          one_name_factor: float = ONE_NAME_FACTOR) -> float:
     """The distance t maximising (share of ``same`` <= t) + (share of ``other`` > t),
     midway between neighbouring values; ties: the middle of the best run.  Without
-    ``other`` (one name): ``one_name_factor`` x the median ``same``; without ``same``: half the smallest
-    ``other``; without either: inf."""
+    ``other`` (one name): ``one_name_factor`` x the median ``same``; without ``same``: half
+    the smallest ``other``; without either: inf."""
     s = np.sort(np.asarray(same, dtype=np.float64))
     o = np.sort(np.asarray(other, dtype=np.float64))
     if not len(o):

@@ -121,12 +121,15 @@ def run_folds(examples: Sequence[Example], units: dict[str, Callable[[Example], 
     does not hold, name the live segments of its takes (``takes``: key -> (take, per-frame
     truth)); with ``hide_names``, also once per true name of the unit with that name left
     out of the library (its segments count as not-known).  Returns ``{"held_out":
-    summary, "hidden_names": summary, "segments": [...]}``."""
+    summary, "hidden_names": summary, "segments": [...], "libraries": [...]}`` (each
+    fold's library: ``library_summary``)."""
     main, hidden = Tally(), Tally()
+    libraries = []
     for unit, held in units.items():
         lib, _ = fold(examples, held)
         if lib is None:
             continue
+        libraries.append(library_summary(lib, unit))
         keys = [k for k, u in take_unit.items() if u == unit]
         for k in keys:
             if progress is not None:
@@ -140,6 +143,7 @@ def run_folds(examples: Sequence[Example], units: dict[str, Callable[[Example], 
             lib_h, _ = fold(examples, held, (nm,))
             if lib_h is None:
                 continue
+            libraries.append(library_summary(lib_h, unit, nm))
             for k in keys:
                 if progress is not None:
                     progress(f"{unit}: {k} without {nm}")
@@ -147,4 +151,14 @@ def run_folds(examples: Sequence[Example], units: dict[str, Callable[[Example], 
                 rows = name_take(take, truth, lib_h, config, k)
                 hidden.add([r for r in rows if r.truth == nm])
     return {"held_out": main.summary(), "hidden_names": hidden.summary() if hide_names else None,
-            "segments": [vars(s) for s in main.segments]}
+            "segments": [vars(s) for s in main.segments], "libraries": libraries}
+
+
+def library_summary(lib: Library, unit: str, without: str | None = None) -> dict[str, Any]:
+    """What a fold's library holds and the rule it calibrated (``calibrated`` False: no
+    behaviour had a second example, the threshold is the metric's default)."""
+    return {"unit": unit, "without": without, "names": len(lib.behaviour_names),
+            "examples": len(lib.examples),
+            "threshold": round(float(lib.threshold), 4) if np.isfinite(lib.threshold) else None,
+            "ratio": round(float(lib.ratio), 4),
+            "calibrated": bool(lib.calibration.get("calibrated", True))}

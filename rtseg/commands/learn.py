@@ -88,11 +88,18 @@ def run(args: argparse.Namespace) -> int:
     counts: dict[str, int] = {}
     for e in lib.examples:
         counts[e["name"]] = counts.get(e["name"], 0) + 1
+    given = lib.calibration.get("threshold_given")
+    calibrated = lib.calibration.get("calibrated", True)
     print(f"{path}: {len(counts)} behaviours, {len(lib.examples)} examples, "
           f"{len(lib.names)} windows; profile {lib.profile} ({lib.dims} dims); "
           f"unknown beyond distance {lib.threshold:.3f} or ratio {lib.ratio:.2f} to the "
           f"next name"
-          + (" (given)" if lib.calibration.get("threshold_given") else " (calibrated)"))
+          + (" (given)" if given else " (calibrated)" if calibrated else " (default)"))
+    if not given and not calibrated:
+        print("rtseg learn: note: no behaviour has a second example (another take or "
+              "recording), so nothing tells how near a new performance lies: the threshold "
+              "is the default; add a second example of a behaviour to calibrate it, or give "
+              "--threshold D", file=sys.stderr)
     for k in sorted(counts):
         print(f"  {k}: {counts[k]} example(s)")
     return 0
