@@ -18,6 +18,7 @@ is one ``LibraryError`` line naming the file.
 from __future__ import annotations
 
 import json
+import logging
 import math
 from pathlib import Path
 from typing import Any
@@ -54,6 +55,10 @@ def save(lib: Library, path: str | Path) -> Path:
     tmp.write_text(json.dumps(to_dict(lib), allow_nan=False) + "\n", encoding="utf-8")
     tmp.replace(p)
     return p
+
+
+#: library files already warned about (``load``)
+_WARNED: set[str] = set()
 
 
 def load(path: str | Path, profile: str | None = None, dims: int | None = None) -> Library:
@@ -125,4 +130,12 @@ def load(path: str | Path, profile: str | None = None, dims: int | None = None) 
         except (KeyError, TypeError, ValueError, np.linalg.LinAlgError) as exc:
             raise LibraryError(f"behaviour library {p}: malformed ({type(exc).__name__}: "
                                f"{exc})") from None
+    if (not math.isfinite(lib.threshold) and not lib.calibration.get("threshold_given")
+            and str(p.resolve()) not in _WARNED):
+        _WARNED.add(str(p.resolve()))    # once per file (rtseg live checks it, then loads it)
+        logging.getLogger(__name__).warning(
+            "behaviour library %s has no rejection threshold (an rtseg before 2026-12-02 "
+            "learned it from one example per behaviour): every segment will get a name; "
+            "learn it again ('rtseg learn %s --new ...'), or add an example to it, which "
+            "calibrates it anew", p, p)
     return lib

@@ -499,3 +499,29 @@ def test_a_one_example_library_of_real_exercises_still_rejects_the_others():
     assert len(others) >= 4
     assert all(r.name == UNKNOWN for r in others), [(r.truth, r.name, r.distance) for r in others]
     assert [r.name for r in rows if r.truth == "ArmCircle"] == ["ArmCircle"]
+
+
+def test_an_old_library_that_never_rejects_is_loaded_with_a_warning(tmp_path, library, caplog):
+    """A file learned before 2026-12-02 from one example per behaviour could hold no
+    threshold (every segment named): it still loads, with a warning that says what to do;
+    a threshold the user gave is not warned about, and a file is warned about once."""
+    import logging
+    path = library.save(tmp_path / "lib.json")
+    doc = json.loads(path.read_text())
+    doc["threshold"] = None
+    doc["calibration"] = {"same": 0, "other": 0}
+    path.write_text(json.dumps(doc))
+    with caplog.at_level(logging.WARNING, logger="rtseg.library_file"):
+        lib = load(path)
+    assert lib.threshold == float("inf")
+    assert "no rejection threshold" in caplog.text and "--new" in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="rtseg.library_file"):
+        load(path)                      # once per file: rtseg live checks it, then loads it
+    assert "no rejection threshold" not in caplog.text
+    doc["calibration"]["threshold_given"] = True
+    given = tmp_path / "given.json"
+    given.write_text(json.dumps(doc))
+    with caplog.at_level(logging.WARNING, logger="rtseg.library_file"):
+        load(given)
+    assert "no rejection threshold" not in caplog.text
