@@ -189,14 +189,32 @@ def main(argv: list[str] | None = None) -> int:
     if "--name-after" in opts:
         cfg["identity.name_after_s"] = opts["--name-after"]
     t0 = time.perf_counter()
-    if argv[0] == "mocap6":
-        doc = mocap6(Path(argv[1]) if len(argv) > 1 else DATA, cfg)
-    elif argv[0] == "fewshot":
-        doc = fewshot(Path(argv[1]) if len(argv) > 1 else DATA, cfg, opts.get("--seconds", 4.0))
-    elif argv[0] == "single":
-        doc = single(Path(argv[1]) if len(argv) > 1 else DATA / "cmu_single", cfg)
-    else:
-        doc = spliced(Path(argv[1]), Path(argv[2]) if len(argv) > 2 else DATA / "cmu_single", cfg)
+    if argv[0] in ("mocap6", "fewshot"):
+        data = Path(argv[1]) if len(argv) > 1 else DATA
+        found = [t.name for t in find_labelled_takes(data, ("cmu",)) if "mocap6" in t.labels.source]
+        if len(found) < 2:
+            print(f"library_loto.py {argv[0]}: {data} holds {len(found)} mocap6-labelled "
+                  f"take(s) (cmu/*.amc with labels/mocap6/TAKE.txt); leave-one-take-out "
+                  f"needs two", file=sys.stderr)
+            return 2
+    try:
+        if argv[0] == "mocap6":
+            doc = mocap6(Path(argv[1]) if len(argv) > 1 else DATA, cfg)
+        elif argv[0] == "fewshot":
+            doc = fewshot(Path(argv[1]) if len(argv) > 1 else DATA, cfg,
+                          opts.get("--seconds", 4.0))
+        elif argv[0] == "single":
+            doc = single(Path(argv[1]) if len(argv) > 1 else DATA / "cmu_single", cfg)
+        elif len(argv) < 2:
+            print("library_loto.py spliced: give SPLICED_DIR (benchmarks/splice.py output)",
+                  file=sys.stderr)
+            return 2
+        else:
+            doc = spliced(Path(argv[1]), Path(argv[2]) if len(argv) > 2 else DATA / "cmu_single",
+                          cfg)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"library_loto.py {argv[0]}: {exc}", file=sys.stderr)
+        return 2
     from rtseg.library import DEFAULT_STEP_S
     doc = {"protocol": argv[0], "seconds": round(time.perf_counter() - t0, 1),
            "step_s": opts.get("--step", DEFAULT_STEP_S),
