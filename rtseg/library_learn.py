@@ -83,6 +83,24 @@ def example_of_take(path: str | Path, name: str, config: Any,
                    float(take.frame_rate))
 
 
+def synthetic_examples(behaviours: Sequence[str], seeds: Sequence[int], config: Any,
+                       seconds: float = 8.0, frame_rate: float = 120.0) -> list[Example]:
+    """Examples of ``behaviours`` performed by synthetic performers
+    (``rtseg.simulators.synth``), one performance of ``seconds`` per behaviour each per
+    seed (a seed varies tempo, amplitude and style: a performer of its own, ``person``
+    ``synth<seed>``), as ``rtseg learn`` would take them from those performances' takes."""
+    from rtseg.simulators.synth import synthesize
+    script = ",".join(f"{b}:{seconds:g}" for b in behaviours)
+    out: list[Example] = []
+    for seed in seeds:
+        res = synthesize(script, frame_rate=frame_rate, seed=int(seed))
+        X, index, profile = take_rows(res.take, config)
+        for a, b, name in label_runs(res.frame_names()):
+            out.append(Example(name, f"synth{seed}", f"synth{seed}", X, index, (a, b),
+                               profile, float(frame_rate)))
+    return out
+
+
 def label_runs(labels: Sequence[Any]) -> list[tuple[int, int, str]]:
     """[(a, b, label)] runs of equal per-frame labels."""
     lab = [str(v) for v in labels]

@@ -39,7 +39,7 @@ def test_demo_names_recurring_behaviours():
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.splitlines()
     ids = {int(m.group(2)): m.group(1) for m in (
-        re.match(r"behaviour\s+(\S+) segment (\d+)", ln) for ln in lines) if m}
+        re.match(r'behaviour\s+(\d+)(?: "[^"]*")? segment (\d+)', ln) for ln in lines) if m}
     cut_segments = [int(m.group(1)) for m in (
         re.match(r"cut .* segment (\d+)", ln) for ln in lines) if m]
     assert len(cut_segments) == 4, proc.stdout
@@ -56,3 +56,36 @@ def test_demo_names_recurring_behaviours():
         capture_output=True, text=True, timeout=60, cwd=REPO)
     assert off.returncode == 0, off.stderr
     assert "behaviour" not in off.stdout and "cut #1" in off.stdout
+
+
+def test_demo_names_segments_with_its_own_library_and_says_unknown_for_the_rest():
+    """By default the demo learns a library of idle, walk, punch, squat and wave from two
+    other synthetic performers: walk and punch get their names, kick (not in it) comes out
+    "unknown"; --no-names leaves ids only."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "rtseg.cli", "demo", "--speed", "4", "--duration", "18",
+         "--script", "walk:6,punch:6,kick:6", "--no-osc"],
+        capture_output=True, text=True, timeout=90, cwd=REPO)
+    assert proc.returncode == 0, proc.stderr
+    assert "behaviour library: idle, walk, punch, squat, wave" in proc.stderr
+    names = re.findall(r'^behaviour\s+\d+ "([^"]+)" segment (\d+)', proc.stdout, re.M)
+    assert [n for n, _ in names] == ["walk", "punch", "unknown"], proc.stdout
+    plain = subprocess.run(
+        [sys.executable, "-m", "rtseg.cli", "demo", "--speed", "4", "--duration", "8",
+         "--script", "walk:4,punch:4", "--no-osc", "--no-names"],
+        capture_output=True, text=True, timeout=60, cwd=REPO)
+    assert plain.returncode == 0, plain.stderr
+    assert "behaviour library" not in plain.stderr
+    lines = [ln for ln in plain.stdout.splitlines() if ln.startswith("behaviour")]
+    assert lines and not any('"' in ln for ln in lines), plain.stdout
+
+
+def test_demo_refuses_a_file_that_is_not_a_library(tmp_path):
+    bad = tmp_path / "lib.json"
+    bad.write_text('{"format": "something else"}')
+    proc = subprocess.run(
+        [sys.executable, "-m", "rtseg.cli", "demo", "--duration", "2", "--no-osc",
+         "--behaviours", str(bad)],
+        capture_output=True, text=True, timeout=60, cwd=REPO)
+    assert proc.returncode == 2
+    assert len(proc.stderr.strip().splitlines()) == 1 and "not a behaviour library" in proc.stderr

@@ -11,6 +11,11 @@ happen, each followed by its behaviour id (``[identity]``, on in the demo unless
 Without ``--config`` the identity threshold is the synthesiser's
 (``rtseg.simulators.synth.IDENTITY_THRESHOLD``, 7.0: its instances of one behaviour differ
 more than real repeats), not the mocap default.
+Each behaviour line also carries the segment's name from a behaviour library: by default
+one the demo learns at start from two other synthetic performers (seeds SEED + 1001 and
+SEED + 1002) of idle, walk, punch, squat and wave, so kick (and any other behaviour of a
+--script) comes out "unknown"; --behaviours LIB names with a library of rtseg learn;
+--no-names gives ids only.
 The first behaviour change comes 5 s in, so the first cut appears about 6 s in; the demo
 ends by itself after ``--duration`` seconds (default 60).  Ctrl-C stops it cleanly.
 """
@@ -28,6 +33,23 @@ DEFAULT_DURATION = 60.0
 #: The demo's performance: behaviours recur (walk, punch, squat twice) so the behaviour ids
 #: printed beside the cuts show a recurring behaviour getting its earlier id back.
 DEMO_SCRIPT = "idle:5,walk:7,punch:7,walk:7,squat:7,punch:7,wave:7,squat:7,kick:6"
+#: The behaviours of the demo's own library, learned from other synthetic performers: the
+#: default script's kick is not among them, so it is named ``unknown``
+DEMO_LIBRARY = ("idle", "walk", "punch", "squat", "wave")
+#: the library's performers: the performance's seed plus these
+LIBRARY_SEED_OFFSETS = (1001, 1002)
+
+
+def demo_library(seed: int, config, folder: str) -> tuple[str, str]:
+    """Learn the demo's behaviour library (module doc) into ``folder``; (path, what it
+    holds, for the console)."""
+    from pathlib import Path
+    from rtseg.library_learn import learn, synthetic_examples
+    seeds = [seed + k for k in LIBRARY_SEED_OFFSETS]
+    lib, _ = learn(synthetic_examples(DEMO_LIBRARY, seeds, config))
+    path = lib.save(Path(folder) / "demo_behaviours.json")
+    return str(path), (f"{', '.join(DEMO_LIBRARY)} from two other synthetic performers "
+                       f"(seeds {seeds[0]} and {seeds[1]}); anything else is named unknown")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -36,15 +58,37 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f"rtseg demo: configuration error: {error_text(exc)}", file=sys.stderr)
         return 2
-    from rtseg.simulators.faults import FaultConfig
-    from rtseg.simulators.serial_device import SerialSuit
-    from rtseg.simulators.synth import ScriptError, synthesize
     script = args.script or DEMO_SCRIPT
     if not args.no_identity:
         cfg["identity.enabled"] = True
         if args.config is None:       # the synthesiser's own spread sets its threshold
             from rtseg.simulators.synth import IDENTITY_THRESHOLD
             cfg["identity.threshold"] = IDENTITY_THRESHOLD
+    if args.behaviours:
+        from rtseg.library import LibraryError, load
+        try:
+            load(args.behaviours)          # format and version now; the profile at start
+        except LibraryError as exc:
+            print(f"rtseg demo: {error_text(exc)}", file=sys.stderr)
+            return 2
+        cfg["identity.enabled"] = True
+        cfg["identity.behaviours"] = args.behaviours
+    import tempfile
+    with tempfile.TemporaryDirectory(prefix="rtseg-demo-") as tmp:
+        held = ""
+        if cfg["identity.enabled"] and not args.behaviours and not args.no_names \
+                and not cfg.values.get("identity", {}).get("behaviours"):
+            path, held = demo_library(args.seed, cfg, tmp)
+            cfg["identity.behaviours"] = path
+        return _run(args, cfg, script, held)
+
+
+def _run(args: argparse.Namespace, cfg, script: str, library: str = "") -> int:
+    """The demo proper: synthesise, play on a pty, run the live session on it
+    (``library``: what the demo's own library holds, for the console; "" without it)."""
+    from rtseg.simulators.faults import FaultConfig
+    from rtseg.simulators.serial_device import SerialSuit
+    from rtseg.simulators.synth import ScriptError, synthesize
     try:
         faults = FaultConfig.parse(args.faults)
         synth = synthesize(script, frame_rate=args.rate, seed=args.seed)
@@ -72,6 +116,8 @@ def run(args: argparse.Namespace) -> int:
                   f"performance time (divide by {args.speed:g} for wall-clock time), "
                   f"processing times are wall-clock", file=sys.stderr)
         print(f"rtseg demo: script {script}", file=sys.stderr)
+        if library:
+            print(f"rtseg demo: behaviour library: {library}", file=sys.stderr)
         wall = f" ({args.duration / args.speed:.1f} s)" if args.speed != 1 else ""
         print(f"rtseg demo: reading {url}; {where}; ending after {args.duration:g} s of "
               f"performance{wall}, Ctrl-C to stop", file=sys.stderr)
@@ -106,6 +152,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--no-identity", action="store_true",
                    help="do not name behaviours (by default the demo turns [identity] on: each "
                         "segment gets a behaviour id, an earlier segment's when it recurs)")
+    p.add_argument("--behaviours", metavar="LIB",
+                   help="name segments with this behaviour library (rtseg learn) instead of "
+                        "the demo's own")
+    p.add_argument("--no-names", action="store_true",
+                   help="behaviour ids only: no library (by default the demo learns one from "
+                        "other synthetic performers at start)")
     p.add_argument("--truth", action="store_true",
                    help="print the script's true transition frames before starting")
     add_session_arguments(p)
