@@ -346,11 +346,12 @@ def test_live_session_sends_names_over_udp(tmp_path, library):
     res = synthesize(PERFORMANCE, seed=1)
     rx = OscCollector(linger=0.5)
     port = rx.port
+    rec = tmp_path / "session"
     cfg = from_dict({"identity": {"enabled": True, "threshold": SYNTH_THRESHOLD,
                                   "behaviours": str(path)},
                      "output": {"osc": [f"127.0.0.1:{port}"],
                                 "templates": ["/cue/{label}/start"]},
-                     "status": {"interval": 60.0}})
+                     "recording": {"dir": str(rec)}, "status": {"interval": 60.0}})
     session = LiveSession(TakeSource(res.take), cfg, handle_signals=False)
     try:
         session.run()
@@ -364,6 +365,13 @@ def test_live_session_sends_names_over_udp(tmp_path, library):
     cues = [a for a, _ in msgs if a.startswith("/cue/")]
     assert cues == ["/cue/walk/start", "/cue/unknown/start", "/cue/punch/start",
                     "/cue/unknown/start", "/cue/squat/start"]
+    # the recording carries the names, and replaying it offline gives them again
+    from rtseg.identity_eval import replay_session_identities
+    from rtseg.recording_reader import read_session_behaviours
+    recorded = [(b.segment, b.name) for b in read_session_behaviours(rec)]
+    assert [n for _, n in recorded] == [p[3] for p in beh]
+    offline = replay_session_identities(str(rec), cfg).history
+    assert [(m.segment, m.name) for m in offline] == recorded
 
 
 def test_live_refuses_a_library_of_another_profile(tmp_path, library):
