@@ -26,7 +26,8 @@ import argparse
 import sys
 
 from rtseg.cli import error_text, positive_float
-from rtseg.commands.live import add_session_arguments, config_from_args, run_session
+from rtseg.commands.live import (add_session_arguments, config_from_args, run_session,
+                                 use_library)
 from rtseg.config import ConfigError
 
 DEFAULT_DURATION = 60.0
@@ -64,15 +65,8 @@ def run(args: argparse.Namespace) -> int:
         if args.config is None:       # the synthesiser's own spread sets its threshold
             from rtseg.simulators.synth import IDENTITY_THRESHOLD
             cfg["identity.threshold"] = IDENTITY_THRESHOLD
-    if args.behaviours:
-        from rtseg.library import LibraryError, load
-        try:
-            load(args.behaviours)          # format and version now; the profile at start
-        except LibraryError as exc:
-            print(f"rtseg demo: {error_text(exc)}", file=sys.stderr)
-            return 2
-        cfg["identity.enabled"] = True
-        cfg["identity.behaviours"] = args.behaviours
+    if args.behaviours and not use_library(cfg, args.behaviours, "rtseg demo"):
+        return 2
     import tempfile
     with tempfile.TemporaryDirectory(prefix="rtseg-demo-") as tmp:
         held = ""

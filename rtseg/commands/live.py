@@ -248,21 +248,29 @@ def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: 
     return 0
 
 
+def use_library(cfg: Any, path: str, prog: str) -> bool:
+    """Turn identity on with the behaviour library file ``path`` (``--behaviours``): its
+    format and version are checked now, its feature profile at session start.  False, with
+    one line on stderr, when it is refused."""
+    from rtseg.library import LibraryError, load
+    try:
+        load(path)
+    except LibraryError as exc:
+        print(f"{prog}: {error_text(exc)}", file=sys.stderr)
+        return False
+    cfg["identity.enabled"] = True
+    cfg["identity.behaviours"] = path
+    return True
+
+
 def run(args: argparse.Namespace) -> int:
     try:
         cfg = config_from_args(args)
     except ConfigError as exc:
         print(f"rtseg live: configuration error: {error_text(exc)}", file=sys.stderr)
         return 2
-    if getattr(args, "behaviours", None):
-        from rtseg.library import LibraryError, load
-        try:
-            load(args.behaviours)          # format and version now; the profile at start
-        except LibraryError as exc:
-            print(f"rtseg live: {error_text(exc)}", file=sys.stderr)
-            return 2
-        cfg["identity.enabled"] = True
-        cfg["identity.behaviours"] = args.behaviours
+    if getattr(args, "behaviours", None) and not use_library(cfg, args.behaviours, "rtseg live"):
+        return 2
     url = args.source or cfg["source.url"]
     if not url:
         print("rtseg live: no source: give SOURCE_URL or set source.url in the configuration",
