@@ -92,6 +92,10 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:       # stdout closed early (`rtseg ... | head`): stop quietly
+        import os
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
     except (OSError, ValueError, KeyError, EOFError, MemoryError) as exc:
         print(f"rtseg {args.command}: error: {error_text(exc)}", file=sys.stderr)
         return EXIT_USAGE

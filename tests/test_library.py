@@ -533,3 +533,31 @@ def test_an_old_library_that_never_rejects_is_loaded_with_a_warning(tmp_path, li
     with caplog.at_level(logging.WARNING, logger="rtseg.library_file"):
         load(given)
     assert "no rejection threshold" not in caplog.text
+
+
+def test_learn_show_lists_what_a_library_holds(tmp_path):
+    """``rtseg learn LIB --show`` reads LIB only: its rule (and where it comes from) and
+    every example with its source and take frames; with --take it is refused."""
+    from rtseg.drivers.readers import write_take
+    takes = []
+    for seed in (0, 4):
+        res = synthesize("walk:5,punch:5", seed=seed)
+        takes.append((tmp_path / f"perf{seed}.npz", res.segments[0].stop, res.take.n_frames))
+        write_take(takes[-1][0], res.take)
+    lib = tmp_path / "lib.json"
+    args = []
+    for path, cut, n in takes:
+        args += ["--take", str(path), "--label", "walk", "--frames", f"0:{cut}",
+                 "--take", str(path), "--label", "punch", "--frames", f"{cut}:{n}"]
+    run = lambda *a: subprocess.run([sys.executable, "-m", "rtseg.cli", "learn", str(lib), *a],
+                                    capture_output=True, text=True, timeout=120)
+    assert run(*args).returncode == 0
+    before = lib.read_bytes()
+    p = run("--show")
+    assert p.returncode == 0, p.stderr
+    assert "2 behaviours, 4 examples" in p.stdout and "(calibrated)" in p.stdout
+    assert "walk: 2 example(s)" in p.stdout and "punch: 2 example(s)" in p.stdout
+    assert f"perf4 frames {takes[1][1]}:{takes[1][2]}" in p.stdout
+    assert lib.read_bytes() == before                   # --show learns and writes nothing
+    p = run("--show", "--take", str(takes[0][0]), "--label", "walk")
+    assert p.returncode == 2 and "--show only reads LIB" in p.stderr

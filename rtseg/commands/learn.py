@@ -2,6 +2,7 @@
 
     rtseg learn LIB --take FILE --label NAME [--frames A:B] [--skeleton ASF] ...
     rtseg learn LIB --from DATA_DIR [--person S ...] [--exclude-person S ...]
+    rtseg learn LIB --show                      # what LIB holds; nothing learned
     (options: --step S, --profile NAME, --threshold D, --new, --config FILE)
 
 ``--take`` starts an example; the ``--label``, ``--frames`` (take frames [A, B), 0-based)
@@ -48,11 +49,52 @@ def parse_frames(text: str) -> tuple[int, int]:
     return a, b
 
 
+def describe(lib: Any, path: Path) -> list[str]:
+    """Lines saying what a library holds: its windows and profile, the rejection rule and
+    where it comes from, and per behaviour its examples (source, take frames, person)."""
+    given = lib.calibration.get("threshold_given")
+    calibrated = lib.calibration.get("calibrated", True)
+    counts: dict[str, int] = {}
+    for e in lib.examples:
+        counts[e["name"]] = counts.get(e["name"], 0) + 1
+    out = [f"{path}: {len(counts)} behaviours, {len(lib.examples)} examples, "
+           f"{len(lib.names)} windows; profile {lib.profile} ({lib.dims} dims); "
+           f"unknown beyond distance {lib.threshold:.3f} or ratio {lib.ratio:.2f} to the "
+           f"next name"
+           + (" (given)" if given else " (calibrated)" if calibrated else " (default)")]
+    for k in sorted(counts):
+        out.append(f"  {k}: {counts[k]} example(s)")
+    return out
+
+
+def show(path: Path) -> int:
+    """``--show``: ``describe`` and, per example, where it came from."""
+    from rtseg.library import load
+    lib = load(path)
+    lines = describe(lib, path)
+    print(lines[0])
+    print(f"  {lib.metric} distance, windows of {lib.window_s:g} s every {lib.step_s:g} s, "
+          f"{lib.frame_rate:g} Hz")
+    for k in sorted({e["name"] for e in lib.examples}):
+        ex = [e for e in lib.examples if e["name"] == k]
+        print(f"  {k}: {len(ex)} example(s)")
+        for e in ex:
+            a, b = (e.get("frames") or [None, None])[:2]
+            span = f" frames {a}:{b}" if a is not None else ""
+            who = f", person {e['person']}" if e.get("person") else ""
+            print(f"    {e.get('source', '?')}{span}{who}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from rtseg.library import DEFAULT_STEP_S, load
     from rtseg.library_learn import example_of_take, examples_from_dir, learn
     from rtseg.online_eval import live_config
     takes = getattr(args, "takes", None) or []
+    if args.show:
+        if takes or args.from_dir or args.new:
+            raise ValueError("--show only reads LIB: give no --take, --from or --new with it")
+        return show(Path(args.library))
     if not takes and not args.from_dir:
         raise ValueError("nothing to learn from: give --take FILE --label NAME or --from DATA_DIR")
     cfg, _ = live_config(args.config)
@@ -85,23 +127,14 @@ def run(args: argparse.Namespace) -> int:
     for n in notes:
         print(f"rtseg learn: note: {n}", file=sys.stderr)
     lib.save(path)
-    counts: dict[str, int] = {}
-    for e in lib.examples:
-        counts[e["name"]] = counts.get(e["name"], 0) + 1
     given = lib.calibration.get("threshold_given")
     calibrated = lib.calibration.get("calibrated", True)
-    print(f"{path}: {len(counts)} behaviours, {len(lib.examples)} examples, "
-          f"{len(lib.names)} windows; profile {lib.profile} ({lib.dims} dims); "
-          f"unknown beyond distance {lib.threshold:.3f} or ratio {lib.ratio:.2f} to the "
-          f"next name"
-          + (" (given)" if given else " (calibrated)" if calibrated else " (default)"))
+    print("\n".join(describe(lib, path)))
     if not given and not calibrated:
         print("rtseg learn: note: no behaviour has a second example (another take or "
               "recording), so nothing tells how near a new performance lies: the threshold "
               "is the default; add a second example of a behaviour to calibrate it, or give "
               "--threshold D", file=sys.stderr)
-    for k in sorted(counts):
-        print(f"  {k}: {counts[k]} example(s)")
     return 0
 
 
@@ -139,6 +172,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="example windows (2 s) start every S seconds (default 0.5; an "
                         "extended library keeps its own)")
     p.add_argument("--new", action="store_true", help="replace LIB instead of extending it")
+    p.add_argument("--show", action="store_true",
+                   help="print what LIB holds (behaviours, examples and where they came "
+                        "from, the rejection rule) and learn nothing")
     p.add_argument("--config", metavar="FILE", help="session configuration (features, "
                    "calibration; default config/live.toml)")
     p.set_defaults(func=run, takes=None)
