@@ -134,6 +134,22 @@ def read_session_cuts(directory: str | Path) -> list[CutEvent]:
     return cuts
 
 
+def session_segment_frames(directory: str | Path, segment: int, n_frames: int) -> tuple[int, int]:
+    """Frames [a, b) of segment ``segment`` of a recorded session, as its console and
+    ``/rtseg/cut`` numbered it: the primary detector's segment (``meta.primary`` of the
+    header; 0 runs from the first frame to its first cut), from its recorded cuts; the last
+    one ends at ``n_frames``.  ValueError naming the segments the session has."""
+    header = read_session_header(directory)
+    primary = (header.get("meta") or {}).get("primary")
+    bounds = sorted({int(c.frame) for c in read_session_cuts(directory)
+                     if (primary is None or c.method == primary) and 0 < c.frame < n_frames})
+    edges = [0, *bounds, int(n_frames)]
+    if not 0 <= segment < len(edges) - 1:
+        raise ValueError(f"{directory}: no segment {segment}: the session's "
+                         f"{primary or 'recorded'} cuts make segments 0..{len(edges) - 2}")
+    return edges[segment], edges[segment + 1]
+
+
 def read_session_behaviours(directory: str | Path) -> list[BehaviourEvent]:
     """The behaviour messages (``rtseg.identity``) a session recorded in events.jsonl, in
     order (decisions and corrections)."""

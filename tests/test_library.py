@@ -561,3 +561,33 @@ def test_learn_show_lists_what_a_library_holds(tmp_path):
     assert lib.read_bytes() == before                   # --show learns and writes nothing
     p = run("--show", "--take", str(takes[0][0]), "--label", "walk")
     assert p.returncode == 2 and "--show only reads LIB" in p.stderr
+
+
+def test_learn_from_segments_of_a_recorded_session(tmp_path):
+    """``--take SESSION_DIR --segment K``: the frames of segment K as the live session
+    numbered it (its recorded cuts), so a rehearsal recording labels itself by segment."""
+    from rtseg.recording_reader import read_session_cuts
+    res = synthesize("walk:6,punch:6,walk:6", seed=1)
+    rec = tmp_path / "rehearsal"
+    cfg = from_dict({"output": {"osc": []}, "recording": {"dir": str(rec)},
+                     "detectors": {"contrast": dict(SYNTH_DETECTOR)},
+                     "status": {"interval": 60.0}})
+    LiveSession(TakeSource(res.take), cfg, handle_signals=False).run()
+    cuts = sorted(c.frame for c in read_session_cuts(rec))
+    assert len(cuts) == 2, cuts
+    lib = tmp_path / "lib.json"
+    run = lambda *a: subprocess.run([sys.executable, "-m", "rtseg.cli", "learn", str(lib), *a],
+                                    capture_output=True, text=True, timeout=120)
+    p = run("--take", str(rec), "--segment", "0", "--label", "walk",
+            "--take", str(rec), "--segment", "1", "--label", "punch",
+            "--take", str(rec), "--segment", "2", "--label", "walk")
+    assert p.returncode == 0, p.stderr
+    got = load(lib)
+    assert [(e["name"], e["frames"]) for e in got.examples] == [
+        ("walk", [0, cuts[0]]), ("punch", [cuts[0], cuts[1]]),
+        ("walk", [cuts[1], res.take.n_frames])]
+    assert got.calibration["calibrated"]            # two walks: a second example
+    p = run("--take", str(rec), "--segment", "3", "--label", "walk")
+    assert p.returncode == 2 and "no segment 3" in p.stderr and "0..2" in p.stderr
+    p = run("--take", str(rec), "--segment", "1", "--frames", "0:100", "--label", "walk")
+    assert p.returncode == 2 and "not both" in p.stderr

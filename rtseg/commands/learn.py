@@ -1,12 +1,14 @@
 """``rtseg learn LIB``: build (or extend) a named behaviour library from labelled takes.
 
     rtseg learn LIB --take FILE --label NAME [--frames A:B] [--skeleton ASF] ...
+    rtseg learn LIB --take SESSION_DIR --segment K --label NAME ...   # a recorded segment
     rtseg learn LIB --from DATA_DIR [--person S ...] [--exclude-person S ...]
     rtseg learn LIB --show                      # what LIB holds; nothing learned
     (options: --step S, --profile NAME, --threshold D, --new, --config FILE)
 
 ``--take`` starts an example; the ``--label``, ``--frames`` (take frames [A, B), 0-based)
-and ``--skeleton`` after it belong to it.  ``--from``: every labelled take of a folder
+or ``--segment`` (of a session recording, ``rtseg live --record DIR``: segment K as the
+session numbered it) and ``--skeleton`` after it belong to it.  ``--from``: every labelled take of a folder
 (``rtseg.library_learn.examples_from_dir``).  An existing LIB is extended (its examples
 kept, and its window step) unless ``--new``.  ``--step``: example windows start every S
 seconds (default ``rtseg.library.DEFAULT_STEP_S``, 0.5).  The library is JSON (``rtseg.library``); ``rtseg live
@@ -47,6 +49,21 @@ def parse_frames(text: str) -> tuple[int, int]:
     if not 0 <= a < b:
         raise ValueError(f"--frames {text!r}: needs 0 <= A < B")
     return a, b
+
+
+def recorded_segment(t: dict[str, Any]) -> tuple[int, int]:
+    """Take frames of ``--segment K`` of a ``--take`` that is a session recording."""
+    from rtseg.recording_reader import is_session_dir, read_session, session_segment_frames
+    if t.get("frames"):
+        raise ValueError(f"--take {t['take']}: give --frames or --segment, not both")
+    if not is_session_dir(t["take"]):
+        raise ValueError(f"--take {t['take']}: --segment needs a session recording "
+                         f"(rtseg live --record DIR)")
+    try:
+        k = int(t["segment"])
+    except ValueError:
+        raise ValueError(f"--segment {t['segment']!r}: a segment number (0, 1, ...)") from None
+    return session_segment_frames(t["take"], k, read_session(t["take"]).n_frames)
 
 
 def describe(lib: Any, path: Path) -> list[str]:
@@ -103,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
         if not t.get("label"):
             raise ValueError(f"--take {t['take']}: needs --label NAME")
         frames = parse_frames(t["frames"]) if t.get("frames") else None
+        if t.get("segment") is not None:
+            frames = recorded_segment(t)
         examples.append(example_of_take(t["take"], t["label"], cfg, frames, t.get("skeleton")))
     if args.from_dir:
         found = examples_from_dir(args.from_dir, cfg, people=args.person or None)
@@ -153,6 +172,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--frames", action=_TakeAction, metavar="A:B",
                    help="take frames [A, B) of the preceding --take (default: all but rest "
                         "frames at the ends)")
+    p.add_argument("--segment", action=_TakeAction, metavar="K",
+                   help="segment K of the preceding --take, a session recording (rtseg live "
+                        "--record DIR): its frames from the session's recorded cuts, as the "
+                        "console numbered them")
     p.add_argument("--skeleton", action=_TakeAction, metavar="ASF",
                    help="skeleton of the preceding --take")
     p.add_argument("--from", dest="from_dir", metavar="DATA_DIR",
