@@ -141,13 +141,19 @@ def session_segment_frames(directory: str | Path, segment: int, n_frames: int) -
     one ends at ``n_frames``.  ValueError naming the segments the session has."""
     header = read_session_header(directory)
     primary = (header.get("meta") or {}).get("primary")
-    bounds = sorted({int(c.frame) for c in read_session_cuts(directory)
-                     if (primary is None or c.method == primary) and 0 < c.frame < n_frames})
-    edges = [0, *bounds, int(n_frames)]
-    if not 0 <= segment < len(edges) - 1:
+    starts = {int(c.segment): int(c.frame) for c in read_session_cuts(directory)
+              if primary is None or c.method == primary}
+    starts[0] = 0
+    last = max(starts)
+    if segment not in starts:
         raise ValueError(f"{directory}: no segment {segment}: the session's "
-                         f"{primary or 'recorded'} cuts make segments 0..{len(edges) - 2}")
-    return edges[segment], edges[segment + 1]
+                         f"{primary or 'recorded'} cuts make segments 0..{last}")
+    a = starts[segment]
+    b = starts.get(segment + 1, int(n_frames))
+    if not 0 <= a < b <= n_frames:
+        raise ValueError(f"{directory}: segment {segment} spans frames {a}:{b}, outside the "
+                         f"{n_frames} recorded frames")
+    return a, b
 
 
 def read_session_behaviours(directory: str | Path) -> list[BehaviourEvent]:
