@@ -286,11 +286,9 @@ class Library:
             if per:
                 o1.append(per[0])
                 o2.append(per[1] if len(per) > 1 else math.inf)
-        if same:
-            factor = MODEL_ONE_NAME_FACTOR if self.metric == "model" else ONE_NAME_FACTOR
-            self.threshold, self.ratio = separating_rule(same, other, o1, o2, factor)
-        else:                            # nothing tells how near a new performance lies
-            self.threshold, self.ratio = DEFAULT_THRESHOLD[self.metric], 1.0
+        factor = MODEL_ONE_NAME_FACTOR if self.metric == "model" else ONE_NAME_FACTOR
+        self.threshold, self.ratio = separating_rule(same, other, o1, o2, factor,
+                                                     DEFAULT_THRESHOLD[self.metric])
         self.calibration = {"same_median": median_or_none(same),
                             "other_median": median_or_none(o1),
                             "same": len(same), "other": len(o1), "calibrated": bool(same)}

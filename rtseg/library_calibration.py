@@ -33,19 +33,24 @@ DEFAULT_THRESHOLD = {"model": 2.43, "descriptor": 0.85}
 
 def separating_rule(same: Sequence[float], same_other: Sequence[float],
                     o1: Sequence[float], o2: Sequence[float],
-                    one_name_factor: float = ONE_NAME_FACTOR) -> tuple[float, float]:
+                    one_name_factor: float = ONE_NAME_FACTOR,
+                    default: float = DEFAULT_THRESHOLD["model"]) -> tuple[float, float]:
     """(threshold, ratio) of the rule "named when d1 <= threshold and d1 / d2 <= ratio"
     (d1, d2: nearest and second-nearest name's distance) that best tells the library's
     own known cases (a window's nearest same-name distance ``same`` against its nearest
     other name ``same_other``) from its unknown ones (the window's name left out: ``o1``,
     ``o2``): the most known accepted plus unknown rejected (shares).  Ratios tried: 0.5,
     0.52, ..., 1.0; ties: the largest ratio, then ``separating_threshold``'s middle rule.
-    Without known or unknown cases: ``separating_threshold`` alone, ratio 1."""
+    Without known cases (no behaviour has a second example) nothing tells how near a new
+    performance lies: ``default``, ratio 1.  Without unknown cases (one name):
+    ``separating_threshold`` alone, ratio 1."""
     s = np.asarray(same, dtype=np.float64)
     so = np.asarray(same_other, dtype=np.float64)
     a = np.asarray(o1, dtype=np.float64)
     b = np.asarray(o2, dtype=np.float64)
-    if not len(s) or not len(a):
+    if not len(s):
+        return float(default), 1.0
+    if not len(a):
         return separating_threshold(s, a, one_name_factor), 1.0
     best = (-1.0, math.inf, 1.0)
     for r in np.round(np.arange(1.0, 0.4999, -0.02), 4):
@@ -62,14 +67,14 @@ def separating_threshold(same: Sequence[float], other: Sequence[float],
                          one_name_factor: float = ONE_NAME_FACTOR) -> float:
     """The distance t maximising (share of ``same`` <= t) + (share of ``other`` > t),
     midway between neighbouring values; ties: the middle of the best run.  Without
-    ``other`` (one name): ``one_name_factor`` x the median ``same``; without ``same``: half
-    the smallest ``other``; without either: inf."""
+    ``other`` (one name): ``one_name_factor`` x the median ``same``.  ``same`` must not be
+    empty (without known cases ``separating_rule`` gives its default)."""
     s = np.sort(np.asarray(same, dtype=np.float64))
     o = np.sort(np.asarray(other, dtype=np.float64))
-    if not len(o):
-        return float(one_name_factor * np.median(s)) if len(s) else math.inf
     if not len(s):
-        return float(0.5 * o[0])
+        raise ValueError("separating_threshold needs known cases")
+    if not len(o):
+        return float(one_name_factor * np.median(s))
     vals = np.unique(np.concatenate([s, o]))
     cands = np.concatenate([[vals[0] / 2], (vals[:-1] + vals[1:]) / 2, [vals[-1] * 1.5]])
     score = (np.searchsorted(s, cands, side="right") / len(s)
