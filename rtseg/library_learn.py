@@ -65,14 +65,19 @@ def take_rows(take: Any, config: Any) -> tuple[np.ndarray, np.ndarray, str]:
 
 def example_of_take(path: str | Path, name: str, config: Any,
                     frames: tuple[int, int] | None = None, skeleton: str | None = None,
-                    person: str = "") -> Example:
-    """An example from a take file (``rtseg.take.load_take``): frames [a, b) or the whole
-    take without its rest frames at the ends."""
+                    person: str = "", segment: int | None = None) -> Example:
+    """An example from a take file (``rtseg.take.load_take``): frames [a, b), or segment
+    ``segment`` of a session recording as the session numbered it
+    (``rtseg.recording_reader.session_segment_frames``), or the whole take without its
+    rest frames at the ends."""
     from rtseg.splice_blend import trim_bounds
     from rtseg.take import load_take
     take = load_take(path, skeleton=skeleton)
     X, index, profile = take_rows(take, config)
     n = take.n_frames
+    if segment is not None:
+        from rtseg.recording_reader import session_segment_frames
+        frames = session_segment_frames(path, segment, n)
     if frames is None:
         frames = trim_bounds(take.quats, take.frame_rate) if take.n_joints > 1 else (0, n)
     a, b = int(frames[0]), int(frames[1])

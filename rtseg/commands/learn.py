@@ -51,56 +51,48 @@ def parse_frames(text: str) -> tuple[int, int]:
     return a, b
 
 
-def recorded_segment(t: dict[str, Any]) -> tuple[int, int]:
-    """Take frames of ``--segment K`` of a ``--take`` that is a session recording."""
-    from rtseg.recording_reader import is_session_dir, read_session, session_segment_frames
+def recorded_segment(t: dict[str, Any]) -> int | None:
+    """K of ``--segment K`` of a ``--take`` (None without it); the take must be a session
+    recording."""
+    from rtseg.recording_reader import is_session_dir
+    if t.get("segment") is None:
+        return None
     if t.get("frames"):
         raise ValueError(f"--take {t['take']}: give --frames or --segment, not both")
     if not is_session_dir(t["take"]):
         raise ValueError(f"--take {t['take']}: --segment needs a session recording "
                          f"(rtseg live --record DIR)")
     try:
-        k = int(t["segment"])
+        return int(t["segment"])
     except ValueError:
         raise ValueError(f"--segment {t['segment']!r}: a segment number (0, 1, ...)") from None
-    return session_segment_frames(t["take"], k, read_session(t["take"]).n_frames)
 
 
-def describe(lib: Any, path: Path) -> list[str]:
+def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
     """Lines saying what a library holds: its windows and profile, the rejection rule and
-    where it comes from, and per behaviour its examples (source, take frames, person)."""
+    where it comes from, and per behaviour its example count; with ``sources`` also its
+    distance and windows, and every example's source, take frames and person."""
     given = lib.calibration.get("threshold_given")
     calibrated = lib.calibration.get("calibrated", True)
-    counts: dict[str, int] = {}
+    by_name: dict[str, list[dict[str, Any]]] = {}
     for e in lib.examples:
-        counts[e["name"]] = counts.get(e["name"], 0) + 1
-    out = [f"{path}: {len(counts)} behaviours, {len(lib.examples)} examples, "
+        by_name.setdefault(e["name"], []).append(e)
+    out = [f"{path}: {len(by_name)} behaviours, {len(lib.examples)} examples, "
            f"{len(lib.names)} windows; profile {lib.profile} ({lib.dims} dims); "
            f"unknown beyond distance {lib.threshold:.3f} or ratio {lib.ratio:.2f} to the "
            f"next name"
            + (" (given)" if given else " (calibrated)" if calibrated else " (default)")]
-    for k in sorted(counts):
-        out.append(f"  {k}: {counts[k]} example(s)")
-    return out
-
-
-def show(path: Path) -> int:
-    """``--show``: ``describe`` and, per example, where it came from."""
-    from rtseg.library import load
-    lib = load(path)
-    lines = describe(lib, path)
-    print(lines[0])
-    print(f"  {lib.metric} distance, windows of {lib.window_s:g} s every {lib.step_s:g} s, "
-          f"{lib.frame_rate:g} Hz")
-    for k in sorted({e["name"] for e in lib.examples}):
-        ex = [e for e in lib.examples if e["name"] == k]
-        print(f"  {k}: {len(ex)} example(s)")
-        for e in ex:
+    if sources:
+        out.append(f"  {lib.metric} distance, windows of {lib.window_s:g} s every "
+                   f"{lib.step_s:g} s, {lib.frame_rate:g} Hz")
+    for k in sorted(by_name):
+        out.append(f"  {k}: {len(by_name[k])} example(s)")
+        for e in by_name[k] if sources else ():
             a, b = (e.get("frames") or [None, None])[:2]
             span = f" frames {a}:{b}" if a is not None else ""
             who = f", person {e['person']}" if e.get("person") else ""
-            print(f"    {e.get('source', '?')}{span}{who}")
-    return 0
+            out.append(f"    {e.get('source', '?')}{span}{who}")
+    return out
 
 
 def run(args: argparse.Namespace) -> int:
@@ -111,7 +103,8 @@ def run(args: argparse.Namespace) -> int:
     if args.show:
         if takes or args.from_dir or args.new:
             raise ValueError("--show only reads LIB: give no --take, --from or --new with it")
-        return show(Path(args.library))
+        print("\n".join(describe(load(args.library), Path(args.library), sources=True)))
+        return 0
     if not takes and not args.from_dir:
         raise ValueError("nothing to learn from: give --take FILE --label NAME or --from DATA_DIR")
     cfg, _ = live_config(args.config)
@@ -120,9 +113,8 @@ def run(args: argparse.Namespace) -> int:
         if not t.get("label"):
             raise ValueError(f"--take {t['take']}: needs --label NAME")
         frames = parse_frames(t["frames"]) if t.get("frames") else None
-        if t.get("segment") is not None:
-            frames = recorded_segment(t)
-        examples.append(example_of_take(t["take"], t["label"], cfg, frames, t.get("skeleton")))
+        examples.append(example_of_take(t["take"], t["label"], cfg, frames, t.get("skeleton"),
+                                        segment=recorded_segment(t)))
     if args.from_dir:
         found = examples_from_dir(args.from_dir, cfg, people=args.person or None)
         drop = set(args.exclude_person or [])
