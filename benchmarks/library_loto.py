@@ -80,7 +80,9 @@ def fewshot(data: Path, cfg, seconds: float) -> dict:
             m = (a + b) // 2
             e = dataclasses.replace(e, frames=(m - n // 2, m - n // 2 + n))
         ex.append(e)
-    tk, unit, units, unit1, units1 = {}, {}, {}, {}, {}
+    # every unit names one take and holds one other take's examples (units1: one name of
+    # them), so a unit's key is also its take's key
+    tk, units, tk1, units1 = {}, {}, {}, {}
     for lt in takes:
         take = lt.load()
         truth = np.array([MOCAP6_NAMES.get(str(v), str(v)) for v in truth_labels(lt, take.n_frames)])
@@ -89,15 +91,12 @@ def fewshot(data: Path, cfg, seconds: float) -> dict:
                 continue
             k = f"{lt.name} by {src}"
             tk[k] = (take, truth)
-            unit[k] = k
             units[k] = (lambda e, s=src: e.take != s)
             for nm in sorted({e.name for e in ex if e.take == src}):
-                u = f"{k}: {nm}"
-                unit1[f"{u} "] = u
-                units1[u] = (lambda e, s=src, n=nm: e.take != s or e.name != n)
-    tk1 = {k: tk[u.split(": ")[0]] for k, u in unit1.items()}
-    doc = run_folds(ex, units, tk, unit, cfg, True, _progress)
-    one = run_folds(ex, units1, tk1, unit1, cfg, False, _progress)
+                tk1[f"{k}: {nm}"] = (take, truth)
+                units1[f"{k}: {nm}"] = (lambda e, s=src, n=nm: e.take != s or e.name != n)
+    doc = run_folds(ex, units, tk, {k: k for k in tk}, cfg, True, _progress)
+    one = run_folds(ex, units1, tk1, {k: k for k in tk1}, cfg, False, _progress)
     doc["one_name"] = one["held_out"]
     doc["libraries"] += one["libraries"]
     doc["seconds"] = seconds
