@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rtseg.drivers.readers.errors import ReaderError, read_text_lines
+from rtseg.drivers.readers.errors import ReaderError, is_number, read_text_lines
 
 ROT_DOFS = ("rx", "ry", "rz")
 _ALL_DOFS = ("rx", "ry", "rz", "tx", "ty", "tz", "l")
@@ -92,14 +92,6 @@ def _floats(path: Path, lineno: int, tokens: list[str], n: int, what: str) -> np
     except ValueError:
         bad = next(t for t in tokens[:n] if not is_number(t))
         raise ReaderError(path, f"{what}: {bad!r} is not a number", lineno) from None
-
-
-def is_number(token: str) -> bool:
-    try:
-        float(token)
-        return True
-    except ValueError:
-        return False
 
 
 def angle_to_deg(values: np.ndarray, unit: str) -> np.ndarray:

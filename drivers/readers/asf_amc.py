@@ -30,8 +30,8 @@ import numpy as np
 
 from rtseg import quat as Q
 from rtseg.drivers.readers.asf import (CMU_METRES_PER_UNIT, ROT_DOFS, AsfBone, AsfSkeleton,
-                                       angle_to_deg, is_number, read_asf)
-from rtseg.drivers.readers.errors import ReaderError, read_text_lines
+                                       angle_to_deg, read_asf)
+from rtseg.drivers.readers.errors import ReaderError, is_number, read_text_lines
 from rtseg.take import Take
 
 __all__ = ["AsfBone", "AsfSkeleton", "read_asf", "read_amc", "read_asf_amc", "skeleton_for",

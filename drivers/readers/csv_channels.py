@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rtseg.drivers.readers.errors import ReaderError
+from rtseg.drivers.readers.errors import ReaderError, is_number
 from rtseg.take import Take
 
 JOINTS = ["lhumerus", "rhumerus", "lfemur", "rfemur"]
@@ -48,7 +48,7 @@ def read_csv_channels(path: str | Path, frame_rate: float | None = None) -> Take
         try:
             vals = [float(f) for f in fields[:4]]
         except ValueError:
-            bad = next(f for f in fields[:4] if not _is_float(f))
+            bad = next(f for f in fields[:4] if not is_number(f))
             raise ReaderError(path, f"angle {bad!r} is not a number", lineno) from None
         if not all(np.isfinite(vals)):
             raise ReaderError(path, "non-finite angle", lineno)
@@ -70,11 +70,3 @@ def read_csv_channels(path: str | Path, frame_rate: float | None = None) -> Take
                 space="local", source=str(path),
                 meta={"format": "tsseg4d csv", "frame_labels": np.array(labels, dtype=np.int64),
                       "angles_deg": np.array(angles)})
-
-
-def _is_float(s: str) -> bool:
-    try:
-        float(s)
-        return True
-    except ValueError:
-        return False

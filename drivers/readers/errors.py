@@ -1,5 +1,5 @@
 """The one exception every take reader raises for malformed input, and the text loader
-the line-oriented readers share."""
+and number test the line-oriented readers share."""
 
 from __future__ import annotations
 
@@ -20,6 +20,15 @@ class ReaderError(ValueError):
         self.problem = problem
         where = self.path if line is None else f"{self.path}:{line}"
         super().__init__(f"{where}: {problem}")
+
+
+def is_number(token: str) -> bool:
+    """Whether ``float(token)`` parses (to name the bad token in a ``ReaderError``)."""
+    try:
+        float(token)
+        return True
+    except ValueError:
+        return False
 
 
 def read_text_lines(path: Path) -> list[str]:
