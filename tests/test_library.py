@@ -591,3 +591,16 @@ def test_learn_from_segments_of_a_recorded_session(tmp_path):
     assert p.returncode == 2 and "no segment 3" in p.stderr and "0..2" in p.stderr
     p = run("--take", str(rec), "--segment", "1", "--frames", "0:100", "--label", "walk")
     assert p.returncode == 2 and "not both" in p.stderr
+    p = run("--take", str(rec), "--segment", "one", "--label", "walk")
+    assert p.returncode == 2 and "a segment number" in p.stderr
+    take = tmp_path / "take.npz"
+    from rtseg.drivers.readers import write_take
+    write_take(take, res.take)
+    p = run("--take", str(take), "--segment", "1", "--label", "walk")
+    assert p.returncode == 2 and "needs a session recording" in p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1
+    p = run("--show")                   # LIB was never written by the refused runs above
+    assert p.returncode == 0 and "3 examples" in p.stdout
+    p = subprocess.run([sys.executable, "-m", "rtseg.cli", "learn", str(tmp_path / "no.json"),
+                        "--show"], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 2 and "cannot read" in p.stderr
