@@ -54,7 +54,13 @@ With a ``library`` (``rtseg.library.Library``, ``rtseg learn``) every decision a
 the segment (``IdentityDecision.name``; the id is the unsupervised one either way):
 ``rtseg.identity_names.SegmentNamer`` names the rows [boundary + ``name_skip_s``, decision
 frame] with the library's nearest name, or ``unknown`` when the segment is unlike every
-example.  A correction keeps the segment's name.
+example.  A correction keeps the segment's name.  With ``exclusive_names`` (default) a name
+belongs to the behaviour ids it was given to: when the library names a segment N but
+every earlier segment named N has another id - the tracker, comparing one performer
+within one session, says this is another behaviour than those - the two judgements
+conflict and the segment is named ``unknown`` (``IdentityStats.names_contested``) rather
+than given a name that may be wrong (a library comparison is across performers; a
+left-out behaviour's nearest name is usually one the session has already seen).
 
 Cost: per frame one row copy into the block buffer; per block one (step x d)^T (step x d)
 product; per decision one eigen-decomposition per changed model (a few per cut).
@@ -134,6 +140,7 @@ class IdentityStats:
     new_behaviours: int = 0
     clamped: int = 0                  # boundaries older than the history (window shortened)
     name_waits: int = 0               # decisions put off to name_after_s: `unknown` sooner
+    names_contested: int = 0          # names held by other ids only: sent as `unknown`
 
 
 class IdentityTracker:
@@ -153,6 +160,8 @@ class IdentityTracker:
     id_skip_s: seconds after the boundary left out of the decision window when at least
         1 s remains (a cut may lie that far from the change, so its first frames may still
         be the previous behaviour).
+    exclusive_names: with a library, a name only earlier segments of other ids hold is
+        sent as ``unknown`` (module doc, Names).
     """
 
     def __init__(self, frame_rate: float, method: str = "", *,
@@ -162,7 +171,7 @@ class IdentityTracker:
                  step: int = 10, history_s: float = 30.0, reference_dims: int = 8,
                  library: Any = None, name_skip_s: float = 0.5,
                  name_after_s: float = DEFAULT_NAME_AFTER_S,
-                 id_skip_s: float = DEFAULT_ID_SKIP_S) -> None:
+                 id_skip_s: float = DEFAULT_ID_SKIP_S, exclusive_names: bool = True) -> None:
         if not frame_rate > 0:
             raise ValueError(f"frame_rate must be positive, got {frame_rate}")
         if not decide_after_s > 0:
@@ -188,6 +197,8 @@ class IdentityTracker:
         self._behaviours: list[list[Any]] = []       # [n, s1, s2, model or None]
         self._seg: _Segment | None = None
         self._next_seg = 0
+        self.exclusive_names = bool(exclusive_names)
+        self._named: dict[str, list[_Segment]] = {}    # name -> the segments sent with it
         self._namer_kw = {"skip_s": name_skip_s, "max_window_s": max_window_s,
                           "min_window_s": MIN_WINDOW_S, "block": step}
         self.library = library
@@ -400,9 +411,26 @@ class IdentityTracker:
         self.stats.decisions += 1
         if self.namer is not None:
             seg.name, seg.name_distance = naming or self.namer.name(seg.boundary, int(frame))
+            seg.name = self._held_name(seg)
         self._emit(IdentityDecision(seg.index, seg.boundary, j, int(frame),
                                     self._confidence(matched, dist), dist, new=not matched,
                                     name=seg.name, name_distance=seg.name_distance))
+
+    def _held_name(self, seg: _Segment) -> str:
+        """``seg.name``, or ``unknown`` when earlier segments hold that name and none of
+        them has ``seg``'s (decided) behaviour id (``exclusive_names``); records the name's
+        holders."""
+        from rtseg.library import UNKNOWN
+        name = seg.name
+        if name in ("", UNKNOWN):
+            return name
+        holders = self._named.setdefault(name, [])
+        if (self.exclusive_names and holders
+                and all(h.behaviour != seg.behaviour for h in holders)):
+            self.stats.names_contested += 1
+            return UNKNOWN
+        holders.append(seg)
+        return name
 
     def _finish(self, seg: _Segment, end: int, frame: int) -> None:
         """The segment ended at block ``end``: correct it if clearly wrong, then pool its
@@ -493,4 +521,5 @@ def tracker_from_config(config: Any, frame_rate: float, method: str,
     return IdentityTracker(frame_rate, method,
                            decide_after_s=float(config["identity.decide_after_s"]),
                            threshold=float(config["identity.threshold"]), library=library,
-                           name_after_s=float(config["identity.name_after_s"]))
+                           name_after_s=float(config["identity.name_after_s"]),
+                           exclusive_names=bool(config["identity.exclusive_names"]))

@@ -119,6 +119,7 @@ def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,
                                                          DEFAULT_DECIDE_AFTER_S))
     name_after = float(config.values.get("identity", {}).get("name_after_s",
                                                              DEFAULT_NAME_AFTER_S))
+    exclusive = bool(config.values.get("identity", {}).get("exclusive_names", True))
     out: dict[str, list[str]] = {}
     for m, r in results.items():
         first, last = int(index[0]), int(index[-1])
@@ -126,7 +127,7 @@ def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,
                               int(c.frame)), int(c.frame)) for c in r.cuts
                          if first < int(c.frame) <= last)
         tr = IdentityTracker(fr, m, decide_after_s=decide, library=library,
-                             name_after_s=name_after)
+                             name_after_s=name_after, exclusive_names=exclusive)
         k = 0
         for i, f in zip(range(len(X)), index):
             tr.update(int(f), X[i])

@@ -205,6 +205,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                 "name after decide_after_s waits this many seconds of it"),
         "behaviours": Key("str", "", doc="behaviour library file naming segments "
                                          "(rtseg learn; '' = ids only)"),
+        "exclusive_names": Key("bool", True,
+                               doc="with a library: a name held only by segments of other "
+                                   "behaviour ids is sent as 'unknown'"),
     },
     "buffer": {
         "capacity": Key("int", 4096, _range(16, MAX_CAPACITY), doc="ring buffer frames"),

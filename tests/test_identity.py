@@ -323,3 +323,43 @@ def test_a_library_decision_waits_only_for_segments_it_cannot_name_yet(rows, dec
     assert seg1[0].name == name
     # segment 0 (120 named rows at its first attempt) waits as segment 1 does
     assert tr.stats.name_waits == waits
+
+
+class _OneNameLibrary(_LengthLibrary):
+    """A stand-in library that names every window ``walk``, whatever it holds."""
+
+    def __init__(self, dims: int) -> None:
+        super().__init__(dims, 0)
+
+
+@pytest.mark.parametrize("exclusive, names, contested", [
+    (True, ["walk", "unknown", "walk"], 1),
+    (False, ["walk", "walk", "walk"], 0),
+])
+def test_a_name_held_by_another_behaviour_id_is_sent_as_unknown(exclusive, names, contested):
+    """Behaviours A, B, A: the library calls all three ``walk``; the tracker gives B its own
+    id, so with exclusive names B's ``walk`` conflicts with A's and goes out ``unknown``,
+    while A's return (A's id again) keeps the name."""
+    rng = np.random.default_rng(5)
+    d, fr = 6, 100.0
+    A = np.linalg.qr(rng.standard_normal((d, d)))[0]
+    X = np.concatenate([_blob(rng, 800, A[:, :3], 1.0), _blob(rng, 800, A[:, 3:], 1.0),
+                        _blob(rng, 800, A[:, :3], 1.0)])
+    tr = IdentityTracker(fr, "x", decide_after_s=1.5, threshold=4.0,
+                         library=_OneNameLibrary(d), exclusive_names=exclusive)
+    cuts = {900: 800, 1700: 1600}
+    for i, x in enumerate(X):
+        tr.update(i, x)
+        if i in cuts:
+            tr.on_cut(cuts[i], i, "x")
+    sent = [(m.behaviour, m.name) for m in tr.history if not m.correction]
+    assert [b for b, _ in sent] == [1, 2, 1]
+    assert [n for _, n in sent] == names
+    assert tr.stats.names_contested == contested
+
+
+def test_exclusive_names_is_read_from_the_configuration():
+    """``[identity] exclusive_names`` reaches the tracker the live pipeline builds."""
+    from rtseg.identity import tracker_from_config
+    assert tracker_from_config(_config(), 120.0, "contrast").exclusive_names is True
+    assert tracker_from_config(_config(exclusive_names=False), 120.0, "contrast").exclusive_names is False
