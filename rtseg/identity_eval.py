@@ -173,7 +173,9 @@ def evaluate_identity(takes: Sequence[LabelledTake], config: Any,
 def library_loto(takes: Sequence[LabelledTake], config: Any) -> dict[str, Any] | None:
     """Named libraries, leave-one-take-out over the mocap6 takes among ``takes`` (shared
     exercise names): ``{accuracy, unknown_rate, unknown_correct, known_segments,
-    unknown_segments, takes}`` (``rtseg.library_eval``); None with fewer than two."""
+    unknown_segments, takes}`` (``rtseg.library_eval``); ``unknown_correct`` over the
+    ``unknown_segments``: each exercise of the held-out take also left out of its library
+    in turn, the share of its segments named ``unknown``.  None with fewer than two."""
     from rtseg.library_eval import run_folds
     from rtseg.library_learn import MOCAP6_NAMES, Example, take_rows
     m6 = [t for t in takes if "mocap6" in t.labels.source]
@@ -191,8 +193,11 @@ def library_loto(takes: Sequence[LabelledTake], config: Any) -> dict[str, Any] |
                                     profile, float(take.frame_rate)))
         tk[lt.name] = (take, truth)
     units = {n: (lambda e, n=n: e.take == n) for n in tk}
-    res = run_folds(examples, units, tk, {n: n for n in tk}, config, hide_names=False)
-    return {**res["held_out"], "takes": sorted(tk), "protocol": "leave-one-take-out"}
+    res = run_folds(examples, units, tk, {n: n for n in tk}, config, hide_names=True)
+    left_out = res["hidden_names"]
+    return {**res["held_out"], "unknown_correct": left_out["unknown_correct"],
+            "unknown_segments": left_out["unknown_segments"], "takes": sorted(tk),
+            "protocol": "leave-one-take-out"}
 
 
 def decision_delays_after(history: Sequence[Any], frame_rate: float,
@@ -261,7 +266,8 @@ def format_identity_table(doc: dict[str, Any]) -> str:
     if lib:
         lines.append(f"library (named, leave-one-take-out over {', '.join(lib['takes'])}): "
                      f"accuracy {lib['accuracy']}, unknown {lib['unknown_rate']} of "
-                     f"{lib['known_segments']} segments")
+                     f"{lib['known_segments']} segments; left out of the library, "
+                     f"unknown {lib['unknown_correct']} of {lib['unknown_segments']}")
     lines.append("ARI+c: with the corrections applied; ids: per take (pooled over the takes' "
                  "frames concatenated); dec_s: median s from segment boundary to its id; "
                  "vs_lab: from the labelled transition")

@@ -426,8 +426,11 @@ def test_library_leave_one_take_out_report():
     takes = find_labelled_takes(DATA, ("cmu",))
     doc = library_loto(takes, _config())
     assert doc["takes"] == ["13_29", "13_31", "14_14"]
-    assert doc["known_segments"] >= 15 and doc["unknown_segments"] == 0
+    assert doc["known_segments"] >= 15
+    # each exercise also left out of its take's library once: every segment counted again
+    assert doc["unknown_segments"] == doc["known_segments"]
     assert 0 <= doc["accuracy"] <= 1 and 0 <= doc["unknown_rate"] <= 1
+    assert doc["unknown_correct"] >= 0.8, "issue 12's target for left-out behaviours"
     assert doc["accuracy"] + doc["unknown_rate"] <= 1.0 + 1e-9
     # the name goes out after the labelled change (its cut comes after the change), and
     # within a few seconds of it; only segments starting near a change are counted
