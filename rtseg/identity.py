@@ -77,6 +77,7 @@ import numpy as np
 
 from rtseg.detectors.window_models import WindowModel, WindowStats, behaviour_distance, fit
 from rtseg.identity_names import SegmentNamer
+from rtseg.library import UNKNOWN
 
 #: defaults (also the ``[identity]`` keys of ``config/live.toml``)
 DEFAULT_DECIDE_AFTER_S = 1.5
@@ -140,7 +141,9 @@ class IdentityStats:
     new_behaviours: int = 0
     clamped: int = 0                  # boundaries older than the history (window shortened)
     name_waits: int = 0               # decisions put off to name_after_s: `unknown` sooner
-    names_contested: int = 0          # names held by other ids only: sent as `unknown`
+    named: int = 0                    # decisions sent with a library name
+    names_unknown: int = 0            # decisions sent as `unknown` (with a library)
+    names_contested: int = 0          # of those, names held by other ids only
 
 
 class IdentityTracker:
@@ -391,7 +394,6 @@ class IdentityTracker:
         if self.namer is None or end - seg.block >= self._named_blocks:
             self._decide(seg, end, frame)
             return
-        from rtseg.library import UNKNOWN
         naming = self.namer.name(seg.boundary, frame)
         if naming[0] == UNKNOWN:
             seg.decide_block = seg.block + self._named_blocks
@@ -412,6 +414,10 @@ class IdentityTracker:
         if self.namer is not None:
             seg.name, seg.name_distance = naming or self.namer.name(seg.boundary, int(frame))
             seg.name = self._held_name(seg)
+            if seg.name == UNKNOWN:
+                self.stats.names_unknown += 1
+            else:
+                self.stats.named += 1
         self._emit(IdentityDecision(seg.index, seg.boundary, j, int(frame),
                                     self._confidence(matched, dist), dist, new=not matched,
                                     name=seg.name, name_distance=seg.name_distance))
@@ -420,7 +426,6 @@ class IdentityTracker:
         """``seg.name``, or ``unknown`` when earlier segments hold that name and none of
         them has ``seg``'s (decided) behaviour id (``exclusive_names``); records the name's
         holders."""
-        from rtseg.library import UNKNOWN
         name = seg.name
         if name in ("", UNKNOWN):
             return name

@@ -454,6 +454,9 @@ class LiveSession(SessionEvents, SessionHealth):
             stop_reason=self.stop_reason, wire_cuts=st.wire_cuts,
             input=self.input_counts() if self.pipeline is not None else {},
             gated={m: d.gate.dropped for m, d in self.pipeline.detectors.items()
-                   if getattr(d, "gate", None) is not None} if self.pipeline else {})
+                   if getattr(d, "gate", None) is not None} if self.pipeline else {},
+            identity=(asdict(self.pipeline.identity.stats)
+                      if self.pipeline is not None and self.pipeline.identity is not None
+                      else {}))
         log.info("%s", summary.text())
         return summary

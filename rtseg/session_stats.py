@@ -94,6 +94,8 @@ class SessionSummary:
     input: dict[str, int] = field(default_factory=dict)
     #: per method, cuts its same-behaviour gate held back (``rtseg.detectors.gate``)
     gated: dict[str, int] = field(default_factory=dict)
+    #: the identity tracker's counters (``rtseg.identity.IdentityStats``; {} when off)
+    identity: dict[str, int] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -109,12 +111,25 @@ class SessionSummary:
                 f"{self.cuts} cuts ({methods}; {self.wire_cuts} sent over OSC"
                 + "".join(f"; {k} gate held back {v}" for k, v in sorted(self.gated.items()))
                 + "), "
+                + identity_text(self.identity) +
                 f"processing latency {lat}, "
                 f"max lag {self.max_lag_ms:.1f} ms"
                 + (f", recording {self.recording}" if self.recording else ""))
 
     def cut_latency_items(self) -> list[tuple[str, int]]:
         return sorted(self.cuts_by_method.items())
+
+
+def identity_text(counts: dict[str, int]) -> str:
+    """The identity part of the session summary ("" when identity was off)."""
+    if not counts:
+        return ""
+    out = (f"{counts['decisions']} behaviour decisions ({counts['new_behaviours']} ids, "
+           f"{counts['corrections']} corrected")
+    if counts.get("named", 0) or counts.get("names_unknown", 0):
+        out += (f"; {counts['named']} named, {counts['names_unknown']} unknown of which "
+                f"{counts['names_contested']} held by another id")
+    return out + "), "
 
 
 def percentile(values: Iterable[float], p: float) -> float | None:

@@ -70,6 +70,8 @@ def test_demo_names_segments_with_its_own_library_and_says_unknown_for_the_rest(
     assert "behaviour library: idle, walk, punch, squat, wave" in proc.stderr
     names = re.findall(r'^behaviour\s+\d+ "([^"]+)" segment (\d+)', proc.stdout, re.M)
     assert [n for n, _ in names] == ["walk", "punch", "unknown"], proc.stdout
+    assert "3 behaviour decisions (3 ids, 0 corrected; 2 named, 1 unknown" in (
+        proc.stdout + proc.stderr), "the session summary counts the names"
     plain = subprocess.run(
         [sys.executable, "-m", "rtseg.cli", "demo", "--speed", "4", "--duration", "8",
          "--script", "walk:4,punch:4", "--no-osc", "--no-names"],

@@ -236,6 +236,10 @@ def test_live_session_sends_records_and_logs_identities(tmp_path):
     assert [p[2] for p in beh] == ["1", "2", "1", "2", "3"]
     assert [p[1] for p in beh] == [0, 1, 2, 3, 4]
     assert [p[0] for p in beh] == [1, 2, 3, 4, 5]
+    # the session summary counts them: five decisions, three ids, no library
+    assert summary.identity["decisions"] == 5 and summary.identity["new_behaviours"] == 3
+    assert summary.identity["named"] == summary.identity["names_unknown"] == 0
+    assert "5 behaviour decisions (3 ids, " in summary.text()
     cues = [a for a, _ in msgs if a.startswith("/cue/")]
     assert cues == ["/cue/1/start", "/cue/2/start", "/cue/1/start", "/cue/2/start",
                     "/cue/3/start"]
