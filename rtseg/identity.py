@@ -60,7 +60,9 @@ every earlier segment named N has another id - the tracker, comparing one perfor
 within one session, says this is another behaviour than those - the two judgements
 conflict and the segment is named ``unknown`` (``IdentityStats.names_contested``) rather
 than given a name that may be wrong (a library comparison is across performers; a
-left-out behaviour's nearest name is usually one the session has already seen).
+left-out behaviour's nearest name is usually one the session has already seen).  A
+correction of such a segment's id to an id that holds N gives N back on the correction
+message (``names_restored``).
 
 Cost: per frame one row copy into the block buffer; per block one (step x d)^T (step x d)
 product; per decision one eigen-decomposition per changed model (a few per cut).
@@ -131,6 +133,7 @@ class _Segment:
     created: bool = False
     name: str = ""
     name_distance: float = math.inf
+    library_name: str = ""            # the library's answer, before exclusive_names
 
 
 @dataclass
@@ -144,6 +147,7 @@ class IdentityStats:
     named: int = 0                    # decisions sent with a library name
     names_unknown: int = 0            # decisions sent as `unknown` (with a library)
     names_contested: int = 0          # of those, names held by other ids only
+    names_restored: int = 0           # contested names a correction to a holder's id gave back
 
 
 class IdentityTracker:
@@ -412,8 +416,9 @@ class IdentityTracker:
         seg.behaviour, seg.created = j, not matched
         self.stats.decisions += 1
         if self.namer is not None:
-            seg.name, seg.name_distance = naming or self.namer.name(seg.boundary, int(frame))
-            seg.name = self._held_name(seg)
+            seg.library_name, seg.name_distance = naming or self.namer.name(seg.boundary,
+                                                                             int(frame))
+            seg.name = self._held_name(seg, seg.library_name)
             if seg.name == UNKNOWN:
                 self.stats.names_unknown += 1
             else:
@@ -422,17 +427,16 @@ class IdentityTracker:
                                     self._confidence(matched, dist), dist, new=not matched,
                                     name=seg.name, name_distance=seg.name_distance))
 
-    def _held_name(self, seg: _Segment) -> str:
-        """``seg.name``, or ``unknown`` when earlier segments hold that name and none of
-        them has ``seg``'s (decided) behaviour id (``exclusive_names``); records the name's
-        holders."""
-        name = seg.name
+    def _held_name(self, seg: _Segment, name: str, count: bool = True) -> str:
+        """``name`` for ``seg``, or ``unknown`` when earlier segments hold that name and
+        none of them has ``seg``'s (decided) behaviour id (``exclusive_names``; counted in
+        ``names_contested`` when ``count``); records ``seg`` among the name's holders."""
         if name in ("", UNKNOWN):
             return name
         holders = self._named.setdefault(name, [])
         if (self.exclusive_names and holders
                 and all(h.behaviour != seg.behaviour for h in holders)):
-            self.stats.names_contested += 1
+            self.stats.names_contested += int(count)
             return UNKNOWN
         holders.append(seg)
         return name
@@ -463,12 +467,16 @@ class IdentityTracker:
                 final = self._new_behaviour()
             self.stats.corrections += 1
             d = dists.get(final, math.inf)
+            seg.behaviour = final
+            if seg.name == UNKNOWN and seg.library_name not in ("", UNKNOWN):
+                # its name was contested; corrected to an id that holds it, it gets it back
+                seg.name = self._held_name(seg, seg.library_name, count=False)
+                self.stats.names_restored += int(seg.name != UNKNOWN)
             self._emit(IdentityDecision(seg.index, seg.boundary, final, int(frame),
                                         self._confidence(final in dists, d), d,
                                         correction=True, previous=sent,
                                         new=final not in dists, name=seg.name,
                                         name_distance=seg.name_distance))
-            seg.behaviour = final
         b = self._behaviours[final - 1]
         b[0] += w.n
         b[1] = b[1] + w.n * w.mean
@@ -489,9 +497,12 @@ class IdentityTracker:
         self._seg = None
 
     # ------------------------------------------------------------------ results
-    def segment_names(self) -> dict[int, tuple[int, str]]:
-        """{segment: (boundary, library name)} of the decisions sent (library only)."""
-        return {m.segment: (m.boundary, m.name) for m in self.history if not m.correction}
+    def segment_names(self, corrected: bool = False) -> dict[int, tuple[int, str]]:
+        """{segment: (boundary, library name)} of the decisions sent (library only); with
+        ``corrected``, the name of a segment's correction when it has one (a contested name
+        given back, module doc)."""
+        return {m.segment: (m.boundary, m.name) for m in self.history
+                if corrected or not m.correction}
 
     def frame_labels(self, n_frames: int, corrected: bool = False) -> np.ndarray:
         """Per-frame behaviour ids (0 before the first decision) from the messages sent:

@@ -13,7 +13,9 @@ for each take of an archive).
   (``unknown`` when unlike every example), as the live tracker names it: the rows the live
   pipeline feeds its detectors (``rtseg.library_learn.take_rows``: the configuration's
   profile and calibration, the rows the library was learned from), each method's cuts
-  delivered at their ``detected_at`` frame, each segment named at its identity decision.
+  delivered at their ``detected_at`` frame, each segment named at its identity decision
+  (or at its correction, when that gives back a contested name: the ids are the corrected
+  ones too).
 """
 
 from __future__ import annotations
@@ -100,11 +102,14 @@ def identify_segments(X: np.ndarray, frame_rate: float,
 
 
 def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,
-              config: Any) -> dict[str, list[str]]:
+              config: Any, threshold: float | None = None) -> dict[str, list[str]]:
     """{method: the library name of each segment of ``results[method]``} (module doc).
+    ``threshold``: the identity threshold (``identify_take``'s; None: the configuration's),
+    so that the ids the names are held by (``exclusive_names``) are the ids reported.
     Raises ``rtseg.library.LibraryError`` (one line) when the library was learned for
     another feature profile or dims than this take's live features."""
-    from rtseg.identity import DEFAULT_DECIDE_AFTER_S, DEFAULT_NAME_AFTER_S, IdentityTracker
+    from rtseg.identity import (DEFAULT_DECIDE_AFTER_S, DEFAULT_NAME_AFTER_S,
+                                DEFAULT_THRESHOLD, IdentityTracker)
     from rtseg.library import UNKNOWN, LibraryError
     from rtseg.library_learn import take_rows
     X, index, profile = take_rows(take, config)
@@ -120,6 +125,8 @@ def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,
     name_after = float(config.values.get("identity", {}).get("name_after_s",
                                                              DEFAULT_NAME_AFTER_S))
     exclusive = bool(config.values.get("identity", {}).get("exclusive_names", True))
+    if threshold is None:
+        threshold = float(config.values.get("identity", {}).get("threshold", DEFAULT_THRESHOLD))
     out: dict[str, list[str]] = {}
     for m, r in results.items():
         first, last = int(index[0]), int(index[-1])
@@ -127,7 +134,8 @@ def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,
                               int(c.frame)), int(c.frame)) for c in r.cuts
                          if first < int(c.frame) <= last)
         tr = IdentityTracker(fr, m, decide_after_s=decide, library=library,
-                             name_after_s=name_after, exclusive_names=exclusive)
+                             name_after_s=name_after, exclusive_names=exclusive,
+                             threshold=threshold)
         k = 0
         for i, f in zip(range(len(X)), index):
             tr.update(int(f), X[i])
@@ -137,7 +145,7 @@ def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,
         for d, b in pending[k:]:
             tr.on_cut(b, d)
         tr.close(last)
-        named = sorted((b, n) for b, n in tr.segment_names().values())
+        named = sorted((b, n) for b, n in tr.segment_names(corrected=True).values())
         names = []
         for s in r.segments:
             if not named:

@@ -129,6 +129,8 @@ def identity_text(counts: dict[str, int]) -> str:
     if counts.get("named", 0) or counts.get("names_unknown", 0):
         out += (f"; {counts['named']} named, {counts['names_unknown']} unknown of which "
                 f"{counts['names_contested']} held by another id")
+        if counts.get("names_restored", 0):
+            out += f", {counts['names_restored']} given back by a correction"
     return out + "), "
 
 

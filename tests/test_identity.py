@@ -367,3 +367,34 @@ def test_exclusive_names_is_read_from_the_configuration():
     from rtseg.identity import tracker_from_config
     assert tracker_from_config(_config(), 120.0, "contrast").exclusive_names is True
     assert tracker_from_config(_config(exclusive_names=False), 120.0, "contrast").exclusive_names is False
+
+
+def test_a_correction_to_the_id_that_holds_the_name_gives_the_name_back():
+    """Segment 1 starts with one of A's three directions turned a right angle (its own id;
+    the library's ``walk`` is held by A's id, so it goes out ``unknown``), then is A for
+    15 s: the correction to A's id carries ``walk`` again, counted in ``names_restored``."""
+    rng = np.random.default_rng(5)
+    d, fr = 6, 100.0
+    A = np.linalg.qr(rng.standard_normal((d, d)))[0]
+    T = A.copy()
+    T[:, 2] = A[:, 3]
+
+    def blob(n, basis):
+        return (rng.standard_normal((n, 3)) @ basis.T
+                + 0.1 * rng.standard_normal((n, d)))
+    X = np.concatenate([blob(800, A[:, :3]),           # segment 0: A
+                        blob(160, T[:, :3]),           # segment 1 begins turned
+                        blob(1500, A[:, :3]),          # ... and is A
+                        blob(600, A[:, 3:])])          # segment 2: another behaviour
+    tr = IdentityTracker(fr, "x", decide_after_s=1.5, threshold=4.0,
+                         library=_OneNameLibrary(d))
+    cuts = {900: 800, 2560: 2460}
+    for i, x in enumerate(X):
+        tr.update(i, x)
+        if i in cuts:
+            tr.on_cut(cuts[i], i, "x")
+    seg1 = [(m.behaviour, m.name, m.correction) for m in tr.history if m.segment == 1]
+    assert seg1 == [(2, "unknown", False), (1, "walk", True)]
+    seg2 = [m for m in tr.history if m.segment == 2]
+    assert seg2[0].name == "unknown" and seg2[0].behaviour not in (1, 2)   # contested too
+    assert tr.stats.names_contested == 2 and tr.stats.names_restored == 1

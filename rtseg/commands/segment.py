@@ -134,7 +134,8 @@ def run(args: argparse.Namespace) -> int:
             from rtseg.library import load as load_library
             from rtseg.online_eval import live_config
             from rtseg.segment_identity import name_take
-            names = name_take(take, results, load_library(lib_path), live_config()[0])
+            names = name_take(take, results, load_library(lib_path), live_config()[0],
+                              threshold=args.identity_threshold)
         out = {"table": format_table, "json": format_json,
                "csv": format_csv}[args.format or "table"]
         sys.stdout.write(out(path, results, names))
