@@ -66,7 +66,7 @@ import numpy as np
 from rtseg.config import ConfigError
 from rtseg.library_calibration import (DEFAULT_THRESHOLD, MODEL_ONE_NAME_FACTOR,
                                        ONE_NAME_FACTOR, k_mean, median_or_none,
-                                       separating_rule)
+                                       nearest_others, separating_rule)
 from rtseg.library_models import LAG_S, window_stats
 
 FORMAT = "rtseg-behaviour-library"
@@ -272,14 +272,21 @@ class Library:
         by_person = len(set(who)) > 1
         same, other = [], []             # distances: nearest same name / nearest other name
         o1, o2 = [], []                  # the window's name left out: nearest two other names
+        # name -> per window: its nearest other name, that distance, its known case's
+        near: dict[str, list[tuple[str, float, float | None]]] = {}
         for i in range(len(names)):
             d = self.window_distances(i)
             if by_person:                # as a new person would be met: others' windows only
                 d = np.where(person != person[i], d, np.inf)
             s = d[(names == names[i]) & (src != src[i])]
             s = s[np.isfinite(s)]
-            per = sorted(v for n, v in self.name_distances(d).items()
-                         if n != names[i] and math.isfinite(v))
+            others = {n: v for n, v in self.name_distances(d).items()
+                      if n != names[i] and math.isfinite(v)}
+            per = sorted(others.values())
+            if others:
+                n1 = min(others, key=others.get)
+                near.setdefault(str(names[i]), []).append(
+                    (n1, others[n1], k_mean(s, self.k_nearest) if len(s) else None))
             if len(s):
                 same.append(k_mean(s, self.k_nearest))
                 other.append(per[0] if per else math.inf)
@@ -291,7 +298,8 @@ class Library:
                                                      DEFAULT_THRESHOLD[self.metric])
         self.calibration = {"same_median": median_or_none(same),
                             "other_median": median_or_none(o1),
-                            "same": len(same), "other": len(o1), "calibrated": bool(same)}
+                            "same": len(same), "other": len(o1), "calibrated": bool(same),
+                            "nearest_other": nearest_others(near)}
         return self.threshold
 
     def merged(self, other: "Library") -> "Library":

@@ -9,7 +9,7 @@ statistics the calibration uses.  Distances are the library's (``Library.metric`
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -91,3 +91,28 @@ def k_mean(v: np.ndarray, k: int) -> float:
 
 def median_or_none(v: Sequence[float]) -> float | None:
     return round(float(np.median(v)), 4) if len(v) else None
+
+
+def nearest_others(near: dict[str, list[tuple[str, float, float | None]]]
+                   ) -> dict[str, dict[str, Any]]:
+    """Per name, from its windows' (nearest other name, distance to it, distance of the
+    window's known case - another example's nearest same-name window - or None): the other
+    name they are most often nearest to (``name``), the median distance to it
+    (``distance``), the median known-case distance (``same``, None without a second
+    example) and the share of the windows with a known case that lie as near or nearer to
+    some other name than to their own name's other examples (``nearer_other``: how often a new
+    example would get the wrong nearest name; None without a second example).
+    ``rtseg learn`` shows it: which behaviours the library can hardly tell apart."""
+    out: dict[str, dict[str, Any]] = {}
+    for name, rows in sorted(near.items()):
+        counts: dict[str, int] = {}
+        for n, _, _ in rows:
+            counts[n] = counts.get(n, 0) + 1
+        top = max(sorted(counts), key=counts.get)
+        known = [(d, s) for _, d, s in rows if s is not None]
+        out[name] = {"name": top,
+                     "distance": round(float(np.median([d for n, d, _ in rows if n == top])), 4),
+                     "same": round(float(np.median([s for _, s in known])), 4) if known else None,
+                     "nearer_other": (round(sum(d <= s for d, s in known) / len(known), 4)
+                                      if known else None)}
+    return out

@@ -607,3 +607,32 @@ def test_learn_from_segments_of_a_recorded_session(tmp_path):
     p = subprocess.run([sys.executable, "-m", "rtseg.cli", "learn", str(tmp_path / "no.json"),
                         "--show"], capture_output=True, text=True, timeout=60)
     assert p.returncode == 2 and "cannot read" in p.stderr
+
+
+def test_learn_says_which_behaviours_the_library_may_confuse(tmp_path):
+    """Each name's nearest other name is kept in the file's calibration and shown by
+    ``rtseg learn``; two names for one motion (``walk`` and ``stroll``, the same walks
+    under two labels) are flagged, a distinct one (``punch``) is not."""
+    from rtseg.commands.learn import describe
+    from rtseg.library import load
+    b = None
+    for seed in (0, 4):
+        res = synthesize("walk:8,punch:8", seed=seed)
+        X, idx, profile = take_rows(res.take, _config())
+        b = b or LibraryBuilder(profile, X.shape[1], res.take.frame_rate)
+        (a, e, _), (c, f, _) = label_runs(res.frame_names())
+        i, j = np.searchsorted(idx, [a, e])
+        who = {"person": f"synth{seed}"}
+        b.add(X[i:j], "walk", f"synth{seed}", info=who)
+        b.add(X[i:j], "stroll", f"synth{seed}", info=who)      # the same frames
+        b.add(X[np.searchsorted(idx, c):np.searchsorted(idx, f)], "punch", f"synth{seed}",
+              info=who)
+    lib = load(b.build().save(tmp_path / "lib.json"))       # kept through the file
+    near = lib.calibration["nearest_other"]
+    assert near["walk"]["name"] == "stroll" and near["stroll"]["name"] == "walk"
+    assert near["walk"]["distance"] <= near["walk"]["same"]
+    assert near["walk"]["nearer_other"] >= 0.25 and near["punch"]["nearer_other"] == 0
+    assert near["punch"]["distance"] > near["punch"]["same"]
+    lines = {ln.split(":")[0].strip(): ln for ln in describe(lib, tmp_path / "lib.json")[1:]}
+    assert "may be confused" in lines["walk"] and "may be confused" in lines["stroll"]
+    assert "nearest other name" in lines["punch"] and "confused" not in lines["punch"]

@@ -68,6 +68,13 @@ def recorded_segment(t: dict[str, Any]) -> int | None:
         raise ValueError(f"--segment {t['segment']!r}: a segment number (0, 1, ...)") from None
 
 
+#: ``rtseg learn`` says a behaviour "may be confused" with its nearest other name when at
+#: least this share of its windows lie as near or nearer another name than its own other
+#: examples (a display choice; naming does not use it), or - no second example - when that
+#: name lies within the threshold
+CONFUSED_SHARE = 0.25
+
+
 def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
     """Lines saying what a library holds: its windows and profile, the rejection rule and
     where it comes from, and per behaviour its example count; with ``sources`` also its
@@ -85,8 +92,20 @@ def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
     if sources:
         out.append(f"  {lib.metric} distance, windows of {lib.window_s:g} s every "
                    f"{lib.step_s:g} s, {lib.frame_rate:g} Hz")
+    near = lib.calibration.get("nearest_other") or {}
     for k in sorted(by_name):
-        out.append(f"  {k}: {len(by_name[k])} example(s)")
+        nb = near.get(k)
+        close = ""
+        if nb:
+            same, share = nb.get("same"), nb.get("nearer_other")
+            close = (f"; nearest other name {nb['name']} at {nb['distance']:.2f}"
+                     + (f" (its other examples at {same:.2f}; {share:.0%} of its windows "
+                        f"lie as near another name)" if same is not None and share is not None
+                        else ""))
+            if (share is not None and share >= CONFUSED_SHARE) or (
+                    same is None and nb["distance"] <= lib.threshold):
+                close += ": may be confused"
+        out.append(f"  {k}: {len(by_name[k])} example(s){close}")
         for e in by_name[k] if sources else ():
             a, b = (e.get("frames") or [None, None])[:2]
             span = f" frames {a}:{b}" if a is not None else ""
