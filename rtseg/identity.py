@@ -55,14 +55,9 @@ the segment (``IdentityDecision.name``; the id is the unsupervised one either wa
 ``rtseg.identity_names.SegmentNamer`` names the rows [boundary + ``name_skip_s``, decision
 frame] with the library's nearest name, or ``unknown`` when the segment is unlike every
 example.  A correction keeps the segment's name.  With ``exclusive_names`` (default) a name
-belongs to the behaviour ids it was given to: when the library names a segment N but
-every earlier segment named N has another id - the tracker, comparing one performer
-within one session, says this is another behaviour than those - the two judgements
-conflict and the segment is named ``unknown`` (``IdentityStats.names_contested``) rather
-than given a name that may be wrong (a library comparison is across performers; a
-left-out behaviour's nearest name is usually one the session has already seen).  A
-correction of such a segment's id to an id that holds N gives N back on the correction
-message (``names_restored``).
+only earlier segments of other ids hold is sent as ``unknown`` (``names_contested``;
+``rtseg.identity_names.NameHolders``); a correction to an id that holds it gives it back
+(``names_restored``).
 
 Cost: per frame one row copy into the block buffer; per block one (step x d)^T (step x d)
 product; per decision one eigen-decomposition per changed model (a few per cut).
@@ -78,7 +73,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from rtseg.detectors.window_models import WindowModel, WindowStats, behaviour_distance, fit
-from rtseg.identity_names import SegmentNamer
+from rtseg.identity_names import NameHolders, SegmentNamer
 from rtseg.library import UNKNOWN
 
 #: defaults (also the ``[identity]`` keys of ``config/live.toml``)
@@ -204,8 +199,7 @@ class IdentityTracker:
         self._behaviours: list[list[Any]] = []       # [n, s1, s2, model or None]
         self._seg: _Segment | None = None
         self._next_seg = 0
-        self.exclusive_names = bool(exclusive_names)
-        self._named: dict[str, list[_Segment]] = {}    # name -> the segments sent with it
+        self._holders = NameHolders(exclusive_names)
         self._namer_kw = {"skip_s": name_skip_s, "max_window_s": max_window_s,
                           "min_window_s": MIN_WINDOW_S, "block": step}
         self.library = library
@@ -428,18 +422,17 @@ class IdentityTracker:
                                     name=seg.name, name_distance=seg.name_distance))
 
     def _held_name(self, seg: _Segment, name: str, count: bool = True) -> str:
-        """``name`` for ``seg``, or ``unknown`` when earlier segments hold that name and
-        none of them has ``seg``'s (decided) behaviour id (``exclusive_names``; counted in
-        ``names_contested`` when ``count``); records ``seg`` among the name's holders."""
-        if name in ("", UNKNOWN):
+        """``name`` for ``seg``, or ``unknown`` when other ids hold it (``NameHolders``;
+        counted in ``names_contested`` when ``count``)."""
+        if name in ("", UNKNOWN) or self._holders.grant(seg, name):
             return name
-        holders = self._named.setdefault(name, [])
-        if (self.exclusive_names and holders
-                and all(h.behaviour != seg.behaviour for h in holders)):
-            self.stats.names_contested += int(count)
-            return UNKNOWN
-        holders.append(seg)
-        return name
+        self.stats.names_contested += int(count)
+        return UNKNOWN
+
+    @property
+    def exclusive_names(self) -> bool:
+        """A name only other ids hold is sent as ``unknown`` (module doc)."""
+        return self._holders.exclusive
 
     def _finish(self, seg: _Segment, end: int, frame: int) -> None:
         """The segment ended at block ``end``: correct it if clearly wrong, then pool its

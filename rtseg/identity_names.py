@@ -12,6 +12,14 @@ window-model distance of the segment's per-joint angular velocities to each exam
 window, a name as near as its nearest window; libraries written before that keep their
 descriptor and 3 nearest windows).
 
+``NameHolders`` keeps which behaviour ids hold each name this session (``exclusive_names``,
+on by default): a name that only earlier segments of *other* ids hold is sent as
+``unknown`` - the tracker, comparing one performer within one session, says the segment is
+another behaviour than those, while the library compares across performers; the two
+conflict, and a forced wrong name is what null rejection exists to avoid (a behaviour
+missing from the library is usually nearest to one the session has already shown).  A
+correction of such a segment's id to an id that holds the name gives it back.
+
 Frames are the pipeline's session indices (0-based among received frames); the rows are
 the pose-feature rows the detectors are fed (``rtseg.features``), d columns, of the
 library's feature profile.
@@ -87,3 +95,24 @@ class SegmentNamer:
             return UNKNOWN, math.inf
         nm = self.library.name(W, self.frame_rate)
         return nm.name, nm.distance
+
+
+class NameHolders:
+    """Which segments (so which behaviour ids) hold each library name this session.
+
+    exclusive: with False every name is granted (the rule off)."""
+
+    def __init__(self, exclusive: bool = True) -> None:
+        self.exclusive = bool(exclusive)
+        self._holders: dict[str, list[Any]] = {}
+
+    def grant(self, seg: Any, name: str) -> bool:
+        """May ``seg`` (anything with a ``behaviour`` id, read when asked: corrections
+        move it) carry ``name``?  No when earlier segments hold the name and none of them
+        has ``seg``'s id; yes otherwise, and ``seg`` then holds it too."""
+        holders = self._holders.setdefault(name, [])
+        if self.exclusive and holders and all(h.behaviour != seg.behaviour for h in holders):
+            return False
+        holders.append(seg)
+        return True
+
