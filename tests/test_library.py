@@ -636,3 +636,9 @@ def test_learn_says_which_behaviours_the_library_may_confuse(tmp_path):
     lines = {ln.split(":")[0].strip(): ln for ln in describe(lib, tmp_path / "lib.json")[1:]}
     assert "may be confused" in lines["walk"] and "may be confused" in lines["stroll"]
     assert "nearest other name" in lines["punch"] and "confused" not in lines["punch"]
+    # a file written before the report was kept: worked out when shown, the file's rule kept
+    lib.calibration.pop("nearest_other")
+    lib.threshold = 9.0
+    again = describe(lib, tmp_path / "lib.json")
+    assert "may be confused" in again[1 + sorted(lines).index("walk")]
+    assert lib.threshold == 9.0 and "nearest_other" not in lib.calibration

@@ -92,7 +92,13 @@ def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
     if sources:
         out.append(f"  {lib.metric} distance, windows of {lib.window_s:g} s every "
                    f"{lib.step_s:g} s, {lib.frame_rate:g} Hz")
-    near = lib.calibration.get("nearest_other") or {}
+    near = lib.calibration.get("nearest_other")
+    if near is None and len(lib.names):     # a file learned before it was kept: work it out
+        import copy
+        probe = copy.copy(lib)
+        probe.calibrate()
+        near = probe.calibration.get("nearest_other")
+    near = near or {}
     for k in sorted(by_name):
         nb = near.get(k)
         close = ""
