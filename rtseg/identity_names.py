@@ -115,4 +115,3 @@ class NameHolders:
             return False
         holders.append(seg)
         return True
-

@@ -283,12 +283,12 @@ class Library:
             others = {n: v for n, v in self.name_distances(d).items()
                       if n != names[i] and math.isfinite(v)}
             per = sorted(others.values())
+            known = k_mean(s, self.k_nearest) if len(s) else None
             if others:
                 n1 = min(others, key=others.get)
-                near.setdefault(str(names[i]), []).append(
-                    (n1, others[n1], k_mean(s, self.k_nearest) if len(s) else None))
-            if len(s):
-                same.append(k_mean(s, self.k_nearest))
+                near.setdefault(str(names[i]), []).append((n1, others[n1], known))
+            if known is not None:
+                same.append(known)
                 other.append(per[0] if per else math.inf)
             if per:
                 o1.append(per[0])

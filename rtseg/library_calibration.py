@@ -99,9 +99,9 @@ def nearest_others(near: dict[str, list[tuple[str, float, float | None]]]
     window's known case - another example's nearest same-name window - or None): the other
     name they are most often nearest to (``name``), the median distance to it
     (``distance``), the median known-case distance (``same``, None without a second
-    example) and the share of the windows with a known case that lie as near or nearer to
-    some other name than to their own name's other examples (``nearer_other``: how often a new
-    example would get the wrong nearest name; None without a second example).
+    example) and the share of the windows with a known case that lie as near or nearer
+    to some other name than to their own name's other examples (``nearer_other``: how
+    often a new example would get the wrong nearest name; None without a second example).
     ``rtseg learn`` shows it: which behaviours the library can hardly tell apart."""
     out: dict[str, dict[str, Any]] = {}
     for name, rows in sorted(near.items()):
