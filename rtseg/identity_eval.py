@@ -174,8 +174,9 @@ def library_loto(takes: Sequence[LabelledTake], config: Any) -> dict[str, Any] |
     """Named libraries, leave-one-take-out over the mocap6 takes among ``takes`` (shared
     exercise names): ``{accuracy, unknown_rate, unknown_correct, known_segments,
     unknown_segments, takes}`` (``rtseg.library_eval``); ``unknown_correct`` over the
-    ``unknown_segments``: each exercise of the held-out take also left out of its library
-    in turn, the share of its segments named ``unknown``.  None with fewer than two."""
+    ``unknown_segments``: the segments of exercises the other takes lack, and each
+    exercise of the held-out take also left out of its library in turn - the share named
+    ``unknown``.  None with fewer than two."""
     from rtseg.library_eval import run_folds
     from rtseg.library_learn import MOCAP6_NAMES, Example, take_rows
     m6 = [t for t in takes if "mocap6" in t.labels.source]
@@ -194,9 +195,9 @@ def library_loto(takes: Sequence[LabelledTake], config: Any) -> dict[str, Any] |
         tk[lt.name] = (take, truth)
     units = {n: (lambda e, n=n: e.take == n) for n in tk}
     res = run_folds(examples, units, tk, {n: n for n in tk}, config, hide_names=True)
-    left_out = res["hidden_names"]
-    return {**res["held_out"], "unknown_correct": left_out["unknown_correct"],
-            "unknown_segments": left_out["unknown_segments"], "takes": sorted(tk),
+    not_known = res["not_known"]
+    return {**res["held_out"], "unknown_correct": not_known["unknown_correct"],
+            "unknown_segments": not_known["unknown_segments"], "takes": sorted(tk),
             "protocol": "leave-one-take-out"}
 
 

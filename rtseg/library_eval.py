@@ -121,7 +121,9 @@ def run_folds(examples: Sequence[Example], units: dict[str, Callable[[Example], 
     does not hold, name the live segments of its takes (``takes``: key -> (take, per-frame
     truth)); with ``hide_names``, also once per true name of the unit with that name left
     out of the library (its segments count as not-known).  Returns ``{"held_out":
-    summary, "hidden_names": summary, "segments": [...], "libraries": [...]}`` (each
+    summary, "hidden_names": summary, "not_known": summary, "segments": [...],
+    "libraries": [...]}`` (``not_known``: every segment whose behaviour its library
+    lacked - the held-out folds' and the hidden names' - for ``unknown_correct``; each
     fold's library: ``library_summary``)."""
     main, hidden = Tally(), Tally()
     libraries = []
@@ -150,8 +152,10 @@ def run_folds(examples: Sequence[Example], units: dict[str, Callable[[Example], 
                 take, truth = takes[k]
                 rows = name_take(take, truth, lib_h, config, k)
                 hidden.add([r for r in rows if r.truth == nm])
+    both = Tally([s for s in main.segments if not s.known] + hidden.segments)
     return {"held_out": main.summary(), "hidden_names": hidden.summary() if hide_names else None,
-            "segments": [vars(s) for s in main.segments], "libraries": libraries}
+            "not_known": both.summary(), "segments": [vars(s) for s in main.segments],
+            "libraries": libraries}
 
 
 def library_summary(lib: Library, unit: str, without: str | None = None) -> dict[str, Any]:
