@@ -29,6 +29,11 @@ take alone (``one_name``: that exercise's segments must get its name, every othe
 ``--step S``: example windows every S seconds (default ``rtseg.library.DEFAULT_STEP_S``);
 ``--name-after S``: the tracker's ``name_after_s`` (default: config/live.toml's).
 Prints one JSON document; parameters are the library's own (calibrated inside it).
+``held_out``: the held-out takes' segments (``unknown_correct`` over those whose behaviour
+the library lacks); ``hidden_names``: the segments of each name left out in turn;
+``not_known``: both kinds of not-known segments together (``rtseg evaluate --identity``'s
+``identity.library.unknown_correct``).  With ``[identity] exclusive_names`` (default) a
+name only other behaviour ids of the session hold is sent ``unknown``.
 ``decision_delay_s`` (per summary): median / p90 seconds from a labelled change to the name
 on the wire, over the known segments that start within 1 s of one.
 """
