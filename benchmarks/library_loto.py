@@ -2,6 +2,7 @@
 """Held-out figures of named behaviour libraries (rtseg.library, docs/identity.md).
 
     python3 benchmarks/library_loto.py mocap6 [DATA_DIR]          # leave-one-take-out
+    python3 benchmarks/library_loto.py mocap6 --by-person [DATA_DIR] # leave-one-person-out
     python3 benchmarks/library_loto.py single [DATA_DIR/cmu_single] # leave-one-person-out
     python3 benchmarks/library_loto.py spliced SPLICED_DIR [DATA_DIR/cmu_single]
     python3 benchmarks/library_loto.py fewshot [DATA_DIR] [--seconds S]  # short examples
@@ -10,7 +11,9 @@
 mocap6: the three mocap6 takes (13_29, 13_31, 14_14; exercise names); for each take a
 library learned from the other two names its live segments (``contrast`` cuts, decided
 names as sent).  Also each exercise of the held-out take left out of the library in turn:
-its segments must come out ``unknown``.
+its segments must come out ``unknown``.  ``--by-person``: leave-one-person-out instead (the
+library of subject 13's takes names subject 14's and the other way round: a person's
+takes are named from other people's examples only).
 single: cmu_single, per feature profile (BVH takes: unity; AMC: cmu14; 10_04's Daz
 skeleton has neither): for each person, a library from the other people's takes of that
 profile names the live segments of the person's takes.  Behaviours only this person
@@ -60,7 +63,7 @@ def _progress(msg: str) -> None:
     print(f"  {msg}", file=sys.stderr, flush=True)
 
 
-def mocap6(data: Path, cfg) -> dict:
+def mocap6(data: Path, cfg, by_person: bool = False) -> dict:
     takes = [t for t in find_labelled_takes(data, ("cmu",)) if "mocap6" in t.labels.source]
     names = [t.name for t in takes]
     ex = examples_from_dir(data, cfg, takes=names)
@@ -69,6 +72,12 @@ def mocap6(data: Path, cfg) -> dict:
         take = lt.load()
         truth = np.array([MOCAP6_NAMES.get(str(v), str(v)) for v in truth_labels(lt, take.n_frames)])
         tk[lt.name] = (take, truth)
+    if by_person:              # the person of a CMU take is its subject number, "13" of 13_29
+        who = {n: n.split("_")[0] for n in names}
+        if len(set(who.values())) < 2:
+            raise ValueError(f"--by-person needs takes of two people, got {sorted(who)}")
+        units = {p: (lambda e, p=p: who.get(e.take) == p) for p in sorted(set(who.values()))}
+        return run_folds(ex, units, tk, who, cfg, True, _progress)
     units = {n: (lambda e, n=n: e.take == n) for n in names}
     return run_folds(ex, units, tk, {n: n for n in names}, cfg, True, _progress)
 
@@ -185,6 +194,9 @@ def main(argv: list[str] | None = None) -> int:
     if "--step" in opts:
         import rtseg.library_eval as le
         le.WINDOWS["step_s"] = opts["--step"]
+    by_person = "--by-person" in argv
+    if by_person:
+        argv.remove("--by-person")
     if not argv or argv[0] not in ("mocap6", "single", "spliced", "fewshot"):
         print(__doc__, file=sys.stderr)
         return 2
@@ -203,7 +215,7 @@ def main(argv: list[str] | None = None) -> int:
             return 2
     try:
         if argv[0] == "mocap6":
-            doc = mocap6(Path(argv[1]) if len(argv) > 1 else DATA, cfg)
+            doc = mocap6(Path(argv[1]) if len(argv) > 1 else DATA, cfg, by_person)
         elif argv[0] == "fewshot":
             doc = fewshot(Path(argv[1]) if len(argv) > 1 else DATA, cfg,
                           opts.get("--seconds", 4.0))
@@ -220,7 +232,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"library_loto.py {argv[0]}: {exc}", file=sys.stderr)
         return 2
     from rtseg.library import DEFAULT_STEP_S
-    doc = {"protocol": argv[0], "seconds": round(time.perf_counter() - t0, 1),
+    doc = {"protocol": argv[0] + (" by person" if by_person else ""), "seconds": round(time.perf_counter() - t0, 1),
            "step_s": opts.get("--step", DEFAULT_STEP_S),
            "name_after_s": cfg["identity.name_after_s"], **doc}
     print(json.dumps(doc, indent=1, default=str))
