@@ -207,7 +207,12 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     if argv[0] in ("mocap6", "fewshot"):
         data = Path(argv[1]) if len(argv) > 1 else DATA
-        found = [t.name for t in find_labelled_takes(data, ("cmu",)) if "mocap6" in t.labels.source]
+        try:
+            found = [t.name for t in find_labelled_takes(data, ("cmu",))
+                     if "mocap6" in t.labels.source]
+        except FileNotFoundError as exc:
+            print(f"library_loto.py {argv[0]}: {exc}", file=sys.stderr)
+            return 2
         if len(found) < 2:
             print(f"library_loto.py {argv[0]}: {data} holds {len(found)} mocap6-labelled "
                   f"take(s) (cmu/*.amc with labels/mocap6/TAKE.txt); leave-one-take-out "
