@@ -513,6 +513,15 @@ class IdentityTracker:
         return out
 
 
+def tracker_options(config: Any) -> dict[str, Any]:
+    """The ``IdentityTracker`` keyword arguments a session configuration's ``[identity]``
+    section sets (decision time, threshold, naming wait, exclusive names)."""
+    return {"decide_after_s": float(config["identity.decide_after_s"]),
+            "threshold": float(config["identity.threshold"]),
+            "name_after_s": float(config["identity.name_after_s"]),
+            "exclusive_names": bool(config["identity.exclusive_names"])}
+
+
 def tracker_from_config(config: Any, frame_rate: float, method: str,
                         profile: str | None = None, dims: int | None = None
                         ) -> IdentityTracker | None:
@@ -527,8 +536,4 @@ def tracker_from_config(config: Any, frame_rate: float, method: str,
     if path:
         from rtseg.library import load
         library = load(path, profile, dims)
-    return IdentityTracker(frame_rate, method,
-                           decide_after_s=float(config["identity.decide_after_s"]),
-                           threshold=float(config["identity.threshold"]), library=library,
-                           name_after_s=float(config["identity.name_after_s"]),
-                           exclusive_names=bool(config["identity.exclusive_names"]))
+    return IdentityTracker(frame_rate, method, library=library, **tracker_options(config))

@@ -108,8 +108,7 @@ def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,
     so that the ids the names are held by (``exclusive_names``) are the ids reported.
     Raises ``rtseg.library.LibraryError`` (one line) when the library was learned for
     another feature profile or dims than this take's live features."""
-    from rtseg.identity import (DEFAULT_DECIDE_AFTER_S, DEFAULT_NAME_AFTER_S,
-                                DEFAULT_THRESHOLD, IdentityTracker)
+    from rtseg.identity import IdentityTracker, tracker_options
     from rtseg.library import UNKNOWN, LibraryError
     from rtseg.library_learn import take_rows
     X, index, profile = take_rows(take, config)
@@ -120,22 +119,16 @@ def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,
                            f"{library.profile!r} ({library.dims} dims), this take's features "
                            f"are {profile!r} ({X.shape[1]} dims)")
     fr = float(take.frame_rate)
-    decide = float(config.values.get("identity", {}).get("decide_after_s",
-                                                         DEFAULT_DECIDE_AFTER_S))
-    name_after = float(config.values.get("identity", {}).get("name_after_s",
-                                                             DEFAULT_NAME_AFTER_S))
-    exclusive = bool(config.values.get("identity", {}).get("exclusive_names", True))
-    if threshold is None:
-        threshold = float(config.values.get("identity", {}).get("threshold", DEFAULT_THRESHOLD))
+    options = tracker_options(config)
+    if threshold is not None:
+        options["threshold"] = float(threshold)
     out: dict[str, list[str]] = {}
     for m, r in results.items():
         first, last = int(index[0]), int(index[-1])
         pending = sorted((max(int(c.detected_at if c.detected_at is not None else c.frame),
                               int(c.frame)), int(c.frame)) for c in r.cuts
                          if first < int(c.frame) <= last)
-        tr = IdentityTracker(fr, m, decide_after_s=decide, library=library,
-                             name_after_s=name_after, exclusive_names=exclusive,
-                             threshold=threshold)
+        tr = IdentityTracker(fr, m, library=library, **options)
         k = 0
         for i, f in zip(range(len(X)), index):
             tr.update(int(f), X[i])
