@@ -50,10 +50,10 @@ from pathlib import Path
 
 import numpy as np
 
-from rtseg.identity_eval import truth_labels
+from rtseg.identity_eval import named_truth_labels
 from rtseg.labels import find_labelled_takes
 from rtseg.library_eval import run_folds
-from rtseg.library_learn import MOCAP6_NAMES, examples_from_dir
+from rtseg.library_learn import examples_from_dir
 from rtseg.online_eval import live_config
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -70,7 +70,7 @@ def mocap6(data: Path, cfg, by_person: bool = False) -> dict:
     tk = {}
     for lt in takes:
         take = lt.load()
-        truth = np.array([MOCAP6_NAMES.get(str(v), str(v)) for v in truth_labels(lt, take.n_frames)])
+        truth = named_truth_labels(lt, take.n_frames)
         tk[lt.name] = (take, truth)
     if by_person:              # the person of a CMU take is its subject number, "13" of 13_29
         who = {n: n.split("_")[0] for n in names}
@@ -99,7 +99,7 @@ def fewshot(data: Path, cfg, seconds: float) -> dict:
     tk, units, tk1, units1 = {}, {}, {}, {}
     for lt in takes:
         take = lt.load()
-        truth = np.array([MOCAP6_NAMES.get(str(v), str(v)) for v in truth_labels(lt, take.n_frames)])
+        truth = named_truth_labels(lt, take.n_frames)
         for src in names:
             if src == lt.name:
                 continue
@@ -237,7 +237,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"library_loto.py {argv[0]}: {exc}", file=sys.stderr)
         return 2
     from rtseg.library import DEFAULT_STEP_S
-    doc = {"protocol": argv[0] + (" by person" if by_person else ""), "seconds": round(time.perf_counter() - t0, 1),
+    doc = {"protocol": argv[0] + (" by person" if by_person else ""),
+           "seconds": round(time.perf_counter() - t0, 1),
            "step_s": opts.get("--step", DEFAULT_STEP_S),
            "name_after_s": cfg["identity.name_after_s"], **doc}
     print(json.dumps(doc, indent=1, default=str))

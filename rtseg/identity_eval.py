@@ -56,6 +56,13 @@ def truth_labels(lt: LabelledTake, n_frames: int) -> np.ndarray:
     return out
 
 
+def named_truth_labels(lt: LabelledTake, n_frames: int) -> np.ndarray:
+    """``truth_labels`` with mocap6 exercise numbers as their names (``Jog``, ...): the
+    names a behaviour library learned from the labelled takes holds."""
+    from rtseg.library_learn import MOCAP6_NAMES
+    return np.array([MOCAP6_NAMES.get(str(v), str(v)) for v in truth_labels(lt, n_frames)])
+
+
 def _fit_len(a: np.ndarray, n: int) -> np.ndarray:
     if len(a) >= n:
         return a[:n]
@@ -178,7 +185,7 @@ def library_loto(takes: Sequence[LabelledTake], config: Any) -> dict[str, Any] |
     exercise of the held-out take also left out of its library in turn - the share named
     ``unknown``.  None with fewer than two."""
     from rtseg.library_eval import run_folds
-    from rtseg.library_learn import MOCAP6_NAMES, Example, take_rows
+    from rtseg.library_learn import Example, take_rows
     m6 = [t for t in takes if "mocap6" in t.labels.source]
     if len(m6) < 2:
         return None
@@ -187,7 +194,7 @@ def library_loto(takes: Sequence[LabelledTake], config: Any) -> dict[str, Any] |
     tk: dict[str, Any] = {}
     for lt in m6:
         take = lt.load()
-        truth = np.array([MOCAP6_NAMES.get(str(v), str(v)) for v in truth_labels(lt, take.n_frames)])
+        truth = named_truth_labels(lt, take.n_frames)
         X, index, profile = take_rows(take, config)
         for a, b, name in label_runs(truth):
             examples.append(Example(name, lt.name, lt.name.split("_")[0], X, index, (a, b),
