@@ -106,8 +106,7 @@ def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
             same, share = nb.get("same"), nb.get("nearer_other")
             close = (f"; nearest other name {nb['name']} at {nb['distance']:.2f}"
                      + (f" (its other examples at {same:.2f}; {share:.0%} of its windows "
-                        f"lie as near another name)" if same is not None and share is not None
-                        else ""))
+                        f"lie as near another name)" if share is not None else ""))
             if (share is not None and share >= CONFUSED_SHARE) or (
                     same is None and nb["distance"] <= lib.threshold):
                 close += ": may be confused"
