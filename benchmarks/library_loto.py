@@ -66,20 +66,18 @@ def _progress(msg: str) -> None:
 def mocap6(data: Path, cfg, by_person: bool = False) -> dict:
     takes = [t for t in find_labelled_takes(data, ("cmu",)) if "mocap6" in t.labels.source]
     names = [t.name for t in takes]
+    # a unit: a take, or with by_person a person (a CMU take's subject, "13" of 13_29)
+    unit_of = {n: n.split("_")[0] if by_person else n for n in names}
+    if by_person and len(set(unit_of.values())) < 2:
+        raise ValueError(f"--by-person needs takes of two people, got {sorted(unit_of)}")
     ex = examples_from_dir(data, cfg, takes=names)
     tk = {}
     for lt in takes:
         take = lt.load()
         truth = named_truth_labels(lt, take.n_frames)
         tk[lt.name] = (take, truth)
-    if by_person:              # the person of a CMU take is its subject number, "13" of 13_29
-        who = {n: n.split("_")[0] for n in names}
-        if len(set(who.values())) < 2:
-            raise ValueError(f"--by-person needs takes of two people, got {sorted(who)}")
-        units = {p: (lambda e, p=p: who.get(e.take) == p) for p in sorted(set(who.values()))}
-        return run_folds(ex, units, tk, who, cfg, True, _progress)
-    units = {n: (lambda e, n=n: e.take == n) for n in names}
-    return run_folds(ex, units, tk, {n: n for n in names}, cfg, True, _progress)
+    units = {u: (lambda e, u=u: unit_of.get(e.take) == u) for u in sorted(set(unit_of.values()))}
+    return run_folds(ex, units, tk, unit_of, cfg, True, _progress)
 
 
 def fewshot(data: Path, cfg, seconds: float) -> dict:

@@ -6,6 +6,7 @@ null rejection on synthetic performances (a behaviour the library never saw come
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -656,3 +657,14 @@ def test_library_benchmark_refuses_bad_folders_in_one_line(tmp_path):
         p = run(*args)
         assert p.returncode == 2, p.stderr
         assert len(p.stderr.strip().splitlines()) == 1 and says in p.stderr, p.stderr
+    if not (DATA / "labels" / "mocap6" / "13_31.txt").is_file():
+        return
+    one = tmp_path / "one_person"                # subject 13's two takes only
+    (one / "cmu").mkdir(parents=True)
+    (one / "labels" / "mocap6").mkdir(parents=True)
+    for f in ("cmu/13.asf", "cmu/13_29.amc", "cmu/13_31.amc", "labels/mocap6/13_29.txt",
+              "labels/mocap6/13_31.txt"):
+        os.symlink(DATA / f, one / f)
+    p = run("mocap6", "--by-person", str(one))
+    assert p.returncode == 2, p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1 and "two people" in p.stderr, p.stderr
