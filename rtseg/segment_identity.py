@@ -77,19 +77,9 @@ def identify_segments(X: np.ndarray, frame_rate: float,
     bounds = sorted({int(b) for b, _ in cuts if 0 < int(b) < n})
     if n == 0:
         return []
-    pending = sorted(((max(int(d), int(b)), int(b)) for b, d in cuts if 0 < int(b) < n),
-                     reverse=True)
     from rtseg.identity import IdentityTracker
     tr = IdentityTracker(frame_rate, **tracker_kw)
-    for i in range(n):
-        tr.update(i, X[i])
-        while pending and pending[-1][0] <= i:
-            d, b = pending.pop()
-            tr.on_cut(b, d)
-    while pending:
-        d, b = pending.pop()
-        tr.on_cut(b, d)
-    tr.close(n - 1)
+    feed_take(tr, X, np.arange(n), [(b, d) for b, d in cuts if 0 < int(b) < n])
     final: dict[int, int] = {}
     for m in tr.history:
         final[m.boundary] = m.behaviour
@@ -99,6 +89,24 @@ def identify_segments(X: np.ndarray, frame_rate: float,
     for j in ids:
         order.setdefault(j, len(order) + 1)
     return [order[j] for j in ids]
+
+
+def feed_take(tracker: Any, X: np.ndarray, index: Sequence[int],
+              cuts: Sequence[tuple[int, int]]) -> None:
+    """Replay a take through ``tracker`` (an ``IdentityTracker``) as the live loop would:
+    each row of X with its session frame ``index``, each cut (boundary, detected) once the
+    frame ``max(detected, boundary)`` has been fed (those detected after the last frame at
+    the end), then ``close`` at the last frame."""
+    pending = sorted((max(int(d), int(b)), int(b)) for b, d in cuts)
+    k = 0
+    for x, f in zip(X, index):
+        tracker.update(int(f), x)
+        while k < len(pending) and pending[k][0] <= f:
+            tracker.on_cut(pending[k][1], pending[k][0])
+            k += 1
+    for d, b in pending[k:]:
+        tracker.on_cut(b, d)
+    tracker.close(int(index[-1]))
 
 
 def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,
@@ -125,19 +133,10 @@ def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,
     out: dict[str, list[str]] = {}
     for m, r in results.items():
         first, last = int(index[0]), int(index[-1])
-        pending = sorted((max(int(c.detected_at if c.detected_at is not None else c.frame),
-                              int(c.frame)), int(c.frame)) for c in r.cuts
-                         if first < int(c.frame) <= last)
         tr = IdentityTracker(fr, m, library=library, **options)
-        k = 0
-        for i, f in zip(range(len(X)), index):
-            tr.update(int(f), X[i])
-            while k < len(pending) and pending[k][0] <= f:
-                tr.on_cut(pending[k][1], pending[k][0])
-                k += 1
-        for d, b in pending[k:]:
-            tr.on_cut(b, d)
-        tr.close(last)
+        feed_take(tr, X, index, [(int(c.frame), int(c.frame if c.detected_at is None
+                                                        else c.detected_at))
+                                 for c in r.cuts if first < int(c.frame) <= last])
         named = sorted((b, n) for b, n in tr.segment_names(corrected=True).values())
         names = []
         for s in r.segments:
