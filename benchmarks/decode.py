@@ -445,6 +445,7 @@ def bench_axis_steps(n: int, repeat: int) -> dict:
     64 KiB reads in local and global space; the minimum over ``repeat`` passes of each
     step, in microseconds per frame.  The steps call the same functions as the pipeline
     (the frames' values are checked against ``TextStream``'s bit for bit)."""
+    from rtseg.drivers import axis_pose as P
     from rtseg.drivers import codec_axis as A
     from rtseg.drivers import codec_axis_text as T
     from rtseg.drivers.axis_source import AxisFrames, TextStream
@@ -482,49 +483,44 @@ def bench_axis_steps(n: int, repeat: int) -> dict:
                           for (i, nm), x in zip(heads, arrays)]
                     vals = arrays[0] if len(fs) == 1 else np.array(arrays)
                     t5 = _clock()
-                    kernel = getattr(A, "axis_kernel", None)
+                    kernel = getattr(P, "axis_kernel", None)
                     if kernel is not None and kernel.ENABLED:
                         # the compiled kernel: half-angle cosines and sines in numpy
                         # ("euler"), products and forward kinematics in C ("fk"; the
                         # local quaternions come out of the same call)
                         if vals.ndim == 1:
-                            half = vals.take(A._angle_index(True, False, 59)[:, :-1])
-                            np.multiply(half, A._HALF_RAD, out=half)
+                            half = vals.take(P._angle_index(True, False, 59)[:, :-1])
+                            np.multiply(half, P._HALF_RAD, out=half)
                         else:
-                            half = A._half_angles(A._channels(vals, True, False, 59)[1])
-                        u = A._cos_sin(half)
+                            half = P._half_angles(P._channels(vals, True, False, 59)[1])
+                        u = P._cos_sin(half)
                         root = vals[..., :3]
                         t6 = _clock()
-                        loc, q = kernel.euler_fk(u, 59, A._order_axes("YXZ"), A.PARENTS)
+                        loc, q = kernel.euler_fk(u, 59, P._order_axes("YXZ"), P.PARENTS)
                         q = (loc if space == "local" else q).reshape(vals.shape[:-1] + (59, 4))
                         t7 = _clock()
                     else:
                         if space == "local" or vals.ndim == 2:
-                            root, angles = A._channels(vals, True, False, 59)
-                            tt = A._euler_terms(angles, identity_row=space == "global")
+                            root, angles = P._channels(vals, True, False, 59)
+                            tt = P._euler_terms(angles, identity_row=space == "global")
                         else:
-                            half = vals.take(A._angle_index(True, False, 59))
-                            np.multiply(half, A._HALF_RAD, out=half)
+                            half = vals.take(P._angle_index(True, False, 59))
+                            np.multiply(half, P._HALF_RAD, out=half)
                             half[:, -1] = 0.0
-                            tt = A._half_terms(half)
+                            tt = P._half_terms(half)
                             root = vals[:3]
-                        T_, T4 = A._euler_tables("YXZ")
+                        T_, T4 = P._euler_tables("YXZ")
                         if space == "local":
                             q = (tt.T @ T_).reshape(angles.shape[:-1] + (4,))
                             t6 = t7 = _clock()
-                        elif hasattr(A, "_fk"):          # quaternion pointer jumping
+                        else:                            # quaternion pointer jumping
                             q = (tt.T @ T4).reshape(vals.shape[:-1] + (60, 16))
                             t6 = _clock()
-                            q = A._fk(q)
-                            t7 = _clock()
-                        else:                            # the 4x4 matrix form before it
-                            m = (tt.T @ T4).reshape(vals.shape[:-1] + (60, 4, 4))
-                            t6 = _clock()
-                            q = A._jump(m)
+                            q = P._fk(q)
                             t7 = _clock()
                     pos = root * 0.01
                     qs, ps = ([q], [pos]) if vals.ndim == 1 else (list(q), list(pos))
-                    frames += [Frame(0.0, qs[k], A._ALL_VALID.copy(), None, conv._seq(f, 0.0),
+                    frames += [Frame(0.0, qs[k], P._ALL_VALID.copy(), None, conv._seq(f, 0.0),
                                      ps[k]) for k, f in enumerate(fs)]
                     t8 = _clock()
                     for key, dt in (("fields_check", t2 - t1), ("orjson", t3 - t2),
