@@ -613,7 +613,8 @@ def test_learn_from_segments_of_a_recorded_session(tmp_path):
 def test_learn_says_which_behaviours_the_library_may_confuse(tmp_path):
     """Each name's nearest other name is kept in the file's calibration and shown by
     ``rtseg learn``; two names for one motion (``walk`` and ``stroll``, the same walks
-    under two labels) are flagged, a distinct one (``punch``) is not."""
+    under two labels) are flagged, a distinct one (``punch``) is not; a name of one person's
+    example only (``squat``) is said to lack a second example from another person."""
     from rtseg.commands.learn import describe
     from rtseg.library import load
     b = None
@@ -628,6 +629,10 @@ def test_learn_says_which_behaviours_the_library_may_confuse(tmp_path):
         b.add(X[i:j], "stroll", f"synth{seed}", info=who)      # the same frames
         b.add(X[np.searchsorted(idx, c):np.searchsorted(idx, f)], "punch", f"synth{seed}",
               info=who)
+        if seed == 0:                    # one person's example only: no known case
+            sq = synthesize("squat:8", seed=seed)
+            Xs, _, _ = take_rows(sq.take, _config())
+            b.add(Xs, "squat", "synth0 squat", info=who)
     lib = load(b.build().save(tmp_path / "lib.json"))       # kept through the file
     near = lib.calibration["nearest_other"]
     assert near["walk"]["name"] == "stroll" and near["stroll"]["name"] == "walk"
@@ -637,6 +642,9 @@ def test_learn_says_which_behaviours_the_library_may_confuse(tmp_path):
     lines = {ln.split(":")[0].strip(): ln for ln in describe(lib, tmp_path / "lib.json")[1:]}
     assert "may be confused" in lines["walk"] and "may be confused" in lines["stroll"]
     assert "nearest other name" in lines["punch"] and "confused" not in lines["punch"]
+    assert near["squat"]["same"] is None
+    assert "no second example from another person" in lines["squat"]
+    assert "no second example" not in lines["punch"]
     # a file written before the report was kept: worked out when shown, the file's rule kept
     lib.calibration.pop("nearest_other")
     lib.threshold = 9.0
