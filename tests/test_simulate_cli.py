@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import os
 import re
-import selectors
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -31,25 +31,30 @@ def _spawn(*args: str) -> subprocess.Popen:
 
 
 def _read_until(proc: subprocess.Popen, pattern: str, timeout: float = 20.0) -> tuple[re.Match, list[str]]:
-    """Read stdout lines until one matches ``pattern``; (match, lines so far)."""
-    sel = selectors.DefaultSelector()
-    sel.register(proc.stdout, selectors.EVENT_READ)
+    """Read stdout lines until one matches ``pattern``; (match, lines so far).
+
+    The lines are read by a thread that stops at the match, so what the pipe holds after
+    it stays in ``proc.stdout`` for ``_finish``.  (A selector on the pipe cannot be used:
+    ``readline`` may have buffered the next lines already, and the selector then waits for
+    output that the simulator - blocked on a pty nobody reads yet - never writes.)"""
     lines: list[str] = []
-    deadline = time.monotonic() + timeout
-    try:
-        while time.monotonic() < deadline:
-            if not sel.select(timeout=max(0.0, deadline - time.monotonic())):
-                break
-            line = proc.stdout.readline()
-            if not line:
-                break
+    found: list[re.Match] = []
+
+    def read() -> None:
+        for line in proc.stdout:
             lines.append(line.rstrip("\n"))
             m = re.search(pattern, line)
             if m:
-                return m, lines
-    finally:
-        sel.close()
+                found.append(m)
+                return
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    reader.join(timeout)
+    if found:
+        return found[0], list(lines)
     proc.kill()
+    reader.join(5.0)
     raise AssertionError(f"no line matching {pattern!r}; got {lines}; stderr: {proc.stderr.read()}")
 
 
