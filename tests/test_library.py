@@ -645,6 +645,17 @@ def test_learn_says_which_behaviours_the_library_may_confuse(tmp_path):
     assert near["squat"]["same"] is None
     assert "no second example from another person" in lines["squat"]
     assert "no second example" not in lines["punch"]
+    # examples that name no person: a second example is another take's
+    b2 = LibraryBuilder(profile, X.shape[1], res.take.frame_rate)
+    for seed in (0, 4):
+        r = synthesize("walk:8,punch:8", seed=seed)
+        Xr, ir, _ = take_rows(r.take, _config())
+        (a, e, _), (c, f, _) = label_runs(r.frame_names())
+        b2.add(Xr[np.searchsorted(ir, a):np.searchsorted(ir, e)], "walk", f"take{seed}")
+        if seed == 0:
+            b2.add(Xr[np.searchsorted(ir, c):np.searchsorted(ir, f)], "punch", "take0")
+    lines2 = {ln.split(":")[0].strip(): ln for ln in describe(b2.build(), tmp_path / "b2.json")[1:]}
+    assert "(no second example: " in lines2["punch"] and "no second" not in lines2["walk"]
     # a file written before the report was kept: worked out when shown, the file's rule kept
     lib.calibration.pop("nearest_other")
     lib.threshold = 9.0

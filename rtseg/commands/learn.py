@@ -99,10 +99,10 @@ def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
         probe.calibrate()
         near = probe.calibration.get("nearest_other")
     near = near or {}
-    # calibrated across people when the library holds several: a second example then
-    # means another person's (rtseg.library.Library.calibrate)
-    people = {str(e.get("person") or e.get("source", k)) for k, e in enumerate(lib.examples)}
-    second = "a second example" + (" from another person" if len(people) > 1 else "")
+    # a known case is another example's window: another person's when the examples name
+    # several people (rtseg.library.Library.calibrate), else another take or recording's
+    people = {str(e["person"]) for e in lib.examples if e.get("person")}
+    second = "second example" + (" from another person" if len(people) > 1 else "")
     for k in sorted(by_name):
         nb = near.get(k)
         close = ""
@@ -111,7 +111,7 @@ def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
             close = (f"; nearest other name {nb['name']} at {nb['distance']:.2f}"
                      + (f" (its other examples at {same:.2f}; {share:.0%} of its windows "
                         f"lie as near another name)" if share is not None else
-                        f" (no {second[2:]}: how near a new performance of it lies is "
+                        f" (no {second}: how near a new performance of it lies is "
                         f"not known, add one)"))
             if (share is not None and share >= CONFUSED_SHARE) or (
                     same is None and nb["distance"] <= lib.threshold):
