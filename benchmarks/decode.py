@@ -483,8 +483,8 @@ def bench_axis_steps(n: int, repeat: int) -> dict:
                           for (i, nm), x in zip(heads, arrays)]
                     vals = arrays[0] if len(fs) == 1 else np.array(arrays)
                     t5 = _clock()
-                    kernel = getattr(P, "axis_kernel", None)
-                    if kernel is not None and kernel.ENABLED:
+                    kernel = P.axis_kernel
+                    if kernel.ENABLED:
                         # the compiled kernel: half-angle cosines and sines in numpy
                         # ("euler"), products and forward kinematics in C ("fk"; the
                         # local quaternions come out of the same call)
