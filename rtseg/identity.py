@@ -11,14 +11,15 @@ Frames and times
 Frame indices are the pipeline's session indices (0-based among received frames).  The
 tracker works in *blocks* of ``step`` fed frames (default 10, 83 ms at 120 Hz): it keeps
 running prefix sums (n, sum x, sum x x^T) at every block start in a ring of
-``history_s`` seconds, so the statistics of any stretch of the recent past cost one
-subtraction, never a pass over frames.  A segment boundary is rounded to the nearest
+``history_s`` seconds (``rtseg.block_sums.BlockSums``), so the statistics of any stretch
+of the recent past cost one subtraction, never a pass over frames.  A segment boundary is rounded to the nearest
 block start.
 
 Decision
 --------
 A cut reaches the tracker when the detector reveals it, ``detected - boundary`` frames
-after the boundary (1-3 s for ``contrast``: about 1.2 s when its early look sends it), so
+after the boundary (1.5-3 s for ``contrast``: its same-behaviour gate holds every cut until
+1.5 s of the new segment have arrived), so
 the new segment's first frames are already summed.  The segment is decided when at least
 ``decide_after_s`` seconds of it are summed (at once when the cut arrives that late; with a
 library, a segment the library would call ``unknown`` then waits until ``name_after_s`` are
@@ -33,7 +34,7 @@ segments pooled) by
 (both factors are about 1 for two windows of one motion; d_eff = the larger number of
 varying directions of the two), stated for ``reference_dims`` (8) effective dimensions:
 1 + (D - 1) x sqrt(reference_dims / d_eff), so that one threshold serves the 4-channel
-(d_eff 8) and the 14-joint (d_eff 48) features.  The default threshold, 4.5 (with
+(d_eff 8) and the 14-joint (d_eff 48) features.  The default threshold, 4.0 (with
 ``decide_after_s`` 1.5), was chosen by leave-one-take-out over the labelled cmu and tsseg4d
 takes and synthetic performances (docs/identity.md).  The nearest behaviour is taken when
 D <= ``threshold``,
@@ -73,6 +74,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from rtseg.detectors.window_models import WindowModel, WindowStats, behaviour_distance, fit
+from rtseg.block_sums import BlockSums
 from rtseg.identity_names import NameHolders, SegmentNamer
 from rtseg.library import UNKNOWN
 
@@ -225,19 +227,8 @@ class IdentityTracker:
 
     # ------------------------------------------------------------------ streaming state
     def _init(self, d: int) -> None:
-        H = self.H
         self._d = d
-        self._buf = np.zeros((self.block, d))
-        self._fill = 0
-        self._n = 0
-        self._s1 = np.zeros(d)
-        self._s2 = np.zeros((d, d))
-        self._pn = np.zeros(H, dtype=np.int64)
-        self._p1 = np.zeros((H, d))
-        self._p2 = np.zeros((H, d, d))
-        self._pstart = np.zeros(H, dtype=np.int64)
-        self._blocks = 0          # blocks started
-        self._index = -1
+        self._sums = BlockSums(d, self.block, self.H)
         if self.namer is not None and not self.namer.start(d):
             self.namer = None
 
@@ -245,29 +236,15 @@ class IdentityTracker:
         """One fed feature row ``x`` (d,) of session frame ``index``."""
         if self._d == 0:
             self._init(len(x))
-        if self._fill == 0:                       # a block starts: record the prefix
-            k = self._blocks % self.H
-            self._pn[k] = self._n
-            self._p1[k] = self._s1
-            self._p2[k] = self._s2
-            self._pstart[k] = index
-            self._blocks += 1
-        self._buf[self._fill] = x
-        self._fill += 1
-        self._index = index
+        completed = self._sums.add(index, x)
         if self.namer is not None:
             self.namer.update(index, x)
         if self._seg is None:
-            self._open(index, 0, self._blocks - 1)
-        if self._fill == self.block:
-            B = self._buf
-            self._n += self.block
-            self._s1 += B.sum(axis=0)
-            self._s2 += B.T @ B
-            self._fill = 0
+            self._open(index, 0, self._sums.started - 1)
+        if completed:
             seg = self._seg
-            if seg.behaviour == 0 and self._blocks >= seg.decide_block:
-                self._attempt(seg, self._blocks, index)
+            if seg.behaviour == 0 and self._sums.started >= seg.decide_block:
+                self._attempt(seg, self._sums.started, index)
 
     def on_cut(self, boundary: int, detected: int, method: str = "") -> None:
         """A cut of the primary detector (``boundary`` = first frame of the new segment)."""
@@ -303,35 +280,21 @@ class IdentityTracker:
     # ------------------------------------------------------------------ blocks
     def _complete(self) -> int:
         """Absolute index one past the last complete block."""
-        return self._blocks - (1 if self._fill else 0)
+        return self._sums.complete()
 
     def _block_at(self, frame: int) -> int:
         """Absolute block whose start is nearest ``frame`` (within the history)."""
-        lo = max(0, self._blocks - self.H)
-        ks = np.arange(lo, self._blocks)
-        starts = self._pstart[ks % self.H]
-        j = int(np.searchsorted(starts, frame))
-        if j == 0 and frame < starts[0] and lo > 0:
-            self.stats.clamped += 1
-        if 0 < j < len(ks) and frame - starts[j - 1] < starts[j] - frame:
-            j -= 1
-        return int(ks[min(j, len(ks) - 1)])
-
-    def _prefix(self, k: int) -> tuple[int, np.ndarray, np.ndarray]:
-        """Prefix sums before absolute block k (k past the started blocks: the running
-        sums, i.e. every complete block)."""
-        if k >= self._blocks:
-            return self._n, self._s1, self._s2
-        i = k % self.H
-        return int(self._pn[i]), self._p1[i], self._p2[i]
+        blk, clamped = self._sums.block_at(frame)
+        self.stats.clamped += int(clamped)
+        return blk
 
     def _window(self, seg: _Segment, end: int, skip: int = 0) -> WindowStats | None:
         """Statistics of the segment's blocks [start, end): start = its first block, or
         ``skip`` blocks later when at least ``_min_blocks`` remain after them."""
         n0, s10, s20 = seg.n0, seg.s10, seg.s20
         if skip and end - (seg.block + skip) >= self._min_blocks:
-            n0, s10, s20 = self._prefix(seg.block + skip)
-        n, s1, s2 = self._prefix(end)
+            n0, s10, s20 = self._sums.prefix(seg.block + skip)
+        n, s1, s2 = self._sums.prefix(end)
         n -= n0
         if n < 2:
             return None
@@ -339,7 +302,7 @@ class IdentityTracker:
 
     # ------------------------------------------------------------------ segments
     def _open(self, boundary: int, index: int, blk: int) -> None:
-        n0, s10, s20 = self._prefix(blk)
+        n0, s10, s20 = self._sums.prefix(blk)
         self._seg = _Segment(index, boundary, blk, n0, s10.copy(), s20.copy(),
                              blk + self.decide_blocks)
         self._next_seg = index + 1
