@@ -289,7 +289,7 @@ def run_evaluate_identity(args: Any) -> int:
     import json
     import sys
     from rtseg.commands.evaluate import Progress
-    from rtseg.labels import GROUPS, find_labelled_takes
+    from rtseg.labels import GROUPS, find_labelled_takes, no_takes_hint
     from rtseg.online_eval import live_config
     if not args.online:
         raise ValueError("--identity scores what the live loop sends: add --online")
@@ -300,7 +300,8 @@ def run_evaluate_identity(args: Any) -> int:
               else GROUPS if args.group == "all" else (args.group,))
     takes = find_labelled_takes(args.data_dir, groups)
     if not takes:
-        raise ValueError(f"no labelled takes of {', '.join(groups)} found in {args.data_dir}")
+        raise ValueError(f"no labelled takes of {', '.join(groups)} found in {args.data_dir}"
+                         + no_takes_hint(args.data_dir))
     bar = Progress(len(takes), enabled=not args.no_progress)
     doc = evaluate_identity(takes, cfg, bar)
     bar.close()

@@ -100,6 +100,21 @@ def _subject(name: str) -> str:
     return name.split("_", 1)[0]
 
 
+def no_takes_hint(data_dir: str | Path) -> str:
+    """What to say after "no labelled takes in ``data_dir``": when the folder holds
+    single-behaviour takes (``cmu_single/``, or an ``index.tsv`` beside ``bvh/`` or
+    ``amc/``), that they have no transitions to score and how to splice them into
+    performances that do; else "" ."""
+    root = Path(data_dir)
+    for src in (root / "cmu_single", root):
+        if (src / "index.tsv").is_file() and ((src / "bvh").is_dir() or (src / "amc").is_dir()):
+            return (f"; {src} holds single-behaviour takes (no transitions to score): "
+                    f"splice them into labelled performances with `python3 "
+                    f"benchmarks/splice.py {src} OUT` (rtseg.splice.generate) and "
+                    f"evaluate OUT")
+    return ""
+
+
 def find_labelled_takes(data_dir: str | Path, groups: Iterable[str] = GROUPS, *,
                         strict: bool = False, on_slip: str = "repair",
                         tolerance: int = DEFAULT_TOLERANCE) -> list[LabelledTake]:

@@ -227,6 +227,21 @@ def test_evaluate_empty_folder(tmp_path, capsys):
     assert rc == 2 and "does not exist" in err
 
 
+
+def test_evaluate_says_how_to_score_single_behaviour_takes(tmp_path, capsys):
+    """A folder of single-behaviour takes (laid out like cmu_single) has no transitions:
+    the error says so and names the splicer, for the folder and for its parent."""
+    src = tmp_path / "d" / "cmu_single"
+    (src / "bvh").mkdir(parents=True)
+    (src / "index.tsv").write_text("name\tsubject\tbehaviour\tpath\n")
+    rc, _, err = run_cli(capsys, "evaluate", tmp_path / "d")
+    assert rc == 2 and "no labelled takes" in err
+    assert "single-behaviour takes" in err and f"splice.py {src} OUT" in err
+    rc, _, err = run_cli(capsys, "evaluate", src, "--online", "--identity")
+    assert rc == 2 and f"splice.py {src} OUT" in err
+    rc, _, err = run_cli(capsys, "evaluate", tmp_path)        # nothing of the kind
+    assert rc == 2 and "no labelled takes" in err and "splice" not in err
+
 # ------------------------------------------------------------------------ plot
 
 def test_plot_writes_png(synth_dir, capsys, tmp_path):

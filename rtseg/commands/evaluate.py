@@ -32,7 +32,7 @@ from rtseg.commands.segment import (
     add_method_argument, add_profile_argument, methods_of, params_by_method,
 )
 from rtseg.evaluation import Score, detection_delays, pooled, score, widen
-from rtseg.labels import GROUPS, LabelledTake, find_labelled_takes
+from rtseg.labels import GROUPS, LabelledTake, find_labelled_takes, no_takes_hint
 from rtseg.detectors import ONLINE_METHODS
 from rtseg.online_eval import live_config, live_cuts
 from rtseg.segmentation import segment_take_methods
@@ -291,7 +291,8 @@ def evaluate_dir(data_dir: str | Path, methods: Sequence[str], group: str | None
     else:
         takes = find_labelled_takes(data_dir, select_groups(group))
     if not takes:
-        raise ValueError(f"no labelled takes of group {group!r} found in {data_dir}")
+        raise ValueError(f"no labelled takes of group {group!r} found in {data_dir}"
+                         + no_takes_hint(data_dir))
     bar = Progress(len(takes), enabled=progress)
     return evaluate_takes(takes, methods, params, bar, profile, tolerance_s, online,
                           workers, scheduler)
