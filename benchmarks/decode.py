@@ -7,7 +7,6 @@
     python3 benchmarks/decode.py --frames 5000 --repeat 7
     python3 benchmarks/decode.py --cpu-time        # process CPU time instead of wall clock
     python3 benchmarks/decode.py --only axis       # only the rows named axis...
-    python3 benchmarks/decode.py --axis-steps      # an Axis text frame's time, step by step
     git worktree add /tmp/before <commit>          # the code before a change, timed by
     python3 benchmarks/decode.py --tree /tmp/before   # these loops (PYTHONPATH alone is not
                                                    # enough: see _use_tree)
@@ -56,11 +55,9 @@ only, on one core, median of ``--repeat`` runs:
 
 Targets: >= 20 000 frames/s for VMC, MVN, mocopi, Rokoko and Axis (a suit sends 60-240).
 
-    python3 benchmarks/decode.py --fuzz [--fuzz-inputs 100000]
-
-feeds, per format (mvn, mvn_tcp: stream reads, mocopi, rokoko, axis binary, axis text), that many mutated datagrams (bit flips, truncation,
-rewritten header/length fields, appended bytes, random bytes; seeded) to the assembler
-and reports how many raised (must be 0), frames produced, counters, and inputs/s.
+Where an Axis text frame's time goes, step by step: ``benchmarks/axis_steps.py``.  Hostile
+input for every decoder: ``benchmarks/fuzz_decoders.py``.  The objects fed here are the
+sources' own per-read pipelines (``benchmarks/codec_feeds.py``, shared with the fuzzer).
 """
 
 from __future__ import annotations
@@ -74,7 +71,6 @@ import sys
 import time
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 
 def _use_tree(argv: list[str]) -> str | None:
@@ -112,20 +108,15 @@ TREE = _use_tree(sys.argv) if __name__ == "__main__" else None
 from rtseg.drivers.codec_vmc import (HUMAN_BODY_BONES, VmcAssembler,  # noqa: E402
                                       encode_frame as vmc_encode)
 
+from codec_feeds import (AxisTextFeed, MvnTcpFeed, axis_binary_feed, axis_values,  # noqa: E402
+                         rokoko_feed, rokoko_payloads, vendor_motion)
+
 BONES = ["Hips", "Spine", "Chest", "Neck", "Head", "LeftUpperArm", "LeftLowerArm", "LeftHand",
          "RightUpperArm", "RightLowerArm", "RightHand", "LeftUpperLeg", "LeftLowerLeg",
          "LeftFoot", "RightUpperLeg", "RightLowerLeg", "RightFoot"]
 SERIAL_CHUNK = 4096
 #: timer of the timed loops: wall clock, or this process's CPU time with --cpu-time
 _clock = time.perf_counter
-
-
-def motion(n: int, seed: int = 0) -> np.ndarray:
-    """(n, 17, 4) smooth, sign-continuous unit quaternions (scalar-last)."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(n)[:, None, None] / 120.0
-    rv = 0.7 * np.sin(2 * np.pi * (0.3 + rng.random((1, 17, 3))) * t + 6 * rng.random((1, 17, 3)))
-    return Rotation.from_rotvec(rv.reshape(-1, 3)).as_quat().reshape(n, 17, 4)
 
 
 def bench_vmc(q: np.ndarray, repeat: int, fast: bool = True, full: bool = False) -> dict:
@@ -166,15 +157,6 @@ def bench_python_osc(q: np.ndarray, repeat: int) -> dict | None:
     return {"frames_per_s": round(statistics.median(rates))}
 
 
-def vendor_motion(n: int, joints: int, seed: int = 0) -> np.ndarray:
-    """(n, joints, 4) smooth unit quaternions (scalar-last)."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(n)[:, None, None] / 120.0
-    rv = 0.7 * np.sin(2 * np.pi * (0.3 + rng.random((1, joints, 3))) * t
-                      + 6 * rng.random((1, joints, 3)))
-    return Rotation.from_rotvec(rv.reshape(-1, 3)).as_quat().reshape(n, joints, 4)
-
-
 def _time_feed(make, dgrams: list[bytes], n: int, repeat: int, what: str) -> list[float]:
     rates = []
     for _ in range(repeat):
@@ -212,179 +194,14 @@ def bench_mocopi(n: int, repeat: int) -> dict:
             "datagrams_per_frame": 1.0, "bytes_per_frame": sum(map(len, dgrams)) / n}
 
 
-def mutate(seeds: list[bytes], n: int, seed: int, magic: bytes = b""):
-    """``n`` mutated datagrams from ``seeds`` (generator; seeded, reproducible)."""
-    rng = np.random.default_rng(seed)
-    for _ in range(n):
-        d = bytearray(seeds[rng.integers(len(seeds))])
-        op = rng.integers(6)
-        if op == 0:
-            for _ in range(rng.integers(1, 8)):
-                d[rng.integers(len(d))] ^= 1 << int(rng.integers(8))
-        elif op == 1:
-            d = d[:rng.integers(len(d) + 1)]
-        elif op == 2:
-            a = int(rng.integers(0, min(len(d), 64)))
-            d[a:a + 4] = rng.bytes(4)
-        elif op == 3:
-            d = d + rng.bytes(rng.integers(1, 64))
-        elif op == 4:
-            d = bytearray(magic + rng.bytes(rng.integers(0, 300)))
-        else:
-            d = bytearray(rng.bytes(rng.integers(0, 300)))
-        yield bytes(d)
-
-
-def fuzz(fmt: str, n: int, seed: int = 1) -> dict:
-    """Feed ``n`` mutated datagrams (TCP reads for mvn_tcp, axis_text) of ``fmt``; count
-    escaped exceptions."""
-    import struct
-    if fmt == "mvn":
-        from rtseg.drivers.codec_mvn import (HEADER_SIZE, ITEM_SIZE, MvnAssembler,
-                                             encode_datagrams, encode_message)
-        q = vendor_motion(4, 23)
-        ids = list(range(1, 24))
-        seeds = [d for i in range(4) for d in encode_datagrams(
-            i, i, ids, q[i], max_datagram=HEADER_SIZE + 8 * ITEM_SIZE)]
-        seeds += [encode_message("12", b"\x00\x00\x00\x0aname:fuzz\n"),
-                  encode_message("13", struct.pack(">II", 1, 2) + b"L5" + bytes(12)),
-                  encode_message("24", bytes(12)), encode_message("25", b"01:02:03.004")]
-        asm, magic = MvnAssembler(ids, quiet=0.0), b"MXTP"
-    elif fmt == "mvn_tcp":
-        from rtseg.drivers.codec_mvn import HEADER_SIZE, ITEM_SIZE, encode_datagrams
-        q = vendor_motion(4, 23)
-        ids = list(range(1, 24))
-        stream = b"".join(d for i in range(4) for d in encode_datagrams(
-            i, i, ids, q[i], max_datagram=HEADER_SIZE + 8 * ITEM_SIZE))
-        seeds = [stream[k:k + 700] for k in range(0, len(stream), 700)]   # TCP reads
-        asm, magic = _MvnTcp(ids), b"MXTP"
-    elif fmt == "rokoko":
-        from rtseg.drivers.codec_rokoko import LZ4_MAGIC
-        seeds = _rokoko_payloads(3, False) + _rokoko_payloads(2, True)
-        asm, magic = _rokoko_assembler(), LZ4_MAGIC
-    elif fmt == "axis":
-        from rtseg.drivers.codec_axis import encode_binary
-        v = _axis_values(3)
-        d = encode_binary(v[0])
-        seeds = [encode_binary(v[1], frame_index=1), d[:1024], d[1024:],
-                 encode_binary(v[2][:180], with_disp=False)]
-        asm, magic = _axis_binary_assembler(), b"\xff\xdd"
-    elif fmt == "axis_text":
-        from rtseg.drivers.codec_axis import encode_text
-        v = _axis_values(3)
-        seeds = [encode_text(v[0]), encode_text(v[1][:180], 1, "Avatar01"), b" ||", b"||"]
-        asm, magic = _AxisText(), b"0 Avatar00 "
-    else:
-        from rtseg.drivers.codec_mocopi import MocopiAssembler, encode_frame, encode_skeleton
-        from rtseg.drivers.codec_mocopi import BONE_PARENTS
-        q = vendor_motion(3, 27)
-        seeds = [encode_frame(i, q[i], uttm=1.0 + i) for i in range(3)]
-        seeds.append(encode_skeleton(list(BONE_PARENTS), np.tile([0, 0, 0, 1, 0, 0, 0], (27, 1))))
-        asm, magic = MocopiAssembler(), b""
-    escaped = frames = 0
-    t0 = time.perf_counter()
-    for k, d in enumerate(mutate(seeds, n, seed, magic)):
-        try:
-            frames += len(asm.feed(d, k * 1e-3)) + len(asm.flush(k * 1e-3))
-        except Exception as exc:  # noqa: BLE001 - counting is the point
-            escaped += 1
-            if escaped <= 3:
-                print(f"{fmt}: input {k} raised {exc!r}", file=sys.stderr)
-    dt = time.perf_counter() - t0
-    st = asm.stats
-    return {"inputs": n, "escaped": escaped, "frames": frames, "corrupt": st.corrupt,
-            "bad_values": st.bad_values, "bad_messages": st.bad_messages,
-            "dropped": st.dropped, "inputs_per_s": round(n / dt)}
-
-
-class _MvnTcp:
-    """What MvnTcpSource runs per TCP read: MxtpStream -> MvnAssembler (its ``corrupt``
-    also counts the stream's resynchronisations)."""
-
-    def __init__(self, ids: list[int]) -> None:
-        from rtseg.drivers.codec_mvn import MxtpStream
-        from rtseg.drivers.codec_mvn_assembler import MvnAssembler
-        self.cut, self.asm = MxtpStream(), MvnAssembler(ids, quiet=0.0)
-        self.stats = self.asm.stats
-
-    def feed(self, data: bytes, now: float) -> list:
-        before = self.cut.resyncs
-        out = [f for m in self.cut.feed(data) for f in self.asm.feed(m, now)]
-        self.stats.corrupt += self.cut.resyncs - before
-        return out
-
-    def flush(self, now: float, force: bool = False) -> list:
-        return self.asm.flush(now, force)
-
-
-class _CountingStats:
-    """A SourceStats and the ``count(field, n, message)`` callable the Rokoko/Axis
-    assemblers take."""
-
-    def __init__(self) -> None:
-        from rtseg.drivers.base import SourceStats
-        self.stats = SourceStats()
-
-    def __call__(self, field: str, n: int = 1, message=None) -> None:
-        setattr(self.stats, field, getattr(self.stats, field) + n)
-
-
-class _AxisText:
-    """What the axis text source runs on each TCP read (``axis_source.TextStream``: split
-    on ``||``, decode the frames of the read together, convert)."""
-
-    def __init__(self, space: str = "local") -> None:
-        from rtseg.drivers.axis_source import AxisFrames, TextStream
-        self.count = _CountingStats()
-        self.stats = self.count.stats
-        self.stream = TextStream(AxisFrames(self.count, space=space))
-
-    def feed(self, data: bytes, now: float) -> list:
-        return self.stream.feed(data, now)
-
-    def flush(self, now: float, force: bool = False) -> list:
-        return []
-
-
-def _rokoko_assembler():
-    from rtseg.drivers.rokoko_source import RokokoAssembler
-    count = _CountingStats()
-    asm = RokokoAssembler(None, count)
-    asm.stats = count.stats
-    return asm
-
-
-def _axis_binary_assembler(space: str = "local"):
-    from rtseg.drivers.axis_source import AxisFrames, _BinaryAdapter
-    count = _CountingStats()
-    asm = _BinaryAdapter(AxisFrames(count, space=space))
-    asm.stats = count.stats
-    return asm
-
-
-def _rokoko_payloads(n: int, compress: bool) -> list[bytes]:
-    from rtseg.drivers.codec_rokoko import encode_packet
-    q = vendor_motion(n, 21)
-    return [encode_packet([("Actor1", q[i], None, np.array([0.0, 0.95, 0.01 * i]))], i / 60,
-                          compress=compress) for i in range(n)]
-
-
-def _axis_values(n: int) -> np.ndarray:
-    from rtseg.drivers.codec_axis import JOINTS, quat_to_euler
-    v = np.zeros((n, len(JOINTS), 6))
-    v[:, :, 3:] = quat_to_euler("YXZ", vendor_motion(n, len(JOINTS)))
-    v[:, 0, :3] = (0.0, 95.0, 0.0)
-    return v.reshape(n, -1)
-
-
 def bench_rokoko(n: int, repeat: int, compress: bool = False, json_module: bool = False) -> dict:
     from rtseg.drivers import codec_rokoko
-    dgrams = _rokoko_payloads(n, compress)
+    dgrams = rokoko_payloads(n, compress)
     saved = codec_rokoko._loads
     if json_module:
         codec_rokoko._loads = json.loads
     try:
-        rates = _time_feed(_rokoko_assembler, dgrams, n, repeat, "Rokoko")
+        rates = _time_feed(rokoko_feed, dgrams, n, repeat, "Rokoko")
     finally:
         codec_rokoko._loads = saved
     return {"frames_per_s": round(statistics.median(rates)), "runs": [round(r) for r in rates],
@@ -395,25 +212,13 @@ def bench_rokoko(n: int, repeat: int, compress: bool = False, json_module: bool 
 def bench_mvn_tcp(n: int, repeat: int) -> dict:
     """MVN over TCP: the type-02 messages back to back, in 4096-byte reads, cut by
     MxtpStream and fed to the assembler (what MvnTcpSource runs per read)."""
-    from rtseg.drivers.codec_mvn import MxtpStream, encode_datagrams
-    from rtseg.drivers.codec_mvn_assembler import MvnAssembler
+    from rtseg.drivers.codec_mvn import encode_datagrams
     q = vendor_motion(n, 23)
     ids = list(range(1, 24))
     stream = b"".join(d for i in range(n) for d in encode_datagrams(i, i * 8, ids, q[i],
                                                                      np.zeros((23, 3))))
     reads = [stream[k:k + SERIAL_CHUNK] for k in range(0, len(stream), SERIAL_CHUNK)]
-
-    class _Tcp:
-        def __init__(self) -> None:
-            self.cut, self.asm = MxtpStream(), MvnAssembler(ids)
-
-        def feed(self, data: bytes, now: float) -> list:
-            return [f for m in self.cut.feed(data) for f in self.asm.feed(m, now)]
-
-        def flush(self, now: float, force: bool = False) -> list:
-            return self.asm.flush(now, force)
-
-    rates = _time_feed(_Tcp, reads, n, repeat, "MVN TCP")
+    rates = _time_feed(lambda: MvnTcpFeed(ids), reads, n, repeat, "MVN TCP")
     return {"frames_per_s": round(statistics.median(rates)), "runs": [round(r) for r in rates],
             "bytes_per_frame": len(stream) / n}
 
@@ -424,131 +229,31 @@ def bench_axis(n: int, repeat: int, text: bool = False, space: str = "local",
     asks for, and gets when it has fallen behind)."""
     from rtseg.drivers.codec_axis import encode_binary
     from rtseg.drivers.codec_axis_text import encode_text
-    v = _axis_values(n)
+    v = axis_values(n)
     if text:
         stream = b"".join(encode_text(v[i]) for i in range(n))
         dgrams = [stream[k:k + chunk] for k in range(0, len(stream), chunk)]
         dgrams.append(b"||")          # the stream's last frame ends at the next separator
-        make = lambda: _AxisText(space)  # noqa: E731
+        make = lambda: AxisTextFeed(space)  # noqa: E731
     else:
         dgrams = [encode_binary(v[i], frame_index=i) for i in range(n)]
         stream = b"".join(dgrams)
-        make = lambda: _axis_binary_assembler(space)  # noqa: E731
+        make = lambda: axis_binary_feed(space)  # noqa: E731
     rates = _time_feed(make, dgrams, n, repeat, "Axis")
     return {"frames_per_s": round(statistics.median(rates)), "runs": [round(r) for r in rates],
             "bytes_per_frame": len(stream) / n}
-
-
-def bench_axis_steps(n: int, repeat: int) -> dict:
-    """Where an Axis text frame's time goes: the text source's pipeline (``TextStream``)
-    taken apart into its steps, each timed with ``_clock`` around it, for 4 KiB and
-    64 KiB reads in local and global space; the minimum over ``repeat`` passes of each
-    step, in microseconds per frame.  The steps call the same functions as the pipeline
-    (the frames' values are checked against ``TextStream``'s bit for bit)."""
-    from rtseg.drivers import axis_pose as P
-    from rtseg.drivers import codec_axis as A
-    from rtseg.drivers import codec_axis_text as T
-    from rtseg.drivers.axis_source import AxisFrames, TextStream
-    from rtseg.frame import Frame
-    v = _axis_values(n)
-    stream = b"".join(T.encode_text(v[i]) for i in range(n))
-    out: dict = {}
-    for chunk in (SERIAL_CHUNK, 65536):
-        reads = [stream[k:k + chunk] for k in range(0, len(stream), chunk)] + [b"||"]
-        for space in ("local", "global"):
-            best: dict[str, float] = {}
-            for _ in range(repeat):
-                acc = dict.fromkeys(("split", "fields_check", "orjson", "array",
-                                     "axisframe_stack", "euler", "fk", "frame"), 0.0)
-                split, conv = T.TextSplitter(), AxisFrames(lambda *a: None, space=space)
-                frames = []
-                for d in reads:
-                    t0 = _clock()
-                    chunks = split.feed(d)
-                    t1 = _clock()
-                    acc["split"] += t1 - t0
-                    if not chunks:
-                        continue
-                    heads, rows = [], []
-                    for c in chunks:
-                        index, name, body = T._fields(c)
-                        heads.append((index, name))
-                        rows.append(body.translate(T._TO_JSON, T._NOT_JSON))
-                    t2 = _clock()
-                    lists = T._json_lists(rows)
-                    t3 = _clock()
-                    arrays = [T._array(x) for x in lists]
-                    t4 = _clock()
-                    fs = [A.AxisFrame(i, nm, x, *A.layout(x.size), finite=True)
-                          for (i, nm), x in zip(heads, arrays)]
-                    vals = arrays[0] if len(fs) == 1 else np.array(arrays)
-                    t5 = _clock()
-                    kernel = P.axis_kernel
-                    if kernel.ENABLED:
-                        # the compiled kernel: half-angle cosines and sines in numpy
-                        # ("euler"), products and forward kinematics in C ("fk"; the
-                        # local quaternions come out of the same call)
-                        if vals.ndim == 1:
-                            half = vals.take(P._angle_index(True, False, 59)[:, :-1])
-                            np.multiply(half, P._HALF_RAD, out=half)
-                        else:
-                            half = P._half_angles(P._channels(vals, True, False, 59)[1])
-                        u = P._cos_sin(half)
-                        root = vals[..., :3]
-                        t6 = _clock()
-                        loc, q = kernel.euler_fk(u, 59, P._order_axes("YXZ"), P.PARENTS)
-                        q = (loc if space == "local" else q).reshape(vals.shape[:-1] + (59, 4))
-                        t7 = _clock()
-                    else:
-                        if space == "local" or vals.ndim == 2:
-                            root, angles = P._channels(vals, True, False, 59)
-                            tt = P._euler_terms(angles, identity_row=space == "global")
-                        else:
-                            half = vals.take(P._angle_index(True, False, 59))
-                            np.multiply(half, P._HALF_RAD, out=half)
-                            half[:, -1] = 0.0
-                            tt = P._half_terms(half)
-                            root = vals[:3]
-                        T_, T4 = P._euler_tables("YXZ")
-                        if space == "local":
-                            q = (tt.T @ T_).reshape(angles.shape[:-1] + (4,))
-                            t6 = t7 = _clock()
-                        else:                            # quaternion pointer jumping
-                            q = (tt.T @ T4).reshape(vals.shape[:-1] + (60, 16))
-                            t6 = _clock()
-                            q = P._fk(q)
-                            t7 = _clock()
-                    pos = root * 0.01
-                    qs, ps = ([q], [pos]) if vals.ndim == 1 else (list(q), list(pos))
-                    frames += [Frame(0.0, qs[k], P._ALL_VALID.copy(), None, conv._seq(f, 0.0),
-                                     ps[k]) for k, f in enumerate(fs)]
-                    t8 = _clock()
-                    for key, dt in (("fields_check", t2 - t1), ("orjson", t3 - t2),
-                                    ("array", t4 - t3), ("axisframe_stack", t5 - t4),
-                                    ("euler", t6 - t5), ("fk", t7 - t6), ("frame", t8 - t7)):
-                        acc[key] += dt
-                for key, dt in acc.items():
-                    best[key] = min(best.get(key, dt), dt)
-            ref = TextStream(AxisFrames(lambda *a: None, space=space))
-            want = [f for d in reads for f in ref.feed(d, 0.0)]
-            if [f.quats.tobytes() for f in want] != [f.quats.tobytes() for f in frames]:
-                raise RuntimeError("Axis steps: frames differ from TextStream's")
-            row = {k: round(x / n * 1e6, 2) for k, x in best.items()}
-            row["total"] = round(sum(best.values()) / n * 1e6, 2)
-            out[f"{'4k' if chunk == SERIAL_CHUNK else '64k'}_{space}"] = row
-    return out
 
 
 def bench_axis_burst(n: int, repeat: int, burst: int = 16, space: str = "global") -> dict:
     """Axis binary datagrams ``burst`` at a time through ``_BinaryAdapter.feed_many``: what
     the binary source decodes when datagrams wait in its socket (a reader catching up)."""
     from rtseg.drivers.codec_axis import encode_binary
-    v = _axis_values(n)
+    v = axis_values(n)
     dgrams = [encode_binary(v[i], frame_index=i) for i in range(n)]
     groups = [dgrams[k:k + burst] for k in range(0, n, burst)]
     rates = []
     for _ in range(repeat):
-        asm = _axis_binary_assembler(space)
+        asm = axis_binary_feed(space)
         if not hasattr(asm, "feed_many"):       # code before feed_many: one at a time
             asm.feed_many = lambda g, now, a=asm: [f for d in g for f in a.feed(d, now)]
         got = 0
@@ -594,13 +299,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--frames", type=int, default=5000, help="frames per run (default 5000)")
     p.add_argument("--repeat", type=int, default=5, help="runs; the median is reported (default 5)")
-    p.add_argument("--fuzz", action="store_true", help="fuzz the MVN, mocopi, Rokoko and Axis decoders "
-                   "instead of timing (exit 1 if any input raised)")
-    p.add_argument("--fuzz-inputs", type=int, default=100_000, help="inputs per format")
     p.add_argument("--cpu-time", action="store_true", help="time with this process's CPU "
                    "time (time.process_time) instead of the wall clock: steadier on a "
                    "machine shared with other jobs (frames per CPU-second)")
-    p.add_argument("--only", metavar="PREFIXES", help="time (or fuzz) only the rows (formats) whose "
+    p.add_argument("--only", metavar="PREFIXES", help="time only the rows whose "
                    "name starts with one of these comma-separated prefixes (e.g. --only axis)")
     p.add_argument("--tree", metavar="DIR", help="import rtseg from the source tree DIR (a git "
                    "worktree of another commit: the code before a change) instead of the "
@@ -608,8 +310,6 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-kernel", action="store_true", help="Axis poses through the "
                    "numpy path even where the compiled kernel (rtseg.drivers._axis_kernel) "
                    "is built, to compare the two in one tree (RTSEG_NO_KERNEL=1)")
-    p.add_argument("--axis-steps", action="store_true", help="instead of the rows: where an "
-                   "Axis text frame's time goes, step by step (microseconds per frame)")
     args = p.parse_args(argv)
     if args.no_kernel:
         os.environ["RTSEG_NO_KERNEL"] = "1"
@@ -618,32 +318,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.cpu_time:
         global _clock
         _clock = time.process_time
-    if args.axis_steps:
-        steps = bench_axis_steps(max(10, args.frames), args.repeat)
-        if args.json:
-            print(json.dumps(steps))
-        else:
-            for key, row in steps.items():
-                print(f"axis text {key}: " + ", ".join(f"{k} {x}" for k, x in row.items())
-                      + " us/frame")
-        return 0
-    if args.fuzz:
-        only = tuple(x for x in (args.only or "").split(",") if x)
-        out = {fmt: fuzz(fmt, args.fuzz_inputs)
-               for fmt in ("mvn", "mvn_tcp", "mocopi", "rokoko", "axis", "axis_text")
-               if not only or fmt.startswith(only)}
-        if args.json:
-            print(json.dumps(out))
-        else:
-            for fmt, r in out.items():
-                print(f"fuzz {fmt}: {r['inputs']:,} inputs, {r['escaped']} escaped, "
-                      f"{r['frames']:,} frames, corrupt {r['corrupt']:,}, bad values "
-                      f"{r['bad_values']:,}, bad messages {r['bad_messages']:,}, dropped "
-                      f"{r['dropped']:,}; {r['inputs_per_s']:,} inputs/s")
-        return 1 if any(r["escaped"] for r in out.values()) else 0
     if args.frames < 10 or args.repeat < 1:
         p.error("--frames must be >= 10 and --repeat >= 1")
-    q = motion(args.frames)
+    q = vendor_motion(args.frames, 17)
     n, rep = args.frames, args.repeat
     rows = {
         "serial": lambda: bench_serial(q, rep) or {"frames_per_s": None},

@@ -19,6 +19,18 @@ keeps one, so state left by earlier junk is part of what is tested; a fresh one 
   split over 3 datagrams, types 12/13/24/25), ``flush`` every 64 inputs;
 - ``mocopi``: ``codec_mocopi.MocopiAssembler`` (27 bones) fed mocopi ``fram``/``skdf``
   datagrams.
+- ``mvn_tcp``: MVN over TCP, what ``MvnTcpSource`` runs per read (``MxtpStream`` then
+  ``MvnAssembler``), fed 700-byte reads of a stream of type-02/12/13 messages;
+- ``rokoko``: the Rokoko source's ``RokokoAssembler`` fed Custom JSON v3 payloads, plain
+  and LZ4-compressed;
+- ``axis``: the Axis binary source's joiner, decoder and converter (``_BinaryAdapter``)
+  fed BVH binary datagrams (whole frames, a frame split over two datagrams, a frame
+  without displacement);
+- ``axis_text``: the Axis text source's ``TextStream`` fed reads of the ``||``-separated
+  text stream.
+
+The four last are the sources' per-read pipelines of ``benchmarks/codec_feeds.py``, the
+objects ``benchmarks/decode.py`` times.
 
 Each input is a valid seed (a real frame, info/status message, bundle, tracker message)
 mutated by one to four of: bit flips, byte overwrites, random insertions (zeros likely,
@@ -57,6 +69,10 @@ from rtseg.drivers import codec_vrchat as cvr  # noqa: E402
 from rtseg.drivers import codec_mocopi as cmo  # noqa: E402
 from rtseg.drivers import codec_mvn as cmv  # noqa: E402
 from rtseg.drivers.base import SourceStats  # noqa: E402
+
+sys.path.insert(0, str(REPO / "benchmarks"))
+from codec_feeds import (AxisTextFeed, MvnTcpFeed, axis_binary_feed,  # noqa: E402
+                         axis_values, rokoko_feed, rokoko_payloads)
 
 BONES = ["Hips", "Spine", "Chest", "Neck", "Head", "LeftUpperArm", "LeftLowerArm", "LeftHand",
          "RightUpperArm", "RightLowerArm", "RightHand", "LeftUpperLeg", "LeftLowerLeg",
@@ -127,6 +143,30 @@ def mocopi_seeds(rng: np.random.Generator) -> list[bytes]:
     out = [cmo.encode_frame(i, q[i], uttm=1.7e9 + i) for i in range(3)]
     out.append(cmo.encode_skeleton(list(cmo.BONE_PARENTS), np.tile([0, 0, 0, 1, 0, 0, 0], (27, 1))))
     return out
+
+
+def mvn_tcp_seeds(rng: np.random.Generator) -> list[bytes]:
+    """TCP reads (700 bytes) of MVN messages back to back, as the stream arrives."""
+    stream = b"".join(mvn_seeds(rng))
+    return [stream[k:k + 700] for k in range(0, len(stream), 700)]
+
+
+def rokoko_seeds(rng: np.random.Generator) -> list[bytes]:
+    return rokoko_payloads(3, False) + rokoko_payloads(2, True)
+
+
+def axis_seeds(rng: np.random.Generator) -> list[bytes]:
+    from rtseg.drivers.codec_axis import encode_binary
+    v = axis_values(3)
+    d = encode_binary(v[0])
+    return [encode_binary(v[1], frame_index=1), d[:1024], d[1024:],
+            encode_binary(v[2][:180], with_disp=False)]
+
+
+def axis_text_seeds(rng: np.random.Generator) -> list[bytes]:
+    from rtseg.drivers.codec_axis import encode_text
+    v = axis_values(3)
+    return [encode_text(v[0]), encode_text(v[1][:180], 1, "Avatar01"), b" ||", b"||"]
 
 
 # ============================================================================ mutation
@@ -253,20 +293,19 @@ def _add(acc: dict[str, int], d: dict[str, int]) -> None:
         acc[k] = acc.get(k, 0) + v
 
 
-def serial_runner() -> Runner:
+def _serial_decoders() -> tuple[Any, Any]:
     ids = range(17)
+    return cs.SerialFrameDecoder(known_ids=ids), cs.TextLineDecoder(known_ids=ids)
 
-    def make():
-        return (cs.SerialFrameDecoder(known_ids=ids), cs.TextLineDecoder(known_ids=ids))
 
-    def step(dec, data, i):
-        binary, text = dec
-        out = binary.feed(data)
-        if i % 8 == 0:
-            out += text.feed(data)
-            out += text.flush()
-        return out
-    return Runner("serial", make, step)
+def _serial_step(dec, data, i):
+    """Binary frames from every input; every 8th input also as text lines, then flushed."""
+    binary, text = dec
+    out = binary.feed(data)
+    if i % 8 == 0:
+        out += text.feed(data)
+        out += text.flush()
+    return out
 
 
 def _feed_then_flush(dec, data, i):
@@ -279,52 +318,37 @@ def _feed_then_flush(dec, data, i):
     return out
 
 
-def vmc_runner() -> Runner:
-    return Runner("vmc", lambda: cv.VmcAssembler(BONES, stats=SourceStats()), _feed_then_flush)
-
-
-def vrchat_runner() -> Runner:
-    return Runner("vrchat", lambda: cvr.VrchatAssembler(root="head", stats=SourceStats()),
-                  _feed_then_flush)
-
-
-def mvn_runner() -> Runner:
-    return Runner("mvn", lambda: cmv.MvnAssembler(list(range(1, 24)), stats=SourceStats()),
-                  _feed_then_flush)
-
-
-def mocopi_runner() -> Runner:
-    return Runner("mocopi", lambda: cmo.MocopiAssembler(stats=SourceStats()),
-                  lambda dec, data, i: dec.feed(data, i * 0.001))
+#: format -> (seed inputs, whether they are OSC, a fresh decoder, its step)
+FORMATS: dict[str, tuple[Callable, bool, Callable[[], Any], Callable]] = {
+    "serial": (lambda rng: serial_seeds(rng) + serial_text_seeds(rng), False,
+               _serial_decoders, _serial_step),
+    "vmc": (vmc_seeds, True, lambda: cv.VmcAssembler(BONES, stats=SourceStats()),
+            _feed_then_flush),
+    "vrchat": (vrchat_seeds, True, lambda: cvr.VrchatAssembler(root="head", stats=SourceStats()),
+               _feed_then_flush),
+    "mvn": (mvn_seeds, False, lambda: cmv.MvnAssembler(list(range(1, 24)), stats=SourceStats()),
+            _feed_then_flush),
+    "mocopi": (mocopi_seeds, False, lambda: cmo.MocopiAssembler(stats=SourceStats()),
+               lambda dec, data, i: dec.feed(data, i * 0.001)),
+    "mvn_tcp": (mvn_tcp_seeds, False, lambda: MvnTcpFeed(list(range(1, 24))), _feed_then_flush),
+    "rokoko": (rokoko_seeds, False, rokoko_feed, _feed_then_flush),
+    "axis": (axis_seeds, False, axis_binary_feed, _feed_then_flush),
+    "axis_text": (axis_text_seeds, False, AxisTextFeed, _feed_then_flush),
+}
 
 
 def fuzz_format(fmt: str, n: int, seed: int) -> dict:
     rng = np.random.default_rng(seed)
     rnd = random.Random(seed)
-    if fmt == "serial":
-        mut = Mutator(serial_seeds(rng) + serial_text_seeds(rng), rnd, osc=False)
-        runner = serial_runner()
-    elif fmt == "vmc":
-        mut = Mutator(vmc_seeds(rng), rnd, osc=True)
-        runner = vmc_runner()
-    elif fmt == "vrchat":
-        mut = Mutator(vrchat_seeds(rng), rnd, osc=True)
-        runner = vrchat_runner()
-    elif fmt == "mvn":
-        mut = Mutator(mvn_seeds(rng), rnd, osc=False)
-        runner = mvn_runner()
-    elif fmt == "mocopi":
-        mut = Mutator(mocopi_seeds(rng), rnd, osc=False)
-        runner = mocopi_runner()
-    else:
-        raise ValueError(fmt)
-    return runner.run(mut, n)
+    seeds, osc, make, step = FORMATS[fmt]
+    return Runner(fmt, make, step).run(Mutator(seeds(rng), rnd, osc=osc), n)
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--n", type=int, default=1_000_000, help="inputs per format (default 10^6)")
-    p.add_argument("--formats", default="serial,vmc,vrchat,mvn,mocopi", help="comma separated")
+    p.add_argument("--formats", default=",".join(FORMATS),
+                   help=f"comma separated (default all: {', '.join(FORMATS)})")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--json", action="store_true", help="print only the JSON result")
     args = p.parse_args(argv)
@@ -332,8 +356,8 @@ def main(argv: list[str] | None = None) -> int:
         p.error("--n must be >= 1")
     fmts = [f.strip() for f in args.formats.split(",") if f.strip()]
     for f in fmts:
-        if f not in ("serial", "vmc", "vrchat", "mvn", "mocopi"):
-            p.error(f"unknown format {f!r} (serial, vmc, vrchat, mvn, mocopi)")
+        if f not in FORMATS:
+            p.error(f"unknown format {f!r} ({', '.join(FORMATS)})")
     logging.disable(logging.CRITICAL)      # the decoders warn on every kind of junk
     results = {}
     for f in fmts:
@@ -341,7 +365,7 @@ def main(argv: list[str] | None = None) -> int:
         results[f] = r
         if not args.json:
             c = ", ".join(f"{k} {v}" for k, v in sorted(r["counters"].items()) if v)
-            print(f"{f:7s} {r['inputs']:,} inputs in {r['seconds']:.1f} s "
+            print(f"{f:9s} {r['inputs']:,} inputs in {r['seconds']:.1f} s "
                   f"({r['inputs_per_s']:,.0f}/s): {r['escaped']} escaped, {r['frames']:,} frames, "
                   f"{r['contract_violations']} contract violations; counters: {c}", flush=True)
             for ex in r["examples"]:
