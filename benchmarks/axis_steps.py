@@ -19,13 +19,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import sys
 import time
 
 import numpy as np
 
-from codec_feeds import axis_values
+from codec_feeds import axis_values, numpy_axis_path
 
 READ_4K = 4096
 #: timer around each step: wall clock, or this process's CPU time with --cpu-time
@@ -146,9 +144,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.frames < 10 or args.repeat < 1:
         p.error("--frames must be >= 10 and --repeat >= 1")
     if args.no_kernel:
-        os.environ["RTSEG_NO_KERNEL"] = "1"
-        if "rtseg.drivers.axis_kernel" in sys.modules:
-            sys.modules["rtseg.drivers.axis_kernel"].ENABLED = False
+        numpy_axis_path()
     if args.cpu_time:
         global _clock
         _clock = time.process_time

@@ -111,3 +111,15 @@ def axis_values(n: int) -> np.ndarray:
     v[:, :, 3:] = quat_to_euler("YXZ", vendor_motion(n, len(JOINTS)))
     v[:, 0, :3] = (0.0, 95.0, 0.0)
     return v.reshape(n, -1)
+
+
+def numpy_axis_path() -> None:
+    """Axis poses through the numpy path even where the compiled kernel is built
+    (``RTSEG_NO_KERNEL=1`` for modules not imported yet, ``ENABLED = False`` for one
+    already imported): to time the two paths in one tree."""
+    import os
+    import sys
+    os.environ["RTSEG_NO_KERNEL"] = "1"
+    kernel = sys.modules.get("rtseg.drivers.axis_kernel")
+    if kernel is not None:
+        kernel.ENABLED = False

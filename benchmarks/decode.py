@@ -64,7 +64,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import platform
 import statistics
 import sys
@@ -109,7 +108,7 @@ from rtseg.drivers.codec_vmc import (HUMAN_BODY_BONES, VmcAssembler,  # noqa: E4
                                       encode_frame as vmc_encode)
 
 from codec_feeds import (AxisTextFeed, MvnTcpFeed, axis_binary_feed, axis_values,  # noqa: E402
-                         rokoko_feed, rokoko_payloads, vendor_motion)
+                         numpy_axis_path, rokoko_feed, rokoko_payloads, vendor_motion)
 
 BONES = ["Hips", "Spine", "Chest", "Neck", "Head", "LeftUpperArm", "LeftLowerArm", "LeftHand",
          "RightUpperArm", "RightLowerArm", "RightHand", "LeftUpperLeg", "LeftLowerLeg",
@@ -312,9 +311,7 @@ def main(argv: list[str] | None = None) -> int:
                    "is built, to compare the two in one tree (RTSEG_NO_KERNEL=1)")
     args = p.parse_args(argv)
     if args.no_kernel:
-        os.environ["RTSEG_NO_KERNEL"] = "1"
-        if "rtseg.drivers.axis_kernel" in sys.modules:
-            sys.modules["rtseg.drivers.axis_kernel"].ENABLED = False
+        numpy_axis_path()
     if args.cpu_time:
         global _clock
         _clock = time.process_time
