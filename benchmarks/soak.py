@@ -64,7 +64,6 @@ from __future__ import annotations
 
 import argparse
 import bisect
-import gc
 import json
 import logging
 import math
@@ -77,7 +76,6 @@ import threading
 import time
 from pathlib import Path
 
-import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -85,14 +83,15 @@ sys.path.insert(0, str(REPO))
 from rtseg.live import LiveSession  # noqa: E402
 from rtseg.session_config import from_dict  # noqa: E402
 
+sys.path.insert(0, str(REPO / "benchmarks"))
+from soak_meter import GcPauses, Meter  # noqa: E402
+
 RATE = 120.0
 FRAMES_PER_HOUR = int(RATE * 3600)
 DEFAULT_FAULTS = ("corrupt=0.01,drop=0.001,jitter=0.002,unplug=10:0.3,"
                   "dropout=5:10:1:20,dropout=11:15:1:20,seed=11")
 IN_FLIGHT_S = 0.1            # intact frames written this soon before a pull may die in the pty
 REPLUG_S = 1.0               # overflow this soon after a replug: the reader is reopening
-BINS_PER_E = 1000            # log-spaced histogram bins per factor e (0.1 % wide)
-N_BINS = int(math.log(10e9) * BINS_PER_E) + 1   # durations up to 10 s (longer: last bin)
 
 
 # ============================================================================ suit process
@@ -171,169 +170,6 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int) ->
 
 
 # ============================================================================ measuring
-def _rss_mb(pid: int | str = "self") -> float | None:
-    """Resident set size of process ``pid`` in MB (``/proc/<pid>/status``), None when it
-    cannot be read."""
-    try:
-        with open(f"/proc/{pid}/status") as fh:
-            for line in fh:
-                if line.startswith("VmRSS:"):
-                    return float(line.split()[1]) / 1024.0
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
-
-
-class GcPauses:
-    """Garbage-collector pauses of this process at least ``min_ms`` long: (start
-    ``time.monotonic()``, milliseconds, generation), at most ``cap`` of them, through
-    ``gc.callbacks``.  A collection holds the GIL, so the serial reader thread cannot drain
-    the pty meanwhile."""
-
-    def __init__(self, min_ms: float = 2.0, cap: int = 100_000) -> None:
-        self.min_ms, self.cap = min_ms, cap
-        self.pauses: list[tuple[float, float, int]] = []
-        self.counts = [0, 0, 0]
-        self._t0 = 0.0
-        gc.callbacks.append(self._cb)
-
-    def _cb(self, phase: str, info: dict) -> None:
-        if phase == "start":
-            self._t0 = time.monotonic()
-            return
-        ms = (time.monotonic() - self._t0) * 1e3
-        gen = int(info.get("generation", 0))
-        self.counts[gen] += 1
-        if ms >= self.min_ms and len(self.pauses) < self.cap:
-            self.pauses.append((self._t0, ms, gen))
-
-    def close(self) -> None:
-        if self._cb in gc.callbacks:
-            gc.callbacks.remove(self._cb)
-
-    def near(self, times: list[float], before_s: float = 0.05) -> int:
-        """How many of ``times`` fall within ``before_s`` of the end of a pause, after it or
-        before it (a time before the end may lie inside the pause itself)."""
-        ends = np.array(sorted(t + ms / 1e3 for t, ms, _ in self.pauses))
-        if not ends.size:
-            return 0
-        n = 0
-        for t in times:
-            k = np.searchsorted(ends, t)
-            if k > 0 and t - ends[k - 1] <= before_s or k < ends.size and abs(ends[k] - t) <= before_s:
-                n += 1
-        return n
-
-
-class Meter:
-    """Per-window histograms of ``Pipeline.process`` time and RSS samples, by session
-    time (the unwrapped sequence number of the last frame processed = messages the suit
-    sent, so destroyed frames still advance it); the same number bounds the lost-frame
-    count.  ``wrap(pipeline)`` installs the timer.
-
-    Every array is allocated and touched here, before the session starts, so the meter
-    itself adds nothing to the RSS growth it measures (per-window dicts of histogram bins
-    grew by about 0.5 MB a session hour, as much as a leak would)."""
-
-    def __init__(self, window_frames: int, n_windows: int, n_seen: int,
-                 max_rss_samples: int = 200_000) -> None:
-        self.window_frames = window_frames
-        self.n_windows = n_windows
-        # [window, bin] counts of log-binned durations (ns), wall and thread CPU time;
-        # frames past the last window count in it
-        self.hist = np.ones((n_windows, N_BINS), dtype=np.int64)
-        self.cpu_hist = np.ones((n_windows, N_BINS), dtype=np.int64)
-        self.hist[:] = 0
-        self.cpu_hist[:] = 0
-        self.rss_mb_samples = np.full(max_rss_samples, np.nan)
-        self.rss_window = np.full(max_rss_samples, -1, dtype=np.int64)
-        self.n_rss = 0
-        self.processed = 0
-        self.last_abs = -1            # unwrapped sequence number of the last frame processed
-        self.seen = np.ones(n_seen, dtype=bool)   # received message indices
-        self.seen[:] = False
-        self.suit_cpu_end = np.full(n_windows, np.nan)
-        self.suit_rss_end = np.full(n_windows, np.nan)
-
-    def window(self) -> int:
-        return min(max(self.last_abs, 0) // self.window_frames, self.n_windows - 1)
-
-    def wrap(self, pipeline) -> None:
-        process = pipeline.process
-        perf = time.perf_counter_ns
-        cpu = time.thread_time_ns
-        log = math.log
-        hist, cpu_hist = self.hist, self.cpu_hist
-        top = N_BINS - 1
-
-        def timed(index, quats, valid, seq=None, recv_time=None, lost=0, source_time=None):
-            c0 = cpu()
-            t0 = perf()
-            out = process(index, quats, valid, seq, recv_time, lost, source_time)
-            dt = perf() - t0
-            dc = cpu() - c0
-            if seq is not None:
-                prev = self.last_abs
-                self.last_abs = seq if prev < 0 else prev + ((seq - prev) & 0xFFFF)
-                if self.last_abs < self.seen.size:
-                    self.seen[self.last_abs] = True
-            w = self.window()
-            hist[w, min(int(log(max(dt, 1)) * BINS_PER_E), top)] += 1
-            cpu_hist[w, min(int(log(max(dc, 1)) * BINS_PER_E), top)] += 1
-            self.processed += 1
-            return out
-
-        pipeline.process = timed
-
-    def sample_rss(self) -> None:
-        if self.n_rss >= self.rss_mb_samples.size:
-            return
-        mb = _rss_mb()
-        if mb is None:
-            return
-        self.rss_mb_samples[self.n_rss] = mb
-        self.rss_window[self.n_rss] = self.window()
-        self.n_rss += 1
-
-    def sample_suit(self, pid: int) -> None:
-        """The suit process's cumulative CPU seconds and RSS, kept per window (the last
-        sample in each): a sender that slows through the run loads the shared cores."""
-        try:
-            with open(f"/proc/{pid}/stat") as fh:
-                fields = fh.read().rsplit(")", 1)[1].split()
-            cpu_s = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-        except (OSError, ValueError, IndexError):
-            return
-        rss = _rss_mb(pid)
-        w = self.window()
-        self.suit_cpu_end[w] = cpu_s
-        self.suit_rss_end[w] = math.nan if rss is None else rss
-
-    def suit_by_window(self) -> tuple[list[float | None], list[float | None]]:
-        """(CPU seconds the suit used in each window, its RSS MB at the window's end)."""
-        cpu: list[float | None] = []
-        prev = 0.0
-        for c in self.suit_cpu_end:
-            cpu.append(None if math.isnan(c) else round(c - prev, 2))
-            prev = prev if math.isnan(c) else c
-        return cpu, [None if math.isnan(r) else round(r, 1) for r in self.suit_rss_end]
-
-    def has_window(self, window: int) -> bool:
-        return bool(self.hist[window].any())
-
-    def p99_us(self, window: int, cpu: bool = False) -> float | None:
-        h = (self.cpu_hist if cpu else self.hist)[window]
-        c = np.cumsum(h)
-        if c[-1] == 0:
-            return None
-        b = int(np.searchsorted(c, 0.99 * c[-1]))
-        return float(math.exp((b + 0.5) / BINS_PER_E) / 1000.0)
-
-    def rss_mb(self, window: int) -> float | None:
-        v = self.rss_mb_samples[:self.n_rss][self.rss_window[:self.n_rss] == window]
-        return float(np.median(v)) if v.size else None
-
-
 def soak(hours: float, speed: float, faults: str, log) -> dict:
     n_frames = int(round(hours * FRAMES_PER_HOUR))
     window_frames = max(1, min(FRAMES_PER_HOUR, n_frames // 4))
