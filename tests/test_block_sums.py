@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from rtseg.block_sums import BlockSums
 
@@ -49,3 +50,25 @@ def test_bad_shapes_are_refused():
         BlockSums(0, 10, 30)
     with pytest.raises(ValueError):
         BlockSums(3, 10, 1)
+
+
+@settings(max_examples=60, deadline=None)
+@given(rows=st.integers(1, 300), d=st.integers(1, 5), block=st.integers(1, 12),
+       history=st.integers(2, 20), seed=st.integers(0, 2**31 - 1))
+def test_any_kept_stretch_is_exact(rows, d, block, history, seed):
+    """For every pair of blocks still in the ring, the prefix difference is the stretch's
+    n, sum and scatter; complete() counts whole blocks; block_at finds each kept start."""
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(rows, d))
+    s, done = _feed(X, block=block, history=history, first_index=0)
+    assert s.complete() == rows // block == sum(done)
+    lo = max(0, s.started - history)
+    for a in range(lo, s.started):
+        assert s.block_at(a * block) == (a, False)
+        for b in range(a, s.complete() + 1):
+            n0, p10, p20 = s.prefix(a)
+            n1, p11, p21 = s.prefix(b)
+            W = X[a * block:b * block]
+            assert n1 - n0 == len(W)
+            np.testing.assert_allclose(p11 - p10, W.sum(axis=0), atol=1e-9)
+            np.testing.assert_allclose(p21 - p20, W.T @ W, atol=1e-9)
