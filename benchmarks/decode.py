@@ -106,13 +106,12 @@ TREE = _use_tree(sys.argv) if __name__ == "__main__" else None
 
 from rtseg.drivers.codec_vmc import (HUMAN_BODY_BONES, VmcAssembler,  # noqa: E402
                                       encode_frame as vmc_encode)
+# the default17 suit's bones, in sensor order
+from rtseg.simulators.synth_skeleton import JOINT_NAMES as BONES  # noqa: E402
 
 from codec_feeds import (AxisTextFeed, MvnTcpFeed, axis_binary_feed, axis_values,  # noqa: E402
                          numpy_axis_path, rokoko_feed, rokoko_payloads, vendor_motion)
 
-BONES = ["Hips", "Spine", "Chest", "Neck", "Head", "LeftUpperArm", "LeftLowerArm", "LeftHand",
-         "RightUpperArm", "RightLowerArm", "RightHand", "LeftUpperLeg", "LeftLowerLeg",
-         "LeftFoot", "RightUpperLeg", "RightLowerLeg", "RightFoot"]
 SERIAL_CHUNK = 4096
 #: timer of the timed loops: wall clock, or this process's CPU time with --cpu-time
 _clock = time.perf_counter

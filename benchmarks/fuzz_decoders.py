@@ -69,14 +69,12 @@ from rtseg.drivers import codec_vrchat as cvr  # noqa: E402
 from rtseg.drivers import codec_mocopi as cmo  # noqa: E402
 from rtseg.drivers import codec_mvn as cmv  # noqa: E402
 from rtseg.drivers.base import SourceStats  # noqa: E402
+from rtseg.simulators.synth_skeleton import JOINT_NAMES as BONES  # noqa: E402
 
 sys.path.insert(0, str(REPO / "benchmarks"))
 from codec_feeds import (AxisTextFeed, MvnTcpFeed, axis_binary_feed,  # noqa: E402
                          axis_values, rokoko_feed, rokoko_payloads)
 
-BONES = ["Hips", "Spine", "Chest", "Neck", "Head", "LeftUpperArm", "LeftLowerArm", "LeftHand",
-         "RightUpperArm", "RightLowerArm", "RightHand", "LeftUpperLeg", "LeftLowerLeg",
-         "LeftFoot", "RightUpperLeg", "RightLowerLeg", "RightFoot"]
 FRESH_EVERY = 100_000
 OSC_TAGS = b"ifsbhdtTFNI[]cmr"
 
