@@ -27,7 +27,9 @@ from typing import Sequence
 import numpy as np
 
 from rtseg import quat as Q
-from rtseg.profiles import choose_profile, resolve_joints
+from rtseg.profiles import CANONICAL, choose_profile, resolve_joints
+from rtseg.rig import CANONICAL_PARENT as CANONICAL_PARENT_OF
+from rtseg.rig import FEATURE_JOINTS, Rig, map_rig
 from rtseg.take import Take
 
 # Left-multiplication matrix of a quaternion a (scalar-last): (a ⊗ b) = L(a) @ b, with
@@ -99,17 +101,43 @@ class PoseFeatures:
         self.joint_names = joint_names
         self.parents = parents
         self.space = space
-        self.profile = profile if profile is not None else choose_profile(joint_names)
-        self.indices = np.array(resolve_joints(self.profile, joint_names), dtype=np.intp)
-        self.joints = [joint_names[i] for i in self.indices]
-        self.dim = 4 * len(self.indices)
+        #: the canonical mapping (``rtseg.rig``) when the profile is ``canonical``
+        self.rig: Rig | None = None
+        if profile is None:
+            profile = choose_profile(joint_names, parents)
+        if profile == CANONICAL:
+            self.rig = map_rig(joint_names, parents)
+        self.profile = profile
         n = len(joint_names)
+        if self.rig is not None:
+            self.indices = np.array(self.rig.feature_indices, dtype=np.intp)
+            paths = self.rig.paths
+            # parent of each feature joint: its canonical parent
+            parent_of = [self.rig.index[p] for p in
+                         (CANONICAL_PARENT_OF[j] for j in FEATURE_JOINTS)]
+        else:
+            self.indices = np.array(resolve_joints(self.profile, joint_names), dtype=np.intp)
+            paths = tuple((int(i),) for i in self.indices)
+            parent_of = [parents[i] for i in self.indices]
+        self.joints = [joint_names[i] for i in self.indices]
+        #: the canonical joint each feature block describes (``rtseg.rig.FEATURE_JOINTS``), or
+        #: the rig's own names for a named profile
+        self.feature_joints = list(FEATURE_JOINTS) if self.rig is not None else list(self.joints)
+        self.dim = 4 * len(self.indices)
         # Parent of each selected joint, roots pointing at an identity row appended at n.
-        self._parent_idx = np.array([parents[i] if parents[i] >= 0 else n for i in self.indices],
-                                    dtype=np.intp)
+        self._parent_idx = np.array([p if p >= 0 else n for p in parent_of], dtype=np.intp)
+        # local inputs: the rotations composed from just below the parent down to the joint,
+        # padded at the front with the identity row n (``rtseg.rig.Rig.paths``)
+        m = max(len(pth) for pth in paths)
+        self._paths = np.array([(n,) * (m - len(pth)) + tuple(pth) for pth in paths],
+                               dtype=np.intp)
+        self._composed = m > 1
+        # flat indices building L(q) of path column t (m-2 down to 0), see left_matrices
+        self._path_gathers = [(self._paths[:, t][:, None, None] * 4 + _GATHER).astype(np.intp)
+                              for t in range(m - 2, -1, -1)]
         self._ext = np.zeros((n + 1, 4))
         self._ext[n, 3] = 1.0
-        self._needs_ext = bool(np.any(self._parent_idx == n))
+        self._needs_ext = bool(np.any(self._parent_idx == n)) or self._composed
         self._frame_shape = (n, 4)
         # Flat indices into the (J[+1], 4) frame building L(conj(parent)) of each selected joint.
         self._parent_gather = (self._parent_idx[:, None, None] * 4 + _GATHER).astype(np.intp)
@@ -174,7 +202,15 @@ class PoseFeatures:
     def _local_one(self, q: np.ndarray) -> np.ndarray:
         """(K, 4) parent-relative rotations of the selected joints of one frame (no calibration)."""
         if self.space == "local":
-            return q[self.indices]
+            if not self._composed:
+                return q[self.indices]
+            src = self._ext
+            src[:-1] = q
+            flat = src.reshape(-1)
+            out = src[self._paths[:, -1]]
+            for g in self._path_gathers:           # left-multiply by the joints above
+                out = ((flat[g] * _SIGN) @ out[:, :, None])[:, :, 0]
+            return out
         if self._needs_ext:
             src = self._ext
             src[:-1] = q
@@ -215,9 +251,15 @@ class PoseFeatures:
             raise ValueError(f"quats must be (frames, {len(self.joint_names)}, 4), got {q.shape}")
         child = q[:, self.indices]
         if self.space == "global":
-            par = np.array(self.parents)[self.indices]
-            parent = np.where((par >= 0)[:, None], q[:, np.maximum(par, 0)], Q.IDENTITY)
+            par = self._parent_idx
+            n = len(self.joint_names)
+            parent = np.where((par < n)[:, None], q[:, np.minimum(par, n - 1)], Q.IDENTITY)
             child = Q.multiply(Q.conjugate(parent), child)
+        elif self._composed:
+            ext = np.concatenate([q, np.broadcast_to(Q.IDENTITY, (q.shape[0], 1, 4))], axis=1)
+            child = ext[:, self._paths[:, 0]]
+            for t in range(1, self._paths.shape[1]):
+                child = Q.multiply(child, ext[:, self._paths[:, t]])
         if self._post is not None:
             child = np.einsum("kot,fkt->fko", self._post, child)
         return child
@@ -231,6 +273,34 @@ class PoseFeatures:
         first[first[:, 3] < 0] *= -1.0
         local = Q.make_continuous(local, axis=0)
         return local.reshape(local.shape[0], self.dim)
+
+    @property
+    def input_joints(self) -> np.ndarray:
+        """Sorted indices of the input joints the features read: the feature joints and, for
+        global orientations, their (canonical) parents; for local rotations every joint
+        composed into a feature joint (``rtseg.rig.Rig.paths``)."""
+        n = len(self.joint_names)
+        need = {int(i) for i in self.indices}
+        if self.space == "global":
+            need |= {int(p) for p in self._parent_idx if p < n}
+        else:
+            need |= {int(i) for i in self._paths.reshape(-1) if i < n}
+        return np.array(sorted(need), dtype=np.intp)
+
+    def report(self) -> dict:
+        """What the features are made of, JSON-ready: ``profile``, ``rig`` (the family
+        mapped, ``rtseg.rig``; None for a named profile), ``joints`` (feature joint -> the
+        rig's joint) and ``composed`` (rig joints folded into a canonical joint's rotation)."""
+        if self.rig is not None:
+            return {"profile": self.profile, **self.rig.report()}
+        return {"profile": self.profile, "rig": None,
+                "joints": {j: j for j in self.joints}, "composed": {}}
+
+    def summary(self) -> str:
+        """One line for a session log: the profile and the joints used."""
+        if self.rig is not None:
+            return f"features: {self.dim} values, canonical joints of {self.rig.summary()}"
+        return f"features: {self.dim} values, profile {self.profile}: {', '.join(self.joints)}"
 
     def __repr__(self) -> str:
         return (f"PoseFeatures(profile={self.profile!r}, joints={len(self.joints)}, "

@@ -157,8 +157,11 @@ class LiveSession(SessionEvents, SessionHealth):
     def __init__(self, source: Any, config: SessionConfig | None = None, *,
                  publishers: Any = None, recorder: Any = None,
                  listeners: Iterable[Callable[[Event], None]] = (),
-                 duration: float | None = None, handle_signals: bool = True) -> None:
+                 duration: float | None = None, handle_signals: bool = True,
+                 on_start: Callable[[str], None] | None = None) -> None:
         self.config = config if config is not None else load_session_config()
+        #: called once the source is open, with the line naming the joints the features use
+        self.on_start = on_start
         detector_params(self.config)          # refuse bad detector settings before opening
         wire_methods(self.config)
         self._source_arg = source
@@ -226,6 +229,11 @@ class LiveSession(SessionEvents, SessionHealth):
             log.warning("source has no nominal frame rate; assuming %.0f Hz", DEFAULT_FRAME_RATE)
         self.frame_rate = float(rate or DEFAULT_FRAME_RATE)
         self.pipeline = Pipeline(names, parents, space, self.frame_rate, self.config)
+        if hasattr(self.pipeline.features, "summary"):
+            line = self.pipeline.features.summary()
+            log.info("%s", line)
+            if self.on_start is not None:
+                self.on_start(line)
         self.primary, self.wire = wire_methods(self.config, self.pipeline.detectors)
         J = len(names)
         self.ring = RingBuffer(int(self.config["buffer.capacity"]), J * 4, valid_width=J)

@@ -128,7 +128,8 @@ class Pipeline:
         if mode == "auto":
             mode = "average" if space == "local" else "none"
         self.calibration_mode = mode
-        self.calibration_needed = 1 if mode == "first" else int(config["calibration.frames"])
+        self.calibration_needed = (1 if mode == "first" else int(config["calibration.frames"])
+                                   or max(1, int(round(config["calibration.seconds"] * self.frame_rate))))
         self._calib: list[np.ndarray] = []
         self.calibrated = mode == "none"
         self.stats = PipelineStats()
@@ -150,6 +151,9 @@ class Pipeline:
     def _feature_joints(self) -> np.ndarray:
         """Input joints the pose features depend on: the profile's joints and, for global
         orientations (made parent-relative), their parents.  All joints if unknown."""
+        used = getattr(self.features, "input_joints", None)
+        if used is not None:
+            return np.asarray(used, dtype=np.intp)
         idx = getattr(self.features, "indices", None)
         if idx is None:
             return np.arange(self.n_joints)

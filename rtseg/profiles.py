@@ -4,9 +4,11 @@ Skeleton profiles live in ``config/skeletons.toml``; suit profiles (sensor id ->
 hierarchy, rate) in ``config/suits.toml``.  Joint names match case-insensitively; a
 profile joint may have aliases tried in order when its own name is absent.
 
-Profiles: ``cmu14`` (the paper's 14 CMU joints), ``unity`` (their 12 HumanBodyBones
-equivalents on the 17-sensor suit), ``tsseg4d`` (the four CSV channels), and the
-pseudo-profile ``all`` (every joint of the take, in take order).
+The default is the pseudo-profile ``canonical``: any humanoid rig mapped to rtseg's
+canonical joints (``rtseg.rig``), the same 12 segments on every rig.  Named profiles select
+a rig's own joints: ``cmu14`` (the paper's 14 CMU joints), ``unity`` (their 12
+HumanBodyBones equivalents on the 17-sensor suit), ``tsseg4d`` (the four CSV channels), and
+the pseudo-profile ``all`` (every joint of the take, in take order).
 """
 
 from __future__ import annotations
@@ -18,8 +20,10 @@ from pathlib import Path
 from rtseg.config import ConfigError, config_dir, load_toml
 
 ALL = "all"
-#: Tried in this order by ``choose_profile``.
-AUTO_ORDER = ("cmu14", "unity", "tsseg4d")
+#: any humanoid rig mapped to the canonical joints (``rtseg.rig``): the default
+CANONICAL = "canonical"
+#: Named profiles tried when the rig cannot be mapped (channel sets that are no skeleton).
+AUTO_ORDER = ("tsseg4d", "vrchat")
 
 
 @dataclass(frozen=True)
@@ -78,8 +82,9 @@ def _load_profiles(path: str) -> dict[str, SkeletonProfile]:
                 raise ConfigError(f"{path}: profiles.{name}.aliases.{joint} must be a list of names")
             aliases[lowered[joint.lower()]] = tuple(alts)
         out[name] = SkeletonProfile(name, tuple(joints), aliases, str(spec.get("description", "")))
-    if ALL in out:
-        raise ConfigError(f"{path}: profile name {ALL!r} is reserved")
+    for reserved in (ALL, CANONICAL):
+        if reserved in out:
+            raise ConfigError(f"{path}: profile name {reserved!r} is reserved")
     return out
 
 
@@ -90,10 +95,14 @@ def profiles(path: str | Path | None = None) -> dict[str, SkeletonProfile]:
 
 def get_profile(name: str, path: str | Path | None = None) -> SkeletonProfile:
     known = _load_profiles(str(_skeleton_file(path)))
+    if name == CANONICAL:
+        raise KeyError(f"profile {CANONICAL!r} maps a whole rig (rtseg.rig.map_rig); it has no "
+                       f"joint list of its own")
     try:
         return known[name]
     except KeyError:
-        raise KeyError(f"unknown skeleton profile {name!r}; known: {', '.join(sorted(known))}, {ALL}") from None
+        raise KeyError(f"unknown skeleton profile {name!r}; known: {CANONICAL}, "
+                       f"{', '.join(sorted(known))}, {ALL}") from None
 
 
 def skeleton_profile(name: str, path: str | Path | None = None) -> list[str]:
@@ -134,17 +143,27 @@ def resolve_joints(profile: str, joint_names: list[str], path: str | Path | None
     return out
 
 
-def choose_profile(joint_names: list[str], path: str | Path | None = None) -> str:
-    """First of cmu14, unity, tsseg4d whose joints are all present, else ``"all"``."""
-    known = _load_profiles(str(_skeleton_file(path)))
-    for name in AUTO_ORDER:
-        if name in known:
-            try:
-                resolve_joints(name, joint_names, path)
-                return name
-            except KeyError:
-                continue
-    return ALL
+def choose_profile(joint_names: list[str], parents: list[int] | None = None,
+                   path: str | Path | None = None) -> str:
+    """``"canonical"`` when the skeleton maps to the canonical joints (``rtseg.rig``), else
+    ``"tsseg4d"`` when those four channels are all present; else ``rtseg.rig.RigError``
+    (one line naming what could not be mapped; never a silent fall-back to every joint).
+    Without ``parents`` the joints are taken as roots (no hierarchy: no canonical map)."""
+    from rtseg.rig import RigError, map_rig
+    parents = list(parents) if parents is not None else [-1] * len(joint_names)
+    try:
+        map_rig(joint_names, parents)
+        return CANONICAL
+    except RigError as err:
+        known = _load_profiles(str(_skeleton_file(path)))
+        for name in AUTO_ORDER:
+            if name in known:
+                try:
+                    resolve_joints(name, joint_names, path)
+                    return name
+                except KeyError:
+                    continue
+        raise err
 
 
 def suit_profile(name: str = "default17", path: str | Path | None = None) -> SuitProfile:

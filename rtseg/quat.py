@@ -94,3 +94,17 @@ def from_euler(axes: str, angles: np.ndarray, degrees: bool = True) -> np.ndarra
         return np.broadcast_to(IDENTITY, shape + (4,)).copy()
     rot = Rotation.from_euler(axes.upper(), angles.reshape(-1, len(axes)), degrees=degrees)
     return rot.as_quat().reshape(shape + (4,))
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Per-element quaternion slerp, shortest path; q0, q1 (..., 4), w broadcast to (...)."""
+    dot = np.sum(q0 * q1, axis=-1)
+    q1 = np.where((dot < 0)[..., None], -q1, q1)
+    dot = np.clip(np.abs(dot), 0.0, 1.0)
+    theta = np.arccos(dot)
+    s = np.sin(theta)
+    small = s < 1e-8
+    safe = np.where(small, 1.0, s)
+    a = np.where(small, 1.0 - w, np.sin((1.0 - w) * theta) / safe)
+    b = np.where(small, w, np.sin(w * theta) / safe)
+    return normalize(a[..., None] * q0 + b[..., None] * q1)

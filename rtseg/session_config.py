@@ -112,13 +112,13 @@ def _range(lo: float, hi: float, strict_lo: bool = False) -> Callable[[Any], str
 
 
 def _profile(v: Any) -> str | None:
-    """A skeleton profile of ``config/skeletons.toml`` (or '' / 'all')."""
-    if v in ("", "all"):
+    """A skeleton profile of ``config/skeletons.toml`` (or '' / 'canonical' / 'all')."""
+    if v in ("", "all", "canonical"):
         return None
     from rtseg.profiles import profiles
     known = sorted(profiles())
     return None if v in known else \
-        f"unknown skeleton profile {v!r}; known: {', '.join(known)}, all"
+        f"unknown skeleton profile {v!r}; known: canonical, {', '.join(known)}, all"
 
 
 def _one_of(options: tuple[str, ...]) -> Callable[[Any], str | None]:
@@ -154,7 +154,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
     "calibration": {
         "mode": Key("str", "auto", _one_of(CALIBRATION_MODES),
                     doc="auto: calibrate rig-relative input (space local, e.g. VMC) only"),
-        "frames": Key("int", 30, _range(1, 100_000), doc="frames averaged for mode average (and auto)"),
+        "seconds": Key("float", 0.25, _range(0.0, 3600.0, strict_lo=True),
+                       doc="how long a calibration averages (mode average and auto), seconds"),
+        "frames": Key("int", 0, _range(0, 100_000),
+                      doc="frames averaged instead of seconds when > 0"),
     },
     "detectors": {
         "methods": Key("list[str]", ["contrast"], _methods),

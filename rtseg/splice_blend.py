@@ -13,6 +13,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from rtseg import quat as Q
+from rtseg.quat import slerp  # noqa: F401  (re-exported)
 
 UP_AXIS = 1                       #: Y is up in CMU BVH and ASF/AMC
 
@@ -77,20 +78,6 @@ class Clip:
 
 def smoothstep(x: np.ndarray) -> np.ndarray:
     return x * x * (3.0 - 2.0 * x)
-
-
-def slerp(q0: np.ndarray, q1: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Per-element quaternion slerp, shortest path; q0, q1 (..., 4), w broadcast to (...)."""
-    dot = np.sum(q0 * q1, axis=-1)
-    q1 = np.where((dot < 0)[..., None], -q1, q1)
-    dot = np.clip(np.abs(dot), 0.0, 1.0)
-    theta = np.arccos(dot)
-    s = np.sin(theta)
-    small = s < 1e-8
-    safe = np.where(small, 1.0, s)
-    a = np.where(small, 1.0 - w, np.sin((1.0 - w) * theta) / safe)
-    b = np.where(small, w, np.sin(w * theta) / safe)
-    return Q.normalize(a[..., None] * q0 + b[..., None] * q1)
 
 
 def fade_weights(n: int) -> np.ndarray:

@@ -12,6 +12,7 @@ from rtseg import quat as Q
 from rtseg.config import ConfigError
 from rtseg.drivers.readers import read_take
 from rtseg.features import PoseFeatures, constant_dims, left_matrices, take_features
+from rtseg.rig import RigError
 from rtseg.profiles import choose_profile, resolve_joints, skeleton_profile, suit_profile
 from rtseg.take import Take
 
@@ -44,10 +45,12 @@ def test_skeleton_profiles_and_choice(suit):
     assert skeleton_profile("cmu14") == CMU14
     assert len(skeleton_profile("unity")) == 12
     assert skeleton_profile("tsseg4d") == ["lhumerus", "rhumerus", "lfemur", "rfemur"]
-    assert choose_profile(["root"] + [n.upper() for n in CMU14]) == "cmu14"
-    assert choose_profile(list(suit.bones)) == "unity"
+    # a skeleton with its hierarchy maps to the canonical joints; bare channels do not
+    assert choose_profile(list(suit.bones), list(suit.parents)) == "canonical"
+    assert choose_profile(["root"] + [n.upper() for n in CMU14]) != "canonical"   # no hierarchy
     assert choose_profile(["lhumerus", "rhumerus", "lfemur", "rfemur"]) == "tsseg4d"
-    assert choose_profile(["a", "b"]) == "all"
+    with pytest.raises(RigError, match="cannot map the skeleton"):
+        choose_profile(["a", "b"], [-1, 0])
     with pytest.raises(KeyError, match="unknown skeleton profile 'nope'"):
         skeleton_profile("nope")
     with pytest.raises(KeyError, match="no fixed joint list"):
@@ -58,7 +61,6 @@ def test_unity_aliases_and_case(suit):
     names = [("UpperChest" if b == "Chest" else b).lower() for b in suit.bones]
     idx = resolve_joints("unity", names)
     assert names[idx[1]] == "upperchest"
-    assert choose_profile(names) == "unity"
     # Canonical name wins over the alias when both exist.
     both = list(suit.bones) + ["UpperChest"]
     assert both[resolve_joints("unity", both)[1]] == "Chest"
@@ -106,10 +108,10 @@ def test_full_hierarchy_used_before_selection(suit):
     """Spine's parent Hips is not in the unity profile, yet Spine is relative to Hips."""
     local = _smooth_local(30, 17, 3)
     g = Q.global_from_local(local, list(suit.parents))
-    pf = PoseFeatures(suit.bones, suit.parents, "global")
+    pf = PoseFeatures(suit.bones, suit.parents, "global", "unity")
     assert pf.profile == "unity" and "Hips" not in pf.joints
     X = pf.transform(g)
-    ref = PoseFeatures(suit.bones, suit.parents, "local").transform(local)
+    ref = PoseFeatures(suit.bones, suit.parents, "local", "unity").transform(local)
     np.testing.assert_allclose(X, ref, atol=1e-12)
     spine = pf.joints.index("Spine")
     np.testing.assert_allclose(np.abs(X[:, 4 * spine:4 * spine + 4]), np.abs(local[:, 1]), atol=1e-12)
@@ -188,7 +190,7 @@ def test_bad_inputs():
         PoseFeatures(["a"], [-1], "world")
     with pytest.raises(ValueError, match="invalid parent index 3"):
         PoseFeatures(["a", "b"], [-1, 3], "local")
-    pf = PoseFeatures(["a", "b"], [-1, 0], "local")
+    pf = PoseFeatures(["a", "b"], [-1, 0], "local", "all")
     with pytest.raises(ValueError, match=r"frame must be \(2, 4\)"):
         pf.step(np.zeros((3, 4)))
     with pytest.raises(ValueError, match=r"quats must be \(frames, 2, 4\)"):
@@ -224,9 +226,9 @@ def test_axis_frames_make_one_dof_components_exactly_zero():
 @pytest.mark.realdata
 def test_real_86_01_features(data_dir):
     take = read_take(data_dir / "cmu" / "86_01.amc")
-    X = take_features(take)
+    X = take_features(take, "cmu14")
     assert X.shape == (4579, 56) and X.dtype == np.float64
-    pf = PoseFeatures.for_take(take)
+    pf = PoseFeatures.for_take(take, "cmu14")
     assert pf.profile == "cmu14" and pf.joints == CMU14
     # Features are the AMC dof rotations M = Rz·Ry·Rx (frame 1 lfemur: -29.1974 1.82053 -23.3363).
     j = CMU14.index("lfemur")
@@ -240,11 +242,12 @@ def test_real_86_01_features(data_dir):
     assert np.linalg.matrix_rank(np.cov(X[:, ~constant_dims(X)].T)) == 48
     # Global orientations (what an IMU suit reports) give the same features.
     g = Q.global_from_local(take.quats, take.parents)
-    pg = PoseFeatures(take.joint_names, take.parents, "global", axis_quats=take.meta["axis_quats"])
+    pg = PoseFeatures(take.joint_names, take.parents, "global", "cmu14",
+                      axis_quats=take.meta["axis_quats"])
     np.testing.assert_allclose(pg.transform(g), X, atol=1e-12)
     np.testing.assert_allclose(np.array([pg.step(f) for f in g[:300]]), X[:300], atol=1e-12)
     # Without axis frames: a fixed orthogonal map per joint, so pairwise distances agree.
-    Xc = PoseFeatures(take.joint_names, take.parents, "local").transform(take.quats)
+    Xc = PoseFeatures(take.joint_names, take.parents, "local", "cmu14").transform(take.quats)
     d = np.linalg.norm(X[::200, None] - X[None, ::200], axis=-1)
     dc = np.linalg.norm(Xc[::200, None] - Xc[None, ::200], axis=-1)
     np.testing.assert_allclose(d, dc, atol=1e-9)

@@ -83,7 +83,7 @@ def test_round_trip_through_the_file(tmp_path, library):
 
 def test_refusals_are_one_clear_line(tmp_path, library):
     path = library.save(tmp_path / "lib.json")
-    with pytest.raises(LibraryError, match="learned for feature profile 'unity'.*'cmu14'"):
+    with pytest.raises(LibraryError, match="learned for feature profile 'canonical'.*'cmu14'"):
         load(path, "cmu14", 56)
     doc = json.loads(path.read_text())
     doc["version"] = 99
@@ -408,15 +408,15 @@ def test_learn_from_a_folder_and_refuse_another_skeleton(tmp_path):
     assert got.profile == "cmu14" and got.dims == 56
     assert got.behaviour_names == ["golf_swing", "jump", "kick"]
     assert {e["person"] for e in got.examples} == {"10", "16", "64"}
-    assert "feature profile 'unity', not 'cmu14'; left out" in p.stderr   # the BVH takes
-    # a BVH stream (unity profile) is refused at start with one line, exit 2
+    assert "feature profile 'canonical', not 'cmu14'; left out" in p.stderr   # the BVH takes
+    # a BVH stream (canonical features) is refused at start with one line, exit 2
     bvh = DATA / "cmu_single" / "bvh" / "02_01.bvh"
     p = subprocess.run([sys.executable, "-m", "rtseg.cli", "live", f"file://{bvh}",
                         "--behaviours", str(lib), "--duration", "5", "--no-osc", "--quiet"],
                        capture_output=True, text=True, timeout=60)
     assert p.returncode == 2
     assert len(p.stderr.strip().splitlines()) == 1
-    assert "learned for feature profile 'cmu14' (56 dims)" in p.stderr and "'unity'" in p.stderr
+    assert "learned for feature profile 'cmu14' (56 dims)" in p.stderr and "'canonical'" in p.stderr
 
 
 @pytest.mark.skipif(not (DATA / "labels" / "mocap6" / "13_29.txt").is_file(),

@@ -233,7 +233,9 @@ def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: 
     instead of seconds since the session started."""
     from rtseg.live import LiveSession
     console = Console(print_cuts=cfg["output.jsonl"] != "-", status=not quiet)
-    session = LiveSession(source, cfg, listeners=[console], duration=duration)
+    session = LiveSession(source, cfg, listeners=[console], duration=duration,
+                          on_start=lambda line: print(f"rtseg live: {line}", file=sys.stderr,
+                                                      flush=True))
     console.session_stats = lambda: session.stats
     if performance_time:
         console.cut_time = lambda ev: ev.frame / session.frame_rate

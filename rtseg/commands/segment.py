@@ -136,8 +136,12 @@ def run(args: argparse.Namespace) -> int:
             from rtseg.segment_identity import name_take
             names = name_take(take, results, load_library(lib_path), live_config()[0],
                               threshold=args.identity_threshold)
-        out = {"table": format_table, "json": format_json,
-               "csv": format_csv}[args.format or "table"]
+        if args.format == "json":
+            from rtseg.features import PoseFeatures
+            used = PoseFeatures.for_take(take, args.profile).report()
+            sys.stdout.write(format_json(path, results, names, features=used))
+            return 0
+        out = {"table": format_table, "csv": format_csv}[args.format or "table"]
         sys.stdout.write(out(path, results, names))
         return 0
     return run_many(args, methods, params)
@@ -206,11 +210,15 @@ def format_table(name: str, results: dict[str, SegmentationResult],
 
 
 def format_json(name: str, results: dict[str, SegmentationResult],
-                names: dict[str, list[str]] | None = None) -> str:
-    """One document; ``names`` (``--behaviours``): a ``name`` field in each segment."""
+                names: dict[str, list[str]] | None = None,
+                features: dict | None = None) -> str:
+    """One document; ``names`` (``--behaviours``): a ``name`` field in each segment;
+    ``features``: the joints used (``PoseFeatures.report``)."""
     first = next(iter(results.values()))
     doc = {"take": name, "n_frames": first.n_frames, "frame_rate": first.frame_rate,
            "methods": {}}
+    if features is not None:
+        doc["features"] = features
     for m, r in results.items():
         d = r.as_dict()
         nm = (names or {}).get(m)

@@ -1,0 +1,248 @@
+#!/usr/bin/env python3
+"""Leave-one-person-out accuracy of the live (contrast) detector over every person of a
+data folder, and the parameter choice made that way.
+
+    python3 benchmarks/lopo.py ../shared/data                 # shipped defaults + LOPO grid
+    python3 benchmarks/lopo.py ../shared/data --grid none     # shipped defaults only
+    python3 benchmarks/lopo.py DIR --per-person 3 --seeds 0 1 --json
+
+DIR is laid out like ``../shared/data``: ``cmu/`` (full labelled performances, one person
+per subject number) and any number of single-behaviour source folders laid out like
+``cmu_single/`` (``index.tsv`` with take, subject, format, behaviour; ``bvh/``, ``amc/``),
+e.g. ``cmu_single``, ``hdm05``, ``bandai``.  A folder laid out like one source alone works
+too.  From each source ``rtseg.splice`` builds same-person performances (``--per-person``
+per person and seed, cached under ``--cache``), so every person of every source is a
+unit; the cmu takes of one subject are one person.
+
+Every performance goes once through the live pipeline (``rtseg.online_eval.fed_features``:
+the features ``rtseg live`` feeds its detectors); every parameter set of the grid then runs
+the real ``ContrastDetector`` on those rows.  A set is scored on a group of people by the
+mean over its performances of each performance's F1 at +-0.5 s; sets whose median
+detection delay over the training people exceeds ``--max-median`` seconds do not count.
+Leave-one-person-out: for each person, the best set on the other people is scored on
+that person's performances; the held-out cuts are pooled per source and over all.  The
+shipped defaults (``config/detectors.toml``) are scored beside it.  The same numbers at
+the strict tolerance (cut inside the labelled range) and delay median / p90 are given.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from rtseg.detectors import load_params
+from rtseg.detectors.contrast import ContrastDetector
+from rtseg.evaluation import pooled_tally, tally
+from rtseg.labels import find_labelled_takes
+from rtseg.online_eval import fed_features, live_config, to_take_frames
+from rtseg.splice import SpliceConfig, generate
+
+TOL_S = 0.5
+#: the candidates (every combination); the shipped defaults fill the other keys
+GRIDS = {
+    "none": {},
+    "small": {
+        "threshold": [1.75, 2.0, 2.25, 2.5],
+        "gate_threshold": [0.0, 3.5, 4.5],
+        "reference_dims": [40, 48],
+    },
+}
+
+
+@dataclass
+class Case:
+    """One performance: the rows fed to the detector, their take frames, its truth."""
+    name: str
+    person: str         # the held-out unit: a person, or a mixed performance's name
+    persons: frozenset  # everyone in it (training sets share nobody with the unit)
+    source: str
+    frame_rate: float
+    X: np.ndarray
+    index: np.ndarray
+    transitions: list
+
+
+def _sources(data: Path) -> list[Path]:
+    """Single-behaviour source folders of ``data`` (or ``data`` itself when it is one)."""
+    if (data / "index.tsv").is_file():
+        return [data]
+    return sorted(p for p in data.iterdir() if p.is_dir() and (p / "index.tsv").is_file())
+
+
+def _subjects(src: Path) -> list[str]:
+    rows = (src / "index.tsv").read_text(encoding="utf-8").splitlines()
+    head = rows[0].split("\t")
+    col = head.index("subject")
+    return sorted({r.split("\t")[col] for r in rows[1:] if r.strip()})
+
+
+def load_cases(data: Path, cache: Path, per_person: int, seeds: list[int]) -> list[Case]:
+    cfg, _ = live_config(methods=["contrast"])
+    cases: list[Case] = []
+
+    def add(take, name, unit, persons, source, transitions):
+        X, idx, _ = fed_features(take, cfg)
+        cases.append(Case(name, unit, frozenset(persons), source, float(take.frame_rate), X,
+                          idx, list(transitions)))
+
+    if (data / "cmu").is_dir():
+        for t in find_labelled_takes(data, ("cmu",)):
+            who = f"cmu:{t.name.split('_')[0]}"
+            add(t.load(), f"cmu/{t.name}", who, [who], "cmu", t.transitions)
+    for src in _sources(data):
+        n = per_person * max(1, len(_subjects(src)))
+        for seed in seeds:
+            out = cache / f"{src.name}-seed{seed}-n{n}"
+            if not (out / "index.tsv").is_file():
+                made = False
+                for kinds in (("same", "mixed"), ("same",)):
+                    try:   # a source with one person makes same-person performances only
+                        generate(src, out, seed=seed, n=n, kinds=kinds, cfg=SpliceConfig(),
+                                 force=True)
+                        made = True
+                        break
+                    except ValueError:
+                        continue
+                if not made:
+                    print(f"lopo: {src}: no performance can be spliced (each person needs two "
+                          f"behaviours in one format)", file=sys.stderr)
+                    continue
+            same = {p for t in find_labelled_takes(out, ("spliced",)) if t.name.startswith("same")
+                    for p in t.load().meta.get("splice", {}).get("subjects", [])}
+            for t in find_labelled_takes(out, ("spliced",)):
+                take = t.load()
+                who = [f"{src.name}:{p}" for p in take.meta.get("splice", {}).get("subjects", ["?"])]
+                if t.name.startswith("same"):
+                    unit = who[0]
+                elif any(p.split(":", 1)[1] not in same for p in who):
+                    unit = f"{src.name}/seed{seed}/{t.name}"   # holds someone with one behaviour
+                else:
+                    continue      # everyone in it is held out through their own performances
+                add(take, f"{src.name}/seed{seed}/{t.name}", unit, who, src.name, t.transitions)
+    return cases
+
+
+def run(case: Case, params: dict) -> tuple:
+    det = ContrastDetector.from_params(params, case.frame_rate)
+    cuts = []
+    for i, x in enumerate(case.X):
+        c = det.update(x)
+        if c is not None:
+            cuts.append((c.frame, i))
+    return tally(to_take_frames(cuts, case.index), case.transitions, case.frame_rate, TOL_S)
+
+
+def candidate_sets(grid: str, base: dict) -> list[dict]:
+    spec = GRIDS[grid]
+    if not spec:
+        return []
+    keys = list(spec)
+    return [{**base, **dict(zip(keys, v))} for v in itertools.product(*spec.values())]
+
+
+def mean_f1(rows: list) -> float:
+    return float(np.mean([pooled_tally([r])["f1"] for r in rows])) if rows else 0.0
+
+
+def summary(rows: list) -> dict:
+    t = pooled_tally(rows)
+    return {"f1": round(t["f1"], 4), "strict_f1": round(t["strict_f1"], 4), "cuts": t["cuts"],
+            "transitions": t["transitions"],
+            "delay_median_s": None if t["delay_median"] is None else round(t["delay_median"], 3),
+            "delay_p90_s": None if t["delay_p90"] is None else round(t["delay_p90"], 3)}
+
+
+def report(cases: list[Case], rows: dict[str, tuple]) -> dict:
+    by_source: dict[str, list] = {}
+    for c in cases:
+        by_source.setdefault(c.source, []).append(rows[c.name])
+    return {"pooled": summary(list(rows.values())),
+            "sources": {s: summary(r) for s, r in sorted(by_source.items())}}
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("data", type=Path, help="folder laid out like ../shared/data (or one source)")
+    p.add_argument("--per-person", type=int, default=2, help="performances per person and seed")
+    p.add_argument("--seeds", type=int, nargs="+", default=[0], help="splice seeds")
+    p.add_argument("--grid", choices=list(GRIDS), default="small")
+    p.add_argument("--max-median", type=float, default=2.5, help="delay budget (s) of a set")
+    p.add_argument("--cache", type=Path, default=Path("/tmp/rtseg-lopo"),
+                   help="where spliced performances are kept")
+    p.add_argument("--json", action="store_true")
+    args = p.parse_args(argv)
+    if not args.data.is_dir():
+        print(f"lopo: {args.data} is not a folder", file=sys.stderr)
+        return 2
+    t0 = time.perf_counter()
+    try:
+        cases = load_cases(args.data, args.cache, args.per_person, args.seeds)
+    except (OSError, ValueError) as exc:
+        print(f"lopo: {exc}", file=sys.stderr)
+        return 2
+    if not cases:
+        print(f"lopo: no labelled takes or single-behaviour sources in {args.data}", file=sys.stderr)
+        return 2
+    people = sorted({p for c in cases for p in c.persons})
+    units = sorted({c.person for c in cases})
+    print(f"lopo: {len(cases)} performances of {len(people)} people in {len(units)} held-out units "
+          f"({time.perf_counter() - t0:.0f} s to read)", file=sys.stderr)
+    base = load_params()["contrast"]
+    shipped = {c.name: run(c, base) for c in cases}
+    out: dict = {"people": people, "performances": len(cases), "shipped": report(cases, shipped)}
+    sets = candidate_sets(args.grid, base)
+    if sets:
+        results = []
+        for k, s in enumerate(sets):
+            results.append({c.name: run(c, s) for c in cases})
+            print(f"lopo: set {k + 1}/{len(sets)} ({time.perf_counter() - t0:.0f} s)",
+                  file=sys.stderr)
+        held: dict[str, tuple] = {}
+        choices = {}
+        for person in units:
+            who = set().union(*(c.persons for c in cases if c.person == person))
+            train = [c for c in cases if not (c.persons & who)]
+            best, best_key = 0, None
+            for k, res in enumerate(results):
+                tr = [res[c.name] for c in train]
+                med = pooled_tally(tr)["delay_median"] or 0.0
+                key = (med <= args.max_median, mean_f1(tr))
+                if best_key is None or key > best_key:
+                    best, best_key = k, key
+            choices[person] = {key: sets[best][key] for key in GRIDS[args.grid]}
+            for c in cases:
+                if c.person == person:
+                    held[c.name] = results[best][c.name]
+        everyone = max(range(len(sets)), key=lambda k: mean_f1(list(results[k].values())))
+        out["held_out"] = report(cases, held)
+        out["choices"] = choices
+        out["chosen_on_everyone"] = {key: sets[everyone][key] for key in GRIDS[args.grid]}
+        out["chosen_on_everyone_fit"] = report(cases, results[everyone])
+    out["seconds"] = round(time.perf_counter() - t0, 1)
+    if args.json:
+        print(json.dumps(out, indent=2))
+        return 0
+    for label in ("held_out", "shipped", "chosen_on_everyone_fit"):
+        if label not in out:
+            continue
+        r = out[label]
+        print(f"{label}: pooled F1 {r['pooled']['f1']:.3f} (strict {r['pooled']['strict_f1']:.3f}), "
+              f"delay {r['pooled']['delay_median_s']} / {r['pooled']['delay_p90_s']} s")
+        for s, v in r["sources"].items():
+            print(f"  {s:12s} F1 {v['f1']:.3f} (strict {v['strict_f1']:.3f})  "
+                  f"{v['cuts']} cuts / {v['transitions']} transitions  "
+                  f"delay {v['delay_median_s']} / {v['delay_p90_s']} s")
+    if "chosen_on_everyone" in out:
+        print(f"chosen on everyone: {out['chosen_on_everyone']}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
