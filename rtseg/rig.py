@@ -46,7 +46,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Sequence
 
-from rtseg.skeletons import MAPS, rank_families, resolve_names
+from rtseg.skeletons import rank_families, resolve_names
 
 __all__ = ["CANONICAL", "CANONICAL_PARENT", "FEATURE_JOINTS", "Rig", "RigError", "map_rig"]
 

@@ -51,7 +51,6 @@ then never sent).
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -59,6 +58,7 @@ from scipy.spatial.transform import Rotation
 
 from rtseg import quat as Q
 from rtseg.profiles import SuitProfile
+from rtseg.skeletons import MAPS, SkeletonMap, candidates, lookup, rank_families, resolve_names
 from rtseg.take import Take
 
 __all__ = ["SkeletonMap", "MAPS", "RetargetError", "ImuModel", "Retargeted",
@@ -69,182 +69,25 @@ class RetargetError(ValueError):
     """A take cannot be mapped onto a suit (names the unmapped bones)."""
 
 
-@dataclass(frozen=True)
-class SkeletonMap:
-    """A named map: suit bone (HumanBodyBones) -> candidate take joints, tried in order.
-
-    ``prefix``: regular expression stripped from the take's joint names before matching
-    (e.g. Mixamo's ``mixamorig:``).  ``signature``: joints peculiar to the family, used to
-    break ties when two maps resolve as many bones."""
-    name: str
-    description: str
-    bones: dict[str, tuple[str, ...]]
-    prefix: str = ""
-    signature: tuple[str, ...] = ()
-
-    def strip(self, joint: str) -> str:
-        return re.sub(self.prefix, "", joint) if self.prefix else joint
-
-
-def _sides(spec: dict[str, tuple[str, ...]]) -> dict[str, tuple[str, ...]]:
-    """Expand ``{Left}``/``{l}`` templates into the Left* and Right* entries."""
-    out: dict[str, tuple[str, ...]] = {}
-    for bone, cands in spec.items():
-        if "{Side}" in bone:
-            for side, s in (("Left", "l"), ("Right", "r")):
-                out[bone.replace("{Side}", side)] = tuple(
-                    c.replace("{Side}", side).replace("{s}", s) for c in cands)
-        else:
-            out[bone] = cands
-    return out
-
-
-MAPS: dict[str, SkeletonMap] = {m.name: m for m in (
-    SkeletonMap(
-        "cmu-asf", "CMU / Acclaim ASF/AMC skeleton (31 bones)",
-        _sides({
-            "Hips": ("root",), "Spine": ("lowerback",), "Chest": ("thorax", "upperback"),
-            "UpperChest": ("thorax",), "Neck": ("lowerneck", "upperneck"), "Head": ("head",),
-            "{Side}Shoulder": ("{s}clavicle",), "{Side}UpperArm": ("{s}humerus",),
-            "{Side}LowerArm": ("{s}radius",), "{Side}Hand": ("{s}hand", "{s}wrist"),
-            "{Side}UpperLeg": ("{s}femur",), "{Side}LowerLeg": ("{s}tibia",),
-            "{Side}Foot": ("{s}foot",), "{Side}Toes": ("{s}toes",),
-        }),
-        signature=("lhumerus", "rhumerus", "lfemur", "rfemur", "thorax")),
-    SkeletonMap(
-        "unity", "Unity humanoid HumanBodyBones names (rtseg's synthetic and suit takes)",
-        _sides({
-            "Hips": ("Hips",), "Spine": ("Spine",), "Chest": ("Chest", "UpperChest"),
-            "UpperChest": ("UpperChest", "Chest"), "Neck": ("Neck",), "Head": ("Head",),
-            "{Side}Shoulder": ("{Side}Shoulder",), "{Side}UpperArm": ("{Side}UpperArm",),
-            "{Side}LowerArm": ("{Side}LowerArm",), "{Side}Hand": ("{Side}Hand",),
-            "{Side}UpperLeg": ("{Side}UpperLeg",), "{Side}LowerLeg": ("{Side}LowerLeg",),
-            "{Side}Foot": ("{Side}Foot",), "{Side}Toes": ("{Side}Toes",),
-        }),
-        signature=("LeftUpperArm", "RightUpperArm", "LeftUpperLeg", "RightUpperLeg")),
-    SkeletonMap(
-        "cmu-bvh", "CMU BVH conversion (cgspeed, 31 joints)",
-        _sides({
-            "Hips": ("Hips",), "Spine": ("LowerBack",), "Chest": ("Spine1",),
-            "UpperChest": ("Spine1",), "Neck": ("Neck",), "Head": ("Head",),
-            "{Side}Shoulder": ("{Side}Shoulder",), "{Side}UpperArm": ("{Side}Arm",),
-            "{Side}LowerArm": ("{Side}ForeArm",), "{Side}Hand": ("{Side}Hand",),
-            "{Side}UpperLeg": ("{Side}UpLeg",), "{Side}LowerLeg": ("{Side}Leg",),
-            "{Side}Foot": ("{Side}Foot",), "{Side}Toes": ("{Side}ToeBase",),
-        }),
-        signature=("LowerBack", "LHipJoint", "RHipJoint", "Neck1")),
-    SkeletonMap(
-        "mixamo", "Mixamo rig (mixamorig: prefix optional)",
-        _sides({
-            "Hips": ("Hips",), "Spine": ("Spine",), "Chest": ("Spine2",),
-            "UpperChest": ("Spine2",), "Neck": ("Neck",), "Head": ("Head",),
-            "{Side}Shoulder": ("{Side}Shoulder",), "{Side}UpperArm": ("{Side}Arm",),
-            "{Side}LowerArm": ("{Side}ForeArm",), "{Side}Hand": ("{Side}Hand",),
-            "{Side}UpperLeg": ("{Side}UpLeg",), "{Side}LowerLeg": ("{Side}Leg",),
-            "{Side}Foot": ("{Side}Foot",), "{Side}Toes": ("{Side}ToeBase",),
-        }),
-        prefix=r"^mixamorig\d*:", signature=("Spine2", "HeadTop_End")),
-    SkeletonMap(
-        "xsens-mvn", "Xsens MVN segments (MVNX labels; also the xsens-mvn suit's L3/T12)",
-        _sides({
-            "Hips": ("Pelvis",), "Spine": ("L5",), "L3": ("L3",), "T12": ("T12",),
-            "Chest": ("T8",), "UpperChest": ("T8",), "Neck": ("Neck",), "Head": ("Head",),
-            "{Side}Shoulder": ("{Side}Shoulder",), "{Side}UpperArm": ("{Side}UpperArm",),
-            "{Side}LowerArm": ("{Side}ForeArm", "{Side}LowerArm"),
-            "{Side}Hand": ("{Side}Hand",), "{Side}UpperLeg": ("{Side}UpperLeg",),
-            "{Side}LowerLeg": ("{Side}LowerLeg",), "{Side}Foot": ("{Side}Foot",),
-            "{Side}Toes": ("{Side}Toe", "{Side}Toes"),
-        }),
-        signature=("Pelvis", "L5", "L3", "T12", "T8")),
-    SkeletonMap(
-        "mocopi", "Sony mocopi bones (root, torso_1..7, neck_1/2, l_up_arm ...)",
-        {
-            "Hips": ("root",), "Spine": ("torso_2",), "Chest": ("torso_4",),
-            "UpperChest": ("torso_6",), "Neck": ("neck_1",), "Head": ("head",),
-            **{f"torso_{k}": (f"torso_{k}",) for k in (1, 3, 5, 7)}, "neck_2": ("neck_2",),
-            **{f"{side}{hbb}": (f"{s}_{m}",) for side, s in (("Left", "l"), ("Right", "r"))
-               for hbb, m in (("Shoulder", "shoulder"), ("UpperArm", "up_arm"),
-                              ("LowerArm", "low_arm"), ("Hand", "hand"),
-                              ("UpperLeg", "up_leg"), ("LowerLeg", "low_leg"),
-                              ("Foot", "foot"), ("Toes", "toes"))},
-        },
-        signature=("torso_1", "torso_7", "neck_2", "l_up_arm", "r_low_leg")),
-    SkeletonMap(
-        "rokoko", "Rokoko Studio body bones (hip, spine, chest, leftUpperArm, leftUpLeg, ...; "
-        "sessions recorded from rokoko://)",
-        _sides({
-            "Hips": ("hip",), "Spine": ("spine",), "Chest": ("chest",),
-            "UpperChest": ("chest",), "Neck": ("neck",), "Head": ("head",),
-            "{Side}Shoulder": ("{Side}Shoulder",), "{Side}UpperArm": ("{Side}UpperArm",),
-            "{Side}LowerArm": ("{Side}LowerArm",), "{Side}Hand": ("{Side}Hand",),
-            "{Side}UpperLeg": ("{Side}UpLeg",), "{Side}LowerLeg": ("{Side}Leg",),
-            "{Side}Foot": ("{Side}Foot",), "{Side}Toes": ("{Side}Toe",),
-        }),
-        signature=("hip", "leftUpLeg", "rightUpLeg", "leftToe", "rightToe")),
-    SkeletonMap(
-        "daz", "Daz / Poser BVH rigs (CMU's Daz-friendly conversion: hip, abdomen, chest, "
-        "lShldr, lForeArm, lThigh, lShin, ...)",
-        _sides({
-            "Hips": ("hip",), "Spine": ("abdomen",), "Chest": ("chest",),
-            "UpperChest": ("chest",), "Neck": ("neck",), "Head": ("head",),
-            "{Side}Shoulder": ("{s}Collar",), "{Side}UpperArm": ("{s}Shldr",),
-            "{Side}LowerArm": ("{s}ForeArm",), "{Side}Hand": ("{s}Hand",),
-            "{Side}UpperLeg": ("{s}Thigh",), "{Side}LowerLeg": ("{s}Shin",),
-            "{Side}Foot": ("{s}Foot",),
-        }),
-        signature=("abdomen", "lShldr", "rShldr", "lThigh", "rShin")),
-    SkeletonMap(
-        "axis", "Noitom Axis Neuron / Axis Studio BVH (59 joints: Spine..Spine3, fingers)",
-        _sides({
-            "Hips": ("Hips",), "Spine": ("Spine",), "Chest": ("Spine3", "Spine2"),
-            "UpperChest": ("Spine3",), "Neck": ("Neck",), "Head": ("Head",),
-            "{Side}Shoulder": ("{Side}Shoulder",), "{Side}UpperArm": ("{Side}Arm",),
-            "{Side}LowerArm": ("{Side}ForeArm",), "{Side}Hand": ("{Side}Hand",),
-            "{Side}UpperLeg": ("{Side}UpLeg",), "{Side}LowerLeg": ("{Side}Leg",),
-            "{Side}Foot": ("{Side}Foot",),
-        }),
-        signature=("Spine3", "RightInHandIndex", "LeftInHandIndex", "RightHandThumb1")),
-)}
-
-
-# --------------------------------------------------------------------------- resolution
-
 def _lookup(take_names: list[str], smap: SkeletonMap) -> dict[str, int]:
-    """Lower-cased, prefix-stripped joint name -> first take index."""
-    out: dict[str, int] = {}
-    for j, n in enumerate(take_names):
-        out.setdefault(smap.strip(n).lower(), j)
-    return out
+    return lookup(take_names, smap)
 
 
 def _resolve_with(take_names: list[str], bones: tuple[str, ...], smap: SkeletonMap
                   ) -> list[int]:
-    look = _lookup(take_names, smap)
-    cols = []
-    for b in bones:
-        cands = _candidates(b, smap)
-        cols.append(next((look[c.lower()] for c in cands if c.lower() in look), -1))
-    return cols
+    return resolve_names(take_names, bones, smap)
 
 
 def _candidates(bone: str, smap: SkeletonMap) -> tuple[str, ...]:
-    """The map's candidate joints for suit ``bone`` (case-insensitive), () if none."""
-    low = bone.lower()
-    return next((v for k, v in smap.bones.items() if k.lower() == low), ())
+    return candidates(bone, smap)
 
 
 def detect_family(take_names: list[str], bones: tuple[str, ...]) -> SkeletonMap:
     """The map resolving most of ``bones`` from ``take_names`` (ties: most signature joints,
     then the order of :data:`MAPS`: cmu-asf, unity, cmu-bvh, mixamo, so plain
     HumanBodyBones names win a tie).  RetargetError if none resolves any."""
-    best, best_key = None, (0, 0)
-    for smap in MAPS.values():
-        found = sum(c >= 0 for c in _resolve_with(take_names, bones, smap))
-        look = _lookup(take_names, smap)
-        sig = sum(s.lower() in look for s in smap.signature)
-        key = (found, sig)
-        if found and key > best_key:
-            best, best_key = smap, key
+    ranked = rank_families(take_names, bones)
+    best = ranked[0][0] if ranked else None
     if best is None:
         raise RetargetError(
             f"no known skeleton family ({', '.join(MAPS)}) names any of the suit's bones "
