@@ -18,7 +18,15 @@ import logging
 import sys
 import time
 
-from rtseg.splice import KINDS, SpliceConfig, generate
+from rtseg.splice import KINDS, SpliceConfig, generate, read_source_index
+
+
+def mixed_possible(src: str) -> bool:
+    """True when some format of ``src`` holds takes of two or more people."""
+    people: dict[str, set[str]] = {}
+    for r in read_source_index(src):
+        people.setdefault(r.fmt, set()).add(r.subject)
+    return any(len(p) >= 2 for p in people.values())
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -40,6 +48,10 @@ def main(argv: list[str] | None = None) -> int:
     kinds = KINDS if args.kind == "both" else (args.kind,)
     t0 = time.perf_counter()
     try:
+        if args.kind == "both" and not mixed_possible(args.src):
+            kinds = ("same",)
+            print(f"splice: {args.src} holds one person per format: same-person "
+                  f"performances only", file=sys.stderr)
         perfs = generate(args.src, args.out, seed=args.seed, n=args.n, kinds=kinds,
                          cfg=SpliceConfig(), force=args.force)
     except (OSError, ValueError) as exc:

@@ -305,6 +305,24 @@ def test_cli_refuses_foreign_npz_and_bad_source(source, tmp_path):
     assert r.returncode == 2 and "index.tsv" in r.stderr
 
 
+def test_cli_on_a_folder_of_one_person(source, tmp_path):
+    """--kind both on a folder holding one person: same-person performances only, said."""
+    one = tmp_path / "one"
+    (one / "bvh").mkdir(parents=True)
+    rows = (source / "index.tsv").read_text().splitlines()
+    keep = [rows[0]] + [r for r in rows[1:] if r.split("\t")[1] == "01"]
+    (one / "index.tsv").write_text("\n".join(keep) + "\n")
+    for r in keep[1:]:
+        name = r.split("\t")[0]
+        (one / "bvh" / f"{name}.bvh").write_bytes((source / "bvh" / f"{name}.bvh").read_bytes())
+    out = tmp_path / "o"
+    r = subprocess.run([sys.executable, str(REPO / "benchmarks" / "splice.py"), str(one), str(out),
+                        "--n", "2"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "same-person performances only" in r.stderr
+    assert sorted(p.name for p in out.glob("*.npz")) == ["same_000.npz", "same_001.npz"]
+
+
 # --------------------------------------------------------------------------- labels group
 
 def test_found_as_group_spliced(spliced, tmp_path, caplog):
