@@ -53,6 +53,11 @@ GRIDS = {
         "gate_threshold": [0.0, 3.5, 4.5],
         "reference_dims": [40, 48],
     },
+    "short": {                      # shorter windows and gaps for 2-5 s behaviours
+        "threshold": [1.75, 2.0],
+        "min_before_s": [1.0, 1.5],
+        "min_gap_s": [1.5, 2.0],
+    },
 }
 
 
