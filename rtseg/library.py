@@ -379,7 +379,7 @@ class LibraryBuilder:
             raise ValueError(f"{source}: {X.shape[1] if X.ndim == 2 else '?'} feature dims, "
                              f"the library's profile {self.profile!r} has {self.dims}")
         fr = float(frame_rate or self.frame_rate)
-        if abs(fr - self.frame_rate) > 1e-6 * self.frame_rate:
+        if abs(fr - self.frame_rate) > 1e-3 * self.frame_rate:   # 0.1 %: BVH frame times are rounded
             raise ValueError(f"{source}: frame rate {fr:g} Hz, the library's is "
                              f"{self.frame_rate:g} Hz")
         a, b = (0, len(X)) if frames is None else (int(frames[0]), int(frames[1]))

@@ -367,7 +367,7 @@ def cmu_takes(data_dir):
     out = []
     for lt in find_labelled_takes(data_dir, groups=("cmu",)):
         take = lt.load()
-        out.append((lt.name, compute_features(take), take.frame_rate, lt.transitions))
+        out.append((lt.name, compute_features(take, "cmu14"), take.frame_rate, lt.transitions))
     if len(out) < 4:
         pytest.skip(f"expected the 4 full-rotation CMU takes in {data_dir}, found {len(out)}")
     return out

@@ -163,6 +163,8 @@ class Console:
         self.first_segment: dict[str, int] = {}    # behaviour id -> earliest segment
         self.last_behaviour: BehaviourEvent | None = None
         self.behaviour_time: Callable[[BehaviourEvent], float] | None = None
+        #: a line printed before the first status line (the features the session uses)
+        self.banner: str | None = None
 
     def _clear(self) -> None:
         if self.tty and self._line_shown:
@@ -190,6 +192,10 @@ class Console:
             print(f"rtseg: dropout: {ev.name} {'lost' if ev.lost else 'restored'} "
                   f"at t={ev.time:.2f} s", file=self.err, flush=True)
         elif isinstance(ev, StatusEvent) and self.status and ev.alive:
+            if self.banner:           # the joints the features use, once the session runs
+                self._clear()
+                print(f"rtseg live: {self.banner}", file=self.err, flush=True)
+                self.banner = None
             self.show_status(ev)
 
     def show_status(self, ev: StatusEvent) -> None:
@@ -234,8 +240,7 @@ def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: 
     from rtseg.live import LiveSession
     console = Console(print_cuts=cfg["output.jsonl"] != "-", status=not quiet)
     session = LiveSession(source, cfg, listeners=[console], duration=duration,
-                          on_start=lambda line: print(f"rtseg live: {line}", file=sys.stderr,
-                                                      flush=True))
+                          on_start=lambda line: setattr(console, "banner", line))
     console.session_stats = lambda: session.stats
     if performance_time:
         console.cut_time = lambda ev: ev.frame / session.frame_rate
