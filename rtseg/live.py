@@ -152,12 +152,17 @@ class LiveSession(SessionEvents, SessionHealth):
         ``rtseg.recording.SessionRecorder`` when ``recording.dir`` is set).
     listeners: callables given every event after it is published (the CLI prints them).
     duration: stop after this many seconds (None: until the source ends or a signal).
+    monitor: object with ``attach(session)`` (once the pipeline exists), ``tick(session)``
+        (after each processing step, on the processing thread; must not block) and
+        ``__call__(event)`` (a listener), e.g. ``rtseg.monitor.MonitorFeed``; its failures
+        are counted (``LiveStats.monitor_errors``) and logged, never raised.
     """
 
     def __init__(self, source: Any, config: SessionConfig | None = None, *,
                  publishers: Any = None, recorder: Any = None,
                  listeners: Iterable[Callable[[Event], None]] = (),
-                 duration: float | None = None, handle_signals: bool = True) -> None:
+                 duration: float | None = None, handle_signals: bool = True,
+                 monitor: Any = None) -> None:
         self.config = config if config is not None else load_session_config()
         detector_params(self.config)          # refuse bad detector settings before opening
         wire_methods(self.config)
@@ -166,6 +171,9 @@ class LiveSession(SessionEvents, SessionHealth):
         self.publishers = publishers
         self.recorder = recorder
         self.listeners = list(listeners)
+        self.monitor = monitor
+        if monitor is not None:
+            self.listeners.append(monitor)
         self.duration = duration
         self.handle_signals = handle_signals
         self.stats = LiveStats()
@@ -355,6 +363,7 @@ class LiveSession(SessionEvents, SessionHealth):
             self._open()
             _freeze_heap(collect=False)
             J = len(self.pipeline.joint_names)
+            monitor = self.monitor
             rec_start = getattr(self.recorder, "start_monotonic", None)
             if isinstance(rec_start, float):
                 self.session_start = rec_start
@@ -374,6 +383,8 @@ class LiveSession(SessionEvents, SessionHealth):
             deadline = None if self.duration is None else time.monotonic() + self.duration
             cursor = self.ring.cursor(0)
             reader = threading.Thread(target=self._reader, name="rtseg-reader", daemon=True)
+            if monitor is not None:
+                self._monitor_call(monitor.attach)
             reader.start()
             while not self._stop.is_set():
                 now = time.monotonic()
@@ -396,6 +407,8 @@ class LiveSession(SessionEvents, SessionHealth):
                     if self.recorder is not None and hasattr(self.recorder, "poll"):
                         with self._rec_lock:
                             self.recorder.poll()
+                if monitor is not None:
+                    self._monitor_call(monitor.tick)
                 if now >= next_status:
                     self._emit(self._status(now))
                     next_status = max(next_status + interval, now + interval / 2)
@@ -416,6 +429,13 @@ class LiveSession(SessionEvents, SessionHealth):
                 blas.restore_original_limits()
             _thaw_heap(frozen_before)
         return summary
+
+    def _monitor_call(self, method: Callable[[Any], None]) -> None:
+        try:
+            method(self)
+        except Exception as exc:  # the monitor must never end the session
+            self.stats.monitor_errors += 1
+            self._warn("monitor", "live monitor failed (%s: %s)", type(exc).__name__, exc)
 
     def _shutdown(self) -> SessionSummary:
         now = time.monotonic()

@@ -57,6 +57,7 @@ class LiveStats:
     overruns: int = 0            # frames overwritten in the ring before processing
     record_errors: int = 0
     publish_errors: int = 0
+    monitor_errors: int = 0      # live monitor calls that raised (logged, session goes on)
     cuts: int = 0                # cuts of every detector (JSON lines, recording)
     wire_cuts: int = 0           # of those, cuts sent to the OSC targets
     cuts_by_method: dict[str, int] = field(default_factory=dict)
