@@ -344,6 +344,7 @@ class LiveSession(SessionEvents, SessionHealth):
             st.lag_s = now - float(w.recv_time[-1])
             st.max_lag_s = max(st.max_lag_s, st.lag_s)
             self._last_recv = float(w.recv_time[-1])
+            self._last_index = w.start + len(w) - 1
 
     # ---------------------------------------------------------------- run
     def run(self) -> SessionSummary:
@@ -373,6 +374,7 @@ class LiveSession(SessionEvents, SessionHealth):
             self._dropout_s = float(self.config["gaps.dropout_seconds"])
             self._source_lost = False
             self._last_recv: float | None = None
+            self._last_index = 0
             self._status_t = time.monotonic()
             self._status_frames = 0
             self._last_rate = 0.0

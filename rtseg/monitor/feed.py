@@ -19,8 +19,10 @@ Batches go into a bounded queue (``capacity`` batches) that the server thread em
 
 Times in a batch are seconds since the session start (as ``CutEvent.time``).  A statistic
 point of the detector at window boundary ``position`` (a frame of the detector's own
-count) is placed at the receive time of the newest processed frame minus
-``(newest detector frame - position) / frame_rate``.
+count) is placed at the time of the newest processed frame (on the session's clock of cut
+times: the source's own when it has one, see ``rtseg.live_events``) minus
+``(newest detector frame - position) / frame_rate``.  A behaviour's ``start`` is the time of
+the primary detector's cut that began its segment (0 for the first segment).
 """
 
 from __future__ import annotations
@@ -66,6 +68,7 @@ class MonitorFeed:
         self._q: deque[dict] = deque()
         self._lock = threading.Lock()
         self._events: list[dict] = []
+        self._segment_time: dict[int, float] = {0: 0.0}   # primary segment -> its cut's time
         self._det: Any = None
         self._gate_seen = 0
         self._next = 0.0
@@ -90,7 +93,7 @@ class MonitorFeed:
         if det is not None and hasattr(det, "trace") and hasattr(det, "keep_trace"):
             det.keep_trace = True
             self._det = det
-            info["statistic"] = f"{session.primary} contrast"
+            info["statistic"] = f"{session.primary} statistic"
             info["threshold"] = float(det.threshold)
             peaks = getattr(det, "peaks", None)
             early = getattr(peaks, "early", None)
@@ -101,6 +104,10 @@ class MonitorFeed:
 
     def __call__(self, ev: Any) -> None:
         if isinstance(ev, CutEvent):
+            if ev.method == self.info.get("primary"):
+                self._segment_time[ev.segment] = ev.time
+                if len(self._segment_time) > 4096:
+                    del self._segment_time[min(self._segment_time)]
             self._events.append({"kind": "cut", "event": ev.event, "method": ev.method,
                                  "segment": ev.segment, "frame": ev.frame,
                                  "time": ev.time, "confidence": ev.confidence,
@@ -109,7 +116,7 @@ class MonitorFeed:
             self._events.append({"kind": "behaviour", "segment": ev.segment,
                                  "behaviour": ev.behaviour, "name": ev.name,
                                  "frame": ev.frame, "time": ev.time,
-                                 "start": ev.frame / self.info.get("frame_rate", 120.0),
+                                 "start": self._segment_time.get(ev.segment, 0.0),
                                  "confidence": ev.confidence,
                                  "correction": bool(ev.correction)})
         elif isinstance(ev, DropoutEvent):
@@ -125,8 +132,11 @@ class MonitorFeed:
             return
         self._next = now + self.interval
         last = session._last_recv
-        t_now = (now if last is None else last) - session.session_start
-        batch: dict[str, Any] = {"now": round(now - session.session_start, 4)}
+        if last is None:
+            t_now = now - session.session_start
+        else:       # the session's clock of cut times (the source's own when it has one)
+            t_now = session._boundary_time(session._last_index, last)
+        batch: dict[str, Any] = {"now": round(t_now + max(0.0, now - (last or now)), 4)}
         det = self._det
         if det is not None:
             rate = self.info["frame_rate"]

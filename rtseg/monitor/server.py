@@ -16,7 +16,10 @@ thread and event loop (``start()`` returns once the socket is bound, ``stop()`` 
 - At most ``max_clients`` pages at once (default 8); one more gets a 503.  Each page has a
   bounded queue of ``client_queue`` messages: a page that reads too slowly has its queue
   emptied and gets a fresh ``hello`` once it catches up (``stats["dropped"]`` counts the
-  messages it missed); a send that blocks for ``send_timeout`` seconds closes it.  Nothing
+  messages it missed); a send that blocks for ``send_timeout`` seconds closes it.  Each
+  page's socket holds at most about ``send_buffer`` bytes (16 KB: seconds of updates) in
+  the kernel and as much in the server's transport, so a page that stops reading is seen
+  in seconds.  Nothing
   a page does reaches the session: the feed's own queue is bounded too
   (:class:`rtseg.monitor.feed.MonitorFeed`).
 
@@ -29,6 +32,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import socket
 import threading
 import time
 from collections import deque
@@ -93,7 +97,8 @@ class MonitorServer:
 
     def __init__(self, feed: MonitorFeed, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
                  *, interval: float = 0.04, max_clients: int = 8, client_queue: int = 64,
-                 send_timeout: float = 5.0, history_s: float = 30.0) -> None:
+                 send_timeout: float = 5.0, history_s: float = 30.0,
+                 send_buffer: int = 16384) -> None:
         self.feed = feed
         self.host, self.port = host, int(port)
         self.interval = float(interval)
@@ -101,6 +106,7 @@ class MonitorServer:
         self.client_queue = int(client_queue)
         self.send_timeout = float(send_timeout)
         self.history_s = float(history_s)
+        self.send_buffer = int(send_buffer)
         self.stats = {"clients": 0, "connections": 0, "refused": 0, "dropped": 0,
                       "messages": 0, "bad_frames": 0, "slow_closed": 0}
         self._static = _load_static()
@@ -119,6 +125,7 @@ class MonitorServer:
         self._health: dict | None = None
         self._now = 0.0
         self._ended = False
+        self._announced: dict | None = None     # the feed.info the pages were sent
         self._rec_size = (0.0, 0)       # (when measured, bytes)
 
     @property
@@ -205,13 +212,24 @@ class MonitorServer:
             self.stats["refused"] += 1
             raise web.HTTPServiceUnavailable(
                 text=f"the monitor serves at most {self.max_clients} pages at once")
-        ws = web.WebSocketResponse(max_msg_size=4096, heartbeat=10.0, compress=False)
+        ws = web.WebSocketResponse(max_msg_size=4096, heartbeat=10.0, compress=False,
+                                   writer_limit=self.send_buffer or 65536)
+        sock = request.transport.get_extra_info("socket") if request.transport else None
+        if sock is not None and self.send_buffer:
+            try:    # a page that stops reading shows up after seconds, not megabytes
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.send_buffer)
+            except OSError:
+                pass
         await ws.prepare(request)
+        if request.transport is not None:
+            request.transport.set_write_buffer_limits(high=self.send_buffer or None)
         client = _Client(ws, self.client_queue)
         self._clients.add(client)
         self.stats["connections"] += 1
         self.stats["clients"] = len(self._clients)
         client.queue.put_nowait(self._hello())
+        if self.feed.info:
+            self._announced = self.feed.info
         writer = asyncio.ensure_future(self._writer(client))
         try:
             async for msg in ws:
@@ -254,6 +272,12 @@ class MonitorServer:
             merged = self._merge(batches)
             if not self._clients:
                 continue
+            if self.feed.info is not self._announced:     # pages that came before attach
+                self._announced = self.feed.info
+                hello = self._hello()
+                for c in list(self._clients):
+                    if not c.queue.full():
+                        c.queue.put_nowait(hello)
             data = orjson.dumps(merged)
             for c in list(self._clients):
                 if c.queue.full():

@@ -38,6 +38,7 @@
                { label: "threshold", stroke: "#e57373", dash: [6, 4], width: 1, points: { show: false } },
                { label: "early threshold", stroke: "#ce93d8", dash: [2, 4], width: 1, points: { show: false },
                  show: info.early_threshold != null }],
+      legend: { live: false },
       hooks: { draw: [drawCuts] },
     };
     el.innerHTML = "";
@@ -154,6 +155,7 @@
 
   function onMessage(msg) {
     if (msg.type === "hello") {
+      if (!msg.info.joints) return;            // the session is still starting
       st.info = msg.info; const hist = msg.history;
       st.stat = hist.stat; st.early = hist.early; st.gated = hist.gated; st.cuts = hist.cuts;
       st.behaviours = {}; for (const b of hist.behaviours) st.behaviours[b.segment] = b;
