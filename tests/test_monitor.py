@@ -231,3 +231,44 @@ def test_bad_requests_are_refused_and_the_session_keeps_running():
     s = run.summary
     assert s.frames_processed == s.frames_received and s.dropped == 0
     assert s.stop_reason == "end of source"
+
+
+def test_recorded_session_gets_the_same_page(tmp_path):
+    rec = tmp_path / "rec"
+    first = LiveSession(f"sim://synth?script={SCRIPT}&speed=8&seed=3",
+                        from_dict({"output": {"osc": []}, "recording": {"dir": str(rec)}}),
+                        handle_signals=False)
+    recorded = first.run()
+    assert recorded.cuts >= 1
+    feed = MonitorFeed()
+    server = MonitorServer(feed, "127.0.0.1", 0)
+    server.start()
+    cuts: list[CutEvent] = []
+    replay = LiveSession(f"file://{rec}?speed=4", session_config(), handle_signals=False,
+                         monitor=feed, listeners=[lambda ev: isinstance(ev, CutEvent)
+                                                  and cuts.append(ev)])
+    t = threading.Thread(target=replay.run, daemon=True)
+    t.start()
+    msgs = asyncio.run(read_ws(f"ws://127.0.0.1:{server.port}/ws", 14 / 4 + 3))
+    t.join(30)
+    server.stop()
+    hello = [m for _, m in msgs if m["type"] == "hello"][-1]
+    assert hello["info"]["source"].startswith("file://") and len(hello["info"]["joints"]) == 17
+    page_cuts = [e["frame"] for _, m in msgs if m["type"] == "batch"
+                 for e in m["events"] if e["kind"] == "cut"]
+    assert page_cuts == [c.frame for c in cuts] and len(cuts) == recorded.cuts
+
+
+def test_without_aiohttp_monitor_is_refused_and_session_unchanged(tmp_path):
+    import subprocess
+    import sys
+    code = ("import sys; sys.modules['aiohttp'] = None\n"
+            "from rtseg.cli import main\n"
+            "sys.exit(main(sys.argv[1:]))\n")
+    args = [sys.executable, "-c", code, "live", "sim://synth?script=idle:2&speed=0",
+            "--no-osc", "--quiet"]
+    refused = subprocess.run(args + ["--monitor"], capture_output=True, text=True, timeout=60)
+    assert refused.returncode == 2
+    assert "pip install 'rtseg[monitor]'" in refused.stderr
+    plain = subprocess.run(args, capture_output=True, text=True, timeout=60)
+    assert plain.returncode == 0 and "240 frames received" in plain.stderr
