@@ -235,11 +235,22 @@ def test_bad_requests_are_refused_and_the_session_keeps_running():
 
 def test_recorded_session_gets_the_same_page(tmp_path):
     rec = tmp_path / "rec"
+    feed = MonitorFeed()
+    server = MonitorServer(feed, "127.0.0.1", 0)
+    server.start()
     first = LiveSession(f"sim://synth?script={SCRIPT}&speed=8&seed=3",
                         from_dict({"output": {"osc": []}, "recording": {"dir": str(rec)}}),
-                        handle_signals=False)
-    recorded = first.run()
+                        handle_signals=False, monitor=feed)
+    result: list = []
+    t = threading.Thread(target=lambda: result.append(first.run()), daemon=True)
+    t.start()
+    msgs = asyncio.run(read_ws(f"ws://127.0.0.1:{server.port}/ws", 14 / 8 + 3))
+    t.join(30)
+    server.stop()
+    recorded = result[0]
     assert recorded.cuts >= 1
+    health = [m["health"] for _, m in msgs if m["type"] == "batch" and "health" in m]
+    assert health[-1]["recording"] == str(rec) and health[-1]["recording_bytes"] > 0
     feed = MonitorFeed()
     server = MonitorServer(feed, "127.0.0.1", 0)
     server.start()
@@ -272,3 +283,12 @@ def test_without_aiohttp_monitor_is_refused_and_session_unchanged(tmp_path):
     assert "pip install 'rtseg[monitor]'" in refused.stderr
     plain = subprocess.run(args, capture_output=True, text=True, timeout=60)
     assert plain.returncode == 0 and "240 frames received" in plain.stderr
+
+
+def test_float_ring_recent_is_the_tail_of_values():
+    from rtseg.session_stats import FloatRing
+    r = FloatRing(7)
+    for total in range(30):
+        for n in (0, 1, 3, 7, 9):
+            assert list(r.recent(n)) == (list(r.values()[-n:]) if n else [])
+        r.append(float(total))

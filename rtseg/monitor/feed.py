@@ -42,18 +42,6 @@ __all__ = ["MonitorFeed"]
 LATENCY_WINDOW = 1200
 
 
-def _recent(ring: Any, n: int) -> np.ndarray:
-    """The newest ``n`` values of a ``rtseg.session_stats.FloatRing`` (no full copy)."""
-    a, total = ring._a, ring._n
-    k = min(n, total, a.size)
-    if k == 0:
-        return a[:0]
-    end = total % a.size
-    if end >= k:
-        return a[end - k:end]
-    return np.concatenate((a[a.size - (k - end):], a[:end]))
-
-
 class MonitorFeed:
     """Bounded, batched hand-over of a live session's state to the monitor server."""
 
@@ -169,7 +157,7 @@ class MonitorFeed:
         dt = max(1e-9, now - self._health_t)
         fps = (st.frames_received - self._health_frames) / dt
         self._health_t, self._health_frames = now, st.frames_received
-        lat = _recent(st.frame_latency_ms, LATENCY_WINDOW)
+        lat = st.frame_latency_ms.recent(LATENCY_WINDOW)
         p50, p99 = (np.percentile(lat, [50, 99]) if lat.size else (float("nan"),) * 2)
         ages = now - session._last_valid
         lost = session._joint_lost

@@ -326,7 +326,7 @@ class MonitorServer:
         if not folder:
             return None
         now = time.monotonic()
-        if now - self._rec_size[0] >= 2.0:
+        if now - self._rec_size[0] >= 1.0:
             total = 0
             try:
                 for p in Path(folder).rglob("*"):
