@@ -21,6 +21,9 @@ to the ``Pipeline`` (calibration, gap handling, ``PoseFeatures.step``, every onl
 ``update``).  Cuts become ``CutEvent``s that are published at once (OSC/JSON lines) and
 recorded.  Once per ``status.interval`` a ``StatusEvent`` goes out; sensor dropouts produce
 ``DropoutEvent``s.
+With a live monitor (``monitor=``, ``rtseg.monitor.MonitorFeed``) the processing loop
+also hands it every event and, after each step, a chance to queue a batch (bounded, at most
+25 a second); the monitor's web server runs on its own thread and only reads that queue.
 
 Keeping up
 ----------
