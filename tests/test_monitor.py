@@ -292,3 +292,26 @@ def test_float_ring_recent_is_the_tail_of_values():
         for n in (0, 1, 3, 7, 9):
             assert list(r.recent(n)) == (list(r.values()[-n:]) if n else [])
         r.append(float(total))
+
+
+def test_demo_serves_the_monitor_and_prints_its_address():
+    import re
+    import subprocess
+    import sys
+    from pathlib import Path
+    exe = str(Path(sys.executable).with_name("rtseg"))
+    base = [exe, "demo", "--duration", "2", "--speed", "4", "--no-osc", "--no-names",
+            "--quiet"]
+    on = subprocess.run(base + ["--monitor", "127.0.0.1:0"], capture_output=True, text=True,
+                        timeout=120)
+    assert on.returncode == 0, on.stderr
+    assert re.search(r"rtseg demo: live monitor at http://127\.0\.0\.1:\d+/", on.stderr)
+    off = subprocess.run(base + ["--no-monitor"], capture_output=True, text=True, timeout=120)
+    assert off.returncode == 0 and "live monitor" not in off.stderr
+
+
+def test_a_wider_binding_is_said_to_expose_the_session():
+    from rtseg.monitor.server import exposure_note
+    assert exposure_note("127.0.0.1", 8765) == "" and exposure_note("localhost", 1) == ""
+    note = exposure_note("0.0.0.0", 8765)
+    assert "0.0.0.0:8765" in note and "anyone who can reach it can watch" in note
