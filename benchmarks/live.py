@@ -4,6 +4,8 @@
     python3 benchmarks/live.py            # readable report (about 1.5 minutes)
     python3 benchmarks/live.py --json     # {"latency_ms": {"p50", "p99"}, "detector_delay_ms":
                                           #  {method: ms}, "cpu_fraction", "max_rate_fps"}
+    python3 benchmarks/live.py --monitor  # only the CPU cost of the live monitor (rtseg.monitor)
+                                          # with one page open in headless Chromium
 
 Everything goes through the real chain: the synthetic 17-sensor suit
 (``rtseg.simulators.serial_device``, default synthesised performance) runs in a **separate
@@ -27,6 +29,11 @@ on 127.0.0.1.
    session receives at least 97 % of the frames the suit sends in that time, loses none
    (no sequence gaps, no ring-buffer overruns, no queue overflow) and the p99 frame latency
    stays under 50 ms.  Reported: the highest sustained rate (target >= 2000).
+
+``--monitor`` runs only step 1, twice: without the live monitor, then with it serving
+(``rtseg.monitor``: feed and server thread in this process) and one page open in headless
+Chromium (another process, not counted).  Reported: both CPU fractions and their difference,
+the monitor's cost (target <= 0.01 of a core).
 """
 
 from __future__ import annotations
@@ -132,15 +139,27 @@ class PacedSource:
 
 
 def run_session(rate: float, seconds: float, port: int, warmup: float = 1.0,
-                kind: str = "serial"):
+                kind: str = "serial", monitor: bool = False):
     """Play the suit at ``rate`` for ``warmup + seconds``; latency statistics cover the
     last ``seconds`` only (start-up reads a burst of frames the pty buffered).
+    ``monitor``: serve the live monitor (``rtseg.monitor``, in this process) and open its
+    page in headless Chromium (another process) during the run; the warm-up is then 3 s
+    (the page loads and connects first).
     Returns (session, summary, cpu fraction over the measured part)."""
     suit = Suit(rate) if kind == "serial" else None
+    feed = server = page = None
     try:
         source = f"serial://{suit.path}?rate=120" if suit else PacedSource(rate)
+        if monitor:
+            from rtseg.monitor import MonitorFeed
+            from rtseg.monitor.headless import HeadlessPage
+            from rtseg.monitor.server import MonitorServer
+            feed = MonitorFeed()
+            server = MonitorServer(feed, "127.0.0.1", 0)
+            page = HeadlessPage(server.start())
+            warmup = max(warmup, 3.0)
         session = LiveSession(source, config(port), handle_signals=False,
-                              duration=seconds + warmup)
+                              duration=seconds + warmup, monitor=feed)
         marks: dict[str, float] = {}
 
         def start_measuring() -> None:
@@ -156,14 +175,23 @@ def run_session(rate: float, seconds: float, port: int, warmup: float = 1.0,
         cpu = (time.process_time() - marks["cpu"]) / (time.monotonic() - marks["wall"])
         measured_fps = ((session.stats.frames_received - marks["frames"])
                         / (time.monotonic() - marks["wall"]))
+        if page is not None:
+            pages = page.evaluate("window.rtsegMonitor.cuts.length")
+            if pages != summary.cuts:
+                print(f"   warning: the page shows {pages} cuts of {summary.cuts}",
+                      file=sys.stderr)
     finally:
         if suit is not None:
             suit.close()
+        if page is not None:
+            page.close()
+        if server is not None:
+            server.stop()
     return session, summary, cpu, measured_fps
 
 
-def latency_and_cpu(seconds: float, port: int) -> dict:
-    session, summary, cpu, fps = run_session(120.0, seconds, port)
+def latency_and_cpu(seconds: float, port: int, monitor: bool = False) -> dict:
+    session, summary, cpu, fps = run_session(120.0, seconds, port, monitor=monitor)
     lat = np.fromiter(session.stats.frame_latency_ms, float)
     cut_lat = np.fromiter(session.stats.cut_latency_ms, float)
     return {
@@ -210,6 +238,28 @@ def max_rate(step_seconds: float, port: int, log, kind: str = "serial") -> tuple
     return best, rows
 
 
+def monitor_cost(seconds: float, port: int, log, as_json: bool) -> int:
+    """CPU of the session (this process: loop, reader, OSC and the monitor's server
+    thread) at 120 Hz without the monitor and with it serving one Chromium page."""
+    log(f"17-sensor suit at 120 Hz over a pty, {seconds:g} s: without the monitor ...")
+    off = latency_and_cpu(seconds, port)
+    log(f"   CPU {off['cpu_fraction'] * 100:.2f} % of one core, latency p50 "
+        f"{off['p50']:.3f} ms p99 {off['p99']:.3f} ms, {off['dropped']} dropped")
+    log("   with the monitor and one page open in headless Chromium ...")
+    on = latency_and_cpu(seconds, port, monitor=True)
+    log(f"   CPU {on['cpu_fraction'] * 100:.2f} % of one core, latency p50 "
+        f"{on['p50']:.3f} ms p99 {on['p99']:.3f} ms, {on['dropped']} dropped")
+    extra = on["cpu_fraction"] - off["cpu_fraction"]
+    log(f"   the monitor costs {extra:+.4f} of a core (target <= 0.01)")
+    result = {"cpu_fraction": {"without": round(off["cpu_fraction"], 4),
+                               "with_monitor": round(on["cpu_fraction"], 4),
+                               "monitor": round(extra, 4)},
+              "latency_ms_p99": {"without": round(off["p99"], 3),
+                                 "with_monitor": round(on["p99"], 3)}}
+    print(json.dumps(result) if as_json else json.dumps(result, indent=2))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--json", action="store_true", help="print only the JSON result")
@@ -217,6 +267,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--step-seconds", type=float, default=4.0, help="length of each rate step")
     p.add_argument("--skip-core", action="store_true",
                    help="skip the rate steps of the session core without the serial driver")
+    p.add_argument("--monitor", action="store_true",
+                   help="only the CPU cost of the live monitor: step 1 without it, then with "
+                        "the monitor served and one page open in headless Chromium")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
 
@@ -226,6 +279,11 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.monotonic()
     s = sink()
     port = s.getsockname()[1]
+    if args.monitor:
+        try:
+            return monitor_cost(args.seconds, port, log, args.json)
+        finally:
+            s.close()
     try:
         log(f"1. 17-sensor suit at 120 Hz over a pty for {args.seconds:g} s ...")
         lc = latency_and_cpu(args.seconds, port)

@@ -21,6 +21,9 @@ to the ``Pipeline`` (calibration, gap handling, ``PoseFeatures.step``, every onl
 ``update``).  Cuts become ``CutEvent``s that are published at once (OSC/JSON lines) and
 recorded.  Once per ``status.interval`` a ``StatusEvent`` goes out; sensor dropouts produce
 ``DropoutEvent``s.
+With a live monitor (``monitor=``, ``rtseg.monitor.MonitorFeed``) the processing loop
+also hands it every event and, after each step, a chance to queue a batch (bounded, at most
+25 a second); the monitor's web server runs on its own thread and only reads that queue.
 
 Keeping up
 ----------
@@ -152,12 +155,17 @@ class LiveSession(SessionEvents, SessionHealth):
         ``rtseg.recording.SessionRecorder`` when ``recording.dir`` is set).
     listeners: callables given every event after it is published (the CLI prints them).
     duration: stop after this many seconds (None: until the source ends or a signal).
+    monitor: object with ``attach(session)`` (once the pipeline exists), ``tick(session)``
+        (after each processing step, on the processing thread; must not block) and
+        ``__call__(event)`` (a listener), e.g. ``rtseg.monitor.MonitorFeed``; its failures
+        are counted (``LiveStats.monitor_errors``) and logged, never raised.
     """
 
     def __init__(self, source: Any, config: SessionConfig | None = None, *,
                  publishers: Any = None, recorder: Any = None,
                  listeners: Iterable[Callable[[Event], None]] = (),
                  duration: float | None = None, handle_signals: bool = True,
+                 monitor: Any = None,
                  on_start: Callable[[str], None] | None = None) -> None:
         self.config = config if config is not None else load_session_config()
         #: called once the source is open, with the line naming the joints the features use
@@ -169,6 +177,9 @@ class LiveSession(SessionEvents, SessionHealth):
         self.publishers = publishers
         self.recorder = recorder
         self.listeners = list(listeners)
+        self.monitor = monitor
+        if monitor is not None:
+            self.listeners.append(monitor)
         self.duration = duration
         self.handle_signals = handle_signals
         self.stats = LiveStats()
@@ -344,6 +355,7 @@ class LiveSession(SessionEvents, SessionHealth):
             st.lag_s = now - float(w.recv_time[-1])
             st.max_lag_s = max(st.max_lag_s, st.lag_s)
             self._last_recv = float(w.recv_time[-1])
+            self._last_index = w.start + len(w) - 1
 
     # ---------------------------------------------------------------- run
     def run(self) -> SessionSummary:
@@ -363,6 +375,7 @@ class LiveSession(SessionEvents, SessionHealth):
             self._open()
             _freeze_heap(collect=False)
             J = len(self.pipeline.joint_names)
+            monitor = self.monitor
             rec_start = getattr(self.recorder, "start_monotonic", None)
             if isinstance(rec_start, float):
                 self.session_start = rec_start
@@ -372,6 +385,7 @@ class LiveSession(SessionEvents, SessionHealth):
             self._dropout_s = float(self.config["gaps.dropout_seconds"])
             self._source_lost = False
             self._last_recv: float | None = None
+            self._last_index = 0
             self._status_t = time.monotonic()
             self._status_frames = 0
             self._last_rate = 0.0
@@ -382,6 +396,8 @@ class LiveSession(SessionEvents, SessionHealth):
             deadline = None if self.duration is None else time.monotonic() + self.duration
             cursor = self.ring.cursor(0)
             reader = threading.Thread(target=self._reader, name="rtseg-reader", daemon=True)
+            if monitor is not None:
+                self._monitor_call(monitor.attach)
             reader.start()
             while not self._stop.is_set():
                 now = time.monotonic()
@@ -404,6 +420,8 @@ class LiveSession(SessionEvents, SessionHealth):
                     if self.recorder is not None and hasattr(self.recorder, "poll"):
                         with self._rec_lock:
                             self.recorder.poll()
+                if monitor is not None:
+                    self._monitor_call(monitor.tick)
                 if now >= next_status:
                     self._emit(self._status(now))
                     next_status = max(next_status + interval, now + interval / 2)
@@ -424,6 +442,13 @@ class LiveSession(SessionEvents, SessionHealth):
                 blas.restore_original_limits()
             _thaw_heap(frozen_before)
         return summary
+
+    def _monitor_call(self, method: Callable[[Any], None]) -> None:
+        try:
+            method(self)
+        except Exception as exc:  # the monitor must never end the session
+            self.stats.monitor_errors += 1
+            self._warn("monitor", "live monitor failed (%s: %s)", type(exc).__name__, exc)
 
     def _shutdown(self) -> SessionSummary:
         now = time.monotonic()

@@ -36,6 +36,18 @@ class FloatRing:
     def __len__(self) -> int:
         return min(self._n, self._a.size)
 
+    def recent(self, n: int) -> np.ndarray:
+        """The newest ``n`` values (fewer if fewer were appended), oldest first; a view
+        when they lie in one piece (copy it to keep it)."""
+        a, total = self._a, self._n
+        k = min(int(n), total, a.size)
+        if k <= 0:
+            return a[:0]
+        end = total % a.size or (a.size if total else 0)
+        if end >= k:
+            return a[end - k:end]
+        return np.concatenate((a[a.size - (k - end):], a[:end]))
+
     def values(self) -> np.ndarray:
         n, size = self._n, self._a.size
         if n <= size:
@@ -57,6 +69,7 @@ class LiveStats:
     overruns: int = 0            # frames overwritten in the ring before processing
     record_errors: int = 0
     publish_errors: int = 0
+    monitor_errors: int = 0      # live monitor calls that raised (logged, session goes on)
     cuts: int = 0                # cuts of every detector (JSON lines, recording)
     wire_cuts: int = 0           # of those, cuts sent to the OSC targets
     cuts_by_method: dict[str, int] = field(default_factory=dict)

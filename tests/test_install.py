@@ -79,3 +79,16 @@ def test_installed_tree_runs_live_and_segment_outside_the_checkout(built, tmp_pa
                        "--format", "json")
     assert r.returncode == 0, r.stderr
     assert '"pca"' in r.stdout
+
+
+def test_monitor_page_and_charting_library_ship(built):
+    """The live monitor's page, uPlot and its licence are in the package (no CDN)."""
+    src = REPO / "rtseg" / "monitor" / "static"
+    shipped = built / "rtseg" / "monitor" / "static"
+    names = {p.name for p in src.iterdir()}
+    assert {"index.html", "monitor.js", "uPlot.iife.min.js", "uPlot.min.css",
+            "uPlot.LICENSE"} <= names
+    for name in names:
+        assert (shipped / name).read_bytes() == (src / name).read_bytes(), name
+    page = (src / "index.html").read_text() + (src / "monitor.js").read_text()
+    assert "http://" not in page.replace("ws://", "") and "https://" not in page

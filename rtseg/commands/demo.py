@@ -27,10 +27,12 @@ import sys
 
 from rtseg.cli import error_text, positive_float
 from rtseg.commands.live import (add_session_arguments, config_from_args, run_session,
-                                 use_library)
+                                 start_monitor, use_library)
 from rtseg.config import ConfigError
 
 DEFAULT_DURATION = 60.0
+#: ``--monitor`` not given: the demo serves the monitor on 127.0.0.1:8765 when it can
+MONITOR_AUTO = "auto"
 #: The demo's performance: behaviours recur (walk, punch, squat twice) so the behaviour ids
 #: printed beside the cuts show a recurring behaviour getting its earlier id back.
 DEMO_SCRIPT = "idle:5,walk:7,punch:7,walk:7,squat:7,punch:7,wave:7,squat:7,kick:6"
@@ -74,7 +76,11 @@ def run(args: argparse.Namespace) -> int:
                 and not cfg.values.get("identity", {}).get("behaviours"):
             path, held = demo_library(args.seed, cfg, tmp)
             cfg["identity.behaviours"] = path
-        return _run(args, cfg, script, held)
+        try:
+            return _run(args, cfg, script, held)
+        except ConfigError as exc:          # --monitor that cannot run
+            print(f"rtseg demo: {error_text(exc)}", file=sys.stderr)
+            return 2
 
 
 def _run(args: argparse.Namespace, cfg, script: str, library: str = "") -> int:
@@ -119,10 +125,27 @@ def _run(args: argparse.Namespace, cfg, script: str, library: str = "") -> int:
             for tr in synth.transitions:
                 print(f"truth: {tr.before} -> {tr.after} at frame {tr.mid} "
                       f"(t={tr.mid / args.rate:.2f} s, blend {tr.lo}..{tr.hi})", file=sys.stderr)
+        monitor = demo_monitor(args)
         return run_session(url, cfg, args.duration / args.speed, args.quiet,
-                           performance_time=args.speed != 1)
+                           performance_time=args.speed != 1, monitor=monitor)
     finally:
         suit.stop()
+
+
+def demo_monitor(args: argparse.Namespace) -> tuple | None:
+    """The demo's live monitor: the one ``--monitor`` asks for (an error if it cannot
+    run), none with ``--no-monitor``, else 127.0.0.1:8765 when aiohttp is installed and
+    the port free (otherwise one line says why there is none)."""
+    if args.no_monitor:
+        return None
+    if args.monitor != MONITOR_AUTO:
+        return start_monitor(args.monitor, "rtseg demo")
+    try:
+        return start_monitor("", "rtseg demo")
+    except ConfigError as exc:
+        print(f"rtseg demo: no live monitor ({str(exc).removeprefix('--monitor: ')})",
+              file=sys.stderr)
+        return None
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -154,5 +177,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "other synthetic performers at start)")
     p.add_argument("--truth", action="store_true",
                    help="print the script's true transition frames before starting")
+    p.add_argument("--no-monitor", action="store_true",
+                   help="serve no live monitor page (by default the demo serves one on "
+                        "127.0.0.1:8765 when aiohttp is installed)")
     add_session_arguments(p)
-    p.set_defaults(func=run, duration=DEFAULT_DURATION)
+    p.set_defaults(func=run, duration=DEFAULT_DURATION, monitor=MONITOR_AUTO)

@@ -45,6 +45,11 @@ def add_session_arguments(p: argparse.ArgumentParser, osc_default_note: str = ""
     p.add_argument("--duration", type=positive_float, metavar="S",
                    help="stop after S seconds (a number > 0)")
     p.add_argument("--quiet", action="store_true", help="no status line on stderr")
+    p.add_argument("--monitor", nargs="?", const="", default=None, metavar="[HOST:]PORT",
+                   help="serve a live monitor page (detector statistic, cuts, behaviours, "
+                        "input health) on HOST:PORT (default 127.0.0.1:8765; another host "
+                        "than 127.0.0.1 lets that network watch); needs "
+                        "pip install 'rtseg[monitor]'")
 
 
 def config_from_args(args: argparse.Namespace) -> SessionConfig:
@@ -229,28 +234,54 @@ class Console:
         self._clear()
 
 
+def start_monitor(address: str | None, prog: str) -> tuple[Any, Any] | None:
+    """The live monitor's feed and started server for ``--monitor`` (None: not asked);
+    prints its address (and what a non-loopback binding exposes) on stderr.  Raises
+    ConfigError when it cannot run (aiohttp missing, bad or busy address)."""
+    if address is None:
+        return None
+    from rtseg.monitor import MonitorUnavailable, start_monitor as start
+    try:
+        feed, server = start(address or None)
+    except (MonitorUnavailable, ValueError, OSError) as exc:
+        raise ConfigError(f"--monitor: {exc}") from None
+    from rtseg.monitor.server import exposure_note
+    print(f"{prog}: live monitor at {server.url}", file=sys.stderr, flush=True)
+    note = exposure_note(server.host, server.port)
+    if note:
+        print(f"{prog}: warning: {note}", file=sys.stderr, flush=True)
+    return feed, server
+
+
 def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: bool,
                 before_run: Callable[[], None] | None = None,
-                performance_time: bool = False) -> int:
+                performance_time: bool = False,
+                monitor: tuple[Any, Any] | None = None) -> int:
     """Run a live session with console output; returns the exit status.
+
+    ``monitor``: ``(feed, server)`` of :func:`start_monitor`; the server is stopped when
+    the session ends.
 
     ``performance_time``: print each cut's ``t=`` as its boundary frame over the source's
     nominal rate (the performance's own clock, for a replay sent faster than real time)
     instead of seconds since the session started."""
     from rtseg.live import LiveSession
     console = Console(print_cuts=cfg["output.jsonl"] != "-", status=not quiet)
-    session = LiveSession(source, cfg, listeners=[console], duration=duration,
-                          on_start=lambda line: setattr(console, "banner", line))
-    console.session_stats = lambda: session.stats
-    if performance_time:
-        console.cut_time = lambda ev: ev.frame / session.frame_rate
-        console.behaviour_time = lambda ev: ev.decided_frame / session.frame_rate
     try:
+        session = LiveSession(source, cfg, listeners=[console], duration=duration,
+                              monitor=monitor[0] if monitor else None,
+                              on_start=lambda line: setattr(console, "banner", line))
+        console.session_stats = lambda: session.stats
+        if performance_time:
+            console.cut_time = lambda ev: ev.frame / session.frame_rate
+            console.behaviour_time = lambda ev: ev.decided_frame / session.frame_rate
         if before_run is not None:
             before_run()
         summary = session.run()
     finally:
         console.finish()
+        if monitor is not None:
+            monitor[1].stop()
     print(summary.text(), file=sys.stderr, flush=True)
     return 0
 
@@ -285,7 +316,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     from rtseg.drivers import SourceError
     try:
-        return run_session(url, cfg, args.duration, args.quiet)
+        monitor = start_monitor(getattr(args, "monitor", None), "rtseg live")
+        return run_session(url, cfg, args.duration, args.quiet, monitor=monitor)
     except (ConfigError, SourceError) as exc:
         print(f"rtseg live: {exc}", file=sys.stderr)
         return 2
