@@ -50,3 +50,41 @@ def test_axis_steps_match_the_text_source():
     doc = json.loads(r.stdout)
     assert set(doc) == {"4k_local", "4k_global", "64k_local", "64k_global"}
     assert all(row["total"] > 0 for row in doc.values())
+
+
+def test_lopo_on_a_folder_of_two_people(tmp_path):
+    """benchmarks/lopo.py on a source folder laid out like hdm05 (two people): each person
+    held out, a choice per fold, per-source and pooled figures; a missing folder is exit 2."""
+    import shutil
+    src = Path(__file__).resolve().parents[2] / "shared" / "data" / "hdm05"
+    if not (src / "index.tsv").is_file():
+        import pytest
+        pytest.skip(f"{src} absent (a folder laid out like ../shared/data/hdm05)")
+    one = tmp_path / "two"
+    (one / "amc").mkdir(parents=True)
+    rows = (src / "index.tsv").read_text().splitlines()
+    head = rows[0].split("\t")
+    subj, take, beh = head.index("subject"), head.index("take"), head.index("behaviour")
+    keep, per = [rows[0]], {}
+    for r in rows[1:]:
+        f = r.split("\t")
+        if f[subj] in ("bd", "bk") and per.setdefault((f[subj], f[beh]), 0) < 2 and \
+                f[beh] in ("jog", "squat", "kick", "hop"):
+            per[(f[subj], f[beh])] += 1
+            keep.append(r)
+            shutil.copy(src / "amc" / f"{f[take]}.amc", one / "amc")
+    for s in ("bd", "bk"):
+        shutil.copy(src / "amc" / f"{s}.asf", one / "amc")
+    (one / "index.tsv").write_text("\n".join(keep) + "\n")
+    r = _run("lopo.py", str(one), "--per-person", "1", "--cache", str(tmp_path / "cache"),
+             "--json")
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    assert doc["people"] == ["two:bd", "two:bk"]
+    # held-out units: a person with same-person performances, or a mixed performance
+    assert len(doc["choices"]) >= 2
+    assert all(u.startswith("two:") or u.startswith("two/seed0/mixed") for u in doc["choices"])
+    for key in ("held_out", "shipped"):
+        assert 0.0 <= doc[key]["pooled"]["f1"] <= 1.0 and doc[key]["pooled"]["transitions"] > 0
+        assert set(doc[key]["sources"]) == {"two"}
+    assert _run("lopo.py", str(tmp_path / "nowhere")).returncode == 2
