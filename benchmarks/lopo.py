@@ -10,9 +10,12 @@ DIR is laid out like ``../shared/data``: ``cmu/`` (full labelled performances, o
 per subject number) and any number of single-behaviour source folders laid out like
 ``cmu_single/`` (``index.tsv`` with take, subject, format, behaviour; ``bvh/``, ``amc/``),
 e.g. ``cmu_single``, ``hdm05``, ``bandai``.  A folder laid out like one source alone works
-too.  From each source ``rtseg.splice`` builds same-person performances (``--per-person``
-per person and seed, cached under ``--cache``), so every person of every source is a
-unit; the cmu takes of one subject are one person.
+too.  From each source ``rtseg.splice`` builds same-person and mixed performances
+(``--per-person`` x people of each kind per seed, cached under ``--cache``; a source of one
+person gives same-person ones only).  Held-out units: each person with same-person
+performances (the cmu takes of one subject are one person), and each mixed performance
+holding someone who has none (a person with one behaviour per format); a unit's training
+set shares nobody with it.  Mixed performances of people who have their own are left out.
 
 Every performance goes once through the live pipeline (``rtseg.online_eval.fed_features``:
 the features ``rtseg live`` feeds its detectors); every parameter set of the grid then runs
