@@ -152,24 +152,33 @@ def examples_from_dir(data_dir: str | Path, config: Any,
 def learn(examples: Sequence[Example], profile: str | None = None,
           threshold: float | None = None, metric: str | None = None,
           **windows: float) -> tuple[Library, list[str]]:
-    """A library from ``examples`` of one feature profile (``profile``, default the most
-    common one among them; examples of other profiles are left out and listed).
+    """A library from ``examples`` of one feature profile (``profile``, default the one
+    with the most examples named by a word, then the most examples; examples of other
+    profiles are left out and listed).  A library in which a behaviour would be named by a
+    number (labels that are only ids, such as the tsseg4d states) is refused: ValueError.
     ``metric``: the library's distance (``rtseg.library.METRICS``; default
     ``DEFAULT_METRIC``).  ``windows``: ``LibraryBuilder`` window options.  Returns
     (library, notes)."""
     if not examples:
         raise ValueError("no labelled examples to learn from")
     if profile is None:
-        counts: dict[str, int] = {}
+        counts: dict[str, tuple[int, int]] = {}
         for e in examples:
-            counts[e.profile] = counts.get(e.profile, 0) + 1
-        profile = max(counts, key=lambda p: (counts[p], p))
+            named, n = counts.get(e.profile, (0, 0))
+            counts[e.profile] = (named + (not e.name.isdigit()), n + 1)
+        profile = max(counts, key=lambda p: (*counts[p], p))
     use = [e for e in examples if e.profile == profile]
     notes = [f"{e.take} [{e.frames[0]}:{e.frames[1]}) {e.name}: feature profile "
              f"{e.profile!r}, not {profile!r}; left out" for e in examples if e.profile != profile]
     if not use:
         raise ValueError(f"no example has feature profile {profile!r} "
                          f"(they have {', '.join(sorted({e.profile for e in examples}))})")
+    numbered = sorted({e.name for e in use if e.name.isdigit()}, key=int)
+    if numbered:
+        raise ValueError(f"{len(numbered)} behaviour(s) would be named by a number "
+                         f"({', '.join(numbered[:5])}{', ...' if len(numbered) > 5 else ''}: "
+                         f"labels that are only ids); learn from takes whose labels name "
+                         f"the behaviours, or leave those takes out")
     b = LibraryBuilder(profile, use[0].X.shape[1], use[0].frame_rate, **windows)
     for e in use:
         i, j = e.rows()

@@ -689,3 +689,22 @@ def test_library_benchmark_refuses_bad_folders_in_one_line(tmp_path):
     p = run("mocap6", "--by-person", str(one))
     assert p.returncode == 2, p.stderr
     assert len(p.stderr.strip().splitlines()) == 1 and "two people" in p.stderr, p.stderr
+
+
+def test_learn_prefers_named_examples_and_refuses_numbered_names():
+    """A folder whose four-channel takes carry only state ids (tsseg4d) beside named takes:
+    the named profile is learned; a library that would name behaviours by numbers is refused."""
+    from rtseg.library_learn import Example, learn
+    rng = np.random.default_rng(4)
+
+    def ex(name: str, profile: str, dims: int, k: int) -> Example:
+        X = rng.normal(size=(720, dims)) * 0.05 + k
+        return Example(name, f"t{k}", f"p{k}", X, np.arange(720), (0, 720), profile, 120.0)
+
+    named = [ex("walk", "canonical", 8, 0), ex("squat", "canonical", 8, 1)]
+    ids = [ex(str(i), "tsseg4d", 4, 2 + i) for i in range(4)]
+    lib, notes = learn(named + ids)
+    assert lib.profile == "canonical" and sorted(lib.behaviour_names) == ["squat", "walk"]
+    assert sum("left out" in n for n in notes) == 4
+    with pytest.raises(ValueError, match="named by a number"):
+        learn(ids)
