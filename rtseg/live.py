@@ -439,7 +439,17 @@ class LiveSession(SessionEvents, SessionHealth):
         dur = now - self.session_start if self.session_start else 0.0
         src_stats = self.source.stats.as_dict() if getattr(self.source, "stats", None) else {}
         rec = getattr(self.recorder, "dir", None) or (self.config["recording.dir"] or None)
+        targets = {}
+        if self.publishers is not None and hasattr(self.publishers, "stats"):
+            try:
+                targets = self.publishers.stats()
+            except Exception as exc:  # pragma: no cover - defensive
+                log.warning("publisher counters unavailable: %s", exc)
+        rec_stats = getattr(self.recorder, "stats", None)
         summary = SessionSummary(
+            targets=targets, recording_failure=getattr(self.recorder, "failure", None),
+            recording_frames=getattr(self.recorder, "frames_written", None),
+            recording_cuts=getattr(rec_stats, "cuts", None),
             duration_s=dur, frames_received=st.frames_received,
             frames_processed=st.frames_processed,
             frame_rate=self._input_rate(),
