@@ -87,6 +87,7 @@ from rtseg.outputs import build_publishers, log_publishers, wire_methods
 from rtseg.pipeline import (DEFAULT_FRAME_RATE, Pipeline, PipelineCut, PipelineStats,
                             _blas_limit, detector_params, make_detectors, replay_frames,
                             replay_session)
+from rtseg.rate_check import DeclaredRateCheck
 from rtseg.ringbuffer import RingBuffer
 from rtseg.session_config import SessionConfig, load_session_config
 from rtseg.session_stats import FloatRing, LiveStats, SessionSummary, percentile
@@ -184,6 +185,7 @@ class LiveSession(SessionEvents, SessionHealth):
         self.wire: frozenset[str] = frozenset()
         self._log_pubs: Any = None
         self.stop_reason = "running"
+        self._rate_check: DeclaredRateCheck | None = None
         self._warn_at: dict[str, float] = {}
 
     # ---------------------------------------------------------------- control
@@ -225,6 +227,7 @@ class LiveSession(SessionEvents, SessionHealth):
         if not rate:
             log.warning("source has no nominal frame rate; assuming %.0f Hz", DEFAULT_FRAME_RATE)
         self.frame_rate = float(rate or DEFAULT_FRAME_RATE)
+        self._rate_check = DeclaredRateCheck(float(rate)) if rate else None
         self.pipeline = Pipeline(names, parents, space, self.frame_rate, self.config)
         self.primary, self.wire = wire_methods(self.config, self.pipeline.detectors)
         J = len(names)
@@ -285,6 +288,10 @@ class LiveSession(SessionEvents, SessionHealth):
                             self.stats.record_errors += 1
                             self._warn("record", "recording a frame failed: %s", exc)
                 ring.append(q, recv, stime, seq, v)
+                if self._rate_check is not None and not self._rate_check.done:
+                    problem = self._rate_check.feed(recv, stime, seq)
+                    if problem is not None:
+                        log.warning("%s", problem)
                 if self._first_recv is None:
                     self._first_recv = recv
                     self._first_src = stime if stime is not None and np.isfinite(stime) else None
