@@ -27,7 +27,10 @@ class SourceStats:
     gaps: sequence discontinuities seen; reconnects: device reopened after loss;
     bad_values: NaN / non-unit quaternions refused; unknown_names: bone or sensor names not
     in the profile; bad_messages: wrongly typed or short messages; refused_senders:
-    datagrams from senders outside a network source's ``allow=`` list (dropped unread).
+    datagrams from senders outside a network source's ``allow=`` list (dropped unread);
+    other_senders: datagrams from a second sender while a network source follows one
+    (dropped unread); clock_restarts: times the source's clock went back or jumped ahead
+    by more than a few seconds, each starting a new segment of the reported clock.
     """
     frames_ok: int = 0
     dropped: int = 0
@@ -39,6 +42,8 @@ class SourceStats:
     bad_messages: int = 0
     crc_failures: int = 0
     refused_senders: int = 0
+    other_senders: int = 0
+    clock_restarts: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)

@@ -30,7 +30,8 @@ Errors
 ------
 :func:`parse_packet` raises :class:`OscParseError` (a ``ValueError``) on malformed bytes;
 :meth:`VmcAssembler.feed` never raises on any input: it counts and drops (``corrupt``
-for malformed OSC, ``bad_messages`` for known addresses with too few / wrongly typed
+for malformed OSC -- a bundle whose element sizes do not tile it, as a truncated datagram's
+do not, is dropped whole before any of its elements is used -- ``bad_messages`` for known addresses with too few / wrongly typed
 arguments, ``unknown_names`` for bone names not in the profile, ``bad_values`` for NaN /
 non-unit quaternions and non-finite positions or times).
 """
@@ -55,6 +56,32 @@ from rtseg.drivers.codec_vmc_template import _Template, build_template
 from rtseg.frame import Frame
 
 _MISSING = object()
+
+
+def bundle_structure_error(data: bytes, start: int, end: int, depth: int) -> str | None:
+    """Why the OSC bundle in ``data[start:end]`` is malformed as a structure (header,
+    element sizes that do not tile it exactly, nesting too deep), or None when every
+    element, nested bundles included, lies whole inside it.  Element contents are not
+    parsed here; this walk lets a truncated bundle be dropped before any element is used."""
+    if depth >= _MAX_DEPTH:
+        return f"bundles nested deeper than {_MAX_DEPTH}"
+    if end - start < 16:
+        return "truncated bundle header"
+    pos = start + 16
+    unpack_i = _I32.unpack_from
+    while pos < end:
+        if pos + 4 > end:
+            return f"truncated bundle element size at byte {pos}"
+        size = unpack_i(data, pos)[0]
+        pos += 4
+        if size <= 0 or size & 3 or pos + size > end:
+            return f"bad bundle element size {size} at byte {pos - 4}"
+        if data.startswith(_BUNDLE, pos):
+            problem = bundle_structure_error(data, pos, pos + size, depth + 1)
+            if problem is not None:
+                return problem
+        pos += size
+    return None
 
 
 class VmcAssembler(VmcFrameRules):
@@ -87,7 +114,9 @@ class VmcAssembler(VmcFrameRules):
     they send every profile bone in each frame (rule 4 closes the frame before the next T).
 
     Per frame: ``quats`` (J, 4) -- bones not received hold their last value (identity before
-    the first) with ``valid`` False; ``source_time`` from T; ``seq`` counts frames from 0,
+    the first) with ``valid`` False; ``source_time`` from T, monotonic across sender restarts: when T goes back or jumps ahead
+    by more than ``MAX_CLOCK_JUMP`` s the reported clock starts a new segment one frame
+    period after the last reported time (warned, counted in ``stats.clock_restarts``); ``seq`` counts frames from 0,
     advancing by the number of sender frames elapsed when T jumps by more than 1.75 of the
     sender's frame period (estimated from T), so frames lost on the network show up as
     sequence gaps (and in ``stats.gaps`` / ``stats.dropped``); ``root_position`` = Root/Pos position + root rotation applied to the root bone's
@@ -126,6 +155,11 @@ class VmcAssembler(VmcFrameRules):
             self._corrupt(f"datagram of {n} bytes is not a positive multiple of 4")
             return out
         if data.startswith(_BUNDLE):
+            problem = bundle_structure_error(data, 0, n, 0)
+            if problem is not None:
+                # dropped whole: no element of a bundle that does not parse is used
+                self._corrupt(f"bundle dropped whole: {problem}")
+                return out
             if self.fast and self._n_got == 0 and self._learned and self.t_last and \
                     self._sends_t:
                 tpl = self._templates.get(n, _MISSING)
@@ -365,5 +399,5 @@ __all__ = [
     "BONE_ADDRESS", "ROOT_ADDRESS", "TIME_ADDRESS", "OK_ADDRESS", "DEFAULT_MAX_DATAGRAM",
     "HUMAN_BODY_BONES", "canonical_bone_name", "OscParseError", "OscMessage",
     "parse_message", "parse_packet", "encode_message", "encode_bundle", "pack_bundles",
-    "encode_pose_message", "encode_frame", "VmcAssembler",
+    "encode_pose_message", "encode_frame", "VmcAssembler", "bundle_structure_error",
 ]

@@ -24,6 +24,10 @@ from rtseg.frame import Frame
 
 log = logging.getLogger("rtseg.drivers.vmc")
 
+#: A step of ``/VMC/Ext/T`` larger than this (s), or any step back, is a clock restart:
+#: reported times continue from the last one instead of following T.
+MAX_CLOCK_JUMP = 3.0
+
 
 def _rotate(q: Sequence[float], v: Sequence[float]) -> tuple[float, float, float]:
     """Vector ``v`` rotated by unit quaternion ``q`` (scalar-last)."""
@@ -87,6 +91,8 @@ class VmcFrameRules:
         self._seq = 0
         self._prev_t: float | None = None      # T of the last frame closed with one
         self._period: float | None = None      # sender frame period estimated from T, s
+        self._t_offset = 0.0                   # reported time = T + offset (clock segments)
+        self._last_reported: float | None = None
         self._out: list[Frame] = []
         self._warned: dict[str, float] = {}
         self._unknown_seen: set[bytes] = set()
@@ -290,6 +296,18 @@ class VmcFrameRules:
                           f"lost on the way")
         return k
 
+    def _restart_clock(self, t: float, dt: float) -> None:
+        """``/VMC/Ext/T`` went back or jumped by ``dt`` s: a new segment of the reported
+        clock, continuing one frame period after the last reported time."""
+        step = self._period or 0.0
+        last = self._last_reported if self._last_reported is not None else self._prev_t
+        self._t_offset = (last + step) - t
+        self.stats.clock_restarts += 1
+        log.warning("VMC: /VMC/Ext/T %s by %.3f s (sender restarted?): reported times "
+                    "continue from %.3f s (clock segment %d)",
+                    "went back" if dt < 0 else "jumped ahead", abs(dt), last + step,
+                    self.stats.clock_restarts + 1)
+
     @property
     def frame_period(self) -> float | None:
         """The sender's frame period in seconds estimated from ``/VMC/Ext/T``, or None."""
@@ -312,8 +330,14 @@ class VmcFrameRules:
         t = self._t
         if t is not None:
             if self._prev_t is not None:
-                self._seq += self._frames_elapsed(t - self._prev_t) - 1
+                dt = t - self._prev_t
+                if dt < 0.0 or dt > MAX_CLOCK_JUMP:
+                    self._restart_clock(t, dt)
+                else:
+                    self._seq += self._frames_elapsed(dt) - 1
             self._prev_t = t
+            t = t + self._t_offset
+            self._last_reported = t
         self._out.append(Frame(recv_time=self._now, quats=quats, valid=valid,
                                source_time=t, seq=self._seq, root_position=rp))
         self._seq += 1

@@ -39,6 +39,14 @@ URL options (VMC)
              (``allow=192.168.1.20,10.0.0.0/24``; default: any sender that can reach the
              bound address).  Datagrams from others are dropped before decoding, counted in
              ``stats.refused_senders`` and logged once per sender address.  (Both formats.)
+``senders``  one stream per sender (both formats): ``one`` (default) follows the first
+             sender (address and port) and refuses datagrams from any other, counted in
+             ``stats.other_senders`` with one warning naming each; once the followed sender
+             has been silent for ``SENDER_HANDOVER`` s (a restarted sender gets a new port)
+             the next one is followed.  ``newest`` follows the sender that started last (a
+             new sender takes over at once; the open frame is closed first).  ``merge``
+             decodes every sender's datagrams as one stream (only right when they send
+             parts of one skeleton).
 
 Frames: ``space = "local"`` (parent-relative rotations), joints in suit order,
 right-handed Y-up scalar-last; ``recv_time`` monotonic s when the frame closed,
@@ -71,8 +79,12 @@ FORMATS = ("vmc", "vrchat")
 #: address listened on when the URL names none: loopback only
 DEFAULT_HOST = "127.0.0.1"
 OPTIONS = ("format", "suit", "quiet", "queue", "rate", "rcvbuf", "tolerance", "time_order",
-           "burst", "allow")
-VRCHAT_OPTIONS = ("format", "quiet", "queue", "rate", "rcvbuf", "root", "allow")
+           "burst", "allow", "senders")
+VRCHAT_OPTIONS = ("format", "quiet", "queue", "rate", "rcvbuf", "root", "allow", "senders")
+#: ``senders=`` policies (see module docstring)
+SENDER_POLICIES = ("one", "newest", "merge")
+#: seconds of silence from the followed sender after which another sender is followed
+SENDER_HANDOVER = 1.0
 #: distinct refused senders remembered (each is logged once); later ones are only counted
 MAX_REFUSED_LOGGED = 1024
 
@@ -172,8 +184,19 @@ class OscUdpSource(QueuedSource):
     _log = log
 
     def _start(self, host: str, port: int, quiet: float, queue_size: int,
-               rcvbuf: int | None, allow: tuple[Network, ...] | None = None) -> None:
+               rcvbuf: int | None, allow: tuple[Network, ...] | None = None,
+               senders: str = "merge") -> None:
+        """Bind and start the reader.  ``senders``: the ``senders=`` policy; ``merge`` for
+        sources whose protocol keys streams itself (MVN characters, actors)."""
+        if senders not in SENDER_POLICIES:
+            raise SourceError(f"osc:// senders={senders!r}: expected one of "
+                              f"{', '.join(SENDER_POLICIES)}")
         self.allow = allow
+        self.senders = senders
+        #: (host, port) of the sender followed, None before the first datagram
+        self.sender: tuple | None = None
+        self._sender_last = -math.inf
+        self._others: set[tuple] = set()
         self._refused: set[str] = set()
         self._queue = FrameQueue(queue_size)   # drop policy: the oldest frame goes
         self._stop = threading.Event()
@@ -231,8 +254,11 @@ class OscUdpSource(QueuedSource):
                 if self.allow is not None and not sender_allowed(sender[0], self.allow):
                     self._refuse(sender[0])
                     continue
+                now = time.monotonic()
+                if self.senders != "merge" and not self._follow(sender[:2], now):
+                    continue
                 try:
-                    frames = asm.feed(data, time.monotonic())
+                    frames = asm.feed(data, now)
                 except Exception:  # a decoder bug must not kill the live loop
                     self.count("corrupt")
                     log.exception("OSC: datagram of %d bytes crashed the decoder; dropped",
@@ -240,6 +266,32 @@ class OscUdpSource(QueuedSource):
                     continue
             for frame in frames:
                 self._put(frame)
+
+    def _follow(self, sender: tuple, now: float) -> bool:
+        """Whether a datagram from ``sender`` belongs to the stream followed (switching to
+        it when the policy says so); a refused one is counted in ``other_senders``."""
+        if sender == self.sender:
+            self._sender_last = now
+            return True
+        if self.sender is None or self.senders == "newest" or \
+                now - self._sender_last >= SENDER_HANDOVER:
+            if self.sender is not None:
+                for frame in self._asm.flush(now, force=True):
+                    self._put(frame)
+                log.warning("OSC port %d: now following sender %s:%s (was %s:%s)", self.port,
+                            sender[0], sender[1], self.sender[0], self.sender[1])
+            self.sender = sender
+            self._sender_last = now
+            self._others.discard(sender)
+            return True
+        self.count("other_senders")
+        if sender not in self._others and len(self._others) < MAX_REFUSED_LOGGED:
+            self._others.add(sender)
+            log.warning("OSC port %d: a second sender %s:%s refused while following %s:%s "
+                        "(senders=one; use senders=newest or senders=merge to change); its "
+                        "datagrams are counted in other_senders", self.port, sender[0],
+                        sender[1], self.sender[0], self.sender[1])
+        return False
 
     def _refuse(self, host: str) -> None:
         """Count a datagram from a sender outside ``allow``; log each sender once."""
@@ -282,7 +334,7 @@ class OscVmcSource(OscUdpSource):
                  queue_size: int = 256, rate: float | None = None,
                  rcvbuf: int | None = None, tolerance: float = 0.05,
                  time_order: str = "last", burst: float = 0.004,
-                 allow: tuple[Network, ...] | None = None) -> None:
+                 allow: tuple[Network, ...] | None = None, senders: str = "one") -> None:
         super().__init__()
         if bone_names is None:
             bones, pars = load_suit(suit)
@@ -301,7 +353,7 @@ class OscVmcSource(OscUdpSource):
             raise SourceError(f"time_order must be 'last' or 'first', not {time_order!r}")
         self._asm = VmcAssembler(bones, quiet=quiet, unit_tolerance=tolerance,
                                  time_order=time_order, burst=burst, stats=self.stats)
-        self._start(host, port, quiet, queue_size, rcvbuf, allow)
+        self._start(host, port, quiet, queue_size, rcvbuf, allow, senders)
 
     @property
     def ok_state(self) -> tuple[int, ...] | None:
@@ -320,7 +372,7 @@ class OscVrchatSource(OscUdpSource):
     def __init__(self, host: str = DEFAULT_HOST, port: int = VRCHAT_PORT, *,
                  quiet: float = 0.02, queue_size: int = 256, rate: float | None = None,
                  rcvbuf: int | None = None, root: str | None = None,
-                 allow: tuple[Network, ...] | None = None) -> None:
+                 allow: tuple[Network, ...] | None = None, senders: str = "one") -> None:
         super().__init__()
         if not quiet > 0:
             raise SourceError(f"quiet must be positive seconds, got {quiet}")
@@ -331,7 +383,7 @@ class OscVrchatSource(OscUdpSource):
             self._asm = VrchatAssembler(quiet=quiet, root=root, stats=self.stats)
         except ValueError as exc:
             raise SourceError(f"osc:// format=vrchat: {exc}") from None
-        self._start(host, port, quiet, queue_size, rcvbuf, allow)
+        self._start(host, port, quiet, queue_size, rcvbuf, allow, senders)
 
 
 def _parse_location(location: str, default_port: int = DEFAULT_PORT,
@@ -399,13 +451,17 @@ def open_url(location: str, options: dict[str, str]) -> OscUdpSource:
                           f"{', '.join(FORMATS)}")
     check_options("osc", options, OPTIONS if fmt == "vmc" else VRCHAT_OPTIONS, fmt)
     allow = allow_option(options)
+    senders = options.get("senders", "one").lower() or "one"
+    if senders not in SENDER_POLICIES:
+        raise SourceError(f"osc:// senders={senders!r}: expected one of "
+                          f"{', '.join(SENDER_POLICIES)}")
     if fmt == "vrchat":
         host, port = _parse_location(location, VRCHAT_PORT)
         return OscVrchatSource(
             host, port, quiet=_num(options, "quiet", 0.02),
             queue_size=_num(options, "queue", 256, int), rate=_num(options, "rate", None),
             rcvbuf=_num(options, "rcvbuf", None, int), root=options.get("root") or None,
-            allow=allow)
+            allow=allow, senders=senders)
     host, port = _parse_location(location)
     return OscVmcSource(
         host, port, suit=options.get("suit", "default17") or "default17",
@@ -413,7 +469,7 @@ def open_url(location: str, options: dict[str, str]) -> OscUdpSource:
         rate=_num(options, "rate", None), rcvbuf=_num(options, "rcvbuf", None, int),
         tolerance=_num(options, "tolerance", 0.05),
         time_order=options.get("time_order", "last").lower() or "last",
-        burst=_num(options, "burst", 0.004), allow=allow)
+        burst=_num(options, "burst", 0.004), allow=allow, senders=senders)
 
 
 __all__ = ["OscUdpSource", "OscVmcSource", "OscVrchatSource", "open_url", "load_suit",

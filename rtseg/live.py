@@ -90,6 +90,7 @@ from rtseg.outputs import build_publishers, log_publishers, wire_methods
 from rtseg.pipeline import (DEFAULT_FRAME_RATE, Pipeline, PipelineCut, PipelineStats,
                             _blas_limit, detector_params, make_detectors, replay_frames,
                             replay_session)
+from rtseg.rate_check import DeclaredRateCheck
 from rtseg.ringbuffer import RingBuffer
 from rtseg.session_config import SessionConfig, load_session_config
 from rtseg.session_stats import FloatRing, LiveStats, SessionSummary, percentile
@@ -198,6 +199,7 @@ class LiveSession(SessionEvents, SessionHealth):
         self.wire: frozenset[str] = frozenset()
         self._log_pubs: Any = None
         self.stop_reason = "running"
+        self._rate_check: DeclaredRateCheck | None = None
         self._warn_at: dict[str, float] = {}
 
     # ---------------------------------------------------------------- control
@@ -239,6 +241,7 @@ class LiveSession(SessionEvents, SessionHealth):
         if not rate:
             log.warning("source has no nominal frame rate; assuming %.0f Hz", DEFAULT_FRAME_RATE)
         self.frame_rate = float(rate or DEFAULT_FRAME_RATE)
+        self._rate_check = DeclaredRateCheck(float(rate)) if rate else None
         self.pipeline = Pipeline(names, parents, space, self.frame_rate, self.config)
         if hasattr(self.pipeline.features, "summary"):
             line = self.pipeline.features.summary()
@@ -304,6 +307,10 @@ class LiveSession(SessionEvents, SessionHealth):
                             self.stats.record_errors += 1
                             self._warn("record", "recording a frame failed: %s", exc)
                 ring.append(q, recv, stime, seq, v)
+                if self._rate_check is not None and not self._rate_check.done:
+                    problem = self._rate_check.feed(recv, stime, seq)
+                    if problem is not None:
+                        log.warning("%s", problem)
                 if self._first_recv is None:
                     self._first_recv = recv
                     self._first_src = stime if stime is not None and np.isfinite(stime) else None
@@ -472,7 +479,17 @@ class LiveSession(SessionEvents, SessionHealth):
         dur = now - self.session_start if self.session_start else 0.0
         src_stats = self.source.stats.as_dict() if getattr(self.source, "stats", None) else {}
         rec = getattr(self.recorder, "dir", None) or (self.config["recording.dir"] or None)
+        targets = {}
+        if self.publishers is not None and hasattr(self.publishers, "stats"):
+            try:
+                targets = self.publishers.stats()
+            except Exception as exc:  # pragma: no cover - defensive
+                log.warning("publisher counters unavailable: %s", exc)
+        rec_stats = getattr(self.recorder, "stats", None)
         summary = SessionSummary(
+            targets=targets, recording_failure=getattr(self.recorder, "failure", None),
+            recording_frames=getattr(self.recorder, "frames_written", None),
+            recording_cuts=getattr(rec_stats, "cuts", None),
             duration_s=dur, frames_received=st.frames_received,
             frames_processed=st.frames_processed,
             frame_rate=self._input_rate(),

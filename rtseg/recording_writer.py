@@ -35,7 +35,8 @@ log = logging.getLogger("rtseg.recording")
 class RecorderStats:
     """frames: records written or buffered; flushes: buffer writes; bad_frames: frames
     refused (wrong shape); write_errors: failed writes (frames lost in them are counted in
-    lost_frames); cuts / events: lines appended."""
+    lost_frames); cuts / events: lines appended; lost_cuts / lost_events: lines not written
+    (a write failed, or the recording had already failed)."""
     frames: int = 0
     flushes: int = 0
     bad_frames: int = 0
@@ -43,6 +44,8 @@ class RecorderStats:
     lost_frames: int = 0
     cuts: int = 0
     events: int = 0
+    lost_cuts: int = 0
+    lost_events: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
@@ -72,16 +75,38 @@ def _json_line(obj: Mapping[str, Any]) -> str:
     return json.dumps(fix(dict(obj)), default=_json_default, ensure_ascii=False) + "\n"
 
 
-def _atomic_write_json(path: Path, obj: Mapping[str, Any]) -> None:
-    tmp = path.with_name(path.name + ".tmp")
+#: bytes the header file is padded to (JSON followed by spaces) when first written, so
+#: the final header can overwrite it in place on a full disk
+HEADER_RESERVE = 16384
+
+
+def _header_bytes(obj: Mapping[str, Any], pad_to: int = 0) -> bytes:
     data = json.dumps(obj, indent=1, default=_json_default, ensure_ascii=False).encode("utf-8")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    data += b"\n"
+    return data + b" " * max(0, pad_to - len(data))
+
+
+def _atomic_write_json(path: Path, obj: Mapping[str, Any], pad_to: int = 0) -> None:
+    """Write ``obj`` to ``path`` through ``path.tmp`` and a rename (the tmp file is removed
+    when the write fails).  Errors are OSErrors naming ``path``."""
+    tmp = path.with_name(path.name + ".tmp")
+    data = _header_bytes(obj, pad_to)
     try:
-        os.write(fd, data)
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-    os.replace(tmp, path)
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        try:
+            view = memoryview(data)
+            while view:
+                view = view[os.write(fd, view):]
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+    except OSError as exc:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
     try:
         dfd = os.open(path.parent, os.O_RDONLY)
         try:
@@ -165,10 +190,31 @@ class SessionRecorder:
             self.header["rtseg_version"] = rtseg.__version__
         except Exception:   # noqa: BLE001
             pass
-        _atomic_write_json(self.dir / HEADER_FILE, self.header)
+        #: None while every write succeeded; else the first failure: ``path``, ``error``,
+        #: ``at_frame`` (frames the recording holds: frames 0..at_frame-1 were written)
+        self.failure: dict[str, Any] | None = None
+        _atomic_write_json(self.dir / HEADER_FILE, self.header, pad_to=HEADER_RESERVE)
         self._fd = os.open(self.dir / FRAMES_FILE, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
         self._cuts = open(self.dir / CUTS_FILE, "a", encoding="utf-8")
         self._events = open(self.dir / EVENTS_FILE, "a", encoding="utf-8")
+
+    def _fail(self, path: Path, exc: BaseException) -> None:
+        """The first write error: one error line naming the file and the cause; from now
+        on nothing more is written (later frames and lines are counted as lost) so what
+        the folder holds is a consistent, shorter session."""
+        if self.failure is not None:
+            return
+        at = self._size // self.record_size
+        cause = getattr(exc, "strerror", None) or str(exc)
+        self.failure = {"path": str(path), "error": cause, "at_frame": at}
+        log.error("session %s: recording failed at frame %d: writing %s failed: %s; the "
+                  "recording holds %d frames and %d cuts, later frames and cuts are not "
+                  "recorded", self.dir, at, path, cause, at, self.stats.cuts)
+
+    @property
+    def frames_written(self) -> int:
+        """Frames in ``frames.bin`` so far (excluding the unflushed buffer)."""
+        return self._size // self.record_size
 
     # -- helpers ------------------------------------------------------------------------
     def _warn(self, key: str, msg: str) -> None:
@@ -217,7 +263,7 @@ class SessionRecorder:
                 self._warn("bad", f"frame not recorded: {exc}")
             return
         with self._lock:
-            if self._closed:
+            if self._closed or self.failure is not None:
                 self.stats.lost_frames += 1
                 return
             self._buf += body
@@ -259,13 +305,13 @@ class SessionRecorder:
             self.stats.write_errors += 1
             lost = n - written // self.record_size
             self.stats.lost_frames += lost
-            self._warn("write", f"writing {FRAMES_FILE} failed ({exc}); {lost} frames lost")
-            # Cut a partial record off so later records stay aligned.
+            # Cut a partial record off so the file holds whole records only.
             try:
                 os.ftruncate(self._fd, self._size + (written // self.record_size) * self.record_size)
                 self._size += (written // self.record_size) * self.record_size
             except OSError:
                 pass
+            self._fail(self.dir / FRAMES_FILE, exc)
 
     # -- events ---------------------------------------------------------------------------
     def _append_line(self, fh: Any, obj: Mapping[str, Any], counter: str) -> None:
@@ -274,8 +320,10 @@ class SessionRecorder:
         except (TypeError, ValueError) as exc:
             self._warn("encode", f"event not recorded: {exc}")
             return
+        lost = "lost_" + counter
         with self._lock:
-            if self._closed:
+            if self._closed or self.failure is not None:
+                setattr(self.stats, lost, getattr(self.stats, lost) + 1)
                 return
             try:
                 fh.write(line)
@@ -285,7 +333,8 @@ class SessionRecorder:
                 setattr(self.stats, counter, getattr(self.stats, counter) + 1)
             except (OSError, ValueError) as exc:
                 self.stats.write_errors += 1
-                self._warn("write-events", f"writing {Path(fh.name).name} failed: {exc}")
+                setattr(self.stats, lost, getattr(self.stats, lost) + 1)
+                self._fail(self.dir / Path(fh.name).name, exc)
 
     def record_cut(self, ev: CutEvent) -> None:
         """Append a cut event to ``cuts.jsonl`` (written and flushed at once)."""
@@ -328,17 +377,32 @@ class SessionRecorder:
             for fh in (self._cuts, self._events):
                 try:
                     fh.close()
-                except OSError:
-                    pass
+                except OSError as exc:
+                    self._fail(self.dir / Path(fh.name).name, exc)
             self.header.update({
                 "closed": True, "end_wall_time": time.time(),
                 "duration_s": time.monotonic() - self.start_monotonic,
-                "frames": self.stats.frames - self.stats.lost_frames,
+                "frames": self.frames_written,
+                "cuts": self.stats.cuts,
+                "recording_failed": self.failure,
                 "stats": self.stats.as_dict()})
+            path = self.dir / HEADER_FILE
             try:
-                _atomic_write_json(self.dir / HEADER_FILE, self.header)
+                _atomic_write_json(path, self.header)
             except OSError as exc:
-                log.warning("session %s: cannot finalise %s: %s", self.dir, HEADER_FILE, exc)
+                # a full disk: overwrite the padded header in place (no new blocks needed)
+                data = _header_bytes(self.header)
+                try:
+                    if len(data) > path.stat().st_size:
+                        raise OSError(exc.errno, "final header larger than the space "
+                                      "reserved for it", str(path))
+                    with open(path, "r+b") as fh:
+                        fh.write(data + b" " * (path.stat().st_size - len(data)))
+                        fh.flush()
+                        os.fsync(fh.fileno())
+                except OSError as exc2:
+                    log.error("session %s: cannot finalise %s: %s", self.dir, path,
+                              exc2.strerror or exc2)
 
     def __enter__(self) -> "SessionRecorder":
         return self

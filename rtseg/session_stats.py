@@ -109,6 +109,14 @@ class SessionSummary:
     gated: dict[str, int] = field(default_factory=dict)
     #: the identity tracker's counters (``rtseg.identity.IdentityStats``; {} when off)
     identity: dict[str, int] = field(default_factory=dict)
+    #: per output target (``osc:``/``osc-tcp:``/``jsonl:``), its counters after closing:
+    #: messages sent, dropped (known not delivered, unsent at close included), errors
+    targets: dict[str, dict[str, int]] = field(default_factory=dict)
+    #: the recorder's first write failure (``path``, ``error``, ``at_frame``) or None
+    recording_failure: dict[str, Any] | None = None
+    #: frames and cuts the recording holds (None without a recording)
+    recording_frames: int | None = None
+    recording_cuts: int | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -121,16 +129,51 @@ class SessionSummary:
                 f"{self.frames_received} frames received ({self.frame_rate:.1f}/s), "
                 f"{self.frames_processed} processed, {self.dropped} dropped, "
                 f"{input_text(self.input)}, "
-                f"{self.cuts} cuts ({methods}; {self.wire_cuts} sent over OSC"
+                f"{self.cuts} cuts ({methods}; {targets_text(self.targets)}"
                 + "".join(f"; {k} gate held back {v}" for k, v in sorted(self.gated.items()))
                 + "), "
                 + identity_text(self.identity) +
                 f"processing latency {lat}, "
                 f"max lag {self.max_lag_ms:.1f} ms"
-                + (f", recording {self.recording}" if self.recording else ""))
+                + source_losses_text(self.source_stats)
+                + recording_text(self))
 
     def cut_latency_items(self) -> list[tuple[str, int]]:
         return sorted(self.cuts_by_method.items())
+
+
+#: source counters of refused or lost input, as the summary names them
+SOURCE_LOSSES = (("refused_senders", "refused by allow="), ("other_senders",
+                 "from a second sender"), ("clock_restarts", "source clock restarts"),
+                 ("corrupt", "corrupt"), ("bad_messages", "bad messages"),
+                 ("bad_values", "bad values"), ("reconnects", "reconnects"))
+
+
+def source_losses_text(stats: dict[str, int]) -> str:
+    """", source: 3 corrupt, 40 from a second sender" for the non-zero loss counters."""
+    parts = [f"{stats[k]} {what}" for k, what in SOURCE_LOSSES if stats.get(k)]
+    return f", source: {', '.join(parts)}" if parts else ""
+
+
+def targets_text(targets: dict[str, dict[str, int]]) -> str:
+    """What the OSC targets really did: messages sent / dropped / failed per target."""
+    osc = {k: v for k, v in targets.items() if not k.startswith("jsonl:")}
+    if not osc:
+        return "no OSC target"
+    return "; ".join(f"{k}: {v.get('sent', 0)} messages sent, {v.get('dropped', 0)} "
+                     f"dropped, {v.get('errors', 0) + v.get('failures', 0)} failed"
+                     for k, v in sorted(osc.items()))
+
+
+def recording_text(summary: "SessionSummary") -> str:
+    if not summary.recording:
+        return ""
+    f = summary.recording_failure
+    if f is None:
+        return f", recording {summary.recording}"
+    return (f", recording {summary.recording} FAILED at frame {f['at_frame']} "
+            f"(writing {f['path']}: {f['error']}); it holds {summary.recording_frames} "
+            f"frames and {summary.recording_cuts} cuts")
 
 
 def identity_text(counts: dict[str, int]) -> str:

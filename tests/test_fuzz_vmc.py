@@ -10,6 +10,7 @@ import math
 import struct
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pythonosc.osc_message import OscMessage as PyOscMessage
@@ -61,7 +62,13 @@ def check_assembler(chunks: list[bytes]) -> None:
             out += asm.feed(d, now + 2 + k)
     out += asm.flush(now + 100.0, force=True)
     last = out[-2:]
-    assert [f.source_time for f in last] == [1001.0, 1002.0]
+    # junk may have left T anywhere: the clean frames keep their spacing, and the reported
+    # clock never goes back (a step back in T starts a new clock segment)
+    assert last[1].source_time - last[0].source_time == pytest.approx(1.0, abs=1e-6)
+    times = [f.source_time for f in out if f.source_time is not None]
+    assert times == sorted(times)
+    if asm.stats.clock_restarts == 0:
+        assert [f.source_time for f in last] == [1001.0, 1002.0]
     for f, q in zip(last, Q[1:]):
         assert f.valid.all()
         d = np.minimum(np.abs(f.quats - q).max(-1), np.abs(f.quats + q).max(-1))

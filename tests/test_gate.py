@@ -120,7 +120,7 @@ def test_session_summary_counts_the_cuts_the_gate_held_back():
                        source_stats={}, pipeline={}, overruns=0, bad_frames=0, max_lag_ms=0.0,
                        cut_latency_ms_p50=None, cut_latency_ms_p99=None, recording=None,
                        stop_reason="test", wire_cuts=2, gated={"contrast": 3})
-    assert "2 cuts (contrast 2; 2 sent over OSC; contrast gate held back 3)" in s.text()
+    assert "2 cuts (contrast 2; no OSC target; contrast gate held back 3)" in s.text()
     assert s.as_dict()["gated"] == {"contrast": 3}
 
 

@@ -182,7 +182,7 @@ def test_bad_frames_are_counted_not_raised(tmp_path):
     assert read_session(tmp_path / "s").n_frames == 1
 
 
-def test_write_error_loses_frames_but_keeps_file_readable(tmp_path, monkeypatch):
+def test_write_error_ends_the_recording_and_keeps_file_readable(tmp_path, monkeypatch):
     rec = SessionRecorder(tmp_path / "s", NAMES, PARENTS, max_buffer_frames=5, flush_interval_s=60)
     frames = random_frames(15)
     for f in frames[:5]:
@@ -198,9 +198,12 @@ def test_write_error_loses_frames_but_keeps_file_readable(tmp_path, monkeypatch)
     for f in frames[10:]:
         rec.record_frame(f)
     rec.close()
-    assert rec.stats.write_errors == 1 and rec.stats.lost_frames == 5
+    # the first failure ends the recording: a shorter session, never one with a hole
+    assert rec.stats.write_errors == 1 and rec.stats.lost_frames == 10
+    assert rec.failure == {"path": str(tmp_path / "s" / FRAMES_FILE),
+                           "error": "No space left on device", "at_frame": 5}
     tk = read_session(tmp_path / "s")
-    assert list(tk.meta["seq"]) == [0, 1, 2, 3, -1, 10, 11, 12, 13, -1]
+    assert list(tk.meta["seq"]) == [0, 1, 2, 3, -1]
 
 
 def test_never_overwrites_a_recording(tmp_path):

@@ -262,7 +262,8 @@ def test_parser_reads_liblo_encoding_like_python_osc(udp_out):
 
 @needs_oscsend
 def test_oscsend_skeleton_decoded():
-    src = open_source("osc://127.0.0.1:0?format=vmc&quiet=0.5")
+    # every oscsend is a new process, so a new sender port: one stream from many senders
+    src = open_source("osc://127.0.0.1:0?format=vmc&quiet=0.5&senders=merge")
     try:
         # Unity (left-handed) 30° about Y for Hips, 90° about X for LeftLowerArm
         s, c = np.sin(np.radians(15)), np.cos(np.radians(15))

@@ -1,0 +1,45 @@
+"""The session summary says what the outputs really did (real sockets on 127.0.0.1)."""
+
+from __future__ import annotations
+
+import socket
+
+from rtseg.session_stats import SessionSummary, source_losses_text, targets_text
+
+
+def _summary(**kw) -> SessionSummary:
+    base = dict(duration_s=1.0, frames_received=10, frames_processed=10, frame_rate=10.0,
+                cuts=2, cuts_by_method={"pca": 2}, dropped=0, source_stats={}, pipeline={},
+                overruns=0, bad_frames=0, max_lag_ms=0.0, cut_latency_ms_p50=None,
+                cut_latency_ms_p99=None, recording=None, stop_reason="test", wire_cuts=2)
+    base.update(kw)
+    return SessionSummary(**base)
+
+
+def test_no_osc_target_claims_no_sends():
+    s = _summary(targets={"jsonl:-": {"sent": 4, "dropped": 0, "errors": 0}})
+    assert "sent over OSC" not in s.text() and "no OSC target" in s.text()
+
+
+def test_dead_tcp_target_is_reported_as_dropped():
+    from rtseg.publishers import PublisherSet
+    with socket.socket() as probe:      # a port with nobody listening
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    pubs = PublisherSet.from_specs([f"tcp:127.0.0.1:{port}"])
+    from rtseg.events import CutEvent
+    for i in range(3):
+        pubs.publish_cut(CutEvent(event=i + 1, segment=i + 1, frame=10 * i, time=0.1 * i,
+                                  method="pca"))
+    pubs.close()
+    s = _summary(targets=pubs.stats())
+    text = targets_text(s.targets)
+    (key, st), = s.targets.items()
+    assert st["sent"] == 0 and st["dropped"] >= 3
+    assert f"{key}: 0 messages sent, {st['dropped']} dropped" in text
+
+
+def test_source_refusals_are_in_the_summary():
+    text = _summary(source_stats={"other_senders": 40, "corrupt": 3, "clock_restarts": 1}).text()
+    assert "40 from a second sender" in text and "1 source clock restarts" in text
+    assert "3 corrupt" in source_losses_text({"corrupt": 3})

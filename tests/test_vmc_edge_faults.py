@@ -1,0 +1,162 @@
+"""VMC faults at the edges over real UDP sockets on 127.0.0.1: truncated bundles are dropped
+whole, never used in part."""
+
+from __future__ import annotations
+
+import socket
+import struct
+import time
+
+import numpy as np
+import pytest
+
+from rtseg.drivers import open_source
+from rtseg.drivers.codec_vmc import VmcAssembler, bundle_structure_error, encode_frame
+
+from tests.test_vmc_live import SUIT, make_take, read_all, same_rotation
+
+
+@pytest.fixture
+def source():
+    src = open_source("osc://127.0.0.1:0?format=vmc&suit=default17&quiet=0.02&queue=4096")
+    try:
+        yield src
+    finally:
+        src.close()
+
+
+def _frame_datagrams(take, i: int) -> list[bytes]:
+    return encode_frame(take.quats[i], SUIT, time=i / 60.0,
+                        root_position=take.root_position[i], max_datagram=60000)
+
+
+def test_truncated_bundles_are_dropped_whole_over_udp(source):
+    take = make_take(60, seed=5)
+    addr = ("127.0.0.1", source.port)
+    rng = np.random.default_rng(1)
+    n_bad = 0
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
+        for i in range(len(take.quats)):
+            dgrams = _frame_datagrams(take, i)
+            assert len(dgrams) == 1, "one whole frame per datagram in this test"
+            whole = dgrams[0]
+            if i % 3 == 1:
+                # a truncated copy of the next frame's bundle: elements before the cut parse
+                cut = 4 * int(rng.integers(8, len(whole) // 4 - 1))
+                bad = _frame_datagrams(take, min(i + 1, len(take.quats) - 1))[0][:cut]
+                assert bundle_structure_error(bad, 0, len(bad), 0) is not None
+                out.sendto(bad, addr)
+                n_bad += 1
+            out.sendto(whole, addr)
+            time.sleep(0.002)
+        frames = read_all(source)
+    assert len(frames) == len(take.quats)          # no phantom frame from a partial bundle
+    for i, f in enumerate(frames):
+        assert f.source_time == pytest.approx(i / 60.0, abs=1e-5)
+        assert bool(f.valid.all())
+        assert same_rotation(f.quats, take.quats[i], atol=1e-6)
+    assert source.stats.corrupt == n_bad
+    assert source.stats.dropped == 0
+
+
+def test_truncated_nested_bundle_is_dropped_whole():
+    take = make_take(3, seed=2)
+    asm = VmcAssembler(SUIT)
+    whole = _frame_datagrams(take, 0)[0]
+    # a nested bundle whose inner element is cut short while the outer sizes still add up
+    inner = whole[:len(whole) - 8]
+    outer = b"#bundle\x00" + struct.pack(">Q", 1) + struct.pack(">i", len(inner)) + inner
+    assert bundle_structure_error(outer, 0, len(outer), 0) is not None
+    assert asm.feed(outer, 0.0) == [] and not asm.pending
+    assert asm.stats.corrupt == 1
+
+
+def _send_run(out: socket.socket, addr, take, t0: float = 0.0, pause: float = 0.002) -> None:
+    for i in range(len(take.quats)):
+        out.sendto(encode_frame(take.quats[i], SUIT, time=t0 + i / 60.0,
+                                root_position=take.root_position[i], max_datagram=60000)[0],
+                   addr)
+        time.sleep(pause)
+
+
+def test_second_sender_is_refused_counted_and_named(source, caplog):
+    a, b = make_take(40, seed=1), make_take(40, seed=9)
+    addr = ("127.0.0.1", source.port)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s1, \
+            socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s2:
+        s1.bind(("127.0.0.1", 0))
+        s2.bind(("127.0.0.1", 0))
+        for i in range(40):       # two senders interleaved on one port, T far apart
+            s1.sendto(encode_frame(a.quats[i], SUIT, time=i / 60.0, max_datagram=60000)[0], addr)
+            s2.sendto(encode_frame(b.quats[i], SUIT, time=500 + i / 60.0,
+                                   max_datagram=60000)[0], addr)
+            time.sleep(0.002)
+        frames = read_all(source)
+        second = s2.getsockname()
+    assert len(frames) == 40
+    for i, f in enumerate(frames):
+        assert f.source_time == pytest.approx(i / 60.0, abs=1e-5)
+        assert same_rotation(f.quats, a.quats[i], atol=1e-6)
+    assert source.stats.other_senders == 40
+    assert source.stats.dropped == 0 and source.stats.clock_restarts == 0
+    named = [r for r in caplog.records if f"{second[0]}:{second[1]}" in r.getMessage()]
+    assert len(named) == 1 and "other_senders" in named[0].getMessage()
+
+
+def test_senders_newest_follows_the_new_sender():
+    src = open_source("osc://127.0.0.1:0?format=vmc&quiet=0.02&queue=4096&senders=newest")
+    try:
+        a, b = make_take(20, seed=1), make_take(20, seed=9)
+        addr = ("127.0.0.1", src.port)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s1, \
+                socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s2:
+            _send_run(s1, addr, a)
+            _send_run(s2, addr, b, t0=0.5)
+            s1.sendto(encode_frame(a.quats[0], SUIT, time=0.0, max_datagram=60000)[0], addr)
+            frames = read_all(src)
+        assert len(frames) == 41       # a, then b; a's late datagram takes over again
+        assert same_rotation(frames[25].quats, b.quats[5], atol=1e-6)
+        assert src.stats.other_senders == 0
+    finally:
+        src.close()
+
+
+def test_bad_senders_option_is_refused():
+    from rtseg.drivers import SourceError
+    with pytest.raises(SourceError, match="senders="):
+        open_source("osc://127.0.0.1:0?format=vmc&senders=all")
+
+
+def test_restarted_sender_continues_the_clock(source, caplog):
+    """A sender restarted (new socket, T from 0 again) after the handover silence: reported
+    times go on increasing, one warning, counted."""
+    from rtseg.drivers.osc_source import SENDER_HANDOVER
+    take = make_take(30, seed=4)
+    addr = ("127.0.0.1", source.port)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s1:
+        _send_run(s1, addr, take)
+    time.sleep(SENDER_HANDOVER + 0.1)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s2:
+        _send_run(s2, addr, take)
+    frames = read_all(source)
+    assert len(frames) == 60
+    times = [f.source_time for f in frames]
+    assert all(b > a for a, b in zip(times, times[1:])), times
+    assert times[30] == pytest.approx(times[29] + 1 / 60.0, abs=1e-3)
+    assert times[59] - times[30] == pytest.approx(29 / 60.0, abs=1e-5)
+    assert source.stats.clock_restarts == 1 and source.stats.other_senders == 0
+    warned = [r for r in caplog.records if "went back" in r.getMessage()]
+    assert len(warned) == 1
+
+
+def test_clock_jump_ahead_starts_a_new_segment():
+    take = make_take(4, seed=3)
+    asm = VmcAssembler(SUIT)
+    out = []
+    for i, t in enumerate([1.0, 1.0 + 1 / 60, 1.0 + 2 / 60, 9000.0]):
+        out += asm.feed(encode_frame(take.quats[i], SUIT, time=t, max_datagram=60000)[0],
+                        i * 0.01)
+    out += asm.flush(1.0, force=True)
+    times = [f.source_time for f in out]
+    assert len(times) == 4 and times[3] == pytest.approx(1.0 + 3 / 60, abs=1e-4)
+    assert asm.stats.clock_restarts == 1 and asm.stats.dropped == 0
