@@ -27,9 +27,9 @@ from typing import Sequence
 import numpy as np
 
 from rtseg import quat as Q
-from rtseg.profiles import CANONICAL, choose_profile, resolve_joints
+from rtseg.profiles import CANONICAL, named_profile, resolve_joints
 from rtseg.rig import CANONICAL_PARENT as CANONICAL_PARENT_OF
-from rtseg.rig import FEATURE_JOINTS, Rig, map_rig
+from rtseg.rig import FEATURE_JOINTS, Rig, RigError, map_rig
 from rtseg.take import Take
 
 # Left-multiplication matrix of a quaternion a (scalar-last): (a ⊗ b) = L(a) @ b, with
@@ -104,8 +104,15 @@ class PoseFeatures:
         #: the canonical mapping (``rtseg.rig``) when the profile is ``canonical``
         self.rig: Rig | None = None
         if profile is None:
-            profile = choose_profile(joint_names, parents)
-        if profile == CANONICAL:
+            # the canonical map when the rig has one, else a named channel profile
+            try:
+                self.rig = map_rig(joint_names, parents)
+                profile = CANONICAL
+            except RigError:
+                profile = named_profile(joint_names)
+                if profile is None:
+                    raise
+        elif profile == CANONICAL:
             self.rig = map_rig(joint_names, parents)
         self.profile = profile
         n = len(joint_names)
@@ -137,7 +144,7 @@ class PoseFeatures:
                               for t in range(m - 2, -1, -1)]
         self._ext = np.zeros((n + 1, 4))
         self._ext[n, 3] = 1.0
-        self._needs_ext = bool(np.any(self._parent_idx == n)) or self._composed
+        self._needs_ext = bool(np.any(self._parent_idx == n))
         self._frame_shape = (n, 4)
         # Flat indices into the (J[+1], 4) frame building L(conj(parent)) of each selected joint.
         self._parent_gather = (self._parent_idx[:, None, None] * 4 + _GATHER).astype(np.intp)
@@ -308,7 +315,7 @@ class PoseFeatures:
 
 
 def take_features(take: Take, profile: str | None = None) -> np.ndarray:
-    """(frames, 4·J) float64 features of a whole take (``profile`` None: ``choose_profile``).
+    """(frames, 4·J) float64 features of a whole take (``profile`` None: canonical when the rig maps, else a named profile).
 
     Uses the take's ``meta["axis_quats"]`` (ASF/AMC) so features are the AMC dof rotations.
     """

@@ -146,24 +146,33 @@ def resolve_joints(profile: str, joint_names: list[str], path: str | Path | None
 def choose_profile(joint_names: list[str], parents: list[int] | None = None,
                    path: str | Path | None = None) -> str:
     """``"canonical"`` when the skeleton maps to the canonical joints (``rtseg.rig``), else
-    ``"tsseg4d"`` when those four channels are all present; else ``rtseg.rig.RigError``
-    (one line naming what could not be mapped; never a silent fall-back to every joint).
-    Without ``parents`` the joints are taken as roots (no hierarchy: no canonical map)."""
+    the first named profile of ``AUTO_ORDER`` whose channels are all present (``tsseg4d``,
+    ``vrchat``); else ``rtseg.rig.RigError`` (one line naming what could not be mapped; never
+    a silent fall-back to every joint).  Without ``parents`` the joints are taken as roots
+    (no hierarchy: no canonical map)."""
     from rtseg.rig import RigError, map_rig
     parents = list(parents) if parents is not None else [-1] * len(joint_names)
     try:
         map_rig(joint_names, parents)
         return CANONICAL
     except RigError as err:
-        known = _load_profiles(str(_skeleton_file(path)))
-        for name in AUTO_ORDER:
-            if name in known:
-                try:
-                    resolve_joints(name, joint_names, path)
-                    return name
-                except KeyError:
-                    continue
-        raise err
+        name = named_profile(joint_names, path)
+        if name is None:
+            raise err
+        return name
+
+
+def named_profile(joint_names: list[str], path: str | Path | None = None) -> str | None:
+    """The first profile of ``AUTO_ORDER`` whose channels are all in ``joint_names``, or None."""
+    known = _load_profiles(str(_skeleton_file(path)))
+    for name in AUTO_ORDER:
+        if name in known:
+            try:
+                resolve_joints(name, joint_names, path)
+                return name
+            except KeyError:
+                continue
+    return None
 
 
 def suit_profile(name: str = "default17", path: str | Path | None = None) -> SuitProfile:

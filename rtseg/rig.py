@@ -108,14 +108,6 @@ class Rig:
 
 # ------------------------------------------------------------------------ topology helpers
 
-def _children(parents: Sequence[int]) -> list[list[int]]:
-    kids: list[list[int]] = [[] for _ in parents]
-    for j, p in enumerate(parents):
-        if p >= 0:
-            kids[p].append(j)
-    return kids
-
-
 def _ancestors(j: int, parents: Sequence[int]) -> list[int]:
     """j, its parent, ... up to the root."""
     out = []

@@ -58,7 +58,7 @@ from scipy.spatial.transform import Rotation
 
 from rtseg import quat as Q
 from rtseg.profiles import SuitProfile
-from rtseg.skeletons import MAPS, SkeletonMap, candidates, lookup, rank_families, resolve_names
+from rtseg.skeletons import MAPS, SkeletonMap, candidates, rank_families, resolve_names
 from rtseg.take import Take
 
 __all__ = ["SkeletonMap", "MAPS", "RetargetError", "ImuModel", "Retargeted",
@@ -67,19 +67,6 @@ __all__ = ["SkeletonMap", "MAPS", "RetargetError", "ImuModel", "Retargeted",
 
 class RetargetError(ValueError):
     """A take cannot be mapped onto a suit (names the unmapped bones)."""
-
-
-def _lookup(take_names: list[str], smap: SkeletonMap) -> dict[str, int]:
-    return lookup(take_names, smap)
-
-
-def _resolve_with(take_names: list[str], bones: tuple[str, ...], smap: SkeletonMap
-                  ) -> list[int]:
-    return resolve_names(take_names, bones, smap)
-
-
-def _candidates(bone: str, smap: SkeletonMap) -> tuple[str, ...]:
-    return candidates(bone, smap)
 
 
 def detect_family(take_names: list[str], bones: tuple[str, ...]) -> SkeletonMap:
@@ -146,12 +133,12 @@ def resolve(take: Take, suit: SuitProfile, family: str | None = None,
                     f"of suit {suit.name!r}'s bones {', '.join(rest)}; joints in the take: "
                     f"{', '.join(names)}; pass a joint map (suit bone -> take joint)") from None
             smap = MAPS["unity"]
-    cols = _resolve_with(names, bones, smap)
+    cols = resolve_names(names, bones, smap)
     for k, j in overrides.items():
         cols[k] = j
     missing = tuple(b for b, c in zip(bones, cols) if c < 0)
     if missing and not allow_missing:
-        wanted = "; ".join(f"{b} (looked for {' or '.join(_candidates(b, smap)) or 'nothing: not in the map'})"
+        wanted = "; ".join(f"{b} (looked for {' or '.join(candidates(b, smap)) or 'nothing: not in the map'})"
                            for b in missing)
         raise RetargetError(
             f"take {where} (skeleton map {smap.name!r}) has no joint for {len(missing)} of "

@@ -14,15 +14,7 @@ from rtseg.drivers import open_source
 from rtseg.drivers.codec_vmc import VmcAssembler, bundle_structure_error, encode_frame
 
 from tests.test_vmc_live import SUIT, make_take, read_all, same_rotation
-
-
-@pytest.fixture
-def source():
-    src = open_source("osc://127.0.0.1:0?format=vmc&suit=default17&quiet=0.02&queue=4096")
-    try:
-        yield src
-    finally:
-        src.close()
+from tests.test_vmc_live import source  # noqa: F401  (the fixture: a VMC source on port 0)
 
 
 def _frame_datagrams(take, i: int) -> list[bytes]:
