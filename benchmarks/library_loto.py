@@ -17,7 +17,8 @@ with each of their behaviours left out of the library in turn (not with --no-hid
 source and pooled: ``known`` (segments of behaviours the library holds: ``accuracy``
 named right, ``unknown_rate``, ``wrong_rate``, ``decision_delay_s`` after the change) and
 ``left_out`` (segments of behaviours missing from the library: ``unknown_rate``).
-``--segments``: every segment in the JSON too.
+``--segments``: every segment in the JSON too.  ``--threshold-scale F``: every fold
+library's calibrated threshold times F (rejection rules to compare).
 
 mocap6: the three mocap6 takes (13_29, 13_31, 14_14; exercise names); for each take a
 library learned from the other two names its live segments (``contrast`` cuts, decided
@@ -186,6 +187,17 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
     if kw["n"] < 1:
         print("--n: at least 1 performance per person", file=sys.stderr)
         return 2
+    if "--threshold-scale" in argv:
+        k = argv.index("--threshold-scale")
+        try:
+            kw["threshold_scale"] = float(argv[k + 1])
+        except (IndexError, ValueError):
+            print("--threshold-scale: a number", file=sys.stderr)
+            return 2
+        if not kw["threshold_scale"] > 0:
+            print("--threshold-scale: > 0", file=sys.stderr)
+            return 2
+        del argv[k:k + 2]
     hide = "--no-hide" not in argv
     segments = "--segments" in argv
     argv = [a for a in argv if a not in ("--no-hide", "--segments")]
@@ -211,7 +223,8 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
                       "seconds": round(time.perf_counter() - t0, 1),
                       "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
                       "name_after_s": cfg["identity.name_after_s"], "performances": kw["n"],
-                      "seed": kw["seed"], "hidden_names": hide, **doc}, indent=1, default=str))
+                      "seed": kw["seed"], "hidden_names": hide,
+                      "threshold_scale": kw.get("threshold_scale", 1.0), **doc}, indent=1, default=str))
     return 0
 
 

@@ -55,9 +55,10 @@ def _truth(perf: Any) -> np.ndarray:
 
 def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: bool = True,
                 progress: Callable[[str], None] | None = None,
-                windows: dict[str, float] | None = None, metric: str | None = None
-                ) -> dict[str, Any]:
-    """Leave-one-person-out over one source folder (module doc)."""
+                windows: dict[str, float] | None = None, metric: str | None = None,
+                threshold_scale: float = 1.0) -> dict[str, Any]:
+    """Leave-one-person-out over one source folder (module doc); ``threshold_scale``: each
+    fold library's calibrated threshold is multiplied by it (a rejection rule to try)."""
     from rtseg.identity_eval import run_identity
     from rtseg.library_sources import examples_from_source
     examples = examples_from_source(src, config)
@@ -72,6 +73,7 @@ def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: b
         lib, _ = learn(use, metric=metric, **(windows or {}))
         if le.NO_REJECT:                 # benchmarks/library_loto.py --no-reject: the ceiling
             lib.threshold, lib.ratio = float("inf"), 1.0
+        lib.threshold *= threshold_scale
         return lib
 
     for p in people:
