@@ -6,7 +6,19 @@
     python3 benchmarks/library_loto.py single [DATA_DIR/cmu_single] # leave-one-person-out
     python3 benchmarks/library_loto.py spliced SPLICED_DIR [DATA_DIR/cmu_single]
     python3 benchmarks/library_loto.py fewshot [DATA_DIR] [--seconds S]  # short examples
+    python3 benchmarks/library_loto.py --by-person DIR [--n N] [--seed K] [--no-hide]
     (options: --no-reject, --metric model|descriptor, --step S, --name-after S)
+
+--by-person DIR: DIR a source folder laid out like ../shared/data/cmu_single, hdm05 or
+bandai, or their parent (../shared/data): per source, leave-one-person-out - the library
+learned from the other people of the same source names N (default 4) spliced
+performances of the held-out person (rtseg.library_lopo; seed K, default 0), then again
+with each of their behaviours left out of the library in turn (not with --no-hide).  Per
+source and pooled: ``known`` (segments of behaviours the library holds: ``accuracy``
+named right, ``unknown_rate``, ``wrong_rate``, ``decision_delay_s`` after the change) and
+``left_out`` (segments of behaviours missing from the library: ``unknown_rate``).
+``--segments``: every segment in the JSON too.  ``--threshold-scale F``: every fold
+library's calibrated threshold times F (rejection rules to compare).
 
 mocap6: the three mocap6 takes (13_29, 13_31, 14_14; exercise names); for each take a
 library learned from the other two names its live segments (``contrast`` cuts, decided
@@ -158,6 +170,64 @@ def spliced(folder: Path, src: Path, cfg) -> dict:
     return run_folds(ex, units, tk, unit, cfg, False, _progress)
 
 
+def by_person_sources(argv: list[str], opts: dict) -> int:
+    """``--by-person DIR [--n N] [--seed K] [--no-hide] [--segments]`` (module doc)."""
+    import rtseg.library_eval as le
+    from rtseg.library_lopo import lopo_sources
+    kw = {"n": 4, "seed": 0}
+    for flag, key in (("--n", "n"), ("--seed", "seed")):
+        if flag in argv:
+            k = argv.index(flag)
+            try:
+                kw[key] = int(argv[k + 1])
+            except (IndexError, ValueError):
+                print(f"{flag}: a whole number", file=sys.stderr)
+                return 2
+            del argv[k:k + 2]
+    if kw["n"] < 1:
+        print("--n: at least 1 performance per person", file=sys.stderr)
+        return 2
+    if "--threshold-scale" in argv:
+        k = argv.index("--threshold-scale")
+        try:
+            kw["threshold_scale"] = float(argv[k + 1])
+        except (IndexError, ValueError):
+            print("--threshold-scale: a number", file=sys.stderr)
+            return 2
+        if not kw["threshold_scale"] > 0:
+            print("--threshold-scale: > 0", file=sys.stderr)
+            return 2
+        del argv[k:k + 2]
+    hide = "--no-hide" not in argv
+    segments = "--segments" in argv
+    argv = [a for a in argv if a not in ("--no-hide", "--segments")]
+    if len(argv) != 1:
+        print(__doc__, file=sys.stderr)
+        return 2
+    cfg, _ = live_config()
+    cfg["identity.enabled"] = True
+    if "--name-after" in opts:
+        cfg["identity.name_after_s"] = opts["--name-after"]
+    t0 = time.perf_counter()
+    try:
+        doc = lopo_sources(Path(argv[0]), cfg, hide=hide, progress=_progress,
+                           windows=dict(le.WINDOWS), metric=le.METRIC, **kw)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"library_loto.py --by-person: {exc}", file=sys.stderr)
+        return 2
+    if not segments:
+        for d in doc["sources"].values():
+            d.pop("segments", None)
+    from rtseg.library import DEFAULT_STEP_S
+    print(json.dumps({"protocol": "leave-one-person-out over source folders",
+                      "seconds": round(time.perf_counter() - t0, 1),
+                      "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
+                      "name_after_s": cfg["identity.name_after_s"], "performances": kw["n"],
+                      "seed": kw["seed"], "hidden_names": hide,
+                      "threshold_scale": kw.get("threshold_scale", 1.0), **doc}, indent=1, default=str))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] in ("-h", "--help"):
@@ -195,6 +265,8 @@ def main(argv: list[str] | None = None) -> int:
     by_person = "--by-person" in argv
     if by_person:
         argv.remove("--by-person")
+    if by_person and argv and argv[0] not in ("mocap6", "single", "spliced", "fewshot"):
+        return by_person_sources(argv, opts)
     if not argv or argv[0] not in ("mocap6", "single", "spliced", "fewshot"):
         print(__doc__, file=sys.stderr)
         return 2

@@ -16,6 +16,10 @@ Scores: adjusted Rand index and normalised mutual information (scikit-learn), pe
 pooled over takes (the takes' frames concatenated, each take's ids kept apart since ids
 are per session).
 
+A given library (``--behaviours LIB``, JSON ``identity.named``): the live loop names every
+segment with it; per segment the name sent at its decision against the behaviour covering
+most of the segment (``rtseg.library_eval.named_summary``).
+
 Named libraries (``library_loto``, JSON ``identity.library``): leave-one-take-out over the
 mocap6 takes among those evaluated - a library learned from the other takes names each
 live segment (``rtseg.library_eval``); accuracy and unknown rate over the segments.
@@ -142,21 +146,40 @@ def pooled_scores(pairs: Sequence[tuple[str, np.ndarray, np.ndarray]]) -> dict[s
     return scores(t, p)
 
 
+def library_fits(take: Any, library: Any, config: Any) -> bool:
+    """True when ``take``'s live features (the configuration's profile) are the library's
+    profile and dims."""
+    from rtseg.features import PoseFeatures
+    f = PoseFeatures(take.joint_names, take.parents, take.space,
+                     profile=config["features.profile"] or None)
+    return (f.profile, f.dim) == (library.profile, library.dims)
+
+
 def evaluate_identity(takes: Sequence[LabelledTake], config: Any,
-                      progress: Any = None) -> dict[str, Any]:
+                      progress: Any = None, library: Any = None) -> dict[str, Any]:
     """``{"pooled": {ari, nmi}, "groups": {group: {ari, nmi}}, "takes": {name: {...}}}``
     for the causal identities the live loop sends on each take (see module docstring).
-    Take keys are ``group/name`` when a name occurs in two groups."""
+    Take keys are ``group/name`` when a name occurs in two groups.  With ``library``
+    (``rtseg.library.Library``) the live loop names the segments too and ``"named"`` is
+    added (``rtseg.library_eval.named_summary``: pooled, per take in ``takes[k]["named"]``,
+    the truth of a segment the behaviour of most of its frames); takes whose features are
+    not the library's profile run without it and are listed in ``named["skipped_takes"]``."""
+    from rtseg.library_eval import named_segments, named_summary
     names = [t.name for t in takes]
     per: dict[str, Any] = {}
     pairs: dict[str, list] = {}
     after_by: dict[str, list[float]] = {}     # decision delays after the transitions, s
+    rows_all: list[Any] = []
+    skipped: list[str] = []
     for lt in takes:
         key = lt.name if names.count(lt.name) == 1 else f"{lt.group}/{lt.name}"
         if progress is not None:
             progress.step(f"identity {key}")
         take = lt.load()
-        run = run_identity(take, config)
+        lib = library if library is not None and library_fits(take, library, config) else None
+        if library is not None and lib is None:
+            skipped.append(key)
+        run = run_identity(take, config, lib)
         truth = truth_labels(lt, take.n_frames)
         st = run.tracker.stats
         after = decision_delays_after(run.tracker.history, take.frame_rate,
@@ -166,15 +189,22 @@ def evaluate_identity(takes: Sequence[LabelledTake], config: Any,
                     "segments": st.segments, "behaviours": st.new_behaviours,
                     "corrections": st.corrections, "true_behaviours": len(set(truth)),
                     "decision_delay_s": _delays(run, take.frame_rate, after)}
+        if lib is not None:
+            rows = named_segments(run, take, named_truth_labels(lt, take.n_frames), lib, key)
+            per[key]["named"] = named_summary(rows)
+            rows_all += rows
         pairs.setdefault(lt.group, []).append((key, truth, run.decided))
         after_by.setdefault(lt.group, []).extend(after)
     allp = [p for g in pairs.values() for p in g]
-    return {"pooled": {**pooled_scores(allp),
-                       "decision_delay_s": delay_summary(
-                           [x for v in after_by.values() for x in v])},
-            "groups": {g: {**pooled_scores(v), "decision_delay_s": delay_summary(after_by[g])}
-                       for g, v in pairs.items()},
-            "takes": per}
+    doc = {"pooled": {**pooled_scores(allp),
+                      "decision_delay_s": delay_summary(
+                          [x for v in after_by.values() for x in v])},
+           "groups": {g: {**pooled_scores(v), "decision_delay_s": delay_summary(after_by[g])}
+                      for g, v in pairs.items()},
+           "takes": per}
+    if library is not None:
+        doc["named"] = {**named_summary(rows_all), "skipped_takes": skipped}
+    return doc
 
 
 def library_loto(takes: Sequence[LabelledTake], config: Any) -> dict[str, Any] | None:
@@ -270,6 +300,15 @@ def format_identity_table(doc: dict[str, Any]) -> str:
         lines.append(f"{'pooled ' + g:<16} {s['ari']:6.3f} {s['nmi']:6.3f}{pad}{vs_lab(s)}")
     lines.append(f"{'pooled':<16} {doc['pooled']['ari']:6.3f} {doc['pooled']['nmi']:6.3f}"
                  f"{pad}{vs_lab(doc['pooled'])}")
+    nm = doc.get("named")
+    if nm:
+        nl = nm["not_in_library"]
+        dd = nm["decision_delay_s"]["after_transition_median"]
+        lines.append(f"named by the library: {nm['segments']} segments of its behaviours: "
+                     f"right {nm['accuracy']}, unknown {nm['unknown_rate']}, wrong "
+                     f"{nm['wrong_rate']}; {nl['segments']} of other behaviours: unknown "
+                     f"{nl['unknown_rate']}; name decided a median "
+                     f"{'-' if dd is None else f'{dd:.2f}'} s after the change")
     lib = doc.get("library")
     if lib:
         lines.append(f"library (named, leave-one-take-out over {', '.join(lib['takes'])}): "
@@ -302,9 +341,17 @@ def run_evaluate_identity(args: Any) -> int:
     if not takes:
         raise ValueError(f"no labelled takes of {', '.join(groups)} found in {args.data_dir}"
                          + no_takes_hint(args.data_dir))
+    library = None
+    if getattr(args, "behaviours", None):
+        from rtseg.library import load
+        library = load(args.behaviours)
     bar = Progress(len(takes), enabled=not args.no_progress)
-    doc = evaluate_identity(takes, cfg, bar)
+    doc = evaluate_identity(takes, cfg, bar, library)
     bar.close()
+    if library is not None and len(doc["named"]["skipped_takes"]) == len(takes):
+        raise ValueError(f"--behaviours {args.behaviours}: learned for feature profile "
+                         f"{library.profile!r} ({library.dims} dims); none of the takes "
+                         f"evaluated has those features")
     primary = cfg["detectors.primary"] or cfg["detectors.methods"][0]
     doc = {"primary": primary, "threshold": cfg["identity.threshold"],
            "decide_after_s": cfg["identity.decide_after_s"], **doc}

@@ -303,15 +303,13 @@ class Library:
         return self.threshold
 
     def merged(self, other: "Library") -> "Library":
-        """This library with ``other``'s examples added (same profile, dims, frame rate and
-        windows), scale refitted and threshold recalibrated."""
+        """This library with ``other``'s examples added (same profile, dims and windows;
+        any frame rate: windows are in seconds, the model distance's angular velocities in
+        rad/s), scale refitted and threshold recalibrated."""
         if (other.profile, other.dims) != (self.profile, self.dims):
             raise LibraryError(f"cannot add examples of profile {other.profile!r} "
                                f"({other.dims} dims) to a library of {self.profile!r} "
                                f"({self.dims} dims)")
-        if abs(other.frame_rate - self.frame_rate) > 1e-6 * self.frame_rate:
-            raise LibraryError(f"cannot add {other.frame_rate:g} Hz examples to a "
-                               f"{self.frame_rate:g} Hz library")
         if (self.metric, self.lag_s) != (other.metric, other.lag_s) or (
                 self.metric == "model" and not (self.window_stats and other.window_stats)):
             raise LibraryError(f"cannot add examples learned with the {other.metric!r} "
@@ -367,8 +365,10 @@ class LibraryBuilder:
     def add(self, X: np.ndarray, name: str, source: str, frames: tuple[int, int] | None = None,
             frame_rate: float | None = None, info: dict[str, Any] | None = None) -> int:
         """Add the labelled range ``frames`` [a, b) (default all) of feature rows X; returns
-        the number of windows it gave (0: too short, noted in ``skipped``).  ``info``:
-        extra fields of the example's record (e.g. take frames, person)."""
+        the number of windows it gave (0: too short, noted in ``skipped``).  ``frame_rate``
+        (Hz; default the builder's): the example's own - windows are cut in seconds at it
+        and the window statistics are per second, so examples of any frame rate mix.
+        ``info``: extra fields of the example's record (e.g. take frames, person, key)."""
         name = str(name).strip()
         if not name:
             raise ValueError(f"{source}: empty behaviour name")
@@ -379,9 +379,8 @@ class LibraryBuilder:
             raise ValueError(f"{source}: {X.shape[1] if X.ndim == 2 else '?'} feature dims, "
                              f"the library's profile {self.profile!r} has {self.dims}")
         fr = float(frame_rate or self.frame_rate)
-        if abs(fr - self.frame_rate) > 1e-3 * self.frame_rate:   # 0.1 %: BVH frame times are rounded
-            raise ValueError(f"{source}: frame rate {fr:g} Hz, the library's is "
-                             f"{self.frame_rate:g} Hz")
+        if not fr > 0:
+            raise ValueError(f"{source}: frame rate {fr:g} Hz, not positive")
         a, b = (0, len(X)) if frames is None else (int(frames[0]), int(frames[1]))
         if not 0 <= a < b <= len(X):
             raise ValueError(f"{source}: frames {a}:{b} outside the take (0:{len(X)})")

@@ -63,6 +63,26 @@ class Tally:
                 "decision_delay_s": delay_summary(d)}
 
 
+def named_summary(rows: Sequence[Named]) -> dict[str, Any]:
+    """``rtseg evaluate --online --identity --behaviours LIB``'s ``identity.named``: over
+    the segments whose true behaviour the library holds (``segments``), the shares sent
+    their true name (``accuracy``), ``unknown`` (``unknown_rate``) and another name
+    (``wrong_rate``), which sum to 1; ``decision_delay_s`` as ``Tally.summary``; and over
+    the segments of behaviours the library lacks (``not_in_library``) the share sent
+    ``unknown`` (``unknown_rate``: right for them) and the share given a name."""
+    k = [s for s in rows if s.known]
+    u = [s for s in rows if not s.known]
+    right = sum(s.name == s.truth for s in k)
+    unk = sum(s.name == UNKNOWN for s in k)
+    d = [s.delay_s for s in k if s.delay_s is not None]
+    return {"accuracy": _share(right, len(k)), "unknown_rate": _share(unk, len(k)),
+            "wrong_rate": _share(len(k) - right - unk, len(k)), "segments": len(k),
+            "decision_delay_s": delay_summary(d),
+            "not_in_library": {"segments": len(u),
+                               "unknown_rate": _share(sum(s.name == UNKNOWN for s in u), len(u)),
+                               "named_rate": _share(sum(s.name != UNKNOWN for s in u), len(u))}}
+
+
 def _share(a: int, b: int) -> float | None:
     return round(a / b, 4) if b else None
 
@@ -70,7 +90,14 @@ def _share(a: int, b: int) -> float | None:
 def name_take(take: Any, truth: np.ndarray, library: Library, config: Any,
               key: str) -> list[Named]:
     """The live segments of ``take`` named by ``library`` (module doc)."""
-    run = run_identity(take, config, library)
+    return named_segments(run_identity(take, config, library), take, truth, library, key)
+
+
+def named_segments(run: Any, take: Any, truth: np.ndarray, library: Library,
+                   key: str) -> list[Named]:
+    """The segments of a live run (``rtseg.identity_eval.run_identity`` with ``library``)
+    with the name each was sent at its decision and its truth: the behaviour of the most
+    per-frame ``truth`` labels over the segment (module doc)."""
     n, fr = take.n_frames, float(take.frame_rate)
     segs = sorted(run.tracker.segment_names().items())
     known = set(library.names)

@@ -7,12 +7,16 @@ calibration), so a library learned here describes what ``rtseg live`` sees.  Fra
 
 Sources of labels (``examples_from_dir``):
 
-- a folder with ``index.tsv`` laid out like ``../shared/data/cmu_single``: each take one
-  behaviour (its ``behaviour`` column), rest frames at the ends dropped
-  (``rtseg.splice_blend.trim_bounds``); the example's source is its subject (``person``);
-- a folder laid out like ``../shared/data``: the labelled takes of ``rtseg.labels``
+- a source folder with ``index.tsv`` laid out like ``../shared/data/cmu_single``,
+  ``hdm05`` or ``bandai``, or a folder holding such folders: each take one behaviour of one
+  person, any format, rig and frame rate (``rtseg.library_sources``: short clips of one
+  person and behaviour joined);
+- a folder laid out like ``../shared/data``: also the labelled takes of ``rtseg.labels``
   (cmu86 behaviour names, mocap6 exercise names - ``MOCAP6_NAMES`` -, tsseg4d label ids,
   spliced performances' behaviour names), each run of one label one example.
+
+Every example carries a content ``key`` (``rtseg.library_sources.motion_key``): ``learn``
+keeps one example per key, and ``rtseg learn`` adds none already in the library.
 """
 
 from __future__ import annotations
@@ -46,6 +50,7 @@ class Example:
     frames: tuple[int, int]
     profile: str
     frame_rate: float
+    key: str = ""                    # content hash of the motion (rtseg.library_sources)
 
     def rows(self) -> tuple[int, int]:
         """[i, j) rows of X covering the take frames [a, b)."""
@@ -83,9 +88,10 @@ def example_of_take(path: str | Path, name: str, config: Any,
     a, b = int(frames[0]), int(frames[1])
     if not 0 <= a < b <= n:
         raise ValueError(f"{path}: --frames {a}:{b} outside the take (0:{n})")
+    from rtseg.library_sources import motion_key
     stem = Path(path).stem
     return Example(name, stem, person or stem.split("_")[0], X, index, (a, b), profile,
-                   float(take.frame_rate))
+                   float(take.frame_rate), motion_key(take, a, b))
 
 
 def synthetic_examples(behaviours: Sequence[str], seeds: Sequence[int], config: Any,
@@ -94,6 +100,7 @@ def synthetic_examples(behaviours: Sequence[str], seeds: Sequence[int], config: 
     (``rtseg.simulators.synth``), one performance of ``seconds`` per behaviour each per
     seed (a seed varies tempo, amplitude and style: a performer of its own, ``person``
     ``synth<seed>``), as ``rtseg learn`` would take them from those performances' takes."""
+    from rtseg.library_sources import motion_key
     from rtseg.simulators.synth import synthesize
     script = ",".join(f"{b}:{seconds:g}" for b in behaviours)
     out: list[Example] = []
@@ -102,7 +109,7 @@ def synthetic_examples(behaviours: Sequence[str], seeds: Sequence[int], config: 
         X, index, profile = take_rows(res.take, config)
         for a, b, name in label_runs(res.frame_names()):
             out.append(Example(name, f"synth{seed}", f"synth{seed}", X, index, (a, b),
-                               profile, float(frame_rate)))
+                               profile, float(frame_rate), motion_key(res.take, a, b)))
     return out
 
 
@@ -115,24 +122,29 @@ def label_runs(labels: Sequence[Any]) -> list[tuple[int, int, str]]:
 
 def examples_from_dir(data_dir: str | Path, config: Any,
                       people: Iterable[str] | None = None,
-                      takes: Iterable[str] | None = None) -> list[Example]:
+                      takes: Iterable[str] | None = None,
+                      notes: list[str] | None = None) -> list[Example]:
     """Examples of every labelled take in ``data_dir`` (module doc); ``people``/``takes``:
-    keep only these subjects / take names."""
+    keep only these subjects / take names; ``notes`` gets a line per take left out."""
+    from rtseg.library_sources import examples_from_source, motion_key, source_folders
     root = Path(data_dir)
     keep_p = None if people is None else {str(p) for p in people}
     keep_t = None if takes is None else {str(t) for t in takes}
     out: list[Example] = []
+    sources = source_folders(root)
+    for src in sources:
+        out += examples_from_source(src, config, keep_p, keep_t, notes)
     if (root / "index.tsv").is_file():
-        from rtseg.splice import read_source_index
-        for r in read_source_index(root):
-            if (keep_p is not None and r.subject not in keep_p) or \
-                    (keep_t is not None and r.name not in keep_t):
-                continue
-            out.append(example_of_take(r.path, r.behaviour, config, person=r.subject))
         return out
     from rtseg.identity_eval import truth_labels
     from rtseg.labels import find_labelled_takes
-    for lt in find_labelled_takes(root, ("cmu", "tsseg4d", "spliced")):
+    try:
+        labelled = find_labelled_takes(root, ("cmu", "tsseg4d", "spliced"))
+    except FileNotFoundError:
+        if sources:                      # a parent of source folders only
+            return out
+        raise
+    for lt in labelled:
         if (keep_t is not None and lt.name not in keep_t) or \
                 (keep_p is not None and lt.name.split("_")[0] not in keep_p):
             continue
@@ -145,8 +157,25 @@ def examples_from_dir(data_dir: str | Path, config: Any,
                 continue
             name = MOCAP6_NAMES.get(lab, lab) if mocap6 else lab
             out.append(Example(name, lt.name, lt.name.split("_")[0], X, index, (a, b),
-                               profile, float(take.frame_rate)))
+                               profile, float(take.frame_rate), motion_key(take, a, b)))
     return out
+
+
+def unique_examples(examples: Sequence[Example], known: dict[str, str] | None = None
+                    ) -> tuple[list[Example], list[Example]]:
+    """(new, repeated): ``examples`` whose ``key`` is neither in ``known`` ({key: name}, a
+    library's) nor held by an earlier example of the list, and the others.  Examples
+    without a key are always new."""
+    seen = dict(known or {})
+    new, rep = [], []
+    for e in examples:
+        if e.key and e.key in seen:
+            rep.append(e)
+            continue
+        if e.key:
+            seen[e.key] = e.name
+        new.append(e)
+    return new, rep
 
 
 def learn(examples: Sequence[Example], profile: str | None = None,
@@ -157,8 +186,9 @@ def learn(examples: Sequence[Example], profile: str | None = None,
     profiles are left out and listed).  A library in which a behaviour would be named by a
     number (labels that are only ids, such as the tsseg4d states) is refused: ValueError.
     ``metric``: the library's distance (``rtseg.library.METRICS``; default
-    ``DEFAULT_METRIC``).  ``windows``: ``LibraryBuilder`` window options.  Returns
-    (library, notes)."""
+    ``DEFAULT_METRIC``).  ``windows``: ``LibraryBuilder`` window options.  Examples of any
+    frame rate mix (the library's ``frame_rate`` is the most common one); an example of the
+    same ``key`` as an earlier one is learned once (noted).  Returns (library, notes)."""
     if not examples:
         raise ValueError("no labelled examples to learn from")
     if profile is None:
@@ -168,8 +198,12 @@ def learn(examples: Sequence[Example], profile: str | None = None,
             counts[e.profile] = (named + (not e.name.isdigit()), n + 1)
         profile = max(counts, key=lambda p: (*counts[p], p))
     use = [e for e in examples if e.profile == profile]
-    notes = [f"{e.take} [{e.frames[0]}:{e.frames[1]}) {e.name}: feature profile "
-             f"{e.profile!r}, not {profile!r}; left out" for e in examples if e.profile != profile]
+    other: dict[tuple[str, str], int] = {}          # (take, profile) -> examples left out
+    for e in examples:
+        if e.profile != profile:
+            other[(e.take, e.profile)] = other.get((e.take, e.profile), 0) + 1
+    notes = [f"{t}: {n} example(s) of feature profile {p!r}, not {profile!r}; left out"
+             for (t, p), n in other.items()]
     if not use:
         raise ValueError(f"no example has feature profile {profile!r} "
                          f"(they have {', '.join(sorted({e.profile for e in examples}))})")
@@ -179,10 +213,17 @@ def learn(examples: Sequence[Example], profile: str | None = None,
                          f"({', '.join(numbered[:5])}{', ...' if len(numbered) > 5 else ''}: "
                          f"labels that are only ids); learn from takes whose labels name "
                          f"the behaviours, or leave those takes out")
-    b = LibraryBuilder(profile, use[0].X.shape[1], use[0].frame_rate, **windows)
+    use, repeated = unique_examples(use)
+    notes += [f"{e.take} [{e.frames[0]}:{e.frames[1]}) {e.name}: the same motion as an "
+              f"earlier example; learned once" for e in repeated]
+    rates = [e.frame_rate for e in use]
+    rate = max(set(rates), key=lambda r: (rates.count(r), r))
+    b = LibraryBuilder(profile, use[0].X.shape[1], rate, **windows)
     for e in use:
         i, j = e.rows()
         b.add(e.X[i:j], e.name, e.take, None, e.frame_rate,
-              info={"frames": list(e.frames), "person": e.person})
+              info={"frames": list(e.frames), "person": e.person,
+                    "frame_rate": round(float(e.frame_rate), 2),
+                    **({"key": e.key} if e.key else {})})
     notes += b.skipped
     return b.build(threshold, metric or DEFAULT_METRIC), notes

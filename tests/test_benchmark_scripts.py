@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
@@ -88,3 +90,34 @@ def test_lopo_on_a_folder_of_two_people(tmp_path):
         assert 0.0 <= doc[key]["pooled"]["f1"] <= 1.0 and doc[key]["pooled"]["transitions"] > 0
         assert set(doc[key]["sources"]) == {"two"}
     assert _run("lopo.py", str(tmp_path / "nowhere")).returncode == 2
+
+
+def test_library_loto_by_person_over_a_source_folder(tmp_path):
+    """benchmarks/library_loto.py --by-person DIR on a parent of one source folder laid
+    out like cmu_single (three synthetic performers, tests/source_folders.py): each person
+    named by the others' library, then each behaviour hidden in turn; a missing folder is
+    exit 2 with one line."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from source_folders import make_source
+    make_source(tmp_path / "data" / "synth", ["p1", "p2", "p3"], ["walk", "squat", "wave"],
+                rate=60.0, seconds=12.0)
+    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1")
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    assert doc["performances"] == 1 and doc["hidden_names"] is True
+    src = doc["sources"]["synth"]
+    assert src["people"] == ["p1", "p2", "p3"] and src["skipped"] == {}
+    k, left = src["known"], src["left_out"]
+    assert k["segments"] >= 3 * 4            # a performance holds 4-10 segments
+    assert k["accuracy"] + k["unknown_rate"] + k["wrong_rate"] == pytest.approx(1.0, abs=1e-3)
+    # every behaviour of a performance is hidden once: each of its segments counted again
+    assert left["segments"] == k["segments"]
+    assert 0.0 <= left["unknown_rate"] <= 1.0
+    # one library per person, and one per person and hidden behaviour
+    assert len(src["libraries"]) == 3 * 4
+    assert {(lib["unit"], lib["without"]) for lib in src["libraries"]} >= {("p1", None), ("p2", "walk")}
+    assert doc["pooled"]["known"]["segments"] == k["segments"]
+    assert "segments" not in src
+    r = _run("library_loto.py", "--by-person", str(tmp_path / "nowhere"))
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert "no source folder" in r.stderr

@@ -364,6 +364,10 @@ def add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
                    help="with --online: score the behaviour ids the live loop sends "
                         "(adjusted Rand index, NMI per take and pooled; rtseg.identity_eval) "
                         "instead of the cuts; takes: cmu and tsseg4d unless --group")
+    p.add_argument("--behaviours", metavar="LIB",
+                   help="with --online --identity: the live loop names the segments with "
+                        "this behaviour library (rtseg learn); adds identity.named: right / "
+                        "unknown / wrong shares over the segments of its behaviours")
     add_profile_argument(p)
     p.add_argument("--workers", type=int, metavar="N",
                    help="read and segment the takes on a local Dask cluster of N processes "
@@ -394,6 +398,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if getattr(args, "behaviours", None) and not getattr(args, "identity", False):
+        raise ValueError("--behaviours names the identity's segments: add --online --identity")
     if getattr(args, "identity", False) and (args.workers or args.scheduler):
         raise ValueError("--identity runs in this process: drop --workers/--scheduler")
     if getattr(args, "identity", False):          # separate path: rtseg.identity_eval

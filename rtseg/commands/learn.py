@@ -6,7 +6,9 @@
     rtseg learn LIB --show                      # what LIB holds; nothing learned
     (options: --step S, --profile NAME, --threshold D, --new, --config FILE)
 
-``--take`` starts an example; the ``--label``, ``--frames`` (take frames [A, B), 0-based)
+Learning an example the library already holds (the same motion: its content key,
+``rtseg.library_sources.motion_key``) adds nothing ("N already in the library"); when
+nothing is new the file is left as it was.  ``--take`` starts an example; the ``--label``, ``--frames`` (take frames [A, B), 0-based)
 or ``--segment`` (of a session recording, ``rtseg live --record DIR``: segment K as the
 session numbered it) and ``--skeleton`` after it belong to it.  ``--from``: every labelled take of a folder
 (``rtseg.library_learn.examples_from_dir``).  An existing LIB is extended (its examples
@@ -127,7 +129,8 @@ def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from rtseg.library import DEFAULT_STEP_S, load
-    from rtseg.library_learn import example_of_take, examples_from_dir, learn
+    from rtseg.library_learn import (example_of_take, examples_from_dir, learn,
+                                     unique_examples)
     from rtseg.online_eval import live_config
     takes = getattr(args, "takes", None) or []
     if args.show:
@@ -145,8 +148,12 @@ def run(args: argparse.Namespace) -> int:
         frames = parse_frames(t["frames"]) if t.get("frames") else None
         examples.append(example_of_take(t["take"], t["label"], cfg, frames, t.get("skeleton"),
                                         segment=recorded_segment(t)))
+    src_notes: list[str] = []
     if args.from_dir:
-        found = examples_from_dir(args.from_dir, cfg, people=args.person or None)
+        if not Path(args.from_dir).is_dir():
+            raise ValueError(f"--from {args.from_dir}: no such folder")
+        found = examples_from_dir(args.from_dir, cfg, people=args.person or None,
+                                  notes=src_notes)
         drop = set(args.exclude_person or [])
         examples += [e for e in found if e.person not in drop]
     old = None
@@ -159,6 +166,27 @@ def run(args: argparse.Namespace) -> int:
     if old is not None and abs(step - old.step_s) > 1e-9:
         raise ValueError(f"--step {step:g}: {path} has windows every {old.step_s:g} s; "
                          f"give --new to learn it again with another step")
+    known = {str(e["key"]): str(e["name"]) for e in (old.examples if old else [])
+             if e.get("key")}
+    examples, repeated = unique_examples(examples, known)
+    for e in repeated:
+        was = known.get(e.key)
+        if was is not None and was != e.name:
+            src_notes.append(f"{e.take} [{e.frames[0]}:{e.frames[1]}) {e.name}: already in "
+                             f"the library as {was!r}; not added again")
+    held = sum(e.key in known for e in repeated)
+    for n in src_notes:
+        print(f"rtseg learn: note: {n}", file=sys.stderr)
+    if held:
+        print(f"rtseg learn: {held} already in the library", file=sys.stderr)
+    if old is not None and not examples:
+        if args.threshold is not None:
+            raise ValueError(f"nothing new to learn: {held} already in the library "
+                             f"(--threshold applies to a library being learned)")
+        print("\n".join(describe(old, path)))
+        return 0
+    if not examples:
+        raise ValueError("no labelled examples to learn from")
     lib, notes = learn(examples, args.profile or (old.profile if old else None), step_s=step)
     if old is not None:
         lib = old.merged(lib)
@@ -201,8 +229,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--skeleton", action=_TakeAction, metavar="ASF",
                    help="skeleton of the preceding --take")
     p.add_argument("--from", dest="from_dir", metavar="DATA_DIR",
-                   help="learn every labelled take of a folder (cmu_single-like index.tsv, "
-                        "or ../shared/data: cmu86 names, mocap6 exercises, tsseg4d ids)")
+                   help="learn every labelled take of a folder: a source folder laid out "
+                        "like cmu_single, hdm05 or bandai (index.tsv), a folder of such "
+                        "folders, or ../shared/data (also cmu86 names, mocap6 exercises)")
     p.add_argument("--person", action="append", metavar="S",
                    help="with --from: only takes of subject S (repeatable)")
     p.add_argument("--exclude-person", action="append", metavar="S",

@@ -1,0 +1,139 @@
+"""``rtseg learn LIB --from DIR`` on source folders laid out like ../shared/data/cmu_single,
+hdm05 and bandai (rtseg.library_sources): every take whose rig maps to the canonical
+skeleton, any frame rate; short clips of one person and behaviour joined; the same example
+learned twice is a no-op.  The folders are written here from synthetic performers
+(tests/source_folders.py); one test uses the real folders and skips when they are absent."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rtseg.library import load
+from rtseg.library_learn import Example, unique_examples
+from rtseg.library_sources import motion_key
+
+from source_folders import make_source
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+BEHAVIOURS = ["walk", "squat", "wave"]
+
+
+def _learn(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "rtseg.cli", "learn", *args],
+                          capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def parent(tmp_path_factory) -> Path:
+    """Two source folders: a cmu-bvh rig at 120 Hz (one 6 s take per person and
+    behaviour) and the bandai rig at 30 Hz (each take cut into three 2 s clips)."""
+    root = tmp_path_factory.mktemp("data")
+    make_source(root / "single", ["a1", "a2"], BEHAVIOURS, rate=120.0, rig="cmu-bvh")
+    make_source(root / "clips", ["b1", "b2"], BEHAVIOURS, rate=30.0, rig="bandai", clips=3,
+                seed0=10)
+    return root
+
+
+def test_learn_from_a_parent_of_sources_of_two_rigs_and_frame_rates(parent, tmp_path):
+    lib = tmp_path / "lib.json"
+    p = _learn(str(lib), "--from", str(parent))
+    assert p.returncode == 0, p.stderr
+    got = load(lib)
+    assert got.profile == "canonical" and got.behaviour_names == sorted(BEHAVIOURS)
+    assert {e["person"] for e in got.examples} == {"a1", "a2", "b1", "b2"}
+    by_rate = {}
+    for e in got.examples:
+        by_rate.setdefault(e["frame_rate"], []).append(e)
+    assert sorted(by_rate) == [30.0, 120.0]
+    # 120 Hz: one example per take (6 s); 30 Hz: the three 2 s clips (shorter than an
+    # example once the rest at the ends is dropped) of a person and behaviour joined
+    assert len(by_rate[120.0]) == 6 and all("+" not in e["source"] for e in by_rate[120.0])
+    assert len(by_rate[30.0]) == 6
+    assert all(e["source"].count("+") == 2 for e in by_rate[30.0]), by_rate[30.0]
+    # windows are cut in seconds at each example's own rate: a joined 30 Hz example of
+    # ~5.4 s gives as many windows as 120 Hz material of that length
+    wins = np.bincount(got.sources, minlength=len(got.examples))
+    k30 = [k for k, e in enumerate(got.examples) if e["frame_rate"] == 30.0]
+    assert all(wins[k] >= 5 for k in k30)
+    assert all(len(e["key"]) == 16 for e in got.examples)
+    assert len({e["key"] for e in got.examples}) == 12
+
+    # the same folder again: nothing added, the file untouched
+    before = lib.read_bytes()
+    p = _learn(str(lib), "--from", str(parent))
+    assert p.returncode == 0, p.stderr
+    assert "12 already in the library" in p.stderr
+    assert lib.read_bytes() == before
+    # one take of it given by hand (the same frames: rest at the ends dropped as --from
+    # does) and a copy of the source folder under another name: the same motion
+    copy = tmp_path / "copy"
+    shutil.copytree(parent / "single", copy)
+    p = _learn(str(lib), "--take", str(copy / "bvh" / "a1_001.bvh"), "--label", "walk",
+               "--from", str(copy))
+    assert p.returncode == 0, p.stderr
+    assert "7 already in the library" in p.stderr and lib.read_bytes() == before
+    # the same frames under another name: not added, said
+    p = _learn(str(lib), "--take", str(copy / "bvh" / "a1_001.bvh"), "--label", "run")
+    assert p.returncode == 0 and "already in the library as 'walk'" in p.stderr
+    assert lib.read_bytes() == before
+    # another range of a known take is another example
+    p = _learn(str(lib), "--take", str(copy / "bvh" / "a1_001.bvh"), "--label", "walk",
+               "--frames", "0:500")
+    assert p.returncode == 0, p.stderr
+    assert len(load(lib).examples) == 13
+
+
+def test_example_keys_and_unique_examples():
+    from rtseg.simulators.synth import synthesize
+    take = synthesize("walk:3,squat:3", frame_rate=60.0, seed=2).take
+    k = motion_key(take, 0, 120)
+    assert k == motion_key(take, 0, 120) and len(k) == 16
+    assert k != motion_key(take, 0, 121) and k != motion_key(take, 1, 121)
+
+    def ex(name: str, key: str) -> Example:
+        return Example(name, "t", "p", np.zeros((10, 8)), np.arange(10), (0, 10), "c", 60.0, key)
+
+    new, rep = unique_examples([ex("walk", "k1"), ex("walk", "k1"), ex("squat", "k2"),
+                                ex("x", ""), ex("x", "")], known={"k2": "squat"})
+    assert [e.key for e in new] == ["k1", "", ""] and [e.key for e in rep] == ["k1", "k2"]
+
+
+def test_learn_from_a_folder_that_does_not_exist(tmp_path):
+    p = _learn(str(tmp_path / "lib.json"), "--from", str(tmp_path / "nowhere"))
+    assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1
+    assert "no such folder" in p.stderr
+
+
+@pytest.mark.skipif(not ((DATA / "hdm05" / "index.tsv").is_file()
+                         and (DATA / "bandai" / "index.tsv").is_file()),
+                    reason="needs ../shared/data/hdm05 and bandai")
+def test_learn_from_real_hdm05_amc_and_bandai_bvh(tmp_path):
+    """A parent folder holding part of hdm05 (ASF/AMC, 120 Hz, one unit per clip) and of
+    bandai (BVH, 30 Hz): one canonical library of both; short clips joined."""
+    root = tmp_path / "data"
+    for src, keep in (("hdm05", ("bd", "bk")), ("bandai", ("bn1", "bn2"))):
+        d = root / src
+        d.mkdir(parents=True)
+        sub = "amc" if src == "hdm05" else "bvh"
+        (d / sub).symlink_to(DATA / src / sub)
+        lines = (DATA / src / "index.tsv").read_text().splitlines()
+        want = ("squat", "kick") if src == "hdm05" else ("walk", "wave_left_hand")
+        rows = [r for r in lines[1:] if r.split("\t")[1] in keep and r.split("\t")[5] in want]
+        (d / "index.tsv").write_text("\n".join(lines[:1] + rows) + "\n")
+    lib = tmp_path / "lib.json"
+    p = _learn(str(lib), "--from", str(root))
+    assert p.returncode == 0, p.stderr
+    got = load(lib)
+    assert got.behaviour_names == ["kick", "squat", "walk", "wave_left_hand"]
+    assert {e["person"] for e in got.examples} == {"bd", "bk", "bn1", "bn2"}
+    assert {e["frame_rate"] for e in got.examples} == {30.0, 120.0}
+    squats = [e for e in got.examples if e["name"] == "squat"]
+    assert squats and all("+" in e["source"] for e in squats)    # one squat per clip: joined
+    p = _learn(str(lib), "--from", str(root))
+    assert f"{len(got.examples)} already in the library" in p.stderr
