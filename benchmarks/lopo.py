@@ -56,6 +56,11 @@ GRIDS = {
         "gate_threshold": [0.0, 3.5, 4.5],
         "reference_dims": [40, 48],
     },
+    "place": {                      # cut placement on or off, with the threshold
+        "threshold": [1.75, 2.0],
+        "place_radius_s": [0.0, 1.0],
+        "gate_threshold": [3.5, 4.0],
+    },
     "short": {                      # shorter windows and gaps for 2-5 s behaviours
         "threshold": [1.75, 2.0],
         "min_before_s": [1.0, 1.5],

@@ -58,6 +58,9 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "early_hold_s": ((int, float), _nonneg),
         "gate_threshold": ((int, float), _nonneg),
         "bound_before": ((bool,), (lambda v: True, "true or false")),
+        "place_radius_s": ((int, float), _nonneg),
+        "place_window_s": ((int, float), _pos),
+        "place_ridge": ((int, float), _nonneg),
     },
     "pca": {
         "window_s": ((int, float), _pos),

@@ -70,12 +70,14 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from dataclasses import replace
 from typing import Any, Mapping
 
 import numpy as np
 
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.detectors.early import EarlyCut, EarlyCuts
+from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, place
 from rtseg.detectors.gate import (GATE_DECIDE_S, GATE_MIN_AFTER_S, GATE_SKIP_S, GATE_WINDOW_S,
                                   SameBehaviourGate)
 from rtseg.detectors.window_models import WindowModel, WindowStats, distances, fit, one_sided
@@ -95,7 +97,9 @@ class ContrastDetector(OnlineDetector):
                  early_threshold: float = 1.5, early_hold: int = 60,
                  gate_threshold: float = 0.0, gate_decide: int = 180, gate_skip: int = 60,
                  gate_window: int = 360, gate_min_after: int = 120,
-                 bound_before: bool = False, keep_trace: bool = False) -> None:
+                 bound_before: bool = False, place_radius: int = 0, place_window: int = 240,
+                 place_ridge: float = 0.01, place_stride: int = 4, place_margin: int = 30,
+                 keep_trace: bool = False) -> None:
         if step < 1:
             raise ValueError(f"step must be >= 1 frame, got {step}")
         for key, v in (("before", before), ("after", after), ("min_before", min_before)):
@@ -124,6 +128,12 @@ class ContrastDetector(OnlineDetector):
                                early_hold=int(early_hold), early_after=self.we * self.step)
         #: before windows never reach back past the last cut sent (module doc)
         self.bound_before = bool(bound_before)
+        #: cut placement (``rtseg.detectors.placement``): radius 0 = off
+        if place_radius < 0 or place_window < 1 or place_ridge < 0:
+            raise ValueError("place_radius and place_ridge must be >= 0, place_window >= 1")
+        self.place_radius, self.place_window = int(place_radius), int(place_window)
+        self.place_ridge, self.place_stride = float(place_ridge), max(1, int(place_stride))
+        self.place_margin = max(2, int(place_margin))
         self.keep_trace = keep_trace
         self.trace: list[tuple[int, float, float]] = []
         #: early-look profile when keep_trace: (position, value, frame that made it known)
@@ -138,6 +148,7 @@ class ContrastDetector(OnlineDetector):
                 ring=self.delay_frames + gate_decide + gate_window + 2 * self.step,
                 fit_args=self.fit_args)
         self._t = 0
+        self._rows: np.ndarray | None = None   # ring of the newest frames (placement)
         self._dim: int | None = None
         self._buf: np.ndarray | None = None
         self.restart()
@@ -163,7 +174,12 @@ class ContrastDetector(OnlineDetector):
                    gate_skip=frames(GATE_SKIP_S, frame_rate),
                    gate_window=frames(GATE_WINDOW_S, frame_rate),
                    gate_min_after=frames(GATE_MIN_AFTER_S, frame_rate),
-                   bound_before=bool(p.get("bound_before", False)), keep_trace=keep_trace)
+                   bound_before=bool(p.get("bound_before", False)),
+                   place_radius=frames(p["place_radius_s"], frame_rate) if p.get("place_radius_s") else 0,
+                   place_window=frames(p.get("place_window_s", 2.0), frame_rate),
+                   place_ridge=p.get("place_ridge", 0.01),
+                   place_stride=frames(PLACE_STRIDE_S, frame_rate),
+                   place_margin=frames(PLACE_MARGIN_S, frame_rate), keep_trace=keep_trace)
 
     @property
     def delay_frames(self) -> int:
@@ -194,6 +210,8 @@ class ContrastDetector(OnlineDetector):
         self._buf = np.empty((self.step, dim))
         cap = 2 * self.wa + self.wb + 2
         self._cap = cap
+        if self.place_radius:
+            self._rows = np.zeros((self.place_window + self.delay_frames + self.step, dim))
         # prefix sums at block boundaries k (blocks < k), ring of cap entries
         self._P1 = np.zeros((cap, dim))
         self._P2 = np.zeros((cap, dim, dim))
@@ -208,6 +226,8 @@ class ContrastDetector(OnlineDetector):
         if self._ref is None:
             self._ref = x.copy()
         self._buf[self._fill] = x - self._ref
+        if self._rows is not None:
+            self._rows[(self._t - 1) % len(self._rows)] = x
         self._fill += 1
         if self._fill < self.step:
             if self._pending is not None:      # spread the work: see _block_done
@@ -217,6 +237,8 @@ class ContrastDetector(OnlineDetector):
             self._fill = 0
             self._block_done()
         cut = self._cut(self._out.popleft(), self._t - 1) if self._out else None
+        if cut is not None and self._rows is not None:
+            cut = self._placed(cut)
         if self.gate is not None:
             self.gate.push(self._t - 1, x)
             if cut is not None:
@@ -264,6 +286,22 @@ class ContrastDetector(OnlineDetector):
         return Cut(frame=peak.position, method=self.name,
                    confidence=float(min(max(conf, 0.0), 1.0)),
                    detected_at=at, score=float(peak.value))
+
+    def _placed(self, cut: Cut) -> Cut:
+        """``cut`` moved to the best two-Gaussian split of the frames within
+        ``place_window`` of it (``rtseg.detectors.placement``), never before the segment's
+        start nor onto or before the last cut sent."""
+        now = self._t                           # frames [lo, now) are in the ring
+        lo = max(cut.frame - self.place_window, self._seg0, now - len(self._rows))
+        if self._last_sent is not None:
+            lo = max(lo, self._seg0 + self._last_sent * self.step + 1)
+        hi = min(now, cut.frame + self.place_window)
+        if hi - lo < 4 or not lo <= cut.frame < hi:
+            return cut
+        rows = self._rows[np.arange(lo, hi) % len(self._rows)]
+        b = lo + place(rows, cut.frame - lo, self.place_radius, self.place_stride,
+                       self.place_ridge, margin=self.place_margin)
+        return cut if b == cut.frame else replace(cut, frame=b)
 
     def _stats(self, lo: int, hi: int) -> WindowStats:
         """Statistics of blocks [lo, hi), from the prefix-sum ring."""

@@ -1,0 +1,45 @@
+"""Cut placement (rtseg.detectors.placement) and the contrast detector's use of it."""
+
+import numpy as np
+
+from rtseg.detectors import load_params
+from rtseg.detectors.contrast import ContrastDetector
+from rtseg.detectors.placement import place
+
+
+def _two_behaviours(n1: int, n2: int, dim: int = 8, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    a = rng.normal(0.0, 0.1, (n1, dim))
+    b = rng.normal(0.0, 0.1, (n2, dim)) @ np.diag(np.linspace(0.5, 3.0, dim))
+    b[:, 0] += 0.3
+    return np.vstack([a, b])
+
+
+def test_place_finds_the_split_of_two_gaussians():
+    X = _two_behaviours(200, 180)
+    for guess in (150, 190, 240):
+        assert abs(place(X, guess, radius=60, stride=1) - 200) <= 3
+
+
+def test_place_stays_within_radius_and_margin():
+    X = _two_behaviours(200, 180)
+    assert abs(place(X, 100, radius=20, stride=1) - 100) <= 20
+    assert place(X, 1, radius=50, stride=1, margin=10) >= 10
+    assert place(X[:3], 1, radius=5, margin=2) == 1      # too short: unchanged
+
+
+def test_detector_cut_placed_nearer_the_change():
+    rng = np.random.default_rng(1)
+    fr = 120.0
+    t = np.arange(int(16 * fr)) / fr
+    X = np.zeros((len(t), 12))
+    change = int(8 * fr)
+    X[:change, :6] = np.sin(2 * np.pi * 1.0 * t[:change, None] + np.arange(6))
+    X[change:, 6:] = 0.7 * np.sin(2 * np.pi * 0.4 * t[change:, None] + np.arange(6))
+    X += rng.normal(0, 0.02, X.shape)
+    p = dict(load_params()["contrast"], gate_threshold=0.0, early_after_s=0.0)
+    plain = ContrastDetector.from_params({**p, "place_radius_s": 0.0}, fr).run(X)
+    placed = ContrastDetector.from_params({**p, "place_radius_s": 1.0}, fr).run(X)
+    assert len(plain) == len(placed) == 1
+    assert abs(placed[0].frame - change) <= abs(plain[0].frame - change)
+    assert abs(placed[0].frame - change) <= 0.1 * fr
