@@ -331,6 +331,20 @@ def test_plot_title_gives_the_scores_evaluate_gives(data_dir, capsys, tmp_path):
     assert f"pca: F1 {strict:.3f}" in _png_title(png) and "±0 s" in _png_title(png)
 
 
+def test_plot_to_a_missing_folder_fails_at_once(synth_dir, capsys, tmp_path, monkeypatch):
+    """``plot -o missing/dir/x.png`` is refused before any segmentation (it used to fail
+    with a raw errno text after the take was segmented)."""
+    import rtseg.commands.plot as plot_cmd
+    ran, real = [], plot_cmd.segment_take         # a spy: counts the real calls
+    monkeypatch.setattr(plot_cmd, "segment_take",
+                        lambda *a, **k: (ran.append(1), real(*a, **k))[1])
+    out = tmp_path / "missing" / "dir" / "x.png"
+    rc, _, err = run_cli(capsys, "plot", synth_dir["root"] / "cmu" / "90_01.npz", "-o", out)
+    assert rc == 2 and not ran
+    assert f"rtseg plot: error: cannot write {out}: folder {out.parent} does not exist" in err
+    assert "Errno" not in err
+
+
 def test_plot_without_matplotlib_is_a_clear_error(synth_dir, capsys, tmp_path, monkeypatch):
     for mod in [m for m in sys.modules if m == "matplotlib" or m.startswith("matplotlib.")]:
         monkeypatch.delitem(sys.modules, mod)

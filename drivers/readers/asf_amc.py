@@ -314,7 +314,7 @@ def skeleton_for(amc_path: str | Path) -> Path:
     asfs = sorted(p for p in amc_path.parent.glob("*") if p.suffix.lower() == ".asf")
     if len(asfs) == 1:
         return asfs[0]
-    tried = ", ".join(c.name for c in candidates)
+    tried = ", ".join(dict.fromkeys(c.name for c in candidates))   # each name once
     raise ReaderError(amc_path, f"no skeleton given and none found beside it (looked for {tried}"
                       + (f"; {len(asfs)} .asf files there, pass skeleton=" if asfs else "") + ")")
 

@@ -452,6 +452,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"rtseg plot: error: {exc}", file=sys.stderr)
         return 2
     from rtseg.take import load_take
+    out = Path(args.output) if args.output else None
+    if out is not None and not out.parent.is_dir():   # before the segmentation's seconds
+        print(f"rtseg plot: error: cannot write {out}: folder {out.parent} does not exist",
+              file=sys.stderr)
+        return 2
     take_path = Path(args.take)
     name = take_path.stem if take_path.suffix else take_path.name
     if args.labels == "none":
@@ -472,7 +477,7 @@ def run(args: argparse.Namespace) -> int:
         if "pca" in methods else None
     profiles = scan_profiles(X, take.frame_rate,
                              {m: params.get(m) for m in methods if m in ("pca", "ppca")})
-    out = Path(args.output) if args.output else Path(f"{name}.png")
+    out = out or Path(f"{name}.png")
     render(out, name, take.n_frames, take.frame_rate, results, labels, band, profiles,
            args.tolerance)
     print(out)
