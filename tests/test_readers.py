@@ -298,6 +298,13 @@ def test_amc_missing_skeleton_and_other_file_errors(tmp_path):
         read_amc(tmp_path / "absent.amc", asf)
     with pytest.raises(ReaderError, match="unknown take format '.xyz'"):
         read_take(_write(tmp_path, "x.xyz", "nothing"))
+    # a BVH given as the skeleton is named for what it is (it used to be "line outside any
+    # section: 'HIERARCHY'")
+    bvh = _write(tmp_path, "86_01.bvh", "HIERARCHY\nROOT Hips\n{\n}\nMOTION\n")
+    with pytest.raises(ReaderError, match=r"86_01\.bvh:1: is a BVH file \(it starts with "
+                       r"HIERARCHY\), not an ASF skeleton: an \.amc take needs its Acclaim "
+                       r"\.asf"):
+        read_take(amc, skeleton=bvh)
     # Explicit skeleton beats the missing neighbour.
     assert read_take(amc, skeleton=asf).n_frames == 2
 
