@@ -228,6 +228,15 @@ def test_evaluate_empty_folder(tmp_path, capsys):
 
 
 
+@pytest.mark.parametrize("n", ["0", "-2", "two"])
+def test_evaluate_workers_below_one_is_refused(synth_dir, capsys, n):
+    """``--workers 0`` used to run silently in one process: now one line says why not."""
+    rc, out, err = run_cli(capsys, "evaluate", synth_dir["root"], "--workers", n)
+    assert rc == 2 and out == ""
+    assert "argument --workers: " in err
+    assert ("must be at least 1" if n != "two" else "not a whole number") in err
+
+
 def test_evaluate_says_how_to_score_single_behaviour_takes(tmp_path, capsys):
     """A folder of single-behaviour takes (laid out like cmu_single) has no transitions:
     the error says so and names the splicer, for the folder and for its parent."""
