@@ -245,6 +245,18 @@ def _retarget_kw(args) -> dict:
             "imu": args.imu or None, "allow_missing": args.allow_missing}
 
 
+def check_host(host: str) -> None:
+    """``--host`` resolved now: a name or address that does not resolve is a ValueError
+    naming it (instead of the resolver's errno text when the first frame goes out)."""
+    import socket
+    try:
+        socket.getaddrinfo(host, None)
+    except (socket.gaierror, UnicodeError) as exc:
+        why = getattr(exc, "strerror", None) or str(exc)
+        raise ValueError(f"--host {host!r}: not an address, and no host of that name can be "
+                         f"found ({why})") from None
+
+
 class Host:
     """What a network simulator's ``serve(args, take, host)`` gets from the command: ``out``
     (print a line), ``retarget_kw`` (retargeting options), :meth:`port` and :meth:`drive`."""
@@ -261,6 +273,7 @@ class Host:
         port = default if args.port is None else args.port
         if not lowest <= port < 65536:
             raise ValueError(f"--port must be {lowest}..65535, got {port}")
+        check_host(args.host)
         if args.faults and not faults:
             raise ValueError(f"--faults is not supported by the {args.device} simulator")
         return port
