@@ -95,7 +95,7 @@ def _describe(kind: str) -> str:
 
 def _check_types(doc: dict, p: Path) -> None:
     """One ``LibraryError`` line naming the first field (or list element) of the wrong JSON
-    type - a number among the names, a string for dims, ... - instead of converting it."""
+    type - a number among the names, a string for dims, ...; nothing is converted."""
     fields = {**_TYPES, **{k: v for k, v in _OPTIONAL_TYPES.items() if k in doc}}
     for key, kind in fields.items():
         if key not in doc:

@@ -85,7 +85,7 @@ def test_discovery_files_folders_globs(archive, tmp_path):
 
 
 def test_segment_of_an_empty_folder_fails(tmp_path):
-    """``rtseg segment EMPTYDIR`` used to exit 0 with "0/0 takes"."""
+    """``rtseg segment EMPTYDIR`` is an error naming the folder, exit 2, no "0/0 takes"."""
     import subprocess
     import sys
     proc = subprocess.run([sys.executable, "-m", "rtseg.cli", "segment", str(tmp_path)],

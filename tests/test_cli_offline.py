@@ -230,7 +230,7 @@ def test_evaluate_empty_folder(tmp_path, capsys):
 
 @pytest.mark.parametrize("n", ["0", "-2", "two"])
 def test_evaluate_workers_below_one_is_refused(synth_dir, capsys, n):
-    """``--workers 0`` used to run silently in one process: now one line says why not."""
+    """``--workers 0`` (or less, or not a number) is refused with one line."""
     rc, out, err = run_cli(capsys, "evaluate", synth_dir["root"], "--workers", n)
     assert rc == 2 and out == ""
     assert "argument --workers: " in err
@@ -278,8 +278,8 @@ def _png_title(path: Path) -> str:
 
 
 def test_plot_legends_leave_every_panel_clear(synth_dir):
-    """Each panel's legend lies outside its axes: it hides no curve (it used to sit in the
-    upper right corner of the scan panel, over its contrast peaks)."""
+    """Each panel's legend lies outside its axes, right of it: it hides no curve (the scan
+    panel's contrast peaks included)."""
     from rtseg.commands.plot import figure, pca_with_band, scan_profiles
     from rtseg.labels import find_labels_for
     from rtseg.segmentation import compute_features, segment_take
@@ -311,8 +311,7 @@ def test_plot_legends_leave_every_panel_clear(synth_dir):
 def test_plot_title_gives_the_scores_evaluate_gives(data_dir, capsys, tmp_path):
     """86_01, PCA: the plot's title gives evaluate's F1 (P, R) at the default 0.5 s
     tolerance - 1.000, where the strict score is lower - with the strict F1 beside it, both
-    labelled; --tolerance 0 makes them one.  (The title used to give the strict P and R
-    alone, unlabelled: "P=0.83 R=0.83".)"""
+    labelled; --tolerance 0 makes them one."""
     data = tmp_path / "data"
     (data / "cmu").mkdir(parents=True)
     (data / "labels").mkdir()
@@ -341,8 +340,8 @@ def test_plot_title_gives_the_scores_evaluate_gives(data_dir, capsys, tmp_path):
 
 
 def test_plot_to_a_missing_folder_fails_at_once(synth_dir, capsys, tmp_path, monkeypatch):
-    """``plot -o missing/dir/x.png`` is refused before any segmentation (it used to fail
-    with a raw errno text after the take was segmented)."""
+    """``plot -o missing/dir/x.png`` is refused before any segmentation, with one line
+    naming the folder (no errno text)."""
     import rtseg.commands.plot as plot_cmd
     ran, real = [], plot_cmd.segment_take         # a spy: counts the real calls
     monkeypatch.setattr(plot_cmd, "segment_take",

@@ -275,9 +275,9 @@ def test_slip_logged_once_per_line_but_always_recorded(tmp_path, caplog):
 
 def test_slips_warned_only_for_the_takes_used(tmp_path, caplog):
     """A data folder whose label file has slips in blocks 86_04, 86_05 and 86_06 but whose
-    only take is 86_05: finding its takes warns about 86_05's slip alone (evaluate, plot
-    and learn used to print all three on every run); the block is still repaired, and a
-    second search does not repeat the warning."""
+    only take is 86_05: finding its takes (what evaluate, plot and learn do) warns about
+    86_05's slip alone; the block is still repaired, and a second search does not repeat
+    the warning."""
     (tmp_path / "cmu").mkdir()
     (tmp_path / "labels").mkdir()
     (tmp_path / "cmu" / "86_05.amc").write_text("")

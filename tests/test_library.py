@@ -130,8 +130,7 @@ def test_refusals_are_one_clear_line(tmp_path, library):
 def test_a_field_of_the_wrong_type_is_one_clear_line(tmp_path, library, key, value,
                                                       message):
     """A library edited by hand with an int among its names, dims as a string or a frame
-    rate its windows contradict is refused with one line naming the field (such files
-    used to be converted and accepted without a word)."""
+    rate its windows contradict is refused with one line naming the field."""
     doc = json.loads(library.save(tmp_path / "lib.json").read_text())
     assert doc["dims"] == 48 and doc["frame_rate"] == 120.0 and doc["window_s"] == 2.0
     doc[key] = value(doc[key])

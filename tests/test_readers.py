@@ -298,8 +298,7 @@ def test_amc_missing_skeleton_and_other_file_errors(tmp_path):
         read_amc(tmp_path / "absent.amc", asf)
     with pytest.raises(ReaderError, match="unknown take format '.xyz'"):
         read_take(_write(tmp_path, "x.xyz", "nothing"))
-    # a BVH given as the skeleton is named for what it is (it used to be "line outside any
-    # section: 'HIERARCHY'")
+    # a BVH given as the skeleton is named for what it is
     bvh = _write(tmp_path, "86_01.bvh", "HIERARCHY\nROOT Hips\n{\n}\nMOTION\n")
     with pytest.raises(ReaderError, match=r"86_01\.bvh:1: is a BVH file \(it starts with "
                        r"HIERARCHY\), not an ASF skeleton: an \.amc take needs its Acclaim "

@@ -133,8 +133,8 @@ def test_mvn_tcp_simulator_waits_for_its_receiver():
 
 def test_serial_simulator_reports_waiting_apart_from_sending(tmp_path):
     """The reader opens the pty 3 s after the simulator printed its path; the 4 s take goes out at
-    x4.  The summary gives the wait and a sending time shorter than it (it used to count
-    the wait as sending time)."""
+    x4.  The summary gives the wait, and a sending time (shorter than it) that does not
+    count the wait."""
     link = tmp_path / "suit"
     sim = _Simulator("serial", "--synth", SYNTH, "--speed", "4", "--link", str(link),
                      "--linger", "2")

@@ -247,7 +247,7 @@ def _retarget_kw(args) -> dict:
 
 def check_host(host: str) -> None:
     """``--host`` resolved now: a name or address that does not resolve is a ValueError
-    naming it (instead of the resolver's errno text when the first frame goes out)."""
+    naming it, before anything is sent."""
     import socket
     try:
         socket.getaddrinfo(host, None)
