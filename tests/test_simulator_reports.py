@@ -183,6 +183,7 @@ def test_demo_faster_than_the_loop_warns_with_the_speed_reached():
         return
     assert proc.returncode == 0, proc.stderr
     m = re.search(r"rtseg demo: warning: processed (\d+) of the 7200 frames of 60 s of "
-                  r"performance \(\d+ %\): the loop reached x([\d.]+) of real time", proc.stderr)
+                  r"performance \(\d+ %\) in [\d.]+ s: the loop reached x([\d.]+) of real "
+                  r"time", proc.stderr)
     assert m, proc.stderr
     assert int(m.group(1)) == processed and float(m.group(2)) < 60
