@@ -68,7 +68,8 @@ def _walk(root: Path) -> Iterable[Path]:
 
 def discover_takes(paths: Sequence[str | os.PathLike]) -> list[str]:
     """Absolute take paths from files, folders and globs (``**`` recurses), sorted and
-    without repeats.  A path that does not exist and matches nothing is a ValueError."""
+    without repeats.  A path that does not exist and matches nothing, or a folder given
+    by name that holds no take, is a ValueError."""
     found: dict[str, None] = {}
     for raw in paths:
         text = os.fspath(raw)
@@ -88,8 +89,13 @@ def discover_takes(paths: Sequence[str | os.PathLike]) -> list[str]:
                 takes = [m]       # a file named explicitly is tried whatever its extension
             else:
                 takes = []
-            for t in takes:
+            n = 0
+            for n, t in enumerate(takes, 1):
                 found[str(t.resolve())] = None
+            if m is p and n == 0 and m.is_dir():
+                raise ValueError(f"{text}: no take in this folder (files "
+                                 f"{', '.join(TAKE_EXTENSIONS)} or recorded sessions, "
+                                 f"searched recursively)")
     return sorted(found)
 
 

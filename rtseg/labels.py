@@ -128,6 +128,8 @@ def find_labelled_takes(data_dir: str | Path, groups: Iterable[str] = GROUPS, *,
     ``*.npz`` takes in the folder itself or in ``spliced/`` that carry their own transition
     ranges (:func:`read_take_transitions`; spliced performances) form group "spliced".
     Motion files without labels are skipped with a warning.  Sorted by group, then name.
+    Label slips (:func:`read_cmu86_transitions`) are warned about for the blocks of the
+    takes returned only.
     """
     root = Path(data_dir)
     if not root.is_dir():
@@ -138,7 +140,8 @@ def find_labelled_takes(data_dir: str | Path, groups: Iterable[str] = GROUPS, *,
             raise ValueError(f"unknown group {g!r}; choose from {GROUPS}")
     ranges: dict[str, TransitionLabels] = {}
     for f in sorted((root / "labels").glob("*transitions*.txt")):
-        for k, v in read_cmu86_transitions(f, strict=strict, on_slip=on_slip).items():
+        for k, v in read_cmu86_transitions(f, strict=strict, on_slip=on_slip,
+                                           warn=False).items():
             if k in ranges:
                 log.warning("%s: block %s already read from %s; ignored", f, k, ranges[k].source)
                 continue
@@ -184,6 +187,8 @@ def find_labelled_takes(data_dir: str | Path, groups: Iterable[str] = GROUPS, *,
                     continue
                 found.append(LabelledTake(path.stem, "spliced", path, None, labels))
     found.sort(key=lambda t: (GROUPS.index(t.group), t.name))
+    for t in found:                 # slips of the blocks used; the others stay quiet
+        _cmu86.warn_repairs(t.labels)
     return found
 
 
@@ -199,10 +204,11 @@ def read_labels_file(path: str | Path, take_name: str, *,
     if path.suffix.lower() == ".csv":
         return read_frame_labels(path, tolerance=tolerance)
     if _looks_like_ranges(path):
-        blocks = read_cmu86_transitions(path)
+        blocks = read_cmu86_transitions(path, warn=False)
         if take_name not in blocks:
             raise LabelError(path, None, f"no block for take {take_name} "
                              f"(blocks: {', '.join(sorted(blocks)) or 'none'})")
+        _cmu86.warn_repairs(blocks[take_name])
         return blocks[take_name]
     return read_block_labels(path, tolerance=tolerance)
 
@@ -219,8 +225,9 @@ def find_labels_for(motion: str | Path, *, tolerance: int = DEFAULT_TOLERANCE
     name = motion.stem
     for root in (motion.parent.parent, motion.parent):
         for f in sorted((root / "labels").glob("*transitions*.txt")):
-            blocks = read_cmu86_transitions(f)
+            blocks = read_cmu86_transitions(f, warn=False)
             if name in blocks:
+                _cmu86.warn_repairs(blocks[name])
                 return blocks[name]
         m6 = root / "labels" / "mocap6" / f"{name}.txt"
         if m6.is_file():

@@ -21,8 +21,9 @@ log = logging.getLogger("rtseg.labels")
 SLIP_POLICIES = ("repair", "reject", "strict")
 
 
-#: (file, line, policy) of slips already logged, so re-reading a file does not repeat them.
-_warned: set[tuple[str, int, str]] = set()
+#: slip notes already logged (they name file, line and action), so re-reading a file
+#: does not repeat them
+_warned: set[str] = set()
 
 _BLOCK_RE = re.compile(r"^\s*(\d+)\s+(\d+)\s*$")
 
@@ -35,8 +36,17 @@ def _check_policy(strict: bool, on_slip: str) -> str:
     return on_slip
 
 
+def warn_repairs(labels: TransitionLabels) -> None:
+    """Log each slip note of ``labels.repairs`` as a warning, once per process."""
+    for note in labels.repairs:
+        if note not in _warned:
+            _warned.add(note)
+            log.warning("label slip %s", note)
+
+
 def read_cmu86_transitions(path: str | Path, *, strict: bool = False,
-                           on_slip: str = "repair") -> dict[str, TransitionLabels]:
+                           on_slip: str = "repair", warn: bool = True
+                           ) -> dict[str, TransitionLabels]:
     """Read a ``cmu86_transitions.txt``-style file: {take name "SS_TT": TransitionLabels}.
 
     on_slip: what to do with an inconsistent line -
@@ -47,8 +57,10 @@ def read_cmu86_transitions(path: str | Path, *, strict: bool = False,
       the previous ``mid`` cannot be repaired and is rejected.
       ``"reject"``: the inconsistent line's transition is dropped (the segment names stay).
       ``"strict"`` (or ``strict=True``): raise :class:`LabelError` naming file and line.
-    Every repair or rejection is logged as a warning naming the file line and block line,
-    and listed in ``TransitionLabels.repairs``.
+    Every repair or rejection is listed in ``TransitionLabels.repairs`` and (``warn``,
+    the default) logged as a warning naming the file line and block line, once per
+    process; ``warn=False`` leaves the logging to the caller (:func:`warn_repairs`), so
+    a command warns only about the blocks of the takes it uses.
     """
     policy = _check_policy(strict, on_slip)
     path = Path(path)
@@ -89,6 +101,8 @@ def read_cmu86_transitions(path: str | Path, *, strict: bool = False,
         if len(lines) < 1:
             raise LabelError(path, None, f"block {name} has no segment lines")
         out[name] = _block_transitions(path, name, lines, policy)
+        if warn:
+            warn_repairs(out[name])
     return out
 
 
@@ -103,12 +117,7 @@ def _block_transitions(path: Path, name: str, lines: list[tuple[int, int, str, l
         where = f"{path.name}:{lineno} ({name} line {blockline})"
         if policy == "strict":
             raise LabelError(path, lineno, f"{name} line {blockline}: {problem}")
-        note = f"{where}: {problem}; {action}"
-        key = (str(path.resolve()), lineno, policy)
-        if key not in _warned:  # once per process and file line; always in ``repairs``
-            _warned.add(key)
-            log.warning("label slip %s", note)
-        repairs.append(note)
+        repairs.append(f"{where}: {problem}; {action}")
 
     *segments, last = lines
     for idx, (lineno, blockline, behaviour, (lo, mid, hi)) in enumerate(segments):

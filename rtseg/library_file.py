@@ -57,6 +57,61 @@ def save(lib: Library, path: str | Path) -> Path:
     return p
 
 
+#: JSON type of each field: "str", "int", "num" (int or float), a trailing "?" (or null),
+#: "[T]" a list of T, "[[num]]" a list of lists of numbers
+_TYPES = {"profile": "str", "dims": "int", "frame_rate": "num", "window_s": "num",
+          "step_s": "num", "edge_s": "num", "min_s": "num", "threshold": "num?",
+          "names": "[str]", "sources": "[int]", "scale": "[num]", "descriptors": "[[num]]",
+          "examples": "[dict]"}
+#: fields that may be absent (files written before them)
+_OPTIONAL_TYPES = {"ratio": "num", "k_nearest": "int", "metric": "str", "lag_s": "num",
+                   "starts": "[num]", "calibration": "dict?"}
+_WHAT = {"str": "a string", "int": "a whole number", "num": "a number", "dict": "an object",
+         "[num]": "a list of numbers"}
+
+
+def _type_ok(value: Any, kind: str) -> bool:
+    """Whether a JSON value is of ``kind`` (see ``_TYPES``; lists: their elements too)."""
+    if kind.endswith("?"):
+        return value is None or _type_ok(value, kind[:-1])
+    if kind.startswith("["):
+        return isinstance(value, list) and all(_type_ok(v, kind[1:-1]) for v in value)
+    if kind == "str":
+        return isinstance(value, str)
+    if kind == "int":
+        return isinstance(value, int) and not isinstance(value, bool)
+    if kind == "num":
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    return isinstance(value, dict)
+
+
+def _describe(kind: str) -> str:
+    if kind.endswith("?"):
+        return f"{_describe(kind[:-1])} or null"
+    if kind.startswith("["):
+        return f"a list of {_describe(kind[1:-1]).split(' ', 1)[1]}s"
+    return _WHAT[kind]
+
+
+def _check_types(doc: dict, p: Path) -> None:
+    """One ``LibraryError`` line naming the first field (or list element) of the wrong JSON
+    type - a number among the names, a string for dims, ...; nothing is converted."""
+    fields = {**_TYPES, **{k: v for k, v in _OPTIONAL_TYPES.items() if k in doc}}
+    for key, kind in fields.items():
+        if key not in doc:
+            raise LibraryError(f"behaviour library {p}: malformed (no {key!r} field)")
+        value = doc[key]
+        if _type_ok(value, kind):
+            continue
+        where = key
+        if kind.startswith("[") and isinstance(value, list):
+            i = next(i for i, v in enumerate(value) if not _type_ok(v, kind[1:-1]))
+            where, value = f"{key}[{i}]", value[i]
+            kind = kind[1:-1]
+        raise LibraryError(f"behaviour library {p}: {where} must be {_describe(kind)}, got "
+                           f"{json.dumps(value)[:40]}")
+
+
 #: library files already warned about (``load``)
 _WARNED: set[str] = set()
 
@@ -81,6 +136,7 @@ def load(path: str | Path, profile: str | None = None, dims: int | None = None) 
         raise LibraryError(f"behaviour library {p}: version {doc.get('version')!r} "
                            f"(this rtseg reads versions {', '.join(map(str, READS))}; "
                            f"learn it again)")
+    _check_types(doc, p)
     metric = str(doc.get("metric", "descriptor")) if doc["version"] >= 2 else "descriptor"
     try:
         lib = Library(str(doc["profile"]), int(doc["dims"]), float(doc["frame_rate"]),
@@ -98,6 +154,8 @@ def load(path: str | Path, profile: str | None = None, dims: int | None = None) 
                       lag_s=float(doc.get("lag_s", LAG_S)))
         if metric not in METRICS:
             raise ValueError(f"metric {metric!r} not one of {', '.join(METRICS)}")
+        if not (lib.frame_rate > 0 and math.isfinite(lib.frame_rate)):
+            raise ValueError(f"frame_rate {lib.frame_rate} not a positive number")
         if not 0 < lib.ratio <= 1:
             raise ValueError(f"ratio {lib.ratio} outside (0, 1]")
         if lib.k_nearest < 1:
@@ -126,6 +184,16 @@ def load(path: str | Path, profile: str | None = None, dims: int | None = None) 
                                  f"{len(lib.names)} windows")
             if not lib.lag_s > 0:
                 raise ValueError(f"lag_s {lib.lag_s} not positive")
+            longest = max(w.n for w in lib.window_stats)
+        except (KeyError, TypeError, ValueError, np.linalg.LinAlgError) as exc:
+            raise LibraryError(f"behaviour library {p}: malformed ({type(exc).__name__}: "
+                               f"{exc})") from None
+        if longest > round(lib.window_s * lib.frame_rate) + 1:
+            raise LibraryError(
+                f"behaviour library {p}: frame_rate {lib.frame_rate:g} Hz disagrees with "
+                f"its windows: {longest} frames in a {lib.window_s:g} s window is at least "
+                f"{longest / lib.window_s:g} Hz")
+        try:
             lib.bank                     # the windows' models, fitted once here (not live)
         except (KeyError, TypeError, ValueError, np.linalg.LinAlgError) as exc:
             raise LibraryError(f"behaviour library {p}: malformed ({type(exc).__name__}: "

@@ -9,7 +9,10 @@ per take frame in the encodings of :mod:`rtseg.drivers.codec_axis`:
 - ``fmt="text"``: like Axis, a **TCP server** on ``host:port`` (default 127.0.0.1:7001)
   writing ``<index> <name> v v ... ||`` to every connected client (``port=0``: an
   ephemeral port, read ``.port``).  ``wait_client`` seconds: hold the clock until the
-  first client connects (so a test receives every frame).
+  first client connects (``float("inf")``: however long that takes; ``rtseg simulate
+  axis --axis-format text`` waits so by default), so the client receives every frame;
+  ``waited_s`` says how long it waited.  Each frame's ``Sent.delivered`` says whether a
+  client took it (False: written while no client was connected - lost).
 
 What is sent: the take retargeted (:mod:`rtseg.simulators.stream_sender`) onto suit
 ``axis`` of ``config/suits.toml`` (HumanBodyBones names, placed on Axis joints through
@@ -179,11 +182,14 @@ class AxisSender(StreamSender):
         data = b"".join(parts)
         with self._clients_lock:
             clients = list(self._clients)
+        took = 0
         for c in clients:
             try:
                 c.sendall(data)
+                took += 1
             except OSError:                      # the client went away
                 self.disconnect(c)
+        self._delivered = took > 0
 
     def disconnect(self, client: socket.socket | None = None) -> int:
         """Close one client (default: all) - what a restart of Axis looks like to rtseg.
@@ -227,7 +233,9 @@ def serve(args, take: Take, host) -> tuple[str, list[str]]:
     port = host.port(BINARY_PORT if fmt == "binary" else TEXT_PORT, lowest=0, faults=True)
     suit = args.suit if args.suit != "default17" else "axis"
     sender = AxisSender(take, fmt, args.host, port, loop=args.loop, speed=args.speed,
-                        suit=suit, faults=args.faults or None, **retarget_kw)
+                        suit=suit, faults=args.faults or None,
+                        wait_client=host.wait_for_peer() if fmt == "text" else None,
+                        **retarget_kw)
     out(f"  {sender.describe()}")
     sender.start()
     how = (f"udp {args.host}:{sender.port}" if fmt == "binary"
@@ -236,5 +244,9 @@ def serve(args, take: Take, host) -> tuple[str, list[str]]:
         f"{sender.order}) to {how} at {sender.rate:g} Hz, sent at x{sender.speed:g}")
     out(f"  receive it with: rtseg live \"axis://{args.host}:{sender.port}?format={fmt}"
         f"&rate={sender.rate:g}\"")
+    if fmt == "text":
+        out("  sending starts when the first client connects" if sender.wait_client
+            else "  sending at once (--no-wait): frames written before a client connects "
+                 "are lost")
     reason, elapsed = host.drive(sender, start=False)
     return reason, host.summary(sender, elapsed, "frames", "bytes", "frame index")

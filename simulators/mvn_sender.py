@@ -14,7 +14,10 @@ first frame it sends a type-12 meta datagram (``name:<character_name>``).
 ``host:port`` (where ``mvn://HOST:PORT?transport=tcp`` listens), sends the meta message then
 the same MXTP messages back to back, and reconnects (every 0.2 s while refused) when the
 connection drops or an ``unplug`` fault closes it; frames due while it is not connected
-are lost (counted in ``send_errors``).
+are lost (counted in ``send_errors``, and ``Sent.delivered`` False).  ``wait_server``
+seconds (``float("inf")``: however long; what ``rtseg simulate mvn --transport tcp`` does by
+default): hold the clock until the first connection is made, so a receiver started after
+the sender loses no frame (``waited_s`` says how long it waited).
 
 Faults: ``faults=`` as the other vendor simulators
 (:mod:`rtseg.simulators.stream_sender`).  Read it with ``rtseg live mvn://127.0.0.1:9763``
@@ -58,7 +61,7 @@ class MvnSender(UdpTakeSender):
                  joint_map: dict[str, str] | None = None, imu: ImuModel | str | None = None,
                  allow_missing: bool = False,
                  max_datagram: int = DEFAULT_MAX_DATAGRAM, transport: str = "udp",
-                 faults=None) -> None:
+                 faults=None, wait_server: float | None = None) -> None:
         if transport not in ("udp", "tcp"):
             raise ValueError(f"transport must be udp or tcp, not {transport!r}")
         self.transport = transport
@@ -67,6 +70,7 @@ class MvnSender(UdpTakeSender):
                          allow_missing=allow_missing, faults=faults)
         #: TCP connections made so far
         self.connections = 0
+        self.wait_server = wait_server
         self._next_try = 0.0
         if not 0 <= int(character) <= 255:
             raise ValueError(f"character must be 0..255, got {character}")
@@ -92,11 +96,17 @@ class MvnSender(UdpTakeSender):
     def _ready(self) -> bool:
         if self.transport == "udp":
             return super()._ready()
-        self._connect()
+        deadline = time.monotonic() + (self.wait_server or 0.0)
+        while not self._connect(count=not self.wait_server):
+            if not self.wait_server or time.monotonic() >= deadline:
+                break
+            if self._stop.wait(max(0.0, min(self._next_try - time.monotonic(), 0.2))):
+                return False
         return True
 
-    def _connect(self) -> bool:
-        """Connect and send the preamble; False (retried later) if refused."""
+    def _connect(self, count: bool = True) -> bool:
+        """Connect and send the preamble; False (retried later) if refused (counted in
+        ``send_errors`` when ``count``: a frame is lost with it)."""
         now = time.monotonic()
         if now < self._next_try:
             return False
@@ -106,8 +116,9 @@ class MvnSender(UdpTakeSender):
             sock.sendall(b"".join(self.preamble()))
         except OSError as exc:
             self._next_try = now + self.retry
-            self.send_errors += 1
-            self._send_failed(exc)
+            if count:
+                self.send_errors += 1
+                self._send_failed(exc)
             return False
         self._sock = sock
         self.connections += 1
@@ -117,10 +128,12 @@ class MvnSender(UdpTakeSender):
         if self.transport == "udp":
             super()._send(dgrams)
             return
+        self._delivered = False
         if self._sock is None and not self._connect():
             return
         try:
             self._sock.sendall(b"".join(dgrams))
+            self._delivered = True
         except OSError as exc:
             self.send_errors += 1
             self._send_failed(exc)

@@ -285,8 +285,17 @@ class SerialSuit:
             tmp.unlink()
         except FileNotFoundError:
             pass
-        os.symlink(pts, tmp)
-        os.replace(tmp, self.link)
+        try:
+            os.symlink(pts, tmp)
+            os.replace(tmp, self.link)
+        except OSError as exc:
+            os.close(slave)
+            os.close(master)
+            folder = self.link.parent
+            why = ("does not exist" if not folder.is_dir() else
+                   f"does not take it ({exc.strerror or exc})")
+            raise ValueError(f"device link {self.link}: cannot create it: folder {folder} "
+                             f"{why}") from None
         os.close(slave)  # the reader opens it by path; the master sees POLLHUP until then
         self._master = master
         self._poll = select.poll()

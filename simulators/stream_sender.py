@@ -51,7 +51,8 @@ class Sent:
     """One frame slot: ``slot`` (from 0 over loops), ``index`` take frame, ``source_time``
     take seconds, ``send_time`` monotonic s (None: not sent), ``parts`` datagrams / chunks
     sent, ``nbytes``, ``fault`` what a fault did to it ("" none, "dropped", "corrupted",
-    "unplugged")."""
+    "unplugged"); ``delivered``: over a TCP transport, whether a connected peer took the
+    frame (False: written while nobody was connected, so lost); None over UDP (unknown)."""
     slot: int
     index: int
     source_time: float
@@ -59,6 +60,7 @@ class Sent:
     parts: int
     nbytes: int
     fault: str = ""
+    delivered: bool | None = None
 
     @property
     def datagrams(self) -> int:
@@ -127,6 +129,12 @@ class StreamSender(SenderThread):
         self.n_frames = take.n_frames
         self._init_thread()
         self.sent_log: list[Sent] = []
+        #: monotonic s when the transport opened and when the clock started (after
+        #: ``_ready``, e.g. waiting for a TCP peer); None until then
+        self.opened_at: float | None = None
+        self.clock_started: float | None = None
+        #: set by a TCP ``_send``: did a connected peer take the frame (None: UDP)
+        self._delivered: bool | None = None
 
     def _retarget(self, skeleton_map: str | None, joint_map: dict[str, str] | None,
                   imu: ImuModel | None, allow_missing: bool) -> Retargeted:
@@ -158,6 +166,22 @@ class StreamSender(SenderThread):
         """Called once before the first frame; False ends the run (stopped)."""
         return True
 
+    @property
+    def waited_s(self) -> float:
+        """Seconds between opening the transport and starting the clock (``_ready``:
+        waiting for a TCP peer), 0 before that."""
+        if self.opened_at is None or self.clock_started is None:
+            return 0.0
+        return self.clock_started - self.opened_at
+
+    @property
+    def sending_s(self) -> float:
+        """Seconds from the clock's start to the last frame sent (0 if none was)."""
+        sent = [s.send_time for s in self.sent_log if s.send_time is not None]
+        if self.clock_started is None or not sent:
+            return 0.0
+        return sent[-1] - self.clock_started
+
     def _unplug(self) -> None:
         """Start of an ``unplug`` fault window (default: nothing - UDP just goes quiet)."""
 
@@ -171,9 +195,10 @@ class StreamSender(SenderThread):
         inj = self.injector
         unplugged_at: float | None = None
         try:
+            self.opened_at = time.monotonic()
             if not self._ready():
                 return
-            t0 = time.monotonic()
+            self.clock_started = t0 = time.monotonic()
             slot = 0
             while not self._stop.is_set():
                 if slot >= n and not self.loop:
@@ -205,9 +230,11 @@ class StreamSender(SenderThread):
                         slot += 1
                         continue
                 sent_at = time.monotonic()
+                self._delivered = None
                 self._send(parts)
                 self.sent_log.append(Sent(slot, index, t, sent_at, len(parts),
-                                          sum(len(p) for p in parts), fault))
+                                          sum(len(p) for p in parts), fault,
+                                          self._delivered))
                 slot += 1
         finally:
             self.done.set()

@@ -75,6 +75,24 @@ def test_discovery_files_folders_globs(archive, tmp_path):
         discover_takes([tmp_path / "missing"])
     with pytest.raises(ValueError, match="no file matches"):
         discover_takes([str(tmp_path / "*.bvh")])
+    # a folder with no take in it is an error naming it, not "0/0 takes"
+    empty = tmp_path / "empty"
+    (empty / "sub").mkdir(parents=True)
+    (empty / "sub" / "notes.txt").write_text("x")
+    with pytest.raises(ValueError, match=f"{empty}: no take in this folder"):
+        discover_takes([empty])
+    assert discover_takes([root, root]) == every             # a folder twice is fine
+
+
+def test_segment_of_an_empty_folder_fails(tmp_path):
+    """``rtseg segment EMPTYDIR`` is an error naming the folder, exit 2, no "0/0 takes"."""
+    import subprocess
+    import sys
+    proc = subprocess.run([sys.executable, "-m", "rtseg.cli", "segment", str(tmp_path)],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2, proc.stderr
+    assert f"rtseg segment: error: {tmp_path}: no take in this folder" in proc.stderr
+    assert "0/0 takes" not in proc.stderr
 
 
 def test_records_match_segmentation_and_broken_take_is_a_record(archive, reference):

@@ -228,6 +228,15 @@ def test_evaluate_empty_folder(tmp_path, capsys):
 
 
 
+@pytest.mark.parametrize("n", ["0", "-2", "two"])
+def test_evaluate_workers_below_one_is_refused(synth_dir, capsys, n):
+    """``--workers 0`` (or less, or not a number) is refused with one line."""
+    rc, out, err = run_cli(capsys, "evaluate", synth_dir["root"], "--workers", n)
+    assert rc == 2 and out == ""
+    assert "argument --workers: " in err
+    assert ("must be at least 1" if n != "two" else "not a whole number") in err
+
+
 def test_evaluate_says_how_to_score_single_behaviour_takes(tmp_path, capsys):
     """A folder of single-behaviour takes (laid out like cmu_single) has no transitions:
     the error says so and names the splicer, for the folder and for its parent."""
@@ -259,6 +268,89 @@ def test_plot_writes_png(synth_dir, capsys, tmp_path):
     rc, _, err = run_cli(capsys, "plot", root / "cmu" / "91_01.npz", "--method", "gmm",
                          "--labels", tmp_path / "nolabels.txt", "-o", out2)
     assert rc == 2 and "nolabels.txt" in err
+
+
+def _png_title(path: Path) -> str:
+    """The ``Title`` tEXt chunk of a PNG (read with Pillow, matplotlib's own dependency)."""
+    from PIL import Image
+    with Image.open(path) as im:
+        return im.info["Title"]
+
+
+def test_plot_legends_leave_every_panel_clear(synth_dir):
+    """Each panel's legend lies outside its axes, right of it: it hides no curve (the scan
+    panel's contrast peaks included)."""
+    from rtseg.commands.plot import figure, pca_with_band, scan_profiles
+    from rtseg.labels import find_labels_for
+    from rtseg.segmentation import compute_features, segment_take
+    path = synth_dir["root"] / "cmu" / "90_01.npz"
+    take = synth_dir["a"].take
+    X = compute_features(take)
+    results = {m: segment_take(take, m, None, keep_trace=True, features=X)
+               for m in ("pca", "ppca")}
+    fig, _ = figure("90_01", take.n_frames, take.frame_rate, results, find_labels_for(path),
+                    pca_with_band(X, take.frame_rate, None),
+                    scan_profiles(X, take.frame_rate, {"pca": None, "ppca": None}))
+    fig.canvas.draw()
+    legends = 0
+    for ax in fig.axes:
+        leg = ax.get_legend()
+        if leg is None:
+            continue
+        legends += 1
+        box, area = leg.get_window_extent(), ax.get_window_extent()
+        assert box.x0 >= area.x1 - 0.5, (ax.get_title(), box, area)
+        # and inside the figure
+        assert box.x1 <= fig.bbox.x1 + 0.5 and box.y0 >= fig.bbox.y0 - 0.5
+    assert legends == 3
+    import matplotlib.pyplot as plt
+    plt.close(fig)
+
+
+@pytest.mark.realdata
+def test_plot_title_gives_the_scores_evaluate_gives(data_dir, capsys, tmp_path):
+    """86_01, PCA: the plot's title gives evaluate's F1 (P, R) at the default 0.5 s
+    tolerance - 1.000, where the strict score is lower - with the strict F1 beside it, both
+    labelled; --tolerance 0 makes them one."""
+    data = tmp_path / "data"
+    (data / "cmu").mkdir(parents=True)
+    (data / "labels").mkdir()
+    for name in ("86_01.amc", "86.asf"):
+        (data / "cmu" / name).symlink_to(data_dir / "cmu" / name)
+    (data / "labels" / "cmu86_transitions.txt").symlink_to(
+        data_dir / "labels" / "cmu86_transitions.txt")
+    rc, out, _ = run_cli(capsys, "evaluate", data, "--method", "pca", "--json",
+                         "--no-progress")
+    assert rc == 0
+    take = json.loads(out)["pca"]["takes"]["86_01"]
+    f1, strict = take["f1"], take["strict"]["f1"]
+    assert strict < f1                            # the two differ on this take
+    png = tmp_path / "p.png"
+    rc, _, _ = run_cli(capsys, "plot", data / "cmu" / "86_01.amc", "--method", "pca",
+                       "-o", png)
+    assert rc == 0
+    title = _png_title(png)
+    assert "with cuts within ±0.5 s of a labelled range" in title, title
+    assert (f"pca: F1 {f1:.3f} (P {take['precision']:.3f}, R {take['recall']:.3f}), "
+            f"strict F1 {strict:.3f}") in title, title
+    rc, _, _ = run_cli(capsys, "plot", data / "cmu" / "86_01.amc", "--method", "pca",
+                       "--tolerance", "0", "-o", png)
+    assert rc == 0
+    assert f"pca: F1 {strict:.3f}" in _png_title(png) and "±0 s" in _png_title(png)
+
+
+def test_plot_to_a_missing_folder_fails_at_once(synth_dir, capsys, tmp_path, monkeypatch):
+    """``plot -o missing/dir/x.png`` is refused before any segmentation, with one line
+    naming the folder (no errno text)."""
+    import rtseg.commands.plot as plot_cmd
+    ran, real = [], plot_cmd.segment_take         # a spy: counts the real calls
+    monkeypatch.setattr(plot_cmd, "segment_take",
+                        lambda *a, **k: (ran.append(1), real(*a, **k))[1])
+    out = tmp_path / "missing" / "dir" / "x.png"
+    rc, _, err = run_cli(capsys, "plot", synth_dir["root"] / "cmu" / "90_01.npz", "-o", out)
+    assert rc == 2 and not ran
+    assert f"rtseg plot: error: cannot write {out}: folder {out.parent} does not exist" in err
+    assert "Errno" not in err
 
 
 def test_plot_without_matplotlib_is_a_clear_error(synth_dir, capsys, tmp_path, monkeypatch):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from rtseg.labels import (
-    LabelError, Transition, find_labelled_takes, labels_from_take, load_cmu86_transitions,
+    GROUPS, LabelError, Transition, find_labelled_takes, labels_from_take, load_cmu86_transitions,
     find_labels_for, read_block_labels, read_cmu86_transitions, read_frame_labels,
     read_labels_file,
     transitions_from_frame_labels,
@@ -271,6 +271,41 @@ def test_slip_logged_once_per_line_but_always_recorded(tmp_path, caplog):
         again = read_cmu86_transitions(p)
     assert len(caplog.records) == 3
     assert again["86_04"].repairs == first["86_04"].repairs != []
+
+
+def test_slips_warned_only_for_the_takes_used(tmp_path, caplog):
+    """A data folder whose label file has slips in blocks 86_04, 86_05 and 86_06 but whose
+    only take is 86_05: finding its takes (what evaluate, plot and learn do) warns about
+    86_05's slip alone; the block is still repaired, and a second search does not repeat
+    the warning."""
+    (tmp_path / "cmu").mkdir()
+    (tmp_path / "labels").mkdir()
+    (tmp_path / "cmu" / "86_05.amc").write_text("")
+    (tmp_path / "cmu" / "86.asf").write_text("")
+    (tmp_path / "labels" / "cmu86_transitions.txt").write_text(SLIPS)
+    with caplog.at_level(logging.WARNING, logger="rtseg.labels"):
+        found = find_labelled_takes(tmp_path)
+        find_labelled_takes(tmp_path)
+    slips = [r.getMessage() for r in caplog.records if "label slip" in r.getMessage()]
+    assert len(slips) == 1 and "(86_05 line 2)" in slips[0], slips
+    assert [t.name for t in found] == ["86_05"] and len(found[0].labels.repairs) == 1
+    caplog.clear()
+    labels_module._warned.clear()
+    with caplog.at_level(logging.WARNING, logger="rtseg.labels"):
+        lab = find_labels_for(tmp_path / "cmu" / "86_06.amc")          # rtseg plot's search
+        read_labels_file(tmp_path / "labels" / "cmu86_transitions.txt", "86_04")
+    slips = [r.getMessage() for r in caplog.records if "label slip" in r.getMessage()]
+    assert len(slips) == 2 and "(86_06 line 2)" in slips[0] and "(86_04 line 3)" in slips[1]
+    assert lab.take == "86_06"
+
+
+def test_real_layout_warns_no_slip_for_its_takes(data_dir, caplog):
+    """The published file's three slips are in 86_04-86_06, of which ../shared/data has no
+    take: finding the takes (what evaluate, plot and learn do) warns about none."""
+    with caplog.at_level(logging.WARNING, logger="rtseg.labels"):
+        found = find_labelled_takes(data_dir, GROUPS)
+    assert found
+    assert not [r for r in caplog.records if "label slip" in r.getMessage()]
 
 
 def test_read_labels_file_tells_formats_apart(tmp_path):

@@ -112,6 +112,36 @@ def test_refusals_are_one_clear_line(tmp_path, library):
         assert len(p.stderr.strip().splitlines()) == 1 and "behaviour library" in p.stderr
 
 
+@pytest.mark.parametrize("key, value, message", [
+    ("names", lambda v: [7, *v[1:]], r"names\[0\] must be a string, got 7"),
+    ("dims", lambda v: str(v), r'dims must be a whole number, got "48"'),
+    ("dims", lambda v: float(v), r"dims must be a whole number, got 48.0"),
+    ("frame_rate", lambda v: "120", r'frame_rate must be a number, got "120"'),
+    ("frame_rate", lambda v: 60, r"frame_rate 60 Hz disagrees with its windows: \d+ frames "
+                                 r"in a 2 s window is at least 1\d\d(\.\d+)? Hz"),
+    ("frame_rate", lambda v: -120.0, r"frame_rate -120.0 not a positive number"),
+    ("sources", lambda v: [True, *v[1:]], r"sources\[0\] must be a whole number, got true"),
+    ("scale", lambda v: ["1.0", *v[1:]], r'scale\[0\] must be a number, got "1.0"'),
+    ("descriptors", lambda v: [v[0][:-1] + ["x"], *v[1:]],
+     r'descriptors\[0\] must be a list of numbers, got \['),
+    ("threshold", lambda v: "high", r'threshold must be a number or null, got "high"'),
+    ("profile", lambda v: 3, r"profile must be a string, got 3"),
+])
+def test_a_field_of_the_wrong_type_is_one_clear_line(tmp_path, library, key, value,
+                                                      message):
+    """A library edited by hand with an int among its names, dims as a string or a frame
+    rate its windows contradict is refused with one line naming the field."""
+    doc = json.loads(library.save(tmp_path / "lib.json").read_text())
+    assert doc["dims"] == 48 and doc["frame_rate"] == 120.0 and doc["window_s"] == 2.0
+    doc[key] = value(doc[key])
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(doc))
+    with pytest.raises(LibraryError, match=message) as ei:
+        load(bad)
+    assert str(ei.value).startswith(f"behaviour library {bad}: ")
+    assert "\n" not in str(ei.value)
+
+
 def test_learn_command_and_its_errors(tmp_path):
     from rtseg.drivers.readers import write_take
     res = synthesize("walk:5,punch:5", seed=0)

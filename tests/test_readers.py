@@ -230,9 +230,64 @@ def test_amc_errors_name_file_line_problem(tmp_path, old, new, fragment, line):
     assert msg.startswith(f"{p}:{line}:"), msg
 
 
+AMC3 = AMC + "3\nroot 7 8 9 0 0 0\na 10\nb 1 2 3\n"
+
+
+@pytest.mark.parametrize("cut, line, problem", [
+    ("3\nroot 7 8 9 0 0 0\na 10\nb 1 2", 15, "bone 'b' has 2 values, expected 3"),
+    # a value cut short that still parses: the frame is short of bone b
+    ("3\nroot 7 8 9 0 0 0\na 1", 14, "frame 3 (line 12) has no line for bone 'b'"),
+    ("3\nroot 7 8 9 0 0 0\na 10\nb 1 2 3e", 15, "value '3e' is not a number"),
+    ("3\nroot 7 8 9 0 0 0\n", 13, "frame 3 (line 12) has no line for bone 'a'"),
+    ("3\nroot 7 8 9 0 0 0\na 10\nb", 15, "bone 'b' has 0 values"),
+    ("3\nroot 7 8 9 0 0 0\na 10\nlfe", 15, "unknown bone 'lfe'"),
+    ("3\n", 12, "frame 3 (line 12) has no line for bone 'root'"),
+])
+def test_truncated_amc_reads_the_whole_frames_and_warns_with_the_line(
+        tmp_path, caplog, cut, line, problem):
+    """A file cut short - inside the last frame's last line (no line break after it) or
+    after a whole line - gives the frames before that frame, with one warning naming the
+    line and the problem; the same wrong line followed by a line break, or followed by
+    more frames, is still an error."""
+    asf = _write(tmp_path, "T.asf", ASF)
+    whole = read_amc(_write(tmp_path, "T_01.amc", AMC3), asf)
+    p = _write(tmp_path, "T_09.amc", AMC + cut)
+    with caplog.at_level("WARNING", logger="rtseg.readers"):
+        take = read_amc(p, asf)
+    assert take.n_frames == 2 and np.array_equal(take.quats, whole.quats[:2])
+    assert take.meta["truncated"] == {"line": line, "frame": 3,
+                                      "problem": take.meta["truncated"]["problem"]}
+    assert problem in take.meta["truncated"]["problem"]
+    msgs = [r.getMessage() for r in caplog.records]
+    assert len(msgs) == 1 and msgs[0].startswith(f"{p}:{line}: the file ends inside frame 3")
+    assert "read the 2 whole frames before it" in msgs[0]
+    if not cut.endswith("\n") and "has no line" not in problem:
+        # the same line ended by a line break is a whole line: wrong, not cut short
+        with pytest.raises(ReaderError, match=re.escape(problem)):
+            read_amc(_write(tmp_path, "T_10.amc", AMC + cut + "\n"), asf)
+        with pytest.raises(ReaderError, match=re.escape(problem)):
+            read_amc(_write(tmp_path, "T_11.amc", AMC + cut + "\n4\n"), asf)
+
+
+@pytest.mark.realdata
+def test_real_truncated_86_01_keeps_its_whole_frames(data_dir, tmp_path, caplog):
+    """86_01.amc cut at 2 000 000 bytes (inside frame 2608): its 2607 whole frames are
+    read, equal to the full file's first 2607, with a warning naming line 78222."""
+    full = read_amc(data_dir / "cmu" / "86_01.amc", data_dir / "cmu" / "86.asf")
+    cut = tmp_path / "86_01.amc"
+    cut.write_bytes((data_dir / "cmu" / "86_01.amc").read_bytes()[:2_000_000])
+    with caplog.at_level("WARNING", logger="rtseg.readers"):
+        take = read_amc(cut, data_dir / "cmu" / "86.asf")
+    assert take.n_frames == 2607
+    assert np.array_equal(take.quats, full.quats[:2607])
+    assert any(f"{cut}:78222: the file ends inside frame 2608" in r.getMessage()
+               for r in caplog.records)
+
+
 def test_amc_missing_skeleton_and_other_file_errors(tmp_path):
     amc = _write(tmp_path, "77_01.amc", AMC)
-    with pytest.raises(ReaderError, match=r"no skeleton given and none found beside it \(looked for 77\.asf"):
+    with pytest.raises(ReaderError, match=r"no skeleton given and none found beside it "
+                       r"\(looked for 77\.asf, 77_01\.asf\)$"):   # each name once
         read_take(amc)
     asf = _write(tmp_path, "T.asf", ASF)
     with pytest.raises(ReaderError, match="skeleton without motion"):
@@ -243,6 +298,12 @@ def test_amc_missing_skeleton_and_other_file_errors(tmp_path):
         read_amc(tmp_path / "absent.amc", asf)
     with pytest.raises(ReaderError, match="unknown take format '.xyz'"):
         read_take(_write(tmp_path, "x.xyz", "nothing"))
+    # a BVH given as the skeleton is named for what it is
+    bvh = _write(tmp_path, "86_01.bvh", "HIERARCHY\nROOT Hips\n{\n}\nMOTION\n")
+    with pytest.raises(ReaderError, match=r"86_01\.bvh:1: is a BVH file \(it starts with "
+                       r"HIERARCHY\), not an ASF skeleton: an \.amc take needs its Acclaim "
+                       r"\.asf"):
+        read_take(amc, skeleton=bvh)
     # Explicit skeleton beats the missing neighbour.
     assert read_take(amc, skeleton=asf).n_frames == 2
 

@@ -167,6 +167,27 @@ def test_simulate_bad_arguments_are_clear_errors(argv, fragment, capsys, tmp_pat
     assert fragment in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("device", ["vmc", "mvn", "axis"])
+def test_simulate_host_that_does_not_resolve_is_named(device, capsys):
+    """An unknown ``--host`` is one line naming it, before anything is sent (no errno
+    text)."""
+    assert main(["simulate", device, "--synth", "idle:2", "--host", "no-such-host.invalid"]) == 2
+    err = capsys.readouterr().err
+    assert "--host 'no-such-host.invalid': not an address, and no host of that name" in err
+    assert "[Errno" not in err
+
+
+def test_simulate_link_in_a_missing_folder_is_named(tmp_path, capsys):
+    """``--link`` into a folder that does not exist: one line naming the link and the
+    folder (no errno text)."""
+    link = tmp_path / "no" / "such" / "suit"
+    assert main(["simulate", "serial", "--synth", "idle:2", "--link", str(link)]) == 2
+    err = capsys.readouterr().err
+    assert (f"device link {link}: cannot create it: folder {link.parent} does not exist"
+            in err)
+    assert "[Errno" not in err and not link.parent.exists()
+
+
 def test_simulate_prints_the_transitions_saved_in_a_synthetic_take(tmp_path, capsys):
     import socket
 

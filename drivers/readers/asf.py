@@ -102,6 +102,11 @@ def read_asf(path: str | Path) -> AsfSkeleton:
     """Parse an Acclaim ASF skeleton file (CRLF tolerant)."""
     path = Path(path)
     lines = read_text_lines(path)
+    first = next((ln.strip() for ln in lines if ln.strip()), "")
+    if first.upper() == "HIERARCHY":
+        raise ReaderError(path, "is a BVH file (it starts with HIERARCHY), not an ASF "
+                          "skeleton: an .amc take needs its Acclaim .asf; a .bvh take carries "
+                          "its own skeleton (read the .bvh itself, without a skeleton)", 1)
     sk = AsfSkeleton(path=str(path))
     section = ""
     bone: AsfBone | None = None

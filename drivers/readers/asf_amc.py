@@ -19,11 +19,16 @@ Conventions (Acclaim / CMU, as in the CMU viewer and Barbič's AMC player)
   ``position``, in the file's length unit (see ``length_unit`` and ``meta``).
 - ASF/AMC carry no frame rate; CMU captures at 120 Hz, the default here.
 
-Malformed input raises ``ReaderError`` naming the file, line and problem.
+Malformed input raises ``ReaderError`` naming the file, line and problem, except a file
+cut short: when the file ends before the last frame's bones are all given, or its last
+line - with no line break after it, a line cut in the middle - is the wrong one, the whole
+frames before it are read, the last is dropped, and a warning names the line
+(``meta["truncated"]``: that line, the frame number dropped and the problem).
 """
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +43,8 @@ __all__ = ["AsfBone", "AsfSkeleton", "read_asf", "read_amc", "read_asf_amc", "sk
            "DEFAULT_FRAME_RATE"]
 
 DEFAULT_FRAME_RATE = 120.0
+
+log = logging.getLogger("rtseg.readers")
 
 
 def _euler_quats(axes: str, angles_deg: np.ndarray) -> np.ndarray:
@@ -124,66 +131,90 @@ def read_amc(path: str | Path, skeleton: AsfSkeleton | str | Path,
             f"{missing[0]!r}" + (f" and {len(missing) - 1} more" if len(missing) > 1 else ""),
             at_line)
 
-    for lineno, raw in enumerate(lines, start=1):
-        tokens = raw.split()
-        if not tokens:
-            continue
-        head = tokens[0]
-        spec = layout_get(head)
-        if spec is not None and row is not None:  # the common case: one bone's values
-            if head in seen:
-                raise ReaderError(path, f"bone {head!r} given twice in frame {frame_numbers[-1]}", lineno)
-            seen.add(head)
-            start, k = spec
-            if len(tokens) - 1 != k:
-                dofs = " ".join(sk.root_order if head == "root" else sk.bones[head].dof) or "none"
-                raise ReaderError(
-                    path, f"bone {head!r} has {len(tokens) - 1} values, expected {k} ({dofs})", lineno)
-            if k:
-                n_seen_required += 1
-                try:
-                    row[start:start + k] = map(float, tokens[1:])
-                except ValueError:
-                    bad = next(t for t in tokens[1:] if not is_number(t))
-                    raise ReaderError(path, f"bone {head!r}: value {bad!r} is not a number", lineno) from None
-            continue
-        if head[0] == "#":
-            continue
-        if head[0] == ":":
-            if row is not None:
-                raise ReaderError(path, f"header keyword {head!r} after motion data", lineno)
-            kw = head.upper()
-            if kw == ":FULLY-SPECIFIED":
-                fully_specified = True
-            elif kw == ":DEGREES":
-                angle_unit = "deg"
-            elif kw == ":RADIANS":
-                angle_unit = "rad"
-            else:
-                raise ReaderError(path, f"unknown header keyword {head!r}", lineno)
-            continue
-        if head.isdigit() or (head[0] == "-" and head[1:].isdigit()):
-            if len(tokens) != 1:
-                raise ReaderError(path, f"frame number line has extra text: {raw.strip()!r}", lineno)
-            number = int(head)
-            close_frame(lineno)
-            if frame_numbers and number != frame_numbers[-1] + 1:
-                raise ReaderError(
-                    path, f"frame number {number} out of order (previous frame {frame_numbers[-1]}, "
-                    f"expected {frame_numbers[-1] + 1})", lineno)
-            frame_numbers.append(number)
-            frame_lines.append(lineno)
-            row = [0.0] * n_cols
-            rows.append(row)
-            seen = set()
-            n_seen_required = 0
-            continue
-        if row is None:
-            if spec is not None:
-                raise ReaderError(path, f"bone line before the first frame number: {raw.strip()!r}", lineno)
-            raise ReaderError(path, f"unexpected text before the first frame number: {raw.strip()!r}", lineno)
-        raise ReaderError(path, f"unknown bone {head!r} (not in skeleton {sk.path})", lineno)
-    close_frame(len(lines))
+    last_line = len(lines)                   # the last line holding text
+    while last_line and not lines[last_line - 1].strip():
+        last_line -= 1
+    truncated: dict | None = None
+    at_number = at_end = False
+    try:
+        for lineno, raw in enumerate(lines, start=1):
+            tokens = raw.split()
+            if not tokens:
+                continue
+            head = tokens[0]
+            spec = layout_get(head)
+            if spec is not None and row is not None:  # the common case: one bone's values
+                if head in seen:
+                    raise ReaderError(path, f"bone {head!r} given twice in frame {frame_numbers[-1]}", lineno)
+                seen.add(head)
+                start, k = spec
+                if len(tokens) - 1 != k:
+                    dofs = " ".join(sk.root_order if head == "root" else sk.bones[head].dof) or "none"
+                    raise ReaderError(
+                        path, f"bone {head!r} has {len(tokens) - 1} values, expected {k} ({dofs})", lineno)
+                if k:
+                    n_seen_required += 1
+                    try:
+                        row[start:start + k] = map(float, tokens[1:])
+                    except ValueError:
+                        bad = next(t for t in tokens[1:] if not is_number(t))
+                        raise ReaderError(path, f"bone {head!r}: value {bad!r} is not a number", lineno) from None
+                continue
+            if head[0] == "#":
+                continue
+            if head[0] == ":":
+                if row is not None:
+                    raise ReaderError(path, f"header keyword {head!r} after motion data", lineno)
+                kw = head.upper()
+                if kw == ":FULLY-SPECIFIED":
+                    fully_specified = True
+                elif kw == ":DEGREES":
+                    angle_unit = "deg"
+                elif kw == ":RADIANS":
+                    angle_unit = "rad"
+                else:
+                    raise ReaderError(path, f"unknown header keyword {head!r}", lineno)
+                continue
+            if head.isdigit() or (head[0] == "-" and head[1:].isdigit()):
+                at_number = True             # problems here are not a file cut short
+                if len(tokens) != 1:
+                    raise ReaderError(path, f"frame number line has extra text: {raw.strip()!r}", lineno)
+                number = int(head)
+                close_frame(lineno)
+                if frame_numbers and number != frame_numbers[-1] + 1:
+                    raise ReaderError(
+                        path, f"frame number {number} out of order (previous frame {frame_numbers[-1]}, "
+                        f"expected {frame_numbers[-1] + 1})", lineno)
+                frame_numbers.append(number)
+                frame_lines.append(lineno)
+                row = [0.0] * n_cols
+                rows.append(row)
+                seen = set()
+                n_seen_required = 0
+                at_number = False
+                continue
+            if row is None:
+                if spec is not None:
+                    raise ReaderError(path, f"bone line before the first frame number: {raw.strip()!r}", lineno)
+                raise ReaderError(path, f"unexpected text before the first frame number: {raw.strip()!r}", lineno)
+            raise ReaderError(path, f"unknown bone {head!r} (not in skeleton {sk.path})", lineno)
+        at_end = True
+        close_frame(len(lines))
+    except ReaderError as exc:
+        # a file cut short: the last frame's bones end with the file (cut after a whole
+        # line), or its last line - with no line break after it - is the one that is wrong
+        # (cut in the middle of that line)
+        cut = at_end or (not at_number and exc.line is not None and exc.line >= last_line
+                         and _ends_mid_line(path))
+        if not (cut and row is not None and len(rows) > 1):
+            raise
+        rows.pop()
+        dropped = frame_numbers.pop()
+        frame_lines.pop()
+        truncated = {"line": exc.line, "frame": dropped, "problem": exc.problem}
+        log.warning("%s:%d: the file ends inside frame %d (%s): read the %d whole frames "
+                    "before it, dropped that one", path, exc.line, dropped, exc.problem,
+                    len(rows))
     if not rows:
         raise ReaderError(path, "no motion frames (no frame number lines)")
 
@@ -191,7 +222,21 @@ def read_amc(path: str | Path, skeleton: AsfSkeleton | str | Path,
     if not np.all(np.isfinite(data)):
         f, c = np.argwhere(~np.isfinite(data))[0]
         raise ReaderError(path, f"non-finite value in frame {frame_numbers[f]}", frame_lines[f])
-    return _build_take(path, sk, data, layout, angle_unit, rate, frame_numbers[0], fully_specified)
+    take = _build_take(path, sk, data, layout, angle_unit, rate, frame_numbers[0],
+                       fully_specified)
+    if truncated is not None:
+        take.meta["truncated"] = truncated
+    return take
+
+
+def _ends_mid_line(path: Path) -> bool:
+    """Whether the file's last byte is not a line break (it was cut inside a line)."""
+    try:
+        with open(path, "rb") as fh:
+            fh.seek(-1, 2)
+            return fh.read(1) not in (b"\n", b"\r")
+    except OSError:
+        return False
 
 
 def _build_take(path: Path, sk: AsfSkeleton, data: np.ndarray, layout: dict[str, tuple[int, int]],
@@ -269,7 +314,7 @@ def skeleton_for(amc_path: str | Path) -> Path:
     asfs = sorted(p for p in amc_path.parent.glob("*") if p.suffix.lower() == ".asf")
     if len(asfs) == 1:
         return asfs[0]
-    tried = ", ".join(c.name for c in candidates)
+    tried = ", ".join(dict.fromkeys(c.name for c in candidates))   # each name once
     raise ReaderError(amc_path, f"no skeleton given and none found beside it (looked for {tried}"
                       + (f"; {len(asfs)} .asf files there, pass skeleton=" if asfs else "") + ")")
 

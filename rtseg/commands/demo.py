@@ -127,9 +127,41 @@ def _run(args: argparse.Namespace, cfg, script: str, library: str = "") -> int:
                       f"(t={tr.mid / args.rate:.2f} s, blend {tr.lo}..{tr.hi})", file=sys.stderr)
         monitor = demo_monitor(args)
         return run_session(url, cfg, args.duration / args.speed, args.quiet,
-                           performance_time=args.speed != 1, monitor=monitor)
+                           performance_time=args.speed != 1, monitor=monitor,
+                           check=lambda summary: speed_check(summary, args))
     finally:
         suit.stop()
+
+
+#: a demo that processed less than this share of the frames of its ``--duration`` of
+#: performance says so (the loop did not keep up with ``--speed``)
+KEPT_UP = 0.9
+
+
+def speed_check(summary, args: argparse.Namespace) -> int:
+    """The demo's exit status from its session ``summary``: 1, with one line, when no frame
+    was processed; 0 otherwise, with a warning giving the speed the loop reached when it
+    processed less than :data:`KEPT_UP` of the ``--duration`` x ``--rate`` frames the
+    performance holds (``--speed`` beyond what this machine sustains)."""
+    due = int(round(args.duration * args.rate))
+    done = summary.frames_processed
+    wall = max(summary.duration_s, 1e-9)
+    reached = done / args.rate / wall               # performance seconds per wall second
+    if done == 0:
+        print(f"rtseg demo: error: no frame processed ({summary.frames_received} received) "
+              f"in {summary.duration_s:.1f} s of wall-clock time: --speed {args.speed:g} "
+              f"leaves the session {args.duration / args.speed:.2f} s, too short to start "
+              f"and process any (lower --speed, or raise --duration)",
+              file=sys.stderr)
+        return 1
+    if done < KEPT_UP * due:
+        print(f"rtseg demo: warning: processed {done} of the {due} frames of "
+              f"{args.duration:g} s of performance ({100 * done / due:.0f} %) in "
+              f"{summary.duration_s:.1f} s: the loop reached x{reached:.1f} of real time "
+              f"({done / wall:.0f} frames/s), not the --speed {args.speed:g} asked for; the "
+              f"rest was not segmented (start-up counts in a short session: lower --speed "
+              f"or raise --duration)", file=sys.stderr)
+    return 0
 
 
 def demo_monitor(args: argparse.Namespace) -> tuple | None:

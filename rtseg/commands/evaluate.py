@@ -369,12 +369,25 @@ def add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
                         "this behaviour library (rtseg learn); adds identity.named: right / "
                         "unknown / wrong shares over the segments of its behaviours")
     add_profile_argument(p)
-    p.add_argument("--workers", type=int, metavar="N",
-                   help="read and segment the takes on a local Dask cluster of N processes "
-                        "(pip install 'rtseg[scale]'; same report)")
+    p.add_argument("--workers", type=worker_count, metavar="N",
+                   help="read and segment the takes on a local Dask cluster of N processes, "
+                        "N >= 1 (pip install 'rtseg[scale]'; same report; without it: in "
+                        "this process)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="read and segment the takes on a running Dask scheduler "
                         "(tcp://host:8786; its workers see the data folder)")
+
+
+def worker_count(text: str) -> int:
+    """argparse type: a whole number of worker processes >= 1."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(
+            f"must be at least 1, got {v} (leave --workers out to run in this process)")
+    return v
 
 
 def tolerance_seconds(text: str) -> float:

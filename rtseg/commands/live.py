@@ -256,8 +256,11 @@ def start_monitor(address: str | None, prog: str) -> tuple[Any, Any] | None:
 def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: bool,
                 before_run: Callable[[], None] | None = None,
                 performance_time: bool = False,
-                monitor: tuple[Any, Any] | None = None) -> int:
-    """Run a live session with console output; returns the exit status.
+                monitor: tuple[Any, Any] | None = None,
+                check: Callable[[Any], int] | None = None) -> int:
+    """Run a live session with console output; returns the exit status (``check``, when
+    given, judges the :class:`rtseg.session_stats.SessionSummary` after it is printed:
+    its return value is the status).
 
     ``monitor``: ``(feed, server)`` of :func:`start_monitor`; the server is stopped when
     the session ends.
@@ -283,7 +286,7 @@ def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: 
         if monitor is not None:
             monitor[1].stop()
     print(summary.text(), file=sys.stderr, flush=True)
-    return 0
+    return check(summary) if check is not None else 0
 
 
 def use_library(cfg: Any, path: str, prog: str) -> bool:

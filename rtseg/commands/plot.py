@@ -10,7 +10,12 @@ Panels (shared x axis = take frame, 0-based):
   3. the offline scans (not in the paper): the two-sided contrast profiles of PCA and PPCA
      whose local maxima above ``min_contrast`` are the offline changes (docs/detectors.md);
   4. a strip with the cuts of every method (green: inside a labelled range and matched,
-     red: false alarm) against the labelled transition ranges (shaded), as in Figure 7.
+     olive: matched within the tolerance outside it, red: false alarm) against the
+     labelled transition ranges (shaded), as in Figure 7.
+
+The title scores each method as ``rtseg evaluate`` does: F1, precision and recall with cuts
+counted within ``--tolerance`` seconds (default 0.5) outside a labelled range, and the
+strict F1 (inside the ranges) beside it.  Legends sit right of their panels.
 
 The PCA panel draws the online pass (d_i, its band and threshold; its cuts dashed) and the
 offline cuts (solid), the ones ``rtseg segment`` and ``rtseg evaluate`` report.
@@ -28,14 +33,18 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from rtseg.commands.evaluate import tolerance_seconds
 from rtseg.commands.segment import add_profile_argument, params_by_method
-from rtseg.evaluation import score
+from rtseg.evaluation import score, widen
 from rtseg.labels import TransitionLabels, find_labels_for, read_labels_file
 from rtseg.segmentation import (
     METHODS, SegmentationResult, compute_features, segment_take, segments_between,
 )
 
 log = logging.getLogger(__name__)
+
+#: the scoring tolerance of the title and the strip, seconds: ``rtseg evaluate``'s default
+DEFAULT_TOLERANCE_S = 0.5
 
 
 class MissingDependency(RuntimeError):
@@ -141,6 +150,12 @@ def pca_with_band(X: np.ndarray, frame_rate: float, params: Mapping[str, Any] | 
 
 # --------------------------------------------------------------------------- drawing
 
+def _legend(ax) -> None:
+    """The panel's legend outside it, right of the axes, so it hides no curve."""
+    ax.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), borderaxespad=0.0, fontsize=7,
+              ncol=1)
+
+
 def _cut_lines(ax, res: SegmentationResult | None, color: str = "k") -> None:
     if res is None:
         return
@@ -184,7 +199,7 @@ def _panel_pca(ax, res: SegmentationResult | None, labels: TransitionLabels | No
             lo, hi = np.percentile(finite, [1, 99.5])
             pad = 0.2 * (hi - lo + 1e-12)
             ax.set_ylim(min(lo, 0) - pad, hi + pad)
-        ax.legend(loc="upper right", fontsize=7, ncol=4)
+        _legend(ax)
     if band is not None and band is not res:
         for c in band.cut_frames:
             ax.axvline(c, color="tab:orange", lw=1.0, ls="--", alpha=0.8)
@@ -240,7 +255,7 @@ def _panel_ppca(ax, res: SegmentationResult | None, labels: TransitionLabels | N
         if finite.size:
             lo, hi = float(finite.min()), float(finite.max())
             ax.set_ylim(lo - 0.1 * (hi - lo + 1e-12), hi + 0.15 * (hi - lo + 1e-12))
-        ax.legend(loc="upper right", fontsize=7, ncol=4)
+        _legend(ax)
     if res is not None:
         for c in res.cuts:
             online_cut = c.detected_at > c.frame
@@ -299,14 +314,18 @@ def _panel_scans(ax, profiles: Mapping[str, Mapping[str, Any]],
                 ha="center", va="center")
     else:
         ax.set_ylim(0, 1.1 * top)
-        ax.legend(loc="upper right", fontsize=7, ncol=4)
+        _legend(ax)
     ax.set_ylabel("contrast")
 
 
 def _panel_strip(ax, results: Mapping[str, SegmentationResult],
-                 labels: TransitionLabels | None) -> None:
-    ax.set_title("cuts of each method against the labelled transition ranges (Figure 7)",
-                 fontsize=9, loc="left")
+                 labels: TransitionLabels | None, frame_rate: float = 120.0,
+                 tolerance_s: float = DEFAULT_TOLERANCE_S) -> None:
+    ax.set_title(f"cuts of each method against the labelled transition ranges (Figure 7): "
+                 f"green matched inside a range, olive within ±{tolerance_s:g} s of one, "
+                 f"red false alarm", fontsize=9, loc="left")
+    wide = (widen(labels.transitions, int(round(tolerance_s * frame_rate)))
+            if labels is not None else [])
     rows = (["labels"] if labels is not None else []) + list(results)
     for r, name in enumerate(rows):
         y0 = len(rows) - 1 - r
@@ -317,10 +336,13 @@ def _panel_strip(ax, results: Mapping[str, SegmentationResult],
             continue
         res = results[name]
         good: set[int] = set()
+        near: set[int] = set()
         if labels is not None:
             good = {c for c, _ in score(res.cut_frames, labels.transitions).matches}
+            near = {c for c, _ in score(res.cut_frames, wide).matches}
         for c in res.cut_frames:
-            color = "tab:green" if c in good else ("tab:red" if labels is not None else "k")
+            color = ("tab:green" if c in good else "tab:olive" if c in near
+                     else "tab:red" if labels is not None else "k")
             ax.plot([c, c], [y0 - 0.4, y0 + 0.4], color=color, lw=2)
     if labels is not None:
         for t in labels.transitions:
@@ -331,32 +353,67 @@ def _panel_strip(ax, results: Mapping[str, SegmentationResult],
     ax.set_xlabel("frame")
 
 
-def render(path: str | Path, take_name: str, n_frames: int, frame_rate: float,
+def score_line(results: Mapping[str, SegmentationResult], labels: TransitionLabels,
+               frame_rate: float, tolerance_s: float = DEFAULT_TOLERANCE_S) -> str:
+    """Each method's scores as ``rtseg evaluate`` gives them: F1, precision and recall with
+    cuts counted within ``tolerance_s`` seconds outside a labelled range (the headline),
+    and the strict F1 (cuts inside the ranges) beside it; both labelled."""
+    wide = widen(labels.transitions, int(round(tolerance_s * frame_rate)))
+    parts = []
+    for m, r in results.items():
+        s, strict = score(r.cut_frames, wide), score(r.cut_frames, labels.transitions)
+        parts.append(f"{m}: F1 {s.f1:.3f} (P {s.precision:.3f}, R {s.recall:.3f}), "
+                     f"strict F1 {strict.f1:.3f}")
+    head = (f"scores as rtseg evaluate: F1 (P, R) with cuts within ±{tolerance_s:g} s of a "
+            f"labelled range; strict F1 with cuts inside the ranges")
+    lines, line = [head], ""
+    for part in parts:                  # two methods a line: the title fits the figure
+        if line and line.count(";") >= 1:
+            lines.append(line)
+            line = ""
+        line = f"{line};   {part}" if line else part
+    return "\n".join(lines + [line])
+
+
+def figure(take_name: str, n_frames: int, frame_rate: float,
            results: Mapping[str, SegmentationResult], labels: TransitionLabels | None,
            pca_band: SegmentationResult | None = None,
-           profiles: Mapping[str, Mapping[str, Any]] | None = None) -> Path:
-    """Write the figure to ``path`` (format from its suffix, PNG by default).  ``pca_band``:
-    the online PCA pass with its band (``pca_with_band``); ``profiles``: ``scan_profiles``."""
+           profiles: Mapping[str, Mapping[str, Any]] | None = None,
+           tolerance_s: float = DEFAULT_TOLERANCE_S):
+    """The matplotlib figure (laid out, not saved) and its title (see :func:`render`)."""
     plt = _pyplot()
-    fig, axes = plt.subplots(4, 1, figsize=(12, 10), sharex=True,
+    fig, axes = plt.subplots(4, 1, figsize=(13.5, 10), sharex=True,
                              gridspec_kw={"height_ratios": [3, 3, 2.2, 1.6]})
     _panel_pca(axes[0], results.get("pca"), labels, pca_band)
     _panel_ppca(axes[1], results.get("ppca"), labels)
     _panel_scans(axes[2], profiles or {}, results, labels)
-    _panel_strip(axes[3], results, labels)
+    _panel_strip(axes[3], results, labels, frame_rate, tolerance_s)
     axes[3].set_xlim(0, n_frames)
     sub = f"{n_frames} frames at {frame_rate:g} fps"
     if labels is not None:
         sub += f"; labels: {labels.description}"
-        parts = []
-        for m, r in results.items():
-            s = score(r.cut_frames, labels.transitions)
-            parts.append(f"{m} P={s.precision:.2f} R={s.recall:.2f}")
-        sub += "\n" + ",  ".join(parts)
-    fig.suptitle(f"{take_name}: {sub}", fontsize=10)
+        sub += "\n" + score_line(results, labels, frame_rate, tolerance_s)
+    title = f"{take_name}: {sub}"
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout()
+    return fig, title
+
+
+def render(path: str | Path, take_name: str, n_frames: int, frame_rate: float,
+           results: Mapping[str, SegmentationResult], labels: TransitionLabels | None,
+           pca_band: SegmentationResult | None = None,
+           profiles: Mapping[str, Mapping[str, Any]] | None = None,
+           tolerance_s: float = DEFAULT_TOLERANCE_S) -> Path:
+    """Write the figure to ``path`` (format from its suffix, PNG by default).  ``pca_band``:
+    the online PCA pass with its band (``pca_with_band``); ``profiles``: ``scan_profiles``;
+    ``tolerance_s``: the scoring tolerance of the title and the strip (``rtseg evaluate``'s
+    ``--tolerance``).  A PNG also carries the title as its ``Title`` text chunk."""
+    plt = _pyplot()
+    fig, title = figure(take_name, n_frames, frame_rate, results, labels, pca_band,
+                        profiles, tolerance_s)
     path = Path(path)
-    fig.savefig(path, dpi=110)
+    meta = {"Title": title} if path.suffix.lower() in ("", ".png") else None
+    fig.savefig(path, dpi=110, metadata=meta)
     plt.close(fig)
     return path
 
@@ -379,6 +436,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "drawn when those methods run)")
     p.add_argument("--params", metavar="FILE", help="detector parameters, TOML or JSON")
     add_profile_argument(p)
+    p.add_argument("--tolerance", type=tolerance_seconds, default=DEFAULT_TOLERANCE_S,
+                   metavar="S", help="score cuts within S seconds outside a labelled range, "
+                   "as rtseg evaluate --tolerance (default 0.5); the title gives these "
+                   "scores and the strict ones (S = 0) beside them")
     p.add_argument("-o", "--output", metavar="PNG",
                    help="output file (default: TAKE name + .png in the current folder)")
     p.set_defaults(func=run)
@@ -391,6 +452,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"rtseg plot: error: {exc}", file=sys.stderr)
         return 2
     from rtseg.take import load_take
+    out = Path(args.output) if args.output else None
+    if out is not None and not out.parent.is_dir():   # before the segmentation's seconds
+        print(f"rtseg plot: error: cannot write {out}: folder {out.parent} does not exist",
+              file=sys.stderr)
+        return 2
     take_path = Path(args.take)
     name = take_path.stem if take_path.suffix else take_path.name
     if args.labels == "none":
@@ -411,7 +477,8 @@ def run(args: argparse.Namespace) -> int:
         if "pca" in methods else None
     profiles = scan_profiles(X, take.frame_rate,
                              {m: params.get(m) for m in methods if m in ("pca", "ppca")})
-    out = Path(args.output) if args.output else Path(f"{name}.png")
-    render(out, name, take.n_frames, take.frame_rate, results, labels, band, profiles)
+    out = out or Path(f"{name}.png")
+    render(out, name, take.n_frames, take.frame_rate, results, labels, band, profiles,
+           args.tolerance)
     print(out)
     return 0

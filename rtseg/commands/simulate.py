@@ -48,7 +48,13 @@ Without ``--take`` the built-in synthesiser performs ``--synth`` (default: its d
 script) with ``--seed``; the exact transition frame ranges (the blend spans) are printed so
 cuts can be checked by eye or by script (``--save take.npz`` keeps take and ground truth).
 Runs until the take ends (never with ``--loop``), ``--duration`` seconds pass, or Ctrl-C /
-SIGTERM, then prints what was sent.
+SIGTERM, then prints what was sent.  Simulators a receiver must connect to hold the take's
+first frame until it does, so a receiver started late loses nothing: ``serial`` until a
+reader opens the pty, ``axis --axis-format text`` until a client connects to its TCP
+server, ``mvn --transport tcp`` until its receiver accepts the connection (``--no-wait``:
+the TCP ones start at once).  The summary gives the time waited apart from the time spent
+sending, and for TCP how many frames a connected peer took and how many were written while
+none was connected (lost).  ``--duration`` counts the waiting too.
 """
 
 from __future__ import annotations
@@ -121,6 +127,10 @@ def register(subparsers: Any) -> None:
     g.add_argument("--host", default="127.0.0.1", help="receiver address (default 127.0.0.1)")
     g.add_argument("--port", type=int, default=None, help="receiver UDP port (default 39539; "
                    "mvn 9763, mocopi 12351)")
+    p.add_argument("--no-wait", action="store_true",
+                   help="TCP simulators (axis --axis-format text, mvn --transport tcp): start "
+                   "sending at once instead of waiting for the first connection (frames "
+                   "written while none is up are lost, and the summary counts them)")
     g = p.add_argument_group("mvn")
     g.add_argument("--character", type=int, default=0, help="MVN character id (default 0)")
     g.add_argument("--transport", choices=("udp", "tcp"), default="udp",
@@ -235,6 +245,18 @@ def _retarget_kw(args) -> dict:
             "imu": args.imu or None, "allow_missing": args.allow_missing}
 
 
+def check_host(host: str) -> None:
+    """``--host`` resolved now: a name or address that does not resolve is a ValueError
+    naming it, before anything is sent."""
+    import socket
+    try:
+        socket.getaddrinfo(host, None)
+    except (socket.gaierror, UnicodeError) as exc:
+        why = getattr(exc, "strerror", None) or str(exc)
+        raise ValueError(f"--host {host!r}: not an address, and no host of that name can be "
+                         f"found ({why})") from None
+
+
 class Host:
     """What a network simulator's ``serve(args, take, host)`` gets from the command: ``out``
     (print a line), ``retarget_kw`` (retargeting options), :meth:`port` and :meth:`drive`."""
@@ -251,6 +273,7 @@ class Host:
         port = default if args.port is None else args.port
         if not lowest <= port < 65536:
             raise ValueError(f"--port must be {lowest}..65535, got {port}")
+        check_host(args.host)
         if args.faults and not faults:
             raise ValueError(f"--faults is not supported by the {args.device} simulator")
         return port
@@ -271,6 +294,17 @@ class Host:
         return reason, time.monotonic() - t0
 
     @staticmethod
+    def peer(sender) -> str:
+        """What a TCP sender waits for: the ``client`` of a server (Axis text) or the
+        ``receiver`` it connects to (MVN)."""
+        return "receiver" if getattr(sender, "transport", "") == "tcp" else "client"
+
+    def wait_for_peer(self):
+        """The ``wait_client`` / ``wait_server`` value of a TCP simulator: however long
+        (inf), unless ``--no-wait`` (0: start the clock at once)."""
+        return 0.0 if self.args.no_wait else float("inf")
+
+    @staticmethod
     def summary(sender, elapsed: float, unit: str = "frames", size: str = "datagrams",
                 last: str = "take time") -> list[str]:
         """What a vendor sender sent: ``unit`` (frames, payloads) counted with their
@@ -283,9 +317,21 @@ class Host:
             if s.fault:
                 faults[s.fault] = faults.get(s.fault, 0) + 1
         sent = len(log) - faults.get("dropped", 0) - faults.get("unplugged", 0)
-        lines = [f"sent {sent} {unit} ({amount} {size}) in {elapsed:.2f} s; "
-                 f"{sender.send_errors} send errors"
-                 + "".join(f"; {v} {k} by faults" for k, v in sorted(faults.items()))]
+        waited = getattr(sender, "waited_s", 0.0)
+        sending = getattr(sender, "sending_s", elapsed)
+        peer = Host.peer(sender)
+        lost = sum(1 for s in log if getattr(s, "delivered", None) is False)
+        reach = ""
+        if lost:              # TCP, nobody connected: those frames reached no one
+            sent -= lost
+            amount -= sum(s.nbytes if size == "bytes" else s.datagrams
+                          for s in log if s.delivered is False)
+            reach = f"; {lost} {unit} lost: no {peer} was connected"
+        lines = ([f"waited {waited:.2f} s for a {peer} before sending"]
+                 if waited >= 0.005 else [])
+        lines += [f"sent {sent} {unit} ({amount} {size}) in {sending:.2f} s{reach}; "
+                  f"{sender.send_errors} send errors"
+                  + "".join(f"; {v} {k} by faults" for k, v in sorted(faults.items()))]
         if log:
             end = (f"{log[-1].slot}" if last == "frame index"
                    else f"{log[-1].source_time:.3f} s")
@@ -295,7 +341,7 @@ class Host:
 
 def _serve_serial(args, take: Take) -> tuple[str, list[str]]:
     from rtseg.simulators.faults import FaultConfig
-    from rtseg.simulators.serial_device import SerialSuit
+    from rtseg.simulators.serial_device import READER_SETTLE_S, SerialSuit
 
     suit = SerialSuit(take, faults=FaultConfig.parse(args.faults), link=args.link,
                       fmt=args.format, loop=args.loop, suit=args.suit, speed=args.speed,
@@ -316,13 +362,21 @@ def _serve_serial(args, take: Take) -> tuple[str, list[str]]:
         pass
     finally:
         suit.stop()
-    elapsed = time.monotonic() - t0
     log = list(suit.sent_log)
     frames = [m for m in log if m.frame >= 0]
     fates: dict[str, int] = {}
     for m in frames:
         fates[m.fate] = fates.get(m.fate, 0) + 1
-    lines = [f"sent {len(frames)} frame messages in {elapsed:.2f} s "
+    started = getattr(suit, "t0", None)        # the clock starts when a reader opens it
+    lines = []
+    if started is None:
+        lines.append(f"no reader opened the device in {time.monotonic() - t0:.2f} s: "
+                     f"nothing sent")
+    elif started - t0 >= 0.005:
+        lines.append(f"waited {started - t0:.2f} s for a reader to open the device "
+                     f"(sending starts {READER_SETTLE_S:g} s after it does)")
+    sending = (log[-1].send_time - started) if log and started is not None else 0.0
+    lines += [f"sent {len(frames)} frame messages in {sending:.2f} s "
              f"({', '.join(f'{v} {k}' for k, v in sorted(fates.items())) or 'none'}); "
              f"{len(log) - len(frames)} device-info messages; {len(suit.unplug_log)} unplug(s)"]
     if frames:
@@ -368,7 +422,9 @@ def _serve_vendor(args, take: Take) -> tuple[str, list[str]]:
     if args.device == "mvn":
         from rtseg.simulators.mvn_sender import MvnSender
         sender = MvnSender(take, args.host, port, character=args.character,
-                           transport=args.transport, **kw)
+                           transport=args.transport,
+                           wait_server=host.wait_for_peer() if args.transport == "tcp"
+                           else None, **kw)
         query = [f"character={args.character}"] if args.character else []
         query += ["transport=tcp"] if args.transport == "tcp" else []
         url = f"mvn://{args.host}:{port}" + ("?" + "&".join(query) if query else "")
@@ -382,6 +438,9 @@ def _serve_vendor(args, take: Take) -> tuple[str, list[str]]:
          f"{how} {args.host}:{port} at {sender.rate:g} Hz (stream clock in take time), sent at "
          f"x{sender.speed:g}" + (f"; faults {args.faults}" if args.faults else ""))
     _out(f"  receive it with: rtseg live {url}")
+    if how == "tcp":
+        _out(f"  {'not waiting' if args.no_wait else 'waiting'} for the receiver to listen "
+             f"on tcp {args.host}:{port}" + (" (--no-wait)" if args.no_wait else ""))
     reason, elapsed = host.drive(sender)
     return reason, host.summary(sender, elapsed)
 
