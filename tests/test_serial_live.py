@@ -413,3 +413,32 @@ def test_reader_connected_is_safe_from_several_threads():
     finally:
         suit.stop()
     assert errors == []
+
+
+def test_unplug_costs_only_the_unplug(rig):
+    """Each 0.5 s unplug costs the frames due while the cable is out, and only a few more:
+    the reader reopens the path as soon as the device is back, so what the suit writes
+    after the replug is read (a back-off that waits 0.35 s, then 0.75 s, would lose
+    ~0.25 s of intact frames per unplug)."""
+    rate = 200.0
+    take = make_take(200)
+    suit, src = rig(take, "stale=0.1", rate=rate, loop=True, faults="unplug=1.0:0.5")
+    suit.begin()
+    frames = collect(src, lambda fr, idle: len(suit.unplug_log) >= 3 and any(
+        f.recv_time > suit.unplug_log[2][1] + 0.3 for f in fr), timeout=10.0)
+    assert len(suit.unplug_log) >= 3 and src.stats.reconnects >= 3
+    got = {f.seq for f in frames}
+    last = frames[-1].recv_time
+    for k, (out, back) in enumerate(suit.unplug_log[:3]):
+        assert back - out >= 0.45
+        nxt = suit.unplug_log[k + 1][0] if k + 1 < len(suit.unplug_log) else last
+        window = [m for m in suit.sent_log
+                  if m.frame >= 0 and out - 0.01 <= m.send_time < min(nxt, last) - 0.05]
+        unplugged = [m for m in window if m.fate == "unplugged"]
+        missed = [m for m in window if m.fate == "intact" and m.seq not in got]
+        # the frames due while the cable was out are lost: 0.5 s at 200 Hz
+        assert 0.45 * rate <= len(unplugged) <= 0.55 * rate
+        # of those written intact after the replug, at most 0.1 s worth are not read
+        assert len(missed) <= 0.1 * rate, (k, len(missed))
+        # and every one of them was written within 0.1 s of the replug
+        assert all(m.send_time - back < 0.1 for m in missed)
