@@ -141,6 +141,9 @@ class StatusEvent:
     lag_ms: how long the newest processed frame waited before processing, ms, and
     backlog: frames received but not yet processed - how far the live loop is behind
     (JSON output and recordings only).
+    overload_drops: of ``dropped``, frames the live loop dropped unprocessed, oldest first,
+    so that none waits longer than ``buffer.max_lag_seconds`` (JSON output and recordings
+    only).
     time: seconds since session start.
 
     Input counters, each since the session started (``INPUT_COUNTERS``; sent over OSC as
@@ -164,6 +167,7 @@ class StatusEvent:
     wall_time: float = field(default_factory=_wall_time)
     lag_ms: float = 0.0
     backlog: int = 0
+    overload_drops: int = 0
     corrupt: int = 0
     crc_failures: int = 0
     bad_messages: int = 0

@@ -44,6 +44,10 @@ def add_session_arguments(p: argparse.ArgumentParser, osc_default_note: str = ""
                    help="online detectors, comma separated: contrast (the default), pca, ppca")
     p.add_argument("--duration", type=positive_float, metavar="S",
                    help="stop after S seconds (a number > 0)")
+    p.add_argument("--max-lag", type=float, metavar="S",
+                   help="longest a frame may wait before processing, s (default 0.1, "
+                        "buffer.max_lag_seconds): under overload older frames are dropped, "
+                        "oldest first, and counted; 0 = never drop")
     p.add_argument("--quiet", action="store_true", help="no status line on stderr")
     p.add_argument("--monitor", nargs="?", const="", default=None, metavar="[HOST:]PORT",
                    help="serve a live monitor page (detector statistic, cuts, behaviours, "
@@ -71,6 +75,8 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
     if args.record:
         check_record_dir(args.record)
         over["recording.dir"] = args.record
+    if getattr(args, "max_lag", None) is not None:
+        over["buffer.max_lag_seconds"] = args.max_lag
     if args.methods:
         over["detectors.methods"] = [m.strip() for m in args.methods.split(",") if m.strip()]
     cfg = load_session_config(args.config)
@@ -111,7 +117,7 @@ def check_record_dir(path: str) -> None:
 #: configuration key -> the command-line flag that sets it (for error messages)
 FLAGS = {"output.osc": "--osc", "output.osc_tcp": "--osc-tcp", "output.templates": "--template",
          "output.targets": "--target", "output.jsonl": "--jsonl", "recording.dir": "--record",
-         "detectors.methods": "--methods"}
+         "detectors.methods": "--methods", "buffer.max_lag_seconds": "--max-lag"}
 
 
 def format_cut(ev: CutEvent, time: float | None = None) -> str:
