@@ -245,8 +245,9 @@ def overload(factor: float, seconds: float, port: int, log, max_lag: float | Non
     sequence numbers keep the take's 120 Hz) for ``seconds`` after a 1 s warm-up.
     Reported: cue latency (arrival of the frame that revealed a cut -> its OSC datagram
     sent) p50/p99 over the cuts, the same for every processed frame, overload drops, the
-    largest lag, and whether every cut time is on the source clock (the take's seconds:
-    within 1 s of the revealing frame's device time, never the wall clock)."""
+    largest lag, and whether every cut time is on the source clock (the take's seconds,
+    running over twice as fast as the wall clock here; never the wall clock) and in
+    order."""
     suit = Suit(120.0, speed=factor)
     try:
         cfg = config(port)
@@ -278,10 +279,11 @@ def overload(factor: float, seconds: float, port: int, log, max_lag: float | Non
                        is not None), float)
     lat = np.fromiter(session.stats.frame_latency_ms, float)
     # the cut's time against the session clock of its revealing frame on the device clock:
-    # the take's seconds run `factor` times faster than the wall clock
+    # the take's seconds run about `factor` times faster than the wall clock (less when a
+    # busy machine slows the simulated suit down); the wall clock would give the same
     src_t = [c.time + (c.detected_frame - c.frame) / 120.0 for c in cuts]
     wall_t = [c.detected_recv_time - session.session_start for c in cuts]
-    on_source = all(s > factor * 0.5 * w for s, w in zip(src_t[1:], wall_t[1:])) and all(
+    on_source = all(s > 2.0 * w for s, w in zip(src_t[1:], wall_t[1:])) and all(
         b >= a for a, b in zip([c.time for c in cuts], [c.time for c in cuts][1:]))
 
     def pct(a: np.ndarray, p: float) -> float | None:

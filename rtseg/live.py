@@ -31,9 +31,11 @@ Keeping up
 The reader never blocks on processing.  Under overload (frames arrive faster than the
 loop processes them) the loop drops the **oldest** waiting frames so that no frame is
 processed more than ``buffer.max_lag_seconds`` (L, default 0.1 s; ``--max-lag``) after it
-arrived, and cues stay timely: waiting frames older than L/2 are dropped at most
-``gaps.max_frames`` before each frame processed (a short gap: the detectors go on, thinned),
-and frames older than L are all dropped (a longer gap: the detectors restart).  Dropped
+arrived, and cues stay timely: while working off what is waiting (at the measured cost
+per frame) would take the oldest past L, waiting frames older than L/2 are dropped at most
+``gaps.max_frames`` before each frame processed (a short gap: the detectors go on,
+thinned); frames older than L are all dropped (a longer gap: the detectors restart).  A
+short stall at a normal rate, soon worked off, drops nothing.  Dropped
 frames are counted in ``LiveStats.overload_drops`` (and in ``dropped``), shown in the
 summary, every status event (JSON lines, recording) and the recording's ``session.json``
 (``"session"``); the recording still holds every frame received, dropped or not, so a
@@ -378,6 +380,7 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
                 self._max_lag = 0.0          # a replay at speed 0: no frame is ever late
             self._thin = int(self.config["gaps.max_frames"])
             self._pending_lost = 0
+            self._frame_cost = 0.0
             max_batch = int(self.config["buffer.max_batch"])
             deadline = None if self.duration is None else time.monotonic() + self.duration
             cursor = self.ring.cursor(0)

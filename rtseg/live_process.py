@@ -4,7 +4,8 @@ the ``Pipeline``, the oldest dropped under overload (see "Keeping up" in ``rtseg
 :class:`SessionProcessing` is a part of :class:`rtseg.live.LiveSession` (a base class; it
 uses the session's ``pipeline``, ``ring``, ``stats``, ``_emit``, ``_warn``, the event
 builders of ``rtseg.live_events`` and the dropout tracking of ``rtseg.live_health``, and
-the state ``run`` sets up: ``_max_lag`` (s), ``_thin`` (frames), ``_pending_lost``).
+the state ``run`` sets up: ``_max_lag`` (s), ``_thin`` (frames), ``_pending_lost``,
+``_frame_cost`` (s)).
 Times are monotonic seconds; latencies milliseconds.
 """
 
@@ -18,16 +19,25 @@ import numpy as np
 class SessionProcessing:
     """Frame processing of a :class:`~rtseg.live.LiveSession`."""
 
-    def _overload_drop(self, recv: np.ndarray, i: int, now: float, pending: int) -> int:
+    def _overload_drop(self, recv: np.ndarray, i: int, now: float, pending: int,
+                       waiting: int) -> int:
         """How many waiting frames, from row ``i`` of the window's receive times ``recv``
         on, to drop before processing the next one (``now``: monotonic s; ``pending``:
-        frames already missing before row ``i``).  Every frame older than
-        ``buffer.max_lag_seconds`` goes; frames older than half of it go too, but at most
-        ``gaps.max_frames`` before each frame processed, a gap the detectors go on across."""
+        frames already missing before row ``i``; ``waiting``: frames waiting from row
+        ``i`` on, in the window and after it).
+
+        Every frame older than ``buffer.max_lag_seconds`` (L) goes.  Frames older than L/2
+        go too, at most ``gaps.max_frames`` before each frame processed (a gap the
+        detectors go on across), when the loop is overloaded: processing all that is
+        waiting, at the measured cost per frame, would take the oldest past L.  A stall
+        at a normal rate (a few frames waiting, quickly worked off) drops nothing."""
         hard = self._max_lag
         old_hard = int(np.searchsorted(recv[i:], now - hard, side="left"))
-        old_soft = int(np.searchsorted(recv[i:], now - 0.5 * hard, side="left"))
-        return max(old_hard, min(old_soft, max(0, self._thin - pending)))
+        soft = 0
+        if now - float(recv[i]) + waiting * self._frame_cost > hard:
+            old_soft = int(np.searchsorted(recv[i:], now - 0.5 * hard, side="left"))
+            soft = min(old_soft, max(0, self._thin - pending))
+        return max(old_hard, soft)
 
     def _process_window(self, w, now: float) -> None:
         """Process the frames of window ``w`` in order (``now``: monotonic s when it was
@@ -45,7 +55,8 @@ class SessionProcessing:
         i = 0
         while i < n:
             if self._max_lag > 0 and now - float(recv_all[i]) > 0.5 * self._max_lag:
-                drop = min(n - i, self._overload_drop(recv_all, i, now, pending))
+                waiting = self.ring.head - (w.start + i)
+                drop = min(n - i, self._overload_drop(recv_all, i, now, pending, waiting))
                 if drop:
                     st.overload_drops += drop
                     pending += drop
@@ -82,8 +93,11 @@ class SessionProcessing:
             if pipe.identity is not None:
                 for d in pipe.identity.drain():
                     self._emit(self._behaviour_event(d))
-            now = time.monotonic()
-            st.frame_latency_ms.append((now - recv) * 1000.0)
+            done = time.monotonic()
+            st.frame_latency_ms.append((done - recv) * 1000.0)
+            # cost of one frame (s), a running mean over about 64 frames
+            self._frame_cost += (done - now - self._frame_cost) / 64.0
+            now = done
         self._pending_lost = pending
         if len(w):
             now = time.monotonic()
