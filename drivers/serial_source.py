@@ -51,6 +51,12 @@ Behaviour
   sent while it lasted plus what the port's input flush at open discards (about 20 ms
   worth); each successful reopen counts in ``stats.reconnects``.  The decoder drops any half-received message.  ``read`` never
   raises because of the device.
+- Damaged messages (binary format): those after the last intact message count in
+  ``stats.dropped`` as soon as they arrive, one frame each, so a suit whose every message
+  is damaged shows its frames destroyed; the next intact message's sequence gap then gives
+  the exact count, which replaces that estimate (a damaged zero byte can merge two
+  messages into one; damage before the first intact message - a boot log - is no longer
+  counted once it arrives).
 - Counters map from the decoder: corrupt messages and boot-log garbage -> ``corrupt``,
   non-unit / NaN quaternions -> ``bad_values``, ids not in the suit -> ``unknown_names``,
   malformed text lines / unknown message types / a frame repeating the previous frame's
@@ -182,6 +188,7 @@ class SerialSource(QueuedSource):
         self._last_time_raw: int | None = None
         self._time_acc = 0
         self._last_data = 0.0
+        self._estimated = 0       # damaged messages counted in dropped as an estimate
         self._events: collections.deque[SensorEvent] = collections.deque(maxlen=4096)
         self._queue = FrameQueue(queue_size)
         self._stop = threading.Event()
@@ -359,6 +366,12 @@ class SerialSource(QueuedSource):
     # ------------------------------------------------------------------ decoding
 
     def _sync_stats(self) -> None:
+        # damaged messages since the last intact one: frames destroyed that no sequence
+        # gap has counted yet, in dropped as an estimate until the next intact message
+        est = int(getattr(self._decoder, "corrupt_since_good", 0))
+        if est != self._estimated:
+            self.count("dropped", est - self._estimated)
+            self._estimated = est
         st = self._decoder.stats
         for k, field in _STAT_MAP.items():
             v = getattr(st, k)
@@ -370,7 +383,6 @@ class SerialSource(QueuedSource):
                           self.path, d, k.replace("_", " "), v)
 
     def _handle(self, messages: list[codec.DecodedFrame], now: float) -> None:
-        self._sync_stats()
         for m in messages:
             if m.seq is not None and not self._track(m.seq, m.time_us, m.msg_type):
                 continue
@@ -387,6 +399,7 @@ class SerialSource(QueuedSource):
                     log.info("serial %s: device %s", self.path,
                              ", ".join(f"{k}={v}" for k, v in m.info.items()))
                 self.device_info = dict(m.info)
+        self._sync_stats()
 
     def _track(self, seq: int, time_us: int, msg_type: int) -> bool:
         """Sequence gaps and clock unwrapping; False to drop a duplicate frame.

@@ -119,6 +119,10 @@ class CutEvent:
 #: Input counters carried by ``StatusEvent`` (and ``/rtseg/input``), in argument order.
 INPUT_COUNTERS = ("corrupt", "crc_failures", "bad_messages", "bad_values", "unknown_names")
 
+#: Counters of a network source's refusals carried by ``StatusEvent`` (JSON lines and
+#: recordings; ``SourceStats`` fields of the same names)
+SENDER_COUNTERS = ("refused_senders", "other_senders", "clock_restarts")
+
 
 def input_text(counts: Mapping[str, int]) -> str:
     """One phrase for the status line and the summary, e.g. ``"bad input: 12 corrupt
@@ -157,6 +161,12 @@ class StatusEvent:
     bad_values: orientation values refused (NaN/inf, zero or non-unit quaternions), by the
         driver or by the live loop.
     unknown_names: sensor ids / bone names not in the suit profile.
+
+    Refusals of a network source, each since the session started (``SENDER_COUNTERS``;
+    JSON output and recordings only):
+    refused_senders: datagrams (or connections) from senders outside ``allow=``.
+    other_senders: datagrams from a second sender while the source follows one.
+    clock_restarts: times the source's clock went back or jumped ahead (new clock segment).
     """
     alive: int = 1
     frame_rate: float = 0.0
@@ -173,6 +183,9 @@ class StatusEvent:
     bad_messages: int = 0
     bad_values: int = 0
     unknown_names: int = 0
+    refused_senders: int = 0
+    other_senders: int = 0
+    clock_restarts: int = 0
 
     def input_counts(self) -> dict[str, int]:
         """The input counters by name (``INPUT_COUNTERS`` order)."""

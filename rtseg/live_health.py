@@ -13,7 +13,7 @@ import logging
 
 import numpy as np
 
-from rtseg.events import INPUT_COUNTERS, DropoutEvent, StatusEvent
+from rtseg.events import INPUT_COUNTERS, SENDER_COUNTERS, DropoutEvent, StatusEvent
 
 log = logging.getLogger("rtseg.live")
 
@@ -79,6 +79,12 @@ class SessionHealth:
         out.update(self.input_counts())
         return out
 
+    def sender_counts(self) -> dict[str, int]:
+        """The source's refusals since start (``SENDER_COUNTERS``: ``allow=``, a second
+        sender, clock restarts); 0 for sources without them."""
+        s = getattr(self.source, "stats", None)
+        return {k: int(getattr(s, k, 0) or 0) for k in SENDER_COUNTERS}
+
     def input_counts(self) -> dict[str, int]:
         """Input refused since start (``INPUT_COUNTERS``): the source's counters, plus the
         quaternions the pipeline itself replaced as non-finite/zero in ``bad_values``."""
@@ -101,7 +107,8 @@ class SessionHealth:
                            stale_joints=stale, stale_names=names, time=now - self.session_start,
                            lag_ms=float(self.stats.lag_s * 1000.0),
                            backlog=int(self.stats.backlog),
-                           overload_drops=int(self.stats.overload_drops), **self.input_counts())
+                           overload_drops=int(self.stats.overload_drops),
+                           **self.sender_counts(), **self.input_counts())
 
     def _input_rate(self) -> float:
         """Frames per second between the first and the last frame received (0 if < 2)."""

@@ -122,13 +122,24 @@ class SessionSummary:
     #: ``max_lag_ms`` (``buffer.max_lag_seconds``; 0 = never dropped)
     overload_drops: int = 0
     max_lag_setting_ms: float = 0.0
+    #: processing latency (arrival -> processed, and sent for a cut), ms, over every frame
+    #: processed (the last 200 000); ``cut_latency_ms_*`` are over the frames that
+    #: revealed a cut only (the cues' latency)
+    latency_ms_p50: float | None = None
+    latency_ms_p99: float | None = None
+    latency_frames: int = 0
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     def text(self) -> str:
-        lat = ("-" if self.cut_latency_ms_p50 is None else
-               f"{self.cut_latency_ms_p50:.2f}/{self.cut_latency_ms_p99:.2f} ms (p50/p99)")
+        lat = ("-" if self.latency_ms_p50 is None else
+               f"{self.latency_ms_p50:.2f}/{self.latency_ms_p99:.2f} ms (p50/p99 over "
+               f"{self.latency_frames} frames")
+        if self.latency_ms_p50 is not None:
+            lat += ("" if self.cut_latency_ms_p50 is None else
+                    f"; cues {self.cut_latency_ms_p50:.2f}/{self.cut_latency_ms_p99:.2f} ms")
+            lat += ")"
         methods = ", ".join(f"{k} {v}" for k, v in self.cut_latency_items()) or "none"
         return (f"session ended ({self.stop_reason}) after {self.duration_s:.1f} s: "
                 f"{self.frames_received} frames received ({self.frame_rate:.1f}/s), "

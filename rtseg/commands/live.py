@@ -15,7 +15,8 @@ from typing import Any, Callable, TextIO
 
 from rtseg.cli import error_text, positive_float
 from rtseg.config import ConfigError
-from rtseg.events import BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
+from rtseg.events import SENDER_COUNTERS, BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
+from rtseg.session_stats import source_losses_text
 from rtseg.session_config import SessionConfig, load_session_config
 
 #: seconds between plain status lines when stderr is not a terminal
@@ -171,6 +172,7 @@ class Console:
         self.cut_time = cut_time     # None: ev.time (seconds since the session started)
         self._line_shown = False
         self._last_plain = 0.0
+        self._corrupt_at: tuple[float, int] | None = None   # (status time s, corrupt count)
         self.first_segment: dict[str, int] = {}    # behaviour id -> earliest segment
         self.last_behaviour: BehaviourEvent | None = None
         self.behaviour_time: Callable[[BehaviourEvent], float] | None = None
@@ -222,10 +224,21 @@ class Console:
             b = self.last_behaviour
             if b is not None and b.segment == c.segment:
                 last += f" ({b.label})"
-        line = (f"rtseg live: {ev.time:7.1f} s | {ev.frame_rate:6.1f} fps | "
-                f"{ev.dropped} dropped | {ev.stale_joints} stale{lag} | last cut: {last}")
+        # messages arriving damaged: their rate next to the frames' (0.0 fps of intact
+        # frames while a suit sends 120 corrupt messages a second says so)
+        damaged = ""
+        prev, self._corrupt_at = self._corrupt_at, (ev.time, ev.corrupt)
+        if prev is not None and ev.corrupt > prev[1] and ev.time > prev[0]:
+            damaged = f" (+{(ev.corrupt - prev[1]) / (ev.time - prev[0]):.1f}/s corrupt)"
+        line = (f"rtseg live: {ev.time:7.1f} s | {ev.frame_rate:6.1f} fps{damaged} | "
+                f"{ev.dropped} dropped"
+                + (f" ({ev.overload_drops} under overload)" if ev.overload_drops else "")
+                + f" | {ev.stale_joints} stale{lag} | last cut: {last}")
         if any(ev.input_counts().values()):
             line += f" | {ev.input_text()}"
+        refused = source_losses_text({k: getattr(ev, k) for k in SENDER_COUNTERS})
+        if refused:
+            line += " | " + refused[2:]
         if self.tty:
             self.err.write("\r\033[K" + line)
             self.err.flush()
