@@ -62,9 +62,10 @@ RATES = (500, 1000, 2000, 3000, 4000, 6000, 8000)
 class Suit:
     """The simulated suit in a subprocess; ``path`` is its pty."""
 
-    def __init__(self, rate: float) -> None:
+    def __init__(self, rate: float, speed: float = 1.0) -> None:
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "rtseg.simulators.serial_device", "--rate", f"{rate:g}"],
+            [sys.executable, "-m", "rtseg.simulators.serial_device", "--rate", f"{rate:g}",
+             "--speed", f"{speed:g}"],
             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=REPO)
         line = self.proc.stdout.readline().strip()
         if not line:
@@ -238,6 +239,75 @@ def max_rate(step_seconds: float, port: int, log, kind: str = "serial") -> tuple
     return best, rows
 
 
+def overload(factor: float, seconds: float, port: int, log, max_lag: float | None = None
+             ) -> dict:
+    """The 17-sensor suit sent ``factor`` times faster than its 120 Hz (device clock and
+    sequence numbers keep the take's 120 Hz) for ``seconds`` after a 1 s warm-up.
+    Reported: cue latency (arrival of the frame that revealed a cut -> its OSC datagram
+    sent) p50/p99 over the cuts, the same for every processed frame, overload drops, the
+    largest lag, and whether every cut time is on the source clock (the take's seconds,
+    running over twice as fast as the wall clock here; never the wall clock) and in
+    order."""
+    suit = Suit(120.0, speed=factor)
+    try:
+        cfg = config(port)
+        if max_lag is not None:
+            from rtseg.session_config import apply_overrides
+            apply_overrides(cfg, {"buffer.max_lag_seconds": max_lag}, origin="benchmark")
+        session = LiveSession(f"serial://{suit.path}?rate=120", cfg, handle_signals=False,
+                              duration=seconds + 1.0)
+        cuts: list = []
+        session.listeners.append(lambda ev: cuts.append(ev) if hasattr(ev, "detected_frame")
+                                 else None)
+        marks: dict[str, float] = {}
+
+        def start_measuring() -> None:
+            session.stats.frame_latency_ms.clear()
+            session.stats.cut_latency_ms.clear()
+            marks.update(wall=time.monotonic(), frames=session.stats.frames_received,
+                         drops=session.stats.overload_drops, cuts=len(cuts))
+
+        timer = threading.Timer(1.0, start_measuring)
+        timer.start()
+        summary = session.run()
+        timer.cancel()
+        wall = time.monotonic() - marks["wall"]
+    finally:
+        suit.close()
+    measured = cuts[int(marks["cuts"]):]
+    cue = np.fromiter((c.processing_ms for c in measured if c.wire and c.processing_ms
+                       is not None), float)
+    lat = np.fromiter(session.stats.frame_latency_ms, float)
+    # the cut's time against the session clock of its revealing frame on the device clock:
+    # the take's seconds run about `factor` times faster than the wall clock (less when a
+    # busy machine slows the simulated suit down); the wall clock would give the same
+    src_t = [c.time + (c.detected_frame - c.frame) / 120.0 for c in cuts]
+    wall_t = [c.detected_recv_time - session.session_start for c in cuts]
+    on_source = all(s > 2.0 * w for s, w in zip(src_t[1:], wall_t[1:])) and all(
+        b >= a for a, b in zip([c.time for c in cuts], [c.time for c in cuts][1:]))
+
+    def pct(a: np.ndarray, p: float) -> float | None:
+        return round(float(np.percentile(a, p)), 3) if a.size else None
+
+    out = {"overload": factor, "input_fps": round((summary.frames_received - marks["frames"])
+                                                    / wall, 1),
+           "seconds": round(wall, 1), "max_lag_setting_ms": summary.max_lag_setting_ms,
+           "cue_latency_ms": {"p50": pct(cue, 50), "p99": pct(cue, 99), "cuts": int(cue.size)},
+           "frame_latency_ms": {"p50": pct(lat, 50), "p99": pct(lat, 99)},
+           "overload_drops": session.stats.overload_drops - int(marks["drops"]),
+           "dropped": summary.dropped, "overruns": summary.overruns,
+           "max_lag_ms": round(summary.max_lag_ms, 1), "cuts": summary.cuts,
+           "restarts": summary.pipeline.get("restarts", 0),
+           "cut_times_on_source_clock": bool(on_source),
+           "cut_times_s": [round(c.time, 2) for c in cuts[:12]]}
+    log(f"   {out['input_fps']:.0f} frames/s in, {out['overload_drops']} dropped for "
+        f"overload, cue latency p50 {out['cue_latency_ms']['p50']} ms p99 "
+        f"{out['cue_latency_ms']['p99']} ms over {out['cue_latency_ms']['cuts']} cuts, "
+        f"frame latency p99 {out['frame_latency_ms']['p99']} ms, max lag "
+        f"{out['max_lag_ms']} ms, cut times on the source clock: {on_source}")
+    return out
+
+
 def monitor_cost(seconds: float, port: int, log, as_json: bool) -> int:
     """CPU of the session (this process: loop, reader, OSC and the monitor's server
     thread) at 120 Hz without the monitor and with it serving one Chromium page."""
@@ -267,6 +337,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--step-seconds", type=float, default=4.0, help="length of each rate step")
     p.add_argument("--skip-core", action="store_true",
                    help="skip the rate steps of the session core without the serial driver")
+    p.add_argument("--overload", type=float, metavar="X",
+                   help="only the overload run: the suit sent X times faster than its 120 Hz "
+                        "for --seconds; cue latency p50/p99, overload drops, cut times")
+    p.add_argument("--max-lag", type=float, metavar="S",
+                   help="with --overload: buffer.max_lag_seconds (default the config's)")
     p.add_argument("--monitor", action="store_true",
                    help="only the CPU cost of the live monitor: step 1 without it, then with "
                         "the monitor served and one page open in headless Chromium")
@@ -279,6 +354,15 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.monotonic()
     s = sink()
     port = s.getsockname()[1]
+    if args.overload:
+        try:
+            log(f"17-sensor suit at {args.overload:g} x 120 Hz over a pty for "
+                f"{args.seconds:g} s ...")
+            res = overload(args.overload, args.seconds, port, log, args.max_lag)
+        finally:
+            s.close()
+        print(json.dumps(res) if args.json else json.dumps(res, indent=2))
+        return 0
     if args.monitor:
         try:
             return monitor_cost(args.seconds, port, log, args.json)

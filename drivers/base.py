@@ -103,12 +103,17 @@ class Source:
     (-1 for roots; all -1 when the source has no hierarchy), ``space`` ("global" for IMU
     orientations, "local" for parent-relative rotations such as VMC) and ``frame_rate``
     (nominal Hz, or None if unknown), and implement ``read``.
+
+    ``as_fast_as_read``: True for a source that hands over frames as fast as they are read
+    (a replay at ``speed=0``): its frames are never late, so the live loop processes every
+    one instead of dropping the oldest under overload.
     """
 
     joint_names: list[str]
     parents: list[int]
     space: str = "global"
     frame_rate: float | None = None
+    as_fast_as_read: bool = False
 
     def __init__(self) -> None:
         self.stats = SourceStats()

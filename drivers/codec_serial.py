@@ -157,6 +157,13 @@ class SerialFrameDecoder:
         self._known = _known_lut(known_ids)
         self._buf = b""
         self._synced = False
+        self._corrupt_at_good = 0     # stats.corrupt when the last intact message was decoded
+
+    @property
+    def corrupt_since_good(self) -> int:
+        """Damaged messages decoded after the last intact one (all of them before the
+        first): frames destroyed that no sequence number has accounted for yet."""
+        return self.stats.corrupt - self._corrupt_at_good
 
     def reset(self) -> None:
         """Forget any partial message and wait for the next delimiter (after a reconnect)."""
@@ -232,6 +239,7 @@ class SerialFrameDecoder:
                 heads.append((seq, time_us, dec[8]))
                 blocks.append(dec[9:blen])
                 order.append(-1)
+                self._corrupt_at_good = stats.corrupt
             elif mtype == MSG_STATUS:
                 if blen < 9 or blen != 9 + 2 * dec[8]:
                     stats.bad_length += 1
@@ -245,10 +253,12 @@ class SerialFrameDecoder:
                                    np.zeros(len(ids), bool), None)
                 order.append(len(others))
                 others.append(msg)
+                self._corrupt_at_good = stats.corrupt
             elif mtype == MSG_INFO:
                 text = bytes(dec[8:blen]).decode("utf-8", errors="replace")
                 order.append(len(others))
                 others.append(_empty_frame(MSG_INFO, seq, time_us, parse_info(text)))
+                self._corrupt_at_good = stats.corrupt
             else:
                 stats.bad_messages += 1
                 continue

@@ -174,6 +174,11 @@ class ReplaySource(Source):
         return self.pacer.speed
 
     @property
+    def as_fast_as_read(self) -> bool:
+        """True at ``speed=0`` (see ``Source.as_fast_as_read``)."""
+        return self.pacer.speed == 0
+
+    @property
     def position(self) -> int:
         """Index (in the take) of the next frame to deliver."""
         return self.first_frame + self.delivered % self.n_frames

@@ -14,7 +14,7 @@ Options (all optional):
 ``stale``      seconds without a valid value before a sensor is reported lost (0.25)
 ``rate``       nominal frame rate in Hz (default: the suit's ``frame_rate``)
 ``queue``      frames buffered for a slow consumer (default 256, ~2 s at 120 Hz)
-``backoff``    longest wait between reconnect attempts, s (default 0.5)
+``backoff``    longest wait between reconnect attempts to a device that stays, s (0.5)
 ``wait``       1: start even if the device is absent and keep trying (default 0: error)
 ``exclusive``  1 (default): lock the port (flock) so two readers cannot share it
 =============  ==============================================================================
@@ -42,11 +42,21 @@ Behaviour
   discarded and counted in ``stats.dropped`` (and ``overflow_drops``), so ``read`` always
   returns recent data.
 - Unplug: a ``SerialException``/``OSError`` while reading closes the port, counts
-  ``disconnects``, and the thread reopens **the same path** at once and then with
-  exponential backoff (50 ms doubling to ``backoff``), so reading resumes within
-  ``backoff`` + open time of the device's return; each successful reopen counts in
-  ``stats.reconnects``.  The decoder drops any half-received message.  ``read`` never
+  ``disconnects``, and the thread reopens **the same path**: at once, then whenever the
+  path names a device it has not yet failed to open - the path is checked every 20 ms
+  (``POLL_S``; a pulled cable removes the device node or its ``/dev/serial/by-id`` link,
+  the replug creates it again) - and otherwise with exponential backoff (50 ms doubling to
+  ``backoff``: a path that stays but cannot be opened, or a pyserial URL).  So reading
+  resumes within ~20 ms + open time of the device's return, and an unplug costs the frames
+  sent while it lasted plus what the port's input flush at open discards (about 20 ms
+  worth); each successful reopen counts in ``stats.reconnects``.  The decoder drops any half-received message.  ``read`` never
   raises because of the device.
+- Damaged messages (binary format): those after the last intact message count in
+  ``stats.dropped`` as soon as they arrive, one frame each, so a suit whose every message
+  is damaged shows its frames destroyed; the next intact message's sequence gap then gives
+  the exact count, which replaces that estimate (a damaged zero byte can merge two
+  messages into one; damage before the first intact message - a boot log - is no longer
+  counted once it arrives).
 - Counters map from the decoder: corrupt messages and boot-log garbage -> ``corrupt``,
   non-unit / NaN quaternions -> ``bad_values``, ids not in the suit -> ``unknown_names``,
   malformed text lines / unknown message types / a frame repeating the previous frame's
@@ -62,6 +72,7 @@ from __future__ import annotations
 import collections
 import errno
 import logging
+import os
 import threading
 import time
 from dataclasses import dataclass
@@ -81,6 +92,9 @@ DEFAULT_BAUD = 921600
 #: highest baud rate accepted (fast USB UARTs reach 12 Mbaud)
 MAX_BAUD = 50_000_000
 LOG_INTERVAL_S = 5.0
+#: while the device is away, its path is checked this often (s) to reopen it as soon as it
+#: is back
+POLL_S = 0.02
 
 
 @dataclass(frozen=True, slots=True)
@@ -174,6 +188,7 @@ class SerialSource(QueuedSource):
         self._last_time_raw: int | None = None
         self._time_acc = 0
         self._last_data = 0.0
+        self._estimated = 0       # damaged messages counted in dropped as an estimate
         self._events: collections.deque[SensorEvent] = collections.deque(maxlen=4096)
         self._queue = FrameQueue(queue_size)
         self._stop = threading.Event()
@@ -272,19 +287,55 @@ class SerialSource(QueuedSource):
             except Exception:
                 pass
 
+    def _device_key(self) -> tuple | None:
+        """What the device path names now: (resolved path, inode, device number), or None
+        when the path is absent (a pulled USB cable removes the node / its udev link).  A
+        new key means a new device behind the path.  Always None for pyserial URLs
+        (``rfc2217://``, ``socket://``, ...): those are retried on the backoff alone."""
+        if "://" in self.path:
+            return None
+        try:
+            st = os.stat(self.path)
+        except OSError:
+            return None
+        return (os.path.realpath(self.path), st.st_ino, st.st_rdev)
+
+    def _wait_to_reopen(self, backoff: float, failed_key: tuple | None) -> bool:
+        """Sleep until the next open attempt; False when the source is stopping.
+
+        A device path is polled every :data:`POLL_S` seconds: the attempt is made as soon
+        as the path names a device it has not failed to open yet (the device came back), so
+        what the device sends once it is back is read, not lost to a back-off.  Otherwise
+        (the path still names the device that failed, or a URL) the attempt waits
+        ``backoff`` seconds."""
+        end = time.monotonic() + backoff
+        while True:
+            key = self._device_key()
+            if key is not None and key != failed_key:
+                return not self._stop.is_set()
+            left = end - time.monotonic()
+            if left <= 0:
+                return not self._stop.is_set()
+            if self._stop.wait(min(POLL_S, left)):
+                return False
+
     def _run(self) -> None:
         backoff = 0.0
+        failed_key: tuple | None = None      # the device the last open attempt failed on
         while not self._stop.is_set():
             if self._ser is None:
-                if self._stop.wait(backoff):
+                if not self._wait_to_reopen(backoff, failed_key):
                     break
+                key = self._device_key()
                 if not self._open():
                     self._log("open", logging.WARNING, "serial %s: cannot open (%s); retrying",
                               self.path, self._open_error)
+                    failed_key = key
                     backoff = min(max(backoff * 2, self.backoff_start), self.backoff_max)
                     self._check_stale(time.monotonic())
                     continue
                 backoff = 0.0
+                failed_key = None
             try:
                 ser = self._ser
                 # Block for the first byte (or the read timeout), then take whatever else
@@ -315,6 +366,12 @@ class SerialSource(QueuedSource):
     # ------------------------------------------------------------------ decoding
 
     def _sync_stats(self) -> None:
+        # damaged messages since the last intact one: frames destroyed that no sequence
+        # gap has counted yet, in dropped as an estimate until the next intact message
+        est = int(getattr(self._decoder, "corrupt_since_good", 0))
+        if est != self._estimated:
+            self.count("dropped", est - self._estimated)
+            self._estimated = est
         st = self._decoder.stats
         for k, field in _STAT_MAP.items():
             v = getattr(st, k)
@@ -326,7 +383,6 @@ class SerialSource(QueuedSource):
                           self.path, d, k.replace("_", " "), v)
 
     def _handle(self, messages: list[codec.DecodedFrame], now: float) -> None:
-        self._sync_stats()
         for m in messages:
             if m.seq is not None and not self._track(m.seq, m.time_us, m.msg_type):
                 continue
@@ -343,6 +399,7 @@ class SerialSource(QueuedSource):
                     log.info("serial %s: device %s", self.path,
                              ", ".join(f"{k}={v}" for k, v in m.info.items()))
                 self.device_info = dict(m.info)
+        self._sync_stats()
 
     def _track(self, seq: int, time_us: int, msg_type: int) -> bool:
         """Sequence gaps and clock unwrapping; False to drop a duplicate frame.

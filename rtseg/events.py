@@ -119,6 +119,10 @@ class CutEvent:
 #: Input counters carried by ``StatusEvent`` (and ``/rtseg/input``), in argument order.
 INPUT_COUNTERS = ("corrupt", "crc_failures", "bad_messages", "bad_values", "unknown_names")
 
+#: Counters of a network source's refusals carried by ``StatusEvent`` (JSON lines and
+#: recordings; ``SourceStats`` fields of the same names)
+SENDER_COUNTERS = ("refused_senders", "other_senders", "clock_restarts")
+
 
 def input_text(counts: Mapping[str, int]) -> str:
     """One phrase for the status line and the summary, e.g. ``"bad input: 12 corrupt
@@ -141,6 +145,9 @@ class StatusEvent:
     lag_ms: how long the newest processed frame waited before processing, ms, and
     backlog: frames received but not yet processed - how far the live loop is behind
     (JSON output and recordings only).
+    overload_drops: of ``dropped``, frames the live loop dropped unprocessed, oldest first,
+    so that none waits longer than ``buffer.max_lag_seconds`` (JSON output and recordings
+    only).
     time: seconds since session start.
 
     Input counters, each since the session started (``INPUT_COUNTERS``; sent over OSC as
@@ -154,6 +161,12 @@ class StatusEvent:
     bad_values: orientation values refused (NaN/inf, zero or non-unit quaternions), by the
         driver or by the live loop.
     unknown_names: sensor ids / bone names not in the suit profile.
+
+    Refusals of a network source, each since the session started (``SENDER_COUNTERS``;
+    JSON output and recordings only):
+    refused_senders: datagrams (or connections) from senders outside ``allow=``.
+    other_senders: datagrams from a second sender while the source follows one.
+    clock_restarts: times the source's clock went back or jumped ahead (new clock segment).
     """
     alive: int = 1
     frame_rate: float = 0.0
@@ -164,11 +177,15 @@ class StatusEvent:
     wall_time: float = field(default_factory=_wall_time)
     lag_ms: float = 0.0
     backlog: int = 0
+    overload_drops: int = 0
     corrupt: int = 0
     crc_failures: int = 0
     bad_messages: int = 0
     bad_values: int = 0
     unknown_names: int = 0
+    refused_senders: int = 0
+    other_senders: int = 0
+    clock_restarts: int = 0
 
     def input_counts(self) -> dict[str, int]:
         """The input counters by name (``INPUT_COUNTERS`` order)."""

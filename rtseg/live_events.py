@@ -65,7 +65,10 @@ class SessionEvents:
                 self._warn("listener", "event listener failed: %s", exc)
         return ev
 
-    def _cut_event(self, pc: PipelineCut, detected_recv: float) -> CutEvent:
+    def _cut_event(self, pc: PipelineCut, detected_recv: float, at_index: int | None = None,
+                   at_source_time: float | None = None) -> CutEvent:
+        """The event of cut ``pc``, revealed by frame ``at_index`` (received at monotonic
+        ``detected_recv``, source clock ``at_source_time`` s or NaN/None)."""
         ring = self.ring
         m = pc.cut.method
         seg = self._segment.get(m, 0) + 1
@@ -78,21 +81,28 @@ class SessionEvents:
             b_recv = detected_recv - (pc.detected - pc.boundary) / self.frame_rate
         return CutEvent(
             event=self._event_no if wire else 0, segment=seg, frame=int(pc.boundary),
-            time=self._boundary_time(pc.boundary, b_recv), method=m,
+            time=self._boundary_time(pc.boundary, b_recv, at_index, at_source_time), method=m,
             label=m,
             confidence=float(np.clip(pc.cut.confidence, 0.0, 1.0)),
             detector_delay_ms=float(max(0, pc.detected - pc.boundary) / self.frame_rate * 1000.0),
             boundary_recv_time=float(b_recv), detected_frame=int(pc.detected),
             score=float(pc.cut.score), detected_recv_time=float(detected_recv), wire=wire)
 
-    def _boundary_time(self, index: int, b_recv: float) -> float:
+    def _boundary_time(self, index: int, b_recv: float, at_index: int | None = None,
+                       at_source_time: float | None = None) -> float:
         """Seconds since session start of frame ``index``: on the source's own clock when it
         has one (a replay sent faster than real time, ``--speed``, keeps the take's clock,
         so cut times are the take's), counted from the first frame's arrival; else its
-        receive time.  A source clock that runs backwards or over 100x faster than the
-        frames arrive (a wrap, a restarted device) is not used."""
+        receive time.  A frame the ring no longer holds (overwritten while a long detector
+        delay ran at a high input rate) is placed on the source clock from a later frame
+        it holds, ``at_index`` with source time ``at_source_time``, one nominal frame
+        period per frame between them.  A source clock that runs backwards or over 100x
+        faster than the frames arrive (a wrap, a restarted device) is not used."""
         recv_t = float(b_recv - self.session_start)
         src = self.ring.source_time_at(index) if self.ring is not None else None
+        if (src is None and at_index is not None and at_source_time is not None
+                and np.isfinite(at_source_time)):
+            src = float(at_source_time) - (at_index - index) / self.frame_rate
         if src is None or self._first_src is None or self._first_recv is None:
             return recv_t
         d_src = src - self._first_src

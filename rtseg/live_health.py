@@ -13,7 +13,7 @@ import logging
 
 import numpy as np
 
-from rtseg.events import INPUT_COUNTERS, DropoutEvent, StatusEvent
+from rtseg.events import INPUT_COUNTERS, SENDER_COUNTERS, DropoutEvent, StatusEvent
 
 log = logging.getLogger("rtseg.live")
 
@@ -54,10 +54,36 @@ class SessionHealth:
             self._emit(DropoutEvent("source", True, now - self.session_start))
 
     def dropped(self) -> int:
-        """Frames lost since start: the source's counters plus frames the session dropped."""
+        """Frames lost since start: the source's counters plus frames the session dropped
+        (malformed, overwritten in the ring, dropped under overload)."""
         s = getattr(self.source, "stats", None)
         src = int(getattr(s, "dropped", 0)) if s is not None else 0
-        return src + self.stats.bad_frames + self.stats.overruns
+        return src + self.stats.bad_frames + self.stats.overruns + self.stats.overload_drops
+
+    def loss_counts(self) -> dict[str, int]:
+        """Every count of lost frames and refused input since start, by name: frames
+        received and processed, ``dropped`` and its parts the session knows (``overruns``,
+        ``overload_drops``, ``bad_frames``), then the source's own counters
+        (``SourceStats``: sequence-gap ``dropped`` as ``source_dropped``, ``refused_senders``,
+        ``other_senders``, ``clock_restarts``, ...) and ``bad_values`` of the pipeline.
+        What ``session.json`` holds under ``"session"`` at the end."""
+        st = self.stats
+        out = {"frames_received": st.frames_received, "frames_processed": st.frames_processed,
+               "dropped": self.dropped(), "overruns": st.overruns,
+               "overload_drops": st.overload_drops, "bad_frames": st.bad_frames,
+               "max_lag_ms": round(st.max_lag_s * 1000.0, 3)}
+        s = getattr(self.source, "stats", None)
+        src = s.as_dict() if s is not None and hasattr(s, "as_dict") else {}
+        for k, v in src.items():
+            out["source_dropped" if k == "dropped" else k] = int(v)
+        out.update(self.input_counts())
+        return out
+
+    def sender_counts(self) -> dict[str, int]:
+        """The source's refusals since start (``SENDER_COUNTERS``: ``allow=``, a second
+        sender, clock restarts); 0 for sources without them."""
+        s = getattr(self.source, "stats", None)
+        return {k: int(getattr(s, k, 0) or 0) for k in SENDER_COUNTERS}
 
     def input_counts(self) -> dict[str, int]:
         """Input refused since start (``INPUT_COUNTERS``): the source's counters, plus the
@@ -80,7 +106,9 @@ class SessionHealth:
         return StatusEvent(alive=alive, frame_rate=float(rate), dropped=self.dropped(),
                            stale_joints=stale, stale_names=names, time=now - self.session_start,
                            lag_ms=float(self.stats.lag_s * 1000.0),
-                           backlog=int(self.stats.backlog), **self.input_counts())
+                           backlog=int(self.stats.backlog),
+                           overload_drops=int(self.stats.overload_drops),
+                           **self.sender_counts(), **self.input_counts())
 
     def _input_rate(self) -> float:
         """Frames per second between the first and the last frame received (0 if < 2)."""

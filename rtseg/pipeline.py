@@ -19,11 +19,15 @@ last good values (what ``Frame`` rows hold).
 Frame indices
 -------------
 ``PipelineCut.boundary`` / ``detected`` are 0-based indices among all frames received this
-session (= the rows of the recorded session).
+session (= the rows of the recorded session).  ``lost`` frames (dropped by the live loop
+before this frame, see ``rtseg.live``) are a gap like a sequence gap: more than
+``gaps.max_frames`` restart the detectors; fewer are skipped, and the cut indices still
+name the frames the detectors were fed (``Pipeline._index_of_fed``).
 """
 
 from __future__ import annotations
 
+import bisect
 import logging
 import math
 from dataclasses import dataclass
@@ -38,6 +42,9 @@ from rtseg.session_config import SessionConfig, load_session_config
 log = logging.getLogger("rtseg.live")
 
 DEFAULT_FRAME_RATE = 120.0
+#: index jumps kept for mapping cuts back to session frames (``Pipeline._index_of_fed``):
+#: between MAX_JUMPS and twice that, far more than one detector delay holds
+MAX_JUMPS = 4096
 
 @dataclass
 class PipelineCut:
@@ -147,6 +154,13 @@ class Pipeline:
         self._fed = {m: 0 for m in self.detectors}
         self._fed_at_start = {m: 0 for m in self.detectors}
         self._fed_since_restart = 0
+        # Fed frames whose session index does not follow the previous fed frame's (the
+        # first fed frame, frames after skipped ones): parallel lists of the fed count
+        # (``stats.fed`` before the frame) and the index.  Between two entries indices
+        # run on by one per fed frame; see ``_index_of_fed``.
+        self._jump_fed: list[int] = []
+        self._jump_index: list[int] = []
+        self._last_fed_index = -2
 
     def _feature_joints(self) -> np.ndarray:
         """Input joints the pose features depend on: the profile's joints and, for global
@@ -193,7 +207,7 @@ class Pipeline:
         self._fed_since_restart = 0
 
     # ---------------------------------------------------------------- main step
-    def _time_missing(self, source_time: float | None) -> int:
+    def _time_missing(self, source_time: float | None, known_lost: int = 0) -> int:
         """Frames missing according to the source's clock, for sources whose sequence
         numbers cannot show a loss (VMC numbers the frames it assembles).
 
@@ -201,7 +215,8 @@ class Pipeline:
         steps that are not gaps, after 16 steps), so it does not depend on the nominal
         rate.  Returns 0 until then, for steps backwards (clock reset) and for steps below
         2.5 periods; after 8 long steps in a row the source is taken to have slowed down
-        and the period is learned again."""
+        and the period is learned again.  A step over frames the caller knows are lost
+        (``known_lost`` > 0: dropped by the live loop) is measured but not learned from."""
         prev = self._prev_src
         if source_time is None or prev is None or not math.isfinite(source_time):
             return 0
@@ -209,6 +224,8 @@ class Pipeline:
         if d <= 0:
             return 0
         p = self._src_period
+        if known_lost > 0:
+            return 0 if p is None else max(0, int(round(d / p)) - 1)
         if p is None:
             self._src_period, self._src_steps = d, 1
             return 0
@@ -228,8 +245,11 @@ class Pipeline:
                 lost: int = 0, source_time: float | None = None) -> list[PipelineCut]:
         st = self.stats
         st.frames += 1
-        # --- gaps in the input (sequence numbers or source clock, silence, ring overruns)
-        missing = max(self._seq_missing(seq), self._time_missing(source_time)) + max(0, int(lost))
+        # --- gaps in the input (sequence numbers or source clock, silence, frames the live
+        # loop lost or dropped): those are all between the previous frame and this one, so
+        # the largest count is the gap (a sequence gap includes the frames dropped)
+        lost = max(0, int(lost))
+        missing = max(self._seq_missing(seq), self._time_missing(source_time, lost), lost)
         st.gap_frames += missing
         silence = (recv_time - self._prev_recv
                    if recv_time is not None and self._prev_recv is not None else 0.0)
@@ -286,6 +306,12 @@ class Pipeline:
             return []
         # --- features and detectors
         x = self.features.step(q)
+        if index != self._last_fed_index + 1:
+            self._jump_fed.append(st.fed)
+            self._jump_index.append(index)
+            if len(self._jump_fed) > 2 * MAX_JUMPS:        # bounded memory
+                del self._jump_fed[:MAX_JUMPS], self._jump_index[:MAX_JUMPS]
+        self._last_fed_index = index
         st.fed += 1
         self._fed_since_restart += 1
         out: list[PipelineCut] = []
@@ -324,14 +350,25 @@ class Pipeline:
         base = self._fed_at_start[method] if origin == "creation" else 0
         rel = cut.frame - base
         rel_det = (cut.detected_at - base) if cut.detected_at >= 0 else fed_in_seg - 1
-        boundary = seg0 + rel
-        detected = seg0 + max(rel, rel_det)
+        fed0 = self.stats.fed - fed_in_seg          # the segment's first fed frame
+        boundary = self._index_of_fed(fed0 + rel) if rel >= 0 else seg0 + rel
+        detected = self._index_of_fed(fed0 + max(rel, rel_det))
         if rel < 0:
             self.stats.discarded_cuts += 1
             log.info("%s cut at frame %d discarded: it precedes the restart at frame %d",
                      method, boundary, seg0)
             return None
         return PipelineCut(cut, boundary, min(detected, index))
+
+    def _index_of_fed(self, fed: int) -> int:
+        """Session index of the ``fed``-th frame fed to the detectors (0-based count over
+        the session): the last index jump at or before it plus the frames fed since.
+        Frames the live loop dropped without a restart (fewer than ``gaps.max_frames``)
+        are skipped indices, so a cut's boundary is the frame the detector saw there."""
+        k = max(0, bisect.bisect_right(self._jump_fed, fed) - 1)
+        if not self._jump_fed:
+            return fed
+        return self._jump_index[k] + (fed - self._jump_fed[k])
 
 
 def detector_params(config: SessionConfig) -> dict[str, dict[str, Any]]:

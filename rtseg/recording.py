@@ -22,7 +22,12 @@ the internal lock (calls are serialised).
 Folder layout (format version 1; see docs/formats.md)
 -----------------------------------------------------
 - ``session.json`` - header, written atomically (temp file, fsync, rename) at start and
-  rewritten at ``close()`` with ``"closed": true`` and the final counters.
+  rewritten at ``close()`` with ``"closed": true`` and the final counters; a live session
+  adds its own under ``"session"`` (``LiveSession.loss_counts``: frames received and
+  processed, ``dropped``, ``overload_drops``, ``overruns``, the source's counters such as
+  ``refused_senders`` and ``other_senders``, the input counters).  Frames the live loop
+  dropped under overload are recorded like every frame received: ``overload_drops`` says
+  how many of them the detectors never saw.
 - ``frames.bin``  - fixed-size little-endian records, one per received frame, appended.
   Record: ``magic u4 = b"RTSF"``, ``recv_time f8`` (monotonic s), ``source_time f8``
   (NaN if none), ``seq i8``, ``flags u1`` (bit0 seq present, bit1 source time present,

@@ -358,6 +358,13 @@ class SessionRecorder:
         """Append a ``{"type": "log", "level": .., "message": ..}`` line to events.jsonl."""
         self.record_event({"type": "log", "level": level, "message": message, **fields})
 
+    def note_session(self, counts: Mapping[str, Any]) -> None:
+        """The live session's final counters (frames lost and input refused, by name:
+        ``LiveSession.loss_counts``), written to session.json under ``"session"`` at
+        :meth:`close`."""
+        with self._lock:
+            self.header["session"] = dict(counts)
+
     # -- end ------------------------------------------------------------------------------
     def close(self) -> None:
         """Flush everything, close the files and rewrite session.json with ``closed: true``,

@@ -34,6 +34,10 @@ skips it forward to ``oldest``, adds the skipped count to ``Cursor.overruns`` an
 it in ``Window.lost`` so the consumer can treat it as a gap in the input (the live loop
 restarts its detectors and counts the frames as dropped).
 
+A consumer that would rather skip old frames than fall behind (the live loop under
+overload) calls ``Cursor.drop_older(t)``: the waiting frames received before ``t`` are
+skipped, oldest first, and counted by the caller.
+
 Thread safety: one producer thread and any number of consumer threads.  ``append`` and
 ``Cursor.read`` take a short lock; windows returned to a consumer are views, so a consumer
 must finish with a window before the producer can lap it — i.e. read at most
@@ -213,11 +217,33 @@ class Cursor:
         self.ring = ring
         self.position = int(position)
         self.overruns = 0
+        self._lapped = 0      # overwritten frames a drop_older() stepped over, for read()
 
     @property
     def backlog(self) -> int:
         """Frames appended but not yet read by this cursor (may exceed capacity if lapped)."""
         return self.ring.head - self.position
+
+    def drop_older(self, t: float, limit: int | None = None) -> int:
+        """Skip the waiting frames received before monotonic time ``t``, oldest first (at
+        most ``limit``); return how many were skipped.  Receive times are taken as
+        non-decreasing (a binary search).  Frames the producer already overwrote are left
+        for :meth:`read` to report in ``Window.lost``."""
+        ring = self.ring
+        with ring._cond:
+            start = max(self.position, ring.oldest)
+            if start >= ring._head:
+                return 0
+            recv = ring._slice(start, ring._head).recv_time
+            k = int(np.searchsorted(recv, t, side="left"))
+            if limit is not None:
+                k = min(k, max(0, int(limit)))
+            if k == 0:
+                return 0
+            if self.position < start:        # lapped as well: read() would report these
+                self._lapped += start - self.position
+            self.position = start + k
+            return k
 
     def read(self, max_frames: int | None = None) -> Window:
         """Frames from the cursor's position up to head (at most ``max_frames``), advancing.
@@ -227,11 +253,12 @@ class Cursor:
         """
         ring = self.ring
         with ring._cond:
-            lost = 0
+            lost, self._lapped = self._lapped, 0
+            self.overruns += lost
             oldest = ring.oldest
             if self.position < oldest:
-                lost = oldest - self.position
-                self.overruns += lost
+                lost += oldest - self.position
+                self.overruns += oldest - self.position
                 self.position = oldest
             stop = ring._head
             if max_frames is not None:

@@ -218,6 +218,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
                          doc="frames processed per wake-up at most"),
         "lag_warn_seconds": Key("float", 0.1, _range(0.0, 3600.0, strict_lo=True),
                                 doc="warn when a frame waits longer than this before processing"),
+        "max_lag_seconds": Key("float", 0.1, _range(0.0, 3600.0),
+                               doc="longest a frame waits before processing: older waiting "
+                                   "frames are dropped, oldest first (0 = never drop)"),
         "blas_threads": Key("int", 1, _range(0, 1024),
                             doc="BLAS threads while the session runs (0 = leave as is)"),
     },

@@ -67,6 +67,7 @@ class LiveStats:
     bad_frames: int = 0          # frames refused by the reader (wrong shape / type)
     source_errors: int = 0       # exceptions raised by source.read (logged, retried)
     overruns: int = 0            # frames overwritten in the ring before processing
+    overload_drops: int = 0      # frames dropped unprocessed to bound the lag (oldest first)
     record_errors: int = 0
     publish_errors: int = 0
     monitor_errors: int = 0      # live monitor calls that raised (logged, session goes on)
@@ -117,17 +118,35 @@ class SessionSummary:
     #: frames and cuts the recording holds (None without a recording)
     recording_frames: int | None = None
     recording_cuts: int | None = None
+    #: of ``dropped``, frames dropped unprocessed (oldest first) to keep the lag under
+    #: ``max_lag_ms`` (``buffer.max_lag_seconds``; 0 = never dropped)
+    overload_drops: int = 0
+    max_lag_setting_ms: float = 0.0
+    #: processing latency (arrival -> processed, and sent for a cut), ms, over every frame
+    #: processed (the last 200 000); ``cut_latency_ms_*`` are over the frames that
+    #: revealed a cut only (the cues' latency)
+    latency_ms_p50: float | None = None
+    latency_ms_p99: float | None = None
+    latency_frames: int = 0
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     def text(self) -> str:
-        lat = ("-" if self.cut_latency_ms_p50 is None else
-               f"{self.cut_latency_ms_p50:.2f}/{self.cut_latency_ms_p99:.2f} ms (p50/p99)")
+        lat = ("-" if self.latency_ms_p50 is None else
+               f"{self.latency_ms_p50:.2f}/{self.latency_ms_p99:.2f} ms (p50/p99 over "
+               f"{self.latency_frames} frames")
+        if self.latency_ms_p50 is not None:
+            lat += ("" if self.cut_latency_ms_p50 is None else
+                    f"; cues {self.cut_latency_ms_p50:.2f}/{self.cut_latency_ms_p99:.2f} ms")
+            lat += ")"
         methods = ", ".join(f"{k} {v}" for k, v in self.cut_latency_items()) or "none"
         return (f"session ended ({self.stop_reason}) after {self.duration_s:.1f} s: "
                 f"{self.frames_received} frames received ({self.frame_rate:.1f}/s), "
-                f"{self.frames_processed} processed, {self.dropped} dropped, "
+                f"{self.frames_processed} processed, {self.dropped} dropped"
+                + (f" ({self.overload_drops} under overload, so none waited over "
+                   f"{self.max_lag_setting_ms:.0f} ms)" if self.overload_drops else "")
+                + ", "
                 f"{input_text(self.input)}, "
                 f"{self.cuts} cuts ({methods}; {targets_text(self.targets)}"
                 + "".join(f"; {k} gate held back {v}" for k, v in sorted(self.gated.items()))

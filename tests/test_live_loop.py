@@ -108,6 +108,34 @@ def test_sequence_gap_restarts_and_no_cut_across_it():
     assert [c.boundary for c in cuts] == [200] and pipe.stats.restarts == 0
 
 
+def test_frames_dropped_by_the_loop_are_a_gap_and_cuts_name_the_frames_fed():
+    """The live loop drops frames under overload and says how many (``lost``): the cut's
+    boundary and detected frame are the session indices of the frames the detector was
+    fed there, and the sequence gap those frames leave is not counted twice."""
+    fr = frames(400, 203)
+    fed = [k for k in range(400) if k % 4 < 2]         # frames k % 4 in (2, 3) dropped
+    after = [k for k in fed if k >= 203]               # the arm is raised from 203 on
+    for origin in ("restart", "creation"):
+        det = StepDetector()
+        det.frame_origin = origin
+        pipe = pipeline(det=det)
+        cuts, prev = [], -1
+        for k in fed:
+            q, v, seq, t = fr[k]
+            cuts.extend(pipe.process(k, q, v, seq, t, lost=k - prev - 1))
+            prev = k
+        assert [(c.boundary, c.detected) for c in cuts] == [(after[0], after[2])], origin
+        assert pipe.stats.restarts == 0
+        assert pipe.stats.gap_frames == 400 - len(fed) - (400 - 1 - fed[-1])
+    # more than gaps.max_frames dropped at once is a gap that restarts the detectors
+    pipe = pipeline()
+    for i, (q, v, seq, t) in enumerate(fr[:100]):
+        pipe.process(i, q, v, seq, t)
+    q, v, seq, t = fr[110]
+    pipe.process(110, q, v, seq, t, lost=10)
+    assert pipe.stats.restarts == 1 and pipe.stats.gap_frames == 10
+
+
 def test_silence_restarts():
     fr = frames(400, 200)
     fr = [(q, v, None, t + (1.0 if i >= 200 else 0.0)) for i, (q, v, s, t) in enumerate(fr)]
@@ -320,7 +348,8 @@ def test_session_reports_joint_dropout_and_restore():
 
 def test_session_counts_ring_overruns_as_dropped_and_restarts():
     src = FakeSource(frames(400, 10_000), pace=0.0003)
-    cfg = {"calibration": {"mode": "none"}, "buffer": {"capacity": 16, "max_batch": 4}}
+    cfg = {"calibration": {"mode": "none"},
+           "buffer": {"capacity": 16, "max_batch": 4, "max_lag_seconds": 0}}
     det = StepDetector(delay=0.003)
     s, summary = session(src, cfg, det=det)
     assert summary.frames_received == 400

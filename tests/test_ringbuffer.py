@@ -112,3 +112,24 @@ def test_window_matches_reference(capacity, n, k):
     np.testing.assert_array_equal(w.data[:, 0], expect)
     assert w.start == (expect[0] if len(expect) else n)
     assert ring.overwritten == max(0, n - capacity)
+
+
+def test_drop_older_skips_the_oldest_waiting_frames():
+    ring = RingBuffer(8, 2)
+    for i in range(6):
+        ring.append(np.full(2, float(i)), recv_time=10.0 + i)
+    cur = ring.cursor(0)
+    assert cur.drop_older(9.0) == 0                    # none older
+    assert cur.drop_older(12.5) == 3                   # frames 0, 1, 2 (received 10, 11, 12)
+    assert cur.drop_older(20.0, limit=1) == 1          # at most limit, oldest first
+    w = cur.read()
+    assert (w.start, len(w), w.lost) == (4, 2, 0)
+    assert cur.drop_older(100.0) == 0                  # nothing waiting
+    # lapped and dropping: the overwritten frames are still reported lost by read()
+    for i in range(6, 20):
+        ring.append(np.full(2, float(i)), recv_time=10.0 + i)
+    assert ring.oldest == 12 and cur.position == 6
+    assert cur.drop_older(24.5) == 3                   # 12, 13, 14 of those held
+    w = cur.read()
+    assert (w.start, w.lost) == (15, 6) and cur.overruns == 6
+    assert w.data[0, 0] == 15.0

@@ -129,7 +129,63 @@ def test_corruption_recovers_exactly_the_intact_frames(rig):
     # every message lost between the first and last one received shows up as dropped
     # (the device-info message at plug-in takes a sequence number too)
     seqs = sorted(set(got) | {m.seq for m in suit.sent_log if m.frame < 0 and m.fate == "intact"})
-    assert src.stats.dropped == (seqs[-1] - seqs[0] + 1) - len(seqs)
+    between = (seqs[-1] - seqs[0] + 1) - len(seqs)
+    # ... and the damaged ones after the last intact message, one per damaged message
+    # (no later sequence number makes that estimate exact)
+    after = [m for m in suit.sent_log if m.seq > seqs[-1]]
+    assert all(m.fate == "corrupted" for m in after)
+    assert between + len(after) // 2 <= src.stats.dropped <= between + 2 * len(after)
+
+
+def damaged(msg: bytes) -> bytes:
+    """``msg`` with one byte in the middle changed to another non-zero value."""
+    bad = bytearray(msg)
+    i = len(bad) // 2
+    bad[i] = 0x01 if bad[i] != 0x01 else 0x02
+    return bytes(bad)
+
+
+def test_frames_destroyed_by_damage_count_as_dropped_before_an_intact_one(raw_pty):
+    """Every message damaged (no intact one arrives): the destroyed frames still show in
+    ``dropped``, one per damaged message; the next intact message's sequence number makes
+    the count exact (damage before the first intact message, which has no sequence number
+    to count from - a boot log - is no longer counted once one arrives)."""
+    master, path = raw_pty
+    src = open_source(f"serial://{path}")
+    try:
+        ids = np.array(SUIT.sensor_ids)
+        q = np.tile([0.0, 0.0, 0.0, 1.0], (len(ids), 1))
+        wire = [codec.encode_frame(k, k * 8333, ids, q) for k in range(40)]
+
+        def wait_corrupt(n: int) -> None:
+            deadline = time.monotonic() + 3
+            while src.stats.corrupt < n and time.monotonic() < deadline:
+                time.sleep(0.01)
+            assert src.stats.corrupt == n
+
+        os.write(master, b"\x00")
+        for k in range(20):                       # frames 0..19, each damaged
+            os.write(master, damaged(wire[k]))
+        wait_corrupt(20)
+        assert src.stats.frames_ok == 0
+        assert src.stats.dropped == 20                 # not 0: 20 frames were destroyed
+        os.write(master, wire[25] + wire[26])          # intact: no reference before 25
+        for k in (27, 28):
+            os.write(master, damaged(wire[k]))
+        wait_corrupt(22)
+        assert src.stats.dropped == 2                  # 27 and 28, estimated
+        os.write(master, wire[29])                     # its sequence number: 2 missing
+        for k in range(30, 35):                        # and 5 more damaged after it
+            os.write(master, damaged(wire[k]))
+        wait_corrupt(27)
+        got = collect(src, lambda fr, idle: len(fr) >= 3, timeout=3.0)
+        assert [f.seq for f in got] == [25, 26, 29]
+        assert src.stats.gaps == 1 and src.stats.dropped == 2 + 5
+        os.write(master, wire[39])                     # exact: 30..38 missing
+        collect(src, lambda fr, idle: len(fr) >= 1, timeout=3.0)
+        assert src.stats.gaps == 2 and src.stats.dropped == 2 + 9
+    finally:
+        src.close()
 
 
 def test_sequence_gaps_counted_exactly(rig):
@@ -413,3 +469,33 @@ def test_reader_connected_is_safe_from_several_threads():
     finally:
         suit.stop()
     assert errors == []
+
+
+def test_unplug_costs_only_the_unplug(rig):
+    """Each 0.5 s unplug costs the frames due while the cable is out, and only a few more:
+    the reader reopens the path as soon as the device is back, so what the suit writes
+    after the replug is read (a back-off that waits 0.35 s, then 0.75 s, would lose
+    ~0.25 s of intact frames per unplug)."""
+    rate = 200.0
+    take = make_take(200)
+    suit, src = rig(take, "stale=0.1", rate=rate, loop=True, faults="unplug=1.0:0.5")
+    suit.begin()
+    frames = collect(src, lambda fr, idle: len(suit.unplug_log) >= 3 and any(
+        f.recv_time > suit.unplug_log[2][1] + 0.3 for f in fr), timeout=10.0)
+    assert len(suit.unplug_log) >= 3 and src.stats.reconnects >= 3
+    got = {f.seq for f in frames}
+    last = frames[-1].recv_time
+    for k, (out, back) in enumerate(suit.unplug_log[:3]):
+        assert back - out >= 0.45
+        nxt = suit.unplug_log[k + 1][0] if k + 1 < len(suit.unplug_log) else last
+        window = [m for m in suit.sent_log
+                  if m.frame >= 0 and out - 0.01 <= m.send_time < min(nxt, last) - 0.05]
+        unplugged = [m for m in window if m.fate == "unplugged"]
+        missed = [m for m in window if m.fate == "intact" and m.seq not in got]
+        # the frames due while the cable was out are lost: 0.5 s at 200 Hz (the suit
+        # replugs at the first frame due after it, a little later on a busy machine)
+        assert 0.45 * rate <= len(unplugged) <= (back - out) * rate + 2
+        # of those written intact after the replug, at most 0.1 s worth are not read
+        assert len(missed) <= 0.1 * rate, (k, len(missed))
+        # and every one of them was written within 0.1 s of the replug
+        assert all(m.send_time - back < 0.1 for m in missed)

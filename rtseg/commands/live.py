@@ -15,7 +15,8 @@ from typing import Any, Callable, TextIO
 
 from rtseg.cli import error_text, positive_float
 from rtseg.config import ConfigError
-from rtseg.events import BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
+from rtseg.events import SENDER_COUNTERS, BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
+from rtseg.session_stats import source_losses_text
 from rtseg.session_config import SessionConfig, load_session_config
 
 #: seconds between plain status lines when stderr is not a terminal
@@ -44,6 +45,10 @@ def add_session_arguments(p: argparse.ArgumentParser, osc_default_note: str = ""
                    help="online detectors, comma separated: contrast (the default), pca, ppca")
     p.add_argument("--duration", type=positive_float, metavar="S",
                    help="stop after S seconds (a number > 0)")
+    p.add_argument("--max-lag", type=float, metavar="S",
+                   help="longest a frame may wait before processing, s (default 0.1, "
+                        "buffer.max_lag_seconds): under overload older frames are dropped, "
+                        "oldest first, and counted; 0 = never drop")
     p.add_argument("--quiet", action="store_true", help="no status line on stderr")
     p.add_argument("--monitor", nargs="?", const="", default=None, metavar="[HOST:]PORT",
                    help="serve a live monitor page (detector statistic, cuts, behaviours, "
@@ -71,6 +76,8 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
     if args.record:
         check_record_dir(args.record)
         over["recording.dir"] = args.record
+    if getattr(args, "max_lag", None) is not None:
+        over["buffer.max_lag_seconds"] = args.max_lag
     if args.methods:
         over["detectors.methods"] = [m.strip() for m in args.methods.split(",") if m.strip()]
     cfg = load_session_config(args.config)
@@ -111,7 +118,7 @@ def check_record_dir(path: str) -> None:
 #: configuration key -> the command-line flag that sets it (for error messages)
 FLAGS = {"output.osc": "--osc", "output.osc_tcp": "--osc-tcp", "output.templates": "--template",
          "output.targets": "--target", "output.jsonl": "--jsonl", "recording.dir": "--record",
-         "detectors.methods": "--methods"}
+         "detectors.methods": "--methods", "buffer.max_lag_seconds": "--max-lag"}
 
 
 def format_cut(ev: CutEvent, time: float | None = None) -> str:
@@ -165,6 +172,7 @@ class Console:
         self.cut_time = cut_time     # None: ev.time (seconds since the session started)
         self._line_shown = False
         self._last_plain = 0.0
+        self._corrupt_at: tuple[float, int] | None = None   # (status time s, corrupt count)
         self.first_segment: dict[str, int] = {}    # behaviour id -> earliest segment
         self.last_behaviour: BehaviourEvent | None = None
         self.behaviour_time: Callable[[BehaviourEvent], float] | None = None
@@ -216,10 +224,21 @@ class Console:
             b = self.last_behaviour
             if b is not None and b.segment == c.segment:
                 last += f" ({b.label})"
-        line = (f"rtseg live: {ev.time:7.1f} s | {ev.frame_rate:6.1f} fps | "
-                f"{ev.dropped} dropped | {ev.stale_joints} stale{lag} | last cut: {last}")
+        # messages arriving damaged: their rate next to the frames' (0.0 fps of intact
+        # frames while a suit sends 120 corrupt messages a second says so)
+        damaged = ""
+        prev, self._corrupt_at = self._corrupt_at, (ev.time, ev.corrupt)
+        if prev is not None and ev.corrupt > prev[1] and ev.time > prev[0]:
+            damaged = f" (+{(ev.corrupt - prev[1]) / (ev.time - prev[0]):.1f}/s corrupt)"
+        line = (f"rtseg live: {ev.time:7.1f} s | {ev.frame_rate:6.1f} fps{damaged} | "
+                f"{ev.dropped} dropped"
+                + (f" ({ev.overload_drops} under overload)" if ev.overload_drops else "")
+                + f" | {ev.stale_joints} stale{lag} | last cut: {last}")
         if any(ev.input_counts().values()):
             line += f" | {ev.input_text()}"
+        refused = source_losses_text({k: getattr(ev, k) for k in SENDER_COUNTERS})
+        if refused:
+            line += " | " + refused[2:]
         if self.tty:
             self.err.write("\r\033[K" + line)
             self.err.flush()
