@@ -88,3 +88,29 @@ def test_lopo_on_a_folder_of_two_people(tmp_path):
         assert 0.0 <= doc[key]["pooled"]["f1"] <= 1.0 and doc[key]["pooled"]["transitions"] > 0
         assert set(doc[key]["sources"]) == {"two"}
     assert _run("lopo.py", str(tmp_path / "nowhere")).returncode == 2
+
+
+def test_faults_benchmark_rows_and_bars():
+    """12 s of the synthetic performance over a real pty and real UDP, clean and with 5 %
+    of frames lost: every row scored beside the clean one, the loss bridged, no restart."""
+    r = _run("faults.py", "--takes", "synth", "--conditions", "clean,loss5,junk",
+             "--seconds", "12", "--json")
+    assert r.returncode in (0, 1), r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    rows = doc["takes"]["synth"]
+    assert set(rows) == {"serial", "vmc"} and set(rows["serial"]) == {"clean", "loss5"}
+    assert set(rows["vmc"]) == {"clean", "loss5", "junk"}
+    for tr, conds in rows.items():
+        clean, loss = conds["clean"], conds["loss5"]
+        assert clean["transitions"] == 1 and clean["f1_clean"] == clean["f1"], tr
+        assert loss["f1_clean"] == clean["f1"] and loss["overload_lost"] == 0, tr
+        assert loss["frames_received"] < loss["frames_sent"] == clean["frames_sent"], tr
+        assert loss["restarts"] == 0 and loss["bridged_gaps"] > 20, tr
+    assert sum(rows["vmc"]["junk"]["junk_sent"].values()) >= 4 * 30 * 11
+    assert set(doc["bars"]) == {"synth/serial/loss5", "synth/vmc/loss5", "synth/vmc/junk"}
+    assert doc["pass"] == all(doc["bars"].values())
+
+
+def test_faults_benchmark_refuses_an_unknown_condition():
+    r = _run("faults.py", "--conditions", "clean,nope")
+    assert r.returncode == 2 and "unknown condition 'nope'" in r.stderr
