@@ -17,13 +17,14 @@ to the one that arrived, and go on without a restart (``PipelineStats.bridged_ga
 ``filled_frames``).  Filled frames are not session frames: a cut whose boundary falls on
 one is reported at the next received frame; behaviour identity is fed received frames only.
 
+A short sensor dropout is bridged the same way: up to that many consecutive frames with an
+invalid required joint are fed with the joint's last good value (what ``Frame`` rows hold).
+
 No cut is placed across a gap the detectors did not see: a sequence gap of more missing
 frames than that (or than ``gaps.max_frames`` when it is larger), more than
-``gaps.max_seconds`` without frames, or more than ``gaps.max_frames`` consecutive frames
-with an invalid required joint restart the detectors (``OnlineDetector.restart()``) and the
-feature state; a cut whose boundary lies before the restart is discarded (counted).
-Shorter runs of invalid joints are fed with the last good values (what ``Frame`` rows
-hold).
+``gaps.max_seconds`` without frames, or a longer run of frames with an invalid required
+joint restart the detectors (``OnlineDetector.restart()``) and the feature state; a cut
+whose boundary lies before the restart is discarded (counted).
 
 Frame indices
 -------------
@@ -325,8 +326,8 @@ class Pipeline:
         if not all_valid and not v[self.required].all():
             st.invalid_frames += 1
             self._bad_run += 1
-            if self._bad_run > self.max_gap_frames:
-                if self._bad_run == self.max_gap_frames + 1:
+            if self._bad_run > self.bridge_frames:
+                if self._bad_run == self.bridge_frames + 1:
                     self.restart(index, f"required joints invalid for {self._bad_run} frames")
                 st.skipped_invalid += 1
                 return []

@@ -161,9 +161,13 @@ def test_u16_sequence_wrap_is_not_a_gap():
 
 def test_invalid_required_joints_restart_only_past_the_limit():
     pipe = pipeline()
-    cuts = run(pipe, frames(400, 200, invalid=range(195, 210)))
+    cuts = run(pipe, frames(400, 200, invalid=range(195, 215)))
     assert cuts == [] and pipe.stats.restarts == 1
-    assert pipe.stats.skipped_invalid == 15 - 3
+    assert pipe.stats.skipped_invalid == 20 - 12      # 0.1 s = 12 frames bridged
+    # 12 invalid frames: bridged, no restart
+    pipe = pipeline()
+    cuts = run(pipe, frames(400, 200, invalid=range(190, 202)))
+    assert [c.boundary for c in cuts] == [202] and pipe.stats.restarts == 0
     # two invalid frames: fed with the last good value, no restart, cut where the arm moves
     pipe = pipeline()
     cuts = run(pipe, frames(400, 200, invalid=range(200, 202)))
