@@ -96,6 +96,7 @@ import sys
 import tempfile
 import threading
 import time
+from array import array
 from pathlib import Path
 
 
@@ -117,6 +118,7 @@ DEFAULT_FAULTS = ("corrupt=0.01,drop=0.001,jitter=0.002,unplug=10:0.3,"
                   "dropout=5:10:1:20,dropout=11:15:1:20,seed=11")
 CUTS_FAULTS = ("corrupt=0.0001,unplug=1200:0.3,dropout=5:300:0.05:300,"
                "dropout=11:450:0.05:300,seed=11")
+FATES = ("intact", "corrupted", "dropped", "unplugged", "overflow", "info", "unknown")
 IN_FLIGHT_S = 0.1            # intact frames written this soon before a pull may die in the pty
 REPLUG_S = 1.0               # overflow this soon after a replug: the reader is reopening
 
@@ -159,6 +161,8 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int,
                                          # pty (the clock is the machine's, shared)
 
     info_idx: list[int] = []             # message indices of the suit's info messages
+    codes = bytearray()                  # per message index: index in FATES
+    sent_at = array("d")                 # per message index: send time (monotonic)
     pulls: list[float] = []              # suit.unplug_log split, in time order (it is
     replugs: list[float] = []            # appended as it happens), extended as it grows
 
@@ -177,6 +181,11 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int,
             pulls.append(u)
             replugs.append(r)
         for m in chunk:
+            while len(codes) <= m.index:
+                codes.append(FATES.index("unknown"))
+                sent_at.append(math.nan)
+            codes[m.index] = FATES.index("info" if m.frame < 0 else m.fate)
+            sent_at[m.index] = m.send_time
             if m.frame < 0:
                 info_idx.append(m.index)
                 continue
@@ -209,7 +218,34 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int,
     for c in recent:
         tally(c, upto)
     conn.send(("done", totals, first_kept, near_unplug, overflow_at, info_idx))
+    unseen = conn.recv()                  # intact frames the session never received
+    conn.send(("why", _why_unseen(unseen, codes, sent_at, pulls, replugs)))
     conn.close()
+
+
+def _why_unseen(unseen, codes: bytearray, sent_at, pulls: list[float],
+                replugs: list[float]) -> dict[str, int]:
+    """Where the intact frames the session never received were: next to a message that
+    met a full pty or was corrupted, within 5 s after a replug, or elsewhere."""
+    out: dict[str, int] = {}
+    ovf, cor = FATES.index("overflow"), FATES.index("corrupted")
+    for i in unseen:
+        i = int(i)
+        if i >= len(codes) or FATES[codes[i]] != "intact":
+            continue
+        near = {codes[j] for j in (i - 1, i + 1) if 0 <= j < len(codes)}
+        t = sent_at[i]
+        k = bisect.bisect_right(replugs, t)
+        if ovf in near:
+            why = "beside_overflow"
+        elif cor in near:
+            why = "beside_corrupted"
+        elif k > 0 and t - replugs[k - 1] < 5.0:
+            why = "within_5s_after_replug"
+        else:
+            why = "other"
+        out[why] = out.get(why, 0) + 1
+    return out
 
 
 # ============================================================================ scoring
@@ -335,6 +371,10 @@ def soak(hours: float, speed: float, faults: str, log, mode: str = "hostile") ->
             if msg[0] == "done":
                 _, fates, first_kept, near_unplug, overflow_at, info_idx = msg
                 break
+        upto = min(meter.last_abs + 1, meter.seen.size)
+        unseen = np.flatnonzero(~meter.seen[:upto])
+        parent.send(unseen)
+        why_unseen = parent.recv()[1] if parent.poll(120) else {}
         wall = time.monotonic() - t_start
         session.stop("soak done")
         runner.join(30)
@@ -386,6 +426,8 @@ def soak(hours: float, speed: float, faults: str, log, mode: str = "hostile") ->
             "destroyed_by_faults": sum(fates.get(k, 0) for k in (
                 "corrupted", "dropped", "unplugged", "overflow_after_replug")) + in_flight,
             "fates": fates, "lost_to_unplug": in_flight, "overruns": overruns,
+            # intact frames never received (those lost to unplugs included), by where
+            "unseen_intact": why_unseen,
             "reconnects": session.source.stats.reconnects if session.source else None,
             "input": summary.input if summary is not None else None,
             "cuts": summary.cuts if summary is not None else None,

@@ -21,12 +21,14 @@ MAX_EVENTS = 100_000         # cuts / identity messages recorded at most
 
 
 def soak_script(seconds: float = 600.0, seed: int = 5, lo: float = 5.0,
-                hi: float = 20.0) -> list[tuple[str, float]]:
-    """A synthesiser script of about ``seconds``: behaviours drawn at random (never the
-    same twice in a row, the last differing from the first so the loop's junction is a
-    change too), each ``lo``..``hi`` seconds long; every behaviour recurs."""
-    from rtseg.simulators.synth import BEHAVIOURS
-    names = list(BEHAVIOURS)
+                hi: float = 20.0, names: Sequence[str] | None = None) -> list[tuple[str, float]]:
+    """A synthesiser script of about ``seconds``: behaviours drawn at random from ``names``
+    (default: the nine of the synthesiser's default performance), never the same twice in
+    a row, the last differing from the first so the loop's junction is a change too, each
+    ``lo``..``hi`` seconds long; every behaviour recurs."""
+    from rtseg.simulators.synth import DEFAULT_SCRIPT
+    from rtseg.simulators.synth_script import parse_script
+    names = list(names) if names is not None else [n for n, _ in parse_script(DEFAULT_SCRIPT)]
     rng = np.random.default_rng(seed)
     while True:
         items: list[tuple[str, float]] = []
