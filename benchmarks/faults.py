@@ -115,8 +115,9 @@ class _Probe:
     """Wraps ``Pipeline.process``: per session frame its seq / source time, and the
     primary detector's cuts (boundary and detected session indices)."""
 
-    def __init__(self, session: LiveSession) -> None:
+    def __init__(self, session: LiveSession, keep_quats: bool = False) -> None:
         pipe = session.pipeline
+        self.quats: list[np.ndarray] | None = [] if keep_quats else None
         cfg = session.config
         self.primary = cfg["detectors.primary"] or next(iter(pipe.detectors))
         self.seq: list[int | None] = []
@@ -127,6 +128,8 @@ class _Probe:
         def process(index, quats, valid, seq=None, recv_time=None, lost=0, source_time=None):
             self.seq.append(seq)
             self.src.append(source_time)
+            if self.quats is not None:
+                self.quats.append(np.array(quats, dtype=np.float64))
             out = inner(index, quats, valid, seq, recv_time, lost, source_time)
             for c in out:
                 if c.cut.method == self.primary:
@@ -141,7 +144,8 @@ def _config():
 
 
 def _run_session(url: str, start_sender: Callable[[], None],
-                 sender_done: Callable[[], bool], timeout: float) -> tuple[LiveSession, _Probe, Any]:
+                 sender_done: Callable[[], bool], timeout: float,
+                 keep_quats: bool = False) -> tuple[LiveSession, _Probe, Any]:
     """Run a session on ``url``, start the sender once it is open, stop when the sender is
     done and the session has processed everything it received (0.7 s without progress)."""
     box: dict = {}
@@ -149,7 +153,7 @@ def _run_session(url: str, start_sender: Callable[[], None],
     class ProbeSession(LiveSession):
         def _open(self) -> None:
             super()._open()
-            box["probe"] = _Probe(self)
+            box["probe"] = _Probe(self, keep_quats)
             box["opened"] = True
 
     session = ProbeSession(url, _config(), handle_signals=False)
@@ -274,10 +278,10 @@ def run_vmc(b: Bench, faults: str, speed: float, junk: bool) -> dict:
     try:
         session, probe, _ = _run_session(
             f"osc://127.0.0.1:{port}?format=vmc&rate={RATE:g}", sender.start,
-            lambda: sender.done.is_set(), b.take.n_frames / RATE / speed + 60)
+            lambda: sender.done.is_set(), b.take.n_frames / RATE / speed + 60, keep_quats=True)
     finally:
         sender.stop()
-    frames = np.array([int(round(t * RATE)) if t is not None else -1 for t in probe.src])
+    frames = match_frames(probe.quats, session.pipeline.joint_names, sender)
     received = set(frames.tolist())
     log_ = sender.sent_log
     intact = [f.index for f in log_ if not f.dropped and not f.corrupted]
@@ -286,6 +290,29 @@ def run_vmc(b: Bench, faults: str, speed: float, junk: bool) -> dict:
     if junk:
         row["junk_sent"] = dict(zip(("random", "truncated", "wrong_types", "bundle_64k"), counts))
     return row
+
+
+def match_frames(received: list[np.ndarray], joint_names: list[str], sender: Any,
+                 window: int = 64, max_dist: float = 1e-3) -> np.ndarray:
+    """The take frame each received VMC frame is, found by content (its ``/VMC/Ext/T``
+    cannot tell once a corrupt T has started a new clock segment): the sent frame among
+    the next ``window`` after the last match whose bone rotations are nearest (mean
+    1 - |dot| over the bones), -1 when none is within ``max_dist``."""
+    names = [n.lower() for n in joint_names]
+    cols = [names.index(b.lower()) for b in sender.bone_names]
+    sent = sender._quats                      # (frames, bones, 4), rtseg frame
+    out = np.full(len(received), -1, dtype=np.int64)
+    p = 0
+    for i, q in enumerate(received):
+        cand = sent[p:p + window]
+        if not len(cand):
+            break
+        d = np.mean(1.0 - np.abs(np.einsum("fbk,bk->fb", cand, q[cols])), axis=1)
+        k = int(np.argmin(d))
+        if d[k] <= max_dist:
+            out[i] = p + k
+            p = p + k + 1
+    return out
 
 
 def _row(b: Bench, session: LiveSession, probe: _Probe, frames: np.ndarray, sent: int,

@@ -167,6 +167,8 @@ class Pipeline:
         # every filled row still needed to map cuts (array of int64, pruned), the last fed pose
         self._rows = 0
         self._filled = array("q")
+        self._pruned = 0                      # filled rows forgotten (all before _filled)
+        self._filled_at_start = {m: 0 for m in self.detectors}
         self._last_cut_row = {m: 0 for m in self.detectors}
         self._prev_fed: np.ndarray | None = None
 
@@ -231,6 +233,7 @@ class Pipeline:
             if self._seg_start[m] < 0:
                 self._seg_start[m] = index
                 self._fed_at_start[m] = self._fed[m]
+                self._filled_at_start[m] = self._filled_before(self._fed[m])
             self._fed[m] += 1
             cut = det.update(x)
             if cut is None:
@@ -239,6 +242,11 @@ class Pipeline:
             if out_cut is not None:
                 out.append(out_cut)
         self._rows += 1
+
+    def _filled_before(self, row: int) -> int:
+        """Filled rows before ``row`` (rows fed since creation; valid for rows not
+        before the forgotten ones)."""
+        return self._pruned + bisect.bisect_left(self._filled, row)
 
     def _prune_filled(self) -> None:
         """Forget filled rows no cut can refer to any more: those before every method's
@@ -250,6 +258,7 @@ class Pipeline:
         k = bisect.bisect_left(self._filled, keep_from)
         if k:
             del self._filled[:k]
+            self._pruned += k
 
     # ---------------------------------------------------------------- main step
     def _time_missing(self, source_time: float | None) -> int:
@@ -391,9 +400,9 @@ class Pipeline:
         rel = cut.frame - base
         rel_det = (cut.detected_at - base) if cut.detected_at >= 0 else fed_in_seg - 1
         rel_det = max(rel, rel_det)
-        f0 = bisect.bisect_left(self._filled, start)
-        boundary = seg0 + rel - (bisect.bisect_left(self._filled, start + max(rel, 0)) - f0)
-        detected = seg0 + rel_det - (bisect.bisect_left(self._filled, start + rel_det) - f0)
+        f0 = self._filled_at_start[method]
+        boundary = seg0 + rel - (self._filled_before(start + max(rel, 0)) - f0)
+        detected = seg0 + rel_det - (self._filled_before(start + rel_det) - f0)
         if rel >= 0:
             self._last_cut_row[method] = max(self._last_cut_row[method], start + rel)
         if rel < 0:

@@ -127,6 +127,25 @@ def test_short_gap_is_bridged_with_filled_frames():
     assert pipe.stats.restarts == 1
 
 
+def test_cuts_keep_their_session_index_over_many_bridged_gaps():
+    """Every 4th frame lost for 20 000 frames (5 000 filled rows, past the point where old
+    ones are forgotten) and the arm toggling every 1 000 frames: each cut is at the
+    session index of the toggle frame."""
+    fr = []
+    for t in range(20_000):
+        if t % 4 == 3:
+            continue
+        q = np.tile([0.0, 0.0, 0.0, 1.0], (J, 1))
+        if (t // 1000) % 2:
+            q[ARM] = RAISED
+        fr.append((q, np.ones(J, dtype=bool), t & 0xFFFF, t / 120.0))
+    pipe = pipeline()
+    cuts = run(pipe, fr)
+    assert [c.boundary for c in cuts] == [750 * k for k in range(1, 20)]
+    assert pipe.stats.restarts == 0 and pipe.stats.filled_frames == 4999
+    assert len(pipe._filled) < 4096 + 10
+
+
 def test_filled_frames_interpolate_between_the_poses():
     """The filled rotations lie between the last fed pose and the received one (nlerp)."""
     class Tap(StepDetector):
