@@ -1,13 +1,35 @@
 #!/usr/bin/env python3
 """Soak test: a long live session through the real pty serial suit with faults, accelerated.
 
-    python3 benchmarks/soak.py                  # 8 session hours at 120 Hz (3.46 M frames)
-    python3 benchmarks/soak.py --hours 0.25     # a quick one
-    python3 benchmarks/soak.py --hours 0.5 --json
+    python3 benchmarks/soak.py                  # cuts mode, 8 session hours at 120 Hz
+    python3 benchmarks/soak.py --hours 1 --json
+    python3 benchmarks/soak.py --mode hostile --hours 0.25 --json   # survival under 1 % corruption
 
-What runs
----------
-The synthesised default performance loops on a simulated 17-sensor suit
+Cuts mode (default)
+-------------------
+The suit loops a 10-minute synthesised performance (``soak_score.soak_script``: the
+synthesiser's behaviours in random order, each 5-20 s, every one recurring; the loop's
+junction is a change too) with realistic faults (``CUTS_FAULTS``: 0.01 % of bytes
+corrupted, an unplug of 0.3 s every 20 session minutes, two sensors silent for 50 ms every
+5 minutes).  Fault times are seconds of the take's 120 Hz clock (session seconds); the suit
+sends ``--speed`` (default 10) times faster.  The session runs the default live detector
+and behaviour identity (``identity.enabled``).  Added to the figures below:
+
+- ``cuts``, ``transitions``: the primary detector's cuts and the true changes sent;
+- ``f1_by_hour``: live F1 at +/- 0.5 s per session hour (cuts matched to the changes over
+  the whole run, then true positives and misses counted in the hour of the change's mid,
+  false cuts in the hour of the cut; ``soak_score.score_by_hour``);
+- ``ari_by_hour``: adjusted Rand index per session hour between every frame's true
+  behaviour and the behaviour id rtseg sent for the segment holding it;
+- ``frames_accounted``: frames sent = frames received + destroyed by faults (corrupted,
+  dropped) + lost at unplugs (sent while unplugged, written just before a pull or in the
+  reconnect second after a replug), exactly; ``accounting`` gives the four numbers.
+Bar: the hostile mode's (below) plus ``frames_accounted``, live F1 of every hour >= 0.95
+and the last hour within 0.02 of the first.
+
+Hostile mode (``--mode hostile``)
+---------------------------------
+The synthesised default performance (62 s) loops on a simulated 17-sensor suit
 (``rtseg.simulators.serial_device.SerialSuit``) in a **separate process** on a real pty,
 rtseg's binary serial format, with faults (``--faults``, default ``corrupt=0.01`` of bytes,
 an unplug of 0.3 s every 10 s, bursts: jitter of up to 2 ms per message so frames arrive
@@ -20,8 +42,8 @@ socket on 127.0.0.1; no recording).  The suit sends ``--speed`` (default 20) tim
 than 120 Hz, so 8 session hours take 24 minutes; the session's windows stay those of 120 Hz
 (the URL's ``rate``).  "Hours" below are **session** hours: 432 000 frames each.
 
-Measured
---------
+Measured (both modes)
+---------------------
 - ``frames``: frames the suit attempted to send (its ``sent_log``); ``frames_received``.
 - ``crashes``: the session ended other than by the soak's stop, raised, or its reader
   thread failed (``stop_reason``), plus source read errors and frames the loop could not
@@ -56,7 +78,7 @@ Measured
   ``overflows_near_gc_pause``: how many came within 50 ms of a garbage-collector pause of
   >= 2 ms in the session process (``gc``: collections per generation, pauses >= 2 ms, the
   longest), to tell a stalled reader from a slow one.
-Bar (issue 11): 0 crashes, RSS growth < 5 MB, p99 last window within 10 % of the first,
+Bar: 0 crashes, RSS growth < 5 MB, p99 last window within 10 % of the first,
 lost_frames 0.  ``pass`` says whether all hold.
 """
 
@@ -74,6 +96,7 @@ import sys
 import tempfile
 import threading
 import time
+from array import array
 from pathlib import Path
 
 
@@ -85,17 +108,24 @@ from rtseg.session_config import from_dict  # noqa: E402
 
 sys.path.insert(0, str(REPO / "benchmarks"))
 from soak_meter import GcPauses, Meter  # noqa: E402
+from soak_score import CutProbe, ari_by_hour, score_by_hour, to_frames, truth  # noqa: E402
+
+import numpy as np  # noqa: E402
 
 RATE = 120.0
 FRAMES_PER_HOUR = int(RATE * 3600)
 DEFAULT_FAULTS = ("corrupt=0.01,drop=0.001,jitter=0.002,unplug=10:0.3,"
                   "dropout=5:10:1:20,dropout=11:15:1:20,seed=11")
+CUTS_FAULTS = ("corrupt=0.0001,unplug=1200:0.3,dropout=5:300:0.05:300,"
+               "dropout=11:450:0.05:300,seed=11")
+FATES = ("intact", "corrupted", "dropped", "unplugged", "overflow", "info", "unknown")
 IN_FLIGHT_S = 0.1            # intact frames written this soon before a pull may die in the pty
 REPLUG_S = 1.0               # overflow this soon after a replug: the reader is reopening
 
 
 # ============================================================================ suit process
-def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int) -> None:
+def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int,
+               mode: str = "hostile", speed: float = 1.0) -> None:
     """Child process: serve the looping synthesised take on a pty until ``n_frames`` frames
     were attempted, then unplug for good (frames still in the pty are lost, but they come
     after the last one the session received and so are not counted, see below).
@@ -107,9 +137,20 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int) ->
     from collections import deque
     from rtseg.simulators.serial_device import SerialSuit
     from rtseg.simulators.synth import synthesize
-    take = synthesize(frame_rate=RATE, seed=0).take
-    suit = SerialSuit(take, rate=send_rate, faults=faults, link=link, loop=True)
-    conn.send(suit.start())
+    if mode == "cuts":
+        from soak_score import soak_script
+        r = synthesize(soak_script(), frame_rate=RATE, seed=0)
+        take = r.take
+        info = (take.n_frames, [(t.lo, t.hi, t.mid, t.before, t.after) for t in r.transitions],
+                [(g.name, g.start, g.stop) for g in r.segments])
+        del r
+        # the take's clock (device time, fault times) runs at 120 Hz, sent speed x faster
+        suit = SerialSuit(take, rate=RATE, speed=speed, faults=faults, link=link, loop=True)
+    else:
+        take = synthesize(frame_rate=RATE, seed=0).take
+        info = None
+        suit = SerialSuit(take, rate=send_rate, faults=faults, link=link, loop=True)
+    conn.send((suit.start(), info))
     totals: dict[str, int] = {}
     recent: deque[list] = deque()
     attempted = 0
@@ -119,6 +160,9 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int) ->
     overflow_at: list[float] = []        # time.monotonic() of each frame that met a full
                                          # pty (the clock is the machine's, shared)
 
+    info_idx: list[int] = []             # message indices of the suit's info messages
+    codes = bytearray()                  # per message index: index in FATES
+    sent_at = array("d")                 # per message index: send time (monotonic)
     pulls: list[float] = []              # suit.unplug_log split, in time order (it is
     replugs: list[float] = []            # appended as it happens), extended as it grows
 
@@ -137,7 +181,15 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int) ->
             pulls.append(u)
             replugs.append(r)
         for m in chunk:
-            if m.frame < 0 or (upto is not None and m.index > upto):
+            while len(codes) <= m.index:
+                codes.append(FATES.index("unknown"))
+                sent_at.append(math.nan)
+            codes[m.index] = FATES.index("info" if m.frame < 0 else m.fate)
+            sent_at[m.index] = m.send_time
+            if m.frame < 0:
+                info_idx.append(m.index)
+                continue
+            if upto is not None and m.index > upto:
                 continue
             fate = m.fate
             if fate == "overflow" and after_replug(m.send_time):
@@ -165,12 +217,69 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int) ->
     first_kept = next((c[0].index for c in recent if c), None)
     for c in recent:
         tally(c, upto)
-    conn.send(("done", totals, first_kept, near_unplug, overflow_at))
+    conn.send(("done", totals, first_kept, near_unplug, overflow_at, info_idx))
+    unseen = conn.recv()                  # intact frames the session never received
+    conn.send(("why", _why_unseen(unseen, codes, sent_at, pulls, replugs)))
     conn.close()
 
 
+def _why_unseen(unseen, codes: bytearray, sent_at, pulls: list[float],
+                replugs: list[float]) -> dict[str, int]:
+    """Where the intact frames the session never received were: next to a message that
+    met a full pty or was corrupted, within 5 s after a replug, or elsewhere."""
+    out: dict[str, int] = {}
+    ovf, cor = FATES.index("overflow"), FATES.index("corrupted")
+    for i in unseen:
+        i = int(i)
+        if i >= len(codes) or FATES[codes[i]] != "intact":
+            continue
+        near = {codes[j] for j in (i - 1, i + 1) if 0 <= j < len(codes)}
+        t = sent_at[i]
+        k = bisect.bisect_right(replugs, t)
+        if ovf in near:
+            why = "beside_overflow"
+        elif cor in near:
+            why = "beside_corrupted"
+        elif k > 0 and t - replugs[k - 1] < 5.0:
+            why = "within_5s_after_replug"
+        else:
+            why = "other"
+        out[why] = out.get(why, 0) + 1
+    return out
+
+
+# ============================================================================ scoring
+def _score_cuts(probe: CutProbe, truth_info, info_idx: list[int], result: dict,
+                session: LiveSession) -> dict:
+    """The cuts mode's figures (see the module docstring)."""
+    n_loop, transitions, segments = truth_info
+    sent = result["frames"]
+    received = session.stats.frames_received
+    fates = result["fates"]
+    destroyed = fates.get("corrupted", 0) + fates.get("dropped", 0)
+    at_unplugs = (fates.get("unplugged", 0) + fates.get("overflow_after_replug", 0)
+                  + result["lost_to_unplug"])
+    cut_msg = probe.cuts[:probe.n_cuts]
+    cut_frames = to_frames(cut_msg[:, 0], info_idx) if probe.n_cuts else np.zeros(0, np.int64)
+    ids = probe.ids[:probe.n_ids].copy()
+    if probe.n_ids:
+        ids[:, 1] = to_frames(ids[:, 1], info_idx)
+    trans, starts, codes, _ = truth(n_loop, transitions, segments, sent)
+    f1 = score_by_hour(cut_frames, trans, FRAMES_PER_HOUR, sent, RATE)
+    ari = ari_by_hour(cut_frames, ids, starts, codes, n_loop, FRAMES_PER_HOUR, len(f1),
+                      sent)
+    return {"mode": "cuts", "cuts": int(probe.n_cuts), "transitions": len(trans),
+            "f1_by_hour": f1, "ari_by_hour": ari, "identity_messages": int(probe.n_ids),
+            "frames_accounted": sent == received + destroyed + at_unplugs,
+            "accounting": {"sent": sent, "received": received, "destroyed": destroyed,
+                           "lost_at_unplugs": at_unplugs},
+            "bridged_gaps": session.pipeline.stats.bridged_gaps,
+            "filled_frames": session.pipeline.stats.filled_frames,
+            "unmapped_events": probe.late}
+
+
 # ============================================================================ measuring
-def soak(hours: float, speed: float, faults: str, log) -> dict:
+def soak(hours: float, speed: float, faults: str, log, mode: str = "hostile") -> dict:
     n_frames = int(round(hours * FRAMES_PER_HOUR))
     window_frames = max(1, min(FRAMES_PER_HOUR, n_frames // 4))
     n_windows = max(1, n_frames // window_frames)
@@ -178,8 +287,8 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
     link = os.path.join(tmp, "suit")
     ctx = mp.get_context("spawn")
     parent, child = ctx.Pipe()
-    proc = ctx.Process(target=_suit_main, args=(child, RATE * speed, faults, link, n_frames),
-                       daemon=True)
+    proc = ctx.Process(target=_suit_main, args=(child, RATE * speed, faults, link, n_frames,
+                                                mode, speed), daemon=True)
     proc.start()
     sink = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sink.bind(("127.0.0.1", 0))
@@ -204,14 +313,20 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
     try:
         if not parent.poll(60):
             raise RuntimeError("the suit process did not start")
-        path = parent.recv()
-        cfg = from_dict({"output": {"osc": [f"127.0.0.1:{sink.getsockname()[1]}"]},
-                         "status": {"interval": 1.0}}, origin="soak")
+        path, truth_info = parent.recv()
+        settings: dict = {"output": {"osc": [f"127.0.0.1:{sink.getsockname()[1]}"]},
+                          "status": {"interval": 1.0}}
+        if mode == "cuts":
+            settings["identity"] = {"enabled": True}
+        cfg = from_dict(settings, origin="soak")
+        probe = CutProbe() if mode == "cuts" else None
 
         class SoakSession(LiveSession):
             def _open(self) -> None:
                 super()._open()
                 meter.wrap(self.pipeline)
+                if probe is not None:
+                    probe.wrap(self.pipeline, meter)
 
         session = SoakSession(f"serial://{path}?rate={RATE:g}", cfg, handle_signals=False)
         box: dict = {}
@@ -254,8 +369,12 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
                 raise RuntimeError("the suit process did not report")
             msg = parent.recv()
             if msg[0] == "done":
-                _, fates, first_kept, near_unplug, overflow_at = msg
+                _, fates, first_kept, near_unplug, overflow_at, info_idx = msg
                 break
+        upto = min(meter.last_abs + 1, meter.seen.size)
+        unseen = np.flatnonzero(~meter.seen[:upto])
+        parent.send(unseen)
+        why_unseen = parent.recv()[1] if parent.poll(120) else {}
         wall = time.monotonic() - t_start
         session.stop("soak done")
         runner.join(30)
@@ -307,6 +426,8 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
             "destroyed_by_faults": sum(fates.get(k, 0) for k in (
                 "corrupted", "dropped", "unplugged", "overflow_after_replug")) + in_flight,
             "fates": fates, "lost_to_unplug": in_flight, "overruns": overruns,
+            # intact frames never received (those lost to unplugs included), by where
+            "unseen_intact": why_unseen,
             "reconnects": session.source.stats.reconnects if session.source else None,
             "input": summary.input if summary is not None else None,
             "cuts": summary.cuts if summary is not None else None,
@@ -324,6 +445,11 @@ def soak(hours: float, speed: float, faults: str, log) -> dict:
         result["pass"] = bool(crashes == 0 and growth is not None and growth < 5.0
                               and result["p99_change"] is not None
                               and result["p99_change"] <= 0.10 and lost == 0)
+        if probe is not None:
+            result.update(_score_cuts(probe, truth_info, info_idx, result, session))
+            f1s = [f for f in result["f1_by_hour"] if f is not None]
+            result["pass"] = bool(result["pass"] and result["frames_accounted"] and f1s
+                                  and min(f1s) >= 0.95 and abs(f1s[-1] - f1s[0]) <= 0.02)
     finally:
         stop_sink.set()
         drainer.join(2)
@@ -348,14 +474,21 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--hours", type=float, default=8.0,
                    help="session hours at 120 Hz (default 8 = 3.46 M frames)")
-    p.add_argument("--speed", type=float, default=20.0,
-                   help="the suit sends this many times faster than 120 Hz (default 20)")
-    p.add_argument("--faults", default=DEFAULT_FAULTS,
-                   help=f"fault spec of rtseg.simulators.faults (default {DEFAULT_FAULTS})")
+    p.add_argument("--speed", type=float, default=None,
+                   help="the suit sends this many times faster than 120 Hz (default: cuts 10, "
+                        "hostile 20)")
+    p.add_argument("--mode", choices=("cuts", "hostile"), default="cuts",
+                   help="cuts (default): a long performance with known changes and realistic "
+                        "faults, scored per hour; hostile: survival under heavy faults")
+    p.add_argument("--faults", default=None,
+                   help=f"fault spec of rtseg.simulators.faults (default: cuts {CUTS_FAULTS}; "
+                        f"hostile {DEFAULT_FAULTS})")
     p.add_argument("--json", action="store_true", help="print only the JSON result")
     args = p.parse_args(argv)
     if not (args.hours > 0 and math.isfinite(args.hours)):
         p.error("--hours must be a number > 0")
+    if args.speed is None:
+        args.speed = 10.0 if args.mode == "cuts" else 20.0
     if not (args.speed > 0 and math.isfinite(args.speed)):
         p.error("--speed must be a number > 0")
     logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
@@ -363,9 +496,11 @@ def main(argv: list[str] | None = None) -> int:
     def log(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
 
-    log(f"soak: {args.hours:g} session hours ({int(args.hours * FRAMES_PER_HOUR)} frames) at "
-        f"{args.speed:g}x 120 Hz, faults {args.faults}")
-    r = soak(args.hours, args.speed, args.faults, log)
+    faults = args.faults if args.faults is not None else (
+        CUTS_FAULTS if args.mode == "cuts" else DEFAULT_FAULTS)
+    log(f"soak ({args.mode}): {args.hours:g} session hours ({int(args.hours * FRAMES_PER_HOUR)} frames) at "
+        f"{args.speed:g}x 120 Hz, faults {faults}")
+    r = soak(args.hours, args.speed, faults, log, args.mode)
     if args.json:
         print(json.dumps(r, indent=2))
     else:
@@ -386,6 +521,14 @@ def main(argv: list[str] | None = None) -> int:
         print("  suit process CPU s by window: " + ", ".join(
             fmt(c, '.1f') for c in r["suit_cpu_s_by_window"])
               + f"; its RSS at the end {fmt(r['suit_rss_mb_by_window'][-1], '.1f')} MB")
+        if r.get("mode") == "cuts":
+            print(f"cuts {r['cuts']} of {r['transitions']} changes; live F1 by hour "
+                  + ", ".join(fmt(f, '.3f') for f in r["f1_by_hour"]) + "; ARI by hour "
+                  + ", ".join(fmt(a, '.3f') for a in r["ari_by_hour"]))
+            a = r["accounting"]
+            print(f"frames accounted: {r['frames_accounted']} (sent {a['sent']} = received "
+                  f"{a['received']} + destroyed {a['destroyed']} + lost at unplugs "
+                  f"{a['lost_at_unplugs']})")
         print(f"wall time {r['wall_s']} s; {'PASS' if r['pass'] else 'FAIL'}")
     return 0 if r["pass"] else 1
 

@@ -31,7 +31,9 @@ Errors
 :func:`parse_packet` raises :class:`OscParseError` (a ``ValueError``) on malformed bytes;
 :meth:`VmcAssembler.feed` never raises on any input: it counts and drops (``corrupt``
 for malformed OSC -- a bundle whose element sizes do not tile it, as a truncated datagram's
-do not, is dropped whole before any of its elements is used -- ``bad_messages`` for known addresses with too few / wrongly typed
+do not, is dropped whole before any of its elements is used, and so is a bundle that is a
+strict prefix of one of the last 4 bundles received (a copy cut at an element boundary,
+which parses) -- ``bad_messages`` for known addresses with too few / wrongly typed
 arguments, ``unknown_names`` for bone names not in the profile, ``bad_values`` for NaN /
 non-unit quaternions and non-finite positions or times).
 """
@@ -56,6 +58,10 @@ from rtseg.drivers.codec_vmc_template import _Template, build_template
 from rtseg.frame import Frame
 
 _MISSING = object()
+
+
+#: Bundles remembered to recognise a truncated copy of one of them.
+RECENT_BUNDLES = 4
 
 
 def bundle_structure_error(data: bytes, start: int, end: int, depth: int) -> str | None:
@@ -140,6 +146,9 @@ class VmcAssembler(VmcFrameRules):
                          continuous=continuous, time_order=time_order, burst=burst,
                          stats=stats)
         self.fast = fast
+        # the last few bundles received: one arriving as a strict prefix of one of them is a
+        # truncated copy (a valid bundle cut at an element boundary still parses)
+        self._recent: list[bytes] = []
         self._templates: dict[int, _Template | None] = {}
         #: Frames decoded by the whole-frame fast path (diagnostics).
         self.fast_frames = 0
@@ -160,6 +169,15 @@ class VmcAssembler(VmcFrameRules):
                 # dropped whole: no element of a bundle that does not parse is used
                 self._corrupt(f"bundle dropped whole: {problem}")
                 return out
+            for prev in self._recent:
+                if len(prev) > n and prev.startswith(data):
+                    self._corrupt(f"bundle of {n} bytes is a truncated copy of one of "
+                                  f"{len(prev)} bytes received before it; dropped whole")
+                    return out
+            recent = self._recent
+            recent.append(data)
+            if len(recent) > RECENT_BUNDLES:
+                del recent[0]
             if self.fast and self._n_got == 0 and self._learned and self.t_last and \
                     self._sends_t:
                 tpl = self._templates.get(n, _MISSING)

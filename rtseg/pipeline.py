@@ -1,20 +1,30 @@
 """The per-frame pipeline shared by the live loop and offline replay of a recording.
 
 ``Pipeline.process()`` takes one received frame and returns the cuts its arrival revealed:
-gap handling (sequence/clock gaps, silence, runs of invalid required joints restart the
-detectors), value sanitising, calibration, ``PoseFeatures.step`` and every online
+gap handling (short sequence/clock gaps bridged with interpolated frames; longer gaps,
+silence and runs of invalid required joints restart the detectors), value sanitising, calibration, ``PoseFeatures.step`` and every online
 detector's ``update``.  It does no I/O and no threading: ``rtseg.live.LiveSession`` runs it
 on frames from a ring buffer, ``replay_frames`` / ``replay_session`` run it on recorded
 frames, so live output can be checked against a recording.
 
 Gaps
 ----
-No cut is placed across a gap the detectors did not see: a sequence gap of more than
-``gaps.max_frames`` missing frames, more than ``gaps.max_seconds`` without frames, or more
-than ``gaps.max_frames`` consecutive frames with an invalid required joint restart the
-detectors (``OnlineDetector.restart()``) and the feature state; a cut whose boundary lies
-before the restart is discarded (counted).  Shorter runs of invalid joints are fed with the
-last good values (what ``Frame`` rows hold).
+A short gap is bridged: when at most ``gaps.bridge_seconds`` (default 0.1 s, converted to
+frames at the pipeline's frame rate: 12 at 120 Hz) of frames are missing (sequence gap,
+source-clock gap or ring overrun), the detectors are fed that many filled frames first,
+each joint's rotation interpolated (normalised lerp, sign-aligned) from the last fed frame
+to the one that arrived, and go on without a restart (``PipelineStats.bridged_gaps``,
+``filled_frames``).  Filled frames are not session frames: a cut whose boundary falls on
+one is reported at the next received frame; behaviour identity is fed received frames only.
+
+A short sensor dropout is bridged the same way: up to that many consecutive frames with an
+invalid required joint are fed with the joint's last good value (what ``Frame`` rows hold).
+
+No cut is placed across a gap the detectors did not see: a sequence gap of more missing
+frames than that (or than ``gaps.max_frames`` when it is larger), more than
+``gaps.max_seconds`` without frames, or a longer run of frames with an invalid required
+joint restart the detectors (``OnlineDetector.restart()``) and the feature state; a cut
+whose boundary lies before the restart is discarded (counted).
 
 Frame indices
 -------------
@@ -30,6 +40,7 @@ from __future__ import annotations
 import bisect
 import logging
 import math
+from array import array
 from dataclasses import dataclass
 from typing import Any, Iterable
 
@@ -62,6 +73,8 @@ class PipelineStats:
     calibration_frames: int = 0
     restarts: int = 0          # detector restarts caused by gaps
     gap_frames: int = 0        # frames known missing (sequence gaps + ring overruns)
+    bridged_gaps: int = 0      # gaps short enough to be filled (no restart)
+    filled_frames: int = 0     # interpolated frames fed to the detectors in those gaps
     invalid_frames: int = 0    # frames with an invalid required joint
     skipped_invalid: int = 0   # of those, frames not fed (run longer than the limit)
     bad_values: int = 0        # non-finite / zero quaternions replaced by the last good ones
@@ -131,6 +144,8 @@ class Pipeline:
                          if req else self._feature_joints())
         self.max_gap_frames = int(config["gaps.max_frames"])
         self.max_gap_seconds = float(config["gaps.max_seconds"])
+        self.bridge_frames = max(self.max_gap_frames,
+                                 int(round(float(config["gaps.bridge_seconds"]) * self.frame_rate)))
         mode = config["calibration.mode"]
         if mode == "auto":
             mode = "average" if space == "local" else "none"
@@ -161,6 +176,14 @@ class Pipeline:
         self._jump_fed: list[int] = []
         self._jump_index: list[int] = []
         self._last_fed_index = -2
+        # rows fed to the detectors since creation (received + filled), the row number of
+        # every filled row still needed to map cuts (array of int64, pruned), the last fed pose
+        self._rows = 0
+        self._filled = array("q")
+        self._pruned = 0                      # filled rows forgotten (all before _filled)
+        self._filled_at_start = {m: 0 for m in self.detectors}
+        self._last_cut_row = {m: 0 for m in self.detectors}
+        self._prev_fed: np.ndarray | None = None
 
     def _feature_joints(self) -> np.ndarray:
         """Input joints the pose features depend on: the profile's joints and, for global
@@ -205,6 +228,50 @@ class Pipeline:
             # keep the calibration pose: reset() only clears the streaming state
             self.features.reset()
         self._fed_since_restart = 0
+        self._prev_fed = None
+
+    def _fill(self, q: np.ndarray, n: int) -> np.ndarray:
+        """``n`` poses between the last fed pose and ``q``, (n, J, 4): per joint the
+        normalised lerp at fractions k / (n + 1), k = 1..n, sign-aligned to the last pose."""
+        a = self._prev_fed
+        b = np.where(np.sum(a * q, axis=-1, keepdims=True) < 0, -q, q)
+        t = (np.arange(1, n + 1, dtype=np.float64) / (n + 1))[:, None, None]
+        m = a[None] * (1.0 - t) + b[None] * t
+        nrm = np.linalg.norm(m, axis=-1, keepdims=True)
+        return np.where(nrm > 1e-9, m / np.where(nrm > 1e-9, nrm, 1.0), a[None])
+
+    def _feed(self, x: np.ndarray, index: int, out: list[PipelineCut]) -> None:
+        """One row to every detector; cuts it reveals appended to ``out``."""
+        for m, det in self.detectors.items():
+            if self._seg_start[m] < 0:
+                self._seg_start[m] = index
+                self._fed_at_start[m] = self._fed[m]
+                self._filled_at_start[m] = self._filled_before(self._fed[m])
+            self._fed[m] += 1
+            cut = det.update(x)
+            if cut is None:
+                continue
+            out_cut = self._to_session(m, cut, index)
+            if out_cut is not None:
+                out.append(out_cut)
+        self._rows += 1
+
+    def _filled_before(self, row: int) -> int:
+        """Filled rows before ``row`` (rows fed since creation; valid for rows not
+        before the forgotten ones)."""
+        return self._pruned + bisect.bisect_left(self._filled, row)
+
+    def _prune_filled(self) -> None:
+        """Forget filled rows no cut can refer to any more: those before every method's
+        segment start and last cut (cuts of one method do not go back in time)."""
+        if len(self._filled) < 4096:
+            return
+        keep_from = min((max(self._fed_at_start[m] if self._seg_start[m] >= 0 else self._rows,
+                             self._last_cut_row[m]) for m in self.detectors), default=self._rows)
+        k = bisect.bisect_left(self._filled, keep_from)
+        if k:
+            del self._filled[:k]
+            self._pruned += k
 
     # ---------------------------------------------------------------- main step
     def _time_missing(self, source_time: float | None, known_lost: int = 0) -> int:
@@ -259,10 +326,13 @@ class Pipeline:
             self._prev_recv = float(recv_time)
         if source_time is not None and math.isfinite(source_time):
             self._prev_src = float(source_time)
-        if missing > self.max_gap_frames:
+        bridge = 0
+        if missing > self.bridge_frames:
             self.restart(index, f"{missing} frames missing")
         elif silence > self.max_gap_seconds:
             self.restart(index, f"no frame for {silence:.3f} s")
+        elif missing:
+            bridge = missing
         # --- sanitise values: non-finite or zero quaternions are invalid
         q = np.asarray(quats, dtype=np.float64)
         v = np.asarray(valid, dtype=bool)
@@ -284,8 +354,8 @@ class Pipeline:
         if not all_valid and not v[self.required].all():
             st.invalid_frames += 1
             self._bad_run += 1
-            if self._bad_run > self.max_gap_frames:
-                if self._bad_run == self.max_gap_frames + 1:
+            if self._bad_run > self.bridge_frames:
+                if self._bad_run == self.bridge_frames + 1:
                     self.restart(index, f"required joints invalid for {self._bad_run} frames")
                 st.skipped_invalid += 1
                 return []
@@ -304,7 +374,15 @@ class Pipeline:
                     log.info("calibrated on %d frame(s) ending at frame %d",
                              self.calibration_needed, index)
             return []
-        # --- features and detectors
+        # --- features and detectors (a short gap first filled, see the module docstring)
+        out: list[PipelineCut] = []
+        if bridge and self._prev_fed is not None:
+            st.bridged_gaps += 1
+            st.filled_frames += bridge
+            for qf in self._fill(q, bridge):
+                self._filled.append(self._rows)
+                self._feed(self.features.step(qf), index, out)
+            self._prune_filled()
         x = self.features.step(q)
         if index != self._last_fed_index + 1:
             self._jump_fed.append(st.fed)
@@ -314,18 +392,11 @@ class Pipeline:
         self._last_fed_index = index
         st.fed += 1
         self._fed_since_restart += 1
-        out: list[PipelineCut] = []
-        for m, det in self.detectors.items():
-            if self._seg_start[m] < 0:
-                self._seg_start[m] = index
-                self._fed_at_start[m] = self._fed[m]
-            self._fed[m] += 1
-            cut = det.update(x)
-            if cut is None:
-                continue
-            out_cut = self._to_session(m, cut, index)
-            if out_cut is not None:
-                out.append(out_cut)
+        self._feed(x, index, out)
+        if self._prev_fed is None:
+            self._prev_fed = q.copy()
+        else:
+            np.copyto(self._prev_fed, q)
         if self.identity is not None:
             try:
                 self.identity.step(index, x, out)
@@ -342,17 +413,26 @@ class Pipeline:
 
         Detectors number frames from their creation (the default, ``frame_origin =
         "creation"``) or from their last restart (``frame_origin = "restart"``).  Within a
-        segment every frame is fed, so the map is linear from the segment's first frame.
+        segment every received frame is fed, plus the filled rows of bridged gaps: a row's
+        session index is the segment's first frame plus the rows before it minus the filled
+        ones among them (so a filled row maps to the next received frame).
         """
         seg0 = self._seg_start[method]
-        fed_in_seg = self._fed[method] - self._fed_at_start[method]
+        start = self._fed_at_start[method]
+        fed_in_seg = self._fed[method] - start
         origin = getattr(self.detectors[method], "frame_origin", "creation")
-        base = self._fed_at_start[method] if origin == "creation" else 0
+        base = start if origin == "creation" else 0
         rel = cut.frame - base
         rel_det = (cut.detected_at - base) if cut.detected_at >= 0 else fed_in_seg - 1
-        fed0 = self.stats.fed - fed_in_seg          # the segment's first fed frame
-        boundary = self._index_of_fed(fed0 + rel) if rel >= 0 else seg0 + rel
-        detected = self._index_of_fed(fed0 + max(rel, rel_det))
+        rel_det = max(rel, rel_det)
+        # a row's fed-frame number: the rows before it less the filled ones among them (a
+        # filled row maps to the next received frame); then the index jumps of dropped frames
+        row, row_det = start + max(rel, 0), start + rel_det
+        boundary = (self._index_of_fed(row - self._filled_before(row)) if rel >= 0
+                    else seg0 + rel)
+        detected = self._index_of_fed(row_det - self._filled_before(row_det))
+        if rel >= 0:
+            self._last_cut_row[method] = max(self._last_cut_row[method], row)
         if rel < 0:
             self.stats.discarded_cuts += 1
             log.info("%s cut at frame %d discarded: it precedes the restart at frame %d",

@@ -187,7 +187,13 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "interval": Key("float", 1.0, _range(0.0, 3600.0, strict_lo=True), doc="seconds"),
     },
     "gaps": {
-        "max_frames": Key("int", 3, _range(0, 1_000_000), doc="longest tolerated run of missing/invalid frames"),
+        "max_frames": Key("int", 3, _range(0, 1_000_000),
+                          doc="fewest missing / invalid frames bridged (when bridge_seconds "
+                              "gives fewer)"),
+        "bridge_seconds": Key("float", 0.1, _range(0.0, 10.0),
+                              doc="longest run of missing frames (or of frames with an invalid "
+                                  "required joint), in seconds of frames, bridged instead of "
+                                  "restarting the detectors"),
         "max_seconds": Key("float", 0.25, _range(0.0, 3600.0, strict_lo=True),
                            doc="longest tolerated silence between frames"),
         "required_joints": Key("list[str]", [],

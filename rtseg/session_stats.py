@@ -154,6 +154,7 @@ class SessionSummary:
                 + identity_text(self.identity) +
                 f"processing latency {lat}, "
                 f"max lag {self.max_lag_ms:.1f} ms"
+                + gaps_text(self.pipeline)
                 + source_losses_text(self.source_stats)
                 + recording_text(self))
 
@@ -166,6 +167,19 @@ SOURCE_LOSSES = (("refused_senders", "refused by allow="), ("other_senders",
                  "from a second sender"), ("clock_restarts", "source clock restarts"),
                  ("corrupt", "corrupt"), ("bad_messages", "bad messages"),
                  ("bad_values", "bad values"), ("reconnects", "reconnects"))
+
+
+def gaps_text(pipeline: dict[str, int]) -> str:
+    """", gaps: 4 bridged (9 frames filled), 1 detector restarts" for what gaps cost."""
+    parts = []
+    if pipeline.get("bridged_gaps"):
+        parts.append(f"{pipeline['bridged_gaps']} bridged ({pipeline.get('filled_frames', 0)} "
+                     f"frames filled)")
+    if pipeline.get("restarts"):
+        parts.append(f"{pipeline['restarts']} detector restarts")
+    if pipeline.get("discarded_cuts"):
+        parts.append(f"{pipeline['discarded_cuts']} cuts discarded before a restart")
+    return f", gaps: {', '.join(parts)}" if parts else ""
 
 
 def source_losses_text(stats: dict[str, int]) -> str:

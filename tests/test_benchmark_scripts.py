@@ -121,3 +121,53 @@ def test_library_loto_by_person_over_a_source_folder(tmp_path):
     r = _run("library_loto.py", "--by-person", str(tmp_path / "nowhere"))
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
     assert "no source folder" in r.stderr
+def test_faults_benchmark_rows_and_bars():
+    """12 s of the synthetic performance over a real pty and real UDP, clean and with 5 %
+    of frames lost: every row scored beside the clean one, the loss bridged, no restart."""
+    r = _run("faults.py", "--takes", "synth", "--conditions", "clean,loss5,junk",
+             "--seconds", "12", "--json")
+    assert r.returncode in (0, 1), r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    rows = doc["takes"]["synth"]
+    assert set(rows) == {"serial", "vmc"} and set(rows["serial"]) == {"clean", "loss5"}
+    assert set(rows["vmc"]) == {"clean", "loss5", "junk"}
+    for tr, conds in rows.items():
+        clean, loss = conds["clean"], conds["loss5"]
+        assert clean["transitions"] == 1 and clean["f1_clean"] == clean["f1"], tr
+        assert loss["f1_clean"] == clean["f1"] and loss["overload_lost"] == 0, tr
+        assert loss["frames_received"] < loss["frames_sent"] == clean["frames_sent"], tr
+        assert loss["restarts"] == 0 and loss["bridged_gaps"] > 20, tr
+    assert sum(rows["vmc"]["junk"]["junk_sent"].values()) >= 4 * 30 * 11
+    assert set(doc["bars"]) == {"synth/serial/loss5", "synth/vmc/loss5", "synth/vmc/junk"}
+    assert doc["pass"] == all(doc["bars"].values())
+
+
+def test_faults_benchmark_refuses_an_unknown_condition():
+    r = _run("faults.py", "--conditions", "clean,nope")
+    assert r.returncode == 2 and "unknown condition 'nope'" in r.stderr
+
+
+def test_soak_cuts_mode_scores_a_short_run():
+    """36 session seconds of the soak's performance through the pty suit with its faults:
+    cuts scored against the truth, frames accounted for (the four numbers add up when it
+    says so)."""
+    r = _run("soak.py", "--hours", "0.01", "--json")
+    assert r.returncode in (0, 1), r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    assert doc["mode"] == "cuts" and doc["crashes"] == 0
+    assert doc["transitions"] >= 1 and doc["cuts"] >= 1
+    assert len(doc["f1_by_hour"]) == 1 == len(doc["ari_by_hour"])
+    assert doc["f1_by_hour"][0] is not None and 0 <= doc["f1_by_hour"][0] <= 1
+    a = doc["accounting"]
+    assert a["sent"] == doc["frames"] >= 0.01 * 432000
+    assert a["destroyed"] > 0                      # 0.01 % of bytes corrupted
+    assert doc["frames_accounted"] == (a["sent"] == a["received"] + a["destroyed"]
+                                       + a["lost_at_unplugs"])
+
+
+def test_soak_hostile_mode_still_runs():
+    r = _run("soak.py", "--mode", "hostile", "--hours", "0.005", "--json")
+    assert r.returncode in (0, 1), r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    assert doc["crashes"] == 0 and "f1_by_hour" not in doc
+    assert doc["destroyed_by_faults"] > 0.5 * doc["frames"]

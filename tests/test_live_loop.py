@@ -98,14 +98,69 @@ def test_cut_found_without_gap():
 
 
 def test_sequence_gap_restarts_and_no_cut_across_it():
+    """A gap longer than gaps.bridge_seconds (0.1 s = 12 frames at 120 Hz) restarts."""
     pipe = pipeline()
-    cuts = run(pipe, frames(400, 200, seq_jump_at=200, jump=10))
+    cuts = run(pipe, frames(400, 200, seq_jump_at=200, jump=13))
     assert cuts == []
-    assert pipe.stats.restarts == 1 and pipe.stats.gap_frames == 10
-    # a gap within the limit (3 frames) is bridged: the cut is found
+    assert pipe.stats.restarts == 1 and pipe.stats.gap_frames == 13
+    assert pipe.stats.bridged_gaps == 0 and pipe.stats.filled_frames == 0
+
+
+def test_short_gap_is_bridged_with_filled_frames():
+    """12 missing frames (0.1 s): the detector is fed 12 interpolated frames and goes on;
+    the change inside the gap is cut at the first received frame after it."""
+    det = StepDetector()
+    pipe = pipeline(det=det)
+    cuts = run(pipe, frames(400, 200, seq_jump_at=200, jump=12))
+    assert [(c.boundary, c.detected) for c in cuts] == [(200, 200)]
+    assert pipe.stats.restarts == 0 and det.restarts == 0
+    assert pipe.stats.bridged_gaps == 1 and pipe.stats.filled_frames == 12
+    assert det.i + 1 == 400 + 12                     # every received frame + the filled ones
+    # a gap before the change: the cut keeps its session index
     pipe = pipeline()
-    cuts = run(pipe, frames(400, 200, seq_jump_at=200, jump=3))
-    assert [c.boundary for c in cuts] == [200] and pipe.stats.restarts == 0
+    cuts = run(pipe, frames(400, 200, seq_jump_at=100, jump=5))
+    assert [(c.boundary, c.detected) for c in cuts] == [(200, 202)]
+    assert pipe.stats.bridged_gaps == 1 and pipe.stats.filled_frames == 5
+    # bridge_seconds = 0: only max_frames (3) missing frames are bridged
+    pipe = pipeline({"calibration": {"mode": "none"}, "gaps": {"bridge_seconds": 0.0}})
+    assert run(pipe, frames(400, 200, seq_jump_at=200, jump=4)) == []
+    assert pipe.stats.restarts == 1
+
+
+def test_cuts_keep_their_session_index_over_many_bridged_gaps():
+    """Every 4th frame lost for 20 000 frames (5 000 filled rows, past the point where old
+    ones are forgotten) and the arm toggling every 1 000 frames: each cut is at the
+    session index of the toggle frame."""
+    fr = []
+    for t in range(20_000):
+        if t % 4 == 3:
+            continue
+        q = np.tile([0.0, 0.0, 0.0, 1.0], (J, 1))
+        if (t // 1000) % 2:
+            q[ARM] = RAISED
+        fr.append((q, np.ones(J, dtype=bool), t & 0xFFFF, t / 120.0))
+    pipe = pipeline()
+    cuts = run(pipe, fr)
+    assert [c.boundary for c in cuts] == [750 * k for k in range(1, 20)]
+    assert pipe.stats.restarts == 0 and pipe.stats.filled_frames == 4999
+    assert len(pipe._filled) < 4096 + 10
+
+
+def test_filled_frames_interpolate_between_the_poses():
+    """The filled rotations lie between the last fed pose and the received one (nlerp)."""
+    class Tap(StepDetector):
+        def update(self, x):
+            rows.append(np.array(x))
+            return None
+    rows: list = []
+    pipe = pipeline(det=Tap())
+    fr = frames(40, 20, seq_jump_at=20, jump=3)
+    run(pipe, fr)
+    assert len(rows) == 43
+    before, after = rows[19], rows[23]
+    d = [np.linalg.norm(rows[k] - before) for k in range(19, 24)]
+    assert d[0] == 0 and all(a < b for a, b in zip(d, d[1:])), d
+    assert np.allclose(rows[23], after)
 
 
 def test_frames_dropped_by_the_loop_are_a_gap_and_cuts_name_the_frames_fed():
@@ -153,9 +208,13 @@ def test_u16_sequence_wrap_is_not_a_gap():
 
 def test_invalid_required_joints_restart_only_past_the_limit():
     pipe = pipeline()
-    cuts = run(pipe, frames(400, 200, invalid=range(195, 210)))
+    cuts = run(pipe, frames(400, 200, invalid=range(195, 215)))
     assert cuts == [] and pipe.stats.restarts == 1
-    assert pipe.stats.skipped_invalid == 15 - 3
+    assert pipe.stats.skipped_invalid == 20 - 12      # 0.1 s = 12 frames bridged
+    # 12 invalid frames: bridged, no restart
+    pipe = pipeline()
+    cuts = run(pipe, frames(400, 200, invalid=range(190, 202)))
+    assert [c.boundary for c in cuts] == [202] and pipe.stats.restarts == 0
     # two invalid frames: fed with the last good value, no restart, cut where the arm moves
     pipe = pipeline()
     cuts = run(pipe, frames(400, 200, invalid=range(200, 202)))
@@ -493,19 +552,20 @@ def test_joint_the_features_do_not_use_may_be_missing_for_ever():
 
 def test_source_clock_reveals_lost_frames_without_sequence_numbers():
     """VMC-like input: seq counts assembled frames (no gap visible), the sender's clock
-    jumps by 10 frame periods where frames were lost -> restart, no cut across it.  The
-    period is learned from the clock (here 1/60 s, whatever the nominal rate)."""
+    jumps by 20 frame periods where frames were lost -> restart (beyond the 12 frames
+    bridged at the nominal 120 Hz), no cut across it.  The period is learned from the clock
+    (here 1/60 s, whatever the nominal rate)."""
     fr = frames(400, 200)
     dt = 1 / 60
     fr_t = []
     for i, (q, v, _, t) in enumerate(fr):
-        st = i * dt + (10 * dt if i >= 200 else 0.0)
+        st = i * dt + (20 * dt if i >= 200 else 0.0)
         fr_t.append((q, v, i, i * dt, st))
     pipe = pipeline()
     cuts = []
     for i, (q, v, seq, t, st) in enumerate(fr_t):
         cuts.extend(pipe.process(i, q, v, seq, t, 0, st))
-    assert cuts == [] and pipe.stats.restarts == 1 and pipe.stats.gap_frames == 10
+    assert cuts == [] and pipe.stats.restarts == 1 and pipe.stats.gap_frames == 20
     # jittery clock, no loss: no restart
     rng = np.random.default_rng(0)
     pipe = pipeline()
@@ -555,4 +615,4 @@ def test_pipeline_survives_garbage(frames_):
         pipe.process(i, q, v, seq, t, 0, st)
         np.testing.assert_allclose(np.linalg.norm(pipe._last_good, axis=1), 1.0, rtol=1e-9)
     assert pipe.stats.frames == len(frames_)
-    assert pipe.stats.fed == len(seen)
+    assert pipe.stats.fed + pipe.stats.filled_frames == len(seen)

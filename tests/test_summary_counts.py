@@ -43,3 +43,10 @@ def test_source_refusals_are_in_the_summary():
     text = _summary(source_stats={"other_senders": 40, "corrupt": 3, "clock_restarts": 1}).text()
     assert "40 from a second sender" in text and "1 source clock restarts" in text
     assert "3 corrupt" in source_losses_text({"corrupt": 3})
+
+
+def test_gap_costs_are_in_the_summary():
+    text = _summary(pipeline={"bridged_gaps": 4, "filled_frames": 9, "restarts": 2,
+                              "discarded_cuts": 1}).text()
+    assert "gaps: 4 bridged (9 frames filled), 2 detector restarts, 1 cuts discarded" in text
+    assert "gaps:" not in _summary(pipeline={"restarts": 0}).text()

@@ -51,6 +51,42 @@ def test_truncated_bundles_are_dropped_whole_over_udp(source):
     assert source.stats.dropped == 0
 
 
+def _element_cuts(bundle: bytes) -> list[int]:
+    """Offsets at which the bundle's elements end (a cut there still parses)."""
+    pos, out = 16, []
+    while pos < len(bundle):
+        pos += 4 + struct.unpack_from(">i", bundle, pos)[0]
+        out.append(pos)
+    return out
+
+
+def test_copy_cut_at_an_element_boundary_is_dropped_over_udp(source):
+    """A copy of the bundle just sent, cut where an element ends, parses as a bundle: it is
+    recognised as a truncated copy, counted in ``corrupt``, and the frames around it are
+    exactly those sent (no phantom frame, no frame closed early)."""
+    take = make_take(60, seed=6)
+    addr = ("127.0.0.1", source.port)
+    n_bad = 0
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
+        for i in range(len(take.quats)):
+            whole = _frame_datagrams(take, i)[0]
+            out.sendto(whole, addr)
+            if i % 2 == 1:
+                cut = _element_cuts(whole)[1 + i % 5]
+                bad = whole[:cut]
+                assert bundle_structure_error(bad, 0, len(bad), 0) is None
+                out.sendto(bad, addr)
+                n_bad += 1
+            time.sleep(0.002)
+        frames = read_all(source)
+    assert len(frames) == len(take.quats)
+    for i, f in enumerate(frames):
+        assert f.source_time == pytest.approx(i / 60.0, abs=1e-5)
+        assert bool(f.valid.all())
+        assert same_rotation(f.quats, take.quats[i], atol=1e-6)
+    assert source.stats.corrupt == n_bad and source.stats.dropped == 0
+
+
 def test_truncated_nested_bundle_is_dropped_whole():
     take = make_take(3, seed=2)
     asm = VmcAssembler(SUIT)
