@@ -121,6 +121,8 @@ def test_library_loto_by_person_over_a_source_folder(tmp_path):
     r = _run("library_loto.py", "--by-person", str(tmp_path / "nowhere"))
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
     assert "no source folder" in r.stderr
+
+
 def test_faults_benchmark_rows_and_bars():
     """12 s of the synthetic performance over a real pty and real UDP, clean and with 5 %
     of frames lost: every row scored beside the clean one, the loss bridged, no restart."""
