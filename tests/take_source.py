@@ -20,6 +20,7 @@ class TakeSource(Source):
     EOFError; local joint rotations at 120 Hz."""
     space = "local"
     frame_rate = 120.0
+    as_fast_as_read = True     # frames as fast as they are read: none is ever late
 
     def __init__(self, take) -> None:
         super().__init__()
