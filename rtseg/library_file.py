@@ -184,15 +184,9 @@ def load(path: str | Path, profile: str | None = None, dims: int | None = None) 
                                  f"{len(lib.names)} windows")
             if not lib.lag_s > 0:
                 raise ValueError(f"lag_s {lib.lag_s} not positive")
-            longest = max(w.n for w in lib.window_stats)
         except (KeyError, TypeError, ValueError, np.linalg.LinAlgError) as exc:
             raise LibraryError(f"behaviour library {p}: malformed ({type(exc).__name__}: "
                                f"{exc})") from None
-        if longest > round(lib.window_s * lib.frame_rate) + 1:
-            raise LibraryError(
-                f"behaviour library {p}: frame_rate {lib.frame_rate:g} Hz disagrees with "
-                f"its windows: {longest} frames in a {lib.window_s:g} s window is at least "
-                f"{longest / lib.window_s:g} Hz")
         try:
             lib.bank                     # the windows' models, fitted once here (not live)
         except (KeyError, TypeError, ValueError, np.linalg.LinAlgError) as exc:

@@ -117,8 +117,6 @@ def test_refusals_are_one_clear_line(tmp_path, library):
     ("dims", lambda v: str(v), r'dims must be a whole number, got "48"'),
     ("dims", lambda v: float(v), r"dims must be a whole number, got 48.0"),
     ("frame_rate", lambda v: "120", r'frame_rate must be a number, got "120"'),
-    ("frame_rate", lambda v: 60, r"frame_rate 60 Hz disagrees with its windows: \d+ frames "
-                                 r"in a 2 s window is at least 1\d\d(\.\d+)? Hz"),
     ("frame_rate", lambda v: -120.0, r"frame_rate -120.0 not a positive number"),
     ("sources", lambda v: [True, *v[1:]], r"sources\[0\] must be a whole number, got true"),
     ("scale", lambda v: ["1.0", *v[1:]], r'scale\[0\] must be a number, got "1.0"'),
@@ -130,7 +128,7 @@ def test_refusals_are_one_clear_line(tmp_path, library):
 def test_a_field_of_the_wrong_type_is_one_clear_line(tmp_path, library, key, value,
                                                       message):
     """A library edited by hand with an int among its names, dims as a string or a frame
-    rate its windows contradict is refused with one line naming the field."""
+    rate that is not a positive number is refused with one line naming the field."""
     doc = json.loads(library.save(tmp_path / "lib.json").read_text())
     assert doc["dims"] == 48 and doc["frame_rate"] == 120.0 and doc["window_s"] == 2.0
     doc[key] = value(doc[key])
