@@ -71,6 +71,28 @@ from rtseg.online_eval import live_config
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
+class _Usage(ValueError):
+    """A command-line option that cannot be taken (the message is printed, exit 2)."""
+
+
+def _pop_number(argv: list[str], flag: str, kind: type, what: str,
+                not_positive: str | None = None):
+    """The value after ``flag`` in ``argv`` as ``kind`` (both removed), None when absent;
+    ``_Usage`` "FLAG: WHAT" when it is not one, "FLAG: NOT_POSITIVE" when it is <= 0 and
+    ``not_positive`` is given."""
+    if flag not in argv:
+        return None
+    k = argv.index(flag)
+    try:
+        value = kind(argv[k + 1])
+    except (IndexError, ValueError):
+        raise _Usage(f"{flag}: {what}") from None
+    if not_positive is not None and not value > 0:
+        raise _Usage(f"{flag}: {not_positive}")
+    del argv[k:k + 2]
+    return value
+
+
 def _progress(msg: str) -> None:
     print(f"  {msg}", file=sys.stderr, flush=True)
 
@@ -175,29 +197,19 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
     import rtseg.library_eval as le
     from rtseg.library_lopo import lopo_sources
     kw = {"n": 4, "seed": 0}
-    for flag, key in (("--n", "n"), ("--seed", "seed")):
-        if flag in argv:
-            k = argv.index(flag)
-            try:
-                kw[key] = int(argv[k + 1])
-            except (IndexError, ValueError):
-                print(f"{flag}: a whole number", file=sys.stderr)
-                return 2
-            del argv[k:k + 2]
-    if kw["n"] < 1:
-        print("--n: at least 1 performance per person", file=sys.stderr)
+    try:
+        for flag, key in (("--n", "n"), ("--seed", "seed")):
+            value = _pop_number(argv, flag, int, "a whole number")
+            if value is not None:
+                kw[key] = value
+        if kw["n"] < 1:
+            raise _Usage("--n: at least 1 performance per person")
+        scale = _pop_number(argv, "--threshold-scale", float, "a number", "> 0")
+    except _Usage as exc:
+        print(exc, file=sys.stderr)
         return 2
-    if "--threshold-scale" in argv:
-        k = argv.index("--threshold-scale")
-        try:
-            kw["threshold_scale"] = float(argv[k + 1])
-        except (IndexError, ValueError):
-            print("--threshold-scale: a number", file=sys.stderr)
-            return 2
-        if not kw["threshold_scale"] > 0:
-            print("--threshold-scale: > 0", file=sys.stderr)
-            return 2
-        del argv[k:k + 2]
+    if scale is not None:
+        kw["threshold_scale"] = scale
     hide = "--no-hide" not in argv
     segments = "--segments" in argv
     argv = [a for a in argv if a not in ("--no-hide", "--segments")]
@@ -247,18 +259,14 @@ def main(argv: list[str] | None = None) -> int:
         le.METRIC = argv[k + 1]
         del argv[k:k + 2]
     opts = {}
-    for flag in ("--step", "--name-after", "--seconds"):
-        if flag in argv:
-            k = argv.index(flag)
-            try:
-                opts[flag] = float(argv[k + 1])
-            except (IndexError, ValueError):
-                print(f"{flag}: seconds, a number", file=sys.stderr)
-                return 2
-            if not opts[flag] > 0:
-                print(f"{flag}: seconds, > 0", file=sys.stderr)
-                return 2
-            del argv[k:k + 2]
+    try:
+        for flag in ("--step", "--name-after", "--seconds"):
+            value = _pop_number(argv, flag, float, "seconds, a number", "seconds, > 0")
+            if value is not None:
+                opts[flag] = value
+    except _Usage as exc:
+        print(exc, file=sys.stderr)
+        return 2
     if "--step" in opts:
         import rtseg.library_eval as le
         le.WINDOWS["step_s"] = opts["--step"]
