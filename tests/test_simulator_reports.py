@@ -70,23 +70,31 @@ def _read_all(src, first: float = 20.0, quiet: float = 1.0) -> list:
     return frames
 
 
+def _receive_late(sim: "_Simulator", waiting: str, url: str, late: float = 1.5):
+    """Once ``sim`` prints ``waiting``, wait ``late`` s, then read every frame from ``url``;
+    (frames, returncode, stdout, stderr) of the finished simulator."""
+    src = None
+    try:
+        sim.wait_for(waiting)
+        time.sleep(late)
+        src = open_source(url)
+        frames = _read_all(src)
+    finally:
+        if src is not None:
+            src.close()
+        rc, out, err = sim.finish()
+    return frames, rc, out, err
+
+
 def test_axis_text_simulator_waits_for_its_client_and_every_frame_arrives():
     """The receiver connects 1.5 s after the simulator started listening: nothing is lost, and the
     summary says how long it waited and that every frame it sent was taken."""
     port = free_port(socket.SOCK_STREAM)
     sim = _Simulator("axis", "--axis-format", "text", "--synth", SYNTH, "--speed", "4",
                      "--port", str(port))
-    src = None
-    try:
-        sim.wait_for("sending starts when the first client connects")
-        time.sleep(1.5)
-        src = open_source(f"axis://127.0.0.1:{port}?format=text&rate=120&backoff=0.05"
-                          "&queue=10000")
-        frames = _read_all(src)
-    finally:
-        if src is not None:
-            src.close()
-        rc, out, err = sim.finish()
+    frames, rc, out, err = _receive_late(
+        sim, "sending starts when the first client connects",
+        f"axis://127.0.0.1:{port}?format=text&rate=120&backoff=0.05&queue=10000")
     assert rc == 0, err
     assert len(frames) == 480, out
     waited = float(re.search(r"waited ([\d.]+) s for a client before sending", out).group(1))
@@ -112,16 +120,8 @@ def test_mvn_tcp_simulator_waits_for_its_receiver():
     port = free_port(socket.SOCK_STREAM)
     sim = _Simulator("mvn", "--transport", "tcp", "--synth", SYNTH, "--speed", "4",
                      "--port", str(port))
-    src = None
-    try:
-        sim.wait_for("waiting for the receiver to listen")
-        time.sleep(1.5)
-        src = open_source(f"mvn://127.0.0.1:{port}?transport=tcp&queue=10000")
-        frames = _read_all(src)
-    finally:
-        if src is not None:
-            src.close()
-        rc, out, err = sim.finish()
+    frames, rc, out, err = _receive_late(sim, "waiting for the receiver to listen",
+                                         f"mvn://127.0.0.1:{port}?transport=tcp&queue=10000")
     assert rc == 0, err
     assert "waiting for the receiver to listen" in out
     assert len(frames) == 480, out
