@@ -33,21 +33,23 @@ SCRIPT = "idle:4,walk:5,punch:5"
 SPEED = 4.0
 
 
-def session_config():
-    return from_dict({"output": {"osc": []}, "status": {"interval": 0.5}})
+def session_config(max_lag_seconds: float = 0.1):
+    return from_dict({"output": {"osc": []}, "status": {"interval": 0.5},
+                      "buffer": {"max_lag_seconds": max_lag_seconds}})
 
 
 class Session:
     """A LiveSession on sim://synth (``SPEED`` x real time) with a monitor on a free port,
     run on a thread."""
 
-    def __init__(self, script: str = SCRIPT, speed: float = SPEED, **server_args) -> None:
+    def __init__(self, script: str = SCRIPT, speed: float = SPEED, max_lag_seconds: float = 0.1,
+                 **server_args) -> None:
         self.cuts: list[CutEvent] = []
         self.feed = MonitorFeed()
         self.server = MonitorServer(self.feed, "127.0.0.1", 0, **server_args)
         self.url = self.server.start()
         self.session = LiveSession(
-            f"sim://synth?script={script}&speed={speed:g}&seed=3", session_config(),
+            f"sim://synth?script={script}&speed={speed:g}&seed=3", session_config(max_lag_seconds),
             listeners=[lambda ev: isinstance(ev, CutEvent) and self.cuts.append(ev)],
             handle_signals=False, monitor=self.feed)
         self.summary = None
@@ -120,9 +122,9 @@ def test_page_gets_the_cuts_the_session_made_batched():
 
 
 def test_stalled_and_closed_pages_cost_the_session_no_frame():
+    # max_lag_seconds 0: no overload thinning, so a frame lost could only be the pages' doing
     run = Session("idle:10,walk:20,punch:20,squat:20", client_queue=4, send_timeout=1.0,
-                  send_buffer=2048,
-                  speed=16.0)
+                  send_buffer=2048, speed=16.0, max_lag_seconds=0.0)
     stalled = socket.socket()
     stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
     stalled.connect(("127.0.0.1", run.port))
