@@ -241,7 +241,8 @@ def test_recorded_session_gets_the_same_page(tmp_path):
     server = MonitorServer(feed, "127.0.0.1", 0)
     server.start()
     first = LiveSession(f"sim://synth?script={SCRIPT}&speed=8&seed=3",
-                        from_dict({"output": {"osc": []}, "recording": {"dir": str(rec)}}),
+                        from_dict({"output": {"osc": []}, "recording": {"dir": str(rec)},
+                                   "buffer": {"max_lag_seconds": 0.0}}),   # no thinning: a page, not load
                         handle_signals=False, monitor=feed)
     result: list = []
     t = threading.Thread(target=lambda: result.append(first.run()), daemon=True)
@@ -257,7 +258,7 @@ def test_recorded_session_gets_the_same_page(tmp_path):
     server = MonitorServer(feed, "127.0.0.1", 0)
     server.start()
     cuts: list[CutEvent] = []
-    replay = LiveSession(f"file://{rec}?speed=4", session_config(), handle_signals=False,
+    replay = LiveSession(f"file://{rec}?speed=4", session_config(0.0), handle_signals=False,
                          monitor=feed, listeners=[lambda ev: isinstance(ev, CutEvent)
                                                   and cuts.append(ev)])
     t = threading.Thread(target=replay.run, daemon=True)
