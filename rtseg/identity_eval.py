@@ -327,7 +327,7 @@ def run_evaluate_identity(args: Any) -> int:
     cmu and tsseg4d)."""
     import json
     import sys
-    from rtseg.commands.evaluate import Progress
+    from rtseg.progress import Progress
     from rtseg.labels import GROUPS, find_labelled_takes, no_takes_hint
     from rtseg.online_eval import live_config
     if not args.online:
