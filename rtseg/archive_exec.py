@@ -115,7 +115,7 @@ def map_tasks(fn: Callable[..., Any], items: Sequence[Any], kwargs: dict[str, An
 
 
 def _records_task(item: tuple[str, list[str]], **kwargs: Any) -> list[dict[str, Any]]:
-    from rtseg.archive import take_records
+    from rtseg.archive_records import take_records
     return take_records(item[0], item[1], **kwargs)
 
 
@@ -124,9 +124,9 @@ def run_tasks(todo: Sequence[tuple[str, list[str]]], kwargs: dict[str, Any],
               stats: Any = None, client: Any = None
               ) -> Iterator[tuple[str, list[dict[str, Any]]]]:
     """Yield ``(path, records)`` for each ``(path, methods)`` of ``todo`` as it completes
-    (``map_tasks`` of ``rtseg.archive.take_records``).  A task lost on its worker gives
+    (``map_tasks`` of ``rtseg.archive_records.take_records``).  A task lost on its worker gives
     error records.  ``client``: a running Dask client (benchmarks: start-up timed apart)."""
-    from rtseg.archive import error_record
+    from rtseg.archive_records import error_record
     if stats is not None:
         backend = "dask" if client is not None else backend_of(workers, scheduler)
         stats.backend = backend if backend == "in-process" else (
