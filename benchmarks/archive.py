@@ -4,12 +4,12 @@
     python benchmarks/archive.py [--takes 200] [--method contrast] [--workers 1,2]
                                  [--archive DIR] [--repeat 1] [--json]
 
-The archive: ``--takes`` synthetic takes of 30-120 s (``rtseg.simulators.synth``, random
+The archive: ``--takes`` synthetic takes of 30-120 s (``rtseg.simulators.synth.motion``, random
 behaviour scripts, 120 fps, written with ``write_take`` to ``--archive``, default a folder
 in the temp dir kept between runs so the takes are generated once) plus the real takes of
 ../shared/data/cmu when present.  For each worker count a ``LocalCluster`` (processes, one
 thread each) is started (start-up timed apart), every take runs as one task through
-``rtseg.archive_exec.run_tasks`` (the code path of ``rtseg segment --workers N``), and the
+``rtseg.archive.executors.run_tasks`` (the code path of ``rtseg segment --workers N``), and the
 wall time from submission to the last record gives takes/s.
 
 Worker CPU: the CPU seconds the worker processes used during the run (``cpu_share`` =
@@ -44,7 +44,7 @@ REAL = REPO.parent / "shared" / "data" / "cmu"
 def make_archive(folder: Path, n: int, min_s: float, max_s: float, seed: int = 0) -> list[str]:
     """``n`` synthetic takes of min_s..max_s seconds in ``folder`` (reused when present)."""
     from rtseg.drivers.readers import write_take
-    from rtseg.simulators.synth import BEHAVIOURS, synthesize
+    from rtseg.simulators.synth.motion import BEHAVIOURS, synthesize
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     names = list(BEHAVIOURS)
@@ -74,7 +74,7 @@ def noop(x: int) -> int:
 
 
 def run_once(todo: list[tuple[str, list[str]]], workers: int) -> dict[str, Any]:
-    from rtseg.archive_exec import dask_client, run_tasks
+    from rtseg.archive.executors import dask_client, run_tasks
     load0 = os.getloadavg()
     t0 = time.perf_counter()
     with dask_client(workers=workers) as client:
@@ -105,7 +105,7 @@ def run_once(todo: list[tuple[str, list[str]]], workers: int) -> dict[str, Any]:
 def noop_overhead(n: int) -> float:
     """Median round trip (s) per no-op task on one worker, tasks submitted together."""
     from dask.distributed import wait
-    from rtseg.archive_exec import dask_client
+    from rtseg.archive.executors import dask_client
     with dask_client(workers=1) as client:
         client.wait_for_workers(1)
         times = []
@@ -131,8 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--noop", type=int, default=500, help="no-op tasks for the round trip")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
-    from rtseg.archive import discover_takes
-    from rtseg.segmentation import METHODS
+    from rtseg.archive.runner import discover_takes
+    from rtseg.detectors.segmentation import METHODS
     methods = list(METHODS) if args.method == "all" else args.method.split(",")
     folder = args.archive or Path(tempfile.gettempdir()) / (
         f"rtseg-archive-bench-{args.takes}-{args.min_s:g}-{args.max_s:g}")

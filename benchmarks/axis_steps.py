@@ -3,7 +3,7 @@
 
     python3 benchmarks/axis_steps.py [--frames 3000] [--repeat 5] [--cpu-time] [--no-kernel] [--json]
 
-The Axis text source's pipeline (``rtseg.drivers.axis_source.TextStream``) taken apart into
+The Axis text source's pipeline (``rtseg.drivers.axis.source.TextStream``) taken apart into
 its steps - split on ``||``, field check, orjson, arrays, ``AxisFrame`` stack, Euler
 half-angles, products and forward kinematics (in the compiled kernel where it is built,
 else numpy), ``Frame`` objects - each timed around it, for 4 KiB and 64 KiB reads in local
@@ -36,11 +36,11 @@ def axis_steps(n: int, repeat: int) -> dict:
     64 KiB reads in local and global space; the minimum over ``repeat`` passes of each
     step, in microseconds per frame.  The steps call the same functions as the pipeline
     (the frames' values are checked against ``TextStream``'s bit for bit)."""
-    from rtseg.drivers import axis_pose as P
-    from rtseg.drivers import codec_axis as A
-    from rtseg.drivers import codec_axis_text as T
-    from rtseg.drivers.axis_source import AxisFrames, TextStream
-    from rtseg.frame import Frame
+    from rtseg.drivers.axis import pose as P
+    from rtseg.drivers.axis import codec as A
+    from rtseg.drivers.axis import text as T
+    from rtseg.drivers.axis.source import AxisFrames, TextStream
+    from rtseg.core.frame import Frame
     v = axis_values(n)
     stream = b"".join(T.encode_text(v[i]) for i in range(n))
     out: dict = {}

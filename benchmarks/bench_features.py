@@ -15,8 +15,8 @@ import time
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rtseg.features import PoseFeatures
-from rtseg.profiles import suit_profile
+from rtseg.core.features import PoseFeatures
+from rtseg.core.profiles import suit_profile
 
 
 def bench_step(pf: PoseFeatures, frames: np.ndarray, calibrate: bool) -> tuple[float, float]:

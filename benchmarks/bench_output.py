@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rtseg.events import CutEvent
-from rtseg.frame import Frame
+from rtseg.core.events import CutEvent
+from rtseg.core.frame import Frame
 from rtseg.publishers import (JsonlPublisher, OscTcpPublisher, OscUdpPublisher, PublisherSet)
 from rtseg.recording import SessionRecorder
 

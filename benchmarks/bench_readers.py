@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from rtseg.drivers.readers import read_take, write_take
-from rtseg.features import take_features
+from rtseg.core.features import take_features
 
 DATA = Path(os.environ.get("RTSEG_DATA", Path(__file__).resolve().parent.parent.parent / "shared" / "data"))
 

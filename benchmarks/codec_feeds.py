@@ -43,8 +43,8 @@ class MvnTcpFeed:
     resynchronisations, as the source counts them).  ``quiet``: the assembler's (s)."""
 
     def __init__(self, ids: list[int], quiet: float = 0.05) -> None:
-        from rtseg.drivers.codec_mvn import MxtpStream
-        from rtseg.drivers.codec_mvn_assembler import MvnAssembler
+        from rtseg.drivers.mvn.codec import MxtpStream
+        from rtseg.drivers.mvn.assembler import MvnAssembler
         self.cut, self.asm = MxtpStream(), MvnAssembler(ids, quiet=quiet)
         self.stats = self.asm.stats
 
@@ -63,7 +63,7 @@ class AxisTextFeed:
     ``||``, decode the frames the read completes together, convert)."""
 
     def __init__(self, space: str = "local") -> None:
-        from rtseg.drivers.axis_source import AxisFrames, TextStream
+        from rtseg.drivers.axis.source import AxisFrames, TextStream
         self.count = CountingStats()
         self.stats = self.count.stats
         self.stream = TextStream(AxisFrames(self.count, space=space))
@@ -77,7 +77,7 @@ class AxisTextFeed:
 
 def rokoko_feed() -> Any:
     """The Rokoko source's assembler (``RokokoAssembler``, all actors) with ``stats``."""
-    from rtseg.drivers.rokoko_source import RokokoAssembler
+    from rtseg.drivers.rokoko.source import RokokoAssembler
     count = CountingStats()
     asm = RokokoAssembler(None, count)
     asm.stats = count.stats
@@ -87,7 +87,7 @@ def rokoko_feed() -> Any:
 def axis_binary_feed(space: str = "local") -> Any:
     """The Axis binary source's datagram joiner, decoder and converter
     (``axis_source._BinaryAdapter``) with ``stats``."""
-    from rtseg.drivers.axis_source import AxisFrames, _BinaryAdapter
+    from rtseg.drivers.axis.source import AxisFrames, _BinaryAdapter
     count = CountingStats()
     asm = _BinaryAdapter(AxisFrames(count, space=space))
     asm.stats = count.stats
@@ -97,7 +97,7 @@ def axis_binary_feed(space: str = "local") -> Any:
 def rokoko_payloads(n: int, compress: bool) -> list[bytes]:
     """n Rokoko Studio Custom JSON v3 payloads (one actor, 21 bones), LZ4 when
     ``compress``."""
-    from rtseg.drivers.codec_rokoko import encode_packet
+    from rtseg.drivers.rokoko.codec import encode_packet
     q = vendor_motion(n, 21)
     return [encode_packet([("Actor1", q[i], None, np.array([0.0, 0.95, 0.01 * i]))], i / 60,
                           compress=compress) for i in range(n)]
@@ -106,7 +106,7 @@ def rokoko_payloads(n: int, compress: bool) -> list[bytes]:
 def axis_values(n: int) -> np.ndarray:
     """(n, 354) Axis BVH values (59 joints x root position + YXZ Euler degrees, zero bone
     offsets), smooth motion."""
-    from rtseg.drivers.codec_axis import JOINTS, quat_to_euler
+    from rtseg.drivers.axis.codec import JOINTS, quat_to_euler
     v = np.zeros((n, len(JOINTS), 6))
     v[:, :, 3:] = quat_to_euler("YXZ", vendor_motion(n, len(JOINTS)))
     v[:, 0, :3] = (0.0, 95.0, 0.0)
@@ -120,6 +120,6 @@ def numpy_axis_path() -> None:
     import os
     import sys
     os.environ["RTSEG_NO_KERNEL"] = "1"
-    kernel = sys.modules.get("rtseg.drivers.axis_kernel")
+    kernel = sys.modules.get("rtseg.drivers.axis.kernel")
     if kernel is not None:
         kernel.ENABLED = False

@@ -14,9 +14,9 @@
 Bytes are encoded **before** timing (encoding is not counted); the timed loop is decoding
 only, on one core, median of ``--repeat`` runs:
 
-- ``serial``: ``rtseg.drivers.codec_serial.SerialFrameDecoder`` fed the binary wire
+- ``serial``: ``rtseg.drivers.serial.codec.SerialFrameDecoder`` fed the binary wire
   stream (COBS + CRC, Q14) in 4096-byte chunks, as a serial read loop would deliver it.
-- ``vmc``: ``rtseg.drivers.codec_vmc.VmcAssembler`` fed one UDP datagram at a time
+- ``vmc``: ``rtseg.drivers.osc.vmc.codec.VmcAssembler`` fed one UDP datagram at a time
   (17 Bone/Pos + Root/Pos + T + OK per frame, bundles of at most 1472 bytes: one datagram),
   frames closed and converted to rtseg's frame exactly as the live OSC source does (the
   whole-frame fast path applies).
@@ -26,13 +26,13 @@ only, on one core, median of ``--repeat`` runs:
 - ``python_osc_parse`` (for comparison): python-osc's ``OscPacket`` parsing the same VMC
   datagrams, without any frame assembly.
 
-- ``mvn``: ``rtseg.drivers.codec_mvn.MvnAssembler`` fed Xsens MVN type-02 datagrams (23
+- ``mvn``: ``rtseg.drivers.mvn.codec.MvnAssembler`` fed Xsens MVN type-02 datagrams (23
   segments, one 760-byte datagram per frame); ``mvn_3_datagrams``: the same frames split
   over 3 datagrams each (reassembly by sample counter).
-- ``mocopi``: ``rtseg.drivers.codec_mocopi.MocopiAssembler`` fed mocopi ``fram`` datagrams
+- ``mocopi``: ``rtseg.drivers.mocopi.codec.MocopiAssembler`` fed mocopi ``fram`` datagrams
   (27 bones, one datagram per frame).
 
-- ``rokoko``: ``rtseg.drivers.rokoko_source.RokokoAssembler`` fed Rokoko Studio Custom
+- ``rokoko``: ``rtseg.drivers.rokoko.source.RokokoAssembler`` fed Rokoko Studio Custom
   JSON v3 payloads (one actor, 21 bones; JSON parsed with orjson, a core dependency - the
   row says which parser ran, the json module only where orjson is missing);
   ``rokoko_lz4``: the same payloads LZ4-compressed; ``rokoko_json_module``: plain payloads
@@ -104,10 +104,10 @@ def _use_tree(argv: list[str]) -> str | None:
 
 TREE = _use_tree(sys.argv) if __name__ == "__main__" else None
 
-from rtseg.drivers.codec_vmc import (HUMAN_BODY_BONES, VmcAssembler,  # noqa: E402
+from rtseg.drivers.osc.vmc.codec import (HUMAN_BODY_BONES, VmcAssembler,  # noqa: E402
                                       encode_frame as vmc_encode)
 # the default17 suit's bones, in sensor order
-from rtseg.simulators.synth_skeleton import JOINT_NAMES as BONES  # noqa: E402
+from rtseg.simulators.synth.skeleton import JOINT_NAMES as BONES  # noqa: E402
 
 from codec_feeds import (AxisTextFeed, MvnTcpFeed, axis_binary_feed, axis_values,  # noqa: E402
                          numpy_axis_path, rokoko_feed, rokoko_payloads, vendor_motion)
@@ -172,7 +172,7 @@ def _time_feed(make, dgrams: list[bytes], n: int, repeat: int, what: str) -> lis
 
 
 def bench_mvn(n: int, repeat: int, parts: int = 1) -> dict:
-    from rtseg.drivers.codec_mvn import HEADER_SIZE, ITEM_SIZE, MvnAssembler, encode_datagrams
+    from rtseg.drivers.mvn.codec import HEADER_SIZE, ITEM_SIZE, MvnAssembler, encode_datagrams
     q = vendor_motion(n, 23)
     ids = list(range(1, 24))
     per = -(-23 // parts)
@@ -184,7 +184,7 @@ def bench_mvn(n: int, repeat: int, parts: int = 1) -> dict:
 
 
 def bench_mocopi(n: int, repeat: int) -> dict:
-    from rtseg.drivers.codec_mocopi import MocopiAssembler, encode_frame
+    from rtseg.drivers.mocopi.codec import MocopiAssembler, encode_frame
     q = vendor_motion(n, 27)
     dgrams = [encode_frame(i, q[i], time=i * 20, uttm=1.7e9 + i / 50) for i in range(n)]
     rates = _time_feed(MocopiAssembler, dgrams, n, repeat, "mocopi")
@@ -193,7 +193,7 @@ def bench_mocopi(n: int, repeat: int) -> dict:
 
 
 def bench_rokoko(n: int, repeat: int, compress: bool = False, json_module: bool = False) -> dict:
-    from rtseg.drivers import codec_rokoko
+    from rtseg.drivers.rokoko import codec as codec_rokoko
     dgrams = rokoko_payloads(n, compress)
     saved = codec_rokoko._loads
     if json_module:
@@ -210,7 +210,7 @@ def bench_rokoko(n: int, repeat: int, compress: bool = False, json_module: bool 
 def bench_mvn_tcp(n: int, repeat: int) -> dict:
     """MVN over TCP: the type-02 messages back to back, in 4096-byte reads, cut by
     MxtpStream and fed to the assembler (what MvnTcpSource runs per read)."""
-    from rtseg.drivers.codec_mvn import encode_datagrams
+    from rtseg.drivers.mvn.codec import encode_datagrams
     q = vendor_motion(n, 23)
     ids = list(range(1, 24))
     stream = b"".join(d for i in range(n) for d in encode_datagrams(i, i * 8, ids, q[i],
@@ -225,8 +225,8 @@ def bench_axis(n: int, repeat: int, text: bool = False, space: str = "local",
                chunk: int = SERIAL_CHUNK) -> dict:
     """``chunk``: bytes per TCP read of the text stream (4096; 65536 is what the source
     asks for, and gets when it has fallen behind)."""
-    from rtseg.drivers.codec_axis import encode_binary
-    from rtseg.drivers.codec_axis_text import encode_text
+    from rtseg.drivers.axis.codec import encode_binary
+    from rtseg.drivers.axis.text import encode_text
     v = axis_values(n)
     if text:
         stream = b"".join(encode_text(v[i]) for i in range(n))
@@ -245,7 +245,7 @@ def bench_axis(n: int, repeat: int, text: bool = False, space: str = "local",
 def bench_axis_burst(n: int, repeat: int, burst: int = 16, space: str = "global") -> dict:
     """Axis binary datagrams ``burst`` at a time through ``_BinaryAdapter.feed_many``: what
     the binary source decodes when datagrams wait in its socket (a reader catching up)."""
-    from rtseg.drivers.codec_axis import encode_binary
+    from rtseg.drivers.axis.codec import encode_binary
     v = axis_values(n)
     dgrams = [encode_binary(v[i], frame_index=i) for i in range(n)]
     groups = [dgrams[k:k + burst] for k in range(0, n, burst)]
@@ -268,7 +268,7 @@ def bench_axis_burst(n: int, repeat: int, burst: int = 16, space: str = "global"
 
 def bench_serial(q: np.ndarray, repeat: int) -> dict | None:
     try:
-        from rtseg.drivers.codec_serial import SerialFrameDecoder, encode_frame as ser_encode
+        from rtseg.drivers.serial.codec import SerialFrameDecoder, encode_frame as ser_encode
     except ImportError as exc:
         print(f"serial decoder not available: {exc}", file=sys.stderr)
         return None
@@ -306,7 +306,7 @@ def main(argv: list[str] | None = None) -> int:
                    "worktree of another commit: the code before a change) instead of the "
                    "installed package; command line only")
     p.add_argument("--no-kernel", action="store_true", help="Axis poses through the "
-                   "numpy path even where the compiled kernel (rtseg.drivers._axis_kernel) "
+                   "numpy path even where the compiled kernel (rtseg.drivers.axis._axis_kernel) "
                    "is built, to compare the two in one tree (RTSEG_NO_KERNEL=1)")
     args = p.parse_args(argv)
     if args.no_kernel:
@@ -352,8 +352,8 @@ def main(argv: list[str] | None = None) -> int:
                         "clock": "process_time" if args.cpu_time else "perf_counter",
                         "python": platform.python_version(), "machine": platform.machine(),
                         "tree": TREE or "installed",
-                        "codec_axis": sys.modules["rtseg.drivers.codec_axis"].__file__
-                        if "rtseg.drivers.codec_axis" in sys.modules else None}
+                        "codec_axis": sys.modules["rtseg.drivers.axis.codec"].__file__
+                        if "rtseg.drivers.axis.codec" in sys.modules else None}
     if args.json:
         print(json.dumps(result))
         return 0

@@ -32,7 +32,7 @@ unknown names.
 
 Scored: the cuts of the default live detector (``detectors.primary``, as ``rtseg live``
 sends them), each mapped back to the take frame it was received as (serial: sequence
-number; VMC: ``/VMC/Ext/T``), against the truth at +/- 0.5 s (``rtseg.evaluation.tally``,
+number; VMC: ``/VMC/Ext/T``), against the truth at +/- 0.5 s (``rtseg.evaluation.scoring.tally``,
 what ``rtseg evaluate --online`` reports as F1).  Every row gives ``f1`` beside the
 take's clean ``f1_clean`` and their ratio, the cuts, the detector restarts and bridged gaps,
 the frames sent / received, and ``overload_lost``: frames the sender delivered intact that
@@ -63,9 +63,9 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from rtseg.evaluation import pooled_tally, tally  # noqa: E402
-from rtseg.live import LiveSession  # noqa: E402
-from rtseg.session_config import from_dict  # noqa: E402
+from rtseg.evaluation.scoring import pooled_tally, tally  # noqa: E402
+from rtseg.live.session import LiveSession  # noqa: E402
+from rtseg.live.config import from_dict  # noqa: E402
 
 RATE = 120.0
 DATA = REPO.parent / "shared" / "data"
@@ -89,7 +89,7 @@ def load_takes(names: list[str], log: Callable[[str], None]) -> tuple[list[Bench
     out, skipped = [], {}
     for name in names:
         if name == "synth":
-            from rtseg.simulators.synth import synthesize
+            from rtseg.simulators.synth.motion import synthesize
             r = synthesize(frame_rate=RATE, seed=0)
             out.append(Bench("synth", r.take, r.transitions))
         elif name == "cmu86_01":
@@ -98,7 +98,7 @@ def load_takes(names: list[str], log: Callable[[str], None]) -> tuple[list[Bench
                 skipped[name] = f"{motion} not found"
                 log(f"faults: {name} skipped: {skipped[name]}")
                 continue
-            from rtseg.labels import find_labelled_takes
+            from rtseg.labels.takes import find_labelled_takes
             lt = [t for t in find_labelled_takes(DATA, groups=("cmu",)) if t.name == "86_01"]
             if not lt:
                 skipped[name] = f"no labels for 86_01 under {DATA / 'labels'}"
@@ -231,7 +231,7 @@ def _junk(rng: np.random.Generator, last: bytes, k: int) -> bytes:
         return last[:int(rng.integers(1, max(2, len(last))))]
     if k == 2:
         return last.replace(_BONE_TAG, b",siiiiiii")
-    from rtseg.drivers.codec_vmc_encode import encode_pose_message
+    from rtseg.drivers.osc.vmc.encode import encode_pose_message
     msgs = []
     size = 16
     i = 0

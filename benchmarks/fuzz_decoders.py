@@ -69,7 +69,7 @@ from rtseg.drivers import codec_vrchat as cvr  # noqa: E402
 from rtseg.drivers import codec_mocopi as cmo  # noqa: E402
 from rtseg.drivers import codec_mvn as cmv  # noqa: E402
 from rtseg.drivers.base import SourceStats  # noqa: E402
-from rtseg.simulators.synth_skeleton import JOINT_NAMES as BONES  # noqa: E402
+from rtseg.simulators.synth.skeleton import JOINT_NAMES as BONES  # noqa: E402
 
 sys.path.insert(0, str(REPO / "benchmarks"))
 from codec_feeds import (AxisTextFeed, MvnTcpFeed, axis_binary_feed,  # noqa: E402
@@ -154,7 +154,7 @@ def rokoko_seeds(rng: np.random.Generator) -> list[bytes]:
 
 
 def axis_seeds(rng: np.random.Generator) -> list[bytes]:
-    from rtseg.drivers.codec_axis import encode_binary
+    from rtseg.drivers.axis.codec import encode_binary
     v = axis_values(3)
     d = encode_binary(v[0])
     return [encode_binary(v[1], frame_index=1), d[:1024], d[1024:],
@@ -162,7 +162,7 @@ def axis_seeds(rng: np.random.Generator) -> list[bytes]:
 
 
 def axis_text_seeds(rng: np.random.Generator) -> list[bytes]:
-    from rtseg.drivers.codec_axis import encode_text
+    from rtseg.drivers.axis.codec import encode_text
     v = axis_values(3)
     return [encode_text(v[0]), encode_text(v[1][:180], 1, "Avatar01"), b" ||", b"||"]
 
@@ -224,7 +224,7 @@ class Mutator:
 # ============================================================================ checks
 def frame_ok(f: Any) -> bool:
     """The output contract: every valid quaternion is finite and unit (frames of
-    ``rtseg.frame.Frame`` or ``codec_serial.DecodedFrame``)."""
+    ``rtseg.core.frame.Frame`` or ``codec_serial.DecodedFrame``)."""
     q = np.asarray(f.quats, dtype=np.float64)
     v = np.asarray(f.valid, dtype=bool)
     if q.size == 0 or not v.any():

@@ -21,10 +21,10 @@ from pathlib import Path
 import numpy as np
 
 from rtseg.detectors.window_models import WindowStats, fit
-from rtseg.identity import IdentityTracker
-from rtseg.identity_eval import truth_labels
-from rtseg.labels import find_labelled_takes
-from rtseg.online_eval import fed_features, live_config, live_cuts
+from rtseg.identity.tracker import IdentityTracker
+from rtseg.evaluation.identity import truth_labels
+from rtseg.labels.takes import find_labelled_takes
+from rtseg.evaluation.online import fed_features, live_config, live_cuts
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 EDGE = 60           # frames cut off each end of a labelled segment (0.5 s)

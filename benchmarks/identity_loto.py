@@ -1,7 +1,7 @@
-"""Choosing the identity threshold by leave-one-take-out (rtseg.identity, docs/identity.md).
+"""Choosing the identity threshold by leave-one-take-out (rtseg.identity.tracker, docs/identity.md).
 
 Every labelled cmu and tsseg4d take is run once through the live pipeline (fed feature
-rows and the primary detector's cuts, ``rtseg.online_eval``); then the ``IdentityTracker``
+rows and the primary detector's cuts, ``rtseg.evaluation.online``); then the ``IdentityTracker``
 is run on them at every threshold of ``--grid``.  For each take *name* (86_01 is in both
 groups and is held out from both), the threshold with the best pooled ARI over all the
 other takes is chosen and the held-out take scored with it.  With ``--decide-after`` the
@@ -26,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from rtseg.identity import IdentityTracker
-from rtseg.identity_eval import decision_delays_after, pooled_scores, truth_labels
-from rtseg.labels import find_labelled_takes
-from rtseg.online_eval import fed_features, live_config, live_cuts
+from rtseg.identity.tracker import IdentityTracker
+from rtseg.evaluation.identity import decision_delays_after, pooled_scores, truth_labels
+from rtseg.labels.takes import find_labelled_takes
+from rtseg.evaluation.online import fed_features, live_config, live_cuts
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
@@ -54,7 +54,7 @@ def replay(d: dict, threshold: float, method: str, decide_after_s: float
 def recurring_script(seed: int, n: int = 8) -> str:
     """A script of ``n`` behaviours (6-8 s) from 4 distinct ones of the synthesiser, drawn
     with ``seed``: consecutive behaviours differ and every one of the 4 recurs."""
-    from rtseg.simulators.synth_behaviours import BEHAVIOURS
+    from rtseg.simulators.synth.behaviours import BEHAVIOURS
     rng = np.random.default_rng([seed, 12])
     names = sorted(BEHAVIOURS)
     pick = list(rng.choice(names, size=4, replace=False))
@@ -97,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
                                           fr=float(tk.frame_rate),
                                           truth=truth_labels(lt, tk.n_frames),
                                           mids=[t.mid for t in lt.transitions])
-    from rtseg.simulators.synth import synthesize
+    from rtseg.simulators.synth.motion import synthesize
     for seed in args.synth_seeds:
         res = synthesize(recurring_script(seed), seed=seed)
         tk = res.take

@@ -1,7 +1,7 @@
-"""Cost of behaviour identity (rtseg.identity) per frame, on top of the detectors.
+"""Cost of behaviour identity (rtseg.identity.tracker) per frame, on top of the detectors.
 
 The take's fed feature rows and the primary detector's cuts are computed once through the
-live pipeline (``rtseg.online_eval``); then the ``IdentityTracker`` alone is run over them
+live pipeline (``rtseg.evaluation.online``); then the ``IdentityTracker`` alone is run over them
 ``--repeat`` times, as the pipeline calls it (``step(index, row, cuts)``), and the
 per-frame time printed: mean per frame over the whole take (amortised cost; median over
 repeats), and the per-frame distribution (median, p99, max: the frames that decide or
@@ -11,7 +11,7 @@ finish a segment).  Also the whole pipeline per frame with identity off and on.
                                          [--library LIB [--compare LIB2]]
 
 ``--library LIB`` (``rtseg learn``): the tracker also names every decided segment
-(``rtseg.library``, the library's distance: ``model`` or, version-1 files, ``descriptor``);
+(``rtseg.library.behaviours``, the library's distance: ``model`` or, version-1 files, ``descriptor``);
 the per-decision naming time is printed too (median of 50 namings of one 2.5 s window).
 ``--compare LIB2``: the same window named by LIB and LIB2 alternately, 300 times each (one
 BLAS thread): medians, p90s and their ratio, side by side in one run.
@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from rtseg.identity import IdentityTracker
-from rtseg.online_eval import fed_features, live_config, live_cuts
-from rtseg.pipeline import _blas_limit
+from rtseg.identity.tracker import IdentityTracker
+from rtseg.evaluation.online import fed_features, live_config, live_cuts
+from rtseg.live.pipeline import _blas_limit
 
 DEFAULT_TAKE = Path(__file__).resolve().parents[2] / "shared" / "data" / "cmu" / "86_01.amc"
 
@@ -43,15 +43,15 @@ class _Cut:
 
 def load(path: str | None):
     if path or DEFAULT_TAKE.is_file():
-        from rtseg.take import load_take
+        from rtseg.core.take import load_take
         return load_take(path or DEFAULT_TAKE), str(path or DEFAULT_TAKE)
-    from rtseg.simulators.synth import synthesize
+    from rtseg.simulators.synth.motion import synthesize
     return synthesize("walk:8,punch:8,walk:8,squat:8,punch:8", seed=0).take, "synthetic"
 
 
 def pipeline_per_frame(take, cfg) -> float:
     """Whole live pipeline, microseconds per frame (one pass)."""
-    from rtseg.pipeline import Pipeline
+    from rtseg.live.pipeline import Pipeline
     fr = float(take.frame_rate)
     pipe = Pipeline(take.joint_names, take.parents, take.space, fr, cfg)
     valid = np.ones(take.n_joints, dtype=bool)
@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.compare and not args.library:
         ap.error("--compare needs --library")
     if args.library:
-        from rtseg.library import load as load_library
+        from rtseg.library.behaviours import load as load_library
         library = load_library(args.library)
         other = load_library(args.compare, library.profile, library.dims) if args.compare else None
     take, name = load(args.take)

@@ -5,7 +5,7 @@ passes and the offline methods: a table and a PNG.
                                            [--png latency_accuracy.png]
 
 DATA is a folder laid out like ../shared/data.  Every take goes once through the live
-pipeline (``rtseg.online_eval.fed_features``: the features ``rtseg live`` computes); the
+pipeline (``rtseg.evaluation.online.fed_features``: the features ``rtseg live`` computes); the
 default live detector (``contrast``) then runs on them at several delay budgets — its after
 window (how long after a change it looks), hold (how long it may wait to confirm a
 maximum), early look (on, as shipped, or off) and same-behaviour gate (as shipped, and
@@ -32,9 +32,9 @@ import numpy as np
 from rtseg.commands.evaluate import evaluate_takes
 from rtseg.detectors import load_params
 from rtseg.detectors.contrast import ContrastDetector
-from rtseg.evaluation import pooled_tally, tally
-from rtseg.labels import find_labelled_takes
-from rtseg.online_eval import fed_features, live_config, to_take_frames
+from rtseg.evaluation.scoring import pooled_tally, tally
+from rtseg.labels.takes import find_labelled_takes
+from rtseg.evaluation.online import fed_features, live_config, to_take_frames
 
 TOL_S = 0.5
 QUICK_S = 1.5                  # the short budget: median delay at most this

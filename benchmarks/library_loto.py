@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Held-out figures of named behaviour libraries (rtseg.library, docs/identity.md).
+"""Held-out figures of named behaviour libraries (rtseg.library.behaviours, docs/identity.md).
 
     python3 benchmarks/library_loto.py mocap6 [DATA_DIR]          # leave-one-take-out
     python3 benchmarks/library_loto.py mocap6 --by-person [DATA_DIR] # leave-one-person-out
@@ -12,7 +12,7 @@
 --by-person DIR: DIR a source folder laid out like ../shared/data/cmu_single, hdm05 or
 bandai, or their parent (../shared/data): per source, leave-one-person-out - the library
 learned from the other people of the same source names N (default 4) spliced
-performances of the held-out person (rtseg.library_lopo; seed K, default 0), then again
+performances of the held-out person (rtseg.evaluation.names_lopo; seed K, default 0), then again
 with each of their behaviours left out of the library in turn (not with --no-hide).  Per
 source and pooled: ``known`` (segments of behaviours the library holds: ``accuracy``
 named right, ``unknown_rate``, ``wrong_rate``, ``decision_delay_s`` after the change) and
@@ -41,7 +41,7 @@ take alone (``one_name``: that exercise's segments must get its name, every othe
 ``unknown``).
 ``--no-reject``: no null rejection (every segment its nearest name), the ceiling.
 ``--metric descriptor``: libraries of the earlier descriptor distance (default: model).
-``--step S``: example windows every S seconds (default ``rtseg.library.DEFAULT_STEP_S``);
+``--step S``: example windows every S seconds (default ``rtseg.library.behaviours.DEFAULT_STEP_S``);
 ``--name-after S``: the tracker's ``name_after_s`` (default: config/live.toml's).
 Prints one JSON document; parameters are the library's own (calibrated inside it).
 ``held_out``: the held-out takes' segments (``unknown_correct`` over those whose behaviour
@@ -62,11 +62,11 @@ from pathlib import Path
 
 import numpy as np
 
-from rtseg.identity_eval import named_truth_labels
-from rtseg.labels import find_labelled_takes
-from rtseg.library_eval import run_folds
-from rtseg.library_learn import examples_from_dir
-from rtseg.online_eval import live_config
+from rtseg.evaluation.identity import named_truth_labels
+from rtseg.labels.takes import find_labelled_takes
+from rtseg.evaluation.library import run_folds
+from rtseg.library.examples import examples_from_dir
+from rtseg.evaluation.online import live_config
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
@@ -150,8 +150,8 @@ def fewshot(data: Path, cfg, seconds: float) -> dict:
 
 
 def single(src: Path, cfg) -> dict:
-    from rtseg.splice import read_source_index
-    from rtseg.take import load_take
+    from rtseg.evaluation.splice import read_source_index
+    from rtseg.core.take import load_take
     rows = read_source_index(src)
     ex = examples_from_dir(src, cfg)
     out = {}
@@ -171,8 +171,8 @@ def single(src: Path, cfg) -> dict:
 
 
 def spliced(folder: Path, src: Path, cfg) -> dict:
-    from rtseg.features import PoseFeatures
-    from rtseg.take import load_take
+    from rtseg.core.features import PoseFeatures
+    from rtseg.core.take import load_take
     ex = examples_from_dir(src, cfg)
     takes = find_labelled_takes(folder, ("spliced",))
     tk, unit, units = {}, {}, {}
@@ -194,8 +194,8 @@ def spliced(folder: Path, src: Path, cfg) -> dict:
 
 def by_person_sources(argv: list[str], opts: dict) -> int:
     """``--by-person DIR [--n N] [--seed K] [--no-hide] [--segments]`` (module doc)."""
-    import rtseg.library_eval as le
-    from rtseg.library_lopo import lopo_sources
+    import rtseg.evaluation.library as le
+    from rtseg.evaluation.names_lopo import lopo_sources
     kw = {"n": 4, "seed": 0}
     try:
         for flag, key in (("--n", "n"), ("--seed", "seed")):
@@ -230,7 +230,7 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
     if not segments:
         for d in doc["sources"].values():
             d.pop("segments", None)
-    from rtseg.library import DEFAULT_STEP_S
+    from rtseg.library.behaviours import DEFAULT_STEP_S
     print(json.dumps({"protocol": "leave-one-person-out over source folders",
                       "seconds": round(time.perf_counter() - t0, 1),
                       "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
@@ -246,12 +246,12 @@ def main(argv: list[str] | None = None) -> int:
         print(__doc__)
         return 0
     if "--no-reject" in argv:              # every segment gets its nearest name
-        import rtseg.library_eval as le
+        import rtseg.evaluation.library as le
         le.NO_REJECT = True
         argv.remove("--no-reject")
-    if "--metric" in argv:                 # the libraries' distance (rtseg.library.METRICS)
-        import rtseg.library_eval as le
-        from rtseg.library import METRICS
+    if "--metric" in argv:                 # the libraries' distance (rtseg.library.behaviours.METRICS)
+        import rtseg.evaluation.library as le
+        from rtseg.library.behaviours import METRICS
         k = argv.index("--metric")
         if k + 1 >= len(argv) or argv[k + 1] not in METRICS:
             print(f"--metric: one of {', '.join(METRICS)}", file=sys.stderr)
@@ -268,7 +268,7 @@ def main(argv: list[str] | None = None) -> int:
         print(exc, file=sys.stderr)
         return 2
     if "--step" in opts:
-        import rtseg.library_eval as le
+        import rtseg.evaluation.library as le
         le.WINDOWS["step_s"] = opts["--step"]
     by_person = "--by-person" in argv
     if by_person:
@@ -314,7 +314,7 @@ def main(argv: list[str] | None = None) -> int:
     except (FileNotFoundError, ValueError) as exc:
         print(f"library_loto.py {argv[0]}: {exc}", file=sys.stderr)
         return 2
-    from rtseg.library import DEFAULT_STEP_S
+    from rtseg.library.behaviours import DEFAULT_STEP_S
     doc = {"protocol": argv[0] + (" by person" if by_person else ""),
            "seconds": round(time.perf_counter() - t0, 1),
            "step_s": opts.get("--step", DEFAULT_STEP_S),

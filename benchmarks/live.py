@@ -53,8 +53,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from rtseg.live import LiveSession, replay_frames  # noqa: E402
-from rtseg.session_config import from_dict  # noqa: E402
+from rtseg.live.session import LiveSession, replay_frames  # noqa: E402
+from rtseg.live.config import from_dict  # noqa: E402
 
 RATES = (500, 1000, 2000, 3000, 4000, 6000, 8000)
 
@@ -103,9 +103,9 @@ class PacedSource:
 
     def __new__(cls, rate: float):
         from rtseg.drivers.base import Source
-        from rtseg.frame import Frame
-        from rtseg.quat import global_from_local
-        from rtseg.simulators.synth import JOINT_NAMES, PARENTS, synthesize
+        from rtseg.core.frame import Frame
+        from rtseg.core.quat import global_from_local
+        from rtseg.simulators.synth.motion import JOINT_NAMES, PARENTS, synthesize
 
         take = synthesize(frame_rate=120.0).take
         g = global_from_local(take.quats, take.parents)
@@ -205,8 +205,8 @@ def latency_and_cpu(seconds: float, port: int, monitor: bool = False) -> dict:
 
 
 def detector_delays(extra: dict[str, list[float]]) -> dict[str, float]:
-    from rtseg.quat import global_from_local
-    from rtseg.simulators.synth import synthesize
+    from rtseg.core.quat import global_from_local
+    from rtseg.simulators.synth.motion import synthesize
     take = synthesize(frame_rate=120.0).take
     g = global_from_local(take.quats, take.parents)
     ok = np.ones(take.n_joints, bool)
@@ -252,7 +252,7 @@ def overload(factor: float, seconds: float, port: int, log, max_lag: float | Non
     try:
         cfg = config(port)
         if max_lag is not None:
-            from rtseg.session_config import apply_overrides
+            from rtseg.live.config import apply_overrides
             apply_overrides(cfg, {"buffer.max_lag_seconds": max_lag}, origin="benchmark")
         session = LiveSession(f"serial://{suit.path}?rate=120", cfg, handle_signals=False,
                               duration=seconds + 1.0)

@@ -10,14 +10,14 @@ DIR is laid out like ``../shared/data``: ``cmu/`` (full labelled performances, o
 per subject number) and any number of single-behaviour source folders laid out like
 ``cmu_single/`` (``index.tsv`` with take, subject, format, behaviour; ``bvh/``, ``amc/``),
 e.g. ``cmu_single``, ``hdm05``, ``bandai``.  A folder laid out like one source alone works
-too.  From each source ``rtseg.splice`` builds same-person and mixed performances
+too.  From each source ``rtseg.evaluation.splice`` builds same-person and mixed performances
 (``--per-person`` x people of each kind per seed, cached under ``--cache``; a source of one
 person gives same-person ones only).  Held-out units: each person with same-person
 performances (the cmu takes of one subject are one person), and each mixed performance
 holding someone who has none (a person with one behaviour per format); a unit's training
 set shares nobody with it.  Mixed performances of people who have their own are left out.
 
-Every performance goes once through the live pipeline (``rtseg.online_eval.fed_features``:
+Every performance goes once through the live pipeline (``rtseg.evaluation.online.fed_features``:
 the features ``rtseg live`` feeds its detectors); every parameter set of the grid then runs
 the real ``ContrastDetector`` on those rows.  A set is scored on a group of people by the
 mean over its performances of each performance's F1 at +-0.5 s; sets whose median
@@ -42,10 +42,10 @@ import numpy as np
 
 from rtseg.detectors import load_params
 from rtseg.detectors.contrast import ContrastDetector
-from rtseg.evaluation import pooled_tally, tally
-from rtseg.labels import find_labelled_takes
-from rtseg.online_eval import fed_features, live_config, to_take_frames
-from rtseg.splice import SpliceConfig, generate
+from rtseg.evaluation.scoring import pooled_tally, tally
+from rtseg.labels.takes import find_labelled_takes
+from rtseg.evaluation.online import fed_features, live_config, to_take_frames
+from rtseg.evaluation.splice import SpliceConfig, generate
 
 TOL_S = 0.5
 #: the candidates (every combination); the shipped defaults fill the other keys

@@ -11,8 +11,8 @@ sensitivity.
                                                       # what chose the shipped set (~16 min)
 
 Every take of DATA (a folder laid out like ../shared/data: its cmu and tsseg4d groups) and
-the synthetic performances (``rtseg.simulators.synth``, the default script, one per seed)
-goes once through the live pipeline (``rtseg.online_eval``: the same features as
+the synthetic performances (``rtseg.simulators.synth.motion``, the default script, one per seed)
+goes once through the live pipeline (``rtseg.evaluation.online``: the same features as
 ``rtseg live``); the features fed to the detector are kept, and every candidate parameter
 set runs the real ``ContrastDetector`` on them (the full and early profiles are computed
 once per window geometry - step, after window, early window; the cut picker
@@ -59,10 +59,10 @@ import numpy as np
 from rtseg.detectors import load_params
 from rtseg.detectors.contrast import ContrastDetector
 from rtseg.detectors.early import EarlyCuts
-from rtseg.evaluation import pooled_tally, tally
-from rtseg.labels import find_labelled_takes
-from rtseg.online_eval import fed_features, live_config, to_take_frames
-from rtseg.simulators.synth import DEFAULT_SCRIPT, synthesize
+from rtseg.evaluation.scoring import pooled_tally, tally
+from rtseg.labels.takes import find_labelled_takes
+from rtseg.evaluation.online import fed_features, live_config, to_take_frames
+from rtseg.simulators.synth.motion import DEFAULT_SCRIPT, synthesize
 
 TOL_S = 0.5
 OBJECTIVES = ("takes", "pooled", "groups")   # objective() kinds; --nested chooses among them

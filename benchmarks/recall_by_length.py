@@ -6,8 +6,8 @@ each transition.
 
 Every labelled take of each folder (groups cmu, tsseg4d and spliced; ``benchmarks/splice.py``
 output is a folder of group spliced) goes through the live pipeline with the shipped
-defaults (``rtseg.online_eval``: the features and detector ``rtseg live`` runs), and its
-cuts are matched to the labelled ranges widened by 0.5 s (``rtseg.evaluation``, maximum
+defaults (``rtseg.evaluation.online``: the features and detector ``rtseg live`` runs), and its
+cuts are matched to the labelled ranges widened by 0.5 s (``rtseg.evaluation.scoring``, maximum
 matching).  Each transition is then binned by the length of the segment **before** it
 (labelled mid of the previous transition, or the take's start, to this one's mid, in
 seconds) and, separately, of the segment **after** it; the recall of each bin is printed
@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from rtseg.evaluation import score, widen
-from rtseg.labels import find_labelled_takes
-from rtseg.online_eval import live_config, live_cuts
+from rtseg.evaluation.scoring import score, widen
+from rtseg.labels.takes import find_labelled_takes
+from rtseg.evaluation.online import live_config, live_cuts
 
 TOL_S = 0.5
 BINS_S = (0.0, 3.5, 5.0, 7.0, float("inf"))

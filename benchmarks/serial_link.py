@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from rtseg.drivers import open_source
-from rtseg.profiles import suit_profile
+from rtseg.core.profiles import suit_profile
 from rtseg.simulators.serial_device import SerialSuit
 
 

@@ -103,8 +103,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from rtseg.live import LiveSession  # noqa: E402
-from rtseg.session_config import from_dict  # noqa: E402
+from rtseg.live.session import LiveSession  # noqa: E402
+from rtseg.live.config import from_dict  # noqa: E402
 
 sys.path.insert(0, str(REPO / "benchmarks"))
 from soak_meter import GcPauses, Meter  # noqa: E402
@@ -136,7 +136,7 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int,
     logging.basicConfig(level=logging.ERROR)
     from collections import deque
     from rtseg.simulators.serial_device import SerialSuit
-    from rtseg.simulators.synth import synthesize
+    from rtseg.simulators.synth.motion import synthesize
     if mode == "cuts":
         from soak_score import soak_script
         r = synthesize(soak_script(), frame_rate=RATE, seed=0)

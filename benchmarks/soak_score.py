@@ -26,8 +26,8 @@ def soak_script(seconds: float = 600.0, seed: int = 5, lo: float = 5.0,
     (default: the nine of the synthesiser's default performance), never the same twice in
     a row, the last differing from the first so the loop's junction is a change too, each
     ``lo``..``hi`` seconds long; every behaviour recurs."""
-    from rtseg.simulators.synth import DEFAULT_SCRIPT
-    from rtseg.simulators.synth_script import parse_script
+    from rtseg.simulators.synth.motion import DEFAULT_SCRIPT
+    from rtseg.simulators.synth.script import parse_script
     names = list(names) if names is not None else [n for n, _ in parse_script(DEFAULT_SCRIPT)]
     rng = np.random.default_rng(seed)
     while True:
@@ -109,7 +109,7 @@ def truth(n_loop: int, transitions: Sequence[tuple], segments: Sequence[tuple],
     """The looped take's truth over ``n_frames`` absolute frames: Transition list (the
     loop junctions included, each one frame wide), and for the per-frame labels the
     segment starts, their behaviour codes and the code names."""
-    from rtseg.labels import Transition
+    from rtseg.labels.takes import Transition
     first, last = segments[0][0], segments[-1][0]
     out = []
     loops = n_frames // n_loop + 1
@@ -129,10 +129,10 @@ def truth(n_loop: int, transitions: Sequence[tuple], segments: Sequence[tuple],
 def score_by_hour(cut_frames: np.ndarray, transitions: list, frames_per_hour: int,
                   n_frames: int, rate: float, tolerance_s: float = 0.5) -> list[float | None]:
     """Live F1 per session hour at +/- ``tolerance_s``: the cuts matched to the transitions
-    over the whole run (``rtseg.evaluation.score`` on widened ranges), then per hour true
+    over the whole run (``rtseg.evaluation.scoring.score`` on widened ranges), then per hour true
     positives and missed transitions by the transition's mid, false cuts by the cut's frame.
     The last hour counts if it holds at least a quarter of an hour of frames."""
-    from rtseg.evaluation import score, widen
+    from rtseg.evaluation.scoring import score, widen
     wide = widen(transitions, int(round(tolerance_s * rate)))
     cuts = [int(c) for c in cut_frames if c >= 0]
     s = score(cuts, wide)

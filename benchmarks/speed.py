@@ -38,8 +38,8 @@ def _features(data: Path | None) -> tuple[np.ndarray, float, str]:
     if data is not None:
         amc = data / "cmu" / "86_01.amc"
         if amc.exists():
-            from rtseg.segmentation import compute_features
-            from rtseg.take import load_take
+            from rtseg.detectors.segmentation import compute_features
+            from rtseg.core.take import load_take
             take = load_take(amc, skeleton=data / "cmu" / "86.asf")
             return compute_features(take), take.frame_rate, f"CMU 86_01 ({amc})"
     rng = np.random.default_rng(0)
@@ -140,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
 def versus(path: Path, rows: list[np.ndarray], fps: float, repeat: int) -> dict[str, float]:
     """Frames/s (medians) of the shipped contrast detector and one with ``path``'s
     overrides, run alternately; ``ratio`` = shipped / other."""
-    from rtseg.segmentation import load_params
+    from rtseg.detectors.segmentation import load_params
     runs = {"shipped": online("contrast", fps, rows),
             "other": online("contrast", fps, rows, load_params(path, "contrast"))}
     speeds: dict[str, list[float]] = {"shipped": [], "other": []}

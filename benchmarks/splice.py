@@ -7,7 +7,7 @@
 SRC is laid out like ``../shared/data/cmu_single`` (index.tsv, bvh/, amc/).  OUT gets
 ``same_NNN.npz`` / ``mixed_NNN.npz`` (rtseg takes with per-frame behaviour labels and the
 cross-fade spans as transition ranges) and ``index.tsv`` (one row per segment).  The same
---seed gives byte-identical files.  The rules are in ``rtseg.splice`` and docs/splice.md.
+--seed gives byte-identical files.  The rules are in ``rtseg.evaluation.splice`` and docs/splice.md.
 Exit status 2 on bad input (one line on stderr).
 """
 
@@ -18,7 +18,7 @@ import logging
 import sys
 import time
 
-from rtseg.splice import KINDS, SpliceConfig, generate, read_source_index
+from rtseg.evaluation.splice import KINDS, SpliceConfig, generate, read_source_index
 
 
 def mixed_possible(src: str) -> bool:

@@ -1,10 +1,10 @@
-"""F1 of the detectors on synthetic takes from ``rtseg.simulators.synth``.
+"""F1 of the detectors on synthetic takes from ``rtseg.simulators.synth.motion``.
 
     python3 benchmarks/synth_segmentation.py [--seeds 0 1 2] [--script SCRIPT] [--tol 0]
                                              [--methods pca ppca] [--params FILE]
 
 Each seed synthesises the script (default: the synthesiser's default script), computes
-the pose features (``rtseg.features.take_features``), runs every detector method with its
+the pose features (``rtseg.core.features.take_features``), runs every detector method with its
 default parameters (or those of ``--params``; GMM's k = the script's behaviours) and
 scores the cuts against the exact transition ranges (the blend spans), widened by ``--tol`` seconds on each side.  Prints per-seed and pooled P/R/F1.
 """
@@ -15,10 +15,10 @@ import argparse
 import time
 
 from rtseg.detectors import METHODS, load_params, segment_features
-from rtseg.evaluation import pooled, score
-from rtseg.features import take_features
-from rtseg.labels import Transition
-from rtseg.simulators.synth import DEFAULT_SCRIPT, synthesize
+from rtseg.evaluation.scoring import pooled, score
+from rtseg.core.features import take_features
+from rtseg.labels.takes import Transition
+from rtseg.simulators.synth.motion import DEFAULT_SCRIPT, synthesize
 
 
 def main() -> None:

@@ -1,17 +1,17 @@
 """Live sources chosen by URL, one module each (in the spirit of pyserial's URL handlers).
 
-    serial:///dev/ttyUSB0?baud=921600&format=rtseg   -> rtseg.drivers.serial_source
-    osc://127.0.0.1:39539?format=vmc&allow=...       -> rtseg.drivers.osc_source
-    file://take.amc?skeleton=86.asf&speed=1.0        -> rtseg.drivers.file_source
-    sim://synth?seed=1&script=...                    -> rtseg.drivers.sim_source
-    rokoko://:14043?actor=NAME                       -> rtseg.drivers.rokoko_source
-    axis://127.0.0.1:7001?format=text | axis://:7002 -> rtseg.drivers.axis_source
-    mvn://:9763?character=0&allow=...                -> rtseg.drivers.mvn_source (Xsens MVN)
-    mocopi://:12351?allow=...                        -> rtseg.drivers.mocopi_source (Sony mocopi)
+    serial:///dev/ttyUSB0?baud=921600&format=rtseg   -> rtseg.drivers.serial.source
+    osc://127.0.0.1:39539?format=vmc&allow=...       -> rtseg.drivers.osc.source
+    file://take.amc?skeleton=86.asf&speed=1.0        -> rtseg.drivers.replay.file
+    sim://synth?seed=1&script=...                    -> rtseg.drivers.replay.sim
+    rokoko://:14043?actor=NAME                       -> rtseg.drivers.rokoko.source
+    axis://127.0.0.1:7001?format=text | axis://:7002 -> rtseg.drivers.axis.source
+    mvn://:9763?character=0&allow=...                -> rtseg.drivers.mvn.source (Xsens MVN)
+    mocopi://:12351?allow=...                        -> rtseg.drivers.mocopi.source (Sony mocopi)
 
 ``open_source(url)`` parses the URL and returns a started ``Source``.  Network sources
 listen on loopback (127.0.0.1) unless the URL writes another address (``osc://0.0.0.0:...``);
-``allow=`` restricts who may send (see ``rtseg.drivers.osc_source``).
+``allow=`` restricts who may send (see ``rtseg.drivers.osc.source``).
 """
 
 from __future__ import annotations
@@ -22,14 +22,14 @@ from urllib.parse import parse_qs, urlsplit
 from rtseg.drivers.base import Source, SourceError, SourceStats
 
 SCHEMES: dict[str, str] = {
-    "serial": "rtseg.drivers.serial_source",
-    "osc": "rtseg.drivers.osc_source",
-    "file": "rtseg.drivers.file_source",
-    "sim": "rtseg.drivers.sim_source",
-    "rokoko": "rtseg.drivers.rokoko_source",
-    "axis": "rtseg.drivers.axis_source",
-    "mvn": "rtseg.drivers.mvn_source",
-    "mocopi": "rtseg.drivers.mocopi_source",
+    "serial": "rtseg.drivers.serial.source",
+    "osc": "rtseg.drivers.osc.source",
+    "file": "rtseg.drivers.replay.file",
+    "sim": "rtseg.drivers.replay.sim",
+    "rokoko": "rtseg.drivers.rokoko.source",
+    "axis": "rtseg.drivers.axis.source",
+    "mvn": "rtseg.drivers.mvn.source",
+    "mocopi": "rtseg.drivers.mocopi.source",
 }
 
 

@@ -8,7 +8,7 @@ from collections import deque
 from dataclasses import asdict, dataclass
 from typing import Iterator
 
-from rtseg.frame import Frame
+from rtseg.core.frame import Frame
 
 log = logging.getLogger("rtseg.drivers")
 

@@ -9,7 +9,7 @@ there and point ``--config`` (or ``--params``) at the copy.
 
 ``config_dir()`` is the folder of the shipped defaults; ``load_toml(name_or_path)`` reads
 ``<config_dir>/<name>.toml`` or any path.  Validation of live-session configuration lives
-in ``rtseg.session_config``; detector parameters are read by ``rtseg.detectors``.
+in ``rtseg.live.config``; detector parameters are read by ``rtseg.detectors``.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Simulated Axis Neuron / Axis Studio BVH broadcast (``axis://`` reads it).
 
 ``AxisSender(take, fmt="binary", host="127.0.0.1", port=7002, ...)`` sends one BVH frame
-per take frame in the encodings of :mod:`rtseg.drivers.codec_axis`:
+per take frame in the encodings of :mod:`rtseg.drivers.axis.codec`:
 
 - ``fmt="binary"``: one UDP datagram per frame and avatar (64-byte header + float32
   values; ``split=1024`` cuts each frame into a 1024-byte datagram and the rest, as Axis
@@ -41,12 +41,12 @@ import time
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rtseg import quat as Q
-from rtseg.drivers.codec_axis import (BINARY_PORT, JOINTS, PARENTS, SUIT_SEGMENTS, TEXT_PORT,
+from rtseg.core import quat as Q
+from rtseg.drivers.axis.codec import (BINARY_PORT, JOINTS, PARENTS, SUIT_SEGMENTS, TEXT_PORT,
                                       encode_binary, quat_to_euler)
-from rtseg.drivers.codec_axis_text import encode_text
+from rtseg.drivers.axis.text import encode_text
 from rtseg.simulators.stream_sender import StreamSender
-from rtseg.take import Take
+from rtseg.core.take import Take
 
 __all__ = ["AxisSender", "axis_globals", "serve"]
 

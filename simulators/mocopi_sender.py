@@ -8,7 +8,7 @@ not documented), ``uttm`` = Unix time at start + take time (s), ``btrs`` with ea
 rotation **relative to its parent** (scalar-last, right-handed Y-up, as mocopi sends it)
 and position (root: the take's root in metres; other bones: 0).  A ``skdf`` skeleton
 packet is sent before the first frame and every ``skeleton_every`` frames.  See
-:mod:`rtseg.drivers.codec_mocopi`.
+:mod:`rtseg.drivers.mocopi.codec`.
 
 Read it with ``rtseg live mocopi://127.0.0.1:12351``.
 """
@@ -19,14 +19,14 @@ import time
 
 import numpy as np
 
-from rtseg import quat as Q
-from rtseg.drivers.codec_mocopi import DEFAULT_PORT, encode_frame, encode_skeleton
-from rtseg.profiles import SuitProfile
+from rtseg.core import quat as Q
+from rtseg.drivers.mocopi.codec import DEFAULT_PORT, encode_frame, encode_skeleton
+from rtseg.core.profiles import SuitProfile
 from rtseg.simulators.retarget import ImuModel
 from rtseg.simulators.udp_take_sender import (UdpTakeSender, cli_arguments, cli_take,
                                                cli_timing)
 from rtseg.simulators.vmc_sender import send_until_done, take_parser
-from rtseg.take import Take
+from rtseg.core.take import Take
 
 
 class MocopiSender(UdpTakeSender):

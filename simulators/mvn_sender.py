@@ -6,7 +6,7 @@ orientations by forward kinematics; segments the take lacks, e.g. L3 or the toes
 their parent's orientation) and sends, per frame, type-02 datagrams of at most
 ``max_datagram`` bytes: segment id, position (pelvis: the take's root in metres; other
 segments: 0), orientation w x y z in MVN's Z-up frame (see
-:mod:`rtseg.drivers.codec_mvn`).  Sample counter = frame slot; time code = take time in
+:mod:`rtseg.drivers.mvn.codec`).  Sample counter = frame slot; time code = take time in
 ms (so ``speed`` > 1 sends faster while the time code keeps the take's clock).  Before the
 first frame it sends a type-12 meta datagram (``name:<character_name>``).
 
@@ -32,14 +32,14 @@ import time
 
 import numpy as np
 
-from rtseg.drivers.codec_mvn import DEFAULT_MAX_DATAGRAM, DEFAULT_PORT, encode_datagrams, \
+from rtseg.drivers.mvn.codec import DEFAULT_MAX_DATAGRAM, DEFAULT_PORT, encode_datagrams, \
     encode_message
-from rtseg.profiles import SuitProfile
+from rtseg.core.profiles import SuitProfile
 from rtseg.simulators.retarget import ImuModel
 from rtseg.simulators.udp_take_sender import (UdpTakeSender, cli_arguments, cli_take,
                                                cli_timing)
 from rtseg.simulators.vmc_sender import send_until_done, take_parser
-from rtseg.take import Take
+from rtseg.core.take import Take
 
 
 class MvnSender(UdpTakeSender):

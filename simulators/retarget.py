@@ -56,10 +56,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rtseg import quat as Q
-from rtseg.profiles import SuitProfile
-from rtseg.skeletons import MAPS, SkeletonMap, candidates, rank_families, resolve_names
-from rtseg.take import Take
+from rtseg.core import quat as Q
+from rtseg.core.profiles import SuitProfile
+from rtseg.core.skeletons import MAPS, SkeletonMap, candidates, rank_families, resolve_names
+from rtseg.core.take import Take
 
 __all__ = ["SkeletonMap", "MAPS", "RetargetError", "ImuModel", "Retargeted",
            "forward_kinematics", "detect_family", "resolve", "retarget"]

@@ -1,7 +1,7 @@
 """Simulated Rokoko Studio: send a take as Custom JSON v3 over UDP (``rokoko://`` reads it).
 
 ``RokokoSender(take, host="127.0.0.1", port=14043, ...)`` sends one datagram per frame, the
-scene as :func:`rtseg.drivers.codec_rokoko.encode_packet` writes it (Studio's published
+scene as :func:`rtseg.drivers.rokoko.codec.encode_packet` writes it (Studio's published
 schema: ``version`` 3, ``fps``, ``scene.timestamp`` in take seconds, ``scene.actors[*].body``
 with the 21 body bones' global orientations, Unity left-handed, float32 values), optionally
 LZ4-compressed (``compress=True``, Studio's "compression" option).
@@ -22,9 +22,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from rtseg.drivers.codec_rokoko import BODY_BONES, DEFAULT_PORT, SUIT_BONES, encode_packet
+from rtseg.drivers.rokoko.codec import BODY_BONES, DEFAULT_PORT, SUIT_BONES, encode_packet
 from rtseg.simulators.stream_sender import StreamSender
-from rtseg.take import Take
+from rtseg.core.take import Take
 
 __all__ = ["RokokoSender", "main", "serve"]
 

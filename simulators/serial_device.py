@@ -3,7 +3,7 @@
 ``SerialSuit`` opens a pty pair (``os.openpty``, raw mode), exposes the slave end under a
 **stable path** - a symlink (``link``, default ``<tmpdir>/rtseg-suit``) to ``/dev/pts/N`` -
 and writes a take's sensor orientations from a background thread at the take's frame rate,
-encoded with :mod:`rtseg.drivers.codec_serial` (binary ``"rtseg"`` or ``"text"`` lines).
+encoded with :mod:`rtseg.drivers.serial.codec` (binary ``"rtseg"`` or ``"text"`` lines).
 Any program can read it like a USB serial device: ``serial:///tmp/.../rtseg-suit``.
 
 Unplug (scheduled by ``faults``' ``unplug=EVERY:FOR`` or requested with :meth:`unplug`)
@@ -49,11 +49,11 @@ from typing import Sequence
 
 import numpy as np
 
-from rtseg.drivers import codec_serial as codec
-from rtseg.profiles import SuitProfile, suit_profile
+from rtseg.drivers.serial import codec
+from rtseg.core.profiles import SuitProfile, suit_profile
 from rtseg.simulators.faults import FaultConfig, FaultInjector
 from rtseg.simulators.retarget import ImuModel, retarget
-from rtseg.take import Take
+from rtseg.core.take import Take
 
 log = logging.getLogger("rtseg.simulators.serial")
 
@@ -454,10 +454,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--once", action="store_true", help="send the take once instead of looping")
     args = p.parse_args(argv)
     if args.take:
-        from rtseg.take import load_take
+        from rtseg.core.take import load_take
         take = load_take(args.take, skeleton=args.skeleton)
     else:
-        from rtseg.simulators.synth import synthesize
+        from rtseg.simulators.synth.motion import synthesize
         take = synthesize().take
     suit = SerialSuit(take, rate=args.rate, faults=FaultConfig.parse(args.faults), link=args.link,
                       fmt=args.format, loop=not args.once, suit=args.suit, speed=args.speed)

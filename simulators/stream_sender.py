@@ -35,11 +35,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rtseg import quat as Q
-from rtseg.profiles import SuitProfile, suit_profile
+from rtseg.core import quat as Q
+from rtseg.core.profiles import SuitProfile, suit_profile
 from rtseg.simulators.retarget import ImuModel, RetargetError, Retargeted, resolve, retarget
 from rtseg.simulators.vmc_sender import SenderThread, _make_injector, root_metres, take_clock
-from rtseg.take import Take
+from rtseg.core.take import Take
 
 log = logging.getLogger("rtseg.simulators")
 

@@ -26,11 +26,11 @@ import logging
 
 import numpy as np
 
-from rtseg import quat as Q
-from rtseg.profiles import SuitProfile, resolve_joints
+from rtseg.core import quat as Q
+from rtseg.core.profiles import SuitProfile, resolve_joints
 from rtseg.simulators.retarget import ImuModel, RetargetError, Retargeted, retarget
 from rtseg.simulators.stream_sender import Sent, StreamSender, root_metres
-from rtseg.take import Take
+from rtseg.core.take import Take
 
 log = logging.getLogger("rtseg.simulators.udp")
 
@@ -124,7 +124,7 @@ def cli_take(args) -> Take:
     if args.take:
         from rtseg.drivers.readers import read_take
         return read_take(args.take)
-    from rtseg.simulators.synth import synthesize
+    from rtseg.simulators.synth.motion import synthesize
     return synthesize(args.script, seed=args.seed).take
 
 

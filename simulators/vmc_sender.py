@@ -45,10 +45,10 @@ from typing import Any
 
 import numpy as np
 
-from rtseg.drivers.codec_vmc import DEFAULT_MAX_DATAGRAM, canonical_bone_name, encode_frame
-from rtseg.profiles import SuitProfile, suit_profile
+from rtseg.drivers.osc.vmc.codec import DEFAULT_MAX_DATAGRAM, canonical_bone_name, encode_frame
+from rtseg.core.profiles import SuitProfile, suit_profile
 from rtseg.simulators.retarget import ImuModel, retarget
-from rtseg.take import Take
+from rtseg.core.take import Take
 
 log = logging.getLogger("rtseg.simulators.vmc")
 
@@ -348,10 +348,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--faults", help="fault spec, e.g. drop=0.02,jitter=0.002,dropout=LeftHand:2:1")
     args = p.parse_args(argv)
     if args.take:
-        from rtseg.take import load_take
+        from rtseg.core.take import load_take
         take = load_take(args.take, skeleton=args.skeleton)
     else:
-        from rtseg.simulators.synth import synthesize
+        from rtseg.simulators.synth.motion import synthesize
         take = synthesize(args.script, seed=args.seed).take
     sender = VmcSender(take, args.host, args.port, rate=args.rate, faults=args.faults,
                        loop=args.loop, speed=args.speed)

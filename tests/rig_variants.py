@@ -1,15 +1,15 @@
 """One motion written in several rigs: the synthetic 17-bone take re-expressed with other
 rigs' joint names and hierarchies (extra spine, neck, clavicle and hip joints; a rotation
 split across two spine joints; a fixed root above the pelvis), as the families of
-``rtseg.skeletons`` name them.  The segments' rotations relative to the segments they hang
+``rtseg.core.skeletons`` name them.  The segments' rotations relative to the segments they hang
 from are the same in every variant, so a rig-independent feature gives the same rows."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from rtseg import quat as Q
-from rtseg.take import Take
+from rtseg.core import quat as Q
+from rtseg.core.take import Take
 
 # (joint, parent, source): source is a bone of the synthetic take (its local rotation),
 # None (identity: a joint that never moves), or ("half1"|"half2", bone): the two halves of

@@ -19,8 +19,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from rig_variants import in_rig
-from rtseg.simulators.synth import synthesize
-from rtseg.take import Take
+from rtseg.simulators.synth.motion import synthesize
+from rtseg.core.take import Take
 
 
 def write_bvh(path: Path, take: Take) -> Path:

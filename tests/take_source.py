@@ -12,7 +12,7 @@ import time
 import numpy as np
 
 from rtseg.drivers.base import Source
-from rtseg.frame import Frame
+from rtseg.core.frame import Frame
 
 
 class TakeSource(Source):

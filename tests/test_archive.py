@@ -1,4 +1,4 @@
-"""Archives: ``rtseg segment PATH... --out FILE`` and ``rtseg.archive.run_archive`` on a
+"""Archives: ``rtseg segment PATH... --out FILE`` and ``rtseg.archive.runner.run_archive`` on a
 small synthetic archive (6 s takes in nested folders, one corrupt file): discovery,
 records, failed takes as records, resuming an interrupted run without redoing work, and a
 real Dask ``LocalCluster`` (2 worker processes) giving the same records as one process."""
@@ -12,13 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rtseg.archive import discover_takes, run_archive
-from rtseg.archive_store import load_records
+from rtseg.archive.runner import discover_takes, run_archive
+from rtseg.archive.store import load_records
 from rtseg.cli import main
 from rtseg.drivers.readers import write_take
-from rtseg.segmentation import segment_take_methods
-from rtseg.simulators.synth import synthesize
-from rtseg.take import load_take
+from rtseg.detectors.segmentation import segment_take_methods
+from rtseg.simulators.synth.motion import synthesize
+from rtseg.core.take import load_take
 
 from synth_identity import SYNTH_THRESHOLD
 
@@ -203,7 +203,7 @@ def test_cli_out_resume_progress_and_errors(archive, tmp_path, capsys):
 def test_without_dask_and_without_pyarrow(archive, tmp_path, capsys, monkeypatch):
     """Without Dask --workers runs in this process (a warning, same records) and
     --scheduler is a clear error; without pyarrow .parquet is a clear error."""
-    import rtseg.archive_exec as ex
+    import rtseg.archive.executors as ex
     monkeypatch.setattr(ex, "have_dask", lambda: False)
     out = tmp_path / "nodask.jsonl"
     rc = main(["segment", str(root := archive["root"] / "s1"), "--method", "pca",
@@ -272,7 +272,7 @@ def test_archive_records_carry_behaviour_ids(tmp_path, capsys):
     synthesiser's identity threshold as every synthetic identity test; the tracker is not
     always right - seed 1's second walk gets a new id - its accuracy is measured by
     `rtseg evaluate --identity`, docs/identity.md)."""
-    from rtseg.segment_identity import identify_take
+    from rtseg.identity.segments import identify_take
     script = "walk:6,punch:6,walk:6,punch:6,squat:6"
     (tmp_path / "in").mkdir()
     takes = [write_take(tmp_path / "in" / f"r{k}.npz", synthesize(script, seed=k).take)

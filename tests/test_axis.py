@@ -15,15 +15,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rtseg import quat as Q
+from rtseg.core import quat as Q
 from rtseg.drivers import open_source
-from rtseg.drivers import codec_axis as A
-from rtseg.drivers.axis_source import AxisFrames, _BinaryAdapter
+from rtseg.drivers.axis import codec as A
+from rtseg.drivers.axis.source import AxisFrames, _BinaryAdapter
 from rtseg.drivers.readers.bvh import read_bvh
-from rtseg.profiles import resolve_joints, suit_profile
-from rtseg.session_config import from_dict
+from rtseg.core.profiles import resolve_joints, suit_profile
+from rtseg.live.config import from_dict
 from rtseg.simulators.axis_sender import AxisSender
-from rtseg.simulators.synth import synthesize
+from rtseg.simulators.synth.motion import synthesize
 from vendor_helpers import (Counter, assert_refused, assert_same_cuts, free_port,
                             overwrite_bytes, random_bytes, read_all, run_live, send_and_read,
                             serial_reference, simulate_into)
@@ -312,7 +312,7 @@ def test_text_numbers_parse_to_exactly_what_float_gives():
     (including -0.0), on numpy's shortest float32 forms, printf forms, and random strings
     of digits, points and minus signs (which must be refused exactly when float() refuses
     them)."""
-    from rtseg.drivers.codec_axis_text import parse_decimals
+    from rtseg.drivers.axis.text import parse_decimals
     rng = random.Random(7)
     nrng = np.random.default_rng(7)
     for _ in range(300):
@@ -372,7 +372,7 @@ def test_json_number_path_is_bit_exact_to_float():
     -0.0 included, on every token form of _random_number_token; rows where some token is
     not a JSON number (or could be the integer -0) are refused as a whole (None) and then
     read exactly by parse_decimals' other paths."""
-    from rtseg.drivers import codec_axis_text as T
+    from rtseg.drivers.axis import text as T
     if T._json_loads is None:
         pytest.skip("orjson is not installed (a dependency of rtseg)")
     rng = random.Random(11)
@@ -404,7 +404,7 @@ def test_text_frames_with_non_json_tokens_keep_float_values_and_counters():
     """A frame whose numbers orjson refuses (printf's '1.', exponents beyond range, 'nan')
     decodes through the exact path: float()'s values, non-finite ones counted as bad
     values, and the other frames of the read unaffected."""
-    from rtseg.drivers.codec_axis_text import decode_texts
+    from rtseg.drivers.axis.text import decode_texts
     rng = np.random.default_rng(5)
     good = [A.encode_text(rng.uniform(-90, 90, 354))[:-3] for _ in range(2)]
     toks = good[0].split()
@@ -479,7 +479,7 @@ def _matrix_jump_global(local: np.ndarray) -> np.ndarray:
 @pytest.fixture(params=["kernel", "numpy"])
 def pose_backend(request, monkeypatch):
     """Each pose path of codec_axis: the compiled kernel and the numpy one."""
-    from rtseg.drivers import axis_kernel
+    from rtseg.drivers.axis import kernel as axis_kernel
     if request.param == "kernel" and not axis_kernel.AVAILABLE:
         pytest.skip("the C kernel is not built (no compiler at install): numpy path only")
     monkeypatch.setattr(axis_kernel, "ENABLED", request.param == "kernel")
@@ -540,7 +540,7 @@ def test_frames_of_one_read_decode_and_convert_as_one_by_one(pose_backend):
     """decode_texts (one number pass for the frames of a TCP read) and AxisFrames.many
     (one Euler / forward-kinematics pass) give each frame's values, errors and Frame as
     decode_text + AxisFrames.frame do, in order, other avatars skipped."""
-    from rtseg.drivers.codec_axis_text import decode_texts
+    from rtseg.drivers.axis.text import decode_texts
     rng = np.random.default_rng(3)
     chunks = [f"0 Avatar00 {ln}".encode() for ln in fixture_motion()]      # 2 real frames
     chunks += [A.encode_text(rng.uniform(-180, 180, 354))[:-3] for _ in range(4)]
@@ -797,7 +797,7 @@ def test_real_take_cuts_match_the_serial_suit(data_dir):
     (offline pipeline, the live loop's own).  (With space=local and the default
     calibration.mode = auto, the first of 86_01's six cuts moves from frame 530 to 450:
     why global is the default.)"""
-    from rtseg.pipeline import replay_frames
+    from rtseg.live.pipeline import replay_frames
 
     take, serial, ref = serial_reference(data_dir)
     rate = take.frame_rate
@@ -876,7 +876,7 @@ def test_kernel_and_numpy_paths_agree(monkeypatch):
     past +-180 included), its global ones within 1e-15 of the pointer jumping's with the
     same float32 values, for every Euler order, one frame and a batch; bad shapes and
     parents are refused with ValueError."""
-    from rtseg.drivers import axis_kernel
+    from rtseg.drivers.axis import kernel as axis_kernel
     if not axis_kernel.AVAILABLE:
         pytest.skip("the C kernel is not built (no compiler at install)")
     rng = np.random.default_rng(5)

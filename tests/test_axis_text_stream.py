@@ -11,8 +11,8 @@ import random
 import numpy as np
 import pytest
 
-from rtseg.drivers import codec_axis as A
-from rtseg.drivers.codec_axis_frames import AxisFrames, TextStream
+from rtseg.drivers.axis import codec as A
+from rtseg.drivers.axis.frames import AxisFrames, TextStream
 from vendor_helpers import Counter
 
 
@@ -99,7 +99,7 @@ def test_a_read_of_many_frames_is_converted_as_one_batch():
     v[..., 3:] = rng.uniform(-180, 180, (30, 59, 3))
     data = b"".join(A.encode_text(x) for x in v.reshape(30, 354))
     shapes: list[tuple] = []
-    from rtseg.drivers import codec_axis_frames as F
+    from rtseg.drivers.axis import frames as F
     real = F.poses
 
     def recording(values, *a, **k):
@@ -127,7 +127,9 @@ def test_text_source_behind_its_server_takes_many_frames_per_read():
     import socket
     import threading
 
-    from rtseg.drivers import axis_source, open_source
+    from rtseg.drivers import open_source
+
+    from rtseg.drivers.axis import source as axis_source
     from vendor_helpers import read_all
 
     rng = np.random.default_rng(8)

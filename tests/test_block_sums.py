@@ -1,10 +1,10 @@
-"""rtseg.block_sums.BlockSums: the statistics of any recent stretch by one subtraction."""
+"""rtseg.identity.block_sums.BlockSums: the statistics of any recent stretch by one subtraction."""
 
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from rtseg.block_sums import BlockSums
+from rtseg.identity.block_sums import BlockSums
 
 
 def _feed(rows, block, history, first_index=100):

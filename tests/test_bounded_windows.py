@@ -8,10 +8,10 @@ import pytest
 
 from rtseg.detectors import make_online
 from rtseg.detectors.contrast import ContrastDetector
-from rtseg.evaluation import score, widen
-from rtseg.features import take_features
-from rtseg.session_config import ConfigError
-from rtseg.simulators.synth import synthesize
+from rtseg.evaluation.scoring import score, widen
+from rtseg.core.features import take_features
+from rtseg.live.config import ConfigError
+from rtseg.simulators.synth.motion import synthesize
 
 FR = 120.0
 #: behaviours of 3.5 s after a long one: 3 s before windows straddle the previous change

@@ -18,9 +18,9 @@ import pytest
 
 from rtseg.cli import main
 from rtseg.drivers.readers import write_take
-from rtseg.evaluation import score, widen
-from rtseg.labels import read_cmu86_transitions
-from rtseg.simulators.synth import synthesize
+from rtseg.evaluation.scoring import score, widen
+from rtseg.labels.takes import read_cmu86_transitions
+from rtseg.simulators.synth.motion import synthesize
 
 REPO = Path(__file__).resolve().parent.parent
 SCRIPT_A = "idle:4,walk:6,punch:6,squat:5"
@@ -281,8 +281,8 @@ def test_plot_legends_leave_every_panel_clear(synth_dir):
     """Each panel's legend lies outside its axes, right of it: it hides no curve (the scan
     panel's contrast peaks included)."""
     from rtseg.commands.plot import figure, pca_with_band, scan_profiles
-    from rtseg.labels import find_labels_for
-    from rtseg.segmentation import compute_features, segment_take
+    from rtseg.labels.takes import find_labels_for
+    from rtseg.detectors.segmentation import compute_features, segment_take
     path = synth_dir["root"] / "cmu" / "90_01.npz"
     take = synth_dir["a"].take
     X = compute_features(take)
@@ -366,7 +366,7 @@ def test_pca_band_reproduces_the_detector(synth_dir):
     """The plot's PCA run finds the same cuts as ``rtseg segment`` and its mean/std band
     reproduces the detector's threshold."""
     from rtseg.commands.plot import pca_with_band
-    from rtseg.segmentation import compute_features, segment_take
+    from rtseg.detectors.segmentation import compute_features, segment_take
     take = synth_dir["a"].take
     X = compute_features(take)
     band = pca_with_band(X, take.frame_rate, None)
@@ -385,7 +385,7 @@ def test_scan_profiles_are_the_ones_the_offline_cuts_come_from(synth_dir):
     from rtseg.commands.plot import scan_profiles
     from rtseg.detectors import method_params
     from rtseg.detectors._scan import local_maxima
-    from rtseg.segmentation import compute_features, segment_take
+    from rtseg.detectors.segmentation import compute_features, segment_take
     take = synth_dir["a"].take
     X = compute_features(take)
     prof = scan_profiles(X, take.frame_rate, {"pca": None, "ppca": None})

@@ -8,8 +8,8 @@ from binascii import crc_hqx
 import numpy as np
 import pytest
 
-from rtseg.drivers import codec_serial as codec
-from rtseg.drivers.codec_serial import (
+from rtseg.drivers.serial import codec
+from rtseg.drivers.serial.codec import (
     SerialFrameDecoder, TextLineDecoder, cobs_decode, cobs_encode, encode_frame)
 
 IDS17 = list(range(17))

@@ -15,7 +15,7 @@ from pythonosc.osc_message_builder import OscMessageBuilder
 from pythonosc.osc_packet import OscPacket
 from scipy.spatial.transform import Rotation
 
-from rtseg.drivers.codec_vmc import (
+from rtseg.drivers.osc.vmc.codec import (
     BONE_ADDRESS, ROOT_ADDRESS, OscParseError, VmcAssembler, encode_bundle, encode_frame,
     encode_message, encode_pose_message, pack_bundles, parse_message, parse_packet,
 )

@@ -16,8 +16,8 @@ from rtseg.detectors.peaks import CausalPeaks
 from rtseg.detectors.window_models import (
     WindowStats, fit, pca_distance, pca_error, ppca_distance, ppca_msq,
 )
-from rtseg.features import take_features
-from rtseg.simulators.synth import synthesize
+from rtseg.core.features import take_features
+from rtseg.simulators.synth.motion import synthesize
 
 FR = 120.0
 

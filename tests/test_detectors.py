@@ -362,8 +362,8 @@ FLOOR_F1 = {"ppca": 0.86, "pca": 0.86, "gmm": 0.72}
 
 @pytest.fixture(scope="module")
 def cmu_takes(data_dir):
-    from rtseg.labels import find_labelled_takes
-    from rtseg.segmentation import compute_features
+    from rtseg.labels.takes import find_labelled_takes
+    from rtseg.detectors.segmentation import compute_features
     out = []
     for lt in find_labelled_takes(data_dir, groups=("cmu",)):
         take = lt.load()
@@ -377,7 +377,7 @@ def cmu_takes(data_dir):
 @pytest.mark.slow
 @pytest.mark.parametrize("method", ["ppca", "pca", "gmm"])
 def test_real_data_pooled_f1(cmu_takes, method):
-    from rtseg.evaluation import pooled, score
+    from rtseg.evaluation.scoring import pooled, score
     scores = []
     for name, X, fps, transitions in cmu_takes:
         assert X.shape[1] == 56

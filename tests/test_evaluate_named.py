@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from rtseg.drivers.readers import write_take
-from rtseg.library import LibraryBuilder
-from rtseg.library_eval import Named, named_summary
-from rtseg.library_learn import label_runs, take_rows
-from rtseg.online_eval import live_config
-from rtseg.simulators.synth import synthesize
+from rtseg.library.behaviours import LibraryBuilder
+from rtseg.evaluation.library import Named, named_summary
+from rtseg.library.examples import label_runs, take_rows
+from rtseg.evaluation.online import live_config
+from rtseg.simulators.synth.motion import synthesize
 
 from synth_identity import SYNTH_DETECTOR, SYNTH_THRESHOLD
 

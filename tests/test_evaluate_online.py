@@ -11,10 +11,10 @@ import pytest
 
 from rtseg.cli import main
 from rtseg.drivers.readers import write_take
-from rtseg.evaluation import detection_delays, score, widen
-from rtseg.labels import Transition
-from rtseg.online_eval import live_config, live_cuts
-from rtseg.simulators.synth import synthesize
+from rtseg.evaluation.scoring import detection_delays, score, widen
+from rtseg.labels.takes import Transition
+from rtseg.evaluation.online import live_config, live_cuts
+from rtseg.simulators.synth.motion import synthesize
 
 SCRIPT = "idle:5,walk:6,punch:6,squat:6"
 
@@ -113,7 +113,7 @@ def test_real_cmu_online_default_detector(data_dir, capsys):
 
 
 def test_tally_and_pooled_tally():
-    from rtseg.evaluation import pooled_tally, tally
+    from rtseg.evaluation.scoring import pooled_tally, tally
     tr = [Transition(lo=100, hi=200, mid=150), Transition(lo=500, hi=600, mid=550)]
     row = tally([(230, 400), (900, 1000)], tr, 120.0, 0.5)       # 230: only within 0.5 s
     assert row[:4] == (1, 2, 2, 0)

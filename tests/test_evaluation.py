@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rtseg.detectors.base import Cut
-from rtseg.evaluation import Score, match, max_matching_size, pooled, score
-from rtseg.labels import Transition
+from rtseg.evaluation.scoring import Score, match, max_matching_size, pooled, score
+from rtseg.labels.takes import Transition
 
 
 def T(lo: int, hi: int, mid: int | None = None) -> Transition:

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from rtseg import quat as Q
+from rtseg.core import quat as Q
 from rtseg.config import ConfigError
 from rtseg.drivers.readers import read_take
-from rtseg.features import PoseFeatures, constant_dims, left_matrices, take_features
-from rtseg.rig import RigError
-from rtseg.profiles import choose_profile, resolve_joints, skeleton_profile, suit_profile
-from rtseg.take import Take
+from rtseg.core.features import PoseFeatures, constant_dims, left_matrices, take_features
+from rtseg.core.rig import RigError
+from rtseg.core.profiles import choose_profile, resolve_joints, skeleton_profile, suit_profile
+from rtseg.core.take import Take
 
 S = math.sqrt(0.5)
 CMU14 = ["lowerback", "upperback", "thorax", "lowerneck", "upperneck", "head", "rhumerus",

@@ -8,13 +8,13 @@ import time
 import numpy as np
 import pytest
 
-from rtseg import quat
+from rtseg.core import quat
 from rtseg.drivers import SourceError, open_source
 from rtseg.drivers.readers import write_take
-from rtseg.drivers.replay import Pacer, ReplaySource
-from rtseg.frame import Frame
-from rtseg.simulators.synth import synthesize
-from rtseg.take import Take
+from rtseg.drivers.replay.pacing import Pacer, ReplaySource
+from rtseg.core.frame import Frame
+from rtseg.simulators.synth.motion import synthesize
+from rtseg.core.take import Take
 
 
 @pytest.fixture(scope="module")

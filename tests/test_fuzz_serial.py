@@ -6,8 +6,8 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from rtseg.drivers import codec_serial as codec
-from rtseg.drivers.codec_serial import SerialFrameDecoder, TextLineDecoder
+from rtseg.drivers.serial import codec
+from rtseg.drivers.serial.codec import SerialFrameDecoder, TextLineDecoder
 
 FUZZ = settings(max_examples=150, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow])

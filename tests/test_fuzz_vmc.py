@@ -16,12 +16,12 @@ from hypothesis import strategies as st
 from pythonosc.osc_message import OscMessage as PyOscMessage
 from scipy.spatial.transform import Rotation
 
-from rtseg.drivers.codec_vmc import (
+from rtseg.drivers.osc.vmc.codec import (
     OscParseError, VmcAssembler, encode_bundle, encode_frame, encode_message, pack_bundles,
     parse_message, parse_packet,
 )
-from rtseg.drivers.codec_vrchat import VrchatAssembler
-from rtseg.frame import Frame
+from rtseg.drivers.osc.vrchat import VrchatAssembler
+from rtseg.core.frame import Frame
 
 BONES = ["Hips", "Spine", "Chest", "Neck", "Head", "LeftUpperArm", "LeftLowerArm", "LeftHand",
          "RightUpperArm", "RightLowerArm", "RightHand", "LeftUpperLeg", "LeftLowerLeg",

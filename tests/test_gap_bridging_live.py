@@ -6,10 +6,10 @@ from __future__ import annotations
 import socket
 import threading
 
-from rtseg.live import LiveSession
-from rtseg.session_config import from_dict
+from rtseg.live.session import LiveSession
+from rtseg.live.config import from_dict
 from rtseg.simulators.serial_device import SerialSuit
-from rtseg.simulators.synth import synthesize
+from rtseg.simulators.synth.motion import synthesize
 from rtseg.simulators.vmc_sender import VmcSender
 
 SPEED = 4.0

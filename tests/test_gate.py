@@ -11,8 +11,8 @@ import pytest
 from rtseg.detectors import make_online
 from rtseg.detectors.base import Cut
 from rtseg.detectors.gate import SameBehaviourGate
-from rtseg.features import take_features
-from rtseg.simulators.synth import synthesize
+from rtseg.core.features import take_features
+from rtseg.simulators.synth.motion import synthesize
 
 FR = 120.0
 
@@ -114,7 +114,7 @@ def test_bad_gate_settings_are_refused():
 
 
 def test_session_summary_counts_the_cuts_the_gate_held_back():
-    from rtseg.session_stats import SessionSummary
+    from rtseg.live.stats import SessionSummary
     s = SessionSummary(duration_s=1.0, frames_received=120, frames_processed=120,
                        frame_rate=120.0, cuts=2, cuts_by_method={"contrast": 2}, dropped=0,
                        source_stats={}, pipeline={}, overruns=0, bad_frames=0, max_lag_ms=0.0,

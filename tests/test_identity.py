@@ -1,4 +1,4 @@
-"""Behaviour identity (rtseg.identity): exact ids on synthetic performances with recurring
+"""Behaviour identity (rtseg.identity.tracker): exact ids on synthetic performances with recurring
 behaviours, one decision per segment within the bound, counted corrections, the OSC
 messages over a real UDP socket, a live session's JSON lines and recording, and the
 ``rtseg evaluate --online --identity`` JSON."""
@@ -15,15 +15,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rtseg.events import BehaviourEvent, CutEvent, event_from_dict
-from rtseg.identity import IdentityTracker
-from rtseg.identity_eval import replay_session_identities, run_identity
-from rtseg.live import LiveSession
-from rtseg.online_eval import live_config
+from rtseg.core.events import BehaviourEvent, CutEvent, event_from_dict
+from rtseg.identity.tracker import IdentityTracker
+from rtseg.evaluation.identity import replay_session_identities, run_identity
+from rtseg.live.session import LiveSession
+from rtseg.evaluation.online import live_config
 from rtseg.publishers import PublisherSet, parse_target
 from rtseg.recording import read_session_behaviours
-from rtseg.session_config import from_dict
-from rtseg.simulators.synth import synthesize
+from rtseg.live.config import from_dict
+from rtseg.simulators.synth.motion import synthesize
 
 from osc_collector import OscCollector
 from synth_identity import SYNTH_DETECTOR, SYNTH_THRESHOLD
@@ -82,7 +82,7 @@ def test_a_new_behaviour_is_not_forced_onto_an_old_one():
 def test_decision_sent_once_within_the_bound():
     res = synthesize(SCRIPT, seed=2)
     cfg = _config(threshold=SYNTH_THRESHOLD, decide_after_s=1.5)
-    from rtseg.pipeline import Pipeline
+    from rtseg.live.pipeline import Pipeline
     take = res.take
     fr = take.frame_rate
     pipe = Pipeline(take.joint_names, take.parents, take.space, fr, cfg)
@@ -142,7 +142,7 @@ def test_a_correction_is_sent_once_and_counted():
 
 def test_an_identity_failure_never_costs_a_cut():
     """A tracker that raises is counted and logged; the frame's cuts still come out."""
-    from rtseg.pipeline import Pipeline
+    from rtseg.live.pipeline import Pipeline
     res = synthesize("walk:6,punch:6", seed=0)
     take = res.take
     cfg = _config(threshold=SYNTH_THRESHOLD)
@@ -296,7 +296,7 @@ class _LengthLibrary:
         self.calls: list[int] = []
 
     def name(self, W, frame_rate=None):
-        from rtseg.library import UNKNOWN, Naming
+        from rtseg.library.behaviours import UNKNOWN, Naming
         self.calls.append(len(W))
         nm = self.label if len(W) >= self.rows else UNKNOWN
         return Naming(nm, self.label, 1.0, 0.5)
@@ -364,7 +364,7 @@ def test_a_name_held_by_another_behaviour_id_is_sent_as_unknown(exclusive, names
 
 def test_exclusive_names_is_read_from_the_configuration():
     """``[identity] exclusive_names`` reaches the tracker the live pipeline builds."""
-    from rtseg.identity import tracker_from_config
+    from rtseg.identity.tracker import tracker_from_config
     assert tracker_from_config(_config(), 120.0, "contrast").exclusive_names is True
     assert tracker_from_config(_config(exclusive_names=False), 120.0, "contrast").exclusive_names is False
 

@@ -1,4 +1,4 @@
-"""rtseg.identity_names.SegmentNamer: which fed rows a segment is named from, and the
+"""rtseg.identity.names.SegmentNamer: which fed rows a segment is named from, and the
 refusal of a library of other feature dims."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import logging
 import numpy as np
 import pytest
 
-from rtseg.identity_names import SegmentNamer
-from rtseg.library import UNKNOWN
+from rtseg.identity.names import SegmentNamer
+from rtseg.library.behaviours import UNKNOWN
 
 
 class _Recording:
@@ -76,13 +76,13 @@ def test_fewer_than_two_rows_is_unknown_without_asking_the_library():
 
 def test_library_of_other_dims_is_refused_with_a_warning(caplog):
     nm = SegmentNamer(_Recording(56), FR)
-    with caplog.at_level(logging.WARNING, logger="rtseg.identity_names"):
+    with caplog.at_level(logging.WARNING, logger="rtseg.identity.names"):
         assert not nm.start(42)
     assert "56 feature dims" in caplog.text and "42" in caplog.text
 
 
 def test_tracker_library_is_fixed_once_rows_flow():
-    from rtseg.identity import IdentityTracker
+    from rtseg.identity.tracker import IdentityTracker
     tr = IdentityTracker(FR, library=_Recording(2))
     assert tr.library is not None and tr.namer is not None
     tr.update(0, np.zeros(2))

@@ -16,13 +16,13 @@ from pathlib import Path
 from osc_collector import OscCollector
 
 from rtseg.drivers import open_source
-from rtseg.events import INPUT_COUNTERS
-from rtseg.live import LiveSession
+from rtseg.core.events import INPUT_COUNTERS
+from rtseg.live.session import LiveSession
 from rtseg.publishers.oscmsg import encode_message
 from rtseg.recording import read_session
-from rtseg.session_config import from_dict
+from rtseg.live.config import from_dict
 from rtseg.simulators.serial_device import SerialSuit
-from rtseg.simulators.synth import synthesize
+from rtseg.simulators.synth.motion import synthesize
 
 RATE = 120.0
 SPEED = 4.0
@@ -152,7 +152,7 @@ def test_clean_input_sends_no_input_message(tmp_path):
 def test_console_status_line_shows_bad_input():
     import io
     from rtseg.commands.live import Console
-    from rtseg.events import StatusEvent
+    from rtseg.core.events import StatusEvent
     err = io.StringIO()
     con = Console(out=io.StringIO(), err=err)
     con(StatusEvent(frame_rate=120.0, time=1.0))

@@ -71,7 +71,7 @@ def test_installed_tree_runs_live_and_segment_outside_the_checkout(built, tmp_pa
 
     take = tmp_path / "synth.npz"
     subprocess.run([sys.executable, "-c",
-                    "import sys\nfrom rtseg.simulators.synth import synthesize\n"
+                    "import sys\nfrom rtseg.simulators.synth.motion import synthesize\n"
                     "from rtseg.drivers.readers.npz_take import write_npz\n"
                     "write_npz(sys.argv[1], synthesize('idle:3,walk:4', seed=1).take)",
                     str(take)], cwd=tmp_path, env=env, check=True, timeout=60)

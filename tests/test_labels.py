@@ -9,14 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rtseg.labels import (
+from rtseg.labels.takes import (
     GROUPS, LabelError, Transition, find_labelled_takes, labels_from_take, load_cmu86_transitions,
     find_labels_for, read_block_labels, read_cmu86_transitions, read_frame_labels,
     read_labels_file,
     transitions_from_frame_labels,
 )
-from rtseg import labels as labels_module
-from rtseg.take import Take
+from rtseg.labels import takes as labels_module
+from rtseg.core.take import Take
 
 
 @pytest.fixture(autouse=True)
@@ -79,7 +79,7 @@ run 2000 2000 2000
 
 def test_slips_repaired_and_logged(tmp_path, caplog):
     p = write(tmp_path, SLIPS, "cmu86_transitions.txt")
-    with caplog.at_level(logging.WARNING, logger="rtseg.labels"):
+    with caplog.at_level(logging.WARNING, logger="rtseg.labels.takes"):
         got = read_cmu86_transitions(p)
     # lo before the previous boundary -> lo set to mid
     t = got["86_04"].transitions[2]
@@ -102,7 +102,7 @@ def test_slips_repaired_and_logged(tmp_path, caplog):
 
 def test_slips_rejected_when_asked(tmp_path, caplog):
     p = write(tmp_path, SLIPS)
-    with caplog.at_level(logging.WARNING, logger="rtseg.labels"):
+    with caplog.at_level(logging.WARNING, logger="rtseg.labels.takes"):
         got = read_cmu86_transitions(p, on_slip="reject")
     assert [t.mid for t in got["86_04"].transitions] == [1018, 4073, 5869]
     assert [t.mid for t in got["86_05"].transitions] == [817]
@@ -202,7 +202,7 @@ def test_find_labelled_takes_in_layout(tmp_path, caplog):
     rows = "\n".join(f"0,0,0,0,{i // 300}" for i in range(600))
     (tmp_path / "tsseg4d" / "86_02.csv").write_text(rows)
     (tmp_path / "tsseg4d" / "86_03.csv").write_text(rows)
-    with caplog.at_level(logging.WARNING, logger="rtseg.labels"):
+    with caplog.at_level(logging.WARNING, logger="rtseg.labels.takes"):
         found = find_labelled_takes(tmp_path)
     got = [(t.group, t.name, t.labels.kind) for t in found]
     assert got == [("cmu", "13_29", "tolerance"), ("cmu", "86_01", "ranges"),
@@ -218,7 +218,7 @@ def test_find_labelled_takes_in_layout(tmp_path, caplog):
 # ---------------------------------------------------------------- real files
 
 def test_real_cmu86_file(data_dir, caplog):
-    with caplog.at_level(logging.WARNING, logger="rtseg.labels"):
+    with caplog.at_level(logging.WARNING, logger="rtseg.labels.takes"):
         got = read_cmu86_transitions(data_dir / "labels" / "cmu86_transitions.txt")
     assert sorted(got) == [f"86_{i:02d}" for i in range(1, 15)]
     assert len(got["86_01"].transitions) == 6 and got["86_01"].n_frames == 4579
@@ -266,7 +266,7 @@ def test_real_layout_pairs_every_take(data_dir):
 
 def test_slip_logged_once_per_line_but_always_recorded(tmp_path, caplog):
     p = write(tmp_path, SLIPS)
-    with caplog.at_level(logging.WARNING, logger="rtseg.labels"):
+    with caplog.at_level(logging.WARNING, logger="rtseg.labels.takes"):
         first = read_cmu86_transitions(p)
         again = read_cmu86_transitions(p)
     assert len(caplog.records) == 3
@@ -283,7 +283,7 @@ def test_slips_warned_only_for_the_takes_used(tmp_path, caplog):
     (tmp_path / "cmu" / "86_05.amc").write_text("")
     (tmp_path / "cmu" / "86.asf").write_text("")
     (tmp_path / "labels" / "cmu86_transitions.txt").write_text(SLIPS)
-    with caplog.at_level(logging.WARNING, logger="rtseg.labels"):
+    with caplog.at_level(logging.WARNING, logger="rtseg.labels.takes"):
         found = find_labelled_takes(tmp_path)
         find_labelled_takes(tmp_path)
     slips = [r.getMessage() for r in caplog.records if "label slip" in r.getMessage()]
@@ -291,7 +291,7 @@ def test_slips_warned_only_for_the_takes_used(tmp_path, caplog):
     assert [t.name for t in found] == ["86_05"] and len(found[0].labels.repairs) == 1
     caplog.clear()
     labels_module._warned.clear()
-    with caplog.at_level(logging.WARNING, logger="rtseg.labels"):
+    with caplog.at_level(logging.WARNING, logger="rtseg.labels.takes"):
         lab = find_labels_for(tmp_path / "cmu" / "86_06.amc")          # rtseg plot's search
         read_labels_file(tmp_path / "labels" / "cmu86_transitions.txt", "86_04")
     slips = [r.getMessage() for r in caplog.records if "label slip" in r.getMessage()]
@@ -302,7 +302,7 @@ def test_slips_warned_only_for_the_takes_used(tmp_path, caplog):
 def test_real_layout_warns_no_slip_for_its_takes(data_dir, caplog):
     """The published file's three slips are in 86_04-86_06, of which ../shared/data has no
     take: finding the takes (what evaluate, plot and learn do) warns about none."""
-    with caplog.at_level(logging.WARNING, logger="rtseg.labels"):
+    with caplog.at_level(logging.WARNING, logger="rtseg.labels.takes"):
         found = find_labelled_takes(data_dir, GROUPS)
     assert found
     assert not [r for r in caplog.records if "label slip" in r.getMessage()]

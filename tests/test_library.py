@@ -1,4 +1,4 @@
-"""Named behaviour libraries (rtseg.library, rtseg learn, rtseg live --behaviours): the
+"""Named behaviour libraries (rtseg.library.behaviours, rtseg learn, rtseg live --behaviours): the
 learn -> file -> load round trip, one-line refusal of another profile / version / garbage,
 null rejection on synthetic performances (a behaviour the library never saw comes out
 ``unknown``), and the names on a real UDP socket from a live session."""
@@ -14,14 +14,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rtseg.identity_eval import run_identity
-from rtseg.library import UNKNOWN, Library, LibraryBuilder, LibraryError, load
-from rtseg.library_calibration import separating_rule, separating_threshold
-from rtseg.library_learn import label_runs, take_rows
-from rtseg.live import LiveSession
-from rtseg.online_eval import live_config
-from rtseg.session_config import from_dict
-from rtseg.simulators.synth import synthesize
+from rtseg.evaluation.identity import run_identity
+from rtseg.library.behaviours import UNKNOWN, Library, LibraryBuilder, LibraryError, load
+from rtseg.library.calibration import separating_rule, separating_threshold
+from rtseg.library.examples import label_runs, take_rows
+from rtseg.live.session import LiveSession
+from rtseg.evaluation.online import live_config
+from rtseg.live.config import from_dict
+from rtseg.simulators.synth.motion import synthesize
 
 from osc_collector import OscCollector
 from take_source import TakeSource
@@ -278,7 +278,7 @@ def _rotate_left(X, seed):
 
 
 def test_angular_velocity_units_and_rest_pose_offsets():
-    from rtseg.library_models import angular_velocity
+    from rtseg.library.distance import angular_velocity
     fr, omega = 120.0, 2.0                        # one joint turning about z at 2 rad/s
     t = np.arange(60) / fr
     X = np.stack([0 * t, 0 * t, np.sin(omega * t / 2), np.cos(omega * t / 2)], axis=1)
@@ -305,10 +305,10 @@ def test_a_performer_with_other_rest_pose_offsets_is_named_alike(library):
 
 def test_model_bank_is_the_trackers_window_distance(library):
     """The vectorised distances of a query to every library window are the identity
-    tracker's D (rtseg.identity.IdentityTracker.distance) pair by pair."""
+    tracker's D (rtseg.identity.tracker.IdentityTracker.distance) pair by pair."""
     from rtseg.detectors.window_models import fit
-    from rtseg.identity import IdentityTracker
-    from rtseg.library_models import window_stats
+    from rtseg.identity.tracker import IdentityTracker
+    from rtseg.library.distance import window_stats
     res = synthesize("punch:4", seed=3)
     X, _, _ = take_rows(res.take, _config())
     q = fit(window_stats(X[100:400], 120.0))
@@ -395,8 +395,8 @@ def test_live_session_sends_names_over_udp(tmp_path, library):
     assert cues == ["/cue/walk/start", "/cue/unknown/start", "/cue/punch/start",
                     "/cue/unknown/start", "/cue/squat/start"]
     # the recording carries the names, and replaying it offline gives them again
-    from rtseg.identity_eval import replay_session_identities
-    from rtseg.recording_reader import read_session_behaviours
+    from rtseg.evaluation.identity import replay_session_identities
+    from rtseg.recording.reader import read_session_behaviours
     recorded = [(b.segment, b.name) for b in read_session_behaviours(rec)]
     assert [n for _, n in recorded] == [p[3] for p in beh]
     offline = replay_session_identities(str(rec), cfg).history
@@ -450,8 +450,8 @@ def test_learn_from_a_folder_and_refuse_another_skeleton(tmp_path):
 @pytest.mark.skipif(not (DATA / "labels" / "mocap6" / "13_29.txt").is_file(),
                     reason="needs ../shared/data (mocap6 takes)")
 def test_library_leave_one_take_out_report():
-    from rtseg.identity_eval import library_loto
-    from rtseg.labels import find_labelled_takes
+    from rtseg.evaluation.identity import library_loto
+    from rtseg.labels.takes import find_labelled_takes
     takes = find_labelled_takes(DATA, ("cmu",))
     doc = library_loto(takes, _config())
     assert doc["takes"] == ["13_29", "13_31", "14_14"]
@@ -473,7 +473,7 @@ def test_library_leave_one_take_out_report():
 def test_library_decision_delay_counts_only_segments_near_a_change():
     """library_eval.Tally: the delay median is over the known segments that have one (a
     boundary within 1 s of a truth change); the others and not-known segments are left out."""
-    from rtseg.library_eval import Named, Tally
+    from rtseg.evaluation.library import Named, Tally
     t = Tally()
     t.add([Named("a", 1, 100, "walk", "walk", 1.0, True, 1.5),
            Named("a", 2, 900, "jump", "jump", 1.0, True, 2.5),
@@ -489,7 +489,7 @@ def test_without_a_second_example_the_threshold_is_the_default():
     are no known case: a library where no behaviour has a second example is not
     calibrated and takes the metric's default threshold (ratio 1); a second performer
     calibrates it."""
-    from rtseg.library_calibration import DEFAULT_THRESHOLD
+    from rtseg.library.calibration import DEFAULT_THRESHOLD
     one = _library("walk:8,punch:8", seeds=(0,))
     assert one.calibration["calibrated"] is False and one.calibration["same"] == 0
     assert one.threshold == DEFAULT_THRESHOLD["model"] and one.ratio == 1.0
@@ -522,10 +522,10 @@ def test_a_one_example_library_of_real_exercises_still_rejects_the_others():
     windows of the one example calibrating each other (before), every segment got the
     name (benchmarks/library_loto.py fewshot: 0 of 196)."""
     import dataclasses
-    from rtseg.identity_eval import truth_labels
-    from rtseg.labels import find_labelled_takes
-    from rtseg.library_eval import name_take
-    from rtseg.library_learn import MOCAP6_NAMES, examples_from_dir, learn
+    from rtseg.evaluation.identity import truth_labels
+    from rtseg.labels.takes import find_labelled_takes
+    from rtseg.evaluation.library import name_take
+    from rtseg.library.examples import MOCAP6_NAMES, examples_from_dir, learn
     cfg, _ = live_config()                 # the shipped detector and identity settings
     cfg["identity.enabled"] = True
     ex = [e for e in examples_from_dir(DATA, cfg, takes=["13_31"]) if e.name == "ArmCircle"]
@@ -553,18 +553,18 @@ def test_an_old_library_that_never_rejects_is_loaded_with_a_warning(tmp_path, li
     doc["threshold"] = None
     doc["calibration"] = {"same": 0, "other": 0}
     path.write_text(json.dumps(doc))
-    with caplog.at_level(logging.WARNING, logger="rtseg.library_file"):
+    with caplog.at_level(logging.WARNING, logger="rtseg.library.file"):
         lib = load(path)
     assert lib.threshold == float("inf")
     assert "no rejection threshold" in caplog.text and "--new" in caplog.text
     caplog.clear()
-    with caplog.at_level(logging.WARNING, logger="rtseg.library_file"):
+    with caplog.at_level(logging.WARNING, logger="rtseg.library.file"):
         load(path)                      # once per file: rtseg live checks it, then loads it
     assert "no rejection threshold" not in caplog.text
     doc["calibration"]["threshold_given"] = True
     given = tmp_path / "given.json"
     given.write_text(json.dumps(doc))
-    with caplog.at_level(logging.WARNING, logger="rtseg.library_file"):
+    with caplog.at_level(logging.WARNING, logger="rtseg.library.file"):
         load(given)
     assert "no rejection threshold" not in caplog.text
 
@@ -600,7 +600,7 @@ def test_learn_show_lists_what_a_library_holds(tmp_path):
 def test_learn_from_segments_of_a_recorded_session(tmp_path):
     """``--take SESSION_DIR --segment K``: the frames of segment K as the live session
     numbered it (its recorded cuts), so a rehearsal recording labels itself by segment."""
-    from rtseg.recording_reader import read_session_cuts
+    from rtseg.recording.reader import read_session_cuts
     res = synthesize("walk:6,punch:6,walk:6", seed=1)
     rec = tmp_path / "rehearsal"
     cfg = from_dict({"output": {"osc": []}, "recording": {"dir": str(rec)},
@@ -646,7 +646,7 @@ def test_learn_says_which_behaviours_the_library_may_confuse(tmp_path):
     under two labels) are flagged, a distinct one (``punch``) is not; a name of one person's
     example only (``squat``) is said to lack a second example from another person."""
     from rtseg.commands.learn import describe
-    from rtseg.library import load
+    from rtseg.library.behaviours import load
     b = None
     for seed in (0, 4):
         res = synthesize("walk:8,punch:8", seed=seed)
@@ -722,7 +722,7 @@ def test_library_benchmark_refuses_bad_folders_in_one_line(tmp_path):
 def test_learn_prefers_named_examples_and_refuses_numbered_names():
     """A folder whose four-channel takes carry only state ids (tsseg4d) beside named takes:
     the named profile is learned; a library that would name behaviours by numbers is refused."""
-    from rtseg.library_learn import Example, learn
+    from rtseg.library.examples import Example, learn
     rng = np.random.default_rng(4)
 
     def ex(name: str, profile: str, dims: int, k: int) -> Example:

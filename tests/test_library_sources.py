@@ -1,5 +1,5 @@
 """``rtseg learn LIB --from DIR`` on source folders laid out like ../shared/data/cmu_single,
-hdm05 and bandai (rtseg.library_sources): every take whose rig maps to the canonical
+hdm05 and bandai (rtseg.library.sources): every take whose rig maps to the canonical
 skeleton, any frame rate; short clips of one person and behaviour joined; the same example
 learned twice is a no-op.  The folders are written here from synthetic performers
 (tests/source_folders.py); one test uses the real folders and skips when they are absent."""
@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rtseg.library import load
-from rtseg.library_learn import Example, unique_examples
-from rtseg.library_sources import motion_key
+from rtseg.library.behaviours import load
+from rtseg.library.examples import Example, unique_examples
+from rtseg.library.sources import motion_key
 
 from source_folders import make_source
 
@@ -90,7 +90,7 @@ def test_learn_from_a_parent_of_sources_of_two_rigs_and_frame_rates(parent, tmp_
 
 
 def test_example_keys_and_unique_examples():
-    from rtseg.simulators.synth import synthesize
+    from rtseg.simulators.synth.motion import synthesize
     take = synthesize("walk:3,squat:3", frame_rate=60.0, seed=2).take
     k = motion_key(take, 0, 120)
     assert k == motion_key(take, 0, 120) and len(k) == 16

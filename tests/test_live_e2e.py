@@ -3,7 +3,7 @@
 
 The cuts received must equal - in order, none lost, none extra, boundary within ±2 frames -
 the cuts the same online detectors give when the recorded session is segmented offline
-(``rtseg.live.replay_frames``).  With fault injection the session keeps running and the
+(``rtseg.live.session.replay_frames``).  With fault injection the session keeps running and the
 recording holds every frame the source delivered.  SIGTERM ends ``rtseg live`` cleanly.
 
 Playback is sped up (4x) so each test takes a few seconds; the source URL keeps the
@@ -27,11 +27,11 @@ import pytest
 from osc_collector import OscCollector
 
 from rtseg.drivers import open_source
-from rtseg.live import LiveSession, replay_frames, replay_session
+from rtseg.live.session import LiveSession, replay_frames, replay_session
 from rtseg.recording import read_session
-from rtseg.session_config import from_dict
+from rtseg.live.config import from_dict
 from rtseg.simulators.serial_device import SerialSuit
-from rtseg.simulators.synth import synthesize
+from rtseg.simulators.synth.motion import synthesize
 from rtseg.simulators.vmc_sender import VmcSender
 
 SCRIPT = "idle:3,walk:4,punch:4,squat:4"      # 15 s of motion, 3 behaviour changes
@@ -138,7 +138,7 @@ def on_wire(expected: list, session: LiveSession) -> list:
 def assert_cuts_match(received: list[list], expected: list, tk, what: str) -> None:
     """received: /rtseg/cut argument lists (event, segment, time, conf, latency, delay,
     label); expected: PipelineCuts.  Same order, same methods, boundary ±2 frames.  A cut's
-    time is on the source's clock when the source has one (rtseg.live: counted from the
+    time is on the source's clock when the source has one (rtseg.live.session: counted from the
     first frame's arrival), else the boundary frame's receive time."""
     st = tk.meta["session_time"]
     src = tk.meta["source_time"]

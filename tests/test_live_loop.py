@@ -11,12 +11,12 @@ import pytest
 from rtseg.config import ConfigError
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.drivers.base import Source
-from rtseg.events import CutEvent, DropoutEvent, StatusEvent
-from rtseg.frame import Frame
-from rtseg.live import LiveSession, Pipeline
-from rtseg.quat import from_euler
-from rtseg.session_config import from_dict, load_session_config
-from rtseg.simulators.synth import JOINT_NAMES, PARENTS
+from rtseg.core.events import CutEvent, DropoutEvent, StatusEvent
+from rtseg.core.frame import Frame
+from rtseg.live.session import LiveSession, Pipeline
+from rtseg.core.quat import from_euler
+from rtseg.live.config import from_dict, load_session_config
+from rtseg.simulators.synth.motion import JOINT_NAMES, PARENTS
 
 J = len(JOINT_NAMES)
 ARM = JOINT_NAMES.index("LeftUpperArm")
@@ -359,7 +359,7 @@ def session(src, cfg=None, det=None, **kw):
     config = from_dict(cfg or {"calibration": {"mode": "none"}, "status": {"interval": 0.05}})
     s = LiveSession(src, config, publishers=FakePublishers(), recorder=FakeRecorder(),
                     handle_signals=False, **kw)
-    import rtseg.pipeline as pipe_mod
+    import rtseg.live.pipeline as pipe_mod
     orig = pipe_mod.make_detectors
     pipe_mod.make_detectors = lambda c, r: {"step": det or StepDetector()}
     try:
@@ -478,7 +478,7 @@ def test_unknown_required_joint_refused():
 
 
 def test_bad_full_target_refused_at_start():
-    from rtseg.live import build_publishers
+    from rtseg.live.session import build_publishers
     with pytest.raises(ConfigError, match=r"output.targets\[0\]"):
         build_publishers(from_dict({"output": {"targets": ["udp:127.0.0.1:9123,colour=red"]}}))
 
@@ -487,8 +487,8 @@ def test_real_detectors_place_no_cut_across_a_gap():
     """Synthesised idle -> walk; the frames around the change (and 1 s either side) never
     arrive (sequence gap).  With the real online PCA/PPCA detectors: without the gap the
     change is found; with it the detectors restart and no cut lands in or right after it."""
-    from rtseg.quat import global_from_local
-    from rtseg.simulators.synth import synthesize
+    from rtseg.core.quat import global_from_local
+    from rtseg.simulators.synth.motion import synthesize
 
     r = synthesize("idle:6,walk:6", frame_rate=120.0, seed=1)
     take = r.take
@@ -519,7 +519,7 @@ def test_real_detectors_place_no_cut_across_a_gap():
 
 
 def test_suit_from_config_added_to_device_urls():
-    from rtseg.live import with_suit
+    from rtseg.live.session import with_suit
     assert with_suit("serial:///dev/ttyUSB0", "suitX") == "serial:///dev/ttyUSB0?suit=suitX"
     assert with_suit("osc://0.0.0.0:39539?format=vmc", "s") == "osc://0.0.0.0:39539?format=vmc&suit=s"
     assert with_suit("serial:///dev/x?suit=a", "b") == "serial:///dev/x?suit=a"

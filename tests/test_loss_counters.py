@@ -18,13 +18,13 @@ import pytest
 
 from rtseg.commands.live import Console
 from rtseg.drivers import open_source
-from rtseg.drivers.codec_vmc import encode_frame
-from rtseg.events import StatusEvent
-from rtseg.live import LiveSession
+from rtseg.drivers.osc.vmc.codec import encode_frame
+from rtseg.core.events import StatusEvent
+from rtseg.live.session import LiveSession
 from rtseg.recording import read_session
-from rtseg.session_config import from_dict
+from rtseg.live.config import from_dict
 from rtseg.simulators.serial_device import SerialSuit
-from rtseg.simulators.synth import synthesize
+from rtseg.simulators.synth.motion import synthesize
 
 from tests.test_vmc_live import SUIT, make_take
 

@@ -14,15 +14,15 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from rtseg.drivers import open_source
-from rtseg.drivers.codec_mocopi import (
+from rtseg.drivers.mocopi.codec import (
     BONE_NAMES, BONE_PARENTS, FTYP, MocopiAssembler, encode_frame, encode_skeleton, field,
     iter_fields, parse_packet,
 )
-from rtseg import quat as Q
-from rtseg.drivers.mocopi_source import ForwardKinematics, MocopiSource
-from rtseg.profiles import suit_profile
+from rtseg.core import quat as Q
+from rtseg.drivers.mocopi.source import ForwardKinematics, MocopiSource
+from rtseg.core.profiles import suit_profile
 from rtseg.simulators.mocopi_sender import MocopiSender
-from rtseg.simulators.synth import synthesize
+from rtseg.simulators.synth.motion import synthesize
 from vendor_helpers import (append_junk, assert_same_cuts, assert_sane_frame, flip_bits,
                             assert_refused, run_live, serial_reference, simulate_into,
                             truncate)
@@ -288,7 +288,7 @@ def test_rtseg_simulate_mocopi_command_reaches_the_source():
 def test_real_take_cuts_match_the_serial_suit(data_dir):
     """86_01 (CMU, 38 s) through the mocopi codec and the source's default global
     conversion gives the cuts the 17-sensor serial suit gives, within 0.25 s."""
-    from rtseg.pipeline import replay_frames
+    from rtseg.live.pipeline import replay_frames
 
     take, serial, ref = serial_reference(data_dir)
     rate = take.frame_rate

@@ -23,11 +23,11 @@ import pytest
 
 aiohttp = pytest.importorskip("aiohttp", reason="the monitor needs aiohttp (rtseg[monitor])")
 
-from rtseg.events import CutEvent  # noqa: E402
-from rtseg.live import LiveSession  # noqa: E402
+from rtseg.core.events import CutEvent  # noqa: E402
+from rtseg.live.session import LiveSession  # noqa: E402
 from rtseg.monitor import MonitorFeed  # noqa: E402
 from rtseg.monitor.server import MonitorServer, parse_address  # noqa: E402
-from rtseg.session_config import from_dict  # noqa: E402
+from rtseg.live.config import from_dict  # noqa: E402
 
 SCRIPT = "idle:4,walk:5,punch:5"
 SPEED = 4.0
@@ -289,7 +289,7 @@ def test_without_aiohttp_monitor_is_refused_and_session_unchanged(tmp_path):
 
 
 def test_float_ring_recent_is_the_tail_of_values():
-    from rtseg.session_stats import FloatRing
+    from rtseg.live.stats import FloatRing
     r = FloatRing(7)
     for total in range(30):
         for n in (0, 1, 3, 7, 9):

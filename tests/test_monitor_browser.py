@@ -53,7 +53,7 @@ class Lines:
 @pytest.fixture(scope="module")
 def library(tmp_path_factory) -> str:
     from rtseg.commands.demo import demo_library
-    from rtseg.session_config import load_session_config
+    from rtseg.live.config import load_session_config
     path, _ = demo_library(0, load_session_config(), str(tmp_path_factory.mktemp("lib")))
     return path
 

@@ -12,15 +12,15 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from rtseg.drivers import open_source
-from rtseg.drivers.codec_mvn import (
+from rtseg.drivers.mvn.codec import (
     BODY_SEGMENTS, HEADER_SIZE, ITEM_SIZE, MvnAssembler, encode_datagrams,
     encode_message, from_mvn_pos, from_mvn_quat, parse_header, parse_meta, to_mvn_pos,
     to_mvn_quat,
 )
-from rtseg.drivers.mvn_source import MvnSource
-from rtseg.profiles import resolve_joints, suit_profile
+from rtseg.drivers.mvn.source import MvnSource
+from rtseg.core.profiles import resolve_joints, suit_profile
 from rtseg.simulators.mvn_sender import MvnSender
-from rtseg.simulators.synth import synthesize
+from rtseg.simulators.synth.motion import synthesize
 from vendor_helpers import (append_junk, assert_same_cuts, assert_sane_frame, flip_bits,
                             assert_refused, read_all, run_live, serial_reference,
                             simulate_into, truncate)
@@ -336,7 +336,7 @@ def test_real_take_cuts_match_the_serial_suit(data_dir):
     """86_01 (CMU, 38 s) through the MVN codec gives the cuts the 17-sensor serial suit
     gives through its codec, within 0.25 s: the suit changes the features only where the
     joints differ (offline pipeline, the live loop's own, no sockets)."""
-    from rtseg.pipeline import replay_frames
+    from rtseg.live.pipeline import replay_frames
 
     take, serial, ref = serial_reference(data_dir)
     rate = take.frame_rate
@@ -381,7 +381,7 @@ def test_tcp_stream_is_cut_into_messages_and_resynchronised_after_damage():
     """MxtpStream: the datagrams sent back to back come out whole whatever the read
     boundaries; bytes that do not start a header are skipped to the next "MXTP" and each
     such run counts once."""
-    from rtseg.drivers.codec_mvn import MxtpStream
+    from rtseg.drivers.mvn.codec import MxtpStream
     q = random_pose(6, seed=4)
     msgs = [encode_message("12", b"name:tcp\n")]
     msgs += [d for i in range(6) for d in encode_datagrams(

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from rtseg.drivers import SourceError, open_source
-from rtseg.drivers.codec_vmc import encode_frame
-from rtseg.drivers.osc_source import (DEFAULT_HOST, _parse_location, is_wide, parse_allow,
+from rtseg.drivers.osc.vmc.codec import encode_frame
+from rtseg.drivers.osc.source import (DEFAULT_HOST, _parse_location, is_wide, parse_allow,
                                       sender_allowed)
-from rtseg.events import StatusEvent
+from rtseg.core.events import StatusEvent
 from rtseg.publishers.osc_udp import OscUdpPublisher
 
 BONES = ["Hips", "Spine", "Head"]

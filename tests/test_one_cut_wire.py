@@ -17,9 +17,9 @@ import pytest
 from osc_collector import OscCollector
 
 from rtseg.config import ConfigError
-from rtseg.live import LiveSession, wire_methods
+from rtseg.live.session import LiveSession, wire_methods
 from rtseg.recording import read_session_cuts, read_session_header
-from rtseg.session_config import from_dict
+from rtseg.live.config import from_dict
 
 SCRIPT = "idle:4,walk:5,punch:5"          # changes at frames 480 and 1080 (120 Hz)
 CHANGES = (480, 1080)

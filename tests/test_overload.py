@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 from osc_collector import OscCollector
 
-from rtseg.live import LiveSession
+from rtseg.live.session import LiveSession
 from rtseg.recording import read_session
-from rtseg.session_config import from_dict
+from rtseg.live.config import from_dict
 
 SPEED = 30.0
 MAX_LAG = 0.1

@@ -20,7 +20,7 @@ from pythonosc.osc_message import OscMessage
 from pythonosc.osc_message_builder import OscMessageBuilder
 
 from osc_collector import OscCollector
-from rtseg.events import CutEvent, DropoutEvent, StatusEvent, event_from_dict
+from rtseg.core.events import CutEvent, DropoutEvent, StatusEvent, event_from_dict
 from rtseg.publishers import (JsonlPublisher, OscTcpPublisher, OscUdpPublisher, Publisher,
                               PublisherSet, parse_target, sanitize_label)
 from rtseg.publishers.oscmsg import encode_message, slip_encode

@@ -1,9 +1,7 @@
 import numpy as np
 from scipy.spatial.transform import Rotation as R
 
-from rtseg import quat
-
-
+from rtseg.core import quat
 def test_multiply_matches_scipy_composition():
     a, b = R.random(50, random_state=1), R.random(50, random_state=2)
     np.testing.assert_allclose(quat.multiply(a.as_quat(), b.as_quat()), (a * b).as_quat(), atol=1e-12)

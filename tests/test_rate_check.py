@@ -7,7 +7,7 @@ import threading
 
 import pytest
 
-from rtseg.rate_check import DeclaredRateCheck
+from rtseg.live.rate_check import DeclaredRateCheck
 
 
 def test_check_warns_once_when_off_and_not_when_right():
@@ -28,10 +28,10 @@ def test_lost_frames_do_not_lower_the_measured_rate():
 
 def test_vmc_at_120_hz_into_rate_60_warns_over_udp(caplog):
     from rtseg.drivers import open_source
-    from rtseg.live import LiveSession
+    from rtseg.live.session import LiveSession
     from rtseg.publishers import PublisherSet
     from rtseg.simulators.vmc_sender import VmcSender
-    from rtseg.session_config import from_dict
+    from rtseg.live.config import from_dict
     from tests.test_vmc_live import make_take
     take = make_take(400, seed=1)                  # 400 frames, sent at 120 Hz: 3.3 s
     src = open_source("osc://127.0.0.1:0?format=vmc&rate=60&queue=4096")

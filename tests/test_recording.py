@@ -14,8 +14,8 @@ import time
 import numpy as np
 import pytest
 
-from rtseg.events import CutEvent, DropoutEvent, StatusEvent
-from rtseg.frame import Frame
+from rtseg.core.events import CutEvent, DropoutEvent, StatusEvent
+from rtseg.core.frame import Frame
 from rtseg.recording import (FRAMES_FILE, RecorderLogHandler, SessionRecorder, is_session_dir,
                              read_session, read_session_cuts, record_dtype)
 
@@ -252,7 +252,7 @@ def test_log_handler_writes_log_lines(tmp_path):
 CHILD = textwrap.dedent("""
     import sys, time
     import numpy as np
-    from rtseg.frame import Frame
+    from rtseg.core.frame import Frame
     from rtseg.recording import SessionRecorder
     J = 17
     rec = SessionRecorder(sys.argv[1], [f"j{i}" for i in range(J)], [-1] + [0] * (J - 1),

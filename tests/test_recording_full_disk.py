@@ -11,7 +11,7 @@ import uuid
 
 import pytest
 
-from rtseg.events import CutEvent
+from rtseg.core.events import CutEvent
 from rtseg.recording import SessionRecorder, read_session, read_session_cuts
 
 from tests.test_recording import NAMES, PARENTS, random_frames

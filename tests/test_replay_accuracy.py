@@ -10,13 +10,13 @@ import time
 import numpy as np
 import pytest
 
-from rtseg.evaluation import score, widen
-from rtseg.labels import find_labelled_takes
-from rtseg.live import LiveSession
-from rtseg.online_eval import live_config, live_cuts
-from rtseg.pipeline import replay_session
+from rtseg.evaluation.scoring import score, widen
+from rtseg.labels.takes import find_labelled_takes
+from rtseg.live.session import LiveSession
+from rtseg.evaluation.online import live_config, live_cuts
+from rtseg.live.pipeline import replay_session
 from rtseg.recording import read_session
-from rtseg.session_config import from_dict
+from rtseg.live.config import from_dict
 from rtseg.simulators.serial_device import SerialSuit
 
 SPEED = 4.0   # 480 frames/s; at 8x the test failed once with load average 4.5

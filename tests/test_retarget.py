@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from rtseg.profiles import suit_profile
+from rtseg.core.profiles import suit_profile
 from rtseg.simulators.retarget import (MAPS, ImuModel, RetargetError, forward_kinematics,
                                        resolve, retarget)
-from rtseg.simulators.synth import synthesize
-from rtseg.take import Take
+from rtseg.simulators.synth.motion import synthesize
+from rtseg.core.take import Take
 
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
 CMU_AMC = DATA / "cmu" / "86_01.amc"

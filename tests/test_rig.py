@@ -1,4 +1,4 @@
-"""Any humanoid rig -> the canonical joints (rtseg.rig), and cuts that do not depend on the
+"""Any humanoid rig -> the canonical joints (rtseg.core.rig), and cuts that do not depend on the
 rig or the frame rate the motion comes in."""
 
 from __future__ import annotations
@@ -10,15 +10,15 @@ import sys
 import numpy as np
 import pytest
 
-from rtseg import quat as Q
+from rtseg.core import quat as Q
 from rtseg.drivers.readers import read_take, write_take
-from rtseg.features import PoseFeatures
-from rtseg.online_eval import live_config, live_cuts
-from rtseg.profiles import suit_profile
-from rtseg.resample import resample_take
-from rtseg.rig import CANONICAL, RigError, map_rig
-from rtseg.segmentation import segment_take
-from rtseg.simulators.synth import synthesize
+from rtseg.core.features import PoseFeatures
+from rtseg.evaluation.online import live_config, live_cuts
+from rtseg.core.profiles import suit_profile
+from rtseg.core.resample import resample_take
+from rtseg.core.rig import CANONICAL, RigError, map_rig
+from rtseg.detectors.segmentation import segment_take
+from rtseg.simulators.synth.motion import synthesize
 
 from conftest import DATA_DIR
 from rig_variants import RIGS, in_rig

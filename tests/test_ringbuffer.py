@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rtseg.ringbuffer import RingBuffer
+from rtseg.core.ringbuffer import RingBuffer
 
 
 def fill(ring: RingBuffer, n: int, start: int = 0) -> None:

@@ -18,13 +18,13 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from rtseg.drivers import open_source
-from rtseg.drivers import codec_rokoko as C
-from rtseg.drivers.codec_rokoko import (BODY_BONES, BODY_PARENTS, LZ4_MAGIC, RokokoError,
+from rtseg.drivers.rokoko import codec as C
+from rtseg.drivers.rokoko.codec import (BODY_BONES, BODY_PARENTS, LZ4_MAGIC, RokokoError,
                                         decode_packet, encode_packet, unity_to_rh)
-from rtseg.drivers.rokoko_source import RokokoAssembler
-from rtseg.profiles import resolve_joints, suit_profile
+from rtseg.drivers.rokoko.source import RokokoAssembler
+from rtseg.core.profiles import resolve_joints, suit_profile
 from rtseg.simulators.rokoko_sender import RokokoSender
-from rtseg.simulators.synth import synthesize
+from rtseg.simulators.synth.motion import synthesize
 from vendor_helpers import (Counter, assert_refused, assert_same_cuts, free_port,
                             overwrite_bytes, random_bytes, read_all, run_live, send_and_read,
                             serial_reference, simulate_into)
@@ -171,7 +171,7 @@ def test_orjson_is_the_parser_and_the_json_fallback_is_logged_once(monkeypatch, 
     not one per source."""
     import tomllib
     from pathlib import Path
-    from rtseg.drivers import rokoko_source as S
+    from rtseg.drivers.rokoko import source as S
     assert C.JSON_PARSER == "orjson"
     project = tomllib.loads((Path(__file__).parent.parent / "pyproject.toml").read_text())
     assert any(r.startswith("orjson") for r in project["project"]["dependencies"])
@@ -383,8 +383,8 @@ def test_rtseg_live_rokoko_url_prints_cuts():
 def test_a_take_with_rokoko_names_replays_unchanged():
     """A take named like Rokoko's bones (a session recorded from rokoko://) is placed by the
     ``rokoko`` skeleton map: the bodies sent are the take's global orientations."""
-    from rtseg import quat as Q
-    from rtseg.take import Take
+    from rtseg.core import quat as Q
+    from rtseg.core.take import Take
     rng = np.random.default_rng(3)
     n = 30
     local = Rotation.from_rotvec(rng.normal(scale=0.5, size=(n * J, 3))).as_quat().reshape(n, J, 4)
@@ -402,7 +402,7 @@ def test_a_take_with_rokoko_names_replays_unchanged():
 def test_real_take_cuts_match_the_serial_suit(data_dir):
     """86_01 (CMU, 38 s) through the Rokoko codec gives the cuts the 17-sensor serial suit
     gives through its codec, within 0.25 s (offline pipeline, the live loop's own)."""
-    from rtseg.pipeline import replay_frames
+    from rtseg.live.pipeline import replay_frames
 
     take, serial, ref = serial_reference(data_dir)
     rate = take.frame_rate

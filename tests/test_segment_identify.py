@@ -16,8 +16,8 @@ import pytest
 
 from rtseg.cli import main
 from rtseg.drivers.readers import write_take
-from rtseg.segment_identity import identify_segments
-from rtseg.simulators.synth import synthesize
+from rtseg.identity.segments import identify_segments
+from rtseg.simulators.synth.motion import synthesize
 
 from synth_identity import SYNTH_DETECTOR, SYNTH_THRESHOLD
 
@@ -80,7 +80,7 @@ def test_gmm_components_repeat_for_repeated_behaviours(tmp_path, capsys):
     # the majority component, checked against the detector's own frame labels
     from rtseg.detectors.gmm import GMMDetector
     from rtseg.detectors import method_params
-    from rtseg.segmentation import compute_features
+    from rtseg.detectors.segmentation import compute_features
     X = compute_features(res.take)
     det = GMMDetector.from_params(method_params("gmm", {}), res.take.frame_rate)
     det.segment(X)
@@ -130,7 +130,7 @@ def test_identify_segments_on_features_directly():
     """The helper alone: no cuts = one segment (id 1); cuts at the true changes of a
     walk/punch/walk take with batch detection (detected == boundary)."""
     res = synthesize("walk:6,punch:6,walk:6", seed=0)
-    from rtseg.segmentation import compute_features
+    from rtseg.detectors.segmentation import compute_features
     X = compute_features(res.take)
     fr = res.take.frame_rate
     assert identify_segments(X, fr, []) == [1]
@@ -147,7 +147,7 @@ DATA = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared" / "d
 def test_real_86_01_walks_share_one_id_and_punches_another(capsys):
     """86_01 (walk jump walk punch walk leg_kick punch): with the default threshold the
     contrast segments' ids follow the labelled behaviours."""
-    from rtseg.labels import read_cmu86_transitions
+    from rtseg.labels.takes import read_cmu86_transitions
     doc = json.loads(_run(capsys, str(DATA / "cmu" / "86_01.amc"), "--method", "contrast",
                           "--identify", "--format", "json"))
     segs = doc["methods"]["contrast"]["segments"]
@@ -170,9 +170,9 @@ def test_real_86_01_walks_share_one_id_and_punches_another(capsys):
 def _synth_library(tmp_path, script="walk:8,punch:8,wave:8", seed=0):
     """A library learned (as rtseg learn does: the live fed rows) from a synthetic take;
     its file path."""
-    from rtseg.library import LibraryBuilder
-    from rtseg.library_learn import label_runs, take_rows
-    from rtseg.online_eval import live_config
+    from rtseg.library.behaviours import LibraryBuilder
+    from rtseg.library.examples import label_runs, take_rows
+    from rtseg.evaluation.online import live_config
     res = synthesize(script, seed=seed)
     X, idx, profile = take_rows(res.take, live_config()[0])
     b = LibraryBuilder(profile, X.shape[1], res.take.frame_rate)

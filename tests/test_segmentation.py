@@ -1,4 +1,4 @@
-"""rtseg.segmentation: segments between cuts, cut cleaning, parameter files."""
+"""rtseg.detectors.segmentation: segments between cuts, cut cleaning, parameter files."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import logging
 import pytest
 
 from rtseg.detectors.base import Cut
-from rtseg.segmentation import _clean_cuts, load_params, segments_between
+from rtseg.detectors.segmentation import _clean_cuts, load_params, segments_between
 
 
 def test_segments_tile_the_take():
@@ -19,7 +19,7 @@ def test_segments_tile_the_take():
 
 def test_clean_cuts_sorts_and_reports_what_it_drops(caplog):
     raw = [Cut(300, "pca"), 120, Cut(120, "pca"), 0, 500]
-    with caplog.at_level(logging.WARNING, logger="rtseg.segmentation"):
+    with caplog.at_level(logging.WARNING, logger="rtseg.detectors.segmentation"):
         cuts = _clean_cuts(raw, "pca", 500)
     assert [c.frame for c in cuts] == [120, 300]
     assert "3 cut(s)" in caplog.text and "[120, 0, 500]" in caplog.text

@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from rtseg.drivers import SourceError, open_source
-from rtseg.drivers import codec_serial as codec
-from rtseg.drivers.serial_source import SerialSource
-from rtseg.profiles import suit_profile
-from rtseg.quat import global_from_local
+from rtseg.drivers.serial import codec
+from rtseg.drivers.serial.source import SerialSource
+from rtseg.core.profiles import suit_profile
+from rtseg.core.quat import global_from_local
 from rtseg.simulators.serial_device import SerialSuit
-from rtseg.take import Take
+from rtseg.core.take import Take
 
 SUIT = suit_profile("default17")
 J = len(SUIT.bones)

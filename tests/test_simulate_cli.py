@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 import serial
 
-from rtseg import quat
+from rtseg.core import quat
 from rtseg.cli import main
-from rtseg.drivers.codec_serial import SerialFrameDecoder
-from rtseg.simulators.synth import synthesize
+from rtseg.drivers.serial.codec import SerialFrameDecoder
+from rtseg.simulators.synth.motion import synthesize
 
 SCRIPT = "idle:2,walk:2"
 SEED = 4
@@ -112,7 +112,7 @@ def test_simulate_serial_through_a_real_pty(tmp_path):
 
 
 def test_simulate_vmc_through_a_real_udp_socket(tmp_path):
-    from rtseg.drivers.osc_source import OscVmcSource
+    from rtseg.drivers.osc.source import OscVmcSource
 
     truth = synthesize("walk:1.5", seed=SEED)
     src = OscVmcSource("127.0.0.1", 0)
@@ -351,7 +351,7 @@ def test_cmu_take_replays_as_vmc_into_rtseg_live(tmp_path):
 
 def test_simulate_take_errors_name_the_unmapped_bones(tmp_path, capsys):
     from rtseg.drivers.readers import write_take
-    from rtseg.take import Take
+    from rtseg.core.take import Take
     q = np.tile([0.0, 0.0, 0.0, 1.0], (10, 3, 1))
     path = write_take(tmp_path / "odd.npz", Take(["Hips", "Spine", "Tail"], [-1, 0, 1], 120.0, q))
     assert main(["simulate", "vmc", "--take", str(path), "--port", "9"]) in (1, 2)

@@ -16,7 +16,7 @@ from pathlib import Path
 import serial
 
 from rtseg.drivers import open_source
-from rtseg.drivers.codec_serial import SerialFrameDecoder
+from rtseg.drivers.serial.codec import SerialFrameDecoder
 from vendor_helpers import free_port
 
 REPO = Path(__file__).resolve().parent.parent

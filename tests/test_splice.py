@@ -1,5 +1,5 @@
-"""Spliced performances (rtseg.splice, benchmarks/splice.py) and their group in
-rtseg.labels: the splice rules, exact boundaries, seeded byte-identical output, no join
+"""Spliced performances (rtseg.evaluation.splice, benchmarks/splice.py) and their group in
+rtseg.labels.takes: the splice rules, exact boundaries, seeded byte-identical output, no join
 across formats or joint sets, rest-frame trimming, reading back as group "spliced".
 
 The source folders are written here (tiny BVH and ASF/AMC files laid out like
@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rtseg import splice as S
+from rtseg.evaluation import splice as S
 from rtseg.drivers.readers import read_take, write_take
-from rtseg.evaluation import score
-from rtseg.labels import LabelError, find_labelled_takes, read_take_transitions
+from rtseg.evaluation.scoring import score
+from rtseg.labels.takes import LabelError, find_labelled_takes, read_take_transitions
 
 from conftest import DATA_DIR, REPO
 
@@ -175,7 +175,7 @@ def _sources_of(seg: dict) -> list[tuple[str, int, int]]:
 
 def test_trim_bounds_rest_frames():
     rng = np.random.default_rng(0)
-    from rtseg import quat as Q
+    from rtseg.core import quat as Q
     ang = _motion(6, 600, "walk", 0.4)
     q = Q.from_euler("ZXY", ang.reshape(-1, 3)).reshape(600, 6, 4)
     assert S.trim_bounds(q, RATE) == (0, 600)                 # nothing to drop

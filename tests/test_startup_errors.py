@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from rtseg.cli import main
-from rtseg.session_config import SCHEMA
+from rtseg.live.config import SCHEMA
 
 
 def run(capsys, *argv: str) -> tuple[int, str, str]:
@@ -332,7 +332,7 @@ def _keep_cwd_and_logging():
 @pytest.fixture(scope="module")
 def synth_take(tmp_path_factory) -> Path:
     from rtseg.drivers.readers.npz_take import write_npz
-    from rtseg.simulators.synth import synthesize
+    from rtseg.simulators.synth.motion import synthesize
     p = tmp_path_factory.mktemp("take") / "synth.npz"
     write_npz(p, synthesize("idle:2,walk:2", seed=2).take)
     return p

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import socket
 
-from rtseg.session_stats import SessionSummary, source_losses_text, targets_text
+from rtseg.live.stats import SessionSummary, source_losses_text, targets_text
 
 
 def _summary(**kw) -> SessionSummary:
@@ -27,7 +27,7 @@ def test_dead_tcp_target_is_reported_as_dropped():
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
     pubs = PublisherSet.from_specs([f"tcp:127.0.0.1:{port}"])
-    from rtseg.events import CutEvent
+    from rtseg.core.events import CutEvent
     for i in range(3):
         pubs.publish_cut(CutEvent(event=i + 1, segment=i + 1, frame=10 * i, time=0.1 * i,
                                   method="pca"))

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rtseg import quat
+from rtseg.core import quat
 from rtseg.config import load_toml
-from rtseg.simulators.synth import (BEHAVIOURS, DEFAULT_SCRIPT, FEATURE_JOINTS, JOINT_NAMES,
+from rtseg.simulators.synth.motion import (BEHAVIOURS, DEFAULT_SCRIPT, FEATURE_JOINTS, JOINT_NAMES,
                                     PARENTS, ScriptError, joint_positions, local_quats, mirror,
                                     parse_script, synthesize)
 
@@ -202,8 +202,8 @@ def test_mirror_swaps_sides_and_is_an_involution():
 def test_detectors_separate_synthetic_behaviours():
     """End to end with the real detectors: PPCA finds every transition of a short take."""
     from rtseg.detectors import segment_features
-    from rtseg.evaluation import score
-    from rtseg.features import take_features
+    from rtseg.evaluation.scoring import score
+    from rtseg.core.features import take_features
 
     r = synthesize("walk:6,squat:6,punch:6,wave:6", seed=0)
     cuts = segment_features(take_features(r.take), "ppca", r.take.frame_rate)

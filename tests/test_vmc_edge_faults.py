@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from rtseg.drivers import open_source
-from rtseg.drivers.codec_vmc import VmcAssembler, bundle_structure_error, encode_frame
+from rtseg.drivers.osc.vmc.codec import VmcAssembler, bundle_structure_error, encode_frame
 
 from tests.test_vmc_live import SUIT, make_take, read_all, same_rotation
 from tests.test_vmc_live import source  # noqa: F401  (the fixture: a VMC source on port 0)
@@ -158,7 +158,7 @@ def test_bad_senders_option_is_refused():
 def test_restarted_sender_continues_the_clock(source, caplog):
     """A sender restarted (new socket, T from 0 again) after the handover silence: reported
     times go on increasing, one warning, counted."""
-    from rtseg.drivers.osc_source import SENDER_HANDOVER
+    from rtseg.drivers.osc.source import SENDER_HANDOVER
     take = make_take(30, seed=4)
     addr = ("127.0.0.1", source.port)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s1:

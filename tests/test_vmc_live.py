@@ -14,12 +14,12 @@ from pythonosc.osc_message import OscMessage as PyOscMessage
 from scipy.spatial.transform import Rotation
 
 from rtseg.drivers import SourceError, open_source
-from rtseg.drivers.codec_vmc import (
+from rtseg.drivers.osc.vmc.codec import (
     BONE_ADDRESS, ROOT_ADDRESS, encode_message, encode_pose_message, pack_bundles, parse_packet,
 )
-from rtseg.drivers.osc_source import OscVmcSource
+from rtseg.drivers.osc.source import OscVmcSource
 from rtseg.simulators.vmc_sender import VmcSender
-from rtseg.take import Take
+from rtseg.core.take import Take
 
 SUIT = ["Hips", "Spine", "Chest", "Neck", "Head", "LeftUpperArm", "LeftLowerArm", "LeftHand",
         "RightUpperArm", "RightLowerArm", "RightHand", "LeftUpperLeg", "LeftLowerLeg",

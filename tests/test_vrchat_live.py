@@ -12,7 +12,7 @@ from pythonosc.udp_client import SimpleUDPClient
 from scipy.spatial.transform import Rotation
 
 from rtseg.drivers import open_source
-from rtseg.drivers.codec_vrchat import JOINT_NAMES, VrchatAssembler, unity_euler_to_quat
+from rtseg.drivers.osc.vrchat import JOINT_NAMES, VrchatAssembler, unity_euler_to_quat
 
 
 def _axis(axis: int, deg: float) -> np.ndarray:

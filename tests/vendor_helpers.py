@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from rtseg.drivers import SourceError, open_source
-from rtseg.live import LiveSession
-from rtseg.session_config import from_dict
+from rtseg.live.session import LiveSession
+from rtseg.live.config import from_dict
 
 
 class Counter:
@@ -148,10 +148,10 @@ def serial_reference(data_dir):
     """86_01 (CMU, 38 s) through the 17-sensor serial suit's codec and the offline
     pipeline: (take, serial frames as replay_frames tuples, reference cuts).  Asserts the
     reference cuts the take at least 3 times."""
-    from rtseg.drivers.codec_serial import SerialFrameDecoder, encode_frame as ser_encode
+    from rtseg.drivers.serial.codec import SerialFrameDecoder, encode_frame as ser_encode
     from rtseg.drivers.readers import read_take
-    from rtseg.pipeline import replay_frames
-    from rtseg.profiles import suit_profile
+    from rtseg.live.pipeline import replay_frames
+    from rtseg.core.profiles import suit_profile
     from rtseg.simulators.retarget import retarget
 
     take = read_take(str(data_dir / "cmu" / "86_01.amc"))

@@ -1,4 +1,4 @@
-"""Take readers, one module per file format; all return ``rtseg.take.Take``.
+"""Take readers, one module per file format; all return ``rtseg.core.take.Take``.
 
 ``read_take(path)`` picks the reader by extension; ``write_take(path, take)`` writes
 rtseg's own ``.npz`` take format.  Malformed input raises ``ReaderError`` (a ValueError)
@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from rtseg.drivers.readers.errors import ReaderError
-from rtseg.take import Take
+from rtseg.core.take import Take
 
 READERS = {".amc": "asf/amc", ".bvh": "bvh", ".npz": "npz", ".csv": "tsseg4d csv"}
 

@@ -11,7 +11,7 @@ Conventions (Acclaim / CMU, as in the CMU viewer and Barbič's AMC player)
   M = Rz(rz)·Ry(ry)·Rx(rx) (missing dofs are 0).  Translation dofs (tx ty tz l) on
   non-root bones are read and checked but do not contribute to the rotation.
 - The take stores for each bone its rotation relative to its parent in world-aligned
-  frames: L = C·M·C⁻¹.  Chaining L along the hierarchy (``rtseg.quat.global_from_local``)
+  frames: L = C·M·C⁻¹.  Chaining L along the hierarchy (``rtseg.core.quat.global_from_local``)
   gives each bone's orientation in the world, the same thing an IMU on that bone reports.
 - Root: ``order TX TY TZ RX RY RZ`` says which AMC column is which; ``axis XYZ`` is the
   order the root rotations are applied; ``orientation`` is the root axis frame C_root.
@@ -33,11 +33,11 @@ from pathlib import Path
 
 import numpy as np
 
-from rtseg import quat as Q
+from rtseg.core import quat as Q
 from rtseg.drivers.readers.asf import (CMU_METRES_PER_UNIT, ROT_DOFS, AsfBone, AsfSkeleton,
                                        angle_to_deg, read_asf)
 from rtseg.drivers.readers.errors import ReaderError, is_number, read_text_lines
-from rtseg.take import Take
+from rtseg.core.take import Take
 
 __all__ = ["AsfBone", "AsfSkeleton", "read_asf", "read_amc", "read_asf_amc", "skeleton_for",
            "DEFAULT_FRAME_RATE"]
@@ -49,7 +49,7 @@ log = logging.getLogger("rtseg.readers")
 
 def _euler_quats(axes: str, angles_deg: np.ndarray) -> np.ndarray:
     """R = R_axes[0]·R_axes[1]·... of (F, k) angles in degrees (same as
-    ``rtseg.quat.from_euler(axes, angles)``, composed directly: faster for long takes)."""
+    ``rtseg.core.quat.from_euler(axes, angles)``, composed directly: faster for long takes)."""
     angles_deg = np.atleast_2d(np.asarray(angles_deg, dtype=np.float64))
     half = np.radians(angles_deg) * 0.5
     out = None
@@ -67,7 +67,7 @@ def _axis_quat(angles_xyz_deg: np.ndarray, order: str) -> np.ndarray:
     """Quaternion of an ASF ``axis``: rotations about the axes applied in ``order``.
 
     Applying X then Y then Z (order "XYZ") is R = Rz·Ry·Rx, i.e. intrinsic "ZYX" in
-    ``rtseg.quat.from_euler`` terms.
+    ``rtseg.core.quat.from_euler`` terms.
     """
     idx = {"X": 0, "Y": 1, "Z": 2}
     rev = order[::-1]

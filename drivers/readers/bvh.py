@@ -6,7 +6,7 @@ Conventions
   ``End Site`` blocks are not joints: their offsets go to ``meta["end_sites"]``.
 - Rotation channels may come in any order per joint; the joint's rotation relative to its
   parent is the product of the elementary rotations in channel order:
-  ``Zrotation Xrotation Yrotation`` gives R = Rz·Rx·Ry (``rtseg.quat.from_euler("ZXY")``),
+  ``Zrotation Xrotation Yrotation`` gives R = Rz·Rx·Ry (``rtseg.core.quat.from_euler("ZXY")``),
   angles in degrees.  A joint without rotation channels has the identity.
 - Position channels may be on any joint and in any order.  The first root's go to
   ``root_position`` (x, y, z, file units, ``None`` if it has none); those of other joints to
@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from rtseg import quat as Q
+from rtseg.core import quat as Q
 from rtseg.drivers.readers.errors import ReaderError, read_text_lines
-from rtseg.take import Take
+from rtseg.core.take import Take
 
 _TOKEN_RE = re.compile(r"[{}]|[^\s{}]+")
 _CHANNELS = {"xposition": "px", "yposition": "py", "zposition": "pz",

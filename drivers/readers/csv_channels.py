@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from rtseg.drivers.readers.errors import ReaderError, is_number
-from rtseg.take import Take
+from rtseg.core.take import Take
 
 JOINTS = ["lhumerus", "rhumerus", "lfemur", "rfemur"]
 DEFAULT_FRAME_RATE = 120.0

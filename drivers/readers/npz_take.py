@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from rtseg.drivers.readers.errors import ReaderError
-from rtseg.take import Take
+from rtseg.core.take import Take
 
 FORMAT_VERSION = 1
 _REQUIRED = ("format_version", "joint_names", "parents", "frame_rate", "quats", "space")

@@ -1,6 +1,6 @@
 """``rtseg demo``: the whole live chain on a simulated suit, no hardware needed.
 
-Synthesises a performance (``rtseg.simulators.synth``, default script: idle, walk, punch,
+Synthesises a performance (``rtseg.simulators.synth.motion``, default script: idle, walk, punch,
 walk, squat, punch, wave, squat, kick: walk, punch and squat recur), plays it as a 17-sensor
 IMU suit on a **real pseudo-terminal** (``rtseg.simulators.serial_device.SerialSuit``, rtseg's
 binary serial format at 120 Hz), and runs the live session on ``serial://<that pty>`` exactly
@@ -9,7 +9,7 @@ cuts sent over OSC to 127.0.0.1:9123 (listen with ``oscdump 9123``) and printed 
 happen, each followed by its behaviour id (``[identity]``, on in the demo unless
 ``--no-identity``): an earlier segment's id when the behaviour recurs, else a new one.
 Without ``--config`` the identity threshold is the synthesiser's
-(``rtseg.simulators.synth.IDENTITY_THRESHOLD``, 7.0: its instances of one behaviour differ
+(``rtseg.simulators.synth.motion.IDENTITY_THRESHOLD``, 7.0: its instances of one behaviour differ
 more than real repeats), not the mocap default.
 Each behaviour line also carries the segment's name from a behaviour library: by default
 one the demo learns at start from two other synthetic performers (seeds SEED + 1001 and
@@ -47,7 +47,7 @@ def demo_library(seed: int, config, folder: str) -> tuple[str, str]:
     """Learn the demo's behaviour library (module doc) into ``folder``; (path, what it
     holds, for the console)."""
     from pathlib import Path
-    from rtseg.library_learn import learn, synthetic_examples
+    from rtseg.library.examples import learn, synthetic_examples
     seeds = [seed + k for k in LIBRARY_SEED_OFFSETS]
     lib, _ = learn(synthetic_examples(DEMO_LIBRARY, seeds, config))
     path = lib.save(Path(folder) / "demo_behaviours.json")
@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_identity:
         cfg["identity.enabled"] = True
         if args.config is None:       # the synthesiser's own spread sets its threshold
-            from rtseg.simulators.synth import IDENTITY_THRESHOLD
+            from rtseg.simulators.synth.motion import IDENTITY_THRESHOLD
             cfg["identity.threshold"] = IDENTITY_THRESHOLD
     if args.behaviours and not use_library(cfg, args.behaviours, "rtseg demo"):
         return 2
@@ -88,7 +88,7 @@ def _run(args: argparse.Namespace, cfg, script: str, library: str = "") -> int:
     (``library``: what the demo's own library holds, for the console; "" without it)."""
     from rtseg.simulators.faults import FaultConfig
     from rtseg.simulators.serial_device import SerialSuit
-    from rtseg.simulators.synth import ScriptError, synthesize
+    from rtseg.simulators.synth.motion import ScriptError, synthesize
     try:
         faults = FaultConfig.parse(args.faults)
         synth = synthesize(script, frame_rate=args.rate, seed=args.seed)

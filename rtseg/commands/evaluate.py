@@ -1,7 +1,7 @@
 """``rtseg evaluate DATA_DIR``: segment every labelled take of a data folder and score the
 cuts against the labels (precision, recall, F1 per take and pooled over takes).
 
-The folder is laid out like ``../shared/data`` (see ``rtseg.labels.find_labelled_takes``).
+The folder is laid out like ``../shared/data`` (see ``rtseg.labels.takes.find_labelled_takes``).
 Group "cmu" holds the full-rotation takes (what accuracy targets are about, the default);
 "tsseg4d" the four-channel takes, reported separately.
 
@@ -9,7 +9,7 @@ Scoring: a cut is correct for a transition when it lies in the labelled range wi
 ``--tolerance`` seconds on each side (default 0.5 s, the tolerance at which a second human
 annotation agrees with the first: F1 0.98); the strict score (tolerance 0) is reported
 beside it.  ``--online`` runs, instead of the offline methods, exactly what ``rtseg live``
-runs (``rtseg.online_eval``: the live pipeline and detectors from the live configuration,
+runs (``rtseg.evaluation.online``: the live pipeline and detectors from the live configuration,
 frame by frame) and reports each matched cut's detection delay: (frame whose arrival
 produced the cut - labelled transition mid) / frame rate, in seconds.
 """
@@ -31,12 +31,12 @@ import numpy as np
 from rtseg.commands.segment import (
     add_method_argument, add_profile_argument, methods_of, params_by_method,
 )
-from rtseg.evaluation import Score, detection_delays, pooled, score, widen
-from rtseg.labels import GROUPS, LabelledTake, find_labelled_takes, no_takes_hint
+from rtseg.evaluation.scoring import Score, detection_delays, pooled, score, widen
+from rtseg.labels.takes import GROUPS, LabelledTake, find_labelled_takes, no_takes_hint
 from rtseg.detectors import ONLINE_METHODS
-from rtseg.online_eval import live_config, live_cuts
+from rtseg.evaluation.online import live_config, live_cuts
 from rtseg.progress import Progress
-from rtseg.segmentation import segment_take_methods
+from rtseg.detectors.segmentation import segment_take_methods
 
 log = logging.getLogger(__name__)
 
@@ -179,13 +179,13 @@ def evaluate_takes(takes: Sequence[LabelledTake], methods: Sequence[str],
     """Segment each take with every method (features computed once a take) and score it,
     at ``tolerance_s`` and strictly.
 
-    ``online``: a live configuration (``rtseg.online_eval.live_config``) whose detectors
+    ``online``: a live configuration (``rtseg.evaluation.online.live_config``) whose detectors
     are ``methods``: the take's frames go through the live pipeline instead of the offline
     methods, and the delay of every matched cut is kept.
     Take keys are the bare take names, or ``group/name`` when a name occurs in two groups.
     A take that cannot be read or segmented is logged and listed in ``errors``.
     ``workers``/``scheduler``: read and segment the takes on Dask, one task per take
-    (``rtseg.archive_exec.map_tasks``); scoring and the report are unchanged.
+    (``rtseg.archive.executors.map_tasks``); scoring and the report are unchanged.
     """
     if not (tolerance_s >= 0 and math.isfinite(tolerance_s)):
         raise ValueError(f"tolerance must be a finite number of seconds >= 0, got {tolerance_s}")
@@ -196,7 +196,7 @@ def evaluate_takes(takes: Sequence[LabelledTake], methods: Sequence[str],
     parallel = bool(workers or scheduler)
     ahead: dict[int, tuple[Any, BaseException | None]] = {}
     if parallel:
-        from rtseg.archive_exec import map_tasks
+        from rtseg.archive.executors import map_tasks
         for i, res, exc in map_tasks(_load_and_cut, takes, {"methods": list(methods),
                                      "params": params, "profile": profile, "online": online},
                                      workers, scheduler):
@@ -326,7 +326,7 @@ def add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
                    help="live configuration for --online (default: the shipped live.toml)")
     p.add_argument("--identity", action="store_true",
                    help="with --online: score the behaviour ids the live loop sends "
-                        "(adjusted Rand index, NMI per take and pooled; rtseg.identity_eval) "
+                        "(adjusted Rand index, NMI per take and pooled; rtseg.evaluation.identity) "
                         "instead of the cuts; takes: cmu and tsseg4d unless --group")
     p.add_argument("--behaviours", metavar="LIB",
                    help="with --online --identity: the live loop names the segments with "
@@ -379,8 +379,8 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--behaviours names the identity's segments: add --online --identity")
     if getattr(args, "identity", False) and (args.workers or args.scheduler):
         raise ValueError("--identity runs in this process: drop --workers/--scheduler")
-    if getattr(args, "identity", False):          # separate path: rtseg.identity_eval
-        from rtseg.identity_eval import run_evaluate_identity
+    if getattr(args, "identity", False):          # separate path: rtseg.evaluation.identity
+        from rtseg.evaluation.identity import run_evaluate_identity
         return run_evaluate_identity(args)
     online = live_default = None
     if args.online:

@@ -7,13 +7,13 @@
     (options: --step S, --profile NAME, --threshold D, --new, --config FILE)
 
 Learning an example the library already holds (the same motion: its content key,
-``rtseg.library_sources.motion_key``) adds nothing ("N already in the library"); when
+``rtseg.library.sources.motion_key``) adds nothing ("N already in the library"); when
 nothing is new the file is left as it was.  ``--take`` starts an example; the ``--label``, ``--frames`` (take frames [A, B), 0-based)
 or ``--segment`` (of a session recording, ``rtseg live --record DIR``: segment K as the
 session numbered it) and ``--skeleton`` after it belong to it.  ``--from``: every labelled take of a folder
-(``rtseg.library_learn.examples_from_dir``).  An existing LIB is extended (its examples
+(``rtseg.library.examples.examples_from_dir``).  An existing LIB is extended (its examples
 kept, and its window step) unless ``--new``.  ``--step``: example windows start every S
-seconds (default ``rtseg.library.DEFAULT_STEP_S``, 0.5).  The library is JSON (``rtseg.library``); ``rtseg live
+seconds (default ``rtseg.library.behaviours.DEFAULT_STEP_S``, 0.5).  The library is JSON (``rtseg.library.behaviours``); ``rtseg live
 --behaviours LIB`` names segments with it.  Exit 2 with one line on bad input.
 """
 
@@ -56,7 +56,7 @@ def parse_frames(text: str) -> tuple[int, int]:
 def recorded_segment(t: dict[str, Any]) -> int | None:
     """K of ``--segment K`` of a ``--take`` (None without it); the take must be a session
     recording."""
-    from rtseg.recording_reader import is_session_dir
+    from rtseg.recording.reader import is_session_dir
     if t.get("segment") is None:
         return None
     if t.get("frames"):
@@ -102,7 +102,7 @@ def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
         near = probe.calibration.get("nearest_other")
     near = near or {}
     # a known case is another example's window: another person's when the examples name
-    # several people (rtseg.library.Library.calibrate), else another take or recording's
+    # several people (rtseg.library.behaviours.Library.calibrate), else another take or recording's
     people = {str(e["person"]) for e in lib.examples if e.get("person")}
     second = "second example" + (" from another person" if len(people) > 1 else "")
     for k in sorted(by_name):
@@ -128,10 +128,10 @@ def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rtseg.library import DEFAULT_STEP_S, load
-    from rtseg.library_learn import (example_of_take, examples_from_dir, learn,
+    from rtseg.library.behaviours import DEFAULT_STEP_S, load
+    from rtseg.library.examples import (example_of_take, examples_from_dir, learn,
                                      unique_examples)
-    from rtseg.online_eval import live_config
+    from rtseg.evaluation.online import live_config
     takes = getattr(args, "takes", None) or []
     if args.show:
         if takes or args.from_dir or args.new:

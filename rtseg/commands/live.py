@@ -15,9 +15,9 @@ from typing import Any, Callable, TextIO
 
 from rtseg.cli import error_text, positive_float
 from rtseg.config import ConfigError
-from rtseg.events import SENDER_COUNTERS, BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
-from rtseg.session_stats import source_losses_text
-from rtseg.session_config import SessionConfig, load_session_config
+from rtseg.core.events import SENDER_COUNTERS, BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
+from rtseg.live.stats import source_losses_text
+from rtseg.live.config import SessionConfig, load_session_config
 
 #: seconds between plain status lines when stderr is not a terminal
 PLAIN_STATUS_EVERY = 5.0
@@ -82,7 +82,7 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
         over["detectors.methods"] = [m.strip() for m in args.methods.split(",") if m.strip()]
     cfg = load_session_config(args.config)
     if over:
-        from rtseg.session_config import apply_overrides
+        from rtseg.live.config import apply_overrides
         for key, value in over.items():
             try:
                 apply_overrides(cfg, {key: value}, origin="command line")
@@ -134,7 +134,7 @@ def format_cut(ev: CutEvent, time: float | None = None) -> str:
 
 def format_behaviour(ev: BehaviourEvent, first_segment: int | None,
                      time: float | None = None) -> str:
-    """One behaviour line (``rtseg.identity``): which behaviour segment ``ev.segment`` is.
+    """One behaviour line (``rtseg.identity.tracker``): which behaviour segment ``ev.segment`` is.
 
     first_segment: the earliest segment of the session with this behaviour id, when that is
     an earlier one (the behaviour recurs), else None (a new behaviour).  ``time``: when the
@@ -278,7 +278,7 @@ def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: 
                 monitor: tuple[Any, Any] | None = None,
                 check: Callable[[Any], int] | None = None) -> int:
     """Run a live session with console output; returns the exit status (``check``, when
-    given, judges the :class:`rtseg.session_stats.SessionSummary` after it is printed:
+    given, judges the :class:`rtseg.live.stats.SessionSummary` after it is printed:
     its return value is the status).
 
     ``monitor``: ``(feed, server)`` of :func:`start_monitor`; the server is stopped when
@@ -287,7 +287,7 @@ def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: 
     ``performance_time``: print each cut's ``t=`` as its boundary frame over the source's
     nominal rate (the performance's own clock, for a replay sent faster than real time)
     instead of seconds since the session started."""
-    from rtseg.live import LiveSession
+    from rtseg.live.session import LiveSession
     console = Console(print_cuts=cfg["output.jsonl"] != "-", status=not quiet)
     try:
         session = LiveSession(source, cfg, listeners=[console], duration=duration,
@@ -312,7 +312,7 @@ def use_library(cfg: Any, path: str, prog: str) -> bool:
     """Turn identity on with the behaviour library file ``path`` (``--behaviours``): its
     format and version are checked now, its feature profile at session start.  False, with
     one line on stderr, when it is refused."""
-    from rtseg.library import LibraryError, load
+    from rtseg.library.behaviours import LibraryError, load
     try:
         load(path)
     except LibraryError as exc:

@@ -35,9 +35,9 @@ import numpy as np
 
 from rtseg.commands.evaluate import tolerance_seconds
 from rtseg.commands.segment import add_profile_argument, params_by_method
-from rtseg.evaluation import score, widen
-from rtseg.labels import TransitionLabels, find_labels_for, read_labels_file
-from rtseg.segmentation import (
+from rtseg.evaluation.scoring import score, widen
+from rtseg.labels.takes import TransitionLabels, find_labels_for, read_labels_file
+from rtseg.detectors.segmentation import (
     METHODS, SegmentationResult, compute_features, segment_take, segments_between,
 )
 
@@ -451,7 +451,7 @@ def run(args: argparse.Namespace) -> int:
     except MissingDependency as exc:
         print(f"rtseg plot: error: {exc}", file=sys.stderr)
         return 2
-    from rtseg.take import load_take
+    from rtseg.core.take import load_take
     out = Path(args.output) if args.output else None
     if out is not None and not out.parent.is_dir():   # before the segmentation's seconds
         print(f"rtseg plot: error: cannot write {out}: folder {out.parent} does not exist",

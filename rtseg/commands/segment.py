@@ -3,7 +3,7 @@
 One take and no ``--out``: print its cuts and the segments between them (table, JSON or
 CSV; frames are 0-based; a cut frame is the first frame of a segment).  Many takes
 (files, folders searched recursively, globs) or ``--out FILE``: one record per take and
-method, as JSON lines or Parquet, resumable, optionally on Dask (``rtseg.archive``).
+method, as JSON lines or Parquet, resumable, optionally on Dask (``rtseg.archive.runner``).
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-from rtseg.archive import SESSION_HEADER
-from rtseg.segment_identity import identify_take
-from rtseg.segmentation import METHODS, SegmentationResult, load_params, segment_take_methods
+from rtseg.archive.runner import SESSION_HEADER
+from rtseg.identity.segments import identify_take
+from rtseg.detectors.segmentation import METHODS, SegmentationResult, load_params, segment_take_methods
 
 
 def add_method_argument(parser: argparse.ArgumentParser, default: str) -> None:
@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
     if lib_path and not _single_take(args):
         raise ValueError("--behaviours names the segments of one take (not archives)")
     if _single_take(args):
-        from rtseg.take import load_take
+        from rtseg.core.take import load_take
         path = args.paths[0]
         take = load_take(path, skeleton=args.skeleton)
         if getattr(args, "identify", False):
@@ -131,13 +131,13 @@ def run(args: argparse.Namespace) -> int:
             results = segment_take_methods(take, methods, params, profile=args.profile)
         names = None
         if lib_path:
-            from rtseg.library import load as load_library
-            from rtseg.online_eval import live_config
-            from rtseg.segment_identity import name_take
+            from rtseg.library.behaviours import load as load_library
+            from rtseg.evaluation.online import live_config
+            from rtseg.identity.segments import name_take
             names = name_take(take, results, load_library(lib_path), live_config()[0],
                               threshold=args.identity_threshold)
         if args.format == "json":
-            from rtseg.features import PoseFeatures
+            from rtseg.core.features import PoseFeatures
             used = PoseFeatures.for_take(take, args.profile).report()
             sys.stdout.write(format_json(path, results, names, features=used))
             return 0
@@ -149,8 +149,8 @@ def run(args: argparse.Namespace) -> int:
 
 def run_many(args: argparse.Namespace, methods: list[str],
              params: dict[str, dict[str, Any]]) -> int:
-    """Records of every take (``rtseg.archive.run_archive``); exit 1 when a take failed."""
-    from rtseg.archive import run_archive
+    """Records of every take (``rtseg.archive.runner.run_archive``); exit 1 when a take failed."""
+    from rtseg.archive.runner import run_archive
     if args.format not in (None, "json"):
         raise ValueError(f"--format {args.format} is for one take; several takes give one "
                          "JSON record per take and method (on stdout, or --out FILE)")

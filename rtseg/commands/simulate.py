@@ -65,7 +65,7 @@ import sys
 import time
 from typing import Any, Callable
 
-from rtseg.take import Take
+from rtseg.core.take import Take
 
 DEVICES = ("serial", "vmc", "mvn", "mocopi", "rokoko", "axis")
 #: devices served by ``rtseg.simulators.<device>_sender.serve(args, take, host)`` (host: a
@@ -173,7 +173,7 @@ def load(args: argparse.Namespace):
     else:
         if args.skeleton:
             raise ValueError("--skeleton goes with --take")
-        from rtseg.simulators.synth import DEFAULT_SCRIPT, synthesize
+        from rtseg.simulators.synth.motion import DEFAULT_SCRIPT, synthesize
         result = synthesize(args.synth or DEFAULT_SCRIPT, frame_rate=args.rate or 120.0,
                             seed=args.seed)
         take = result.take

@@ -4,7 +4,7 @@ behaviour than the motion just before it.
 A change detector fires wherever the motion's statistics change.  Inside one behaviour
 that has phases - an arm raised and lowered, a pause in a drink, the arm circles of an
 exercise reversing - that is not a behaviour change, and the identity tracker
-(``rtseg.identity``) then gives the new segment the id of the one before it.  The gate asks
+(``rtseg.identity.tracker``) then gives the new segment the id of the one before it.  The gate asks
 that question of every cut before it goes out:
 
 - a cut at boundary b (frame numbers of the detector: frames since its creation) is held
@@ -39,13 +39,13 @@ import numpy as np
 
 from rtseg.detectors.base import Cut
 from rtseg.detectors.window_models import WindowStats, behaviour_distance, fit
-from rtseg.identity import (DEFAULT_DECIDE_AFTER_S, DEFAULT_ID_SKIP_S, DEFAULT_MAX_WINDOW_S,
+from rtseg.identity.tracker import (DEFAULT_DECIDE_AFTER_S, DEFAULT_ID_SKIP_S, DEFAULT_MAX_WINDOW_S,
                             MIN_WINDOW_S)
 
 log = logging.getLogger("rtseg.detectors")
 
 #: the identity tracker's decision time, skipped start, longest window and the least that
-#: must remain after the skip (rtseg.identity), s
+#: must remain after the skip (rtseg.identity.tracker), s
 GATE_DECIDE_S, GATE_SKIP_S = DEFAULT_DECIDE_AFTER_S, DEFAULT_ID_SKIP_S
 GATE_WINDOW_S, GATE_MIN_AFTER_S = DEFAULT_MAX_WINDOW_S, MIN_WINDOW_S
 #: the shipped ``[contrast] gate_threshold`` (config/detectors.toml; chosen in

@@ -150,7 +150,7 @@ def behaviour_distance(a: WindowModel, b: WindowModel, reference_dims: int = 8) 
     1 for two windows of one motion), then stated for ``reference_dims`` effective
     dimensions, 1 + (D - 1) x sqrt(reference_dims / d_eff), so that one threshold serves
     few and many input dims (0: not restated).  inf when undefined.  The behaviour
-    identity (``rtseg.identity``) and the same-behaviour gate (``rtseg.detectors.gate``)
+    identity (``rtseg.identity.tracker``) and the same-behaviour gate (``rtseg.detectors.gate``)
     compare windows with it."""
     deff = max(a.nonnull, b.nonnull, 1)
     p, q = distances(a, b)

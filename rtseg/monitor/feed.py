@@ -1,6 +1,6 @@
 """The processing side of the live monitor: what the session hands to the browser page.
 
-:class:`MonitorFeed` is fed by :class:`rtseg.live.LiveSession` on its processing thread
+:class:`MonitorFeed` is fed by :class:`rtseg.live.session.LiveSession` on its processing thread
 through three calls, and never blocks it:
 
 - ``attach(session)`` once the pipeline exists: the joint names, frame rate, the primary
@@ -20,7 +20,7 @@ Batches go into a bounded queue (``capacity`` batches) that the server thread em
 Times in a batch are seconds since the session start (as ``CutEvent.time``).  A statistic
 point of the detector at window boundary ``position`` (a frame of the detector's own
 count) is placed at the time of the newest processed frame (on the session's clock of cut
-times: the source's own when it has one, see ``rtseg.live_events``) minus
+times: the source's own when it has one, see ``rtseg.live.emitter``) minus
 ``(newest detector frame - position) / frame_rate``.  A behaviour's ``start`` is the time of
 the primary detector's cut that began its segment (0 for the first segment).
 """
@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from rtseg.events import BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
+from rtseg.core.events import BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
 
 __all__ = ["MonitorFeed"]
 

@@ -9,7 +9,7 @@ Interface (what the live loop uses)
                                     "udp:127.0.0.1:53000,standard=off,template=/cue/{label}/start",
                                     "-"])
     sent = pubs.publish_cut(cut_event)   # returns the event with latency_ms stamped
-    pubs.publish_behaviour(behaviour_event)  # /rtseg/behaviour (rtseg.identity)
+    pubs.publish_behaviour(behaviour_event)  # /rtseg/behaviour (rtseg.identity.tracker)
     pubs.publish_status(status_event)    # once a second
     pubs.publish_dropout(dropout_event)
     pubs.stats()                         # {target: {"sent": .., "dropped": .., ...}}
@@ -43,7 +43,7 @@ import logging
 import re
 from typing import Any, Iterable, Sequence
 
-from rtseg.events import CutEvent, DropoutEvent, StatusEvent
+from rtseg.core.events import CutEvent, DropoutEvent, StatusEvent
 from rtseg.publishers.base import (OscPublisher, Publisher, PublisherStats, RateLimitedLog,
                                    cut_messages, dropout_message, status_message)
 from rtseg.publishers.jsonl import JsonlPublisher
@@ -215,7 +215,7 @@ class PublisherSet:
         self._each("publish_dropout", ev)
 
     def publish_behaviour(self, ev: Any) -> None:
-        """Send a behaviour message (``rtseg.events.BehaviourEvent``) to every publisher
+        """Send a behaviour message (``rtseg.core.events.BehaviourEvent``) to every publisher
         that takes one."""
         for p in self.publishers:
             if hasattr(p, "publish_behaviour"):

@@ -23,12 +23,12 @@ address                     tags       arguments
 ``/rtseg/dropout``          si         joint/sensor name, 1 lost / 0 restored
 ``/rtseg/behaviour``        iissf      behaviour message number, segment index, behaviour
                                        id, name (the id when unnamed), confidence 0..1
-                                       (``rtseg.identity``; ``[identity] enabled``)
+                                       (``rtseg.identity.tracker``; ``[identity] enabled``)
 ``/rtseg/behaviour/correct``  iissfs   the same five, then the id sent before: a
                                        segment's one correction
 ``/rtseg/input``            iiiii      input refused since start: corrupt messages, CRC
                                        failures (part of corrupt), bad messages, bad
-                                       values, unknown names (``rtseg.events.
+                                       values, unknown names (``rtseg.core.events.
                                        StatusEvent``); sent right after ``/rtseg/status``
                                        whenever one of them is not 0
 ==========================  =========  ==================================================
@@ -42,7 +42,7 @@ import time
 from dataclasses import asdict, dataclass
 from typing import Any, Callable, Sequence
 
-from rtseg.events import INPUT_COUNTERS, BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
+from rtseg.core.events import INPUT_COUNTERS, BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
 from rtseg.publishers.oscmsg import encode_message
 from rtseg.publishers.templates import AddressTemplate, cut_arg_value, sanitize_label
 

@@ -4,7 +4,7 @@
 so redirections made later are honoured); any other path is opened for appending
 (parent folders must exist; an unopenable path raises ValueError naming it).
 
-Each line is ``event.to_dict()`` (see ``rtseg.events``): ``{"type": "cut", "event": 3,
+Each line is ``event.to_dict()`` (see ``rtseg.core.events``): ``{"type": "cut", "event": 3,
 "segment": 3, "frame": 412, "time": 3.43, "method": "pca", "label": "pca",
 "confidence": 0.8, "latency_ms": 12.5, ...}``, ``{"type": "status", ...}``,
 ``{"type": "dropout", "name": "LeftHand", "lost": true, ...}``; NaN/inf are written as
@@ -19,7 +19,7 @@ import sys
 import threading
 from typing import IO, Any
 
-from rtseg.events import BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
+from rtseg.core.events import BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
 from rtseg.publishers.base import Publisher
 
 

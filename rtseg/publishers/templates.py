@@ -38,7 +38,7 @@ import re
 import string
 from typing import Any
 
-from rtseg.events import CutEvent
+from rtseg.core.events import CutEvent
 
 ADDRESS_FIELDS = ("label", "method", "segment", "event")
 ARG_FIELDS: dict[str, str] = {

@@ -1,0 +1,154 @@
+"""Live Sony mocopi input: ``mocopi://HOST:PORT?allow=...`` (UDP, default port 12351).
+
+Listens on **127.0.0.1** unless another address is written: the mocopi app runs on a phone,
+so receiving from it needs ``mocopi://0.0.0.0:12351`` (every IPv4 interface) - and then
+anyone who can reach the port can send poses: restrict with ``allow=<phone address>``.
+One reader thread feeds each datagram to a
+:class:`rtseg.drivers.mocopi.codec.MocopiAssembler` (one ``fram`` datagram = one frame;
+``skdf`` skeleton packets are kept in ``assembler.skeleton``) and queues the frames.
+
+URL options
+-----------
+``suit``       suit profile in ``config/suits.toml`` whose sensor ids are mocopi bone ids
+               (default ``mocopi``: the 27 bones).
+``queue``      frames held for ``read`` (default 256; when full the *oldest* is dropped,
+               counted in ``stats.dropped`` and logged).
+``rate``       nominal frame rate in Hz to report (default unknown, None).
+``rcvbuf``     SO_RCVBUF bytes (default: the OS default).
+``tolerance``  accepted | |q|^2 - 1 | (default 0.05).
+``allow``      senders accepted, comma separated addresses / CIDR networks; others are
+               dropped before decoding, counted in ``stats.refused_senders``, logged once.
+
+``space``      ``global`` (default) or ``local``, see below.
+
+Frames: joints in suit order, right-handed Y-up scalar-last (mocopi's own frame).  mocopi
+sends rotations relative to the parent bone of a skeleton whose rest pose (``skdf``) is the
+identity for every bone, so they carry no rig rest orientation to calibrate away:
+``space=global`` (default) chains them to global orientations at this boundary
+(:class:`ForwardKinematics`; a bone is valid only when its whole chain is), and the live
+loop takes parent-relative rotations again with no calibration pose - the same features a
+global IMU suit gives.  ``space=local`` passes them through as sent (the live loop then
+calibrates them like VMC, ``calibration.mode = "auto"``).  ``seq`` = ``fnum``; ``source_time`` =
+``uttm`` (sender Unix time, s) when sent, else None; ``root_position`` = root bone position
+(m).  Bad datagrams are counted (``corrupt``, ``bad_values``, ``bad_messages``,
+``unknown_names``), never raised.  Port 0 binds an ephemeral port: read ``.port``.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from rtseg.drivers.base import SourceError
+from rtseg.drivers.mocopi.codec import DEFAULT_PORT
+from rtseg.drivers.mocopi.assembler import MocopiAssembler
+from rtseg.drivers.mvn.source import (VendorUdpSource, check_options, number_option,
+                                      parse_location)
+from rtseg.drivers.osc.source import DEFAULT_HOST, Network, allow_option, load_suit
+
+OPTIONS = ("suit", "queue", "rate", "rcvbuf", "tolerance", "allow", "space")
+#: socket poll interval, s (also how soon ``close`` is noticed); no frame waits on it
+POLL = 0.05
+
+
+class ForwardKinematics:
+    """Global orientations from parent-relative ones: global_j = global_parent(j) ⊗ local_j
+    (scalar-last; parents before children).  Plain float arithmetic: for one 27-bone
+    frame it is several times faster than array operations per tree level."""
+
+    def __init__(self, parents: Sequence[int]) -> None:
+        for j, p in enumerate(parents):
+            if p >= j:
+                raise ValueError("parents must come before children")
+        self.parents = [int(p) for p in parents]
+
+    def __call__(self, local: np.ndarray) -> np.ndarray:
+        lq = local.tolist()
+        g: list = [None] * len(lq)
+        for j, p in enumerate(self.parents):
+            if p < 0:
+                g[j] = lq[j]
+                continue
+            bx, by, bz, bw = lq[j]
+            ax, ay, az, aw = g[p]
+            g[j] = (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                    aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+        return np.array(g, dtype=np.float64)
+
+    def chain_valid(self, valid: np.ndarray) -> np.ndarray:
+        """A bone's global orientation is known only when its whole chain is valid."""
+        v = valid.copy()
+        for j, p in enumerate(self.parents):
+            if p >= 0 and not v[p]:
+                v[j] = False
+        return v
+
+
+class _GlobalAssembler:
+    """Wraps a ``MocopiAssembler``: its frames with global orientations."""
+
+    def __init__(self, asm: MocopiAssembler, parents: Sequence[int]) -> None:
+        self.inner = asm
+        self.fk = ForwardKinematics(parents)
+
+    def __getattr__(self, name: str):
+        return getattr(self.inner, name)
+
+    def _convert(self, frames: list) -> list:
+        for f in frames:
+            f.quats = self.fk(f.quats)
+            if not f.valid.all():
+                f.valid = self.fk.chain_valid(f.valid)
+        return frames
+
+    def feed(self, data: bytes, now: float) -> list:
+        return self._convert(self.inner.feed(data, now))
+
+    def flush(self, now: float, force: bool = False) -> list:
+        return self._convert(self.inner.flush(now, force))
+
+
+class MocopiSource(VendorUdpSource):
+    """Sony mocopi receiver (see module docstring).  ``.port`` is the bound port."""
+
+    _fmt = "mocopi"
+
+    def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
+                 suit: str = "mocopi", queue_size: int = 256, rate: float | None = None,
+                 rcvbuf: int | None = None, tolerance: float = 0.05,
+                 allow: tuple[Network, ...] | None = None, space: str = "global") -> None:
+        super().__init__()
+        if space not in ("global", "local"):
+            raise SourceError(f"mocopi:// space must be 'global' or 'local', not {space!r}")
+        self.space = space
+        bones, parents = load_suit(suit)
+        from rtseg.core.profiles import suit_profile
+        ids = list(suit_profile(suit).sensor_ids)
+        self.joint_names = bones
+        self.parents = parents
+        self.bone_ids = ids
+        self.frame_rate = rate
+        self.suit = suit
+        root = ids[parents.index(-1)] if -1 in parents else ids[0]
+        asm = MocopiAssembler(ids, unit_tolerance=tolerance, root_id=root, stats=self.stats)
+        self._asm = asm if space == "local" else _GlobalAssembler(asm, parents)
+        self._start(host, port, POLL * 2, queue_size, rcvbuf, allow)
+
+
+def open_url(location: str, options: dict[str, str]) -> MocopiSource:
+    """Open ``mocopi://location?options`` (see module docstring)."""
+    check_options("mocopi", options, OPTIONS)
+    allow = allow_option(options)
+    host, port = parse_location("mocopi", location, DEFAULT_PORT)
+    num = number_option
+    return MocopiSource(
+        host, port, suit=options.get("suit") or "mocopi",
+        queue_size=num("mocopi", options, "queue", 256, int),
+        rate=num("mocopi", options, "rate", None),
+        rcvbuf=num("mocopi", options, "rcvbuf", None, int),
+        tolerance=num("mocopi", options, "tolerance", 0.05), allow=allow,
+        space=(options.get("space") or "global").lower())
+
+
+__all__ = ["MocopiSource", "ForwardKinematics", "open_url", "DEFAULT_PORT"]

@@ -1,0 +1,478 @@
+"""Live VMC input over OSC/UDP: ``osc://HOST:PORT?format=vmc&suit=default17&quiet=0.02``.
+
+rtseg listens as a VMC receiver ("Marionette", default UDP 39539) on **127.0.0.1** unless
+another address is written: ``osc://`` and ``osc://:39541`` listen on loopback only (a
+sender on the same machine); ``osc://0.0.0.0:39539`` (every IPv4 interface),
+``osc://[::]:39539`` or an interface address must be given explicitly to receive from
+other machines - and then anyone who can reach that port can send poses and so fire cues:
+restrict senders with ``allow=``.  One reader thread
+blocks on the socket, feeds every datagram in arrival order to a
+:class:`rtseg.drivers.osc.vmc.codec.VmcAssembler`, and queues the completed frames; ``read``
+takes them off the queue.  (No threaded OSC server: it would handle datagrams in parallel
+and could reorder the parts of a skeleton.)
+
+``osc://HOST:PORT?format=vrchat`` instead reads VRChat-style OSC trackers (head + 8
+trackers, world orientations, default port 9000; options quiet, queue, rate, rcvbuf and
+``root=head|1..8``, the tracker whose position is ``Frame.root_position``); see
+:mod:`rtseg.drivers.osc.vrchat`.
+
+URL options (VMC)
+-----------------
+``format``   ``vmc`` (default) or ``vrchat``.
+``suit``     suit profile in ``config/suits.toml`` giving bone order and hierarchy
+             (default ``default17``).
+``quiet``    seconds without datagrams after which an open frame is closed (default 0.02).
+``queue``    frames held for ``read`` (default 256).  **Drop policy**: when full, the
+             *oldest* queued frame is discarded (a live segmenter wants the newest data),
+             counted in ``stats.dropped`` and logged.
+``rate``     nominal frame rate in Hz to report as ``frame_rate`` (VMC does not announce it;
+             default: unknown, None).
+``rcvbuf``   SO_RCVBUF in bytes (default: the OS default).
+``tolerance``  accepted | |q|² - 1 | for incoming quaternions (default 0.05); accepted ones
+             are renormalised.
+``time_order``  ``last`` (default: ``/VMC/Ext/T`` follows the bones it stamps, as
+             VirtualMotionCapture sends it) or ``first`` (T opens each frame); see
+             ``VmcAssembler``.
+``burst``    seconds within which the datagrams of one frame arrive (default 0.004): a root
+             arriving later than this after a frame's first bone starts a new frame.
+``allow``    senders accepted, comma separated addresses or CIDR networks
+             (``allow=192.168.1.20,10.0.0.0/24``; default: any sender that can reach the
+             bound address).  Datagrams from others are dropped before decoding, counted in
+             ``stats.refused_senders`` and logged once per sender address.  (Both formats.)
+``senders``  one stream per sender (both formats): ``one`` (default) follows the first
+             sender (address and port) and refuses datagrams from any other, counted in
+             ``stats.other_senders`` with one warning naming each; once the followed sender
+             has been silent for ``SENDER_HANDOVER`` s (a restarted sender gets a new port)
+             the next one is followed.  ``newest`` follows the sender that started last (a
+             new sender takes over at once; the open frame is closed first).  ``merge``
+             decodes every sender's datagrams as one stream (only right when they send
+             parts of one skeleton).
+
+Frames: ``space = "local"`` (parent-relative rotations), joints in suit order,
+right-handed Y-up scalar-last; ``recv_time`` monotonic s when the frame closed,
+``source_time`` = ``/VMC/Ext/T`` (s, sender clock), ``seq`` = frame counter from 0,
+``valid`` False for bones absent from that frame (their last value is repeated),
+``root_position`` see ``VmcAssembler``.  Port 0 binds an ephemeral port: read ``.port``.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import logging
+import math
+import socket
+import threading
+import time
+from typing import Any, Sequence
+
+from rtseg.drivers.base import FrameQueue, QueuedSource, SourceError
+from rtseg.drivers.osc.vmc.codec import VmcAssembler
+from rtseg.drivers.osc.vrchat import DEFAULT_PORT as VRCHAT_PORT
+from rtseg.drivers.osc.vrchat import JOINT_NAMES as VRCHAT_JOINTS
+from rtseg.drivers.osc.vrchat import VrchatAssembler
+from rtseg.core.frame import Frame
+
+log = logging.getLogger("rtseg.drivers.osc")
+
+DEFAULT_PORT = 39539
+FORMATS = ("vmc", "vrchat")
+#: address listened on when the URL names none: loopback only
+DEFAULT_HOST = "127.0.0.1"
+OPTIONS = ("format", "suit", "quiet", "queue", "rate", "rcvbuf", "tolerance", "time_order",
+           "burst", "allow", "senders")
+VRCHAT_OPTIONS = ("format", "quiet", "queue", "rate", "rcvbuf", "root", "allow", "senders")
+#: ``senders=`` policies (see module docstring)
+SENDER_POLICIES = ("one", "newest", "merge")
+#: seconds of silence from the followed sender after which another sender is followed
+SENDER_HANDOVER = 1.0
+#: distinct refused senders remembered (each is logged once); later ones are only counted
+MAX_REFUSED_LOGGED = 1024
+
+Network = ipaddress.IPv4Network | ipaddress.IPv6Network
+
+
+def parse_allow(text: str) -> tuple[Network, ...]:
+    """``allow=`` value -> networks (a bare address is a /32 or /128 network).  Refuses
+    an empty list or a bad entry with a ``SourceError`` naming it."""
+    nets = []
+    for part in text.split(","):
+        part = part.strip()
+        if not part:
+            continue
+        try:
+            nets.append(ipaddress.ip_network(part, strict=False))
+        except ValueError as exc:
+            raise SourceError(f"osc:// allow={text!r}: {exc}") from None
+    if not nets:
+        raise SourceError("osc:// allow= needs at least one address or network "
+                          "(e.g. allow=127.0.0.1,192.168.1.0/24)")
+    return tuple(nets)
+
+
+def renamed(scheme: str, fn, *args):
+    """``fn(*args)``, a SourceError it raises re-raised with ``osc://`` written
+    ``<scheme>://`` (the vendor sources reuse the OSC parsers)."""
+    try:
+        return fn(*args)
+    except SourceError as exc:
+        raise SourceError(str(exc).replace("osc://", f"{scheme}://")) from None
+
+
+def allow_option(options: dict[str, str], scheme: str | None = None
+                 ) -> tuple[Network, ...] | None:
+    """The ``allow=`` URL option as networks (:func:`parse_allow`), None when absent; with
+    ``scheme``, its errors name that scheme (:func:`renamed`)."""
+    if "allow" not in options:
+        return None
+    if scheme is None:
+        return parse_allow(options["allow"])
+    return renamed(scheme, parse_allow, options["allow"])
+
+
+def sender_allowed(host: str, allow: tuple[Network, ...] | None) -> bool:
+    """Whether a datagram from ``host`` (as ``recvfrom`` gives it) passes ``allow``
+    (None: everyone).  IPv4-mapped IPv6 senders (``::ffff:a.b.c.d``) match IPv4 entries."""
+    if allow is None:
+        return True
+    try:
+        addr = ipaddress.ip_address(host.split("%", 1)[0])
+    except ValueError:
+        return False
+    if isinstance(addr, ipaddress.IPv6Address) and addr.ipv4_mapped is not None:
+        addr = addr.ipv4_mapped
+    return any(addr.version == n.version and addr in n for n in allow)
+
+
+def is_wide(host: str) -> bool:
+    """True when listening on ``host`` accepts datagrams from other machines (anything but
+    a loopback address)."""
+    try:
+        return not ipaddress.ip_address(host.split("%", 1)[0]).is_loopback
+    except ValueError:
+        return host.lower() != "localhost"      # a host name: whatever it resolves to
+
+
+def load_suit(name: str) -> tuple[list[str], list[int]]:
+    """(bone names, parent indices) of suit ``name`` in ``config/suits.toml``."""
+    try:
+        from rtseg.core.profiles import suit_profile
+    except ImportError:  # pragma: no cover - profiles module is part of the package
+        suit_profile = None
+    try:
+        if suit_profile is not None:
+            prof = suit_profile(name)
+            return list(prof.bones), list(prof.parents)
+        from rtseg.config import load_toml
+        spec = load_toml("suits")["suits"][name]
+        bones = [s["bone"] for s in spec["sensors"]]
+        low = [b.lower() for b in bones]
+        parents = [low.index(s["parent"].lower()) if s.get("parent") else -1
+                   for s in spec["sensors"]]
+        return bones, parents
+    except (KeyError, ValueError) as exc:
+        raise SourceError(f"suit {name!r}: {exc}") from None
+
+
+class OscUdpSource(QueuedSource):
+    """Shared machinery of the OSC sources: a UDP socket read by one thread that feeds an
+    assembler (``feed(data, now)`` / ``flush(now)`` returning frames) and a bounded queue
+    (drop-oldest).  ``.port`` is the bound port."""
+
+    _asm: Any
+    #: name in the drop warning, and the logger it goes to
+    _fmt = "VMC"
+    _log = log
+
+    def _start(self, host: str, port: int, quiet: float, queue_size: int,
+               rcvbuf: int | None, allow: tuple[Network, ...] | None = None,
+               senders: str = "merge") -> None:
+        """Bind and start the reader.  ``senders``: the ``senders=`` policy; ``merge`` for
+        sources whose protocol keys streams itself (MVN characters, actors)."""
+        if senders not in SENDER_POLICIES:
+            raise SourceError(f"osc:// senders={senders!r}: expected one of "
+                              f"{', '.join(SENDER_POLICIES)}")
+        self.allow = allow
+        self.senders = senders
+        #: (host, port) of the sender followed, None before the first datagram
+        self.sender: tuple | None = None
+        self._sender_last = -math.inf
+        self._others: set[tuple] = set()
+        self._refused: set[str] = set()
+        self._queue = FrameQueue(queue_size)   # drop policy: the oldest frame goes
+        self._stop = threading.Event()
+        self._closed = False
+        self._last_drop_log = -math.inf
+        try:
+            infos = socket.getaddrinfo(host, port, type=socket.SOCK_DGRAM)
+            family, _, _, _, addr = infos[0]
+            self._sock = socket.socket(family, socket.SOCK_DGRAM)
+        except (OSError, UnicodeError) as exc:
+            raise SourceError(f"osc://{host}:{port}: {exc}") from None
+        try:
+            if rcvbuf:
+                self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, int(rcvbuf))
+            self._sock.bind(addr)
+        except (OSError, OverflowError) as exc:
+            self._sock.close()
+            raise SourceError(f"cannot listen on UDP {host}:{port}: {exc}") from None
+        self.host = host
+        self.port: int = self._sock.getsockname()[1]
+        if is_wide(host):
+            log.warning("OSC: listening on %s:%d - reachable from other machines; %s",
+                        host, self.port,
+                        "senders restricted to allow=" + ",".join(map(str, allow)) if allow
+                        else "any host that can reach it can send poses (restrict with allow=)")
+        # wake up often enough to apply the quiet-gap rule and to notice close()
+        self._sock.settimeout(max(0.001, min(quiet / 2.0, 0.05)))
+        self._thread = threading.Thread(target=self._run, name=f"rtseg-osc-{self.port}",
+                                        daemon=True)
+        self._thread.start()
+
+    @property
+    def assembler(self) -> Any:
+        return self._asm
+
+    def _run(self) -> None:
+        sock = self._sock
+        asm = self._asm
+        while not self._stop.is_set():
+            try:
+                data, sender = sock.recvfrom(65536)
+            except (socket.timeout, BlockingIOError, InterruptedError):
+                try:
+                    frames = asm.flush(time.monotonic())
+                except Exception:  # pragma: no cover - a decoder bug must not end the loop
+                    log.exception("OSC: flushing the open frame failed")
+                    continue
+            except OSError as exc:
+                if self._stop.is_set():
+                    break
+                log.warning("OSC receive error on port %d: %s", self.port, exc)
+                time.sleep(0.01)
+                continue
+            else:
+                if self.allow is not None and not sender_allowed(sender[0], self.allow):
+                    self._refuse(sender[0])
+                    continue
+                now = time.monotonic()
+                if self.senders != "merge" and not self._follow(sender[:2], now):
+                    continue
+                try:
+                    frames = asm.feed(data, now)
+                except Exception:  # a decoder bug must not kill the live loop
+                    self.count("corrupt")
+                    log.exception("OSC: datagram of %d bytes crashed the decoder; dropped",
+                                  len(data))
+                    continue
+            for frame in frames:
+                self._put(frame)
+
+    def _follow(self, sender: tuple, now: float) -> bool:
+        """Whether a datagram from ``sender`` belongs to the stream followed (switching to
+        it when the policy says so); a refused one is counted in ``other_senders``."""
+        if sender == self.sender:
+            self._sender_last = now
+            return True
+        if self.sender is None or self.senders == "newest" or \
+                now - self._sender_last >= SENDER_HANDOVER:
+            if self.sender is not None:
+                for frame in self._asm.flush(now, force=True):
+                    self._put(frame)
+                log.warning("OSC port %d: now following sender %s:%s (was %s:%s)", self.port,
+                            sender[0], sender[1], self.sender[0], self.sender[1])
+            self.sender = sender
+            self._sender_last = now
+            self._others.discard(sender)
+            return True
+        self.count("other_senders")
+        if sender not in self._others and len(self._others) < MAX_REFUSED_LOGGED:
+            self._others.add(sender)
+            log.warning("OSC port %d: a second sender %s:%s refused while following %s:%s "
+                        "(senders=one; use senders=newest or senders=merge to change); its "
+                        "datagrams are counted in other_senders", self.port, sender[0],
+                        sender[1], self.sender[0], self.sender[1])
+        return False
+
+    def _refuse(self, host: str) -> None:
+        """Count a datagram from a sender outside ``allow``; log each sender once."""
+        self.count("refused_senders")
+        if host not in self._refused and len(self._refused) < MAX_REFUSED_LOGGED:
+            self._refused.add(host)
+            log.warning("OSC port %d: datagram from %s refused (not in allow=%s); further "
+                        "datagrams from it are counted in refused_senders, not logged",
+                        self.port, host, ",".join(map(str, self.allow or ())))
+
+    def _put(self, frame: Frame) -> None:
+        if self._queue.put(frame):
+            self.count("dropped")
+            now = time.monotonic()
+            if now - self._last_drop_log > 5.0:
+                self._last_drop_log = now
+                self._log.warning("%s: reader too slow, dropped oldest queued frame "
+                                  "(%d dropped so far)", self._fmt, self.stats.dropped)
+
+    def close(self) -> None:
+        """Stop the reader thread, wake blocked readers and close the socket.  Safe to call
+        twice."""
+        if self._closed:
+            return
+        self._closed = True
+        self._stop.set()
+        self._queue.close()
+        self._thread.join(timeout=2.0)
+        self._sock.close()
+
+
+class OscVmcSource(OscUdpSource):
+    """VMC receiver on a UDP socket (see module docstring).  ``.port`` is the bound port."""
+
+    space = "local"
+
+    def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, *,
+                 suit: str = "default17", bone_names: Sequence[str] | None = None,
+                 parents: Sequence[int] | None = None, quiet: float = 0.02,
+                 queue_size: int = 256, rate: float | None = None,
+                 rcvbuf: int | None = None, tolerance: float = 0.05,
+                 time_order: str = "last", burst: float = 0.004,
+                 allow: tuple[Network, ...] | None = None, senders: str = "one") -> None:
+        super().__init__()
+        if bone_names is None:
+            bones, pars = load_suit(suit)
+        else:
+            bones = list(bone_names)
+            pars = list(parents) if parents is not None else [-1] * len(bones)
+        if len(pars) != len(bones):
+            raise SourceError("parents and bone_names differ in length")
+        if not quiet > 0:
+            raise SourceError(f"quiet must be positive seconds, got {quiet}")
+        self.joint_names = bones
+        self.parents = pars
+        self.frame_rate = rate
+        self.suit = suit
+        if time_order not in ("last", "first"):
+            raise SourceError(f"time_order must be 'last' or 'first', not {time_order!r}")
+        self._asm = VmcAssembler(bones, quiet=quiet, unit_tolerance=tolerance,
+                                 time_order=time_order, burst=burst, stats=self.stats)
+        self._start(host, port, quiet, queue_size, rcvbuf, allow, senders)
+
+    @property
+    def ok_state(self) -> tuple[int, ...] | None:
+        """Last ``/VMC/Ext/OK`` arguments (loaded, calibration state, mode, tracking)."""
+        return self._asm.ok_state
+
+
+class OscVrchatSource(OscUdpSource):
+    """VRChat OSC trackers receiver (``format=vrchat``, default port 9000): joints Head,
+    Tracker1..Tracker8, world orientations (``space = "global"``, no hierarchy); see
+    :mod:`rtseg.drivers.osc.vrchat`.  ``root``: tracker whose position is
+    ``Frame.root_position``."""
+
+    space = "global"
+
+    def __init__(self, host: str = DEFAULT_HOST, port: int = VRCHAT_PORT, *,
+                 quiet: float = 0.02, queue_size: int = 256, rate: float | None = None,
+                 rcvbuf: int | None = None, root: str | None = None,
+                 allow: tuple[Network, ...] | None = None, senders: str = "one") -> None:
+        super().__init__()
+        if not quiet > 0:
+            raise SourceError(f"quiet must be positive seconds, got {quiet}")
+        self.joint_names = list(VRCHAT_JOINTS)
+        self.parents = [-1] * len(VRCHAT_JOINTS)
+        self.frame_rate = rate
+        try:
+            self._asm = VrchatAssembler(quiet=quiet, root=root, stats=self.stats)
+        except ValueError as exc:
+            raise SourceError(f"osc:// format=vrchat: {exc}") from None
+        self._start(host, port, quiet, queue_size, rcvbuf, allow, senders)
+
+
+def _parse_location(location: str, default_port: int = DEFAULT_PORT,
+                    scheme: str = "osc") -> tuple[str, int]:
+    """``host:port`` / ``:port`` / ``[v6]:port`` / ``""`` -> (host, port); loopback when no
+    host is written.  Errors name ``scheme``."""
+    loc = location.strip("/")
+    if not loc:
+        return DEFAULT_HOST, default_port
+    if loc.startswith("["):                       # [v6addr]:port
+        host, _, rest = loc[1:].partition("]")
+        port_s = rest[1:] if rest.startswith(":") else ""
+    else:
+        host, _, port_s = loc.rpartition(":") if ":" in loc else (loc, "", "")
+    try:
+        port = int(port_s) if port_s else default_port
+    except ValueError:
+        raise SourceError(f"{scheme}://{location}: port {port_s!r} is not a number") from None
+    if not 0 <= port <= 65535:
+        raise SourceError(f"{scheme}://{location}: port {port} out of range 0..65535")
+    return host or DEFAULT_HOST, port
+
+
+#: accepted range of each numeric option
+_RANGES = {"quiet": (1e-4, 60.0), "queue": (1, 1_000_000), "rate": (1e-3, 1e5),
+           "rcvbuf": (1, 1 << 30), "tolerance": (0.0, 1.0), "burst": (0.0, 60.0)}
+
+
+def number_option(scheme: str, options: dict[str, str], key: str, default, kind=float,
+                  ranges: dict[str, tuple[float, float]] = _RANGES):
+    """Option ``key`` as ``kind`` within ``ranges[key]``, or ``default`` when absent or
+    empty; errors name ``scheme``."""
+    if key not in options or options[key] == "":
+        return default
+    try:
+        value = kind(options[key])
+    except ValueError:
+        raise SourceError(f"{scheme}:// option {key}={options[key]!r} is not a valid "
+                          f"{'integer' if kind is int else 'number'}") from None
+    lo, hi = ranges[key]
+    if not lo <= value <= hi:                 # also refuses nan and inf
+        raise SourceError(f"{scheme}:// option {key}={options[key]}: out of range {lo}..{hi}")
+    return value
+
+
+def check_options(scheme: str, options: dict[str, str], known: Sequence[str],
+                  fmt: str | None = None) -> None:
+    """Refuse options not in ``known`` (naming ``scheme`` and, when given, the format)."""
+    unknown = sorted(set(options) - set(known))
+    if unknown:
+        raise SourceError(f"{scheme}:// unknown option(s) {', '.join(unknown)}"
+                          f"{'' if fmt is None else f' for format={fmt}'}; known: "
+                          f"{', '.join(known)}")
+
+
+def _num(options: dict[str, str], key: str, default, kind=float):
+    return number_option("osc", options, key, default, kind)
+
+
+def open_url(location: str, options: dict[str, str]) -> OscUdpSource:
+    """Open ``osc://location?options`` (see module docstring)."""
+    fmt = options.get("format", "vmc").lower() or "vmc"
+    if fmt not in FORMATS:
+        raise SourceError(f"osc:// format {fmt!r} is not supported; supported: "
+                          f"{', '.join(FORMATS)}")
+    check_options("osc", options, OPTIONS if fmt == "vmc" else VRCHAT_OPTIONS, fmt)
+    allow = allow_option(options)
+    senders = options.get("senders", "one").lower() or "one"
+    if senders not in SENDER_POLICIES:
+        raise SourceError(f"osc:// senders={senders!r}: expected one of "
+                          f"{', '.join(SENDER_POLICIES)}")
+    if fmt == "vrchat":
+        host, port = _parse_location(location, VRCHAT_PORT)
+        return OscVrchatSource(
+            host, port, quiet=_num(options, "quiet", 0.02),
+            queue_size=_num(options, "queue", 256, int), rate=_num(options, "rate", None),
+            rcvbuf=_num(options, "rcvbuf", None, int), root=options.get("root") or None,
+            allow=allow, senders=senders)
+    host, port = _parse_location(location)
+    return OscVmcSource(
+        host, port, suit=options.get("suit", "default17") or "default17",
+        quiet=_num(options, "quiet", 0.02), queue_size=_num(options, "queue", 256, int),
+        rate=_num(options, "rate", None), rcvbuf=_num(options, "rcvbuf", None, int),
+        tolerance=_num(options, "tolerance", 0.05),
+        time_order=options.get("time_order", "last").lower() or "last",
+        burst=_num(options, "burst", 0.004), allow=allow, senders=senders)
+
+
+__all__ = ["OscUdpSource", "OscVmcSource", "OscVrchatSource", "open_url", "load_suit",
+           "parse_allow", "allow_option", "renamed", "sender_allowed", "number_option",
+           "check_options", "DEFAULT_HOST",
+           "DEFAULT_PORT"]

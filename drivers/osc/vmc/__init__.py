@@ -1,0 +1,3 @@
+"""VMC over OSC: the parser and frame assembler (``codec``), Unity bone names (``bones``),
+the assembly rules (``frames``), whole-frame datagram templates (``template``) and the
+reference encoder (``encode``)."""

@@ -1,0 +1,545 @@
+"""Live IMU suit over a serial port (USB CDC / UART), rtseg binary frames or text lines.
+
+URL::
+
+    serial:///dev/ttyUSB0?baud=921600&format=rtseg&suit=default17&stale=0.25
+
+Options (all optional):
+
+=============  ==============================================================================
+``baud``       line speed, default 921600 (use 115200 for typical text sketches)
+``format``     ``rtseg`` (binary, :mod:`rtseg.drivers.serial.codec`) or ``text``
+``suit``       suit profile name in ``config/suits.toml`` (default ``default17``)
+``suits``      another suits TOML file to read the profile from
+``stale``      seconds without a valid value before a sensor is reported lost (0.25)
+``rate``       nominal frame rate in Hz (default: the suit's ``frame_rate``)
+``queue``      frames buffered for a slow consumer (default 256, ~2 s at 120 Hz)
+``backoff``    longest wait between reconnect attempts to a device that stays, s (0.5)
+``wait``       1: start even if the device is absent and keep trying (default 0: error)
+``exclusive``  1 (default): lock the port (flock) so two readers cannot share it
+=============  ==============================================================================
+
+Behaviour
+---------
+- A reader thread reads whatever bytes are waiting (at most 20 ms of blocking), feeds the
+  decoder and turns each orientation message into a :class:`rtseg.core.frame.Frame`: ``quats``
+  (J, 4) scalar-last in the suit's bone order, ``valid`` (J,), ``recv_time`` =
+  ``time.monotonic()`` when the bytes arrived, ``seq`` = the u16 wire sequence number,
+  ``source_time`` = device clock in seconds, unwrapped across u32 wrap-around (every
+  ~71.6 min) so it keeps increasing.  A sensor absent from a frame, or present but not
+  valid, keeps its last good value with ``valid`` False (identity before its first value).
+- Sequence gaps: each discontinuity adds 1 to ``stats.gaps`` and the number of missing
+  messages to ``stats.dropped``.  A jump backwards in device time means the device
+  restarted: sequence and clock tracking start afresh (logged, not counted as a gap), and
+  ``source_time`` continues from its previous value plus one frame period.
+- Sensors: a sensor with no valid value for more than ``stale`` seconds is *lost*; the
+  first valid value afterwards *restores* it.  The clock starts at the first frame
+  received: a port that is open but silent (a suit not yet streaming) is not a dropout
+  of every sensor (the live loop reports a silent source as such).  Each change is a :class:`SensorEvent`,
+  queued for :meth:`SerialSource.dropouts` and passed to ``on_dropout`` (called on the
+  reader thread; keep it short).  ``stale_joints`` lists the sensors lost now.
+- Slow consumer: the frame queue is bounded (``queue``); when full the **oldest** frame is
+  discarded and counted in ``stats.dropped`` (and ``overflow_drops``), so ``read`` always
+  returns recent data.
+- Unplug: a ``SerialException``/``OSError`` while reading closes the port, counts
+  ``disconnects``, and the thread reopens **the same path**: at once, then whenever the
+  path names a device it has not yet failed to open - the path is checked every 20 ms
+  (``POLL_S``; a pulled cable removes the device node or its ``/dev/serial/by-id`` link,
+  the replug creates it again) - and otherwise with exponential backoff (50 ms doubling to
+  ``backoff``: a path that stays but cannot be opened, or a pyserial URL).  So reading
+  resumes within ~20 ms + open time of the device's return, and an unplug costs the frames
+  sent while it lasted plus what the port's input flush at open discards (about 20 ms
+  worth); each successful reopen counts in ``stats.reconnects``.  The decoder drops any half-received message.  ``read`` never
+  raises because of the device.
+- Damaged messages (binary format): those after the last intact message count in
+  ``stats.dropped`` as soon as they arrive, one frame each, so a suit whose every message
+  is damaged shows its frames destroyed; the next intact message's sequence gap then gives
+  the exact count, which replaces that estimate (a damaged zero byte can merge two
+  messages into one; damage before the first intact message - a boot log - is no longer
+  counted once it arrives).
+- Counters map from the decoder: corrupt messages and boot-log garbage -> ``corrupt``,
+  non-unit / NaN quaternions -> ``bad_values``, ids not in the suit -> ``unknown_names``,
+  malformed text lines / unknown message types / a frame repeating the previous frame's
+  sequence number -> ``bad_messages``.  Warnings are logged at most once per kind per 5 s, with the count of
+  suppressed repeats.
+- Text format: no sequence numbers or device clock (``seq``/``source_time`` None); a
+  partial frame is closed after a quiet gap of a third of a frame period (see
+  ``codec_serial`` for the other closing rules).
+"""
+
+from __future__ import annotations
+
+import collections
+import errno
+import logging
+import os
+import threading
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import serial
+
+from rtseg.drivers.serial import codec
+from rtseg.drivers.base import FrameQueue, QueuedSource, SourceError
+from rtseg.core.frame import Frame
+from rtseg.core.profiles import SuitProfile, suit_profile
+
+log = logging.getLogger("rtseg.drivers.serial")
+
+DEFAULT_BAUD = 921600
+#: highest baud rate accepted (fast USB UARTs reach 12 Mbaud)
+MAX_BAUD = 50_000_000
+LOG_INTERVAL_S = 5.0
+#: while the device is away, its path is checked this often (s) to reopen it as soon as it
+#: is back
+POLL_S = 0.02
+
+
+@dataclass(frozen=True, slots=True)
+class SensorEvent:
+    """A sensor lost (``lost`` True) or restored, at ``time`` (``time.monotonic()`` s)."""
+    name: str
+    sensor_id: int
+    lost: bool
+    time: float
+
+
+class _RateLimitedLog:
+    """At most one message per key per ``interval`` seconds; counts the suppressed ones."""
+
+    def __init__(self, logger: logging.Logger, interval: float = LOG_INTERVAL_S) -> None:
+        self.logger = logger
+        self.interval = interval
+        self._last: dict[str, float] = {}
+        self._suppressed: dict[str, int] = collections.defaultdict(int)
+
+    def __call__(self, key: str, level: int, msg: str, *args: object) -> None:
+        now = time.monotonic()
+        last = self._last.get(key)
+        if last is not None and now - last < self.interval:
+            self._suppressed[key] += 1
+            return
+        n = self._suppressed.pop(key, 0)
+        self._last[key] = now
+        if n:
+            msg += " (%d similar in the last %.0f s)"
+            args = args + (n, self.interval)
+        self.logger.log(level, msg, *args)
+
+
+_STAT_MAP = {  # decoder counter -> SourceStats field
+    "corrupt": "corrupt", "garbage_lines": "corrupt", "bad_values": "bad_values",
+    "unknown_ids": "unknown_names", "bad_messages": "bad_messages", "bad_crc": "crc_failures",
+}
+
+
+class SerialSource(QueuedSource):
+    """See the module docstring.  ``path``: device path or any pyserial URL."""
+
+    space = "global"
+
+    def __init__(self, path: str, baud: int = DEFAULT_BAUD, fmt: str = "rtseg",
+                 suit: str | SuitProfile = "default17", suits_path: str | None = None,
+                 stale: float = 0.25, rate: float | None = None, queue_size: int = 256,
+                 backoff_start: float = 0.05, backoff_max: float = 0.5, wait: bool = False,
+                 exclusive: bool = True, read_timeout: float = 0.02,
+                 on_dropout: Callable[[SensorEvent], None] | None = None) -> None:
+        super().__init__()
+        if fmt not in ("rtseg", "text"):
+            raise SourceError(f"serial format must be 'rtseg' or 'text', not {fmt!r}")
+        if stale <= 0 or queue_size < 1 or backoff_start <= 0 or backoff_max < backoff_start:
+            raise SourceError("serial source needs stale > 0, queue >= 1, 0 < backoff start <= max")
+        try:
+            self.suit = suit if isinstance(suit, SuitProfile) else suit_profile(suit, suits_path)
+        except (KeyError, ValueError) as exc:
+            raise SourceError(f"serial source: {exc}") from None
+        self.path = path
+        self.baud = int(baud)
+        self.fmt = fmt
+        self.stale = float(stale)
+        self.joint_names = list(self.suit.bones)
+        self.parents = list(self.suit.parents)
+        self.frame_rate = float(rate) if rate else float(self.suit.frame_rate)
+        self.backoff_start = float(backoff_start)
+        self.backoff_max = float(backoff_max)
+        self.exclusive = exclusive
+        self.read_timeout = float(read_timeout)
+        self.on_dropout = on_dropout
+        self.device_info: dict[str, str] = {}
+        self.sensor_status: dict[int, int] = {}
+        self.disconnects = 0
+        self.overflow_drops = 0
+        self.restarts = 0
+
+        n = len(self.joint_names)
+        self._lut = np.full(256, -1, dtype=np.int64)
+        for k, sid in enumerate(self.suit.sensor_ids):
+            self._lut[sid] = k
+        self._decoder = codec.decoder_for(fmt, self.suit.sensor_ids)
+        self._dec_seen = {k: 0 for k in _STAT_MAP}
+        self._state = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (n, 1))
+        self._last_valid = np.full(n, time.monotonic())
+        self._lost = np.zeros(n, dtype=bool)
+        self._streaming = False   # set by the first frame: staleness counts from there
+        self._last_seq: int | None = None
+        self._last_was_frame = False
+        self._last_time_raw: int | None = None
+        self._time_acc = 0
+        self._last_data = 0.0
+        self._estimated = 0       # damaged messages counted in dropped as an estimate
+        self._events: collections.deque[SensorEvent] = collections.deque(maxlen=4096)
+        self._queue = FrameQueue(queue_size)
+        self._stop = threading.Event()
+        self._log = _RateLimitedLog(log)
+        self._ser: serial.SerialBase | None = None
+        self._ever_connected = False
+        self._connected = threading.Event()
+
+        self._not_a_port = False
+        opened = self._open()
+        if not opened and self._not_a_port:
+            raise SourceError(f"{path!r} is not a serial port (it refuses serial settings: "
+                              f"{self._open_error})")
+        if not opened and not wait:
+            raise SourceError(f"cannot open serial device {path!r}: {self._open_error}"
+                              " (add wait=1 to keep trying)")
+        self._thread = threading.Thread(target=self._run, name=f"rtseg-serial {path}", daemon=True)
+        self._thread.start()
+
+    # ------------------------------------------------------------------ public API
+
+    @property
+    def connected(self) -> bool:
+        """True while the port is open."""
+        return self._connected.is_set()
+
+    def wait_connected(self, timeout: float | None = None) -> bool:
+        return self._connected.wait(timeout)
+
+    @property
+    def stale_joints(self) -> list[str]:
+        """Sensors (bone names) currently lost."""
+        return [self.joint_names[j] for j in np.flatnonzero(self._lost)]
+
+    def dropouts(self) -> list[SensorEvent]:
+        """Sensor lost/restored events since the last call, oldest first."""
+        out = []
+        while self._events:
+            try:
+                out.append(self._events.popleft())
+            except IndexError:
+                break
+        return out
+
+    def close(self) -> None:
+        """Stop the reader thread and close the port.  Safe to call twice."""
+        self._stop.set()
+        self._queue.close()
+        ser = self._ser
+        if ser is not None:
+            try:
+                ser.cancel_read()
+            except Exception:  # not all pyserial backends support it
+                pass
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(timeout=2.0)
+        self._close_port()
+
+    # ------------------------------------------------------------------ port handling
+
+    _open_error: str = ""
+
+    def _open(self) -> bool:
+        try:
+            kwargs = {"baudrate": self.baud, "timeout": self.read_timeout}
+            if self.exclusive and "://" not in self.path:
+                kwargs["exclusive"] = True
+            ser = serial.serial_for_url(self.path, **kwargs)
+        except (serial.SerialException, OSError, ValueError, OverflowError) as exc:
+            self._open_error = str(exc)
+            ctx = exc.__context__
+            self._not_a_port = (getattr(exc, "errno", None) == errno.ENOTTY
+                                or (ctx is not None and getattr(ctx, "args", (None,))[0]
+                                    == errno.ENOTTY)
+                                or "Inappropriate ioctl" in str(exc))
+            return False
+        self._ser = ser
+        self._decoder.reset()
+        self._last_data = time.monotonic()
+        if self._ever_connected:
+            self.count("reconnects")
+            log.warning("serial %s: reconnected", self.path)
+        else:
+            log.info("serial %s: open at %d baud, format %s, suit %s",
+                     self.path, self.baud, self.fmt, self.suit.name)
+        self._ever_connected = True
+        self._connected.set()
+        return True
+
+    def _close_port(self) -> None:
+        ser, self._ser = self._ser, None
+        self._connected.clear()
+        if ser is not None:
+            try:
+                ser.close()
+            except Exception:
+                pass
+
+    def _device_key(self) -> tuple | None:
+        """What the device path names now: (resolved path, inode, device number), or None
+        when the path is absent (a pulled USB cable removes the node / its udev link).  A
+        new key means a new device behind the path.  Always None for pyserial URLs
+        (``rfc2217://``, ``socket://``, ...): those are retried on the backoff alone."""
+        if "://" in self.path:
+            return None
+        try:
+            st = os.stat(self.path)
+        except OSError:
+            return None
+        return (os.path.realpath(self.path), st.st_ino, st.st_rdev)
+
+    def _wait_to_reopen(self, backoff: float, failed_key: tuple | None) -> bool:
+        """Sleep until the next open attempt; False when the source is stopping.
+
+        A device path is polled every :data:`POLL_S` seconds: the attempt is made as soon
+        as the path names a device it has not failed to open yet (the device came back), so
+        what the device sends once it is back is read, not lost to a back-off.  Otherwise
+        (the path still names the device that failed, or a URL) the attempt waits
+        ``backoff`` seconds."""
+        end = time.monotonic() + backoff
+        while True:
+            key = self._device_key()
+            if key is not None and key != failed_key:
+                return not self._stop.is_set()
+            left = end - time.monotonic()
+            if left <= 0:
+                return not self._stop.is_set()
+            if self._stop.wait(min(POLL_S, left)):
+                return False
+
+    def _run(self) -> None:
+        backoff = 0.0
+        failed_key: tuple | None = None      # the device the last open attempt failed on
+        while not self._stop.is_set():
+            if self._ser is None:
+                if not self._wait_to_reopen(backoff, failed_key):
+                    break
+                key = self._device_key()
+                if not self._open():
+                    self._log("open", logging.WARNING, "serial %s: cannot open (%s); retrying",
+                              self.path, self._open_error)
+                    failed_key = key
+                    backoff = min(max(backoff * 2, self.backoff_start), self.backoff_max)
+                    self._check_stale(time.monotonic())
+                    continue
+                backoff = 0.0
+                failed_key = None
+            try:
+                ser = self._ser
+                # Block for the first byte (or the read timeout), then take whatever else
+                # is already waiting, so a frame is decoded in one call, not byte by byte.
+                data = ser.read(1)
+                if data and ser.in_waiting:
+                    data += ser.read(ser.in_waiting)
+            except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
+                if self._stop.is_set():
+                    break
+                self.disconnects += 1
+                self._log("unplug", logging.WARNING, "serial %s: device lost (%s); reconnecting",
+                          self.path, exc)
+                self._close_port()
+                continue
+            now = time.monotonic()
+            try:
+                if data:
+                    self._last_data = now
+                    self._handle(self._decoder.feed(data), now)
+                elif (self.fmt == "text" and self._decoder.has_partial
+                      and now - self._last_data > 1.0 / (3.0 * self.frame_rate)):
+                    self._handle(self._decoder.flush(), now)
+                self._check_stale(now)
+            except Exception:  # a bug must not kill the live loop's input
+                log.exception("serial %s: error handling input", self.path)
+
+    # ------------------------------------------------------------------ decoding
+
+    def _sync_stats(self) -> None:
+        # damaged messages since the last intact one: frames destroyed that no sequence
+        # gap has counted yet, in dropped as an estimate until the next intact message
+        est = int(getattr(self._decoder, "corrupt_since_good", 0))
+        if est != self._estimated:
+            self.count("dropped", est - self._estimated)
+            self._estimated = est
+        st = self._decoder.stats
+        for k, field in _STAT_MAP.items():
+            v = getattr(st, k)
+            d = v - self._dec_seen[k]
+            if d:
+                self._dec_seen[k] = v
+                self.count(field, d)
+                self._log(k, logging.WARNING, "serial %s: %d %s (total %d)",
+                          self.path, d, k.replace("_", " "), v)
+
+    def _handle(self, messages: list[codec.DecodedFrame], now: float) -> None:
+        for m in messages:
+            if m.seq is not None and not self._track(m.seq, m.time_us, m.msg_type):
+                continue
+            if m.msg_type == codec.MSG_FRAME:
+                self._frame(m, now)
+            elif m.msg_type == codec.MSG_STATUS:
+                for sid, st in zip(m.ids.tolist(), m.status.tolist()):
+                    self.sensor_status[sid] = st
+                    if st & codec.STATUS_ERROR:
+                        self._log(f"err{sid}", logging.WARNING,
+                                  "serial %s: sensor %d reports an error", self.path, sid)
+            elif m.msg_type == codec.MSG_INFO and m.info is not None:
+                if m.info != self.device_info:
+                    log.info("serial %s: device %s", self.path,
+                             ", ".join(f"{k}={v}" for k, v in m.info.items()))
+                self.device_info = dict(m.info)
+        self._sync_stats()
+
+    def _track(self, seq: int, time_us: int, msg_type: int) -> bool:
+        """Sequence gaps and clock unwrapping; False to drop a duplicate frame.
+
+        Lenient with firmware that numbers only its frames: a status/info message may
+        repeat the sequence number of the frame before or after it without counting as a
+        duplicate or a gap.  Only frames drive the clock (firmware may stamp status/info
+        messages carelessly)."""
+        if msg_type != codec.MSG_FRAME:
+            pass
+        elif self._last_time_raw is None:
+            self._time_acc = time_us
+            self._last_time_raw = time_us
+        else:
+            dt = (time_us - self._last_time_raw) & 0xFFFFFFFF
+            if dt >= 0x80000000:  # clock went backwards: the device restarted
+                self.restarts += 1
+                self._log("restart", logging.WARNING,
+                          "serial %s: device clock went back; device restarted?", self.path)
+                self._time_acc += int(round(1e6 / self.frame_rate))
+                self._last_seq = None
+            else:
+                self._time_acc += dt
+            self._last_time_raw = time_us
+        if self._last_seq is not None:
+            d = (seq - self._last_seq) & 0xFFFF
+            is_frame = msg_type == codec.MSG_FRAME
+            if d == 0 and not (is_frame and self._last_was_frame):
+                self._last_was_frame = is_frame
+                return True
+            if d == 0:
+                self.count("bad_messages")
+                self._log("dup", logging.WARNING, "serial %s: duplicate sequence number %d",
+                          self.path, seq)
+                return False
+            if 1 < d < 0x8000:
+                self.count("gaps")
+                self.count("dropped", d - 1)
+                self._log("gap", logging.WARNING, "serial %s: %d messages missing before seq %d",
+                          self.path, d - 1, seq)
+        self._last_seq = seq
+        self._last_was_frame = msg_type == codec.MSG_FRAME
+        return True
+
+    def _frame(self, m: codec.DecodedFrame, now: float) -> None:
+        rows = self._lut[m.ids]
+        take = (rows >= 0) & m.valid
+        j = rows[take]
+        valid = np.zeros(len(self.joint_names), dtype=bool)
+        if not self._streaming:
+            self._streaming = True
+            self._last_valid[:] = now
+        if len(j):
+            self._state[j] = m.quats[take]
+            valid[j] = True
+            self._last_valid[j] = now
+            back = j[self._lost[j]]
+            if len(back):
+                self._lost[back] = False
+                for k in back.tolist():
+                    self._event(k, False, now)
+                log.info("serial %s: sensor(s) restored: %s", self.path,
+                         ", ".join(self.joint_names[k] for k in back.tolist()))
+        frame = Frame(recv_time=now, quats=self._state.copy(), valid=valid,
+                      source_time=self._time_acc / 1e6 if m.time_us is not None else None,
+                      seq=m.seq)
+        if self._queue.put(frame):
+            self.overflow_drops += 1
+            self.count("dropped")
+            self._log("overflow", logging.WARNING,
+                      "serial %s: consumer too slow, oldest frame dropped", self.path)
+
+    def _check_stale(self, now: float) -> None:
+        if not self._streaming:
+            return
+        newly = (now - self._last_valid > self.stale) & ~self._lost
+        if newly.any():
+            self._lost |= newly
+            ks = np.flatnonzero(newly).tolist()
+            for k in ks:
+                self._event(k, True, now)
+            self._log("lost", logging.WARNING, "serial %s: sensor(s) lost (no valid value for "
+                      "%.2f s): %s", self.path, self.stale,
+                      ", ".join(self.joint_names[k] for k in ks))
+
+    def _event(self, k: int, lost: bool, now: float) -> None:
+        ev = SensorEvent(self.joint_names[k], int(self.suit.sensor_ids[k]), lost, now)
+        self._events.append(ev)
+        if self.on_dropout is not None:
+            try:
+                self.on_dropout(ev)
+            except Exception:
+                log.exception("serial %s: on_dropout callback failed", self.path)
+
+
+_OPTIONS = {"baud", "format", "suit", "suits", "stale", "rate", "queue", "backoff", "wait",
+            "exclusive"}
+
+
+def _flag(value: str, key: str) -> bool:
+    v = value.strip().lower()
+    if v in ("1", "true", "yes", "on", ""):
+        return True
+    if v in ("0", "false", "no", "off"):
+        return False
+    raise SourceError(f"serial option {key}={value!r}: expected 0 or 1")
+
+
+def open_url(location: str, options: dict[str, str]) -> SerialSource:
+    """``serial://`` handler for :func:`rtseg.drivers.open_source`; see the module docstring."""
+    unknown = set(options) - _OPTIONS
+    if unknown:
+        raise SourceError(f"unknown serial option(s) {', '.join(sorted(unknown))}; "
+                          f"known: {', '.join(sorted(_OPTIONS))}")
+    if not location:
+        raise SourceError("serial URL needs a device path, e.g. serial:///dev/ttyUSB0")
+
+    def num(key: str, kind: type, default, lo: float, hi: float):
+        """Option ``key`` as ``kind`` within [lo, hi] (finite), or ``default``."""
+        if key not in options:
+            return default
+        text = options[key]
+        try:
+            value = kind(text)
+        except ValueError:
+            raise SourceError(f"serial option {key}={text!r}: expected "
+                              f"{'an integer' if kind is int else 'a number'}") from None
+        if not (lo <= value <= hi):          # also refuses nan and inf
+            raise SourceError(f"serial option {key}={text}: out of range {lo}..{hi}")
+        return value
+
+    return SerialSource(
+        location, baud=num("baud", int, DEFAULT_BAUD, 50, MAX_BAUD),
+        fmt=options.get("format", "rtseg"),
+        suit=options.get("suit", "default17"), suits_path=options.get("suits"),
+        stale=num("stale", float, 0.25, 1e-3, 3600.0), rate=num("rate", float, None, 1e-3, 1e5),
+        queue_size=num("queue", int, 256, 1, 1_000_000),
+        backoff_max=num("backoff", float, 0.5, 0.05, 3600.0),
+        wait=_flag(options["wait"], "wait") if "wait" in options else False,
+        exclusive=_flag(options["exclusive"], "exclusive") if "exclusive" in options else True)
+
+
+__all__ = ["SerialSource", "SensorEvent", "open_url"]

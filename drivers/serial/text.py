@@ -1,0 +1,127 @@
+"""Streaming decoder of the serial text form: ``id,w,x,y,z[,status]`` lines.
+
+How lines group into frames is specified in :mod:`rtseg.drivers.serial.codec`'s docstring.
+The wire carries w first; frames come out **scalar-last (x, y, z, w)** float64.
+"""
+
+from __future__ import annotations
+
+from typing import Iterable
+
+import numpy as np
+
+from rtseg.drivers.serial.decoded import (DecodedFrame, DecoderStats, _check_quats,
+                                                _known_lut)
+from rtseg.drivers.serial.wire import (_WXYZ_TO_XYZW, MSG_FRAME, NORM_TOLERANCE,
+                                             STATUS_ERROR, STATUS_VALID)
+
+
+
+class TextLineDecoder:
+    """Streaming decoder of ``id,w,x,y,z[,status]`` lines (see ``codec_serial``'s docstring for
+    how lines group into frames).  Never raises on bad input."""
+
+    MAX_LINE = 256
+    """Longer runs without a newline are discarded as garbage."""
+
+    def __init__(self, known_ids: Iterable[int] | None = None,
+                 norm_tolerance: float = NORM_TOLERANCE) -> None:
+        self.stats = DecoderStats()
+        self.norm_tolerance = float(norm_tolerance)
+        self._known = _known_lut(known_ids)
+        self._n_known = 0 if self._known is None else int(self._known.sum())
+        self._buf = b""
+        self._ids: list[int] = []
+        self._seen: set[int] = set()
+        self._rows: list[tuple[float, float, float, float]] = []
+        self._status: list[int] = []
+        self._known_seen = 0
+
+    def reset(self) -> None:
+        """Drop the partial line and the partial frame (after a reconnect)."""
+        self._buf = b""
+        self._clear()
+
+    def _clear(self) -> None:
+        self._ids, self._seen, self._rows, self._status = [], set(), [], []
+        self._known_seen = 0
+
+    @property
+    def has_partial(self) -> bool:
+        """True while a frame has records but has not been closed."""
+        return bool(self._ids)
+
+    def flush(self) -> list[DecodedFrame]:
+        """Close the current partial frame (if any) and return it."""
+        if not self._ids:
+            return []
+        wxyz = np.array(self._rows, dtype=np.float64).reshape(-1, 4)
+        q = wxyz[:, _WXYZ_TO_XYZW]
+        ids = np.array(self._ids, dtype=np.uint8)
+        status = np.array(self._status, dtype=np.uint8)
+        claims = (status & (STATUS_VALID | STATUS_ERROR)) == STATUS_VALID
+        q, valid, n_bad = _check_quats(q, claims, self.norm_tolerance)
+        self.stats.bad_values += n_bad
+        if self._known is not None:
+            self.stats.unknown_ids += int(np.count_nonzero(~self._known[ids]))
+        self._clear()
+        self.stats.frames += 1
+        self.stats.messages += 1
+        return [DecodedFrame(MSG_FRAME, None, None, ids, status, q, valid, None)]
+
+    def feed(self, data: bytes | bytearray | memoryview) -> list[DecodedFrame]:
+        """Decode the complete lines in ``data``; keep the unfinished tail."""
+        if not data:
+            return []
+        buf = self._buf + bytes(data) if self._buf else bytes(data)
+        lines = buf.split(b"\n")
+        tail = lines.pop()
+        if len(tail) > self.MAX_LINE:
+            self.stats.garbage_lines += 1
+            self.stats.skipped_bytes += len(tail)
+            tail = b""
+        self._buf = tail
+        out: list[DecodedFrame] = []
+        for line in lines:
+            self._line(line, out)
+        return out
+
+    def _line(self, raw: bytes, out: list[DecodedFrame]) -> None:
+        line = raw.strip()
+        if not line or line.startswith(b"#"):
+            out.extend(self.flush())
+            return
+        if len(line) > self.MAX_LINE:
+            self.stats.garbage_lines += 1
+            return
+        fields = line.split(b",")
+        try:
+            sid = int(fields[0])
+        except ValueError:
+            self.stats.garbage_lines += 1
+            return
+        if not 0 <= sid <= 255 or len(fields) not in (5, 6):
+            self.stats.bad_messages += 1
+            return
+        try:
+            w, x, y, z = (float(f) for f in fields[1:5])
+            st = int(fields[5]) if len(fields) == 6 else STATUS_VALID
+        except ValueError:
+            self.stats.bad_messages += 1
+            return
+        if not 0 <= st <= 255:
+            self.stats.bad_messages += 1
+            return
+        if sid in self._seen:
+            out.extend(self.flush())
+        self._ids.append(sid)
+        self._seen.add(sid)
+        self._rows.append((w, x, y, z))
+        self._status.append(st)
+        if self._known is not None and self._known[sid]:
+            self._known_seen += 1
+            if self._known_seen == self._n_known:
+                out.extend(self.flush())
+
+
+__all__ = ["TextLineDecoder"]

@@ -1,0 +1,145 @@
+"""Leave-one-person-out naming over source folders (``benchmarks/library_loto.py
+--by-person DIR``).
+
+For each source folder (``rtseg.library.sources.source_folders``: a folder laid out like
+``../shared/data/cmu_single``, ``hdm05`` or ``bandai``, or their parent) and each person P
+of it:
+
+- the library is learned (``rtseg.library.examples.learn``, its own calibration) from the
+  examples of the OTHER people of the same source (``examples_from_source``);
+- ``n`` spliced performances of P alone (``rtseg.evaluation.splice.make_performance`` kind ``same``,
+  seed ``seed``: 4-10 segments of P's behaviours, 2.5-8 s each, joined by 0.3-1 s
+  cross-fades) go through the live loop with that library (``rtseg.evaluation.library``): every
+  live segment's name as sent against the behaviour covering most of it;
+- with ``hide``, once more per behaviour of P's performances that the library holds, with
+  that behaviour left out of the library: its segments must come out ``unknown``.
+
+Per source (and pooled over sources): ``known`` (``rtseg.evaluation.library.named_summary``:
+segments of behaviours the library holds named right / unknown / wrong, decision delay
+after the change), ``left_out`` (segments of behaviours missing from their library - P's
+own behaviours nobody else performs, and the hidden ones: ``unknown_rate``), the people
+scored and skipped, and each fold's library (``library_summary``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from rtseg.evaluation.library import Named, library_summary, named_segments, named_summary
+from rtseg.library.examples import Example, learn
+
+
+def person_performances(src: str | Path, person: str, n: int, seed: int) -> list[Any]:
+    """``n`` spliced performances (``rtseg.evaluation.splice.Performance``) of ``person`` alone from
+    the source folder ``src`` (empty when the person has fewer than two behaviours with
+    material enough in one format)."""
+    from rtseg.evaluation.splice import (SpliceConfig, build_groups, load_sources, make_performance,
+                              read_source_index)
+    rows = [r for r in read_source_index(src) if r.subject == person]
+    cfg = SpliceConfig()
+    groups = build_groups(load_sources(rows), cfg)
+    if not any(len(g.behaviours(person)) >= 2 for g in groups):
+        return []
+    names = sorted({b for g in groups for b in g.behaviours()})
+    return [make_performance(f"{person}_{i:03d}", "same", groups, seed, i, cfg, names)
+            for i in range(n)]
+
+
+def _truth(perf: Any) -> np.ndarray:
+    names = list(perf.take.meta["frame_label_names"])
+    return np.array([names[int(i)] for i in perf.take.meta["frame_labels"]])
+
+
+def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: bool = True,
+                progress: Callable[[str], None] | None = None,
+                windows: dict[str, float] | None = None, metric: str | None = None,
+                threshold_scale: float = 1.0) -> dict[str, Any]:
+    """Leave-one-person-out over one source folder (module doc); ``threshold_scale``: each
+    fold library's calibrated threshold is multiplied by it (a rejection rule to try)."""
+    from rtseg.evaluation.identity import run_identity
+    from rtseg.library.sources import examples_from_source
+    examples = examples_from_source(src, config)
+    people = sorted({e.person for e in examples})
+    known: list[Named] = []
+    left: list[Named] = []
+    libraries: list[dict[str, Any]] = []
+    scored, skipped = [], {}
+
+    def fold(use: Sequence[Example]) -> Any:
+        import rtseg.evaluation.library as le
+        lib, _ = learn(use, metric=metric, **(windows or {}))
+        if le.NO_REJECT:                 # benchmarks/library_loto.py --no-reject: the ceiling
+            lib.threshold, lib.ratio = float("inf"), 1.0
+        lib.threshold *= threshold_scale
+        return lib
+
+    for p in people:
+        others = [e for e in examples if e.person != p]
+        if not others:
+            skipped[p] = "no other person in this source"
+            continue
+        perfs = person_performances(src, p, n, seed)
+        if not perfs:
+            skipped[p] = "fewer than two behaviours with material for a performance"
+            continue
+        lib = fold(others)
+        libraries.append(library_summary(lib, p))
+        scored.append(p)
+        truths = {perf.name: _truth(perf) for perf in perfs}
+        for perf in perfs:
+            if progress is not None:
+                progress(f"{Path(src).name} {p}: {perf.name}")
+            run = run_identity(perf.take, config, lib)
+            rows = named_segments(run, perf.take, truths[perf.name], lib, perf.name)
+            known += [r for r in rows if r.known]
+            left += [r for r in rows if not r.known]
+        if not hide:
+            continue
+        names = sorted({str(v) for t in truths.values() for v in np.unique(t)} & set(lib.names))
+        for nm in names:
+            use = [e for e in others if e.name != nm]
+            if not use:
+                continue
+            lib_h = fold(use)
+            libraries.append(library_summary(lib_h, p, nm))
+            for perf in perfs:
+                if nm not in truths[perf.name]:
+                    continue
+                if progress is not None:
+                    progress(f"{Path(src).name} {p}: {perf.name} without {nm}")
+                run = run_identity(perf.take, config, lib_h)
+                rows = named_segments(run, perf.take, truths[perf.name], lib_h, perf.name)
+                left += [r for r in rows if r.truth == nm]
+    return {"source": str(src), "people": scored, "skipped": skipped,
+            **summarise(known, left), "libraries": libraries,
+            "segments": [vars(s) for s in known + left]}
+
+
+def summarise(known: Sequence[Named], left: Sequence[Named]) -> dict[str, Any]:
+    """``known`` (``named_summary`` of the segments whose behaviour the library held) and
+    ``left_out`` (segments of behaviours missing from their library: count, share sent
+    ``unknown``, share sent a name)."""
+    k = named_summary(list(known))
+    k.pop("not_in_library", None)
+    u = len(left)
+    unk = sum(s.name == "unknown" for s in left)
+    return {"known": k,
+            "left_out": {"segments": u, "unknown_rate": round(unk / u, 4) if u else None,
+                         "named_rate": round((u - unk) / u, 4) if u else None}}
+
+
+def lopo_sources(root: str | Path, config: Any, **kw: Any) -> dict[str, Any]:
+    """``lopo_source`` over every source folder of ``root``; ``pooled`` over them.
+    FileNotFoundError when ``root`` holds none."""
+    from rtseg.library.sources import source_folders
+    srcs = source_folders(root)
+    if not srcs:
+        raise FileNotFoundError(f"{root}: no source folder (index.tsv with bvh/ or amc/) in "
+                                f"it or its subfolders")
+    per = {s.name: lopo_source(s, config, **kw) for s in srcs}
+    rows = [Named(**r) for d in per.values() for r in d["segments"]]
+    return {"sources": per,
+            "pooled": summarise([r for r in rows if r.known], [r for r in rows if not r.known])}

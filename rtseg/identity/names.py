@@ -1,0 +1,117 @@
+"""Names for live segments from a behaviour library (``rtseg.library.behaviours``): the part of the
+identity tracker (``rtseg.identity.tracker.IdentityTracker``) that says *what* a segment is, beside
+its unsupervised id.
+
+``SegmentNamer`` keeps a ring of the last ``max_window_s + skip_s + 1`` s of the rows the
+tracker is fed (one row copy per frame) and, when the tracker decides a segment, names the
+rows [boundary + ``skip_s``, decision frame] - the first ``skip_s`` = 0.5 s, the
+transition, left out when at least ``min_window_s`` (1 s) remains; at most
+``max_window_s`` (3 s) long - with the library's nearest name, or ``unknown`` when the
+segment is unlike every example (``rtseg.library.behaviours.Library.name``: by default the
+window-model distance of the segment's per-joint angular velocities to each example
+window, a name as near as its nearest window; libraries written before that keep their
+descriptor and 3 nearest windows).
+
+``NameHolders`` keeps which behaviour ids hold each name this session (``exclusive_names``,
+on by default): a name that only earlier segments of *other* ids hold is sent as
+``unknown`` - the tracker, comparing one performer within one session, says the segment is
+another behaviour than those, while the library compares across performers; the two
+conflict, and a forced wrong name is what null rejection exists to avoid (a behaviour
+missing from the library is usually nearest to one the session has already shown).  A
+correction of such a segment's id to an id that holds the name gives it back.
+
+Frames are the pipeline's session indices (0-based among received frames); the rows are
+the pose-feature rows the detectors are fed (``rtseg.core.features``), d columns, of the
+library's feature profile.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from typing import Any
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+
+class SegmentNamer:
+    """Names segments from a ring of recent fed rows (module doc).
+
+    library: a ``rtseg.library.behaviours.Library``.  frame_rate: Hz.  skip_s: seconds after the
+    boundary left out of the named window.  max_window_s: longest named window, s.
+    min_window_s: the skip is kept only when at least this much remains, s.  block: extra
+    rows of slack in the ring (the tracker's block length, frames).
+    """
+
+    def __init__(self, library: Any, frame_rate: float, *, skip_s: float = 0.5,
+                 max_window_s: float = 3.0, min_window_s: float = 1.0,
+                 block: int = 10) -> None:
+        self.library = library
+        self.frame_rate = float(frame_rate)
+        self.skip = max(0, int(round(skip_s * frame_rate)))
+        self._max_window = int(round(max_window_s * frame_rate))
+        self._min_named = max(2, int(round(min_window_s * frame_rate)))
+        self._R = self._max_window + self.skip + int(round(frame_rate)) + int(block)
+        self._rows: np.ndarray | None = None
+        self._ridx = np.full(self._R, -1, dtype=np.int64)
+        self._rn = 0
+
+    def start(self, d: int) -> bool:
+        """Allocate the ring for d-column rows; False (logged) when the library holds
+        another number of feature dims - the session's segments then go unnamed."""
+        if self.library.dims != d:
+            log.warning("behaviour library has %d feature dims, the session's features "
+                        "have %d: segments are not named", self.library.dims, d)
+            return False
+        self._rows = np.zeros((self._R, d))
+        return True
+
+    def update(self, index: int, x: np.ndarray) -> None:
+        """One fed row ``x`` (d,) of session frame ``index`` into the ring."""
+        k = self._rn % self._R
+        self._rows[k] = x
+        self._ridx[k] = index
+        self._rn += 1
+
+    def rows(self, boundary: int, frame: int) -> np.ndarray:
+        """The fed rows named for a segment starting at ``boundary`` decided at ``frame``
+        (module doc), oldest first, (frames, d)."""
+        lo, hi = boundary + self.skip, frame + 1
+        if hi - lo < self._min_named:
+            lo = boundary
+        hi = min(hi, lo + self._max_window)
+        pos = np.flatnonzero((self._ridx >= lo) & (self._ridx < hi))
+        pos = pos[np.argsort(self._ridx[pos], kind="stable")]
+        return self._rows[pos]
+
+    def name(self, boundary: int, frame: int) -> tuple[str, float]:
+        """(name, library distance) of the segment starting at ``boundary`` when decided
+        at ``frame``; (``unknown``, inf) with fewer than 2 rows."""
+        W = self.rows(boundary, frame)
+        if len(W) < 2:
+            from rtseg.library.behaviours import UNKNOWN
+            return UNKNOWN, math.inf
+        nm = self.library.name(W, self.frame_rate)
+        return nm.name, nm.distance
+
+
+class NameHolders:
+    """Which segments (so which behaviour ids) hold each library name this session.
+
+    exclusive: with False every name is granted (the rule off)."""
+
+    def __init__(self, exclusive: bool = True) -> None:
+        self.exclusive = bool(exclusive)
+        self._holders: dict[str, list[Any]] = {}
+
+    def grant(self, seg: Any, name: str) -> bool:
+        """May ``seg`` (anything with a ``behaviour`` id, read when asked: corrections
+        move it) carry ``name``?  No when earlier segments hold the name and none of them
+        has ``seg``'s id; yes otherwise, and ``seg`` then holds it too."""
+        holders = self._holders.setdefault(name, [])
+        if self.exclusive and holders and all(h.behaviour != seg.behaviour for h in holders):
+            return False
+        holders.append(seg)
+        return True

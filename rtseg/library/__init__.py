@@ -1,0 +1,52 @@
+"""Named behaviour libraries: learn behaviour names from labelled examples, name segments,
+and say ``unknown`` for a segment unlike every example.  ``behaviours`` holds the library
+and its builder, ``distance`` the model distance, ``calibration`` the rejection rule,
+``file`` the library file, ``examples`` and ``sources`` the labelled examples (from takes
+and from source folders).
+
+May import ``rtseg.core``, ``rtseg.labels``, ``rtseg.detectors`` and the readers of
+``rtseg.drivers``."""
+
+from rtseg.library.behaviours import (
+    FORMAT,
+    VERSION,
+    READS,
+    METRICS,
+    DEFAULT_METRIC,
+    MODEL_K_NEAREST,
+    UNKNOWN,
+    GROUPS,
+    SCALE_FLOOR,
+    K_NEAREST,
+    DEFAULT_STEP_S,
+    LibraryError,
+    descriptor,
+    group_slices,
+    window_bounds,
+    Naming,
+    Library,
+    LibraryBuilder,
+    load,
+)
+
+__all__ = [
+    "FORMAT",
+    "VERSION",
+    "READS",
+    "METRICS",
+    "DEFAULT_METRIC",
+    "MODEL_K_NEAREST",
+    "UNKNOWN",
+    "GROUPS",
+    "SCALE_FLOOR",
+    "K_NEAREST",
+    "DEFAULT_STEP_S",
+    "LibraryError",
+    "descriptor",
+    "group_slices",
+    "window_bounds",
+    "Naming",
+    "Library",
+    "LibraryBuilder",
+    "load",
+]

@@ -1,0 +1,431 @@
+"""Named behaviour libraries: learn behaviour names from labelled examples, name segments,
+and say ``unknown`` for a segment unlike every example (issue #12 item 2).
+
+A library holds, for one feature profile (``rtseg.core.features``: profile name and feature
+dims), short windows cut from labelled examples, each with its name and the example
+(source) it came from, and per window what its distance (``metric``) needs:
+
+- ``model`` (the default since 2026-12-01; ``rtseg.library.distance``): the statistics of
+  the window's per-joint body-frame angular velocities, compared with the segmenter's own
+  PCA / PPCA window models - the identity tracker's distance D (1 for two windows of one
+  motion).  A name's distance is its nearest window's (``k_nearest`` 1).
+- ``descriptor`` (version-1 files): a hand-made descriptor, below; a name's distance is
+  the mean of its 3 nearest windows' (``k_nearest`` 3).
+
+Descriptor of a window W (frames, 4J) of pose-feature rows (unit quaternions per joint,
+frame rate ``fr`` Hz), three groups, all logarithms:
+
+- ``spread`` (J): per joint log(sqrt(sum of the 4 components' variances) + 0.01) - about
+  half the joint's angular spread in rad; unchanged by any fixed rotation before or after
+  the joint's rotation (rest pose, axis conventions);
+- ``speed`` (J): per joint log(mean |q[t+1] - q[t]| x fr + 0.05) - about half its mean
+  angular speed in rad/s; unchanged by the same fixed rotations;
+- ``dims`` (4J): per feature dim log(std + 0.005) - which axes each joint moves about.
+
+Descriptor distance between a query q and an example e: each dim standardised by the
+library's ``scale`` (per-dim std over all its windows, floored at ``SCALE_FLOOR``), then
+``sqrt(mean over groups of mean over the group's dims of z^2)``.
+
+Decision (``Library.name``): d1, d2 = the distances of the nearest and second-nearest
+*name* (a name's distance: the mean of its ``k_nearest`` nearest windows').  The segment
+gets the nearest name when d1 <= ``threshold`` and d1 / d2 <= ``ratio``, else
+``unknown``.  Both are calibrated INSIDE the library, for either metric
+(``calibrate``, ``separating_rule``): for every window, its known case - the
+nearest same-name window of another example (``same``) against the nearest other name -
+and its unknown case - its own name left out, the nearest two other names (what a
+behaviour missing from the library would see); the rule that accepts the most known and
+rejects the most unknown cases wins (its same-name distance is likewise the mean of the k
+nearest same-name windows).  When the library holds more than one person
+(examples' ``person``), each window is compared only with other people's windows, as a new
+performer would be.  Nothing held out is looked at.  A known case needs a second example
+of the name (another take or recording; another person's when the library holds several):
+windows of one example lie nearer each other than a new performance does.  A library where
+no behaviour has a second example cannot be calibrated: its threshold is
+``DEFAULT_THRESHOLD`` of its metric and its ratio 1 (``calibration["calibrated"]`` False).
+
+Windows: ``window_s`` (2 s) long every ``step_s`` (0.5 s) inside each labelled range after
+``edge_s`` (0.5 s) is cut off each end (transitions); a range shorter than that gives one
+window of what is left if it is at least ``min_s`` (1 s).
+
+File: JSON (data only), ``{"format": "rtseg-behaviour-library", "version": 2, "profile",
+"dims", "frame_rate", "window_s", ..., "threshold", "ratio", "k_nearest", "metric",
+"lag_s", "scale", "names", "sources", "starts", "descriptors", "window_stats",
+"examples"}`` (``rtseg.library.file``).  ``load`` refuses another format, version (1 and
+2 are read), profile or dims with one ``LibraryError`` line.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rtseg.config import ConfigError
+from rtseg.library.calibration import (DEFAULT_THRESHOLD, MODEL_ONE_NAME_FACTOR,
+                                       ONE_NAME_FACTOR, k_mean, median_or_none,
+                                       nearest_others, separating_rule)
+from rtseg.library.distance import LAG_S, window_stats
+
+FORMAT = "rtseg-behaviour-library"
+VERSION = 2
+#: versions this rtseg reads: 1 (descriptor distance only), 2 (window statistics: model distance)
+READS = (1, 2)
+METRICS = ("model", "descriptor")
+#: the distance a library is learned with: "model" (``rtseg.library.distance``) since
+#: 2026-12-01 (held out: mocap6 0.80 -> 0.90, cmu_single BVH walk 0.67 -> 1.00, spliced
+#: 0.81 -> 0.94; docs/identity.md); "descriptor" is the earlier one
+DEFAULT_METRIC = "model"
+#: a name's distance under the model metric: its nearest window (k = 1; k = 3, the
+#: descriptor's, let 3 more left-out mocap6 exercises through, docs/identity.md)
+MODEL_K_NEAREST = 1
+UNKNOWN = "unknown"
+GROUPS = ("spread", "speed", "dims")
+SCALE_FLOOR = 0.05
+K_NEAREST = 3
+#: example windows start every this many seconds (0.5 since 2026-12-02; 1 s before): the
+#: nearest window is likelier to meet a query's phase of the movement - held out, with the
+#: 1.75 s name wait, left-out exercises `unknown` mocap6 12 -> 13 of 17, spliced 28 -> 30
+#: of 35, nothing lost (docs/identity.md, "Held-out figures ... session 11")
+DEFAULT_STEP_S = 0.5
+
+
+class LibraryError(ConfigError):
+    """A library file that cannot be used (one line: path and reason)."""
+
+
+def descriptor(W: np.ndarray, frame_rate: float) -> np.ndarray:
+    """Descriptor (6J,) of a window W (frames >= 2, 4J) of feature rows (module doc):
+    spread (J), speed (J), dims (4J) concatenated."""
+    W = np.asarray(W, dtype=np.float64)
+    n, d = W.shape
+    if n < 2 or d % 4:
+        raise ValueError(f"a descriptor needs >= 2 frames of 4J features, got {W.shape}")
+    J = d // 4
+    var = W.var(axis=0)
+    spread = np.log(np.sqrt(var.reshape(J, 4).sum(axis=1)) + 0.01)
+    step = np.linalg.norm(np.diff(W, axis=0).reshape(n - 1, J, 4), axis=2)
+    speed = np.log(step.mean(axis=0) * float(frame_rate) + 0.05)
+    dims = np.log(np.sqrt(var) + 0.005)
+    return np.concatenate([spread, speed, dims])
+
+
+def group_slices(dims: int) -> list[slice]:
+    """Slices of the descriptor groups for ``dims`` feature dims (4J)."""
+    J = dims // 4
+    return [slice(0, J), slice(J, 2 * J), slice(2 * J, 6 * J)]
+
+
+def window_bounds(a: int, b: int, frame_rate: float, window_s: float, step_s: float,
+                  edge_s: float, min_s: float) -> list[tuple[int, int]]:
+    """Windows [s, e) (frames) inside the labelled range [a, b) (module doc)."""
+    L = max(2, int(round(window_s * frame_rate)))
+    S = max(1, int(round(step_s * frame_rate)))
+    E = int(round(edge_s * frame_rate))
+    lo, hi = a + E, b - E
+    if hi - lo < L:
+        return [(lo, hi)] if hi - lo >= max(2, int(round(min_s * frame_rate))) else []
+    return [(s, s + L) for s in range(lo, hi - L + 1, S)]
+
+
+@dataclass
+class Naming:
+    """The library's answer for one window: ``name`` (``UNKNOWN`` when rejected), the
+    ``nearest`` name and its ``distance``, and ``confidence`` 0..1 (named:
+    1 - distance / threshold; unknown: 1 - threshold / distance)."""
+    name: str
+    nearest: str
+    distance: float
+    confidence: float
+
+
+@dataclass
+class Library:
+    """Example-window descriptors with names (module doc).  Build with ``LibraryBuilder``
+    or ``load``."""
+    profile: str
+    dims: int
+    frame_rate: float
+    descriptors: np.ndarray                  # (windows, 6J)
+    names: list[str]                         # per window
+    sources: list[int]                       # per window: index into examples
+    examples: list[dict[str, Any]]           # {"name", "source", "frames": [a, b]}
+    scale: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    threshold: float = math.inf
+    ratio: float = 1.0                       # named only when d1 / d2 <= ratio
+    window_s: float = 2.0
+    step_s: float = DEFAULT_STEP_S
+    edge_s: float = 0.5
+    min_s: float = 1.0
+    calibration: dict[str, Any] = field(default_factory=dict)
+    starts: list[float] = field(default_factory=list)   # per window: first frame in its example
+    k_nearest: int = K_NEAREST               # a name's distance: mean of its k nearest windows
+    metric: str = "descriptor"               # "model" (window models) or "descriptor"
+    window_stats: list[Any] = field(default_factory=list)   # per window (model metric)
+    lag_s: float = LAG_S                     # angular-velocity lag (model metric), s
+
+    @property
+    def behaviour_names(self) -> list[str]:
+        return sorted(set(self.names))
+
+    def fit_scale(self) -> None:
+        """Per-dim std over all windows, floored at ``SCALE_FLOOR``."""
+        D = self.descriptors
+        s = D.std(axis=0) if len(D) > 1 else np.zeros(D.shape[1])
+        self.scale = np.maximum(s, SCALE_FLOOR)
+
+    def distances(self, q: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """Distance of descriptor q to every example window (or to ``rows`` of them)."""
+        D = self.descriptors if rows is None else self.descriptors[rows]
+        z2 = ((D - q) / self.scale) ** 2
+        g = [z2[:, s].mean(axis=1) for s in group_slices(self.dims)]
+        return np.sqrt(np.mean(g, axis=0))
+
+    def name_descriptor(self, q: np.ndarray) -> Naming:
+        """Name a descriptor (module doc, Decision; descriptor metric)."""
+        if not len(self.names):
+            return Naming(UNKNOWN, "", math.inf, 0.0)
+        return self.decide(self.distances(q))
+
+    @property
+    def bank(self) -> Any:
+        """The windows' models (``rtseg.library.distance.ModelBank``; built once)."""
+        b = getattr(self, "_bank", None)
+        if b is None or len(b) != len(self.window_stats):
+            from rtseg.library.distance import ModelBank
+            b = self._bank = ModelBank(self.window_stats)
+        return b
+
+    def window_distances(self, i: int) -> np.ndarray:
+        """Distances of window i to every window (the library's metric)."""
+        if self.metric == "model":
+            return self.bank.pairwise()[i].copy()
+        return self.distances(self.descriptors[i])
+
+    def decide(self, d: np.ndarray) -> Naming:
+        """Name from the distances ``d`` to every window (module doc, Decision)."""
+        per = self.name_distances(d)
+        if not per:
+            return Naming(UNKNOWN, "", math.inf, 0.0)
+        order = sorted(per, key=per.get)
+        best, dist = order[0], per[order[0]]
+        second = per[order[1]] if len(order) > 1 else math.inf
+        t, r = self.threshold, self.ratio
+        ratio = dist / second if second > 0 else 1.0
+        if dist <= t and ratio <= r:
+            conf = min(1.0 - dist / t, 1.0 - ratio / r if r > 0 else 0.0)
+            return Naming(best, best, dist, float(min(1.0, max(0.0, conf))))
+        conf = max(1.0 - t / dist if dist > t else 0.0, 1.0 - r / ratio if ratio > r else 0.0)
+        return Naming(UNKNOWN, best, dist, float(min(1.0, max(0.0, conf))))
+
+    def name_distances(self, d: np.ndarray) -> dict[str, float]:
+        """{name: the mean of its ``k_nearest`` nearest windows' distances} from the
+        distances ``d`` to every window (inf entries skipped; a name without a finite one
+        is left out)."""
+        out: dict[str, float] = {}
+        if self.k_nearest == 1:                  # the nearest window: one pass
+            for n, idx in self._name_rows().items():
+                m = float(d[idx].min())
+                if math.isfinite(m):
+                    out[n] = m
+            return out
+        for n, idx in self._name_rows().items():
+            v = d[idx]
+            v = v[np.isfinite(v)]
+            if len(v):
+                out[n] = k_mean(v, self.k_nearest)
+        return out
+
+    def _name_rows(self) -> dict[str, np.ndarray]:
+        """{name: indices of its windows} (cached; rebuilt when the window count changes)."""
+        cache = getattr(self, "_rows_cache", None)
+        if cache is None or cache[0] != len(self.names):
+            names = np.asarray(self.names)
+            cache = (len(self.names), {n: np.flatnonzero(names == n) for n in dict.fromkeys(self.names)})
+            self._rows_cache = cache
+        return cache[1]
+
+    def name(self, W: np.ndarray, frame_rate: float | None = None) -> Naming:
+        """Name a window of feature rows (frames, dims) of this library's profile."""
+        W = np.asarray(W, dtype=np.float64)
+        if W.ndim != 2 or W.shape[1] != self.dims:
+            raise ValueError(f"library wants {self.dims} feature dims, got {W.shape}")
+        fr = frame_rate or self.frame_rate
+        if self.metric == "model":
+            if not len(self.names):
+                return Naming(UNKNOWN, "", math.inf, 0.0)
+            return self.decide(self.bank.distances(self.bank.query(W, fr, self.lag_s)))
+        return self.name_descriptor(descriptor(W, fr))
+
+    # ------------------------------------------------------------------ calibration
+    def calibrate(self) -> float:
+        """Set ``threshold`` and ``ratio`` from the library's own windows (module doc);
+        returns the threshold.  ``calibration`` keeps the medians and counts, and
+        ``calibrated``: False when no behaviour has a second example (the threshold is then
+        ``DEFAULT_THRESHOLD``)."""
+        names = np.array(self.names)
+        src = np.array(self.sources)
+        who = [str(e.get("person") or e.get("source", k)) for k, e in enumerate(self.examples)]
+        person = np.array([who[k] for k in self.sources])
+        by_person = len(set(who)) > 1
+        same, other = [], []             # distances: nearest same name / nearest other name
+        o1, o2 = [], []                  # the window's name left out: nearest two other names
+        # name -> per window: its nearest other name, that distance, its known case's
+        near: dict[str, list[tuple[str, float, float | None]]] = {}
+        for i in range(len(names)):
+            d = self.window_distances(i)
+            if by_person:                # as a new person would be met: others' windows only
+                d = np.where(person != person[i], d, np.inf)
+            s = d[(names == names[i]) & (src != src[i])]
+            s = s[np.isfinite(s)]
+            others = {n: v for n, v in self.name_distances(d).items()
+                      if n != names[i] and math.isfinite(v)}
+            per = sorted(others.values())
+            known = k_mean(s, self.k_nearest) if len(s) else None
+            if others:
+                n1 = min(others, key=others.get)
+                near.setdefault(str(names[i]), []).append((n1, others[n1], known))
+            if known is not None:
+                same.append(known)
+                other.append(per[0] if per else math.inf)
+            if per:
+                o1.append(per[0])
+                o2.append(per[1] if len(per) > 1 else math.inf)
+        factor = MODEL_ONE_NAME_FACTOR if self.metric == "model" else ONE_NAME_FACTOR
+        self.threshold, self.ratio = separating_rule(same, other, o1, o2, factor,
+                                                     DEFAULT_THRESHOLD[self.metric])
+        self.calibration = {"same_median": median_or_none(same),
+                            "other_median": median_or_none(o1),
+                            "same": len(same), "other": len(o1), "calibrated": bool(same),
+                            "nearest_other": nearest_others(near)}
+        return self.threshold
+
+    def merged(self, other: "Library") -> "Library":
+        """This library with ``other``'s examples added (same profile, dims and windows;
+        any frame rate: windows are in seconds, the model distance's angular velocities in
+        rad/s), scale refitted and threshold recalibrated."""
+        if (other.profile, other.dims) != (self.profile, self.dims):
+            raise LibraryError(f"cannot add examples of profile {other.profile!r} "
+                               f"({other.dims} dims) to a library of {self.profile!r} "
+                               f"({self.dims} dims)")
+        if (self.metric, self.lag_s) != (other.metric, other.lag_s) or (
+                self.metric == "model" and not (self.window_stats and other.window_stats)):
+            raise LibraryError(f"cannot add examples learned with the {other.metric!r} "
+                               f"distance to a library of the {self.metric!r} distance (a "
+                               f"file of an earlier rtseg): learn it again with --new")
+        k = len(self.examples)
+        lib = Library(self.profile, self.dims, self.frame_rate,
+                      np.concatenate([self.descriptors, other.descriptors]),
+                      self.names + other.names, self.sources + [s + k for s in other.sources],
+                      self.examples + other.examples, window_s=self.window_s,
+                      step_s=self.step_s, edge_s=self.edge_s, min_s=self.min_s,
+                      starts=(self.starts or [0.0] * len(self.names))
+                      + (other.starts or [0.0] * len(other.names)),
+                      k_nearest=self.k_nearest, metric=self.metric,
+                      window_stats=list(self.window_stats) + list(other.window_stats),
+                      lag_s=self.lag_s)
+        lib.fit_scale()
+        lib.calibrate()
+        return lib
+
+    # ------------------------------------------------------------------ file
+    def to_dict(self) -> dict[str, Any]:
+        """The library as a JSON-ready dict (``rtseg.library.file.to_dict``)."""
+        from rtseg.library.file import to_dict
+        return to_dict(self)
+
+    def save(self, path: str | Path) -> Path:
+        """Write the library as JSON, atomically (``rtseg.library.file.save``)."""
+        from rtseg.library.file import save
+        return save(self, path)
+
+
+class LibraryBuilder:
+    """Collects labelled examples (feature rows + name) and builds a ``Library``.
+
+    profile/dims: the feature profile of every example (``add`` refuses other dims).
+    """
+
+    def __init__(self, profile: str, dims: int, frame_rate: float, *, window_s: float = 2.0,
+                 step_s: float = DEFAULT_STEP_S, edge_s: float = 0.5, min_s: float = 1.0) -> None:
+        if not frame_rate > 0:
+            raise ValueError(f"frame_rate must be positive, got {frame_rate}")
+        self.profile, self.dims, self.frame_rate = profile, int(dims), float(frame_rate)
+        self.window_s, self.step_s, self.edge_s, self.min_s = window_s, step_s, edge_s, min_s
+        self.rows: list[np.ndarray] = []
+        self.names: list[str] = []
+        self.sources: list[int] = []
+        self.starts: list[float] = []
+        self.stats: list[Any] = []           # per window: angular-velocity statistics
+        self.examples: list[dict[str, Any]] = []
+        self.skipped: list[str] = []
+
+    def add(self, X: np.ndarray, name: str, source: str, frames: tuple[int, int] | None = None,
+            frame_rate: float | None = None, info: dict[str, Any] | None = None) -> int:
+        """Add the labelled range ``frames`` [a, b) (default all) of feature rows X; returns
+        the number of windows it gave (0: too short, noted in ``skipped``).  ``frame_rate``
+        (Hz; default the builder's): the example's own - windows are cut in seconds at it
+        and the window statistics are per second, so examples of any frame rate mix.
+        ``info``: extra fields of the example's record (e.g. take frames, person, key)."""
+        name = str(name).strip()
+        if not name:
+            raise ValueError(f"{source}: empty behaviour name")
+        if name == UNKNOWN:
+            raise ValueError(f"{source}: {UNKNOWN!r} is reserved for rejected segments")
+        X = np.asarray(X, dtype=np.float64)
+        if X.ndim != 2 or X.shape[1] != self.dims:
+            raise ValueError(f"{source}: {X.shape[1] if X.ndim == 2 else '?'} feature dims, "
+                             f"the library's profile {self.profile!r} has {self.dims}")
+        fr = float(frame_rate or self.frame_rate)
+        if not fr > 0:
+            raise ValueError(f"{source}: frame rate {fr:g} Hz, not positive")
+        a, b = (0, len(X)) if frames is None else (int(frames[0]), int(frames[1]))
+        if not 0 <= a < b <= len(X):
+            raise ValueError(f"{source}: frames {a}:{b} outside the take (0:{len(X)})")
+        wins = window_bounds(a, b, fr, self.window_s, self.step_s, self.edge_s, self.min_s)
+        if not wins:
+            self.skipped.append(f"{source} [{a}:{b}) {name}: shorter than "
+                                f"{self.min_s + 2 * self.edge_s:g} s")
+            return 0
+        k = len(self.examples)
+        self.examples.append({"name": name, "source": str(source), "frames": [a, b],
+                              **(info or {})})
+        for s, e in wins:
+            self.rows.append(descriptor(X[s:e], fr))
+            self.names.append(name)
+            self.sources.append(k)
+            self.starts.append(float(s))
+            self.stats.append(window_stats(X[s:e], fr))
+        return len(wins)
+
+    def build(self, threshold: float | None = None, metric: str = DEFAULT_METRIC) -> Library:
+        """The library of distance ``metric`` (``METRICS``; scale fitted, threshold
+        calibrated unless given)."""
+        if metric not in METRICS:
+            raise ValueError(f"metric {metric!r}: expected one of {', '.join(METRICS)}")
+        if not self.rows:
+            raise ValueError("no example long enough to learn from"
+                             + (f" ({'; '.join(self.skipped[:3])})" if self.skipped else ""))
+        lib = Library(self.profile, self.dims, self.frame_rate, np.array(self.rows),
+                      list(self.names), list(self.sources), list(self.examples),
+                      window_s=self.window_s, step_s=self.step_s, edge_s=self.edge_s,
+                      min_s=self.min_s, starts=list(self.starts), metric=metric,
+                      k_nearest=MODEL_K_NEAREST if metric == "model" else K_NEAREST,
+                      window_stats=list(self.stats))
+        lib.fit_scale()
+        lib.calibrate()
+        if threshold is not None:
+            if not threshold > 0:
+                raise ValueError(f"threshold must be positive, got {threshold}")
+            lib.threshold = float(threshold)
+            lib.calibration["threshold_given"] = True
+        return lib
+
+
+def load(path: str | Path, profile: str | None = None, dims: int | None = None) -> Library:
+    """Read a library file (``rtseg.library.file.load``: one-line ``LibraryError`` for
+    another format, version, profile or dims)."""
+    from rtseg.library.file import load as _load
+    return _load(path, profile, dims)

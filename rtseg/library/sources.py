@@ -1,0 +1,127 @@
+"""Library examples from source folders (``rtseg learn LIB --from DIR``), and example keys.
+
+A *source folder* is laid out like ``../shared/data/cmu_single``, ``hdm05`` or ``bandai``:
+``index.tsv`` (take, subject, format, behaviour) with the takes in ``bvh/`` or ``amc/``
+(``rtseg.evaluation.splice.read_source_index``), any frame rate (cmu_single and hdm05 120 Hz, bandai
+30 Hz), any rig whose joints map to the configured feature profile (the canonical skeleton,
+``rtseg.core.rig``).  Every take is one behaviour of one person (``subject``); rest frames at
+its ends are dropped (``rtseg.evaluation.blend.trim_bounds``).
+
+- A take at least ``min_example_s`` long (after the trim) is one example.
+- Shorter takes (HDM05's clips hold ONE squat, one hop: 0.5-7.5 s) of one person, behaviour
+  and skeleton are joined in take-name order with the 0.3 s slerp cross-fade the spliced
+  performances use (``rtseg.evaluation.splice.SpliceConfig.join_fade_s``), into one example (its
+  ``take``: the member names joined by ``+``), as a spliced segment of that behaviour joins
+  them.  A lone short take is left out with a note.
+
+Every example has a ``key``: a content hash (sha256, 16 hex digits) of the motion it covers
+- joint names, frame rate and the local rotations of its frames - so learning the same
+example twice, from the same file or a copy of it, is recognised (``rtseg learn`` reports
+"N already in the library").
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+#: a take at least this long (s, after its rest frames are dropped) is an example of its
+#: own; shorter takes of one person and behaviour are joined.  The library's shortest
+#: window (``min_s`` 1 s) plus ``edge_s`` (0.5 s) cut from each end: 2 s.
+MIN_EXAMPLE_S = 2.0
+
+
+def motion_key(take: Any, a: int, b: int) -> str:
+    """Content hash (16 hex digits) of frames [a, b) of ``take``: joint names, frame rate
+    (to 0.01 Hz) and the rotations, rounded to 1e-6."""
+    h = hashlib.sha256()
+    h.update("\x1f".join(map(str, take.joint_names)).encode())
+    h.update(f"|{float(take.frame_rate):.2f}|".encode())
+    q = np.round(np.asarray(take.quats[a:b], dtype=np.float64), 6) + 0.0   # -0.0 -> 0.0
+    h.update(np.ascontiguousarray(q).tobytes())
+    return h.hexdigest()[:16]
+
+
+def joined_key(keys: Iterable[str]) -> str:
+    """Key of an example joined from takes of these keys (in order)."""
+    return hashlib.sha256("+".join(keys).encode()).hexdigest()[:16]
+
+
+def source_folders(root: str | Path) -> list[Path]:
+    """``root`` itself when it holds ``index.tsv``, else its subfolders that do (sorted)."""
+    root = Path(root)
+    if (root / "index.tsv").is_file():
+        return [root]
+    if not root.is_dir():
+        return []
+    return sorted(p for p in root.iterdir() if p.is_dir() and (p / "index.tsv").is_file())
+
+
+def examples_from_source(src: str | Path, config: Any, people: Iterable[str] | None = None,
+                         takes: Iterable[str] | None = None,
+                         notes: list[str] | None = None,
+                         min_example_s: float = MIN_EXAMPLE_S) -> list[Any]:
+    """Examples (``rtseg.library.examples.Example``) of one source folder (module doc);
+    ``people`` / ``takes``: keep only these subjects / take names; ``notes`` gets one line
+    per take left out."""
+    from rtseg.library.examples import Example, take_rows
+    from rtseg.evaluation.splice import (SpliceConfig, build_groups, clip_of, crossfade, load_sources,
+                              read_source_index)
+    from rtseg.core.take import Take
+    keep_p = None if people is None else {str(p) for p in people}
+    keep_t = None if takes is None else {str(t) for t in takes}
+    rows = [r for r in read_source_index(src)
+            if (keep_p is None or r.subject in keep_p) and (keep_t is None or r.name in keep_t)]
+    load_sources(rows)
+    notes = notes if notes is not None else []
+    out: list[Example] = []
+    # the groups of takes that may be joined (one format, joint set, frame rate); pools too
+    # short for a spliced segment are dropped there, so group here, keeping every take
+    cfg = SpliceConfig(min_segment_s=0.0, min_fade_s=0.0)
+    for g in build_groups(rows, cfg):
+        join = int(round(SpliceConfig().join_fade_s * g.frame_rate))
+        for (subject, behaviour), pool in sorted(g.pools.items()):
+            short = []
+            need = min_example_s * g.frame_rate          # fed rows (one per frame)
+            for r in sorted(pool.takes, key=lambda r: r.name):
+                X, index, profile = take_rows(r.take, config)
+                e = Example(behaviour, r.name, subject, X, index, r.trim, profile,
+                            float(g.frame_rate), motion_key(r.take, *r.trim))
+                i, j = e.rows()
+                if j - i >= need:
+                    out.append(e)
+                else:
+                    short.append(r)
+            if len(short) < 2:
+                notes += [f"{r.name} [{r.trim[0]}:{r.trim[1]}) {behaviour}: shorter than "
+                          f"{min_example_s:g} s and no other short take of {subject} "
+                          f"{behaviour} to join it with; left out" for r in short]
+                continue
+            clip = clip_of(short[0])
+            for r in short[1:]:
+                clip, _ = crossfade(clip, clip_of(r), max(1, min(join, len(clip), r.n_frames)),
+                                    g.roots)
+            t0 = short[0].take
+            take = Take(joint_names=list(g.joint_names), parents=list(g.parents),
+                        frame_rate=g.frame_rate, quats=clip.quats, root_position=clip.root,
+                        space=t0.space, length_unit=t0.length_unit,
+                        source="+".join(r.name for r in short), meta={})
+            X, index, profile = take_rows(take, config)
+            key = joined_key(motion_key(r.take, *r.trim) for r in short)
+            e = Example(behaviour, "+".join(r.name for r in short), subject, X, index,
+                        (0, take.n_frames), profile, float(g.frame_rate), key)
+            i, j = e.rows()
+            if j - i < need:
+                notes.append(f"{e.take} {behaviour}: {len(short)} short takes joined are "
+                             f"still shorter than {min_example_s:g} s; left out")
+                continue
+            out.append(e)
+            log.info("%s %s: %d short takes joined into one example of %d frames",
+                     subject, behaviour, len(short), take.n_frames)
+    return out

@@ -1,0 +1,45 @@
+"""The live session: source -> ring buffer -> pose features -> online detectors -> cut
+events -> publishers.  ``session`` holds :class:`LiveSession`; ``pipeline`` the per-frame
+pipeline it shares with offline replay; ``process``, ``emitter``, ``health`` its
+processing step, events and health; ``config`` the ``config/live.toml`` schema;
+``outputs`` the publishers of ``[output]``; ``stats`` the run-time counters;
+``rate_check`` the declared-frame-rate check.
+
+May import ``rtseg.identity``, ``rtseg.detectors``, ``rtseg.recording``,
+``rtseg.publishers``, ``rtseg.core`` and ``rtseg.drivers``; no command module."""
+
+from rtseg.live.session import (
+    DEFAULT_FRAME_RATE,
+    FloatRing,
+    LiveSession,
+    LiveStats,
+    Pipeline,
+    PipelineCut,
+    PipelineStats,
+    SessionSummary,
+    build_publishers,
+    detector_params,
+    make_detectors,
+    replay_frames,
+    replay_session,
+    wire_methods,
+    with_suit,
+)
+
+__all__ = [
+    "DEFAULT_FRAME_RATE",
+    "FloatRing",
+    "LiveSession",
+    "LiveStats",
+    "Pipeline",
+    "PipelineCut",
+    "PipelineStats",
+    "SessionSummary",
+    "build_publishers",
+    "detector_params",
+    "make_detectors",
+    "replay_frames",
+    "replay_session",
+    "wire_methods",
+    "with_suit",
+]

@@ -1,0 +1,528 @@
+"""The per-frame pipeline shared by the live loop and offline replay of a recording.
+
+``Pipeline.process()`` takes one received frame and returns the cuts its arrival revealed:
+gap handling (short sequence/clock gaps bridged with interpolated frames; longer gaps,
+silence and runs of invalid required joints restart the detectors), value sanitising, calibration, ``PoseFeatures.step`` and every online
+detector's ``update``.  It does no I/O and no threading: ``rtseg.live.session.LiveSession`` runs it
+on frames from a ring buffer, ``replay_frames`` / ``replay_session`` run it on recorded
+frames, so live output can be checked against a recording.
+
+Gaps
+----
+A short gap is bridged: when at most ``gaps.bridge_seconds`` (default 0.1 s, converted to
+frames at the pipeline's frame rate: 12 at 120 Hz) of frames are missing (sequence gap,
+source-clock gap or ring overrun), the detectors are fed that many filled frames first,
+each joint's rotation interpolated (normalised lerp, sign-aligned) from the last fed frame
+to the one that arrived, and go on without a restart (``PipelineStats.bridged_gaps``,
+``filled_frames``).  Filled frames are not session frames: a cut whose boundary falls on
+one is reported at the next received frame; behaviour identity is fed received frames only.
+
+A short sensor dropout is bridged the same way: up to that many consecutive frames with an
+invalid required joint are fed with the joint's last good value (what ``Frame`` rows hold).
+
+No cut is placed across a gap the detectors did not see: a sequence gap of more missing
+frames than that (or than ``gaps.max_frames`` when it is larger), more than
+``gaps.max_seconds`` without frames, or a longer run of frames with an invalid required
+joint restart the detectors (``OnlineDetector.restart()``) and the feature state; a cut
+whose boundary lies before the restart is discarded (counted).
+
+Frame indices
+-------------
+``PipelineCut.boundary`` / ``detected`` are 0-based indices among all frames received this
+session (= the rows of the recorded session).  ``lost`` frames (dropped by the live loop
+before this frame, see ``rtseg.live.session``) are a gap like a sequence gap: more than
+``gaps.max_frames`` restart the detectors; fewer are skipped, and the cut indices still
+name the frames the detectors were fed (``Pipeline._index_of_fed``).
+"""
+
+from __future__ import annotations
+
+import bisect
+import logging
+import math
+from array import array
+from dataclasses import dataclass
+from typing import Any, Iterable
+
+import numpy as np
+
+from rtseg.config import ConfigError
+from rtseg.detectors.base import Cut, OnlineDetector
+from rtseg.live.config import SessionConfig, load_session_config
+
+log = logging.getLogger("rtseg.live.session")
+
+DEFAULT_FRAME_RATE = 120.0
+#: index jumps kept for mapping cuts back to session frames (``Pipeline._index_of_fed``):
+#: between MAX_JUMPS and twice that, far more than one detector delay holds
+MAX_JUMPS = 4096
+
+@dataclass
+class PipelineCut:
+    """A cut in session frame indices: ``boundary`` and ``detected`` are absolute indices
+    of received frames; ``cut`` is the detector's own ``Cut``."""
+    cut: Cut
+    boundary: int
+    detected: int
+
+
+@dataclass
+class PipelineStats:
+    frames: int = 0            # frames given to process()
+    fed: int = 0               # frames fed to the detectors
+    calibration_frames: int = 0
+    restarts: int = 0          # detector restarts caused by gaps
+    gap_frames: int = 0        # frames known missing (sequence gaps + ring overruns)
+    bridged_gaps: int = 0      # gaps short enough to be filled (no restart)
+    filled_frames: int = 0     # interpolated frames fed to the detectors in those gaps
+    invalid_frames: int = 0    # frames with an invalid required joint
+    skipped_invalid: int = 0   # of those, frames not fed (run longer than the limit)
+    bad_values: int = 0        # non-finite / zero quaternions replaced by the last good ones
+    discarded_cuts: int = 0    # cuts whose boundary preceded a restart
+    identity_errors: int = 0   # frames on which rtseg.identity.tracker failed (cuts still sent)
+
+
+def _average_quats(q: np.ndarray) -> np.ndarray:
+    """Mean rotation of (n, J, 4) quaternions close to each other: sign-align to the first
+    frame, average, normalise (the first-order approximation of the quaternion mean)."""
+    ref = q[0]
+    signs = np.where(np.sum(q * ref, axis=-1, keepdims=True) < 0, -1.0, 1.0)
+    m = np.mean(q * signs, axis=0)
+    n = np.linalg.norm(m, axis=-1, keepdims=True)
+    return np.where(n > 1e-9, m / np.where(n > 1e-9, n, 1.0), ref)
+
+
+def _resolve_joints(names: Iterable[str], joint_names: list[str], key: str) -> np.ndarray:
+    lower = {n.lower(): i for i, n in enumerate(joint_names)}
+    idx = []
+    for n in names:
+        if n.lower() not in lower:
+            raise ConfigError(f"{key}: joint {n!r} not among the source's joints "
+                              f"({', '.join(joint_names)})")
+        idx.append(lower[n.lower()])
+    return np.asarray(idx, dtype=np.intp)
+
+
+class Pipeline:
+    """Frame-by-frame core shared by the live loop and offline replay of a recording.
+
+    ``process(index, quats, valid, seq, recv_time, lost, source_time)`` takes one received
+    frame (``quats`` (J, 4) scalar-last, ``valid`` (J,) bool, ``index`` its 0-based session
+    index, ``seq`` the source's sequence number or None, ``recv_time`` monotonic seconds,
+    ``lost`` frames known lost just before it, ``source_time`` the source's clock in
+    seconds or None) and returns the cuts its arrival revealed, in session frame indices.  Deterministic: the
+    same frames give the same cuts, which is how live output is checked against a recording.
+    """
+
+    def __init__(self, joint_names: list[str], parents: list[int], space: str,
+                 frame_rate: float | None, config: SessionConfig,
+                 features: Any = None, detectors: dict[str, OnlineDetector] | None = None) -> None:
+        self.joint_names = list(joint_names)
+        self.parents = list(parents)
+        self.space = space
+        self.frame_rate = float(frame_rate or DEFAULT_FRAME_RATE)
+        self.config = config
+        self.n_joints = len(self.joint_names)
+        if features is None:
+            from rtseg.core.features import PoseFeatures
+            profile = config["features.profile"] or None
+            features = PoseFeatures(self.joint_names, self.parents, space, profile=profile)
+        self.features = features
+        if detectors is None:
+            detectors = make_detectors(config, self.frame_rate)
+        self.detectors = detectors
+        # behaviour identity (rtseg.identity.tracker): fed every row and the primary detector's cuts
+        self.identity: Any = None
+        if config["identity.enabled"] and self.detectors:
+            from rtseg.identity.tracker import tracker_from_config
+            primary = config["detectors.primary"] or next(iter(self.detectors))
+            self.identity = tracker_from_config(config, self.frame_rate, primary,
+                                                getattr(features, "profile", None),
+                                                getattr(features, "dim", None))
+        req = config["gaps.required_joints"]
+        self.required = (_resolve_joints(req, self.joint_names, "gaps.required_joints")
+                         if req else self._feature_joints())
+        self.max_gap_frames = int(config["gaps.max_frames"])
+        self.max_gap_seconds = float(config["gaps.max_seconds"])
+        self.bridge_frames = max(self.max_gap_frames,
+                                 int(round(float(config["gaps.bridge_seconds"]) * self.frame_rate)))
+        mode = config["calibration.mode"]
+        if mode == "auto":
+            mode = "average" if space == "local" else "none"
+        self.calibration_mode = mode
+        self.calibration_needed = (1 if mode == "first" else int(config["calibration.frames"])
+                                   or max(1, int(round(config["calibration.seconds"] * self.frame_rate))))
+        self._calib: list[np.ndarray] = []
+        self.calibrated = mode == "none"
+        self.stats = PipelineStats()
+        self._prev_seq: int | None = None
+        self._prev_recv: float | None = None
+        self._prev_src: float | None = None
+        self._src_period: float | None = None
+        self._src_steps = 0
+        self._src_long = 0
+        self._bad_run = 0
+        self._last_good = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (self.n_joints, 1))
+        # Per detector: session index of the first frame fed since the last (re)start and
+        # the detector's own frame count at that moment.
+        self._seg_start = {m: -1 for m in self.detectors}
+        self._fed = {m: 0 for m in self.detectors}
+        self._fed_at_start = {m: 0 for m in self.detectors}
+        self._fed_since_restart = 0
+        # Fed frames whose session index does not follow the previous fed frame's (the
+        # first fed frame, frames after skipped ones): parallel lists of the fed count
+        # (``stats.fed`` before the frame) and the index.  Between two entries indices
+        # run on by one per fed frame; see ``_index_of_fed``.
+        self._jump_fed: list[int] = []
+        self._jump_index: list[int] = []
+        self._last_fed_index = -2
+        # rows fed to the detectors since creation (received + filled), the row number of
+        # every filled row still needed to map cuts (array of int64, pruned), the last fed pose
+        self._rows = 0
+        self._filled = array("q")
+        self._pruned = 0                      # filled rows forgotten (all before _filled)
+        self._filled_at_start = {m: 0 for m in self.detectors}
+        self._last_cut_row = {m: 0 for m in self.detectors}
+        self._prev_fed: np.ndarray | None = None
+
+    def _feature_joints(self) -> np.ndarray:
+        """Input joints the pose features depend on: the profile's joints and, for global
+        orientations (made parent-relative), their parents.  All joints if unknown."""
+        used = getattr(self.features, "input_joints", None)
+        if used is not None:
+            return np.asarray(used, dtype=np.intp)
+        idx = getattr(self.features, "indices", None)
+        if idx is None:
+            return np.arange(self.n_joints)
+        need = {int(i) for i in idx}
+        if self.space == "global":
+            need |= {self.parents[i] for i in list(need) if self.parents[i] >= 0}
+        return np.array(sorted(need), dtype=np.intp)
+
+    # ---------------------------------------------------------------- gap logic
+    def _seq_missing(self, seq: int | None) -> int:
+        """Frames missing between the previous sequence number and ``seq``.
+
+        A backwards jump (device restart) counts as a gap beyond any limit; a jump back by
+        more than half of 16 bits from near the top is taken as a u16 wrap.
+        """
+        prev = self._prev_seq
+        if seq is None or prev is None:
+            return 0
+        d = seq - prev
+        if d <= 0 and prev < 65536 and seq < 65536 and prev - seq > 32768:
+            d += 65536
+        if d <= 0:
+            return self.max_gap_frames + 1 if d < 0 else 0
+        return d - 1
+
+    def restart(self, index: int, reason: str) -> None:
+        """Forget the current segment in every detector (and the feature state)."""
+        if self._fed_since_restart:
+            self.stats.restarts += 1
+            log.info("detectors restarted at frame %d: %s", index, reason)
+        for m, det in self.detectors.items():
+            det.restart()
+            self._seg_start[m] = -1
+        if hasattr(self.features, "reset"):
+            # keep the calibration pose: reset() only clears the streaming state
+            self.features.reset()
+        self._fed_since_restart = 0
+        self._prev_fed = None
+
+    def _fill(self, q: np.ndarray, n: int) -> np.ndarray:
+        """``n`` poses between the last fed pose and ``q``, (n, J, 4): per joint the
+        normalised lerp at fractions k / (n + 1), k = 1..n, sign-aligned to the last pose."""
+        a = self._prev_fed
+        b = np.where(np.sum(a * q, axis=-1, keepdims=True) < 0, -q, q)
+        t = (np.arange(1, n + 1, dtype=np.float64) / (n + 1))[:, None, None]
+        m = a[None] * (1.0 - t) + b[None] * t
+        nrm = np.linalg.norm(m, axis=-1, keepdims=True)
+        return np.where(nrm > 1e-9, m / np.where(nrm > 1e-9, nrm, 1.0), a[None])
+
+    def _feed(self, x: np.ndarray, index: int, out: list[PipelineCut]) -> None:
+        """One row to every detector; cuts it reveals appended to ``out``."""
+        for m, det in self.detectors.items():
+            if self._seg_start[m] < 0:
+                self._seg_start[m] = index
+                self._fed_at_start[m] = self._fed[m]
+                self._filled_at_start[m] = self._filled_before(self._fed[m])
+            self._fed[m] += 1
+            cut = det.update(x)
+            if cut is None:
+                continue
+            out_cut = self._to_session(m, cut, index)
+            if out_cut is not None:
+                out.append(out_cut)
+        self._rows += 1
+
+    def _filled_before(self, row: int) -> int:
+        """Filled rows before ``row`` (rows fed since creation; valid for rows not
+        before the forgotten ones)."""
+        return self._pruned + bisect.bisect_left(self._filled, row)
+
+    def _prune_filled(self) -> None:
+        """Forget filled rows no cut can refer to any more: those before every method's
+        segment start and last cut (cuts of one method do not go back in time)."""
+        if len(self._filled) < 4096:
+            return
+        keep_from = min((max(self._fed_at_start[m] if self._seg_start[m] >= 0 else self._rows,
+                             self._last_cut_row[m]) for m in self.detectors), default=self._rows)
+        k = bisect.bisect_left(self._filled, keep_from)
+        if k:
+            del self._filled[:k]
+            self._pruned += k
+
+    # ---------------------------------------------------------------- main step
+    def _time_missing(self, source_time: float | None, known_lost: int = 0) -> int:
+        """Frames missing according to the source's clock, for sources whose sequence
+        numbers cannot show a loss (VMC numbers the frames it assembles).
+
+        The frame period is learned from the source's own time steps (running mean of the
+        steps that are not gaps, after 16 steps), so it does not depend on the nominal
+        rate.  Returns 0 until then, for steps backwards (clock reset) and for steps below
+        2.5 periods; after 8 long steps in a row the source is taken to have slowed down
+        and the period is learned again.  A step over frames the caller knows are lost
+        (``known_lost`` > 0: dropped by the live loop) is measured but not learned from."""
+        prev = self._prev_src
+        if source_time is None or prev is None or not math.isfinite(source_time):
+            return 0
+        d = source_time - prev
+        if d <= 0:
+            return 0
+        p = self._src_period
+        if known_lost > 0:
+            return 0 if p is None else max(0, int(round(d / p)) - 1)
+        if p is None:
+            self._src_period, self._src_steps = d, 1
+            return 0
+        if d < 2.5 * p or self._src_steps < 16:
+            self._src_period = p + (d - p) / min(self._src_steps + 1, 64)
+            self._src_steps += 1
+            self._src_long = 0
+            return 0
+        self._src_long += 1
+        if self._src_long >= 8:          # the source slowed down for good: new period
+            self._src_period, self._src_steps, self._src_long = d, 1, 0
+            return 0
+        return max(0, int(round(d / p)) - 1)
+
+    def process(self, index: int, quats: np.ndarray, valid: np.ndarray,
+                seq: int | None = None, recv_time: float | None = None,
+                lost: int = 0, source_time: float | None = None) -> list[PipelineCut]:
+        st = self.stats
+        st.frames += 1
+        # --- gaps in the input (sequence numbers or source clock, silence, frames the live
+        # loop lost or dropped): those are all between the previous frame and this one, so
+        # the largest count is the gap (a sequence gap includes the frames dropped)
+        lost = max(0, int(lost))
+        missing = max(self._seq_missing(seq), self._time_missing(source_time, lost), lost)
+        st.gap_frames += missing
+        silence = (recv_time - self._prev_recv
+                   if recv_time is not None and self._prev_recv is not None else 0.0)
+        if seq is not None:
+            self._prev_seq = int(seq)
+        if recv_time is not None:
+            self._prev_recv = float(recv_time)
+        if source_time is not None and math.isfinite(source_time):
+            self._prev_src = float(source_time)
+        bridge = 0
+        if missing > self.bridge_frames:
+            self.restart(index, f"{missing} frames missing")
+        elif silence > self.max_gap_seconds:
+            self.restart(index, f"no frame for {silence:.3f} s")
+        elif missing:
+            bridge = missing
+        # --- sanitise values: non-finite or zero quaternions are invalid
+        q = np.asarray(quats, dtype=np.float64)
+        v = np.asarray(valid, dtype=bool)
+        norms = np.einsum("ij,ij->i", q, q)
+        ok = (norms > 1e-12) & (norms < 1e12)          # False for NaN too
+        all_valid = bool(v.all())
+        if not ok.all():
+            bad = ~ok
+            st.bad_values += int(bad.sum())
+            v = v & ok
+            all_valid = False
+        if not all_valid:
+            q = np.where(v[:, None], q, self._last_good)
+            norms = np.where(v, norms, 1.0)
+        if not (np.abs(norms - 1.0) < 1e-6).all():     # drivers normalise; be sure anyway
+            q = q / np.sqrt(np.where(norms > 1e-12, norms, 1.0))[:, None]
+        np.copyto(self._last_good, q)       # q may be a ring-buffer view: keep a copy
+        # --- invalid required joints
+        if not all_valid and not v[self.required].all():
+            st.invalid_frames += 1
+            self._bad_run += 1
+            if self._bad_run > self.bridge_frames:
+                if self._bad_run == self.bridge_frames + 1:
+                    self.restart(index, f"required joints invalid for {self._bad_run} frames")
+                st.skipped_invalid += 1
+                return []
+        else:
+            self._bad_run = 0
+        # --- calibration pose (rig-relative input)
+        if not self.calibrated:
+            if v[self.required].all():
+                self._calib.append(q.copy())
+                st.calibration_frames += 1
+                if len(self._calib) >= self.calibration_needed:
+                    pose = _average_quats(np.stack(self._calib))
+                    self.features.calibrate(pose)
+                    self.calibrated = True
+                    self._calib = []
+                    log.info("calibrated on %d frame(s) ending at frame %d",
+                             self.calibration_needed, index)
+            return []
+        # --- features and detectors (a short gap first filled, see the module docstring)
+        out: list[PipelineCut] = []
+        if bridge and self._prev_fed is not None:
+            st.bridged_gaps += 1
+            st.filled_frames += bridge
+            for qf in self._fill(q, bridge):
+                self._filled.append(self._rows)
+                self._feed(self.features.step(qf), index, out)
+            self._prune_filled()
+        x = self.features.step(q)
+        if index != self._last_fed_index + 1:
+            self._jump_fed.append(st.fed)
+            self._jump_index.append(index)
+            if len(self._jump_fed) > 2 * MAX_JUMPS:        # bounded memory
+                del self._jump_fed[:MAX_JUMPS], self._jump_index[:MAX_JUMPS]
+        self._last_fed_index = index
+        st.fed += 1
+        self._fed_since_restart += 1
+        self._feed(x, index, out)
+        if self._prev_fed is None:
+            self._prev_fed = q.copy()
+        else:
+            np.copyto(self._prev_fed, q)
+        if self.identity is not None:
+            try:
+                self.identity.step(index, x, out)
+            except Exception as exc:  # identity must never cost a cut
+                self.stats.identity_errors += 1
+                n = self.stats.identity_errors
+                if n & (n - 1) == 0:            # logged at the 1st, 2nd, 4th, 8th, ... failure
+                    log.warning("behaviour identity failed at frame %d (%s: %s; %d so far)",
+                                index, type(exc).__name__, exc, n)
+        return out
+
+    def _to_session(self, method: str, cut: Cut, index: int) -> PipelineCut | None:
+        """Map the detector's frame numbers to session indices.
+
+        Detectors number frames from their creation (the default, ``frame_origin =
+        "creation"``) or from their last restart (``frame_origin = "restart"``).  Within a
+        segment every received frame is fed, plus the filled rows of bridged gaps: a row's
+        session index is the segment's first frame plus the rows before it minus the filled
+        ones among them (so a filled row maps to the next received frame).
+        """
+        seg0 = self._seg_start[method]
+        start = self._fed_at_start[method]
+        fed_in_seg = self._fed[method] - start
+        origin = getattr(self.detectors[method], "frame_origin", "creation")
+        base = start if origin == "creation" else 0
+        rel = cut.frame - base
+        rel_det = (cut.detected_at - base) if cut.detected_at >= 0 else fed_in_seg - 1
+        rel_det = max(rel, rel_det)
+        # a row's fed-frame number: the rows before it less the filled ones among them (a
+        # filled row maps to the next received frame); then the index jumps of dropped frames
+        row, row_det = start + max(rel, 0), start + rel_det
+        boundary = (self._index_of_fed(row - self._filled_before(row)) if rel >= 0
+                    else seg0 + rel)
+        detected = self._index_of_fed(row_det - self._filled_before(row_det))
+        if rel >= 0:
+            self._last_cut_row[method] = max(self._last_cut_row[method], row)
+        if rel < 0:
+            self.stats.discarded_cuts += 1
+            log.info("%s cut at frame %d discarded: it precedes the restart at frame %d",
+                     method, boundary, seg0)
+            return None
+        return PipelineCut(cut, boundary, min(detected, index))
+
+    def _index_of_fed(self, fed: int) -> int:
+        """Session index of the ``fed``-th frame fed to the detectors (0-based count over
+        the session): the last index jump at or before it plus the frames fed since.
+        Frames the live loop dropped without a restart (fewer than ``gaps.max_frames``)
+        are skipped indices, so a cut's boundary is the frame the detector saw there."""
+        k = max(0, bisect.bisect_right(self._jump_fed, fed) - 1)
+        if not self._jump_fed:
+            return fed
+        return self._jump_index[k] + (fed - self._jump_fed[k])
+
+
+def detector_params(config: SessionConfig) -> dict[str, dict[str, Any]]:
+    """Validated parameters of each configured method: ``detectors.params`` (default
+    ``config/detectors.toml``) overridden by ``[detectors.<method>]``.  ConfigError names
+    the key."""
+    from rtseg import detectors as det_mod
+    params_file = config["detectors.params"] or None
+    try:
+        all_params = det_mod.load_params(params_file)
+    except (ValueError, OSError) as exc:
+        raise ConfigError(f"detectors.params: {exc}") from None
+    out = {}
+    for m in det_mod.ONLINE_METHODS:     # every override is checked, run or not
+        p = dict(all_params.get(m, {}))
+        try:
+            p.update(det_mod.validate(m, config[f"detectors.{m}"]))
+        except ValueError as exc:
+            raise ConfigError(f"detectors.{m}: {exc}") from None
+        out[m] = p
+    return {m: out[m] for m in config["detectors.methods"]}
+
+
+def make_detectors(config: SessionConfig, frame_rate: float) -> dict[str, OnlineDetector]:
+    """The configured online detectors (``detectors.methods``) with ``detector_params``."""
+    from rtseg import detectors as det_mod
+    out: dict[str, OnlineDetector] = {}
+    for m, p in detector_params(config).items():
+        try:
+            out[m] = det_mod.make_online(m, frame_rate, p)
+        except (TypeError, ValueError, KeyError) as exc:
+            raise ConfigError(f"detectors.{m}: {exc}") from None
+    return out
+
+
+def _blas_limit(n: int) -> Any:
+    """Limit BLAS threads to ``n`` (0: no change); the limiter, or None."""
+    if n <= 0:
+        return None
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn
+        return None
+    return threadpool_limits(n, user_api="blas")
+
+
+def replay_frames(frames: Iterable[tuple], joint_names: list[str], parents: list[int],
+                  space: str, frame_rate: float | None,
+                  config: SessionConfig | None = None) -> list[PipelineCut]:
+    """Run recorded frames ``(quats (J,4), valid (J,), seq, recv_time[, source_time])``
+    through the same ``Pipeline`` as the live loop; the cuts in order (session frame
+    indices).  ``replay_session(dir)`` does this for a recorded session folder."""
+    cfg = config if config is not None else load_session_config()
+    pipe = Pipeline(joint_names, parents, space, frame_rate, cfg)
+    cuts: list[PipelineCut] = []
+    blas = _blas_limit(int(cfg["buffer.blas_threads"]))
+    try:
+        for i, f in enumerate(frames):
+            stime = f[4] if len(f) > 4 else None
+            cuts.extend(pipe.process(i, f[0], f[1], f[2], f[3], 0, stime))
+    finally:
+        if blas is not None:
+            blas.restore_original_limits()
+    return cuts
+
+
+def replay_session(directory: str, config: SessionConfig | None = None) -> list[PipelineCut]:
+    """The cuts the live loop's detectors give on a recorded session folder
+    (``rtseg.recording``), offline: every recorded frame with its sequence number, receive
+    time and source time, through ``replay_frames``."""
+    from rtseg.recording import read_session
+    tk = read_session(directory)
+    m = tk.meta
+    seq, recv, src = m["seq"], m["recv_time"], m["source_time"]
+    frames = ((tk.quats[i], tk.valid[i], None if seq[i] < 0 else int(seq[i]), float(recv[i]),
+               None if not np.isfinite(src[i]) else float(src[i])) for i in range(tk.n_frames))
+    return replay_frames(frames, tk.joint_names, tk.parents, tk.space, tk.frame_rate, config)

@@ -1,0 +1,111 @@
+"""The live session's processing step: frames taken from the ring buffer, in order, through
+the ``Pipeline``, the oldest dropped under overload (see "Keeping up" in ``rtseg.live.session``).
+
+:class:`SessionProcessing` is a part of :class:`rtseg.live.session.LiveSession` (a base class; it
+uses the session's ``pipeline``, ``ring``, ``stats``, ``_emit``, ``_warn``, the event
+builders of ``rtseg.live.emitter`` and the dropout tracking of ``rtseg.live.health``, and
+the state ``run`` sets up: ``_max_lag`` (s), ``_thin`` (frames), ``_pending_lost``,
+``_frame_cost`` (s)).
+Times are monotonic seconds; latencies milliseconds.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+
+class SessionProcessing:
+    """Frame processing of a :class:`~rtseg.live.session.LiveSession`."""
+
+    def _overload_drop(self, recv: np.ndarray, i: int, now: float, pending: int,
+                       waiting: int) -> int:
+        """How many waiting frames, from row ``i`` of the window's receive times ``recv``
+        on, to drop before processing the next one (``now``: monotonic s; ``pending``:
+        frames already missing before row ``i``; ``waiting``: frames waiting from row
+        ``i`` on, in the window and after it).
+
+        Every frame older than ``buffer.max_lag_seconds`` (L) goes.  Frames older than L/2
+        go too, at most ``gaps.max_frames`` before each frame processed (a gap the
+        detectors go on across), when the loop is overloaded: processing all that is
+        waiting, at the measured cost per frame, would take the oldest past L.  A stall
+        at a normal rate (a few frames waiting, quickly worked off) drops nothing."""
+        hard = self._max_lag
+        old_hard = int(np.searchsorted(recv[i:], now - hard, side="left"))
+        soft = 0
+        if now - float(recv[i]) + waiting * self._frame_cost > hard:
+            old_soft = int(np.searchsorted(recv[i:], now - 0.5 * hard, side="left"))
+            soft = min(old_soft, max(0, self._thin - pending))
+        return max(old_hard, soft)
+
+    def _process_window(self, w, now: float) -> None:
+        """Process the frames of window ``w`` in order (``now``: monotonic s when it was
+        read), dropping the oldest under overload (``_overload_drop``)."""
+        pipe = self.pipeline
+        st = self.stats
+        J = self.ring.valid_width
+        if w.lost:
+            st.overruns += w.lost
+            self._warn("overrun", "processing fell behind: %d frames overwritten before use "
+                       "(treated as a gap)", w.lost)
+        pending = self._pending_lost + w.lost     # frames missing before the next processed
+        recv_all = w.recv_time
+        n = len(w)
+        i = 0
+        while i < n:
+            if self._max_lag > 0 and now - float(recv_all[i]) > 0.5 * self._max_lag:
+                waiting = self.ring.head - (w.start + i)
+                drop = min(n - i, self._overload_drop(recv_all, i, now, pending, waiting))
+                if drop:
+                    st.overload_drops += drop
+                    pending += drop
+                    i += drop
+                    self._warn("overload", "overloaded: frames dropped, oldest first, so "
+                               "none waits over %.0f ms (%d so far)", self._max_lag * 1000,
+                               st.overload_drops)
+                    continue
+            index = w.start + i
+            recv = float(recv_all[i])
+            seq = int(w.seq[i])
+            stime = float(w.source_time[i])
+            valid = w.valid[i]
+            lost, pending = pending, 0
+            i += 1
+            try:
+                cuts = pipe.process(index, w.data[index - w.start].reshape(J, 4), valid,
+                                    None if seq < 0 else seq, recv, lost,
+                                    stime if stime == stime else None)
+            except Exception as exc:  # never let one frame end the session
+                st.bad_frames += 1
+                self._warn("process", "frame %d could not be processed (%s: %s); dropped",
+                           index, type(exc).__name__, exc)
+                continue
+            st.frames_processed += 1
+            self._track_dropouts(valid, recv)
+            for pc in cuts:
+                ev = self._emit(self._cut_event(pc, recv, index, stime))
+                st.cuts += 1
+                st.wire_cuts += int(ev.wire)
+                st.cuts_by_method[ev.method] = st.cuts_by_method.get(ev.method, 0) + 1
+                st.last_cut = ev
+                st.cut_latency_ms.append((time.monotonic() - recv) * 1000.0)
+            if pipe.identity is not None:
+                for d in pipe.identity.drain():
+                    self._emit(self._behaviour_event(d))
+            done = time.monotonic()
+            st.frame_latency_ms.append((done - recv) * 1000.0)
+            # cost of one frame (s), a running mean over about 64 frames
+            self._frame_cost += (done - now - self._frame_cost) / 64.0
+            now = done
+        self._pending_lost = pending
+        if len(w):
+            now = time.monotonic()
+            st.lag_s = now - float(w.recv_time[-1])
+            st.max_lag_s = max(st.max_lag_s, st.lag_s)
+            self._last_recv = float(w.recv_time[-1])
+            self._last_index = w.start + len(w) - 1
+
+
+
+__all__ = ["SessionProcessing"]

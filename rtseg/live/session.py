@@ -1,0 +1,511 @@
+"""The live session: source -> ring buffer -> pose features -> online detectors -> cut events.
+
+The per-frame work (gaps, calibration, features, detectors) is ``rtseg.live.pipeline.Pipeline``;
+this module runs it in a threaded session and publishes what it finds.  Where events go
+(publishers, which detectors' cuts go on the wire) is ``rtseg.live.outputs``; the counters and
+the summary are ``rtseg.live.stats``.  Their public names (``Pipeline``,
+``PipelineCut``, ``make_detectors``, ``replay_frames``, ``replay_session``,
+``build_publishers``, ``wire_methods``, ``LiveStats``, ``SessionSummary``) are re-exported
+here.  Three parts of ``LiveSession`` live in their own modules: ``rtseg.live.process``
+(frames from the ring through the pipeline, overload drops), ``rtseg.live.emitter`` (cut and
+behaviour events built, published, recorded) and ``rtseg.live.health`` (dropouts, status
+events, counters).
+
+Threads and data flow
+---------------------
+``LiveSession.run()`` starts one **reader thread** that only does
+``source.read()`` -> sanity check -> ``recorder`` (every frame received is recorded) ->
+``RingBuffer.append`` (raw quaternions, valid flags, receive time, source time/seq).  The
+**calling thread** is the processing loop: it sleeps on the ring until frames arrive, takes
+them in order through a ``Cursor`` (at most ``buffer.max_batch`` per wake-up) and hands each
+to the ``Pipeline`` (calibration, gap handling, ``PoseFeatures.step``, every online detector's
+``update``).  Cuts become ``CutEvent``s that are published at once (OSC/JSON lines) and
+recorded.  Once per ``status.interval`` a ``StatusEvent`` goes out; sensor dropouts produce
+``DropoutEvent``s.
+With a live monitor (``monitor=``, ``rtseg.monitor.MonitorFeed``) the processing loop
+also hands it every event and, after each step, a chance to queue a batch (bounded, at most
+25 a second); the monitor's web server runs on its own thread and only reads that queue.
+
+Keeping up
+----------
+The reader never blocks on processing.  Under overload (frames arrive faster than the
+loop processes them) the loop drops the **oldest** waiting frames so that no frame is
+processed more than ``buffer.max_lag_seconds`` (L, default 0.1 s; ``--max-lag``) after it
+arrived, and cues stay timely: while working off what is waiting (at the measured cost
+per frame) would take the oldest past L, waiting frames older than L/2 are dropped at most
+``gaps.max_frames`` before each frame processed (a short gap: the detectors go on,
+thinned); frames older than L are all dropped (a longer gap: the detectors restart).  A
+short stall at a normal rate, soon worked off, drops nothing.  Dropped
+frames are counted in ``LiveStats.overload_drops`` (and in ``dropped``), shown in the
+summary, every status event (JSON lines, recording) and the recording's ``session.json``
+(``"session"``); the recording still holds every frame received, dropped or not, so a
+replay of it (``replay_session``) shows what an unloaded machine would have found.
+Measured with ``python3 benchmarks/live.py --overload 30`` (the suit at 30 x 120 Hz over a
+pty): cue latency p99 60 ms, ~23 % of the frames dropped, no detector restart; with
+``--max-lag 0`` (never drop) p99 1.28 s.
+With L = 0, or a source that hands over frames as fast as they are read
+(``Source.as_fast_as_read``: a replay at ``speed=0``), nothing is dropped: the loop falls behind until the ring overwrites its oldest
+frames (see ``rtseg.core.ringbuffer``); it notices by absolute index, counts the lost frames as
+dropped (``LiveStats.overruns``) and treats them as a gap (detectors restart).
+``LiveStats.lag_s`` (age of the frame being processed) and ``backlog`` (frames waiting)
+measure how far behind the loop is; a lag above ``buffer.lag_warn_seconds`` is logged
+(rate-limited) and reported in the summary.  Cut times stay on the source clock under
+overload too: a boundary frame the ring no longer holds is placed from the revealing
+frame's source time (``SessionEvents._boundary_time``).
+
+Gaps
+----
+No cut is placed across a gap the detectors did not see: see ``rtseg.live.pipeline``.
+
+Frame indices
+-------------
+``CutEvent.frame`` is the 0-based index of the boundary frame among all frames received
+this session (= the row of the recorded session).  ``CutEvent.time`` is that frame's
+receive time minus the session start, in seconds.  Processing latency (frame arrival ->
+datagram sent) is measured for every frame that revealed a cut (``LiveStats.cut_latency_ms``)
+and, for benchmarking, the arrival -> end-of-processing time of every frame
+(``LiveStats.frame_latency_ms``).
+
+One cut per change on the wire
+------------------------------
+Every detector in ``detectors.methods`` runs on every frame, but by default only the
+*primary* one's cuts (``detectors.primary``, default the first of ``methods``) are sent to
+the OSC targets (``/rtseg/cut`` and templates), so one behaviour change fires one cue.
+``output.cut_methods = "all"`` (or a list of methods) sends other streams too.  Every cut of
+every detector still goes to the JSON-lines targets and the session recording, with
+``CutEvent.wire`` saying whether it was sent (``wire_methods``).
+
+Input counters
+--------------
+Input the source had to refuse (corrupt messages, CRC failures, bad messages, bad values,
+unknown names: ``rtseg.core.events.INPUT_COUNTERS``) is read from ``source.stats`` (plus the
+pipeline's own ``bad_values``) into every ``StatusEvent`` (``/rtseg/input`` over OSC, the
+JSON-lines log, the recording) and the ``SessionSummary``.  These are counts of refused
+input, not of lost frames (``dropped``).
+
+Shutdown
+--------
+SIGINT / SIGTERM (when ``run()`` is called from the main thread) only set a stop flag; the
+loop then drains nothing further, closes the source, publishers and recorder, sends a final
+status with alive=0 and returns a ``SessionSummary``.  Nothing the source delivers can crash
+the loop: malformed frames are counted (``LiveStats.bad_frames``) and logged.
+"""
+
+from __future__ import annotations
+
+import gc
+import logging
+import signal
+import threading
+import time
+from dataclasses import asdict
+from typing import Any, Callable, Iterable
+
+import numpy as np
+
+from rtseg.live.emitter import Event, SessionEvents
+from rtseg.live.health import SessionHealth
+from rtseg.live.process import SessionProcessing
+from rtseg.live.outputs import build_publishers, log_publishers, wire_methods
+from rtseg.live.pipeline import (DEFAULT_FRAME_RATE, Pipeline, PipelineCut, PipelineStats,
+                            _blas_limit, detector_params, make_detectors, replay_frames,
+                            replay_session)
+from rtseg.live.rate_check import DeclaredRateCheck
+from rtseg.core.ringbuffer import RingBuffer
+from rtseg.live.config import SessionConfig, load_session_config
+from rtseg.live.stats import FloatRing, LiveStats, SessionSummary, percentile
+
+log = logging.getLogger("rtseg.live.session")
+
+
+__all__ = ["DEFAULT_FRAME_RATE", "FloatRing", "LiveSession", "LiveStats", "Pipeline",
+           "PipelineCut", "PipelineStats", "SessionSummary", "build_publishers",
+           "detector_params", "make_detectors", "replay_frames", "replay_session",
+           "wire_methods", "with_suit"]
+
+
+def with_suit(url: str, suit: str) -> str:
+    """``url`` with ``suit=<suit>`` added for the sources that take a suit profile
+    (serial://, osc://) when the URL does not name one itself."""
+    from urllib.parse import parse_qs, urlsplit
+    parts = urlsplit(url)
+    if parts.scheme.lower() not in ("serial", "osc") or not suit:
+        return url
+    query = parse_qs(parts.query, keep_blank_values=True)
+    if "suit" in query or (parts.scheme.lower() == "osc"
+                           and query.get("format", ["vmc"])[-1].lower() not in ("vmc", "")):
+        return url      # a suit is named, or an OSC format without suits (vrchat)
+    return url + ("&" if parts.query else "?") + f"suit={suit}"
+
+
+def _freeze_heap(collect: bool) -> None:
+    """Move every object alive now (modules, configuration, the pipeline's arrays) out of
+    the garbage collector's reach (``gc.freeze``), after one full collection when
+    ``collect``.  A full collection holds the GIL while it walks every tracked object: with
+    numpy and scipy loaded that is about 30 ms, during which the reader thread cannot drain
+    the serial port or socket (a pty holds ~4 KB: 10 ms of a 17-sensor suit at 20x its
+    120 Hz).  Frozen, later collections walk only what the session itself allocates.
+    ``LiveSession.run`` undoes it when the session ends (:func:`_thaw_heap`)."""
+    if collect:
+        gc.collect()
+    gc.freeze()
+
+
+def _thaw_heap(frozen_before: int) -> None:
+    """Return what :func:`_freeze_heap` froze to the collector (``gc.unfreeze``) when
+    nothing was frozen before the session (``frozen_before``, ``gc.get_freeze_count()``
+    then), so a host that runs many sessions in one process still collects the cycles that
+    were alive when each started.  A host that froze objects itself keeps them frozen
+    (``gc.unfreeze`` cannot release only the session's)."""
+    if frozen_before == 0:
+        gc.unfreeze()
+
+
+class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
+    """One live segmentation session.
+
+    source: a URL for ``rtseg.drivers.open_source`` or an opened ``Source``.
+    config: a ``SessionConfig`` (default: ``config/live.toml``).
+    publishers: object with ``publish_cut(ev) -> ev``, ``publish_status(ev)``,
+        ``publish_dropout(ev)`` and ``close()`` (default: ``build_publishers(config)``, a
+        ``rtseg.publishers.PublisherSet``).  ``publish_cut`` gets the cuts that go on the
+        wire (``wire_methods``); the others go to a ``PublisherSet``'s JSON-lines targets,
+        or to a custom object's ``publish_log_cut(ev)`` if it has one, and always to the
+        recorder and the listeners.  recorder: object with ``record_frame(frame)``,
+        ``record_cut(ev)``, ``record_event(ev)``, ``close()`` (default: a
+        ``rtseg.recording.SessionRecorder`` when ``recording.dir`` is set).
+    listeners: callables given every event after it is published (the CLI prints them).
+    duration: stop after this many seconds (None: until the source ends or a signal).
+    monitor: object with ``attach(session)`` (once the pipeline exists), ``tick(session)``
+        (after each processing step, on the processing thread; must not block) and
+        ``__call__(event)`` (a listener), e.g. ``rtseg.monitor.MonitorFeed``; its failures
+        are counted (``LiveStats.monitor_errors``) and logged, never raised.
+    """
+
+    def __init__(self, source: Any, config: SessionConfig | None = None, *,
+                 publishers: Any = None, recorder: Any = None,
+                 listeners: Iterable[Callable[[Event], None]] = (),
+                 duration: float | None = None, handle_signals: bool = True,
+                 monitor: Any = None,
+                 on_start: Callable[[str], None] | None = None) -> None:
+        self.config = config if config is not None else load_session_config()
+        #: called once the source is open, with the line naming the joints the features use
+        self.on_start = on_start
+        detector_params(self.config)          # refuse bad detector settings before opening
+        wire_methods(self.config)
+        self._source_arg = source
+        self.source: Any = None
+        self.publishers = publishers
+        self.recorder = recorder
+        self.listeners = list(listeners)
+        self.monitor = monitor
+        if monitor is not None:
+            self.listeners.append(monitor)
+        self.duration = duration
+        self.handle_signals = handle_signals
+        self.stats = LiveStats()
+        self.pipeline: Pipeline | None = None
+        self.ring: RingBuffer | None = None
+        self.session_start = 0.0
+        self._stop = threading.Event()
+        self._eof = threading.Event()
+        self._reader_error: BaseException | None = None
+        self._first_recv: float | None = None
+        self._first_src: float | None = None    # the first frame's source time (s)
+        self._rec_lock = threading.Lock()
+        self._event_no = 0
+        self._segment: dict[str, int] = {}
+        self.primary = ""
+        self.wire: frozenset[str] = frozenset()
+        self._log_pubs: Any = None
+        self.stop_reason = "running"
+        self._rate_check: DeclaredRateCheck | None = None
+        self._warn_at: dict[str, float] = {}
+
+    # ---------------------------------------------------------------- control
+    def stop(self, reason: str = "stopped") -> None:
+        """Ask the loop to end (from any thread; signal handlers use ``_on_signal``)."""
+        if not self._stop.is_set():
+            self.stop_reason = reason
+        self._stop.set()
+        if self.ring is not None:
+            self.ring.notify()
+
+    def _on_signal(self, signum: int, _frame: Any) -> None:
+        """SIGINT/SIGTERM handler.  Runs in the main thread between two bytecodes, possibly
+        while that thread holds the ring buffer's lock: it must not take that lock (no
+        ``ring.notify()``), so it only sets the flag; the loop wakes within 50 ms anyway."""
+        if not self._stop.is_set():
+            self.stop_reason = signal.Signals(signum).name
+        self._stop.set()
+
+    def _warn(self, key: str, msg: str, *args: Any, every: float = 5.0) -> None:
+        now = time.monotonic()
+        if now - self._warn_at.get(key, -1e9) >= every:
+            self._warn_at[key] = now
+            log.warning(msg, *args)
+
+    # ---------------------------------------------------------------- setup
+    def _open(self) -> None:
+        if isinstance(self._source_arg, str):
+            from rtseg.drivers import open_source
+            self._source_arg = with_suit(self._source_arg, self.config["source.suit"])
+            self.source = open_source(self._source_arg)
+        else:
+            self.source = self._source_arg
+        src = self.source
+        names = list(src.joint_names)
+        parents = list(getattr(src, "parents", [-1] * len(names)))
+        space = getattr(src, "space", "global")
+        rate = getattr(src, "frame_rate", None)
+        if not rate:
+            log.warning("source has no nominal frame rate; assuming %.0f Hz", DEFAULT_FRAME_RATE)
+        self.frame_rate = float(rate or DEFAULT_FRAME_RATE)
+        self._rate_check = DeclaredRateCheck(float(rate)) if rate else None
+        self.pipeline = Pipeline(names, parents, space, self.frame_rate, self.config)
+        if hasattr(self.pipeline.features, "summary"):
+            line = self.pipeline.features.summary()
+            log.info("%s", line)
+            if self.on_start is not None:
+                self.on_start(line)
+        self.primary, self.wire = wire_methods(self.config, self.pipeline.detectors)
+        J = len(names)
+        self.ring = RingBuffer(int(self.config["buffer.capacity"]), J * 4, valid_width=J)
+        if self.publishers is None:
+            self.publishers = build_publishers(self.config)
+        self._log_pubs = log_publishers(self.publishers)
+        if self.pipeline.identity is not None and hasattr(self.publishers,
+                                                          "templates_on_behaviour"):
+            self.publishers.templates_on_behaviour()   # {label} = the behaviour (identity)
+        if self.recorder is None and self.config["recording.dir"]:
+            from rtseg.recording import SessionRecorder
+            url = (self._source_arg if isinstance(self._source_arg, str)
+                   else getattr(src, "url", type(src).__name__))
+            self.recorder = SessionRecorder(
+                self.config["recording.dir"], names, parents, space=space,
+                frame_rate=self.frame_rate, start_monotonic=self.session_start,
+                meta={"source": url, "config": self.config.origin,
+                      "methods": list(self.pipeline.detectors), "primary": self.primary,
+                      "wire_methods": sorted(self.wire)})
+
+    # ---------------------------------------------------------------- reader thread
+    def _reader(self) -> None:
+        src, ring = self.source, self.ring
+        assert ring is not None
+        J = ring.valid_width
+        try:
+            while not self._stop.is_set():
+                try:
+                    frame = src.read(timeout=0.1)
+                except EOFError:
+                    self._eof.set()
+                    ring.notify()
+                    return
+                except Exception as exc:  # a driver bug or device error must not end the session
+                    self.stats.source_errors += 1
+                    self._warn("source", "source read failed (%s: %s); retrying",
+                               type(exc).__name__, exc)
+                    self._stop.wait(0.05)
+                    continue
+                if frame is None:
+                    continue
+                try:
+                    q = np.asarray(frame.quats, dtype=np.float64).reshape(J, 4)
+                    v = np.asarray(frame.valid, dtype=bool).reshape(J)
+                    recv = float(frame.recv_time)
+                    seq = None if frame.seq is None else int(frame.seq)
+                    stime = None if frame.source_time is None else float(frame.source_time)
+                except (TypeError, ValueError, AttributeError) as exc:
+                    self.stats.bad_frames += 1
+                    self._warn("badframe", "malformed frame dropped (%s)", exc)
+                    continue
+                if self.recorder is not None:
+                    with self._rec_lock:
+                        try:
+                            self.recorder.record_frame(frame)
+                        except Exception as exc:
+                            self.stats.record_errors += 1
+                            self._warn("record", "recording a frame failed: %s", exc)
+                ring.append(q, recv, stime, seq, v)
+                if self._rate_check is not None and not self._rate_check.done:
+                    problem = self._rate_check.feed(recv, stime, seq)
+                    if problem is not None:
+                        log.warning("%s", problem)
+                if self._first_recv is None:
+                    self._first_recv = recv
+                    self._first_src = stime if stime is not None and np.isfinite(stime) else None
+                self.stats.frames_received += 1
+        except BaseException as exc:  # pragma: no cover - defensive
+            self._reader_error = exc
+            log.exception("reader thread failed")
+            ring.notify()
+
+    # ---------------------------------------------------------------- run
+    def run(self) -> SessionSummary:
+        """Run until the duration elapses, the source ends, or stop()/a signal; then shut
+        everything down and return the summary."""
+        old_handlers = {}
+        if self.handle_signals and threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                old_handlers[sig] = signal.signal(sig, self._on_signal)
+        reader = None
+        blas = _blas_limit(int(self.config["buffer.blas_threads"]))
+        frozen_before = gc.get_freeze_count()
+        try:
+            # the time origin precedes the source's first frame (CutEvent.time >= 0)
+            self.session_start = time.monotonic()
+            _freeze_heap(collect=True)
+            self._open()
+            _freeze_heap(collect=False)
+            J = len(self.pipeline.joint_names)
+            monitor = self.monitor
+            rec_start = getattr(self.recorder, "start_monotonic", None)
+            if isinstance(rec_start, float):
+                self.session_start = rec_start
+            self._last_valid = np.full(J, self.session_start)
+            self._joint_lost = np.zeros(J, dtype=bool)
+            self._n_lost = 0
+            self._dropout_s = float(self.config["gaps.dropout_seconds"])
+            self._source_lost = False
+            self._last_recv: float | None = None
+            self._last_index = 0
+            self._status_t = time.monotonic()
+            self._status_frames = 0
+            self._last_rate = 0.0
+            interval = float(self.config["status.interval"])
+            next_status = self._status_t + interval
+            lag_warn = float(self.config["buffer.lag_warn_seconds"])
+            self._max_lag = float(self.config["buffer.max_lag_seconds"])
+            if getattr(self.source, "as_fast_as_read", False) is True:
+                self._max_lag = 0.0          # a replay at speed 0: no frame is ever late
+            self._thin = int(self.config["gaps.max_frames"])
+            self._pending_lost = 0
+            self._frame_cost = 0.0
+            max_batch = int(self.config["buffer.max_batch"])
+            deadline = None if self.duration is None else time.monotonic() + self.duration
+            cursor = self.ring.cursor(0)
+            reader = threading.Thread(target=self._reader, name="rtseg-reader", daemon=True)
+            if monitor is not None:
+                self._monitor_call(monitor.attach)
+            reader.start()
+            while not self._stop.is_set():
+                now = time.monotonic()
+                timeout = max(0.0, min(0.05, next_status - now))
+                if deadline is not None:
+                    timeout = min(timeout, max(0.0, deadline - now))
+                self.ring.wait(cursor.position, timeout)
+                now = time.monotonic()
+                if self._max_lag > 0:
+                    # frames over the maximum lag: dropped at once, oldest first
+                    skipped = cursor.drop_older(now - self._max_lag)
+                    if skipped:
+                        self.stats.overload_drops += skipped
+                        self._pending_lost += skipped
+                w = cursor.read(max_batch)
+                if len(w) or w.lost:
+                    self._process_window(w, now)
+                self.stats.backlog = cursor.backlog
+                self.stats.max_backlog = max(self.stats.max_backlog, self.stats.backlog)
+                now = time.monotonic()
+                if len(w) and self.stats.lag_s > lag_warn:
+                    self.stats.lag_warnings += 1
+                    self._warn("lag", "falling behind the source: frames wait %.0f ms "
+                               "(%d frames queued)", self.stats.lag_s * 1000, cursor.backlog)
+                if not len(w):
+                    self._check_silence(now)
+                    if self.recorder is not None and hasattr(self.recorder, "poll"):
+                        with self._rec_lock:
+                            self.recorder.poll()
+                if monitor is not None:
+                    self._monitor_call(monitor.tick)
+                if now >= next_status:
+                    self._emit(self._status(now))
+                    next_status = max(next_status + interval, now + interval / 2)
+                if deadline is not None and now >= deadline:
+                    self.stop("duration reached")
+                elif self._eof.is_set() and cursor.backlog == 0:
+                    self.stop("end of source")
+                elif self._reader_error is not None:
+                    self.stop(f"reader failed: {self._reader_error}")
+        finally:
+            self._stop.set()
+            if reader is not None:
+                reader.join(timeout=5.0)
+            summary = self._shutdown()
+            for sig, h in old_handlers.items():
+                signal.signal(sig, h)
+            if blas is not None:
+                blas.restore_original_limits()
+            _thaw_heap(frozen_before)
+        return summary
+
+    def _monitor_call(self, method: Callable[[Any], None]) -> None:
+        try:
+            method(self)
+        except Exception as exc:  # the monitor must never end the session
+            self.stats.monitor_errors += 1
+            self._warn("monitor", "live monitor failed (%s: %s)", type(exc).__name__, exc)
+
+    def _shutdown(self) -> SessionSummary:
+        now = time.monotonic()
+        # no final status when setup failed before the loop state existed (e.g. the
+        # recording folder could not be created after the publishers were built)
+        if (self.pipeline is not None and self.publishers is not None
+                and hasattr(self, "_status_t")):
+            try:
+                self._emit(self._status(now, alive=0))
+            except Exception as exc:  # pragma: no cover - defensive
+                log.warning("final status failed: %s", exc)
+        if self.recorder is not None and hasattr(self.recorder, "note_session"):
+            try:
+                self.recorder.note_session(self.loss_counts())
+            except Exception as exc:  # pragma: no cover - defensive
+                log.warning("session counters not recorded: %s", exc)
+        for name, obj in (("source", self.source), ("publishers", self.publishers),
+                          ("recorder", self.recorder)):
+            if obj is None:
+                continue
+            try:
+                obj.close()
+            except Exception as exc:
+                log.warning("closing %s failed: %s", name, exc)
+        st = self.stats
+        dur = now - self.session_start if self.session_start else 0.0
+        src_stats = self.source.stats.as_dict() if getattr(self.source, "stats", None) else {}
+        rec = getattr(self.recorder, "dir", None) or (self.config["recording.dir"] or None)
+        targets = {}
+        if self.publishers is not None and hasattr(self.publishers, "stats"):
+            try:
+                targets = self.publishers.stats()
+            except Exception as exc:  # pragma: no cover - defensive
+                log.warning("publisher counters unavailable: %s", exc)
+        rec_stats = getattr(self.recorder, "stats", None)
+        summary = SessionSummary(
+            targets=targets, recording_failure=getattr(self.recorder, "failure", None),
+            recording_frames=getattr(self.recorder, "frames_written", None),
+            recording_cuts=getattr(rec_stats, "cuts", None),
+            duration_s=dur, frames_received=st.frames_received,
+            frames_processed=st.frames_processed,
+            frame_rate=self._input_rate(),
+            cuts=st.cuts, cuts_by_method=dict(st.cuts_by_method),
+            dropped=self.dropped() if self.pipeline is not None else 0,
+            source_stats=src_stats,
+            pipeline=asdict(self.pipeline.stats) if self.pipeline else {},
+            overruns=st.overruns, bad_frames=st.bad_frames, max_lag_ms=st.max_lag_s * 1000.0,
+            overload_drops=st.overload_drops,
+            max_lag_setting_ms=getattr(self, "_max_lag", 0.0) * 1000.0,
+            latency_ms_p50=percentile(st.frame_latency_ms, 50),
+            latency_ms_p99=percentile(st.frame_latency_ms, 99),
+            latency_frames=len(st.frame_latency_ms),
+            cut_latency_ms_p50=percentile(st.cut_latency_ms, 50),
+            cut_latency_ms_p99=percentile(st.cut_latency_ms, 99),
+            recording=str(rec) if rec else None,
+            stop_reason=self.stop_reason, wire_cuts=st.wire_cuts,
+            input=self.input_counts() if self.pipeline is not None else {},
+            gated={m: d.gate.dropped for m, d in self.pipeline.detectors.items()
+                   if getattr(d, "gate", None) is not None} if self.pipeline else {},
+            identity=(asdict(self.pipeline.identity.stats)
+                      if self.pipeline is not None and self.pipeline.identity is not None
+                      else {}))
+        log.info("%s", summary.text())
+        return summary
