@@ -26,10 +26,10 @@ only, on one core, median of ``--repeat`` runs:
 - ``python_osc_parse`` (for comparison): python-osc's ``OscPacket`` parsing the same VMC
   datagrams, without any frame assembly.
 
-- ``mvn``: ``rtseg.drivers.mvn.codec.MvnAssembler`` fed Xsens MVN type-02 datagrams (23
+- ``mvn``: ``rtseg.drivers.mvn.assembler.MvnAssembler`` fed Xsens MVN type-02 datagrams (23
   segments, one 760-byte datagram per frame); ``mvn_3_datagrams``: the same frames split
   over 3 datagrams each (reassembly by sample counter).
-- ``mocopi``: ``rtseg.drivers.mocopi.codec.MocopiAssembler`` fed mocopi ``fram`` datagrams
+- ``mocopi``: ``rtseg.drivers.mocopi.assembler.MocopiAssembler`` fed mocopi ``fram`` datagrams
   (27 bones, one datagram per frame).
 
 - ``rokoko``: ``rtseg.drivers.rokoko.source.RokokoAssembler`` fed Rokoko Studio Custom
@@ -172,7 +172,8 @@ def _time_feed(make, dgrams: list[bytes], n: int, repeat: int, what: str) -> lis
 
 
 def bench_mvn(n: int, repeat: int, parts: int = 1) -> dict:
-    from rtseg.drivers.mvn.codec import HEADER_SIZE, ITEM_SIZE, MvnAssembler, encode_datagrams
+    from rtseg.drivers.mvn.assembler import MvnAssembler
+    from rtseg.drivers.mvn.codec import HEADER_SIZE, ITEM_SIZE, encode_datagrams
     q = vendor_motion(n, 23)
     ids = list(range(1, 24))
     per = -(-23 // parts)
@@ -184,7 +185,8 @@ def bench_mvn(n: int, repeat: int, parts: int = 1) -> dict:
 
 
 def bench_mocopi(n: int, repeat: int) -> dict:
-    from rtseg.drivers.mocopi.codec import MocopiAssembler, encode_frame
+    from rtseg.drivers.mocopi.assembler import MocopiAssembler
+    from rtseg.drivers.mocopi.codec import encode_frame
     q = vendor_motion(n, 27)
     dgrams = [encode_frame(i, q[i], time=i * 20, uttm=1.7e9 + i / 50) for i in range(n)]
     rates = _time_feed(MocopiAssembler, dgrams, n, repeat, "mocopi")

@@ -162,7 +162,7 @@ def axis_seeds(rng: np.random.Generator) -> list[bytes]:
 
 
 def axis_text_seeds(rng: np.random.Generator) -> list[bytes]:
-    from rtseg.drivers.axis.codec import encode_text
+    from rtseg.drivers.axis.text import encode_text
     v = axis_values(3)
     return [encode_text(v[0]), encode_text(v[1][:180], 1, "Avatar01"), b" ||", b"||"]
 

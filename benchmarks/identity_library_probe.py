@@ -22,7 +22,7 @@ import numpy as np
 
 from rtseg.detectors.window_models import WindowStats, fit
 from rtseg.identity.tracker import IdentityTracker
-from rtseg.evaluation.identity import truth_labels
+from rtseg.labels.truth import truth_labels
 from rtseg.labels.takes import find_labelled_takes
 from rtseg.evaluation.online import fed_features, live_config, live_cuts
 

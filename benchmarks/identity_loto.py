@@ -27,7 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from rtseg.identity.tracker import IdentityTracker
-from rtseg.evaluation.identity import decision_delays_after, pooled_scores, truth_labels
+from rtseg.evaluation.identity import decision_delays_after, pooled_scores
+from rtseg.labels.truth import truth_labels
 from rtseg.labels.takes import find_labelled_takes
 from rtseg.evaluation.online import fed_features, live_config, live_cuts
 

@@ -43,8 +43,8 @@ class _Cut:
 
 def load(path: str | None):
     if path or DEFAULT_TAKE.is_file():
-        from rtseg.core.take import load_take
-        return load_take(path or DEFAULT_TAKE), str(path or DEFAULT_TAKE)
+        from rtseg.drivers.readers import read_take
+        return read_take(path or DEFAULT_TAKE), str(path or DEFAULT_TAKE)
     from rtseg.simulators.synth.motion import synthesize
     return synthesize("walk:8,punch:8,walk:8,squat:8,punch:8", seed=0).take, "synthetic"
 
@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.compare and not args.library:
         ap.error("--compare needs --library")
     if args.library:
-        from rtseg.library.behaviours import load as load_library
+        from rtseg.library.file import load as load_library
         library = load_library(args.library)
         other = load_library(args.compare, library.profile, library.dims) if args.compare else None
     take, name = load(args.take)

@@ -62,10 +62,10 @@ from pathlib import Path
 
 import numpy as np
 
-from rtseg.evaluation.identity import named_truth_labels
+from rtseg.labels.truth import named_truth_labels
 from rtseg.labels.takes import find_labelled_takes
 from rtseg.evaluation.library import run_folds
-from rtseg.library.examples import examples_from_dir
+from rtseg.library.sources import examples_from_dir
 from rtseg.evaluation.online import live_config
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -151,7 +151,7 @@ def fewshot(data: Path, cfg, seconds: float) -> dict:
 
 def single(src: Path, cfg) -> dict:
     from rtseg.evaluation.splice import read_source_index
-    from rtseg.core.take import load_take
+    from rtseg.drivers.readers import read_take
     rows = read_source_index(src)
     ex = examples_from_dir(src, cfg)
     out = {}
@@ -161,7 +161,7 @@ def single(src: Path, cfg) -> dict:
         tk, unit = {}, {}
         for r in rows:
             if r.subject in people and any(e.take == r.name for e in exp):
-                take = load_take(r.path)
+                take = read_take(r.path)
                 tk[r.name] = (take, np.array([r.behaviour] * take.n_frames))
                 unit[r.name] = r.subject
         units = {p: (lambda e, p=p: e.person == p) for p in people}
@@ -172,12 +172,12 @@ def single(src: Path, cfg) -> dict:
 
 def spliced(folder: Path, src: Path, cfg) -> dict:
     from rtseg.core.features import PoseFeatures
-    from rtseg.core.take import load_take
+    from rtseg.drivers.readers import read_take
     ex = examples_from_dir(src, cfg)
     takes = find_labelled_takes(folder, ("spliced",))
     tk, unit, units = {}, {}, {}
     for lt in takes:
-        take = load_take(lt.motion)
+        take = read_take(lt.motion)
         people = sorted(str(p) for p in (take.meta.get("splice") or {}).get("subjects", []))
         names = list(take.meta["frame_label_names"])
         truth = np.array([names[int(i)] for i in take.meta["frame_labels"]])

@@ -39,8 +39,8 @@ def _features(data: Path | None) -> tuple[np.ndarray, float, str]:
         amc = data / "cmu" / "86_01.amc"
         if amc.exists():
             from rtseg.detectors.segmentation import compute_features
-            from rtseg.core.take import load_take
-            take = load_take(amc, skeleton=data / "cmu" / "86.asf")
+            from rtseg.drivers.readers import read_take
+            take = read_take(amc, skeleton=data / "cmu" / "86.asf")
             return compute_features(take), take.frame_rate, f"CMU 86_01 ({amc})"
     rng = np.random.default_rng(0)
     parts = []

@@ -454,8 +454,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--once", action="store_true", help="send the take once instead of looping")
     args = p.parse_args(argv)
     if args.take:
-        from rtseg.core.take import load_take
-        take = load_take(args.take, skeleton=args.skeleton)
+        from rtseg.drivers.readers import read_take
+        take = read_take(args.take, skeleton=args.skeleton)
     else:
         from rtseg.simulators.synth.motion import synthesize
         take = synthesize().take

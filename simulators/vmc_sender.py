@@ -348,8 +348,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--faults", help="fault spec, e.g. drop=0.02,jitter=0.002,dropout=LeftHand:2:1")
     args = p.parse_args(argv)
     if args.take:
-        from rtseg.core.take import load_take
-        take = load_take(args.take, skeleton=args.skeleton)
+        from rtseg.drivers.readers import read_take
+        take = read_take(args.take, skeleton=args.skeleton)
     else:
         from rtseg.simulators.synth.motion import synthesize
         take = synthesize(args.script, seed=args.seed).take

@@ -18,7 +18,7 @@ from rtseg.cli import main
 from rtseg.drivers.readers import write_take
 from rtseg.detectors.segmentation import segment_take_methods
 from rtseg.simulators.synth.motion import synthesize
-from rtseg.core.take import load_take
+from rtseg.drivers.readers import read_take
 
 from synth_identity import SYNTH_THRESHOLD
 
@@ -103,7 +103,7 @@ def test_records_match_segmentation_and_broken_take_is_a_record(archive, referen
         bad = by_key[(archive["broken"], m)]
         assert bad["error"] and "broken.npz" in bad["error"] and bad["cuts"] is None
     path = archive["takes"][0]
-    take = load_take(path)
+    take = read_take(path)
     direct = segment_take_methods(take, METHODS)
     for m in METHODS:
         r = by_key[(path, m)]
@@ -285,7 +285,7 @@ def test_archive_records_carry_behaviour_ids(tmp_path, capsys):
     assert sorted(recs) == ["r0", "r1"]
     for path in takes:
         rec = recs[Path(path).stem]
-        alone = identify_take(load_take(str(path)), ["contrast"], {},
+        alone = identify_take(read_take(str(path)), ["contrast"], {},
                               threshold=SYNTH_THRESHOLD)["contrast"]
         ids = [s["behaviour"] for s in rec["segments"]]
         assert ids == [s.behaviour for s in alone.segments]

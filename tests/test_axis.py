@@ -18,6 +18,7 @@ import pytest
 from rtseg.core import quat as Q
 from rtseg.drivers import open_source
 from rtseg.drivers.axis import codec as A
+from rtseg.drivers.axis import text as AT
 from rtseg.drivers.axis.source import AxisFrames, _BinaryAdapter
 from rtseg.drivers.readers.bvh import read_bvh
 from rtseg.core.profiles import resolve_joints, suit_profile
@@ -61,7 +62,7 @@ def test_fixture_motion_decodes_to_the_files_values_in_both_encodings():
     for k, line in enumerate(fixture_motion()):
         values = np.array(line.split(), dtype=np.float64)
         assert values.size == 354
-        f = A.decode_text(f"0 Avatar00 {line} ||".encode())
+        f = AT.decode_text(f"0 Avatar00 {line} ||".encode())
         assert (f.avatar_index, f.avatar_name, f.with_disp, f.with_ref) == (0, "Avatar00", True, False)
         assert np.array_equal(f.values, values)
         q, valid, pos = A.to_pose(f)
@@ -75,7 +76,7 @@ def test_fixture_motion_decodes_to_the_files_values_in_both_encodings():
         qb, validb, posb = A.to_pose(fb)
         assert validb.all() and same_rotation(qb, take.quats[k], 1e-6)
     # the first frame's documented values (test.bvh line 352)
-    f0 = A.decode_text(b"0 Avatar00 " + fixture_motion()[0].encode())
+    f0 = AT.decode_text(b"0 Avatar00 " + fixture_motion()[0].encode())
     assert f0.values[:6].tolist() == [-8.964398, 108.673515, 16.348038, -10.676419, -5.120858,
                                       -1.091372]
 
@@ -115,7 +116,7 @@ def test_layouts(disp, ref, count):
     assert valid.all()
     assert same_rotation(q, Q.from_euler("YXZ", angles.astype(np.float32)), 1e-9)
     assert np.allclose(pos, root / 100.0)
-    ft = A.decode_text(A.encode_text(v))
+    ft = AT.decode_text(AT.encode_text(v))
     assert (ft.with_disp, ft.with_ref) == (disp, ref)
     assert np.array_equal(ft.values.astype(np.float32), v.astype(np.float32))
 
@@ -152,7 +153,7 @@ def test_simulator_round_trip_is_exact_to_float32_and_keeps_the_suit_pose():
         s = AxisSender(take, fmt)
         for k in (0, 77, 200):
             part = s.encode(k, k, k / 60)[0]
-            f = A.decode_binary(part) if fmt == "binary" else A.decode_text(part)
+            f = A.decode_binary(part) if fmt == "binary" else AT.decode_text(part)
             assert np.array_equal(f.values.astype(np.float32), s.values[k])
             q, valid, pos = A.to_pose(f)
             assert valid.all()
@@ -226,7 +227,7 @@ def test_bad_binary_frames_raise_a_counted_kind(mutate, kind):
 ])
 def test_bad_text_frames_raise_a_counted_kind(text, kind):
     with pytest.raises(A.AxisError) as exc:
-        A.decode_text(text)
+        AT.decode_text(text)
     assert exc.value.kind == kind
 
 
@@ -251,7 +252,7 @@ def test_non_finite_angles_make_joints_invalid():
 
 
 def test_text_splitter_bounds_its_buffer():
-    sp = A.TextSplitter(max_frame=100)
+    sp = AT.TextSplitter(max_frame=100)
     assert sp.feed(b"0 a 1 2 ||0 b 3") == [b"0 a 1 2 "]
     assert sp.feed(b" 4 ||") == [b"0 b 3 4 "]
     sp.feed(b"x" * 500)
@@ -293,12 +294,12 @@ def test_fuzzed_inputs_never_escape():
         adapter.feed(d, k * 1e-3)
         adapter.flush(k * 1e-3)
     frames = AxisFrames(count)
-    splitter = A.TextSplitter()
+    splitter = AT.TextSplitter()
     for _ in range(10_000):
         d = mutate(rng.choice(texts))
         for chunk in [d, *splitter.feed(d)]:
             try:
-                frames.frame(A.decode_text(chunk), 0.0)
+                frames.frame(AT.decode_text(chunk), 0.0)
                 ok += 1
             except A.AxisError:
                 bad += 1
@@ -406,7 +407,7 @@ def test_text_frames_with_non_json_tokens_keep_float_values_and_counters():
     values, and the other frames of the read unaffected."""
     from rtseg.drivers.axis.text import decode_texts
     rng = np.random.default_rng(5)
-    good = [A.encode_text(rng.uniform(-90, 90, 354))[:-3] for _ in range(2)]
+    good = [AT.encode_text(rng.uniform(-90, 90, 354))[:-3] for _ in range(2)]
     toks = good[0].split()
     odd = b" ".join(toks[:5] + [b"7."] + toks[6:])                 # not JSON, float() reads it
     huge = b" ".join(toks[:5] + [b"1e999"] + toks[6:])             # inf: a bad value
@@ -429,14 +430,14 @@ def test_text_splitter_cuts_any_read_boundaries_like_one_split():
     for _ in range(2000):
         stream = b"".join(rng.choice([b"0 a 1.5 ", b"|", b"||", b"|||", b" ", b"2 b 3"])
                           for _ in range(rng.randint(0, 30))) + b"||"
-        sp = A.TextSplitter()
+        sp = AT.TextSplitter()
         got, at = [], 0
         while at < len(stream):
             n = rng.randint(1, 12)
             got += sp.feed(stream[at:at + n])
             at += n
         assert got == [f for f in stream.split(b"||")[:-1] if f.strip()], stream
-    sp = A.TextSplitter(max_frame=10)
+    sp = AT.TextSplitter(max_frame=10)
     assert sp.feed(b"0 a 1.5 |") == [] and sp.feed(b"| 0 b") == [b"0 a 1.5 "]
     assert sp.feed(b"x" * 11) == [] and sp.overflows == 1 and sp.feed(b"||") == []
 
@@ -543,7 +544,7 @@ def test_frames_of_one_read_decode_and_convert_as_one_by_one(pose_backend):
     from rtseg.drivers.axis.text import decode_texts
     rng = np.random.default_rng(3)
     chunks = [f"0 Avatar00 {ln}".encode() for ln in fixture_motion()]      # 2 real frames
-    chunks += [A.encode_text(rng.uniform(-180, 180, 354))[:-3] for _ in range(4)]
+    chunks += [AT.encode_text(rng.uniform(-180, 180, 354))[:-3] for _ in range(4)]
     chunks.insert(2, b"0 Avatar00 1.0 2.0")                       # no layout: bad_messages
     chunks.insert(4, chunks[1].replace(b" 0", b" x", 1))           # not a number: corrupt
     chunks.insert(5, chunks[0].replace(b"Avatar00", b"Avatar01").replace(b"0 ", b"1 ", 1))
@@ -551,7 +552,7 @@ def test_frames_of_one_read_decode_and_convert_as_one_by_one(pose_backend):
     one = []
     for c in chunks:
         try:
-            one.append(A.decode_text(c))
+            one.append(AT.decode_text(c))
         except A.AxisError as e:
             one.append(e)
     many = decode_texts(chunks)

@@ -11,7 +11,7 @@ import random
 import numpy as np
 import pytest
 
-from rtseg.drivers.axis import codec as A
+from rtseg.drivers.axis import text as AT
 from rtseg.drivers.axis.frames import AxisFrames, TextStream
 from vendor_helpers import Counter
 
@@ -32,7 +32,7 @@ def _frames(rng: np.random.Generator, n: int) -> list[bytes]:
             vals = np.concatenate([rng.uniform(-9, 9, 6), vals])
         if kind == 1:
             vals[rng.integers(6, vals.size)] = np.nan           # bad_values
-        text = A.encode_text(vals, avatar_index=0, avatar_name="Avatar00")[:-2]
+        text = AT.encode_text(vals, avatar_index=0, avatar_name="Avatar00")[:-2]
         if kind == 2:
             text = text.replace(b"0 Avatar00", b"1 Avatar01", 1)    # another avatar
         elif kind == 3:
@@ -97,7 +97,7 @@ def test_a_read_of_many_frames_is_converted_as_one_batch():
     rng = np.random.default_rng(2)
     v = np.zeros((30, 59, 6))
     v[..., 3:] = rng.uniform(-180, 180, (30, 59, 3))
-    data = b"".join(A.encode_text(x) for x in v.reshape(30, 354))
+    data = b"".join(AT.encode_text(x) for x in v.reshape(30, 354))
     shapes: list[tuple] = []
     from rtseg.drivers.axis import frames as F
     real = F.poses
@@ -136,7 +136,7 @@ def test_text_source_behind_its_server_takes_many_frames_per_read():
     v = np.zeros((300, 59, 6))
     v[..., 3:] = rng.uniform(-180, 180, (300, 59, 3))
     v[:, 0, :3] = rng.uniform(-50, 150, (300, 3))
-    frames = [A.encode_text(x) for x in v.reshape(300, 354)]
+    frames = [AT.encode_text(x) for x in v.reshape(300, 354)]
     per_read: list[int] = []
 
     class Recording(TextStream):

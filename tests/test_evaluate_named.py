@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rtseg.library.file import save as save_library
 from rtseg.drivers.readers import write_take
 from rtseg.library.behaviours import LibraryBuilder
 from rtseg.evaluation.library import Named, named_summary
@@ -61,7 +62,7 @@ def _evaluate(folder: Path, lib: Path, *extra: str) -> subprocess.CompletedProce
 
 
 def test_named_segments_right_unknown_and_wrong(folder, tmp_path):
-    lib = _library().save(tmp_path / "lib.json")
+    lib = save_library(_library(), tmp_path / "lib.json")
     p = _evaluate(folder, lib, "--json")
     assert p.returncode == 0, p.stderr
     idn = json.loads(p.stdout)["identity"]
@@ -89,7 +90,7 @@ def test_named_segments_right_unknown_and_wrong(folder, tmp_path):
 def test_names_swapped_in_the_library_are_counted_wrong(folder, tmp_path):
     """The same library with walk and squat named the other way round: the decisions are
     the same, so those segments are sent the other's name - wrong, not unknown."""
-    lib = _library({"walk": "squat", "squat": "walk"}).save(tmp_path / "swapped.json")
+    lib = save_library(_library({"walk": "squat", "squat": "walk"}), tmp_path / "swapped.json")
     p = _evaluate(folder, lib, "--json")
     assert p.returncode == 0, p.stderr
     nm = json.loads(p.stdout)["identity"]["named"]
@@ -110,7 +111,7 @@ def test_named_summary_shares():
 
 
 def test_behaviours_needs_identity_and_a_fitting_library(folder, tmp_path):
-    lib = _library().save(tmp_path / "lib.json")
+    lib = save_library(_library(), tmp_path / "lib.json")
     p = subprocess.run([sys.executable, "-m", "rtseg.cli", "evaluate", str(folder), "--online",
                         "--behaviours", str(lib), "--group", "spliced"],
                        capture_output=True, text=True, timeout=120)

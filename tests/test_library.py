@@ -14,8 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rtseg.library.file import save as save_library, to_dict as library_dict
 from rtseg.evaluation.identity import run_identity
-from rtseg.library.behaviours import UNKNOWN, Library, LibraryBuilder, LibraryError, load
+from rtseg.library.behaviours import UNKNOWN, Library, LibraryBuilder, LibraryError
+from rtseg.library.file import load
 from rtseg.library.calibration import separating_rule, separating_threshold
 from rtseg.library.examples import label_runs, take_rows
 from rtseg.live.session import LiveSession
@@ -60,7 +62,7 @@ def library():
 
 
 def test_round_trip_through_the_file(tmp_path, library):
-    path = library.save(tmp_path / "lib.json")
+    path = save_library(library, tmp_path / "lib.json")
     doc = json.loads(path.read_text())
     assert doc["format"] == "rtseg-behaviour-library" and doc["version"] == 2
     assert doc["metric"] == "model" and len(doc["window_stats"]["n"]) == len(library.names)
@@ -82,7 +84,7 @@ def test_round_trip_through_the_file(tmp_path, library):
 
 
 def test_refusals_are_one_clear_line(tmp_path, library):
-    path = library.save(tmp_path / "lib.json")
+    path = save_library(library, tmp_path / "lib.json")
     with pytest.raises(LibraryError, match="learned for feature profile 'canonical'.*'cmu14'"):
         load(path, "cmu14", 56)
     doc = json.loads(path.read_text())
@@ -129,7 +131,7 @@ def test_a_field_of_the_wrong_type_is_one_clear_line(tmp_path, library, key, val
                                                       message):
     """A library edited by hand with an int among its names, dims as a string or a frame
     rate that is not a positive number is refused with one line naming the field."""
-    doc = json.loads(library.save(tmp_path / "lib.json").read_text())
+    doc = json.loads(save_library(library, tmp_path / "lib.json").read_text())
     assert doc["dims"] == 48 and doc["frame_rate"] == 120.0 and doc["window_s"] == 2.0
     doc[key] = value(doc[key])
     bad = tmp_path / "bad.json"
@@ -240,8 +242,8 @@ def test_k_nearest_in_the_file(tmp_path, library):
     assert library.k_nearest == 1
     desc = _library(metric="descriptor")
     assert desc.metric == "descriptor" and desc.k_nearest == 3 and not json.loads(
-        desc.save(tmp_path / "d.json").read_text()).get("window_stats")
-    doc = json.loads(desc.save(tmp_path / "lib.json").read_text())
+        save_library(desc, tmp_path / "d.json").read_text()).get("window_stats")
+    doc = json.loads(save_library(desc, tmp_path / "lib.json").read_text())
     assert doc["k_nearest"] == 3 and load(tmp_path / "lib.json").k_nearest == 3
     doc["version"] = 1
     del doc["metric"]
@@ -371,7 +373,7 @@ def test_hiding_a_name_turns_its_segments_unknown():
 
 
 def test_live_session_sends_names_over_udp(tmp_path, library):
-    path = library.save(tmp_path / "lib.json")
+    path = save_library(library, tmp_path / "lib.json")
     res = synthesize(PERFORMANCE, seed=1)
     rx = OscCollector(linger=0.5)
     port = rx.port
@@ -405,7 +407,7 @@ def test_live_session_sends_names_over_udp(tmp_path, library):
 
 def test_live_refuses_a_library_of_another_profile(tmp_path, library):
     """sim://synth is a 'unity' skeleton: a cmu14 library is refused at start, one line."""
-    doc = library.to_dict()
+    doc = library_dict(library)
     doc["profile"] = "cmu14"
     doc["dims"] = 56
     doc["descriptors"] = [r + [0.0] * 12 for r in doc["descriptors"]]
@@ -450,7 +452,7 @@ def test_learn_from_a_folder_and_refuse_another_skeleton(tmp_path):
 @pytest.mark.skipif(not (DATA / "labels" / "mocap6" / "13_29.txt").is_file(),
                     reason="needs ../shared/data (mocap6 takes)")
 def test_library_leave_one_take_out_report():
-    from rtseg.evaluation.identity import library_loto
+    from rtseg.evaluation.report import library_loto
     from rtseg.labels.takes import find_labelled_takes
     takes = find_labelled_takes(DATA, ("cmu",))
     doc = library_loto(takes, _config())
@@ -522,10 +524,12 @@ def test_a_one_example_library_of_real_exercises_still_rejects_the_others():
     windows of the one example calibrating each other (before), every segment got the
     name (benchmarks/library_loto.py fewshot: 0 of 196)."""
     import dataclasses
-    from rtseg.evaluation.identity import truth_labels
+    from rtseg.labels.truth import truth_labels
     from rtseg.labels.takes import find_labelled_takes
     from rtseg.evaluation.library import name_take
-    from rtseg.library.examples import MOCAP6_NAMES, examples_from_dir, learn
+    from rtseg.library.examples import learn
+    from rtseg.labels.truth import MOCAP6_NAMES
+    from rtseg.library.sources import examples_from_dir
     cfg, _ = live_config()                 # the shipped detector and identity settings
     cfg["identity.enabled"] = True
     ex = [e for e in examples_from_dir(DATA, cfg, takes=["13_31"]) if e.name == "ArmCircle"]
@@ -548,7 +552,7 @@ def test_an_old_library_that_never_rejects_is_loaded_with_a_warning(tmp_path, li
     threshold (every segment named): it still loads, with a warning that says what to do;
     a threshold the user gave is not warned about, and a file is warned about once."""
     import logging
-    path = library.save(tmp_path / "lib.json")
+    path = save_library(library, tmp_path / "lib.json")
     doc = json.loads(path.read_text())
     doc["threshold"] = None
     doc["calibration"] = {"same": 0, "other": 0}
@@ -646,7 +650,7 @@ def test_learn_says_which_behaviours_the_library_may_confuse(tmp_path):
     under two labels) are flagged, a distinct one (``punch``) is not; a name of one person's
     example only (``squat``) is said to lack a second example from another person."""
     from rtseg.commands.learn import describe
-    from rtseg.library.behaviours import load
+    from rtseg.library.file import load
     b = None
     for seed in (0, 4):
         res = synthesize("walk:8,punch:8", seed=seed)
@@ -663,7 +667,7 @@ def test_learn_says_which_behaviours_the_library_may_confuse(tmp_path):
             sq = synthesize("squat:8", seed=seed)
             Xs, _, _ = take_rows(sq.take, _config())
             b.add(Xs, "squat", "synth0 squat", info=who)
-    lib = load(b.build().save(tmp_path / "lib.json"))       # kept through the file
+    lib = load(save_library(b.build(), tmp_path / "lib.json"))       # kept through the file
     near = lib.calibration["nearest_other"]
     assert near["walk"]["name"] == "stroll" and near["stroll"]["name"] == "walk"
     assert near["walk"]["distance"] <= near["walk"]["same"]

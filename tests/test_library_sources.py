@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rtseg.library.behaviours import load
+from rtseg.library.file import load
 from rtseg.library.examples import Example, unique_examples
-from rtseg.library.sources import motion_key
+from rtseg.library.examples import motion_key
 
 from source_folders import make_source
 

@@ -15,10 +15,11 @@ from scipy.spatial.transform import Rotation
 
 from rtseg.drivers import open_source
 from rtseg.drivers.mocopi.codec import (
-    BONE_NAMES, BONE_PARENTS, FTYP, MocopiAssembler, encode_frame, encode_skeleton, field,
+    BONE_NAMES, BONE_PARENTS, FTYP, encode_frame, encode_skeleton, field,
     iter_fields, parse_packet,
 )
 from rtseg.core import quat as Q
+from rtseg.drivers.mocopi.assembler import MocopiAssembler
 from rtseg.drivers.mocopi.source import ForwardKinematics, MocopiSource
 from rtseg.core.profiles import suit_profile
 from rtseg.simulators.mocopi_sender import MocopiSender

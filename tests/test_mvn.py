@@ -13,10 +13,11 @@ from scipy.spatial.transform import Rotation
 
 from rtseg.drivers import open_source
 from rtseg.drivers.mvn.codec import (
-    BODY_SEGMENTS, HEADER_SIZE, ITEM_SIZE, MvnAssembler, encode_datagrams,
+    BODY_SEGMENTS, HEADER_SIZE, ITEM_SIZE, encode_datagrams,
     encode_message, from_mvn_pos, from_mvn_quat, parse_header, parse_meta, to_mvn_pos,
     to_mvn_quat,
 )
+from rtseg.drivers.mvn.assembler import MvnAssembler
 from rtseg.drivers.mvn.source import MvnSource
 from rtseg.core.profiles import resolve_joints, suit_profile
 from rtseg.simulators.mvn_sender import MvnSender

@@ -14,6 +14,7 @@ import json
 import numpy as np
 import pytest
 
+from rtseg.library.file import save as save_library
 from rtseg.cli import main
 from rtseg.drivers.readers import write_take
 from rtseg.identity.segments import identify_segments
@@ -178,7 +179,7 @@ def _synth_library(tmp_path, script="walk:8,punch:8,wave:8", seed=0):
     b = LibraryBuilder(profile, X.shape[1], res.take.frame_rate)
     for a, e, name in label_runs(res.frame_names()):
         b.add(X[np.searchsorted(idx, a):np.searchsorted(idx, e)], name, f"synth{seed}")
-    return str(b.build().save(tmp_path / "lib.json"))
+    return str(save_library(b.build(), tmp_path / "lib.json"))
 
 
 @pytest.mark.parametrize("seed", [1, 2])

@@ -221,15 +221,3 @@ class BinaryAssembler:
             self._pending.clear()
             return AxisError("corrupt", "frame incomplete (continuation datagram lost)")
         return None
-
-
-_TEXT_NAMES = ("TextSplitter", "decode_text", "encode_text")
-
-
-def __getattr__(name: str):
-    """The text encoding lives in :mod:`rtseg.drivers.axis.text`; its names stay
-    importable from here (loaded on first use: that module imports this one)."""
-    if name in _TEXT_NAMES:
-        from rtseg.drivers.axis import text as codec_axis_text
-        return getattr(codec_axis_text, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -16,13 +16,11 @@ values come from C, bit for bit in local space.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
 from rtseg.drivers.axis import kernel as axis_kernel
-if TYPE_CHECKING:
-    from rtseg.drivers.axis.codec import AxisFrame
 
 __all__ = ["JOINTS", "PARENTS", "euler_to_quat", "quat_to_euler", "global_pose", "poses",
            "to_poses", "to_pose"]
@@ -370,7 +368,7 @@ def to_poses(values: np.ndarray, with_disp: bool, with_ref: bool, order: str = "
     return q, root
 
 
-def to_pose(frame: "AxisFrame", order: str = "YXZ", unit_scale: float = 0.01,
+def to_pose(frame: Any, order: str = "YXZ", unit_scale: float = 0.01,
             joints: int = len(JOINTS)) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """(quats (joints, 4) local, valid (joints,), root position (3,) metres or None) of a
     decoded frame (:class:`~rtseg.drivers.axis.codec.AxisFrame`: its ``values``,

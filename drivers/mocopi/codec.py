@@ -352,12 +352,3 @@ def encode_skeleton(parent_ids: Sequence[int], rest: np.ndarray, *,
 __all__ = ["MocopiParseError", "MocopiPacket", "MocopiFrame",
            "MocopiSkeleton", "parse_packet", "iter_fields", "encode_frame", "encode_skeleton",
            "field", "BONE_NAMES", "BONE_PARENTS", "DEFAULT_PORT", "FTYP"]
-
-
-def __getattr__(name: str):
-    """``MocopiAssembler`` lives in :mod:`rtseg.drivers.mocopi.assembler` (which
-    imports this module); it stays importable from here."""
-    if name == "MocopiAssembler":
-        from rtseg.drivers.mocopi import assembler as codec_mocopi_assembler
-        return codec_mocopi_assembler.MocopiAssembler
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -4,7 +4,7 @@ Listens on **127.0.0.1** unless another address is written: the mocopi app runs 
 so receiving from it needs ``mocopi://0.0.0.0:12351`` (every IPv4 interface) - and then
 anyone who can reach the port can send poses: restrict with ``allow=<phone address>``.
 One reader thread feeds each datagram to a
-:class:`rtseg.drivers.mocopi.codec.MocopiAssembler` (one ``fram`` datagram = one frame;
+:class:`rtseg.drivers.mocopi.assembler.MocopiAssembler` (one ``fram`` datagram = one frame;
 ``skdf`` skeleton packets are kept in ``assembler.skeleton``) and queues the frames.
 
 URL options

@@ -336,12 +336,3 @@ __all__ = ["MxtpStream", "MvnParseError", "MxtpHeader", "parse_header", "parse_p
            "parse_meta", "parse_scaling", "encode_datagrams", "encode_message",
            "encode_header", "SEGMENT_NAMES", "SEGMENT_PARENTS", "DEFAULT_PORT",
            "from_mvn_quat", "to_mvn_quat", "from_mvn_pos", "to_mvn_pos"]
-
-
-def __getattr__(name: str):
-    """``MvnAssembler`` and ``LATE_WINDOW`` live in :mod:`rtseg.drivers.mvn.assembler`
-    (which imports this module); they stay importable from here."""
-    if name in ("MvnAssembler", "LATE_WINDOW"):
-        from rtseg.drivers.mvn import assembler as codec_mvn_assembler
-        return getattr(codec_mvn_assembler, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

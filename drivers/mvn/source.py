@@ -5,7 +5,7 @@ Listens on **127.0.0.1** unless another address is written (``mvn://`` and ``mvn
 are loopback only; ``mvn://0.0.0.0:9763`` receives from other machines, i.e. from MVN
 Analyze/Animate on another PC - then restrict senders with ``allow=``).  One reader thread
 feeds every datagram, in arrival order, to a
-:class:`rtseg.drivers.mvn.codec.MvnAssembler` (frames spanning several datagrams are
+:class:`rtseg.drivers.mvn.assembler.MvnAssembler` (frames spanning several datagrams are
 reassembled by sample counter) and queues the frames; ``read`` takes them off the queue.
 The socket/thread/queue/allow-list machinery is the OSC sources' (``OscUdpSource``).
 

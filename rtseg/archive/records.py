@@ -32,11 +32,11 @@ def take_records(path: str, methods: Sequence[str],
     """
     from rtseg.identity.segments import identify_take
     from rtseg.detectors.segmentation import segment_take_methods
-    from rtseg.core.take import load_take
+    from rtseg.drivers.readers import read_take
     t0 = time.perf_counter()
     base = {"take": take_name(path), "path": path}
     try:
-        take = load_take(path, skeleton=skeleton)
+        take = read_take(path, skeleton=skeleton)
         if identify:
             results = identify_take(take, list(methods), dict(params or {}), profile=profile,
                                     threshold=identity_threshold)

@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from rtseg.library.file import save as save_library
 from rtseg.cli import error_text, positive_float
 from rtseg.commands.live import (add_session_arguments, config_from_args, run_session,
                                  start_monitor, use_library)
@@ -50,7 +51,7 @@ def demo_library(seed: int, config, folder: str) -> tuple[str, str]:
     from rtseg.library.examples import learn, synthetic_examples
     seeds = [seed + k for k in LIBRARY_SEED_OFFSETS]
     lib, _ = learn(synthetic_examples(DEMO_LIBRARY, seeds, config))
-    path = lib.save(Path(folder) / "demo_behaviours.json")
+    path = save_library(lib, Path(folder) / "demo_behaviours.json")
     return str(path), (f"{', '.join(DEMO_LIBRARY)} from two other synthetic performers "
                        f"(seeds {seeds[0]} and {seeds[1]}); anything else is named unknown")
 

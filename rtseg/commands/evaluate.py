@@ -380,7 +380,7 @@ def run(args: argparse.Namespace) -> int:
     if getattr(args, "identity", False) and (args.workers or args.scheduler):
         raise ValueError("--identity runs in this process: drop --workers/--scheduler")
     if getattr(args, "identity", False):          # separate path: rtseg.evaluation.identity
-        from rtseg.evaluation.identity import run_evaluate_identity
+        from rtseg.evaluation.report import run_evaluate_identity
         return run_evaluate_identity(args)
     online = live_default = None
     if args.online:

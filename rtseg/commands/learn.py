@@ -24,6 +24,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from rtseg.library.file import save as save_library
+
 
 class _TakeAction(argparse.Action):
     """--take / --label / --frames / --skeleton grouped per --take, in order."""
@@ -128,9 +130,10 @@ def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from rtseg.library.behaviours import DEFAULT_STEP_S, load
-    from rtseg.library.examples import (example_of_take, examples_from_dir, learn,
-                                     unique_examples)
+    from rtseg.library.behaviours import DEFAULT_STEP_S
+    from rtseg.library.file import load
+    from rtseg.library.examples import example_of_take, learn, unique_examples
+    from rtseg.library.sources import examples_from_dir
     from rtseg.evaluation.online import live_config
     takes = getattr(args, "takes", None) or []
     if args.show:
@@ -195,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
         lib.calibration["threshold_given"] = True
     for n in notes:
         print(f"rtseg learn: note: {n}", file=sys.stderr)
-    lib.save(path)
+    save_library(lib, path)
     given = lib.calibration.get("threshold_given")
     calibrated = lib.calibration.get("calibrated", True)
     print("\n".join(describe(lib, path)))

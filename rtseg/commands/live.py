@@ -312,7 +312,8 @@ def use_library(cfg: Any, path: str, prog: str) -> bool:
     """Turn identity on with the behaviour library file ``path`` (``--behaviours``): its
     format and version are checked now, its feature profile at session start.  False, with
     one line on stderr, when it is refused."""
-    from rtseg.library.behaviours import LibraryError, load
+    from rtseg.library.behaviours import LibraryError
+    from rtseg.library.file import load
     try:
         load(path)
     except LibraryError as exc:

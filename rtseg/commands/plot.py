@@ -451,7 +451,7 @@ def run(args: argparse.Namespace) -> int:
     except MissingDependency as exc:
         print(f"rtseg plot: error: {exc}", file=sys.stderr)
         return 2
-    from rtseg.core.take import load_take
+    from rtseg.drivers.readers import read_take
     out = Path(args.output) if args.output else None
     if out is not None and not out.parent.is_dir():   # before the segmentation's seconds
         print(f"rtseg plot: error: cannot write {out}: folder {out.parent} does not exist",
@@ -467,7 +467,7 @@ def run(args: argparse.Namespace) -> int:
             log.warning("%s: no labels found by the data layout; plotting cuts only", take_path)
     else:
         labels = read_labels_file(args.labels, name)
-    take = load_take(take_path, skeleton=args.skeleton)
+    take = read_take(take_path, skeleton=args.skeleton)
     methods = list(METHODS) if args.method == "all" else [args.method]
     params = params_by_method(args.params, methods)
     X = compute_features(take, args.profile)

@@ -121,9 +121,9 @@ def run(args: argparse.Namespace) -> int:
     if lib_path and not _single_take(args):
         raise ValueError("--behaviours names the segments of one take (not archives)")
     if _single_take(args):
-        from rtseg.core.take import load_take
+        from rtseg.drivers.readers import read_take
         path = args.paths[0]
-        take = load_take(path, skeleton=args.skeleton)
+        take = read_take(path, skeleton=args.skeleton)
         if getattr(args, "identify", False):
             results = identify_take(take, methods, params, profile=args.profile,
                                     threshold=args.identity_threshold)
@@ -131,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
             results = segment_take_methods(take, methods, params, profile=args.profile)
         names = None
         if lib_path:
-            from rtseg.library.behaviours import load as load_library
+            from rtseg.library.file import load as load_library
             from rtseg.evaluation.online import live_config
             from rtseg.identity.segments import name_take
             names = name_take(take, results, load_library(lib_path), live_config()[0],

@@ -17,7 +17,6 @@ Conventions
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -89,14 +88,3 @@ class Take:
             space=self.space,
             valid=None if self.valid is None else self.valid[start:stop].copy(),
             length_unit=self.length_unit, source=self.source, meta=dict(self.meta))
-
-
-def load_take(path: str | Path, skeleton: str | Path | None = None) -> Take:
-    """Read any take format rtseg knows, chosen by file extension.
-
-    ``.amc`` (needs an ASF: ``skeleton`` or ``SS.asf`` beside ``SS_TT.amc``), ``.bvh``,
-    ``.npz`` (rtseg's own take format), ``.csv`` (tsseg4d four-channel), or a session folder
-    recorded by ``rtseg live --record``.
-    """
-    from rtseg.drivers.readers import read_take
-    return read_take(path, skeleton=skeleton)

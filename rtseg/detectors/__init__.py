@@ -27,7 +27,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from rtseg.config import ConfigError, config_dir, load_toml
-from rtseg.detectors.base import BatchDetector, Cut, OnlineDetector
+from rtseg.detectors.base import BatchDetector, Cut, OnlineDetector, frames
 
 METHODS: tuple[str, ...] = ("contrast", "pca", "ppca", "gmm")
 #: Methods with a streaming detector (``make_online``).
@@ -107,13 +107,6 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "split_agreement": ((int, float), (lambda v: 0 <= v <= 1, "in [0, 1]")),
     },
 }
-
-
-def frames(seconds: float, frame_rate: float) -> int:
-    """A duration in seconds as a whole number of frames (nearest, at least 1)."""
-    if frame_rate <= 0:
-        raise ValueError(f"frame_rate must be positive, got {frame_rate}")
-    return max(1, int(round(float(seconds) * float(frame_rate))))
 
 
 def validate(method: str, params: Mapping[str, Any], where: str = "") -> dict[str, Any]:

@@ -100,3 +100,10 @@ class BatchDetector:
 
     def segment(self, X: np.ndarray) -> list[Cut]:
         raise NotImplementedError
+
+
+def frames(seconds: float, frame_rate: float) -> int:
+    """A duration in seconds as a whole number of frames (nearest, at least 1)."""
+    if frame_rate <= 0:
+        raise ValueError(f"frame_rate must be positive, got {frame_rate}")
+    return max(1, int(round(float(seconds) * float(frame_rate))))

@@ -157,7 +157,7 @@ class ContrastDetector(OnlineDetector):
     def from_params(cls, p: Mapping[str, Any], frame_rate: float,
                     keep_trace: bool = False) -> "ContrastDetector":
         """From ``[contrast]`` parameters in seconds (``config/detectors.toml``)."""
-        from rtseg.detectors import frames
+        from rtseg.detectors.base import frames
         step = frames(p["step_s"], frame_rate)
         return cls(step=step, before=frames(p["before_s"], frame_rate),
                    after=frames(p["after_s"], frame_rate),

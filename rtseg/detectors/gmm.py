@@ -169,7 +169,7 @@ class GMMDetector(BatchDetector):
     @classmethod
     def from_params(cls, p: Mapping[str, Any], frame_rate: float,
                     keep_trace: bool = False) -> "GMMDetector":
-        from rtseg.detectors import frames
+        from rtseg.detectors.base import frames
 
         def opt(key: str) -> int:
             v = float(p.get(key, 0.0))

@@ -72,7 +72,7 @@ class PCADetector(OnlineDetector):
     @classmethod
     def from_params(cls, p: Mapping[str, Any], frame_rate: float,
                     keep_trace: bool = False) -> "PCADetector":
-        from rtseg.detectors import frames
+        from rtseg.detectors.base import frames
         return cls(k=frames(p["window_s"], frame_rate), lag=frames(p["lag_s"], frame_rate),
                    i0=frames(p["test_after_s"], frame_rate), tau=p["energy"],
                    k_sigma=p["k_sigma"], refresh=p["refresh_frames"], keep_trace=keep_trace)

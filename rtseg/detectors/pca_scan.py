@@ -60,7 +60,7 @@ def contrast_profile(X: np.ndarray, windows: Sequence[int], step: int,
 def scan_windows(p: Mapping[str, Any], frame_rate: float) -> tuple[list[int], int]:
     """(window lengths, step) of the offline scan in frames for parameters ``p``
     (``scan_windows_s``, ``scan_step_s``), the lengths rounded to whole steps."""
-    from rtseg.detectors import frames
+    from rtseg.detectors.base import frames
     step = frames(p["scan_step_s"], frame_rate)
     return [on_grid(frames(w, frame_rate), step) for w in p["scan_windows_s"]], step
 

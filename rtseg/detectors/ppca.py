@@ -98,7 +98,7 @@ class PPCADetector(OnlineDetector):
     def from_params(cls, p: Mapping[str, Any], frame_rate: float,
                     keep_trace: bool = False) -> "PPCADetector":
         """The forward pass with the ``[ppca]`` parameters ``p`` (windows in seconds)."""
-        from rtseg.detectors import frames
+        from rtseg.detectors.base import frames
         return cls(T=frames(p["window_s"], frame_rate), delta=frames(p["step_s"], frame_rate),
                    tau=p["energy"], R=p["peak_threshold"], distance=p["distance"],
                    noise_floor=p["noise_floor"], null_rel=p["null_rel"],

@@ -88,7 +88,7 @@ def contrast_profile(X: np.ndarray, W: int, step: int, tau: float, noise_floor: 
 def scan_window(p: Mapping[str, Any], frame_rate: float) -> tuple[int, int]:
     """(W, step) of the offline scan in frames for parameters ``p`` (``verify_window_s``,
     ``step_s`` = Delta), W rounded to whole steps."""
-    from rtseg.detectors import frames
+    from rtseg.detectors.base import frames
     step = frames(p["step_s"], frame_rate)
     return on_grid(frames(p["verify_window_s"], frame_rate), step), step
 
@@ -171,7 +171,7 @@ def segment_ppca(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
 
     The trace is the first forward pass's (H and its threshold, for plotting).
     """
-    from rtseg.detectors import frames
+    from rtseg.detectors.base import frames
     args = dict(T=frames(p["window_s"], frame_rate), delta=frames(p["step_s"], frame_rate),
                 tau=p["energy"], R=p["peak_threshold"], distance=p["distance"],
                 noise_floor=p["noise_floor"], null_rel=p["null_rel"],

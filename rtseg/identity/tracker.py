@@ -497,6 +497,6 @@ def tracker_from_config(config: Any, frame_rate: float, method: str,
     library = None
     path = config.values.get("identity", {}).get("behaviours", "")
     if path:
-        from rtseg.library.behaviours import load
+        from rtseg.library.file import load
         library = load(path, profile, dims)
     return IdentityTracker(frame_rate, method, library=library, **tracker_options(config))

@@ -87,9 +87,9 @@ class LabelledTake:
         return self.labels.description
 
     def load(self) -> "Take":
-        """Read the motion (``rtseg.core.take.load_take``)."""
-        from rtseg.core.take import load_take
-        return load_take(self.motion, skeleton=self.skeleton)
+        """Read the motion (``rtseg.core.take.read_take``)."""
+        from rtseg.drivers.readers import read_take
+        return read_take(self.motion, skeleton=self.skeleton)
 
 
 def _take_name(path: Path) -> str:

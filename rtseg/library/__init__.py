@@ -26,10 +26,12 @@ from rtseg.library.behaviours import (
     Naming,
     Library,
     LibraryBuilder,
-    load,
 )
+from rtseg.library.file import load, save
 
 __all__ = [
+    "load",
+    "save",
     "FORMAT",
     "VERSION",
     "READS",
@@ -48,5 +50,4 @@ __all__ = [
     "Naming",
     "Library",
     "LibraryBuilder",
-    "load",
 ]

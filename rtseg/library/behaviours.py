@@ -58,7 +58,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -330,17 +329,6 @@ class Library:
         lib.calibrate()
         return lib
 
-    # ------------------------------------------------------------------ file
-    def to_dict(self) -> dict[str, Any]:
-        """The library as a JSON-ready dict (``rtseg.library.file.to_dict``)."""
-        from rtseg.library.file import to_dict
-        return to_dict(self)
-
-    def save(self, path: str | Path) -> Path:
-        """Write the library as JSON, atomically (``rtseg.library.file.save``)."""
-        from rtseg.library.file import save
-        return save(self, path)
-
 
 class LibraryBuilder:
     """Collects labelled examples (feature rows + name) and builds a ``Library``.
@@ -422,10 +410,3 @@ class LibraryBuilder:
             lib.threshold = float(threshold)
             lib.calibration["threshold_given"] = True
         return lib
-
-
-def load(path: str | Path, profile: str | None = None, dims: int | None = None) -> Library:
-    """Read a library file (``rtseg.library.file.load``: one-line ``LibraryError`` for
-    another format, version, profile or dims)."""
-    from rtseg.library.file import load as _load
-    return _load(path, profile, dims)

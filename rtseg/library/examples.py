@@ -21,6 +21,7 @@ keeps one example per key, and ``rtseg learn`` adds none already in the library.
 
 from __future__ import annotations
 
+import hashlib
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,11 +32,6 @@ import numpy as np
 from rtseg.library.behaviours import DEFAULT_METRIC, Library, LibraryBuilder
 
 log = logging.getLogger(__name__)
-
-#: mocap6 exercise numbers -> names (../shared/data/README.md)
-MOCAP6_NAMES = {"1": "JumpJack", "2": "Jog", "3": "Squat", "4": "KneeRaise",
-                "5": "ArmCircle", "6": "Twist", "7": "SideReach", "8": "Box", "9": "UpDown",
-                "10": "ToeTouchOneHand", "11": "SideBend", "12": "ToeTouchTwoHands"}
 
 
 @dataclass
@@ -71,13 +67,13 @@ def take_rows(take: Any, config: Any) -> tuple[np.ndarray, np.ndarray, str]:
 def example_of_take(path: str | Path, name: str, config: Any,
                     frames: tuple[int, int] | None = None, skeleton: str | None = None,
                     person: str = "", segment: int | None = None) -> Example:
-    """An example from a take file (``rtseg.core.take.load_take``): frames [a, b), or segment
+    """An example from a take file (``rtseg.core.take.read_take``): frames [a, b), or segment
     ``segment`` of a session recording as the session numbered it
     (``rtseg.recording.reader.session_segment_frames``), or the whole take without its
     rest frames at the ends."""
     from rtseg.evaluation.blend import trim_bounds
-    from rtseg.core.take import load_take
-    take = load_take(path, skeleton=skeleton)
+    from rtseg.drivers.readers import read_take
+    take = read_take(path, skeleton=skeleton)
     X, index, profile = take_rows(take, config)
     n = take.n_frames
     if segment is not None:
@@ -88,7 +84,6 @@ def example_of_take(path: str | Path, name: str, config: Any,
     a, b = int(frames[0]), int(frames[1])
     if not 0 <= a < b <= n:
         raise ValueError(f"{path}: --frames {a}:{b} outside the take (0:{n})")
-    from rtseg.library.sources import motion_key
     stem = Path(path).stem
     return Example(name, stem, person or stem.split("_")[0], X, index, (a, b), profile,
                    float(take.frame_rate), motion_key(take, a, b))
@@ -100,7 +95,6 @@ def synthetic_examples(behaviours: Sequence[str], seeds: Sequence[int], config: 
     (``rtseg.simulators.synth.motion``), one performance of ``seconds`` per behaviour each per
     seed (a seed varies tempo, amplitude and style: a performer of its own, ``person``
     ``synth<seed>``), as ``rtseg learn`` would take them from those performances' takes."""
-    from rtseg.library.sources import motion_key
     from rtseg.simulators.synth.motion import synthesize
     script = ",".join(f"{b}:{seconds:g}" for b in behaviours)
     out: list[Example] = []
@@ -118,47 +112,6 @@ def label_runs(labels: Sequence[Any]) -> list[tuple[int, int, str]]:
     lab = [str(v) for v in labels]
     ch = [0] + [i for i in range(1, len(lab)) if lab[i] != lab[i - 1]] + [len(lab)]
     return [(a, b, lab[a]) for a, b in zip(ch[:-1], ch[1:]) if b > a]
-
-
-def examples_from_dir(data_dir: str | Path, config: Any,
-                      people: Iterable[str] | None = None,
-                      takes: Iterable[str] | None = None,
-                      notes: list[str] | None = None) -> list[Example]:
-    """Examples of every labelled take in ``data_dir`` (module doc); ``people``/``takes``:
-    keep only these subjects / take names; ``notes`` gets a line per take left out."""
-    from rtseg.library.sources import examples_from_source, motion_key, source_folders
-    root = Path(data_dir)
-    keep_p = None if people is None else {str(p) for p in people}
-    keep_t = None if takes is None else {str(t) for t in takes}
-    out: list[Example] = []
-    sources = source_folders(root)
-    for src in sources:
-        out += examples_from_source(src, config, keep_p, keep_t, notes)
-    if (root / "index.tsv").is_file():
-        return out
-    from rtseg.evaluation.identity import truth_labels
-    from rtseg.labels.takes import find_labelled_takes
-    try:
-        labelled = find_labelled_takes(root, ("cmu", "tsseg4d", "spliced"))
-    except FileNotFoundError:
-        if sources:                      # a parent of source folders only
-            return out
-        raise
-    for lt in labelled:
-        if (keep_t is not None and lt.name not in keep_t) or \
-                (keep_p is not None and lt.name.split("_")[0] not in keep_p):
-            continue
-        take = lt.load()
-        X, index, profile = take_rows(take, config)
-        truth = truth_labels(lt, take.n_frames)
-        mocap6 = "mocap6" in lt.labels.source
-        for a, b, lab in label_runs(truth):
-            if lab in ("?", "") or lab.startswith("s") and lab[1:].isdigit():
-                continue
-            name = MOCAP6_NAMES.get(lab, lab) if mocap6 else lab
-            out.append(Example(name, lt.name, lt.name.split("_")[0], X, index, (a, b),
-                               profile, float(take.frame_rate), motion_key(take, a, b)))
-    return out
 
 
 def unique_examples(examples: Sequence[Example], known: dict[str, str] | None = None
@@ -227,3 +180,19 @@ def learn(examples: Sequence[Example], profile: str | None = None,
                     **({"key": e.key} if e.key else {})})
     notes += b.skipped
     return b.build(threshold, metric or DEFAULT_METRIC), notes
+
+
+def motion_key(take: Any, a: int, b: int) -> str:
+    """Content hash (16 hex digits) of frames [a, b) of ``take``: joint names, frame rate
+    (to 0.01 Hz) and the rotations, rounded to 1e-6."""
+    h = hashlib.sha256()
+    h.update("\x1f".join(map(str, take.joint_names)).encode())
+    h.update(f"|{float(take.frame_rate):.2f}|".encode())
+    q = np.round(np.asarray(take.quats[a:b], dtype=np.float64), 6) + 0.0   # -0.0 -> 0.0
+    h.update(np.ascontiguousarray(q).tobytes())
+    return h.hexdigest()[:16]
+
+
+def joined_key(keys: Iterable[str]) -> str:
+    """Key of an example joined from takes of these keys (in order)."""
+    return hashlib.sha256("+".join(keys).encode()).hexdigest()[:16]

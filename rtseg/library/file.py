@@ -1,5 +1,5 @@
-"""A behaviour library file (``rtseg.library.behaviours``): writing (``to_dict``, ``save``; also
-``Library.to_dict`` / ``Library.save``) and reading (``load``).
+"""A behaviour library file (``rtseg.library.behaviours.Library``): writing (``to_dict``,
+``save``) and reading (``load``); ``rtseg.library.save`` / ``rtseg.library.load``.
 
 The file is JSON, data only: ``format`` (``rtseg-behaviour-library``), ``version`` (2;
 version-1 files, written before the model distance, are read as descriptor libraries),

@@ -22,12 +22,12 @@ example twice, from the same file or a copy of it, is recognised (``rtseg learn`
 
 from __future__ import annotations
 
-import hashlib
 import logging
 from pathlib import Path
 from typing import Any, Iterable
 
-import numpy as np
+from rtseg.labels.truth import MOCAP6_NAMES, truth_labels
+from rtseg.library.examples import Example, label_runs, motion_key, joined_key, take_rows
 
 log = logging.getLogger(__name__)
 
@@ -35,22 +35,6 @@ log = logging.getLogger(__name__)
 #: own; shorter takes of one person and behaviour are joined.  The library's shortest
 #: window (``min_s`` 1 s) plus ``edge_s`` (0.5 s) cut from each end: 2 s.
 MIN_EXAMPLE_S = 2.0
-
-
-def motion_key(take: Any, a: int, b: int) -> str:
-    """Content hash (16 hex digits) of frames [a, b) of ``take``: joint names, frame rate
-    (to 0.01 Hz) and the rotations, rounded to 1e-6."""
-    h = hashlib.sha256()
-    h.update("\x1f".join(map(str, take.joint_names)).encode())
-    h.update(f"|{float(take.frame_rate):.2f}|".encode())
-    q = np.round(np.asarray(take.quats[a:b], dtype=np.float64), 6) + 0.0   # -0.0 -> 0.0
-    h.update(np.ascontiguousarray(q).tobytes())
-    return h.hexdigest()[:16]
-
-
-def joined_key(keys: Iterable[str]) -> str:
-    """Key of an example joined from takes of these keys (in order)."""
-    return hashlib.sha256("+".join(keys).encode()).hexdigest()[:16]
 
 
 def source_folders(root: str | Path) -> list[Path]:
@@ -70,7 +54,6 @@ def examples_from_source(src: str | Path, config: Any, people: Iterable[str] | N
     """Examples (``rtseg.library.examples.Example``) of one source folder (module doc);
     ``people`` / ``takes``: keep only these subjects / take names; ``notes`` gets one line
     per take left out."""
-    from rtseg.library.examples import Example, take_rows
     from rtseg.evaluation.splice import (SpliceConfig, build_groups, clip_of, crossfade, load_sources,
                               read_source_index)
     from rtseg.core.take import Take
@@ -124,4 +107,43 @@ def examples_from_source(src: str | Path, config: Any, people: Iterable[str] | N
             out.append(e)
             log.info("%s %s: %d short takes joined into one example of %d frames",
                      subject, behaviour, len(short), take.n_frames)
+    return out
+
+
+def examples_from_dir(data_dir: str | Path, config: Any,
+                      people: Iterable[str] | None = None,
+                      takes: Iterable[str] | None = None,
+                      notes: list[str] | None = None) -> list[Example]:
+    """Examples of every labelled take in ``data_dir`` (module doc); ``people``/``takes``:
+    keep only these subjects / take names; ``notes`` gets a line per take left out."""
+    root = Path(data_dir)
+    keep_p = None if people is None else {str(p) for p in people}
+    keep_t = None if takes is None else {str(t) for t in takes}
+    out: list[Example] = []
+    sources = source_folders(root)
+    for src in sources:
+        out += examples_from_source(src, config, keep_p, keep_t, notes)
+    if (root / "index.tsv").is_file():
+        return out
+    from rtseg.labels.takes import find_labelled_takes
+    try:
+        labelled = find_labelled_takes(root, ("cmu", "tsseg4d", "spliced"))
+    except FileNotFoundError:
+        if sources:                      # a parent of source folders only
+            return out
+        raise
+    for lt in labelled:
+        if (keep_t is not None and lt.name not in keep_t) or \
+                (keep_p is not None and lt.name.split("_")[0] not in keep_p):
+            continue
+        take = lt.load()
+        X, index, profile = take_rows(take, config)
+        truth = truth_labels(lt, take.n_frames)
+        mocap6 = "mocap6" in lt.labels.source
+        for a, b, lab in label_runs(truth):
+            if lab in ("?", "") or lab.startswith("s") and lab[1:].isdigit():
+                continue
+            name = MOCAP6_NAMES.get(lab, lab) if mocap6 else lab
+            out.append(Example(name, lt.name, lt.name.split("_")[0], X, index, (a, b),
+                               profile, float(take.frame_rate), motion_key(take, a, b)))
     return out
