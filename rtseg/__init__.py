@@ -5,6 +5,21 @@ Data flows one way: driver -> Frame -> pose features -> ring buffer -> detectors
 events -> publishers.  Internal conventions (see ../shared/design/conventions.md):
 quaternions are float64 arrays shaped (..., 4), scalar-last (x, y, z, w); right-handed,
 Y-up, metres; time in seconds.
+
+Packages, each importing only those below it:
+
+- ``rtseg.commands`` (and ``rtseg.cli``): the ``rtseg`` command's argument parsing and output;
+- ``rtseg.live`` (the live session), ``rtseg.evaluation`` (accuracy), ``rtseg.archive``
+  (archives of takes, on Dask);
+- ``rtseg.identity`` (behaviour ids and names), ``rtseg.library`` (named behaviour
+  libraries), ``rtseg.recording`` (recorded sessions), ``rtseg.publishers`` (OSC and JSON
+  lines out), ``rtseg.monitor`` (the browser monitor);
+- ``rtseg.detectors`` (online and offline change detectors);
+- ``rtseg.labels`` (human transition labels), ``rtseg.core`` (frames, takes, quaternions,
+  ring buffer, profiles, rigs, pose features, events);
+- ``rtseg.drivers`` (live sources by URL and file readers) and ``rtseg.simulators``
+  (simulated devices); ``rtseg.config`` (the shipped TOML defaults) and
+  ``rtseg.progress`` (a progress bar).
 """
 
 __version__ = "0.1.0"

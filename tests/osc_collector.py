@@ -2,7 +2,7 @@
 
 Imported as ``from osc_collector import OscCollector`` (pytest puts ``tests/`` on the path,
 as for ``vendor_helpers``).  rtseg sends plain OSC messages, one per datagram, never bundles
-(``rtseg.publishers.oscmsg``), so every datagram is decoded as exactly one message by
+(``rtseg.publishers.osc.message``), so every datagram is decoded as exactly one message by
 python-osc, an OSC implementation independent of rtseg's encoder; a datagram that is not one
 well-formed message is kept in ``malformed`` for the test to assert on.
 """

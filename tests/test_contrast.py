@@ -10,8 +10,8 @@ import pytest
 
 from rtseg.detectors import make_online, segment_features
 from rtseg.detectors.contrast import ContrastDetector
-from rtseg.detectors.pca_distance import cross_error as _cross_error
-from rtseg.detectors.pca_distance import pca_model as _pca_model
+from rtseg.detectors.pca.distance import cross_error as _cross_error
+from rtseg.detectors.pca.distance import pca_model as _pca_model
 from rtseg.detectors.peaks import CausalPeaks
 from rtseg.detectors.window_models import (
     WindowStats, fit, pca_distance, pca_error, ppca_distance, ppca_msq,

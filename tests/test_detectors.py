@@ -13,8 +13,8 @@ from rtseg.detectors import (METHODS, load_params, make_online, method_params,
                              segment_features)
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.detectors.gmm import merge_short_runs
-from rtseg.detectors.pca import PCADetector
-from rtseg.detectors.ppca import PPCADetector
+from rtseg.detectors.pca.online import PCADetector
+from rtseg.detectors.ppca.online import PPCADetector
 
 FPS = 120.0
 

@@ -18,7 +18,7 @@ from osc_collector import OscCollector
 from rtseg.drivers import open_source
 from rtseg.core.events import INPUT_COUNTERS
 from rtseg.live.session import LiveSession
-from rtseg.publishers.oscmsg import encode_message
+from rtseg.publishers.osc.message import encode_message
 from rtseg.recording import read_session
 from rtseg.live.config import from_dict
 from rtseg.simulators.serial_device import SerialSuit

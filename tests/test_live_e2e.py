@@ -64,7 +64,7 @@ class OscDump:
         self.thread = threading.Thread(target=self._read, daemon=True)
         self.thread.start()
         # wait until it is really listening: probe until a probe message comes back
-        from rtseg.publishers.oscmsg import encode_message
+        from rtseg.publishers.osc.message import encode_message
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             for _ in range(100):
                 s.sendto(encode_message("/probe", "i", [1]), ("127.0.0.1", self.port))

@@ -17,7 +17,7 @@ from rtseg.drivers.osc.vmc.codec import encode_frame
 from rtseg.drivers.osc.source import (DEFAULT_HOST, _parse_location, is_wide, parse_allow,
                                       sender_allowed)
 from rtseg.core.events import StatusEvent
-from rtseg.publishers.osc_udp import OscUdpPublisher
+from rtseg.publishers.osc.udp import OscUdpPublisher
 
 BONES = ["Hips", "Spine", "Head"]
 

@@ -86,7 +86,7 @@ def test_bad_scan_windows_are_rejected(value):
 
 
 def test_scan_contrast_peaks_at_the_change_and_stays_low_inside_behaviours():
-    from rtseg.detectors.pca_scan import contrast_profile, scan_cuts
+    from rtseg.detectors.pca.scan import contrast_profile, scan_cuts
     X, la = two_behaviours(5, la=2400, lb=2400)
     f, k = contrast_profile(X, [300, 360, 420], 10, 0.9)
     assert f[0] == 300 and np.all(np.diff(f) == 10)      # from the shortest window
@@ -122,7 +122,7 @@ def test_scan_on_few_noise_like_dims_has_no_false_cuts(dim):
 
 
 def test_a_take_too_short_to_scan_gets_the_paper_forward_pass():
-    from rtseg.detectors.pca_scan import scan_cuts
+    from rtseg.detectors.pca.scan import scan_cuts
     # 740 frames: under 2.5 x the shortest default window (300 frames), so no position has
     # a whole window before it and a whole outer window
     X, la = two_behaviours(6, la=370, lb=370)
@@ -156,7 +156,7 @@ def test_scan_windows_are_put_on_the_step_grid():
 
 
 def test_scan_windows_shorter_than_two_frames_are_a_clear_error():
-    from rtseg.detectors.pca_scan import contrast_profile
+    from rtseg.detectors.pca.scan import contrast_profile
     X, _ = two_behaviours(8, la=600, lb=600)
     with pytest.raises(ValueError, match="scan windows must be >= 2 frames"):
         contrast_profile(X, [1, 300], 10, 0.9)

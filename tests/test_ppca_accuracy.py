@@ -11,8 +11,8 @@ import pytest
 from rtseg.config import ConfigError
 from rtseg.detectors import method_params, segment_features
 from rtseg.detectors.base import Cut
-from rtseg.detectors.ppca_distance import cut_contrast, fit_ppca, mean_distance
-from rtseg.detectors.ppca_offline import verify_cuts
+from rtseg.detectors.ppca.distance import cut_contrast, fit_ppca, mean_distance
+from rtseg.detectors.ppca.offline import verify_cuts
 
 FPS = 120.0
 
@@ -68,7 +68,7 @@ def blended_take(seed: int, dim: int = 16, la: int = 2400, blend: int = 60
 def test_scan_places_changes_between_the_forward_and_backward_peaks():
     """A gradual change (blend over 0.5 s): the forward pass peaks early, the backward pass
     late; the verified cut lies between them, nearer the middle of the blend than either."""
-    from rtseg.detectors.ppca import PPCADetector
+    from rtseg.detectors.ppca.online import PPCADetector
     X, la = blended_take(11)
     ver = [c.frame for c in segment_features(X, "ppca", FPS)]
     assert len(ver) == 1 and abs(ver[0] - la) <= 15, ver
@@ -82,7 +82,7 @@ def test_scan_places_changes_between_the_forward_and_backward_peaks():
 def test_localise_blends_the_passes_estimate_with_the_anchor():
     """anchor_weight w: (1 - w) x the passes' estimate + w x the anchor; 0 is the passes
     alone, 1 the anchor alone; a change no pass peak is near goes to its anchor."""
-    from rtseg.detectors.ppca_offline import localise_cuts
+    from rtseg.detectors.ppca.offline import localise_cuts
     X, la = blended_take(5)
     args = dict(T=150, delta=10)
     passes = localise_cuts(X, [la], args, reach=150)[0]
@@ -102,7 +102,7 @@ def test_localise_blends_the_passes_estimate_with_the_anchor():
 
 
 def test_scan_cuts_reports_local_maxima_above_the_threshold_one_window_apart():
-    from rtseg.detectors.ppca_offline import contrast_profile, scan_cuts
+    from rtseg.detectors.ppca.offline import contrast_profile, scan_cuts
     rng = np.random.default_rng(4)
     dim = 12
     parts = [stationary(rng, 1200, dim, 0.6 * rng.normal(size=dim)) for _ in range(3)]
@@ -193,7 +193,7 @@ def test_the_retired_online_check_is_refused_and_the_online_detector_is_the_forw
     online PPCA detector is the paper's forward pass, cutting like the "paper" variant's
     first pass."""
     from rtseg.detectors import make_online
-    from rtseg.detectors.ppca import PPCADetector
+    from rtseg.detectors.ppca.online import PPCADetector
     with pytest.raises(ConfigError, match="unknown key 'online_verify'"):
         method_params("ppca", {"online_verify": True})
     det = make_online("ppca", FPS)

@@ -23,7 +23,7 @@ from osc_collector import OscCollector
 from rtseg.core.events import CutEvent, DropoutEvent, StatusEvent, event_from_dict
 from rtseg.publishers import (JsonlPublisher, OscTcpPublisher, OscUdpPublisher, Publisher,
                               PublisherSet, parse_target, sanitize_label)
-from rtseg.publishers.oscmsg import encode_message, slip_encode
+from rtseg.publishers.osc.message import encode_message, slip_encode
 from rtseg.publishers.templates import AddressTemplate
 
 HOST = "127.0.0.1"
@@ -558,7 +558,7 @@ def test_slip_encode_escapes():
 
 
 def test_slip_decoder_and_message_decoder_on_chunked_stream():
-    from rtseg.publishers.oscmsg import SlipDecoder, decode_message
+    from rtseg.publishers.osc.message import SlipDecoder, decode_message
     pkts = [encode_message("/rtseg/cut", "iiffffs", [192, 219, -2.0, 0.5, 1.0, 2.0, "kick"]),
             encode_message("/rtseg/dropout", "si", ["Head", 1])]
     stream = b"".join(slip_encode(p) for p in pkts)

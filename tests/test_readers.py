@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from rtseg.core import quat as Q
 from rtseg.drivers.readers import ReaderError, read_take, write_take
-from rtseg.drivers.readers.asf_amc import read_amc, read_asf
+from rtseg.drivers.readers.amc import read_amc, read_asf
 from rtseg.drivers.readers.bvh import read_bvh
 from rtseg.drivers.readers.npz_take import read_npz, write_npz
 from rtseg.core.take import Take

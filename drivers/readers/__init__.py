@@ -46,7 +46,7 @@ def read_take(path: str | Path, skeleton: str | Path | None = None,
         return take
     ext = path.suffix.lower()
     if ext == ".amc":
-        from rtseg.drivers.readers.asf_amc import read_asf_amc
+        from rtseg.drivers.readers.amc import read_asf_amc
         return read_asf_amc(path, skeleton=skeleton, frame_rate=frame_rate)
     if ext == ".asf":
         raise ReaderError(path, "an ASF file is a skeleton without motion; read the .amc take "

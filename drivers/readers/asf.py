@@ -1,5 +1,5 @@
 """Acclaim ASF skeleton reader, as written by the CMU mocap database (the motion that goes
-with it: ``rtseg.drivers.readers.asf_amc``).
+with it: ``rtseg.drivers.readers.amc``).
 
 - ``units``: ``angle deg|rad``, ``length`` (CMU: 0.45, lengths in inches / 0.45 -
   ``CMU_METRES_PER_UNIT`` metres per unit).

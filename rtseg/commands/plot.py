@@ -269,8 +269,8 @@ def scan_profiles(X: np.ndarray, frame_rate: float,
     variant scans (PCA "scan", PPCA "verified"): ``{method: {"frame": frames, "contrast":
     values (inf where nothing can be checked), "threshold": min_contrast}}``."""
     from rtseg.detectors import method_params
-    from rtseg.detectors import pca_scan
-    from rtseg.detectors import ppca_offline
+    from rtseg.detectors.pca import scan as pca_scan
+    from rtseg.detectors.ppca import offline as ppca_offline
     X = np.asarray(X, dtype=np.float64)
     out: dict[str, dict[str, Any]] = {}
     if "pca" in params:

@@ -1,10 +1,10 @@
 """The three detectors of Barbič et al. 2004 and their parameters.
 
 - ``pca``  (online): cut where the PCA projection error of the current segment starts to grow
-  faster than before (``rtseg.detectors.pca``); offline the two-sided contrast scan with the
+  faster than before (``rtseg.detectors.pca.online``); offline the two-sided contrast scan with the
   PCA window distance (``pca_scan``, ``pca_distance``).
 - ``ppca`` (online): cut at a peak of the mean Mahalanobis distance of the next T frames to
-  a probabilistic-PCA model of the segment so far (``rtseg.detectors.ppca``); offline the
+  a probabilistic-PCA model of the segment so far (``rtseg.detectors.ppca.online``); offline the
   two-sided contrast scan with the PPCA window distance, placed by forward/backward passes
   (``ppca_offline``, ``ppca_distance``).
 - ``gmm``  (batch): cut where consecutive frames change Gaussian-mixture cluster
@@ -175,10 +175,10 @@ def make_online(method: str, frame_rate: float, params: Mapping[str, Any] | None
         from rtseg.detectors.contrast import ContrastDetector
         return ContrastDetector.from_params(p, frame_rate, keep_trace=keep_trace)
     if method == "pca":
-        from rtseg.detectors.pca import PCADetector
+        from rtseg.detectors.pca.online import PCADetector
         return PCADetector.from_params(p, frame_rate, keep_trace=keep_trace)
     if method == "ppca":
-        from rtseg.detectors.ppca import PPCADetector
+        from rtseg.detectors.ppca.online import PPCADetector
         return PPCADetector.from_params(p, frame_rate, keep_trace=keep_trace)
     raise ConfigError(f"method {method!r} has no online detector "
                       f"(online: {', '.join(ONLINE_METHODS)})")
@@ -205,10 +205,10 @@ def segment_features(X: np.ndarray, method: str, frame_rate: float,
         from rtseg.detectors.contrast import segment_contrast
         cuts, trace = segment_contrast(X, p, frame_rate, keep_trace=keep_trace)
     elif method == "pca":
-        from rtseg.detectors.pca_scan import segment_pca
+        from rtseg.detectors.pca.scan import segment_pca
         cuts, trace = segment_pca(X, p, frame_rate, keep_trace=keep_trace)
     elif method == "ppca":
-        from rtseg.detectors.ppca_offline import segment_ppca
+        from rtseg.detectors.ppca.offline import segment_ppca
         cuts, trace = segment_ppca(X, p, frame_rate, keep_trace=keep_trace)
     else:
         from rtseg.detectors.gmm import GMMDetector

@@ -38,9 +38,9 @@ from dataclasses import replace
 import numpy as np
 
 from rtseg.detectors.base import Cut
-from rtseg.detectors.window_models import WindowStats, behaviour_distance, fit
-from rtseg.identity.tracker import (DEFAULT_DECIDE_AFTER_S, DEFAULT_ID_SKIP_S, DEFAULT_MAX_WINDOW_S,
-                            MIN_WINDOW_S)
+from rtseg.detectors.window_models import (DEFAULT_DECIDE_AFTER_S, DEFAULT_ID_SKIP_S,
+                                          DEFAULT_MAX_WINDOW_S, MIN_WINDOW_S, WindowStats,
+                                          behaviour_distance, fit)
 
 log = logging.getLogger("rtseg.detectors")
 

@@ -73,19 +73,18 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from rtseg.detectors.window_models import WindowModel, WindowStats, behaviour_distance, fit
+from rtseg.detectors.window_models import (DEFAULT_DECIDE_AFTER_S, DEFAULT_ID_SKIP_S,
+                                          DEFAULT_MAX_WINDOW_S, MIN_WINDOW_S, WindowModel,
+                                          WindowStats, behaviour_distance, fit)
 from rtseg.identity.block_sums import BlockSums
 from rtseg.identity.names import NameHolders, SegmentNamer
 from rtseg.library.behaviours import UNKNOWN
 
-#: defaults (also the ``[identity]`` keys of ``config/live.toml``)
-DEFAULT_DECIDE_AFTER_S = 1.5
+#: defaults (also the ``[identity]`` keys of ``config/live.toml``; the decision window's
+#: ``DEFAULT_DECIDE_AFTER_S``, ``DEFAULT_ID_SKIP_S``, ``DEFAULT_MAX_WINDOW_S`` and
+#: ``MIN_WINDOW_S`` are ``rtseg.detectors.window_models``', shared with the gate)
 DEFAULT_NAME_AFTER_S = 1.75
-DEFAULT_ID_SKIP_S = 0.5
 DEFAULT_THRESHOLD = 4.0
-#: the longest decision window, and the least that must remain after a skipped start, s
-DEFAULT_MAX_WINDOW_S = 3.0
-MIN_WINDOW_S = 1.0
 
 
 @dataclass

@@ -47,8 +47,8 @@ from rtseg.core.events import CutEvent, DropoutEvent, StatusEvent
 from rtseg.publishers.base import (OscPublisher, Publisher, PublisherStats, RateLimitedLog,
                                    cut_messages, dropout_message, status_message)
 from rtseg.publishers.jsonl import JsonlPublisher
-from rtseg.publishers.osc_tcp import OscTcpPublisher
-from rtseg.publishers.osc_udp import DEFAULT_HOST, DEFAULT_PORT, OscUdpPublisher
+from rtseg.publishers.osc.tcp import OscTcpPublisher
+from rtseg.publishers.osc.udp import DEFAULT_HOST, DEFAULT_PORT, OscUdpPublisher
 from rtseg.publishers.templates import AddressTemplate, sanitize_label
 
 __all__ = [

@@ -43,7 +43,7 @@ from dataclasses import asdict, dataclass
 from typing import Any, Callable, Sequence
 
 from rtseg.core.events import INPUT_COUNTERS, BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
-from rtseg.publishers.oscmsg import encode_message
+from rtseg.publishers.osc.message import encode_message
 from rtseg.publishers.templates import AddressTemplate, cut_arg_value, sanitize_label
 
 log = logging.getLogger("rtseg.publishers")

@@ -29,8 +29,8 @@ which d crossed the threshold, so ``detected_at == frame`` (the statistic looks 
 ``score`` = d_n, ``confidence`` = 1 - threshold / d_n.
 
 The offline strategies built on the same PCA model live beside it: the window models and
-their distance in ``rtseg.detectors.pca_distance``, the two-sided contrast scan and
-``segment_pca`` in ``rtseg.detectors.pca_scan``.
+their distance in ``rtseg.detectors.pca.distance``, the two-sided contrast scan and
+``segment_pca`` in ``rtseg.detectors.pca.scan``.
 """
 
 from __future__ import annotations

@@ -48,8 +48,8 @@ so the delay is T + (a few) Delta frames; ``score`` = peak - valley; ``confidenc
 1 - R / (peak - valley).
 
 The offline strategies live beside this module: the window models and their distance in
-``rtseg.detectors.ppca_distance``, the contrast scan, the passes and the placement
-(``segment_ppca``) in ``rtseg.detectors.ppca_offline``.
+``rtseg.detectors.ppca.distance``, the contrast scan, the passes and the placement
+(``segment_ppca``) in ``rtseg.detectors.ppca.offline``.
 
 History: ``VerifiedPPCADetector`` (``online_verify = true``: each forward-pass cut held 2W
 frames, 6 s, then checked two-sided like the offline cuts) was retired (issue 10: neither

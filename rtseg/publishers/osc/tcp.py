@@ -31,7 +31,7 @@ import threading
 import time
 
 from rtseg.publishers.base import OscPublisher, log
-from rtseg.publishers.oscmsg import slip_encode
+from rtseg.publishers.osc.message import slip_encode
 from rtseg.publishers.templates import AddressTemplate
 
 

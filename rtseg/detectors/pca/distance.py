@@ -6,7 +6,7 @@ counted from 0).  Its model is its mean and its top-r directions, r the smallest
 E_r > tau (Eq. 6), as the online detector fixes it.  ``cross_error(Y, model)`` is the mean
 per-frame projection error (Eq. 5 per frame) of frames Y off a model, over the model's own
 (1 = as well explained as its own frames); ``WindowPCA.distance`` is the symmetric distance
-of two windows used by the scan (``rtseg.detectors.pca_scan``).  Features in their own
+of two windows used by the scan (``rtseg.detectors.pca.scan``).  Features in their own
 units (quaternion components); errors are ratios (unitless).
 """
 

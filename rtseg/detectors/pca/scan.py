@@ -2,7 +2,7 @@
 "scan"``, the default) or the paper's online forward pass run over the take (``"paper"``).
 
 The scan: at every ``scan_step_s`` the two-sided contrast of ``rtseg.detectors._scan`` with
-the PCA window distance (``rtseg.detectors.pca_distance.WindowPCA.distance``), averaged over
+the PCA window distance (``rtseg.detectors.pca.distance.WindowPCA.distance``), averaged over
 the window lengths ``scan_windows_s``; the changes are its local maxima reaching
 ``min_contrast``, at least the mean window apart, each cut at its maximum
 (``detected_at == frame``: a batch result).  Frames count from 0 (rows of X); window
@@ -22,8 +22,8 @@ import numpy as np
 
 from rtseg.detectors._scan import local_maxima, on_grid, window_contrast
 from rtseg.detectors.base import Cut
-from rtseg.detectors.pca import PCADetector
-from rtseg.detectors.pca_distance import WindowPCA
+from rtseg.detectors.pca.online import PCADetector
+from rtseg.detectors.pca.distance import WindowPCA
 
 
 def contrast_profile(X: np.ndarray, windows: Sequence[int], step: int,

@@ -7,7 +7,7 @@ Why a scan: the forward/backward passes over-segment behaviours whose cycle is l
 T (alternating-side exercises: toe touches, knee raises): H peaks when the model of one
 side meets the other.  The scan compares, at every Delta, the paper's own symmetric
 distance (Fig. 6: the larger of the two mean Mahalanobis distances between two windows,
-each scored against the other's PPCA model; ``rtseg.detectors.ppca_distance``) between
+each scored against the other's PPCA model; ``rtseg.detectors.ppca.distance``) between
 the W = ``verify_window_s`` windows before and after c (3 s, longer than the cycles of
 such exercises) with the same distance between consecutive W windows on either side
 (c-2W..c-W vs c-W..c, c..c+W vs c+W..c+2W): a behaviour boundary is a larger change than
@@ -18,7 +18,7 @@ the nearest forward and backward pass peak, blended with the contrast maximum by
 pass the same check one by one (``verify_cuts``).
 
 Frames count from 0 (rows of X); windows and steps are in frames here, in seconds in
-``config/detectors.toml``.  The online detector (``rtseg.detectors.ppca.PPCADetector``) is
+``config/detectors.toml``.  The online detector (``rtseg.detectors.ppca.online.PPCADetector``) is
 the paper's forward pass, unverified.
 """
 
@@ -31,8 +31,8 @@ import numpy as np
 
 from rtseg.detectors._scan import local_maxima, on_grid
 from rtseg.detectors.base import Cut
-from rtseg.detectors.ppca import PPCADetector
-from rtseg.detectors.ppca_distance import WindowPPCA, cut_contrast
+from rtseg.detectors.ppca.online import PPCADetector
+from rtseg.detectors.ppca.distance import WindowPPCA, cut_contrast
 
 log = logging.getLogger(__name__)
 

@@ -1,0 +1,12 @@
+"""Barbič et al.'s PCA method: the online detector (``online``: a segment's projection error
+onto its r-dimensional hyperplane, Eq. 5, cut where it rises faster than it did), the
+window models for the offline strategies (``distance``) and the offline segmentation of a
+whole take (``scan``)."""
+
+from rtseg.detectors.pca.online import (
+    PCADetector,
+)
+
+__all__ = [
+    "PCADetector",
+]
