@@ -38,7 +38,7 @@ only, on one core, median of ``--repeat`` runs:
   ``rokoko_lz4``: the same payloads LZ4-compressed; ``rokoko_json_module``: plain payloads
   parsed with the standard json module (the fallback, for comparison).
 - ``mvn_tcp``: the ``mvn`` frames as MVN's TCP stream (messages back to back) in 4096-byte
-  reads, cut by ``codec_mvn.MxtpStream`` and assembled.
+  reads, cut by ``rtseg.drivers.mvn.codec.MxtpStream`` and assembled.
 - ``axis_binary``: Axis BVH binary datagrams (64-byte header + 354 float32, 1480 bytes)
   through the axis source's datagram joiner, decoder and Euler -> quaternion conversion
   (``space=local``); ``axis_binary_global``: the same with ``space=global`` (the sources'

@@ -9,15 +9,15 @@ Formats and the decoder objects fed (one long-lived decoder per format, as a liv
 keeps one, so state left by earlier junk is part of what is tested; a fresh one every
 100 000 inputs):
 
-- ``serial``: ``codec_serial.SerialFrameDecoder`` (binary COBS/CRC frames, 17 sensors) fed
+- ``serial``: ``rtseg.drivers.serial.codec.SerialFrameDecoder`` (binary COBS/CRC frames, 17 sensors) fed
   byte chunks, and every 8th input also ``TextLineDecoder`` (text lines) then ``flush``;
-- ``vmc``: ``codec_vmc.VmcAssembler`` (17 humanoid bones) fed one UDP datagram per input,
+- ``vmc``: ``rtseg.drivers.osc.vmc.codec.VmcAssembler`` (17 humanoid bones) fed one UDP datagram per input,
   ``flush`` every 64 inputs;
-- ``vrchat``: ``codec_vrchat.VrchatAssembler`` fed one datagram per input, ``flush`` every
+- ``vrchat``: ``rtseg.drivers.osc.vrchat.VrchatAssembler`` fed one datagram per input, ``flush`` every
   64 inputs.
-- ``mvn``: ``codec_mvn.MvnAssembler`` (23 segments) fed Xsens MVN datagrams (type-02 frames
+- ``mvn``: ``rtseg.drivers.mvn.assembler.MvnAssembler`` (23 segments) fed Xsens MVN datagrams (type-02 frames
   split over 3 datagrams, types 12/13/24/25), ``flush`` every 64 inputs;
-- ``mocopi``: ``codec_mocopi.MocopiAssembler`` (27 bones) fed mocopi ``fram``/``skdf``
+- ``mocopi``: ``rtseg.drivers.mocopi.assembler.MocopiAssembler`` (27 bones) fed mocopi ``fram``/``skdf``
   datagrams.
 - ``mvn_tcp``: MVN over TCP, what ``MvnTcpSource`` runs per read (``MxtpStream`` then
   ``MvnAssembler``), fed 700-byte reads of a stream of type-02/12/13 messages;
@@ -63,11 +63,13 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from rtseg.drivers import codec_serial as cs  # noqa: E402
-from rtseg.drivers import codec_vmc as cv  # noqa: E402
-from rtseg.drivers import codec_vrchat as cvr  # noqa: E402
-from rtseg.drivers import codec_mocopi as cmo  # noqa: E402
-from rtseg.drivers import codec_mvn as cmv  # noqa: E402
+from rtseg.drivers.serial import codec as cs  # noqa: E402
+from rtseg.drivers.osc.vmc import codec as cv  # noqa: E402
+from rtseg.drivers.osc import vrchat as cvr  # noqa: E402
+from rtseg.drivers.mocopi import codec as cmo  # noqa: E402
+from rtseg.drivers.mvn import codec as cmv  # noqa: E402
+from rtseg.drivers.mvn.assembler import MvnAssembler  # noqa: E402
+from rtseg.drivers.mocopi.assembler import MocopiAssembler  # noqa: E402
 from rtseg.drivers.base import SourceStats  # noqa: E402
 from rtseg.simulators.synth.skeleton import JOINT_NAMES as BONES  # noqa: E402
 
@@ -224,7 +226,7 @@ class Mutator:
 # ============================================================================ checks
 def frame_ok(f: Any) -> bool:
     """The output contract: every valid quaternion is finite and unit (frames of
-    ``rtseg.core.frame.Frame`` or ``codec_serial.DecodedFrame``)."""
+    ``rtseg.core.frame.Frame`` or ``rtseg.drivers.serial.codec.DecodedFrame``)."""
     q = np.asarray(f.quats, dtype=np.float64)
     v = np.asarray(f.valid, dtype=bool)
     if q.size == 0 or not v.any():
@@ -324,9 +326,9 @@ FORMATS: dict[str, tuple[Callable, bool, Callable[[], Any], Callable]] = {
             _feed_then_flush),
     "vrchat": (vrchat_seeds, True, lambda: cvr.VrchatAssembler(root="head", stats=SourceStats()),
                _feed_then_flush),
-    "mvn": (mvn_seeds, False, lambda: cmv.MvnAssembler(list(range(1, 24)), stats=SourceStats()),
+    "mvn": (mvn_seeds, False, lambda: MvnAssembler(list(range(1, 24)), stats=SourceStats()),
             _feed_then_flush),
-    "mocopi": (mocopi_seeds, False, lambda: cmo.MocopiAssembler(stats=SourceStats()),
+    "mocopi": (mocopi_seeds, False, lambda: MocopiAssembler(stats=SourceStats()),
                lambda dec, data, i: dec.feed(data, i * 0.001)),
     "mvn_tcp": (mvn_tcp_seeds, False, lambda: MvnTcpFeed(list(range(1, 24))), _feed_then_flush),
     "rokoko": (rokoko_seeds, False, rokoko_feed, _feed_then_flush),

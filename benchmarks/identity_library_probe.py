@@ -1,5 +1,4 @@
-"""Probe for issue #12 item 2 (named behaviours from examples), before building it: how
-well would the unsupervised identity's distance name segments from a library learned on
+"""Probe of named behaviours from examples: how well would the unsupervised identity's distance name segments from a library learned on
 *other* takes?
 
 Leave-one-take-out over the mocap6 takes (13_29, 13_31, 14_14; exercise numbers): the

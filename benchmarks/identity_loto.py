@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--max-decision", type=float, default=2.0, metavar="S",
                     help="a (threshold, decide_after_s) counts only when the median decision "
                          "delay after the labelled transitions of the real training takes "
-                         "is at most S seconds (default 2.0, issue 12's target)")
+                         "is at most S seconds (default 2.0)")
     ap.add_argument("--synth-seeds", type=int, nargs="*", default=[0, 1, 2, 3, 4, 5])
     args = ap.parse_args(argv)
     cfg, method = live_config()

@@ -4,7 +4,7 @@ sensitivity.
     python3 benchmarks/loto.py [DATA] [--synth-seeds 0 1 2 3 4 5] [--json]
     python3 benchmarks/loto.py [DATA] --select-on SPLICED_DIR [...]   # chosen on other people
     python3 benchmarks/loto.py ../shared/data --nested --max-median 2.0 --fix step_s=0.125 \
-        --fix bound_before=0                          # what chose session 10's set (~15 min)
+        --fix bound_before=0
     python3 benchmarks/loto.py ../shared/data --max-median 2.0 --fix step_s=0.125 \
         --fix after_s=2.0 --fix hold_s=1.0 --fix drop=0.5 --fix early_after_s=1.0 \
         --fix early_hold_s=0.5 --loto-spliced SPLICED_SAME SPLICED_MIXED

@@ -16,7 +16,7 @@ per take frame in the encodings of :mod:`rtseg.drivers.axis.codec`:
 
 What is sent: the take retargeted (:mod:`rtseg.simulators.stream_sender`) onto suit
 ``axis`` of ``config/suits.toml`` (HumanBodyBones names, placed on Axis joints through
-``codec_axis.SUIT_SEGMENTS``), turned into the 59-joint Axis skeleton: Spine1 and Spine2
+``rtseg.drivers.axis.codec.SUIT_SEGMENTS``), turned into the 59-joint Axis skeleton: Spine1 and Spine2
 split the Spine -> Chest (Spine3) rotation in equal thirds, fingers (and shoulders a take
 lacks) are rigid with their parent; each joint's rotation relative to its Axis parent is
 written as Euler angles in ``order`` (default YXZ), degrees.  With displacement (default)

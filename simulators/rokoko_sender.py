@@ -8,7 +8,7 @@ LZ4-compressed (``compress=True``, Studio's "compression" option).
 
 What is sent: the take retargeted (:mod:`rtseg.simulators.stream_sender`) onto suit
 ``rokoko`` of ``config/suits.toml`` (HumanBodyBones names, mapped to Rokoko's through
-``codec_rokoko.SUIT_BONES``); shoulders and toes a take lacks go rigid with their parent.
+``rtseg.drivers.rokoko.codec.SUIT_BONES``); shoulders and toes a take lacks go rigid with their parent.
 The hip position is the take's root position in metres.  Bones not valid in a frame are
 left out of ``body``.
 

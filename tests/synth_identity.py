@@ -17,6 +17,6 @@ __all__ = ["SYNTH_DETECTOR", "SYNTH_THRESHOLD"]
 #: (config/detectors.toml ``bound_before``), and on the synthesiser's very regular motion
 #: that cuts some changes 1-1.5 s early (a 2 s after window that already holds the next
 #: behaviour against two before windows of one unvarying motion: docs/live_detector.md,
-#: "Measured (session 11)"); these tests check the ids and names given cuts in the right
+#: "Measured"); these tests check the ids and names given cuts in the right
 #: places, which the unbounded windows give on their performances.
 SYNTH_DETECTOR = {"bound_before": False}

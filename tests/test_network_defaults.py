@@ -1,4 +1,4 @@
-"""Safe network defaults (issue 11 item 4): the OSC sources listen on loopback unless an
+"""Safe network defaults: the OSC sources listen on loopback unless an
 address is written, ``allow=`` restricts senders (refused datagrams counted and logged once
 per sender), and a UDP target with nothing listening is warned about once.  Real UDP
 sockets, all on 127.0.0.0/8."""

@@ -1,4 +1,4 @@
-"""One cut per behaviour change on the wire (issue 10 item 4).
+"""One cut per behaviour change on the wire.
 
 Two real online detectors (the paper's PCA and PPCA passes) run on a synthesised
 performance with two behaviour changes; both find each change.  The session's OSC output

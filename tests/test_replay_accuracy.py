@@ -1,6 +1,6 @@
 """A real take through the simulated serial suit on a real pty into the live loop: the cuts
 it sends are the ones the same detector gives offline on the recorded frames, and they
-score on 86_01 like ``rtseg evaluate --online`` does (issue 10's acceptance test)."""
+score on 86_01 like ``rtseg evaluate --online`` does."""
 
 from __future__ import annotations
 

@@ -25,7 +25,8 @@ SEED = 4
 
 
 def _spawn(*args: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "rtseg.cli", "simulate", *args],
+    # -u: unbuffered, so a simulator that does not stop shows how far it got
+    return subprocess.Popen([sys.executable, "-u", "-m", "rtseg.cli", "simulate", *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=os.getcwd())
 
@@ -58,7 +59,7 @@ def _read_until(proc: subprocess.Popen, pattern: str, timeout: float = 20.0) -> 
     raise AssertionError(f"no line matching {pattern!r}; got {lines}; stderr: {proc.stderr.read()}")
 
 
-def _finish(proc: subprocess.Popen, timeout: float = 15.0) -> tuple[int, str, str]:
+def _finish(proc: subprocess.Popen, timeout: float = 45.0) -> tuple[int, str, str]:
     try:
         out, err = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:

@@ -1,7 +1,7 @@
-"""Errors at start: one clear line on stderr, exit status 2, never a traceback (issue 11
-item 5).  Every case runs the real CLI in-process (``rtseg.cli.main``); sessions that do
-start read ``sim://synth`` for a fraction of a second.  A property-based test throws random
-values at every ``rtseg live`` option and configuration key."""
+"""Errors at start: one clear line on stderr, exit status 2, never a traceback.
+Every case runs the real CLI in-process (``rtseg.cli.main``); sessions that do start read
+``sim://synth`` for a fraction of a second.  A property-based test throws random values at
+every ``rtseg live`` option and configuration key."""
 
 from __future__ import annotations
 

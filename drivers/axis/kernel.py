@@ -8,7 +8,7 @@ jumping) is about twenty numpy calls at their per-call floor, ~24 µs of a text 
 numpy's bit for bit (the same products, summed as numpy's matmul sums them); its global
 ones compose joint by joint and so differ from the pointer jumping's in the last bits
 (within 1e-15; the same float32 values in ``tests/test_axis.py``).  Every path of
-``axis_pose`` uses one or the other, so a frame alone and in a batch stay bit-identical.
+``rtseg.drivers.axis.pose`` uses one or the other, so a frame alone and in a batch stay bit-identical.
 
 ``ENABLED`` is True when the module was built, unless the environment variable
 ``RTSEG_NO_KERNEL`` is set to anything but ``0`` or empty (tests and
@@ -24,12 +24,12 @@ import numpy as np
 
 try:
     from rtseg.drivers.axis import _axis_kernel as _C
-except ImportError:          # not built (no compiler at install): axis_pose uses numpy
+except ImportError:          # not built (no compiler at install): the pose maths use numpy
     _C = None
 
 #: the kernel is built
 AVAILABLE = _C is not None
-#: axis_pose calls the kernel (read at each call; tests switch it)
+#: rtseg.drivers.axis.pose calls the kernel (read at each call; tests switch it)
 ENABLED = AVAILABLE and os.environ.get("RTSEG_NO_KERNEL", "") in ("", "0")
 
 _PARENTS: dict[tuple[int, ...], np.ndarray] = {}

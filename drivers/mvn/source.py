@@ -36,7 +36,7 @@ in ``corrupt`` (one per resynchronisation).  A connection from outside ``allow``
 closed at once (``refused_senders``).  ``rcvbuf`` does not apply.
 
 Frames: ``space = "global"`` (segment orientations in the world), joints in suit order,
-right-handed Y-up scalar-last (converted from MVN's Z-up, see ``codec_mvn``); ``seq`` = MVN
+right-handed Y-up scalar-last (converted from MVN's Z-up, see ``rtseg.drivers.mvn.codec``); ``seq`` = MVN
 sample counter; ``source_time`` = MVN time code in s; ``root_position`` = pelvis position
 (m).  Bad datagrams are counted (``corrupt``, ``bad_values``, ``bad_messages``,
 ``dropped`` for late ones), never raised.  Port 0 binds an ephemeral port: read ``.port``.

@@ -126,7 +126,7 @@ from rtseg.drivers.serial.wire import (
     Q14_SCALE, RECORD_SIZE, SENSOR_DTYPE, STATUS_DEFAULT, STATUS_ERROR, STATUS_VALID,
     VERSION, calibration_level, cobs_decode, cobs_encode, crc16, encode_frame, encode_info,
     encode_status, encode_text_frame, frame_body, pack_message, status_bits)
-# the remaining wire constants, read by callers as codec_serial.X (listed in __all__)
+# the remaining wire constants, read by callers as rtseg.drivers.serial.codec.X (listed in __all__)
 from rtseg.drivers.serial.wire import HEADER, HEADER_SIZE, MSG_TYPES
 
 

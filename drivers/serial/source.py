@@ -64,7 +64,7 @@ Behaviour
   suppressed repeats.
 - Text format: no sequence numbers or device clock (``seq``/``source_time`` None); a
   partial frame is closed after a quiet gap of a third of a frame period (see
-  ``codec_serial`` for the other closing rules).
+  ``rtseg.drivers.serial.codec`` for the other closing rules).
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ from rtseg.drivers.serial.wire import (_WXYZ_TO_XYZW, MSG_FRAME, NORM_TOLERANCE,
 
 
 class TextLineDecoder:
-    """Streaming decoder of ``id,w,x,y,z[,status]`` lines (see ``codec_serial``'s docstring for
+    """Streaming decoder of ``id,w,x,y,z[,status]`` lines (see ``rtseg.drivers.serial.codec``'s docstring for
     how lines group into frames).  Never raises on bad input."""
 
     MAX_LINE = 256

@@ -2,11 +2,11 @@
 
 - ``pca``  (online): cut where the PCA projection error of the current segment starts to grow
   faster than before (``rtseg.detectors.pca.online``); offline the two-sided contrast scan with the
-  PCA window distance (``pca_scan``, ``pca_distance``).
+  PCA window distance (``rtseg.detectors.pca.scan``, ``rtseg.detectors.pca.distance``).
 - ``ppca`` (online): cut at a peak of the mean Mahalanobis distance of the next T frames to
   a probabilistic-PCA model of the segment so far (``rtseg.detectors.ppca.online``); offline the
   two-sided contrast scan with the PPCA window distance, placed by forward/backward passes
-  (``ppca_offline``, ``ppca_distance``).
+  (``rtseg.detectors.ppca.offline``, ``rtseg.detectors.ppca.distance``).
 - ``gmm``  (batch): cut where consecutive frames change Gaussian-mixture cluster
   (``rtseg.detectors.gmm``).
 - ``contrast`` (online, rtseg's own; the default of ``rtseg live``): cut at a causal maximum

@@ -57,8 +57,8 @@ Bounded before windows (``bound_before``): once the last cut sent lies at least
 hold only the behaviour since that cut (a behaviour of 3-6 s is compared with itself, not
 with itself and the one before it); closer to the cut they straddle it as without the
 bound.  The windows then depend on the cuts sent (after the gate), and a bounded window is
-fitted afresh at each position for a while after every cut (docs/live_detector.md,
-session 11: x0.83 frames/s).
+fitted afresh at each position for a while after every cut (its cost in frames/s:
+``python3 benchmarks/speed.py``).
 
 Same-behaviour gate (``gate_threshold`` > 0, ``rtseg.detectors.gate``): every cut is then
 held until ``gate_decide`` frames of its new segment have arrived and sent only when the

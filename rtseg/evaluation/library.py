@@ -1,4 +1,4 @@
-"""Held-out scoring of named behaviour libraries (issue #12 item 5, issue #15 item 3).
+"""Held-out scoring of named behaviour libraries.
 
 Every figure names segments of takes the library did not learn from:
 

@@ -1,11 +1,11 @@
 """Named behaviour libraries: learn behaviour names from labelled examples, name segments,
-and say ``unknown`` for a segment unlike every example (issue #12 item 2).
+and say ``unknown`` for a segment unlike every example.
 
 A library holds, for one feature profile (``rtseg.core.features``: profile name and feature
 dims), short windows cut from labelled examples, each with its name and the example
 (source) it came from, and per window what its distance (``metric``) needs:
 
-- ``model`` (the default since 2026-12-01; ``rtseg.library.distance``): the statistics of
+- ``model`` (the default; ``rtseg.library.distance``): the statistics of
   the window's per-joint body-frame angular velocities, compared with the segmenter's own
   PCA / PPCA window models - the identity tracker's distance D (1 for two windows of one
   motion).  A name's distance is its nearest window's (``k_nearest`` 1).
@@ -84,10 +84,8 @@ UNKNOWN = "unknown"
 GROUPS = ("spread", "speed", "dims")
 SCALE_FLOOR = 0.05
 K_NEAREST = 3
-#: example windows start every this many seconds (0.5 since 2026-12-02; 1 s before): the
-#: nearest window is likelier to meet a query's phase of the movement - held out, with the
-#: 1.75 s name wait, left-out exercises `unknown` mocap6 12 -> 13 of 17, spliced 28 -> 30
-#: of 35, nothing lost (docs/identity.md, "Held-out figures ... session 11")
+#: example windows start every this many seconds: the nearest window is then likely to
+#: meet a query's phase of the movement (held-out figures: docs/identity.md)
 DEFAULT_STEP_S = 0.5
 
 

@@ -196,8 +196,8 @@ def load(path: str | Path, profile: str | None = None, dims: int | None = None) 
             and str(p.resolve()) not in _WARNED):
         _WARNED.add(str(p.resolve()))    # once per file (rtseg live checks it, then loads it)
         logging.getLogger(__name__).warning(
-            "behaviour library %s has no rejection threshold (an rtseg before 2026-12-02 "
-            "learned it from one example per behaviour): every segment will get a name; "
+            "behaviour library %s has no rejection threshold (it was learned from one "
+            "example per behaviour): every segment will get a name; "
             "learn it again ('rtseg learn %s --new ...'), or add an example to it, which "
             "calibrates it anew", p, p)
     return lib

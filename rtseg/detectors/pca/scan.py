@@ -7,11 +7,6 @@ the window lengths ``scan_windows_s``; the changes are its local maxima reaching
 ``min_contrast``, at least the mean window apart, each cut at its maximum
 (``detected_at == frame``: a batch result).  Frames count from 0 (rows of X); window
 lengths and the step are in frames here, in seconds in ``config/detectors.toml``.
-
-History: a third variant, ``"verified"`` (forward and backward online passes merged, each
-cut checked two-sided with the PCA window models and moved to the contrast maximum within
-+-l), was the offline default before the scan and was retired (issue 10: neither the
-paper's method nor the default); its figures are in docs/detectors.md.
 """
 
 from __future__ import annotations

@@ -50,10 +50,6 @@ so the delay is T + (a few) Delta frames; ``score`` = peak - valley; ``confidenc
 The offline strategies live beside this module: the window models and their distance in
 ``rtseg.detectors.ppca.distance``, the contrast scan, the passes and the placement
 (``segment_ppca``) in ``rtseg.detectors.ppca.offline``.
-
-History: ``VerifiedPPCADetector`` (``online_verify = true``: each forward-pass cut held 2W
-frames, 6 s, then checked two-sided like the offline cuts) was retired (issue 10: neither
-the paper's detector nor the live default); its figures are in docs/detectors.md.
 """
 
 from __future__ import annotations
