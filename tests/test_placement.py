@@ -43,3 +43,24 @@ def test_detector_cut_placed_nearer_the_change():
     assert len(plain) == len(placed) == 1
     assert abs(placed[0].frame - change) <= abs(plain[0].frame - change)
     assert abs(placed[0].frame - change) <= 0.1 * fr
+
+
+def test_placement_moves_the_default_detectors_cuts_and_never_adds_or_drops_one():
+    """With the shipped gate and bounded windows, placement on gives the cuts of placement
+    off (same count, same detection frames), each moved at most the radius."""
+    from rtseg.evaluation.online import fed_features, live_config
+    from rtseg.simulators.synth.motion import synthesize
+
+    take = synthesize("idle:4,walk:5,punch:4,walk:5,squat:5,punch:4", seed=3).take
+    X, _, _ = fed_features(take, live_config()[0])
+    fr = take.frame_rate
+    p = load_params()["contrast"]
+    assert p["gate_threshold"] > 0 and p["bound_before"]
+    plain = ContrastDetector.from_params({**p, "place_radius_s": 0.0}, fr).run(X)
+    placed = ContrastDetector.from_params({**p, "place_radius_s": 1.0}, fr).run(X)
+    assert len(plain) >= 3
+    assert [c.detected_at for c in placed] == [c.detected_at for c in plain]
+    moves = [q.frame - c.frame for c, q in zip(plain, placed)]
+    assert all(abs(m) <= fr for m in moves)
+    assert any(moves)                                 # placement did act
+    assert all(a.frame < b.frame for a, b in zip(placed, placed[1:]))

@@ -64,6 +64,13 @@ Same-behaviour gate (``gate_threshold`` > 0, ``rtseg.detectors.gate``): every cu
 held until ``gate_decide`` frames of its new segment have arrived and sent only when the
 motion after it is another behaviour than the motion before it (the identity tracker's
 window distance above ``gate_threshold``); ``detected_at`` is the deciding frame.
+
+Cut placement (``place_radius`` > 0 frames, ``rtseg.detectors.placement``): each cut the
+gate lets through (every cut when the gate is off) is moved to the best two-Gaussian split
+of the frames within ``place_window`` of it that have arrived, at most ``place_radius``
+from the grid position and never onto or before the last cut sent.  The gate and the
+bounded windows work on the unplaced positions, so placement moves cuts and never adds or
+removes one.
 """
 
 from __future__ import annotations
@@ -197,6 +204,7 @@ class ContrastDetector(OnlineDetector):
         self._models: dict[tuple[int, int], WindowModel] = {}
         self._pending: tuple[int, int] | None = None   # a window to fit with the next frame
         self._last_sent: int | None = None   # block position of the last cut sent
+        self._last_placed: int | None = None  # frame of the last cut sent, as placed
         self.peaks.reset()
         self._out: deque[EarlyCut] = deque()  # cuts to send (a queued one is dropped)
         if self._dim is not None:              # the ring restarts at block 0
@@ -237,15 +245,17 @@ class ContrastDetector(OnlineDetector):
             self._fill = 0
             self._block_done()
         cut = self._cut(self._out.popleft(), self._t - 1) if self._out else None
-        if cut is not None and self._rows is not None:
-            cut = self._placed(cut)
         if self.gate is not None:
             self.gate.push(self._t - 1, x)
             if cut is not None:
                 self.gate.hold(cut)
             cut = self.gate.poll()
         if cut is not None:
+            # the windows follow the detector's own grid position, not the placed frame
             self._last_sent = (cut.frame - self._seg0) // self.step
+            if self._rows is not None:             # only cuts the gate lets through
+                cut = self._placed(cut)
+                self._last_placed = cut.frame
         return cut
 
     def _block_done(self) -> None:
@@ -293,8 +303,8 @@ class ContrastDetector(OnlineDetector):
         start nor onto or before the last cut sent."""
         now = self._t                           # frames [lo, now) are in the ring
         lo = max(cut.frame - self.place_window, self._seg0, now - len(self._rows))
-        if self._last_sent is not None:
-            lo = max(lo, self._seg0 + self._last_sent * self.step + 1)
+        if self._last_placed is not None:
+            lo = max(lo, self._last_placed + 1)
         hi = min(now, cut.frame + self.place_window)
         if hi - lo < 4 or not lo <= cut.frame < hi:
             return cut
