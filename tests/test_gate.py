@@ -82,10 +82,10 @@ def test_replay_equals_feeding_the_frames(seed):
     """benchmarks/loto.py replays the gate on the ungated detector's cuts: the same cuts,
     sent on the same frames, as the detector with its gate fed frame by frame - when the
     before windows do not depend on the cuts sent (``bound_before`` off; bounded sets are
-    full detector runs there)."""
+    full detector runs there) and no cut is placed (placement acts after the gate)."""
     res = synthesize("walk:6,punch:6,walk:6,squat:6,walk:6", seed=seed)
     X = take_features(res.take)
-    unbound = {"bound_before": False}
+    unbound = {"bound_before": False, "place_radius_s": 0.0}
     gated = make_online("contrast", FR, unbound)
     assert gated.gate is not None
     streamed = [(c.frame, c.detected_at) for c in gated.run(X)]

@@ -135,7 +135,7 @@ def test_identify_segments_on_features_directly():
     X = compute_features(res.take)
     fr = res.take.frame_rate
     assert identify_segments(X, fr, []) == [1]
-    ids = identify_segments(X, fr, [(720, 720), (1440, 1440)], threshold=7.0)
+    ids = identify_segments(X, fr, [(720, 720), (1440, 1440)], threshold=SYNTH_THRESHOLD)
     assert ids == [1, 2, 1]
     assert identify_segments(X[:0], fr, []) == []
 
