@@ -339,6 +339,31 @@ def test_plot_title_gives_the_scores_evaluate_gives(data_dir, capsys, tmp_path):
     assert f"pca: F1 {strict:.3f}" in _png_title(png) and "±0 s" in _png_title(png)
 
 
+def _result(method: str, frames: list[int], n_frames: int = 2400):
+    """A segmentation result with cuts at ``frames`` (120 fps)."""
+    from rtseg.detectors.base import Cut
+    from rtseg.detectors.segmentation import SegmentationResult, segments_between
+    return SegmentationResult(method, [Cut(f, method) for f in frames],
+                              segments_between(frames, n_frames, 120.0), 120.0, n_frames)
+
+
+def test_plot_title_scores_at_the_default_tolerance_and_labels_it():
+    """Three transitions, one cut 30 frames (0.25 s) past its range: the title gives F1
+    1.000 at the default +-0.5 s, says so, and gives the strict 0.667 beside it, labelled
+    strict - never the strict figures alone."""
+    from rtseg.commands.plot import DEFAULT_TOLERANCE_S, score_line
+    from rtseg.labels.types import Transition, TransitionLabels
+    labels = TransitionLabels("90_01", [Transition(560, 640, 600), Transition(1160, 1240, 1200),
+                                        Transition(1760, 1840, 1800)])
+    results = {"pca": _result("pca", [600, 1200, 1870])}
+    assert DEFAULT_TOLERANCE_S == 0.5
+    line = score_line(results, labels, 120.0)
+    assert "with cuts within ±0.5 s of a labelled range" in line, line
+    assert "pca: F1 1.000 (P 1.000, R 1.000), strict F1 0.667" in line, line
+    strict = score_line(results, labels, 120.0, tolerance_s=0.0)
+    assert "±0 s" in strict and "pca: F1 0.667 (P 0.667, R 0.667)" in strict, strict
+
+
 def test_plot_to_a_missing_folder_fails_at_once(synth_dir, capsys, tmp_path, monkeypatch):
     """``plot -o missing/dir/x.png`` is refused before any segmentation, with one line
     naming the folder (no errno text)."""
