@@ -141,6 +141,21 @@ def test_segment_bad_input_is_a_clear_error(tmp_path, capsys):
     assert rc == 2 and "junk.bvh" in err
 
 
+def test_segment_with_a_bvh_as_skeleton_says_what_a_skeleton_is(tmp_path, capsys):
+    """``--skeleton`` given a BVH: one line saying the skeleton must be an ASF and that a
+    BVH take carries its own (not "line outside any section: 'HIERARCHY'")."""
+    amc = tmp_path / "86_01.amc"
+    amc.write_text(":FULLY-SPECIFIED\n:DEGREES\n1\nroot 0 0 0 0 0 0\n")
+    bvh = tmp_path / "86_01.bvh"
+    bvh.write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Xrotation "
+                   "Yrotation Zrotation\n}\nMOTION\nFrames: 1\nFrame Time: 0.0083\n0 0 0\n")
+    rc, out, err = run_cli(capsys, "segment", amc, "--skeleton", bvh)
+    assert rc == 2 and out == "" and len(err.splitlines()) == 1
+    assert f"{bvh}:1: is a BVH file" in err and "not an ASF skeleton" in err
+    assert "needs its Acclaim .asf" in err and "a .bvh take carries its own skeleton" in err
+    assert "outside any section" not in err
+
+
 # ------------------------------------------------------------------------ evaluate
 
 def test_evaluate_json_synthetic(synth_dir, capsys):
