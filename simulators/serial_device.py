@@ -280,27 +280,40 @@ class SerialSuit:
         tty.setraw(slave)  # no echo, no CR/LF translation, byte-exact
         os.set_blocking(master, False)
         pts = os.ttyname(slave)
-        tmp = self.link.with_name(self.link.name + ".new")
         try:
-            tmp.unlink()
-        except FileNotFoundError:
-            pass
-        try:
-            os.symlink(pts, tmp)
-            os.replace(tmp, self.link)
+            self._link_to(pts)
         except OSError as exc:
             os.close(slave)
             os.close(master)
-            folder = self.link.parent
-            why = ("does not exist" if not folder.is_dir() else
-                   f"does not take it ({exc.strerror or exc})")
-            raise ValueError(f"device link {self.link}: cannot create it: folder {folder} "
-                             f"{why}") from None
+            raise ValueError(f"device link {self.link}: cannot create it: "
+                             f"{self._link_problem(exc)}") from None
         os.close(slave)  # the reader opens it by path; the master sees POLLHUP until then
         self._master = master
         self._poll = select.poll()
         self._poll.register(master, select.POLLHUP)
         log.info("serial suit on %s -> %s", self.link, pts)
+
+    def _link_to(self, pts: str) -> None:
+        """Point the link at ``pts``: a fresh symlink beside it renamed over it (a reader
+        never sees the path missing)."""
+        tmp = self.link.with_name(self.link.name + ".new")
+        try:
+            tmp.unlink()
+        except FileNotFoundError:
+            pass
+        os.symlink(pts, tmp)
+        os.replace(tmp, self.link)
+
+    def _link_problem(self, exc: OSError) -> str:
+        """Why the link could not be made, in words (no errno number)."""
+        folder = self.link.parent
+        if not folder.exists():
+            return f"folder {folder} does not exist"
+        if not folder.is_dir():
+            return f"{folder} is not a folder"
+        if self.link.is_dir() and not self.link.is_symlink():
+            return "a folder is there"
+        return f"folder {folder} does not take it ({exc.strerror or exc})"
 
     def _unplug_now(self) -> None:
         try:

@@ -141,6 +141,21 @@ def test_segment_bad_input_is_a_clear_error(tmp_path, capsys):
     assert rc == 2 and "junk.bvh" in err
 
 
+def test_segment_with_a_bvh_as_skeleton_says_what_a_skeleton_is(tmp_path, capsys):
+    """``--skeleton`` given a BVH: one line saying the skeleton must be an ASF and that a
+    BVH take carries its own (not "line outside any section: 'HIERARCHY'")."""
+    amc = tmp_path / "86_01.amc"
+    amc.write_text(":FULLY-SPECIFIED\n:DEGREES\n1\nroot 0 0 0 0 0 0\n")
+    bvh = tmp_path / "86_01.bvh"
+    bvh.write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Xrotation "
+                   "Yrotation Zrotation\n}\nMOTION\nFrames: 1\nFrame Time: 0.0083\n0 0 0\n")
+    rc, out, err = run_cli(capsys, "segment", amc, "--skeleton", bvh)
+    assert rc == 2 and out == "" and len(err.splitlines()) == 1
+    assert f"{bvh}:1: is a BVH file" in err and "not an ASF skeleton" in err
+    assert "needs its Acclaim .asf" in err and "a .bvh take carries its own skeleton" in err
+    assert "outside any section" not in err
+
+
 # ------------------------------------------------------------------------ evaluate
 
 def test_evaluate_json_synthetic(synth_dir, capsys):
@@ -337,6 +352,31 @@ def test_plot_title_gives_the_scores_evaluate_gives(data_dir, capsys, tmp_path):
                        "--tolerance", "0", "-o", png)
     assert rc == 0
     assert f"pca: F1 {strict:.3f}" in _png_title(png) and "±0 s" in _png_title(png)
+
+
+def _result(method: str, frames: list[int], n_frames: int = 2400):
+    """A segmentation result with cuts at ``frames`` (120 fps)."""
+    from rtseg.detectors.base import Cut
+    from rtseg.detectors.segmentation import SegmentationResult, segments_between
+    return SegmentationResult(method, [Cut(f, method) for f in frames],
+                              segments_between(frames, n_frames, 120.0), 120.0, n_frames)
+
+
+def test_plot_title_scores_at_the_default_tolerance_and_labels_it():
+    """Three transitions, one cut 30 frames (0.25 s) past its range: the title gives F1
+    1.000 at the default +-0.5 s, says so, and gives the strict 0.667 beside it, labelled
+    strict - never the strict figures alone."""
+    from rtseg.commands.plot import DEFAULT_TOLERANCE_S, score_line
+    from rtseg.labels.types import Transition, TransitionLabels
+    labels = TransitionLabels("90_01", [Transition(560, 640, 600), Transition(1160, 1240, 1200),
+                                        Transition(1760, 1840, 1800)])
+    results = {"pca": _result("pca", [600, 1200, 1870])}
+    assert DEFAULT_TOLERANCE_S == 0.5
+    line = score_line(results, labels, 120.0)
+    assert "with cuts within ±0.5 s of a labelled range" in line, line
+    assert "pca: F1 1.000 (P 1.000, R 1.000), strict F1 0.667" in line, line
+    strict = score_line(results, labels, 120.0, tolerance_s=0.0)
+    assert "±0 s" in strict and "pca: F1 0.667 (P 0.667, R 0.667)" in strict, strict
 
 
 def test_plot_to_a_missing_folder_fails_at_once(synth_dir, capsys, tmp_path, monkeypatch):

@@ -142,6 +142,22 @@ def test_a_field_of_the_wrong_type_is_one_clear_line(tmp_path, library, key, val
     assert "\n" not in str(ei.value)
 
 
+@pytest.mark.parametrize("rate", [120, 60])
+def test_a_whole_number_frame_rate_loads_as_a_number(tmp_path, library, caplog, rate):
+    """``frame_rate: 120`` (a JSON int where the file writes 120.0) is a number like any
+    other: loaded as a float without a word; libraries mix frame rates, so 60 in a library
+    learned at 120 Hz loads too."""
+    doc = json.loads(save_library(library, tmp_path / "lib.json").read_text())
+    doc["frame_rate"] = rate
+    path = tmp_path / "int_rate.json"
+    path.write_text(json.dumps(doc))
+    assert '"frame_rate": %d,' % rate in path.read_text()
+    with caplog.at_level("WARNING"):
+        back = load(path)
+    assert back.frame_rate == float(rate) and isinstance(back.frame_rate, float)
+    assert back.names == library.names and not caplog.records
+
+
 def test_learn_command_and_its_errors(tmp_path):
     from rtseg.drivers.readers import write_take
     res = synthesize("walk:5,punch:5", seed=0)

@@ -178,15 +178,51 @@ def test_simulate_host_that_does_not_resolve_is_named(device, capsys):
     assert "[Errno" not in err
 
 
-def test_simulate_link_in_a_missing_folder_is_named(tmp_path, capsys):
-    """``--link`` into a folder that does not exist: one line naming the link and the
-    folder (no errno text)."""
-    link = tmp_path / "no" / "such" / "suit"
+def _link_cases(tmp_path):
+    """(--link value, the line it must give): paths where no symlink can be made."""
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "plain").write_text("keep me")
+    missing = tmp_path / "no" / "such" / "suit"
+    return [
+        (missing, f"--link {missing}: cannot create the link: folder {missing.parent} "
+                  f"does not exist"),
+        (tmp_path / "plain" / "suit", f"--link {tmp_path / 'plain' / 'suit'}: cannot "
+                                      f"create the link: {tmp_path / 'plain'} is not a folder"),
+        (tmp_path / "folder", f"--link {tmp_path / 'folder'}: is a folder; give the path of "
+                              f"the link to create"),
+        (tmp_path / "plain", f"--link {tmp_path / 'plain'}: a file that is not a link is there"),
+        ("", "--link '': an empty path"),
+    ]
+
+
+@pytest.mark.parametrize("case", range(5))
+def test_simulate_link_that_cannot_be_made_is_named(tmp_path, capsys, case):
+    """``--link`` where no symlink can be made - a missing folder, a file for a folder, a
+    folder or a plain file at the path, an empty path - is one line naming the option and
+    its value, exit 2, before anything is synthesised (no errno text); nothing is
+    created or replaced."""
+    link, line = _link_cases(tmp_path)[case]
     assert main(["simulate", "serial", "--synth", "idle:2", "--link", str(link)]) == 2
-    err = capsys.readouterr().err
-    assert (f"device link {link}: cannot create it: folder {link.parent} does not exist"
-            in err)
-    assert "[Errno" not in err and not link.parent.exists()
+    out, err = capsys.readouterr()
+    assert err.startswith(f"rtseg simulate: error: {line}"), err
+    assert len(err.splitlines()) == 1 and "Errno" not in err and "transitions" not in out
+    assert (tmp_path / "plain").read_text() == "keep me"
+    assert not (tmp_path / "no").exists() and list((tmp_path / "folder").iterdir()) == []
+
+
+def test_serial_suit_link_it_cannot_make_is_one_line(tmp_path):
+    """The suit itself (``rtseg demo``, tests, benchmarks): a link under a plain file is a
+    ValueError in words - the ``.new`` twin it clears first used to raise the raw errno
+    text - and the pty is closed again."""
+    from rtseg.simulators.serial_device import SerialSuit
+    (tmp_path / "plain").write_text("")
+    link = tmp_path / "plain" / "suit"
+    suit = SerialSuit(synthesize("idle:2", seed=0).take, link=link)
+    with pytest.raises(ValueError) as ei:
+        suit.start()
+    assert str(ei.value) == (f"device link {link}: cannot create it: {tmp_path / 'plain'} "
+                             f"is not a folder")
+    assert not suit.plugged
 
 
 def test_simulate_prints_the_transitions_saved_in_a_synthetic_take(tmp_path, capsys):

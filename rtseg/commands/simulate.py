@@ -63,6 +63,7 @@ import argparse
 import signal
 import sys
 import time
+from pathlib import Path
 from typing import Any, Callable
 
 from rtseg.core.take import Take
@@ -116,7 +117,8 @@ def register(subparsers: Any) -> None:
                    "ground truth in its meta) to this .npz")
     g = p.add_argument_group("serial")
     g.add_argument("--link", metavar="PATH", help="stable device path (symlink to the pty) "
-                   "(default: a fresh temporary path)")
+                   "in an existing folder; a link already there is replaced (default: a "
+                   "fresh temporary path)")
     g.add_argument("--format", choices=("rtseg", "text"), default="rtseg",
                    help="wire format (default rtseg binary frames)")
     p.add_argument("--suit", default="default17", help="suit profile (config/suits.toml): "
@@ -164,6 +166,8 @@ def load(args: argparse.Namespace):
     if args.faults:
         from rtseg.simulators.faults import FaultConfig
         FaultConfig.parse(args.faults)          # fail before anything starts
+    if args.device == "serial" and args.link is not None:
+        check_link(args.link)
     from rtseg.simulators.retarget import ImuModel
     ImuModel.parse(args.imu)
     parse_joint_map(args.joint_map)
@@ -255,6 +259,34 @@ def check_host(host: str) -> None:
         why = getattr(exc, "strerror", None) or str(exc)
         raise ValueError(f"--host {host!r}: not an address, and no host of that name can be "
                          f"found ({why})") from None
+
+
+def check_link(link: str) -> None:
+    """``--link`` checked before any work: a ValueError naming it when the symlink cannot
+    be made there - an empty path, a folder that does not exist or is a file, an existing
+    folder or file (not a link) at the path itself.  A link already there is replaced."""
+    import os
+    if not link:
+        raise ValueError("--link '': an empty path (give the device path to create, e.g. "
+                         "/tmp/rtseg-suit)")
+    path = Path(link)
+    folder = path.parent
+    if path.is_symlink():
+        return
+    if path.is_dir():
+        raise ValueError(f"--link {link}: is a folder; give the path of the link to create, "
+                         f"e.g. {path / 'rtseg-suit'}")
+    if path.exists():
+        raise ValueError(f"--link {link}: a file that is not a link is there (it would be "
+                         f"replaced); remove it or choose another path")
+    if not folder.exists():
+        raise ValueError(f"--link {link}: cannot create the link: folder {folder} does not "
+                         f"exist")
+    if not folder.is_dir():
+        raise ValueError(f"--link {link}: cannot create the link: {folder} is not a folder")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ValueError(f"--link {link}: cannot create the link: folder {folder} is not "
+                         f"writable")
 
 
 class Host:
