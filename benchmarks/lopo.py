@@ -51,15 +51,13 @@ TOL_S = 0.5
 #: the candidates (every combination); the shipped defaults fill the other keys
 GRIDS = {
     "none": {},
-    "small": {
-        "threshold": [1.75, 2.0, 2.25, 2.5],
-        "gate_threshold": [0.0, 3.5, 4.5],
-        "reference_dims": [40, 48],
+    "default": {                    # the two thresholds that decide a cut
+        "threshold": [1.5, 1.75, 2.0],
+        "gate_threshold": [3.5, 4.0, 4.5],
     },
-    "place": {                      # cut placement on or off, with the threshold
-        "threshold": [1.75, 2.0],
+    "looks": {                      # the early look and cut placement
+        "early_threshold": [1.5, 2.0],
         "place_radius_s": [0.0, 1.0],
-        "gate_threshold": [3.5, 4.0],
     },
     "short": {                      # shorter windows and gaps for 2-5 s behaviours
         "threshold": [1.75, 2.0],
@@ -185,7 +183,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("data", type=Path, help="folder laid out like ../shared/data (or one source)")
     p.add_argument("--per-person", type=int, default=2, help="performances per person and seed")
     p.add_argument("--seeds", type=int, nargs="+", default=[0], help="splice seeds")
-    p.add_argument("--grid", choices=list(GRIDS), default="small")
+    p.add_argument("--grid", choices=list(GRIDS), default="default")
     p.add_argument("--max-median", type=float, default=2.5, help="delay budget (s) of a set")
     p.add_argument("--cache", type=Path, default=Path("/tmp/rtseg-lopo"),
                    help="where spliced performances are kept")

@@ -78,7 +78,7 @@ def test_lopo_on_a_folder_of_two_people(tmp_path):
     for s in ("bd", "bk"):
         shutil.copy(src / "amc" / f"{s}.asf", one / "amc")
     (one / "index.tsv").write_text("\n".join(keep) + "\n")
-    r = _run("lopo.py", str(one), "--per-person", "1", "--grid", "place",
+    r = _run("lopo.py", str(one), "--per-person", "1", "--grid", "looks",
              "--cache", str(tmp_path / "cache"), "--json")
     assert r.returncode == 0, r.stderr[-2000:]
     doc = json.loads(r.stdout)

@@ -332,3 +332,53 @@ def test_two_cuts_confirmed_on_one_frame_go_out_one_frame_apart(perf):
     assert c1.frame < c2.frame
     assert c1.confidence == pytest.approx(1 - det.threshold / 9.0)
     assert c2.confidence == pytest.approx(1 - det.peaks.early.threshold / 9.0)
+
+
+# ---------------------------------------------------------------- gate drops
+def test_a_forgotten_peak_keeps_no_later_one_away():
+    """The gate dropped the first cut: the picker's min_gap no longer counts from it, but a
+    later maximum must still beat the values before it."""
+    pk = CausalPeaks(threshold=2.0, hold=100, min_gap=40, drop=0.5)
+    first = [p for p in (pk.update(pos, v, pos) for pos, v in ((0, 1.0), (10, 4.0), (20, 1.5)))
+             if p]
+    assert [p.position for p in first] == [10]
+    pk.forget(10)
+    got = [p for p in (pk.update(pos, v, pos) for pos, v in ((30, 3.0), (40, 5.0), (50, 1.0)))
+           if p]
+    assert [(p.position, p.value) for p in got] == [(40, 5.0)]   # 3.0 < 4.0 within min_gap
+
+
+def test_early_cuts_forget_a_dropped_cut():
+    ec = _early_cuts()
+    for pos, v in ((100, 1.0), (105, 3.0), (110, 1.0)):
+        sent = ec.update_full(pos, v, pos + 70)
+    assert sent is not None and sent.peak.position == 105
+    # a second change 30 frames later (less than min_gap 50) is refused while 105 stands ...
+    kept = _early_cuts()
+    for pos, v in ((100, 1.0), (105, 3.0), (110, 1.0)):
+        kept.update_full(pos, v, pos + 70)
+    assert [kept.update_full(p, v, p + 70) for p, v in ((130, 4.0), (135, 1.0))][1] is None
+    # ... and sent once the gate dropped it
+    ec.forget(105)
+    out = [ec.update_full(p, v, p + 70) for p, v in ((130, 4.0), (135, 1.0))]
+    assert out[1] is not None and out[1].peak.position == 130
+
+
+def test_a_cut_the_gate_drops_does_not_hide_the_change_after_it():
+    """A premature early-look cut the gate drops must not keep the true change, under
+    min_gap later, from being cut (the synthetic performance resampled to 30 fps has one)."""
+    from rtseg.core.resample import resample_take
+    from rtseg.detectors import load_params
+    from rtseg.evaluation.online import fed_features, live_config
+    perf = synthesize(seed=3)
+    take = resample_take(perf.take, 30.0)
+    cfg, _ = live_config(methods=["contrast"])
+    X, _, _ = fed_features(take, cfg)
+    det = ContrastDetector.from_params(load_params()["contrast"], 30.0)
+    cuts = [c.frame / 30.0 for c in det.run(X)]
+    dropped = [b / 30.0 for b, _, sent in det.gate.decisions if not sent]
+    assert dropped, "the take should hold a cut the gate drops"
+    # the change after the dropped cut, and under min_gap (2 s) from it, is cut
+    after = next(t for t in perf.transitions if t.lo / 120.0 > dropped[0])
+    assert after.lo / 120.0 - dropped[0] < 2.0
+    assert any(after.lo / 120.0 - 0.5 <= c <= after.hi / 120.0 + 0.5 for c in cuts)

@@ -381,9 +381,13 @@ def test_unseen_behaviours_come_out_unknown(library, seed):
 
 
 def test_hiding_a_name_turns_its_segments_unknown():
+    """A library without punch names the punch of a performance ``unknown`` and the
+    behaviours it holds by their names (cut at the true changes: the library's naming
+    alone, wherever a detector would cut)."""
+    from rtseg.evaluation.names_lopo import truth_cut_run
     lib = _library("walk:8,squat:8,wave:8")       # no punch
     res = synthesize("walk:6,punch:6,squat:6", seed=2)
-    run = run_identity(res.take, _config(), lib)
+    run = truth_cut_run(res.take, np.asarray(res.frame_names()), _config(), lib)
     names = [m.name for m in run.tracker.history if not m.correction]
     assert names == ["walk", UNKNOWN, "squat"]
 

@@ -5,15 +5,19 @@ arrived, the motion just after c is compared with the motion just before it:
 
     A0 = [c-2w, c-w)   A = [c-w, c)   B = [c, c+after)          (w = before, frames)
 
-    contrast(c) = sqrt( Dpca(A, B) / Dpca(A0, A)  x  Dppca(A, B) / Dppca(A0, A) )
+    contrast(c) = Dpca(A, B) / Dpca(A0, A)
 
-with the window distances of ``rtseg.detectors.window_models`` (PCA projection error and
-PPCA Mahalanobis distance, the two models of Barbič et al. 2004), then stated for
-``reference_dims`` effective input dimensions: 1 + (contrast - 1) x sqrt(d_eff /
-reference_dims), d_eff = the before window's varying directions.  Ratios of distances
-estimated from fewer dimensions scatter more (like the PPCA detector's R, scaled by the
-same rule): 48 = the CMU 14-joint features less their 8 structural zeros, unchanged there;
-on the 4-channel tsseg4d features (d_eff 8) a contrast of 3.4 counts as 2.  A behaviour change makes
+``Dpca`` is the PCA window distance of ``rtseg.detectors.window_models`` (Barbič et al.
+2004, 3.1: the geometric mean of each window's projection error off the other's mean and
+top-r hyperplane, r from ``pca_energy``, each over that model's own error).  The ratio is
+then stated for ``reference_dims`` effective input dimensions: 1 + (contrast - 1) x
+sqrt(d_eff / reference_dims), d_eff = the before window's varying directions (ratios
+estimated from fewer dimensions scatter more; 48 = the canonical 12-joint features, which
+are unchanged by it; on the 4-channel tsseg4d features, d_eff 8, a contrast of 3.4 counts
+as 2).  The paper's second model, PPCA, is left out of the contrast: chosen
+leave-one-person-out over the 15 people of ../shared/data (``benchmarks/lopo.py``,
+docs/live_detector.md) the PCA ratio alone finds more changes with fewer false ones.  The
+same-behaviour gate still compares windows with both models.  A behaviour change makes
 the window after c unlike the one before it, more than that one is unlike its own
 predecessor (contrast well above 1); within a behaviour whose cycle is shorter than the
 windows it stays about 1.  Near the start of a segment (after the stream starts or a gap)
@@ -40,11 +44,10 @@ change far above it; the same meaning as every rtseg detector's confidence).
 Early look (``early_after`` > 0 frames): each position is also scored as soon as the
 ``early_after`` frames from c on have arrived, one-sided and without fitting that window:
 
-    early(c) = sqrt( Epca(B'|A) / Epca(A|A0)  x  Mppca(B'|A) / Mppca(A|A0) ),  B' = [c, c+early_after)
+    early(c) = Epca(B'|A) / Epca(A|A0),  B' = [c, c+early_after)
 
-(E: PCA projection error off the model of the second window, M: root mean squared
-Mahalanobis distance under its PPCA Gaussian), stated for ``reference_dims`` like the
-contrast.  Its maxima (at least ``early_threshold``, confirmed within ``early_hold``) are
+(E: the per-frame PCA projection error off the second window's model, over that model's
+own), stated for ``reference_dims`` like the contrast.  Its maxima (at least ``early_threshold``, confirmed within ``early_hold``) are
 sent when the full contrast corroborates them (``rtseg.detectors.early``): so a clear
 change is sent about ``after - early_after`` frames sooner, and a change the early look
 misses or that the full look does not back is still sent from the full look.
@@ -63,7 +66,8 @@ fitted afresh at each position for a while after every cut (its cost in frames/s
 Same-behaviour gate (``gate_threshold`` > 0, ``rtseg.detectors.gate``): every cut is then
 held until ``gate_decide`` frames of its new segment have arrived and sent only when the
 motion after it is another behaviour than the motion before it (the identity tracker's
-window distance above ``gate_threshold``); ``detected_at`` is the deciding frame.
+window distance above ``gate_threshold``); ``detected_at`` is the deciding frame.  A cut
+the gate drops is forgotten: it keeps no later maximum ``min_gap`` away.
 
 Cut placement (``place_radius`` > 0 frames, ``rtseg.detectors.placement``): each cut the
 gate lets through (every cut when the gate is off) is moved to the best two-Gaussian split
@@ -87,7 +91,7 @@ from rtseg.detectors.early import EarlyCut, EarlyCuts
 from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, place
 from rtseg.detectors.gate import (GATE_DECIDE_S, GATE_MIN_AFTER_S, GATE_SKIP_S, GATE_WINDOW_S,
                                   SameBehaviourGate)
-from rtseg.detectors.window_models import WindowModel, WindowStats, distances, fit, one_sided
+from rtseg.detectors.window_models import WindowModel, WindowStats, fit, pca_distance, pca_error
 
 
 class ContrastDetector(OnlineDetector):
@@ -153,7 +157,7 @@ class ContrastDetector(OnlineDetector):
                 gate_threshold, decide_after=gate_decide, skip=gate_skip,
                 max_window=gate_window, min_after=gate_min_after,
                 ring=self.delay_frames + gate_decide + gate_window + 2 * self.step,
-                fit_args=self.fit_args)
+                fit_args=self.fit_args, on_drop=self.peaks.forget)
         self._t = 0
         self._rows: np.ndarray | None = None   # ring of the newest frames (placement)
         self._dim: int | None = None
@@ -342,27 +346,25 @@ class ContrastDetector(OnlineDetector):
         w = self._width(c)
         return self._model(c - 2 * w, c - w), self._model(c - w, c)
 
-    def _stated(self, kp: float, kq: float, a: WindowModel) -> float:
-        """sqrt(kp x kq), stated for ``reference_dims`` effective dimensions (module doc)."""
-        k = math.sqrt(max(kp, 0.0) * max(kq, 0.0))
-        return 1.0 + (k - 1.0) * math.sqrt(a.nonnull / self.reference_dims)
+    def _stated(self, k: float, a: WindowModel) -> float:
+        """A ratio k stated for ``reference_dims`` effective dimensions (module doc)."""
+        return 1.0 + (max(k, 0.0) - 1.0) * math.sqrt(a.nonnull / self.reference_dims)
 
     def _contrast(self, c: int) -> float:
         """The contrast at block position c (see the module docstring)."""
         a0, a = self._before(c)
         b = self._model(c, c + self.wb)
-        (p_ab, q_ab), (p_0a, q_0a) = distances(a, b), distances(a0, a)
         oldest = c + 1 - 2 * self.wa
         for key in [k for k in self._models if k[0] < oldest]:
             del self._models[key]
-        return self._stated(p_ab / max(p_0a, 1e-300), q_ab / max(q_0a, 1e-300), a)
+        return self._stated(pca_distance(a, b) / max(pca_distance(a0, a), 1e-300), a)
 
     def _early(self, c: int) -> float:
         """The early look at block position c (module docstring): B' = [c, c + we) under
-        the models of A, over A under those of A0 (both already fitted)."""
+        A's PCA model, over A under A0's (both already fitted)."""
         a0, a = self._before(c)
-        (p_b, q_b), (p_a, q_a) = one_sided(self._stats(c, c + self.we), a), one_sided(a.stats, a0)
-        return self._stated(p_b / max(p_a, 1e-300), q_b / max(q_a, 1e-300), a)
+        e_b = pca_error(self._stats(c, c + self.we), a)
+        return self._stated(e_b / max(pca_error(a.stats, a0), 1e-300), a)
 
 
 def segment_contrast(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,

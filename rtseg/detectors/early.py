@@ -93,6 +93,16 @@ class EarlyCuts:
             return None
         return self._send(peak, early=True)
 
+    def forget(self, position: int) -> None:
+        """A cut sent at ``position`` was withdrawn before it went out (the same-behaviour
+        gate dropped it): it no longer keeps other cuts ``min_gap`` away, and the look
+        that found it may find a maximum again (one that exceeds the values before it)."""
+        if position in self._sent:
+            self._sent.remove(position)
+        for look in (self.full, self.early):
+            if look is not None:
+                look.forget(position)
+
     def _send(self, peak: Peak, early: bool) -> EarlyCut | None:
         sent = self._sent
         if any(abs(peak.position - p) < self.min_gap for p in sent):

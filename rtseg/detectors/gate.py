@@ -34,6 +34,7 @@ import logging
 import math
 from collections import deque
 from dataclasses import replace
+from typing import Callable
 
 import numpy as np
 
@@ -63,7 +64,8 @@ class SameBehaviourGate:
 
     def __init__(self, threshold: float = GATE_THRESHOLD, decide_after: int = 180,
                  skip: int = 60, max_window: int = 360, min_after: int = 120, ring: int = 1200,
-                 reference_dims: int = 8, fit_args: dict | None = None) -> None:
+                 reference_dims: int = 8, fit_args: dict | None = None,
+                 on_drop: Callable[[int], None] | None = None) -> None:
         if not threshold > 0:
             raise ValueError(f"gate threshold must be positive, got {threshold}")
         if ring < max_window + decide_after:
@@ -85,6 +87,9 @@ class SameBehaviourGate:
         self.sent = 0
         #: (boundary, distance, sent) of every decision, for plots and benchmarks
         self.decisions: list[tuple[int, float, bool]] = []
+        #: called with the frame of every cut dropped (the detector forgets it: a dropped
+        #: cut does not keep a later change at bay)
+        self.on_drop = on_drop
 
     def push(self, t: int, x: np.ndarray) -> None:
         """The row of frame ``t`` (frames come in order)."""
@@ -172,6 +177,8 @@ class SameBehaviourGate:
             log.info("%s cut at frame %d dropped: the motion after it is the behaviour "
                      "before it (distance %.2f <= %.2f; %d dropped so far)",
                      cut.method, b, d, self.threshold, self.dropped)
+            if self.on_drop is not None:
+                self.on_drop(b)
             return
         self.sent += 1
         self._floor = max(self._floor, b)

@@ -42,6 +42,12 @@ class CausalPeaks:
         self._cand: tuple[int, float] | None = None
         self._last = None
 
+    def forget(self, position: int) -> None:
+        """The event at ``position`` was withdrawn: it no longer holds the next one
+        ``min_gap`` away (a later maximum must still exceed the values before it)."""
+        if self._last == position:
+            self._last = None
+
     def update(self, position: int, value: float, now: int) -> Peak | None:
         """Feed the value at ``position`` (known since frame ``now``); a Peak once confirmed."""
         out = None

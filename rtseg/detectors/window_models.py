@@ -120,8 +120,14 @@ def _errors(y: WindowStats, m: WindowModel) -> tuple[float, float]:
 
 
 def pca_error(y: WindowStats, m: WindowModel) -> float:
-    """Mean per-frame projection error of y's frames off m's mean + hyperplane, over m's own."""
-    return _errors(y, m)[0]
+    """Mean per-frame projection error of y's frames off m's mean + hyperplane, over m's own
+    (from y's statistics: tr M - sum of v^T M v over m's PCA basis, M as in ``_errors``)."""
+    n = y.n
+    dm = y.mean - m.stats.mean
+    W = m.pca_basis
+    kept = float(np.einsum("ij,ij->", W, y.scatter @ W) + n * np.sum((W.T @ dm) ** 2)) if W.shape[1] else 0.0
+    tr = float(np.trace(y.scatter)) + n * float(dm @ dm)
+    return (tr - kept) / n / m.pca_own
 
 
 def pca_distance(a: WindowModel, b: WindowModel) -> float:
