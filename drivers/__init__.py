@@ -12,7 +12,9 @@
 ``open_source(url)`` parses the URL and returns a started ``Source``.  Network sources
 listen on loopback (127.0.0.1) unless the URL writes another address (``osc://0.0.0.0:...``);
 ``allow=`` restricts who may send (see ``rtseg.drivers.osc.source``).
-"""
+
+May import ``rtseg.core``; its modules ``base`` and ``vendor_seq`` serve every source
+package."""
 
 from __future__ import annotations
 

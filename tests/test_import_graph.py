@@ -7,7 +7,10 @@
   ``rtseg.simulators`` (imports inside functions count: they tie modules together too).
 - ``rtseg/`` and ``drivers/`` hold at most 6 plain modules beside their sub-packages; in
   no package do two sibling modules share a family prefix (``library_file`` beside
-  ``library_learn``); every package's ``__init__`` says what it holds."""
+  ``library_learn``); every package's ``__init__`` says what it holds.
+- Every package's ``__init__`` says what it may import (a paragraph starting "May import"
+  that names modules and packages in double backquotes), and its modules import nothing
+  else of rtseg but their own package."""
 
 from __future__ import annotations
 
@@ -215,3 +218,86 @@ def test_pyproject_installs_every_package():
     present = {name for name, path in module_files().items() if path.name == "__init__.py"}
     assert present - listed == set(), f"packages missing from pyproject.toml: {sorted(present - listed)}"
     assert listed - present == {"rtseg.defaults"}
+
+
+#: packages whose ``__init__`` states no "May import" rule, and the rule the test holds
+#: them to: the detectors import ``rtseg.core``, ``rtseg.config`` and their own shared
+#: modules only
+_DETECTOR_SHARED = {"rtseg.core", "rtseg.config", "rtseg.detectors.base",
+                    "rtseg.detectors._linalg", "rtseg.detectors._scan"}
+UNSTATED = {
+    "rtseg.detectors": {"rtseg.core", "rtseg.config"},
+    "rtseg.detectors.pca": _DETECTOR_SHARED,
+    "rtseg.detectors.ppca": _DETECTOR_SHARED,
+}
+
+
+def stated_imports(doc: str) -> set[str] | None:
+    """The modules a package's docstring says it may import: the ``rtseg...`` names in
+    double backquotes of its paragraph starting "May import"; ``{"*"}`` for "any package";
+    None when it has no such paragraph."""
+    import re
+
+    para = next((p for p in re.split(r"\n\s*\n", doc) if p.lstrip().startswith("May import")),
+                None)
+    if para is None:
+        return None
+    if "any package" in para:
+        return {"*"}
+    return set(re.findall(r"``(rtseg(?:\.\w+)*)``", para))
+
+
+def allowed(package: str, target: str, stated: set[str]) -> bool:
+    """Whether a module of ``package`` may import module ``target``: its own package and
+    what lies below it, or a stated name and what lies below that; a stated ancestor of
+    the package (``rtseg``) allows that module alone."""
+    if "*" in stated or target == package or target.startswith(package + "."):
+        return True
+    for name in stated:
+        if package.startswith(name + "."):
+            if target == name:
+                return True
+        elif target == name or target.startswith(name + "."):
+            return True
+    return False
+
+
+def test_every_package_keeps_to_what_it_may_import():
+    mods = module_files()
+    edges = import_edges(mods)
+    rules: dict[str, set[str]] = {}
+    unstated = []
+    for name, path in mods.items():
+        if path.name != "__init__.py" or name == "rtseg":   # the root holds everything
+            continue
+        doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
+        stated = stated_imports(doc)
+        if stated is None:
+            stated = UNSTATED.get(name)
+            if stated is None:
+                unstated.append(name)
+                continue
+        rules[name] = stated
+    assert not unstated, "packages whose __init__ does not say what they may import " \
+        "(a paragraph starting 'May import ``rtseg...``'): " + ", ".join(sorted(unstated))
+    offenders = []
+    for name, path in mods.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        if package not in rules:
+            continue
+        for target in sorted(edges[name]):
+            if not allowed(package, target, rules[package]):
+                offenders.append(f"{name} imports {target}")
+    assert not offenders, "imports their package's __init__ does not allow:\n" + \
+        "\n".join(offenders)
+
+
+def test_the_rule_check_reads_the_docstring_and_refuses_what_it_leaves_out():
+    doc = "Holds things.\n\nMay import ``rtseg.core`` and ``rtseg`` (its version)."
+    stated = stated_imports(doc)
+    assert stated == {"rtseg.core", "rtseg"}
+    assert allowed("rtseg.recording", "rtseg.core.events", stated)
+    assert allowed("rtseg.recording", "rtseg", stated)
+    assert allowed("rtseg.recording", "rtseg.recording.format", stated)
+    assert not allowed("rtseg.recording", "rtseg.live.session", stated)
+    assert stated_imports("Holds things, and says nothing of imports.") is None

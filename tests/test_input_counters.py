@@ -1,4 +1,4 @@
-"""Bad input is counted *and shown* (issue 11 item 3): corrupt serial frames on a real pty
+"""Bad input is counted *and shown*: corrupt serial frames on a real pty
 and junk UDP datagrams on a real socket reach the summary (text and dict), the
 ``/rtseg/input`` OSC message (received here over a real UDP socket), the status events of
 the JSON-lines log, and the session recording; ``/rtseg/status`` keeps its ``ifii`` form.

@@ -1,4 +1,7 @@
 """Noitom Axis Neuron / Axis Studio BVH broadcast: the binary (``codec``) and text
 (``text``) encodings, the 59-joint skeleton and its pose maths (``pose``, with the optional
 C ``kernel``), decoded frames to rtseg frames (``frames``) and the live source ``axis://``
-(``source``)."""
+(``source``).
+
+May import ``rtseg.core``, ``rtseg.drivers.base``, ``rtseg.drivers.vendor_seq`` and
+``rtseg.drivers.osc.source`` (the UDP listener)."""

@@ -271,7 +271,7 @@ def _fk(x: np.ndarray) -> np.ndarray:
     :data:`_HAMILTON_TILED` sums them (each component the sum of 4 exact products) back
     into the tiled form.  Per frame, not one product over all frames: BLAS sums a large
     product in another order, and a frame must come out the same alone or in a batch.
-    The 4x4 matrix products this replaced differ in the last bits only."""
+    The 4x4 left-product matrix form (the tests' reference) differs in the last bits only."""
     flat = x.shape[:-2] + (-1,)
     for anc in _FK_ANCESTOR:
         p = x.reshape(flat).take(anc, axis=-1)

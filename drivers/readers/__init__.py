@@ -3,7 +3,8 @@
 ``read_take(path)`` picks the reader by extension; ``write_take(path, take)`` writes
 rtseg's own ``.npz`` take format.  Malformed input raises ``ReaderError`` (a ValueError)
 naming the file, the line and the problem.
-"""
+
+May import ``rtseg.core`` and ``rtseg.recording`` (a recorded session folder is a take)."""
 
 from __future__ import annotations
 

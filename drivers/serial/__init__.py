@@ -1,3 +1,5 @@
 """Serial IMU suits (USB CDC / UART): rtseg's wire format (``wire``: constants, COBS/CRC
 framing, encoder), its streaming decoders (``codec`` binary, ``text`` lines, ``decoded``
-the checks both share) and the live source ``serial://`` (``source``)."""
+the checks both share) and the live source ``serial://`` (``source``).
+
+May import ``rtseg.core`` and ``rtseg.drivers.base``."""

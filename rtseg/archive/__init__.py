@@ -3,7 +3,7 @@ this process or on Dask (``executors``), and keep the records (``store``: JSON l
 Parquet).
 
 May import ``rtseg.detectors``, ``rtseg.identity``, ``rtseg.labels``, ``rtseg.core`` and
-the drivers' readers."""
+the drivers' readers (``rtseg.drivers.readers``)."""
 
 from rtseg.archive.runner import (
     TAKE_EXTENSIONS,

@@ -3,5 +3,4 @@ quaternion maths (scalar-last ``x, y, z, w``), the ring buffer of live frames, s
 suit profiles, rig recognition, resampling, pose features, and the cut / status events a
 session emits.
 
-Imports nothing of rtseg outside ``rtseg.core`` except ``rtseg.config`` (the shipped
-defaults) and the file readers of ``rtseg.drivers.readers`` where a take is loaded."""
+May import ``rtseg.config`` (the shipped defaults) and nothing else of rtseg."""

@@ -5,7 +5,8 @@ and spliced performances with exact boundaries built from single-behaviour takes
 (``splice``, ``blend``).
 
 May import ``rtseg.live``, ``rtseg.identity``, ``rtseg.library``, ``rtseg.detectors``,
-``rtseg.labels``, ``rtseg.core`` and the drivers' readers; no command module."""
+``rtseg.labels``, ``rtseg.recording``, ``rtseg.core``, ``rtseg.progress`` and the drivers'
+readers (``rtseg.drivers.readers``); no command module."""
 
 from rtseg.evaluation.scoring import (
     Score,

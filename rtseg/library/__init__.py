@@ -4,8 +4,11 @@ and its builder, ``distance`` the model distance, ``calibration`` the rejection 
 ``file`` the library file, ``examples`` and ``sources`` the labelled examples (from takes
 and from source folders).
 
-May import ``rtseg.core``, ``rtseg.labels``, ``rtseg.detectors`` and the readers of
-``rtseg.drivers``."""
+May import ``rtseg.core``, ``rtseg.config``, ``rtseg.labels``, ``rtseg.detectors`` and
+``rtseg.drivers.readers``; building examples (``examples``, ``sources``) also imports,
+inside functions, ``rtseg.evaluation`` (the rows the live pipeline feeds its detectors,
+the joining of source takes), ``rtseg.recording`` (segments of a recorded session) and
+``rtseg.simulators.synth`` (synthetic examples)."""
 
 from rtseg.library.behaviours import (
     FORMAT,

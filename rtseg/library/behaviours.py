@@ -73,9 +73,10 @@ VERSION = 2
 #: versions this rtseg reads: 1 (descriptor distance only), 2 (window statistics: model distance)
 READS = (1, 2)
 METRICS = ("model", "descriptor")
-#: the distance a library is learned with: "model" (``rtseg.library.distance``) since
-#: 2026-12-01 (held out: mocap6 0.80 -> 0.90, cmu_single BVH walk 0.67 -> 1.00, spliced
-#: 0.81 -> 0.94; docs/identity.md); "descriptor" is the earlier one
+#: the distance a library is learned with: "model" (``rtseg.library.distance``); held
+#: out it names more segments right than "descriptor" (mocap6 0.90 against 0.80,
+#: cmu_single BVH walk 1.00 against 0.67, spliced 0.94 against 0.81; docs/identity.md),
+#: the metric of version-1 files
 DEFAULT_METRIC = "model"
 #: a name's distance under the model metric: its nearest window (k = 1; k = 3, the
 #: descriptor's, let 3 more left-out mocap6 exercises through, docs/identity.md)

@@ -16,13 +16,12 @@ import numpy as np
 #: a library of one name has no unknown cases to calibrate against: its threshold is this
 #: many times its median same-name distance - the largest threshold / median ratio the
 #: calibration chose in the 25 multi-name libraries of benchmarks/library_loto.py's mocap6
-#: and cmu_single folds (median 1.15, range 0.87-1.30); it was 1.5 x the largest one
+#: and cmu_single folds (median 1.15, range 0.87-1.30) under the descriptor metric
 ONE_NAME_FACTOR = 1.3
 #: the same re-derived for the model metric: the largest ratio in the 25 multi-name
 #: libraries of those folds under the model distance, with windows every
 #: ``DEFAULT_STEP_S`` and known cases from other examples only (median 1.24, range
-#: 1.09-1.40; 1.565 while windows of one example counted as known cases, 1.45 with
-#: windows every 1 s).  The descriptor's factor (legacy files) was not re-derived.
+#: 1.09-1.40).
 MODEL_ONE_NAME_FACTOR = 1.40
 #: the threshold of a library that cannot be calibrated (no behaviour has a second example,
 #: so no known case): per metric, the median threshold the calibration chose in the

@@ -2,11 +2,11 @@
 ``save``) and reading (``load``); ``rtseg.library.save`` / ``rtseg.library.load``.
 
 The file is JSON, data only: ``format`` (``rtseg-behaviour-library``), ``version`` (2;
-version-1 files, written before the model distance, are read as descriptor libraries),
+version-1 files hold the descriptor distance only and are read as descriptor libraries),
 ``profile`` and ``dims`` (the pose-feature profile and its dims), the window settings,
 ``threshold`` and ``ratio`` (the rejection rule), ``k_nearest`` (a name's distance is the
-mean of its k nearest windows'; files written before it existed have none and read as 1,
-the rule their threshold was calibrated for), ``scale`` (per descriptor dim), per
+mean of its k nearest windows'; a file without it reads as 1, the rule its threshold
+was calibrated for), ``scale`` (per descriptor dim), per
 window its ``names`` / ``sources`` (example index) / ``starts`` / ``descriptors``, the
 distance ``metric`` (``model`` or ``descriptor``) and, for ``model``, ``lag_s`` and per
 window its ``window_stats`` (``rtseg.library.distance.stats_to_json``: frame count, mean and

@@ -6,7 +6,8 @@ processing step, events and health; ``config`` the ``config/live.toml`` schema;
 ``rate_check`` the declared-frame-rate check.
 
 May import ``rtseg.identity``, ``rtseg.detectors``, ``rtseg.recording``,
-``rtseg.publishers``, ``rtseg.core`` and ``rtseg.drivers``; no command module."""
+``rtseg.publishers``, ``rtseg.core``, ``rtseg.config`` and ``rtseg.drivers``; no command
+module."""
 
 from rtseg.live.session import (
     DEFAULT_FRAME_RATE,

@@ -6,7 +6,8 @@ beyond numpy): the session feeds it, it queues bounded batches.
 :class:`~rtseg.monitor.server.MonitorServer` (aiohttp, its own thread) serves the page, the
 uPlot charting library shipped in ``static/`` (MIT, ``static/uPlot.LICENSE``) and a
 WebSocket of those batches.  :func:`start_monitor` makes both.
-"""
+
+May import ``rtseg.core``."""
 
 from __future__ import annotations
 

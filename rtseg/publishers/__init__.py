@@ -35,7 +35,8 @@ OSC targets take options after commas: ``template=ADDRESS [ARG ...]`` (repeatabl
 default on), and for TCP ``queue=N`` (outgoing queue length, default 1000) and
 ``max_age=SECONDS`` (drop messages that could not be sent in time, default 2).
 IPv6 hosts go in brackets: ``udp:[::1]:9123``.  A bad spec raises ValueError naming it.
-"""
+
+May import ``rtseg.core``."""
 
 from __future__ import annotations
 

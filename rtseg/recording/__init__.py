@@ -54,7 +54,8 @@ any record failing its magic/CRC) is skipped and counted, never raised.
 Modules: :mod:`rtseg.recording.format` (file names, record layout),
 :mod:`rtseg.recording.writer` (writing) and :mod:`rtseg.recording.reader` (reading); their
 public names are importable from here.
-"""
+
+May import ``rtseg.core`` and ``rtseg`` (its version, written into ``session.json``)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,8 @@
 """The procedural motion synthesiser, the built-in default suit (so a fresh clone needs no
 data): ``motion`` (``synthesize``), the behaviour library (``behaviours``), scripts such as
-``"idle:4,walk:8"`` (``script``) and the default17 skeleton (``skeleton``)."""
+``"idle:4,walk:8"`` (``script``) and the default17 skeleton (``skeleton``).
+
+May import ``rtseg.core`` and ``rtseg.labels``."""
 
 from rtseg.simulators.synth.motion import (
     synthesize,

@@ -66,7 +66,7 @@ BLEND_RANGE = (0.4, 0.8)
 
 #: The identity threshold (``[identity] threshold``) for synthetic performances.  Their
 #: instances of one behaviour differ by design (tempo, amplitude, posture style) more than a
-#: performer's real repeats, so the mocap-chosen default (4.5) gives recurring synthetic
+#: performer's real repeats, so the mocap-chosen default (4.0) gives recurring synthetic
 #: behaviours new ids.  Measured D of a recurring walk or punch to its first instance on
 #: ``walk:6,punch:6,walk:6,punch:6,squat:6``, seeds 0-5, cut at the true changes and at the
 #: contrast detector's cuts (placement and bounded windows on and off): 1.9-7.1; of the
