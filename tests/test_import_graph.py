@@ -220,18 +220,6 @@ def test_pyproject_installs_every_package():
     assert listed - present == {"rtseg.defaults"}
 
 
-#: packages whose ``__init__`` states no "May import" rule, and the rule the test holds
-#: them to: the detectors import ``rtseg.core``, ``rtseg.config`` and their own shared
-#: modules only
-_DETECTOR_SHARED = {"rtseg.core", "rtseg.config", "rtseg.detectors.base",
-                    "rtseg.detectors._linalg", "rtseg.detectors._scan"}
-UNSTATED = {
-    "rtseg.detectors": {"rtseg.core", "rtseg.config"},
-    "rtseg.detectors.pca": _DETECTOR_SHARED,
-    "rtseg.detectors.ppca": _DETECTOR_SHARED,
-}
-
-
 def stated_imports(doc: str) -> set[str] | None:
     """The modules a package's docstring says it may import: the ``rtseg...`` names in
     double backquotes of its paragraph starting "May import"; ``{"*"}`` for "any package";
@@ -273,10 +261,8 @@ def test_every_package_keeps_to_what_it_may_import():
         doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
         stated = stated_imports(doc)
         if stated is None:
-            stated = UNSTATED.get(name)
-            if stated is None:
-                unstated.append(name)
-                continue
+            unstated.append(name)
+            continue
         rules[name] = stated
     assert not unstated, "packages whose __init__ does not say what they may import " \
         "(a paragraph starting 'May import ``rtseg...``'): " + ", ".join(sorted(unstated))

@@ -10,13 +10,19 @@
 - ``gmm``  (batch): cut where consecutive frames change Gaussian-mixture cluster
   (``rtseg.detectors.gmm``).
 - ``contrast`` (online, rtseg's own; the default of ``rtseg live``): cut at a causal maximum
-  of the contrast between the windows just before and just after a frame
-  (``rtseg.detectors.contrast``); offline it runs unchanged.
+  of the ratio of PCA window distances just after and just before a frame
+  (``rtseg.detectors.contrast``), with its early look (``early``), same-behaviour gate
+  (``gate``) and cut placement (``placement``) beside it; offline it runs unchanged.
+  Window models shared by these and the identity tracker: ``window_models``.
 
 Parameters live in ``config/detectors.toml`` (sections ``[pca]``, ``[ppca]``, ``[gmm]``).
 Windows are given in seconds and converted to frames with the frame rate of the take or
 stream (``frames(seconds, frame_rate)``).  Frame numbers in cuts are 0-based indices of the
 feature rows given to the detector; ``Cut.frame`` is the first frame of the new segment.
+
+May import ``rtseg.core`` and ``rtseg.config``; ``rtseg.detectors.pca`` and
+``rtseg.detectors.ppca`` may import those and the shared modules ``rtseg.detectors.base``,
+``rtseg.detectors._linalg`` and ``rtseg.detectors._scan``.
 """
 
 from __future__ import annotations
