@@ -382,3 +382,23 @@ def test_a_cut_the_gate_drops_does_not_hide_the_change_after_it():
     after = next(t for t in perf.transitions if t.lo / 120.0 > dropped[0])
     assert after.lo / 120.0 - dropped[0] < 2.0
     assert any(after.lo / 120.0 - 0.5 <= c <= after.hi / 120.0 + 0.5 for c in cuts)
+
+
+# ---------------------------------------------------------------- warm-started window fits
+def test_warm_started_pca_fit_follows_the_exact_one():
+    """Windows sliding over the synthetic performance (every 1/8 s): the model warm
+    started from the previous window's gives, within 1 %, the exact fit's
+    projection errors; without a warm start it is the exact fit."""
+    from rtseg.detectors.window_models import fit_pca
+    X = take_features(synthesize(seed=1).take)
+    warm = None
+    worst = 0.0
+    for lo in range(0, len(X) - 600, 15):
+        s = WindowStats.of(X[lo:lo + 360])
+        exact, approx = fit(s), fit_pca(s, warm=warm)
+        assert fit_pca(s).pca_basis.shape == exact.pca_basis.shape and fit_pca(s).exact
+        y = WindowStats.of(X[lo + 360:lo + 600])
+        worst = max(worst, abs(pca_error(y, approx) / pca_error(y, exact) - 1))
+        warm = approx
+    assert worst < 0.01
+    assert warm is not None and not warm.exact

@@ -30,7 +30,8 @@ Delay: a cut at c is known ``after`` frames later plus the confirmation (at most
 frames): 2 + <= 1 s at the defaults; about 1 + <= 0.5 s when the early look (below) sends
 it.  The statistics of every ``step``-frame block are
 summed once (one BLAS call); windows are differences of their prefix sums, and each
-window's models are fitted once (``window_models.fit``: one 56x56 eigen-decomposition) and
+window's PCA model is fitted once (``window_models.fit_pca``: two steps of subspace iteration
+from the previous grid position's window, an exact eigen-decomposition every ``EXACT_EVERY``) and
 reused while the window is in use (A becomes A0 w frames later).  A position's before
 window is fitted with the frame after the block that completes it and its after window
 when that is complete, so no frame fits more than one window.
@@ -91,7 +92,12 @@ from rtseg.detectors.early import EarlyCut, EarlyCuts
 from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, place
 from rtseg.detectors.gate import (GATE_DECIDE_S, GATE_MIN_AFTER_S, GATE_SKIP_S, GATE_WINDOW_S,
                                   SameBehaviourGate)
-from rtseg.detectors.window_models import WindowModel, WindowStats, fit, pca_distance, pca_error
+from rtseg.detectors.window_models import PcaWindow, WindowStats, fit_pca, pca_distance, pca_error
+
+
+#: every this many window fits one is exact (``fit_pca`` without a warm start): it
+#: refreshes the input's effective dimension and bounds any drift of the warm starts
+EXACT_EVERY = 24
 
 
 class ContrastDetector(OnlineDetector):
@@ -205,7 +211,10 @@ class ContrastDetector(OnlineDetector):
         self._nb = 0                         # whole blocks in the segment
         self._fill = 0                       # frames in the block being filled
         self._ref: np.ndarray | None = None  # the segment's first frame (sums are about it)
-        self._models: dict[tuple[int, int], WindowModel] = {}
+        self._models: dict[tuple[int, int], PcaWindow] = {}
+        #: the last model of each chain (before / after windows): the next one's warm start
+        self._warm: dict[str, PcaWindow] = {}
+        self._fits = 0
         self._pending: tuple[int, int] | None = None   # a window to fit with the next frame
         self._last_sent: int | None = None   # block position of the last cut sent
         self._last_placed: int | None = None  # frame of the last cut sent, as placed
@@ -324,10 +333,16 @@ class ContrastDetector(OnlineDetector):
                                      self._P1[hi % cap] - self._P1[lo % cap],
                                      self._P2[hi % cap] - self._P2[lo % cap])
 
-    def _model(self, lo: int, hi: int) -> WindowModel:
+    def _model(self, lo: int, hi: int, chain: str = "before") -> PcaWindow:
+        """The PCA model of blocks [lo, hi), fitted once (``window_models.fit_pca``), warm
+        started from the last model of its ``chain`` (the window at the previous grid
+        position), exactly every ``EXACT_EVERY`` fits."""
         m = self._models.get((lo, hi))
         if m is None:
-            m = self._models[(lo, hi)] = fit(self._stats(lo, hi), **self.fit_args)
+            self._fits += 1
+            warm = self._warm.get(chain) if self._fits % EXACT_EVERY else None
+            m = fit_pca(self._stats(lo, hi), self.fit_args["pca_energy"], warm)
+            self._models[(lo, hi)] = self._warm[chain] = m
         return m
 
     def _width(self, c: int) -> int:
@@ -341,19 +356,19 @@ class ContrastDetector(OnlineDetector):
             w = min(w, (c - L) // 2)
         return w
 
-    def _before(self, c: int) -> tuple[WindowModel, WindowModel]:
+    def _before(self, c: int) -> tuple[PcaWindow, PcaWindow]:
         """The models of A0 and A at block position c (``_width``)."""
         w = self._width(c)
         return self._model(c - 2 * w, c - w), self._model(c - w, c)
 
-    def _stated(self, k: float, a: WindowModel) -> float:
+    def _stated(self, k: float, a: PcaWindow) -> float:
         """A ratio k stated for ``reference_dims`` effective dimensions (module doc)."""
         return 1.0 + (max(k, 0.0) - 1.0) * math.sqrt(a.nonnull / self.reference_dims)
 
     def _contrast(self, c: int) -> float:
         """The contrast at block position c (see the module docstring)."""
         a0, a = self._before(c)
-        b = self._model(c, c + self.wb)
+        b = self._model(c, c + self.wb, "after")
         oldest = c + 1 - 2 * self.wa
         for key in [k for k in self._models if k[0] < oldest]:
             del self._models[key]
