@@ -87,6 +87,15 @@ class FrameQueue:
                 return None
             return self._frames.popleft()
 
+    def drain(self, out: list[Frame]) -> int:
+        """Move every queued frame, oldest first, onto ``out`` without waiting; how many."""
+        with self._cond:
+            n = len(self._frames)
+            if n:
+                out.extend(self._frames)
+                self._frames.clear()
+        return n
+
     def close(self) -> None:
         with self._cond:
             self._closed = True
@@ -107,6 +116,18 @@ class Source:
     ``as_fast_as_read``: True for a source that hands over frames as fast as they are read
     (a replay at ``speed=0``): its frames are never late, so the live loop processes every
     one instead of dropping the oldest under overload.
+
+    Polled reading (optional)
+    -------------------------
+    A source that reads file descriptors (a serial port, a UDP socket) can be read by its
+    owner's event loop instead of its own thread, so that one thread serves every source
+    of a process (``rtseg.live.loop``).  ``take_over()`` switches it (True once its reader
+    thread has ended); from then on the owner waits for ``poll_fds()`` to become readable
+    (or until ``poll_due()``, a monotonic time, whichever comes first), calls
+    ``poll(now)``, which reads without blocking whatever is waiting and decodes it, and
+    takes the decoded frames with ``take(out)``, in arrival order.  The defaults describe
+    a source that keeps its thread (a file replay, a TCP client that blocks, any source
+    written before this protocol): ``take_over()`` is False and the owner calls ``read``.
     """
 
     joint_names: list[str]
@@ -135,6 +156,30 @@ class Source:
 
     def close(self) -> None:
         """Release the device/socket.  Safe to call twice."""
+
+    # ------------------------------------------------------------------ polled reading
+    def take_over(self) -> bool:
+        """Hand reading to the caller's event loop (see the class docstring); False when
+        this source must keep reading in its own thread."""
+        return False
+
+    def poll_fds(self) -> tuple[int, ...]:
+        """File descriptors whose readability means input is waiting (may change after a
+        reconnect; empty while the device is away)."""
+        return ()
+
+    def poll_due(self) -> float | None:
+        """Monotonic time by which ``poll`` must run even without input (a quiet-gap
+        flush, a staleness check, a reconnect attempt); None when only input matters."""
+        return None
+
+    def poll(self, now: float) -> None:
+        """Read without blocking whatever is waiting, decode it and queue the frames for
+        ``take`` (``now``: ``time.monotonic()``).  Never raises because of the device."""
+
+    def take(self, out: list[Frame]) -> int:
+        """Append the frames decoded so far to ``out`` without waiting; how many."""
+        return 0
 
     def __iter__(self) -> Iterator[Frame]:
         while True:
@@ -166,3 +211,10 @@ class QueuedSource(Source):
             return None
         self.count("frames_ok")
         return frame
+
+    def take(self, out: list[Frame]) -> int:
+        """The queued frames, oldest first, appended to ``out`` without waiting; how many."""
+        n = self._queue.drain(out)
+        if n:
+            self.count("frames_ok", n)
+        return n

@@ -53,6 +53,9 @@ class SessionProcessing:
         recv_all = w.recv_time
         n = len(w)
         i = 0
+        # between frames, the loop reads the polled sources (rtseg.live.loop: at most
+        # once a millisecond), so that frames arriving meanwhile are stamped and waiting
+        pump = self._loop.pump if self._loop is not None else None
         while i < n:
             if self._max_lag > 0 and now - float(recv_all[i]) > 0.5 * self._max_lag:
                 waiting = self.ring.head - (w.start + i)
@@ -98,6 +101,8 @@ class SessionProcessing:
             # cost of one frame (s), a running mean over about 64 frames
             self._frame_cost += (done - now - self._frame_cost) / 64.0
             now = done
+            if pump is not None and i < n:
+                pump(done)
         self._pending_lost = pending
         if len(w):
             now = time.monotonic()
