@@ -151,7 +151,9 @@ def test_two_suits_in_one_thread_each_with_its_detectors_recording_and_tagged_cu
                                 handle_signals=False, name="alice"),
                     LiveSession(vmc_src, cfgs["bob"], handle_signals=False, name="bob")]
         t, box = run_in_thread(lambda: run_sessions(sessions, handle_signals=False))
-        time.sleep(0.2)
+        end = time.monotonic() + 10
+        while time.monotonic() < end and not all(s._polled for s in sessions):
+            time.sleep(0.01)     # the drivers' own threads end when the loop takes over
         sender.start()
         play = take.n_frames / (RATE * SPEED)
         end = time.monotonic() + play + 10
@@ -255,3 +257,52 @@ def test_names_must_suit_an_osc_address():
     with pytest.raises(ValueError, match="twice"):
         s = LiveSession("osc://127.0.0.1:0", from_dict({}), handle_signals=False)
         run_sessions([s, s], handle_signals=False)
+
+
+def test_rtseg_live_runs_several_urls_in_one_process(tmp_path):
+    """``rtseg live NAME=URL URL ...``: one session per source, in one process; every
+    JSON line names its source, each recording goes to its own sub-folder and each
+    summary is printed after its name."""
+    import subprocess
+    import sys
+    log, rec = tmp_path / "events.jsonl", tmp_path / "rec"
+    out = subprocess.run(
+        [sys.executable, "-m", "rtseg.cli", "live", "left=sim://synth?seed=1",
+         "sim://synth?seed=2", "--duration", "2", "--no-osc", "--quiet", "--jsonl", str(log),
+         "--record", str(rec)], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    events = [json.loads(line) for line in log.read_text().splitlines()]
+    assert {e["source"] for e in events} == {"left", "suit2"}
+    for name in ("left", "suit2"):
+        final = [e for e in events if e["source"] == name and e["type"] == "status"][-1]
+        assert final["alive"] == 0
+        tk = read_session(rec / name)
+        assert tk.n_frames >= 120                      # 2 s at 120 Hz, less start-up
+        assert f"{name}: session ended (duration reached)" in out.stderr
+
+
+def test_sources_tables_in_the_configuration(tmp_path):
+    from rtseg.commands.live import source_list
+    from rtseg.config import ConfigError
+    from rtseg.live.config import load_session_config
+    p = tmp_path / "live.toml"
+    p.write_text('[[sources]]\nurl = "serial:///dev/ttyUSB0"\nname = "alice"\n'
+                 '[[sources]]\nurl = "osc://:39540"\n')
+    cfg = load_session_config(p)
+    assert cfg.sources == [{"url": "serial:///dev/ttyUSB0", "name": "alice"},
+                           {"url": "osc://:39540", "name": ""}]
+    assert source_list([], cfg) == [("alice", "serial:///dev/ttyUSB0"),
+                                     ("suit2", "osc://:39540")]
+    # the command line's URLs replace them; one URL alone stays unnamed
+    assert source_list(["osc://:1?format=vmc"], cfg) == [("", "osc://:1?format=vmc")]
+    assert source_list(["x=osc://:1"], cfg) == [("x", "osc://:1")]
+    with pytest.raises(ConfigError, match="twice"):
+        source_list(["a=osc://:1", "a=osc://:2"], cfg)
+    for bad, what in (('[[sources]]\nname = "a"\n', "url"),
+                      ('[[sources]]\nurl = "osc://:1"\nname = "a b"\n', "name"),
+                      ('[[sources]]\nurl = "osc://:1"\nport = 3\n', "unknown key"),
+                      ('[[sources]]\nurl = "osc://:1"\nname = "a"\n'
+                       '[[sources]]\nurl = "osc://:2"\nname = "a"\n', "twice")):
+        p.write_text(bad)
+        with pytest.raises(ConfigError, match=what):
+            load_session_config(p)

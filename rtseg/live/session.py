@@ -402,13 +402,15 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
         self._pending_lost = 0
         self._frame_cost = 0.0
         self._max_batch = int(self.config["buffer.max_batch"])
-        self._deadline = None if self.duration is None else time.monotonic() + self.duration
+        self._deadline: float | None = None      # set when the input starts
         self._cursor = self.ring.cursor(0)
         self._got: list[Any] = []
 
     def _start_input(self, loop: Any) -> None:
         """Let the loop read the source (``Source.take_over``), or start a reader thread
         for a source that must block; attach the monitor."""
+        if self.duration is not None:
+            self._deadline = time.monotonic() + self.duration
         if self.monitor is not None:
             self._monitor_call(self.monitor.attach)
         taken = False
