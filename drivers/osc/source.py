@@ -302,6 +302,19 @@ class OscUdpSource(QueuedSource):
         self._poll_at = time.monotonic() + self._quiet_wait
         return True
 
+    def give_back(self) -> bool:
+        """Read in the reader thread again (after ``take_over``)."""
+        if not self._polled:
+            return True
+        if self._closed:
+            return False
+        self._sock.settimeout(self._quiet_wait)
+        self._polled = False
+        self._thread = threading.Thread(target=self._run, name=f"rtseg-osc-{self.port}",
+                                        daemon=True)
+        self._thread.start()
+        return True
+
     def poll_fds(self) -> tuple[int, ...]:
         return () if self._closed else (self._sock.fileno(),)
 

@@ -406,6 +406,16 @@ class SerialSource(QueuedSource):
         self._poll_at = time.monotonic()
         return True
 
+    def give_back(self) -> bool:
+        """Read in the reader thread again (after ``take_over``)."""
+        if not self._polled:
+            return True
+        self._polled = False
+        self._thread = threading.Thread(target=self._run, name=f"rtseg-serial {self.path}",
+                                        daemon=True)
+        self._thread.start()
+        return True
+
     def poll_fds(self) -> tuple[int, ...]:
         ser = self._ser
         if ser is None:

@@ -14,9 +14,9 @@ order (``LiveSession._receive``); then every session processes what its ring hol
 (``LiveSession._step``, at most ``buffer.max_batch`` frames per wake-up) and sends its
 status when due.  No frame changes threads on the way.
 
-While a session works through a batch, the sources are read again whenever a
-millisecond has passed since the last read (:meth:`SessionLoop.pump`, a ``poll`` with no
-wait): frames are stamped when they are read, so a long batch does not hold frames in
+While a session works through a batch, the sources are read again whenever
+``PUMP_EVERY_S`` (3 ms) has passed since the last read (:meth:`SessionLoop.pump`, a
+``poll`` with no wait): frames are stamped when they are read, so a long batch does not hold frames in
 the kernel's buffers (a pty holds about 4 KB), and the overload policy of
 ``rtseg.live.session`` ("Keeping up") sees them waiting and their age.
 
@@ -50,7 +50,8 @@ log = logging.getLogger("rtseg.live.session")
 
 #: longest wait between two wake-ups, s (stop flags and silence are checked this often)
 MAX_WAIT_S = 0.05
-#: during a batch, the sources are read again after this long, s
+#: during a batch, the sources are read again after this long, s (a pty holds 4 KB:
+#: 6 ms of a 17-sensor suit sent at 30 times its 120 Hz)
 PUMP_EVERY_S = 0.001
 
 _READ = select.POLLIN | select.POLLPRI | select.POLLERR | select.POLLHUP
@@ -108,7 +109,9 @@ class SessionLoop:
         self._poller = select.poll()
         self._poller.register(self.waker.rfd, select.POLLIN)
         self._fds: dict[int, Any] = {}          # descriptor -> session
+        self._watched: dict[int, tuple[int, ...]] = {}   # id(session) -> its descriptors
         self._polled: list[Any] = []            # sessions whose source this loop reads
+        self._woken: list[Any] = []             # sessions whose source's thread wakes it
         self._last_pump = 0.0
 
     # ------------------------------------------------------------------ descriptors
@@ -116,12 +119,18 @@ class SessionLoop:
         self._polled.append(session)
         self.sync(session)
 
+    def add_woken(self, session: Any) -> None:
+        self._woken.append(session)
+
     def drop(self, session: Any) -> None:
         """Stop watching ``session``'s source (it has stopped)."""
         if session in self._polled:
             self._polled.remove(session)
+        if session in self._woken:
+            self._woken.remove(session)
         for fd in [fd for fd, s in self._fds.items() if s is session]:
             self._unregister(fd)
+        self._watched.pop(id(session), None)
 
     def _unregister(self, fd: int) -> None:
         del self._fds[fd]
@@ -135,9 +144,13 @@ class SessionLoop:
         device is lost and reopened).  ``poll(2)`` keeps no state between calls, so a
         descriptor number reused by a reopened device needs nothing more."""
         try:
-            want = set(session.source.poll_fds())
+            fds = tuple(session.source.poll_fds())
         except Exception:                      # pragma: no cover - a driver bug
-            want = set()
+            fds = ()
+        if self._watched.get(id(session)) == fds:
+            return                             # the usual case: nothing changed
+        self._watched[id(session)] = fds
+        want = set(fds)
         have = {fd for fd, s in self._fds.items() if s is session}
         for fd in have - want:
             self._unregister(fd)
@@ -168,11 +181,15 @@ class SessionLoop:
                 continue
             if ev & select.POLLNVAL:           # closed under us: forget it
                 self._unregister(fd)
+                self._watched.pop(id(s), None)     # looked at again after the next poll
             ready.add(s)
         return ready
 
     def read_sources(self, ready: set[Any], now: float) -> None:
-        """Poll the sources of ``ready`` and those whose ``poll_due`` has come."""
+        """Take the frames the woken sources' threads queued; poll the sources of
+        ``ready`` and those whose ``poll_due`` has come."""
+        for s in self._woken:
+            s._take_frames()
         for s in self._polled:
             if s in ready:
                 s._poll_source(now)
@@ -190,9 +207,14 @@ class SessionLoop:
     def pump(self, now: float) -> None:
         """Between two frames of a batch: read whatever the polled sources hold (no
         wait), when ``PUMP_EVERY_S`` has passed since the last read."""
-        if now - self._last_pump < PUMP_EVERY_S or not self._polled:
+        if now - self._last_pump < PUMP_EVERY_S:
             return
-        self.read_sources(self._ready(self._poller.poll(0)), now)
+        if self._polled:
+            self.read_sources(self._ready(self._poller.poll(0)), now)
+        else:
+            for s in self._woken:
+                s._take_frames()
+            self._last_pump = now
 
     def next_due(self, now: float) -> float:
         """Seconds until the earliest due time of the polled sources (``MAX_WAIT_S`` at

@@ -32,7 +32,7 @@ also hands it every event and, after each step, a chance to queue a batch (bound
 Keeping up
 ----------
 Reading never waits for processing: a reader thread runs beside it, and a polled source is
-read again between the frames of a batch (at most once a millisecond).  Under overload (frames arrive faster than the
+read again between the frames of a batch (every 3 ms at most).  Under overload (frames arrive faster than the
 loop processes them) the loop drops the **oldest** waiting frames so that no frame is
 processed more than ``buffer.max_lag_seconds`` (L, default 0.1 s; ``--max-lag``) after it
 arrived, and cues stay timely: while working off what is waiting (at the measured cost
@@ -121,6 +121,10 @@ from rtseg.live.config import SessionConfig, load_session_config
 from rtseg.live.stats import FloatRing, LiveStats, SessionSummary, percentile
 
 log = logging.getLogger("rtseg.live.session")
+
+#: frames dropped for overload after which a polled source is read in threads again
+#: (``LiveSession._hand_back``): a sustained overload, not a stall of a few frames
+HAND_BACK_DROPS = 64
 
 
 __all__ = ["DEFAULT_FRAME_RATE", "FloatRing", "LiveSession", "LiveStats", "Pipeline",
@@ -219,6 +223,7 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
         self._loop: Any = None                  # the rtseg.live.loop.SessionLoop running it
         self._reader_thread: threading.Thread | None = None
         self._polled = False                    # the loop reads the source (no thread)
+        self._woken = False                     # the source's thread wakes the loop
 
     # ---------------------------------------------------------------- control
     def stop(self, reason: str = "stopped") -> None:
@@ -336,6 +341,21 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
                 self._receive(frame)
             got.clear()
 
+    def _take_frames(self) -> None:
+        """The frames a woken source's own thread queued (``Source.wake_with``),
+        received in order."""
+        got = self._got
+        try:
+            self.source.take(got)
+        except Exception as exc:  # a driver bug must not end the session
+            self.stats.source_errors += 1
+            self._warn("source", "source read failed (%s: %s); retrying",
+                       type(exc).__name__, exc)
+        if got:
+            for frame in got:
+                self._receive(frame)
+            got.clear()
+
     def _reader(self) -> None:
         """Reader thread of a source that must block (``Source.take_over`` False): frames
         received into the ring buffer, the loop woken for each batch."""
@@ -419,15 +439,52 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
         except Exception as exc:  # a driver bug: read it in a thread instead
             self._warn("source", "the source cannot be polled (%s: %s); a reader thread "
                        "reads it", type(exc).__name__, exc)
+        woken = False
+        if not taken:
+            try:
+                woken = bool(self.source.wake_with(loop.waker.wake))
+            except Exception as exc:  # a driver bug: read it in a thread instead
+                self._warn("source", "the source cannot wake the loop (%s: %s); a reader "
+                           "thread reads it", type(exc).__name__, exc)
         if taken:
             self._polled = True
             # frames its own thread decoded before the hand-over come first
             self._poll_source(time.monotonic())
             loop.add_polled(self)
+        elif woken:
+            self._woken = True
+            self._take_frames()
+            loop.add_woken(self)
         else:
             self._reader_thread = threading.Thread(target=self._reader, name="rtseg-reader",
                                                    daemon=True)
             self._reader_thread.start()
+
+    def _hand_back(self) -> None:
+        """Overloaded with a polled source (``HAND_BACK_DROPS`` frames dropped to keep
+        up): reading goes back to threads for the rest of the session, the source's own
+        and a reader thread that records and buffers each frame, so that frames are read
+        and recorded while processing runs behind, and a device's small buffer (a pty
+        holds 4 KB) is drained however long a batch takes or however little of the CPU
+        this thread gets."""
+        loop = self._loop
+        loop.drop(self)
+        self._polled = False
+        try:
+            ok = bool(self.source.give_back())
+        except Exception as exc:  # a driver bug: keep polling
+            ok = False
+            self._warn("source", "the source cannot read in its thread (%s: %s)",
+                       type(exc).__name__, exc)
+        if not ok:
+            self._polled = True
+            loop.add_polled(self)
+            return
+        log.info("overloaded: the source is read in threads from now on (%d frames "
+                 "dropped to keep up)", self.stats.overload_drops)
+        self._reader_thread = threading.Thread(target=self._reader, name="rtseg-reader",
+                                               daemon=True)
+        self._reader_thread.start()
 
     def _wait_s(self, now: float) -> float:
         """How long the loop may sleep for this session: 0 while frames wait in the ring,
@@ -454,6 +511,8 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
             self._process_window(w, now)
         self.stats.backlog = cursor.backlog
         self.stats.max_backlog = max(self.stats.max_backlog, self.stats.backlog)
+        if self._polled and self.stats.overload_drops >= HAND_BACK_DROPS:
+            self._hand_back()
         now = time.monotonic()
         if len(w) and self.stats.lag_s > self._lag_warn:
             self.stats.lag_warnings += 1
