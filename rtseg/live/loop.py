@@ -15,17 +15,24 @@ order (``LiveSession._receive``); then every session processes what its ring hol
 status when due.  No frame changes threads on the way.
 
 While a session works through a batch, the sources are read again whenever
-``PUMP_EVERY_S`` (3 ms) has passed since the last read (:meth:`SessionLoop.pump`, a
-``poll`` with no wait): frames are stamped when they are read, so a long batch does not hold frames in
-the kernel's buffers (a pty holds about 4 KB), and the overload policy of
+``PUMP_EVERY_S`` (1 ms) has passed since the last read (:meth:`SessionLoop.pump`, a
+``poll`` with no wait): frames are stamped when they are read, so a long batch does not
+hold frames in the kernel's buffers (a pty holds about 4 KB), and the overload policy of
 ``rtseg.live.session`` ("Keeping up") sees them waiting and their age.
 
-Sources that must block (a file replay, the TCP clients of Axis and MVN, a source
-object without the polling protocol) keep a reader thread each, as before
-(``LiveSession._reader``): it appends to the session's ring buffer and wakes the loop
-through the pipe.  Either way the ring buffer holds every frame received in arrival
-order; the recording gets every frame before it is appended, so ``replay_session`` of a
-recording reproduces the live cuts.
+Sources that keep a thread of their own because they must block (the TCP clients of
+Axis and MVN, Axis binary UDP, a pyserial URL) queue their frames and wake the loop
+through the pipe (``Source.wake_with``); the loop takes them as it takes a polled
+source's.  A source read only through ``read`` (a file or ``sim://`` replay, a source
+object without either protocol) gets a reader thread (``LiveSession._reader``) that
+appends to the session's ring buffer and wakes the loop.  A session that falls behind
+a polled source for good (``HAND_BACK_DROPS`` frames dropped to keep up) hands it back
+to its thread and reads it with a reader thread from then on
+(``LiveSession._hand_back``): on a machine short of CPU one thread doing both would
+read late, and a device with a small buffer (a pty holds 4 KB) would lose frames.
+Either way the ring buffer holds every frame received in arrival order; the recording
+gets every frame before it is appended, so ``replay_session`` of a recording reproduces
+the live cuts.
 
 Several sessions in one loop each keep their own source, pipeline (features, detectors,
 identity), ring buffer, publishers, recording and counters; they share the thread, the

@@ -32,7 +32,7 @@ also hands it every event and, after each step, a chance to queue a batch (bound
 Keeping up
 ----------
 Reading never waits for processing: a reader thread runs beside it, and a polled source is
-read again between the frames of a batch (every 3 ms at most).  Under overload (frames arrive faster than the
+read again between the frames of a batch (every millisecond at most).  Under overload (frames arrive faster than the
 loop processes them) the loop drops the **oldest** waiting frames so that no frame is
 processed more than ``buffer.max_lag_seconds`` (L, default 0.1 s; ``--max-lag``) after it
 arrived, and cues stay timely: while working off what is waiting (at the measured cost
