@@ -130,15 +130,21 @@ class Suits:
 
 def serve_suits(n: int, rate: float) -> int:
     """``--serve-suits N``: N suits playing the synthesised performance at ``rate`` Hz,
-    their phases spread over one frame period; prints each pty path; stops when stdin
-    closes."""
+    each from its own point of it, their frames' phases spread over one frame period;
+    prints each pty path; stops when stdin closes."""
+    from rtseg.core.take import Take
     from rtseg.simulators.serial_device import SerialSuit
     from rtseg.simulators.synth.motion import synthesize
     take = synthesize(frame_rate=120.0).take
     suits = []
     try:
         for i in range(n):
-            suit = SerialSuit(take, rate=rate, loop=True)
+            # each suit plays the performance from its own point (performers do not move
+            # in step: their cuts, and the detector's work, come at different times)
+            part = Take(take.joint_names, take.parents, take.frame_rate,
+                        np.roll(take.quats, -i * take.n_frames // n, axis=0),
+                        space=take.space, source="synth")
+            suit = SerialSuit(part, rate=rate, loop=True)
             print(suit.start(), flush=True)
             suits.append(suit)
             time.sleep(1.0 / (rate * n))

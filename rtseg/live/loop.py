@@ -11,8 +11,9 @@ reconnect attempt).  Then, for each session whose source is readable or due, the
 decodes what is waiting (``Source.poll``) and the session takes the frames
 (``Source.take``): each is recorded and appended to the session's ring buffer in arrival
 order (``LiveSession._receive``); then every session processes what its ring holds
-(``LiveSession._step``, at most ``buffer.max_batch`` frames per wake-up) and sends its
-status when due.  No frame changes threads on the way.
+(``LiveSession._step``, at most ``buffer.max_batch`` frames per wake-up, and with several
+sessions for at most ``TURN_S`` before the next one's turn) and sends its status when
+due.  No frame changes threads on the way.
 
 While a session works through a batch, the sources are read again whenever
 ``PUMP_EVERY_S`` (1 ms) has passed since the last read (:meth:`SessionLoop.pump`, a
@@ -60,6 +61,9 @@ MAX_WAIT_S = 0.05
 #: during a batch, the sources are read again after this long, s (a pty holds 4 KB:
 #: 6 ms of a 17-sensor suit sent at 30 times its 120 Hz)
 PUMP_EVERY_S = 0.001
+
+#: with several sessions, the longest one processes before the next one's turn, s
+TURN_S = 0.002
 
 _READ = select.POLLIN | select.POLLPRI | select.POLLERR | select.POLLHUP
 
@@ -120,6 +124,9 @@ class SessionLoop:
         self._polled: list[Any] = []            # sessions whose source this loop reads
         self._woken: list[Any] = []             # sessions whose source's thread wakes it
         self._last_pump = 0.0
+        #: longest a session processes in one turn when there are several (s; None for
+        #: one): the others' frames wait at most about that long per session
+        self.turn_s: float | None = TURN_S if len(self.sessions) > 1 else None
 
     # ------------------------------------------------------------------ descriptors
     def add_polled(self, session: Any) -> None:
@@ -321,4 +328,4 @@ def run_sessions(sessions: Sequence[Any], handle_signals: bool = True) -> list[A
     return [summaries[id(s)] for s in sessions]
 
 
-__all__ = ["MAX_WAIT_S", "PUMP_EVERY_S", "SessionLoop", "Waker", "run_sessions"]
+__all__ = ["MAX_WAIT_S", "PUMP_EVERY_S", "TURN_S", "SessionLoop", "Waker", "run_sessions"]

@@ -508,7 +508,7 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
                 self._pending_lost += skipped
         w = cursor.read(self._max_batch)
         if len(w) or w.lost:
-            self._process_window(w, now)
+            self._process_window(w, now, self._loop.turn_s if self._loop is not None else None)
         self.stats.backlog = cursor.backlog
         self.stats.max_backlog = max(self.stats.max_backlog, self.stats.backlog)
         if self._polled and self.stats.overload_drops >= HAND_BACK_DROPS:
