@@ -309,7 +309,10 @@ def run_sessions(sessions: Sequence[Any], handle_signals: bool = True) -> list[A
             now = time.monotonic()
             loop.read_sources(ready, now)
             for s in list(running):
-                s._step(time.monotonic())
+                now = time.monotonic()
+                if not s._due(now):
+                    continue                   # another session's wake-up
+                s._step(now)
                 if s._stop.is_set():
                     running.remove(s)
                     loop.drop(s)

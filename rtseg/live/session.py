@@ -122,6 +122,8 @@ from rtseg.live.stats import FloatRing, LiveStats, SessionSummary, percentile
 
 log = logging.getLogger("rtseg.live.session")
 
+#: longest a session goes without a step while other sessions wake the loop, s
+STEP_EVERY_S = 0.05
 #: frames dropped for overload after which a polled source is read in threads again
 #: (``LiveSession._hand_back``): a sustained overload, not a stall of a few frames
 HAND_BACK_DROPS = 64
@@ -425,6 +427,7 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
         self._deadline: float | None = None      # set when the input starts
         self._cursor = self.ring.cursor(0)
         self._got: list[Any] = []
+        self._last_step = 0.0
 
     def _start_input(self, loop: Any) -> None:
         """Let the loop read the source (``Source.take_over``), or start a reader thread
@@ -496,9 +499,19 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
             wait = min(wait, self._deadline - now)
         return wait
 
+    def _due(self, now: float) -> bool:
+        """Whether the loop's wake-up concerns this session: frames wait, its status or
+        deadline is due, it must stop, or ``STEP_EVERY_S`` passed since its last step
+        (silence, recorder and monitor are looked after that often)."""
+        return (self._cursor.backlog > 0 or now >= self._next_status
+                or now - self._last_step >= STEP_EVERY_S or self._stop.is_set()
+                or self._eof.is_set() or self._reader_error is not None
+                or (self._deadline is not None and now >= self._deadline))
+
     def _step(self, now: float) -> None:
         """One wake-up of the session: frames too old dropped, the next window processed,
         silence, recorder, monitor and status looked after, stop conditions checked."""
+        self._last_step = now
         cursor = self._cursor
         if self._max_lag > 0:
             # frames over the maximum lag: dropped at once, oldest first
