@@ -329,3 +329,35 @@ def test_an_overloaded_polled_source_is_read_in_threads_again(tmp_path, take):
     assert session._polled is False and session._reader_thread is not None
     assert read_session(tmp_path / "rec").n_frames == summary.frames_received
     assert summary.frames_received > 1000
+
+
+def test_the_wake_up_pipe_never_loses_a_wake_up():
+    """A thread wakes the loop every 0.2 ms while the loop waits on the pipe and clears
+    it whenever it is readable, as run_sessions does: no wait may run its full timeout
+    (a wake-up lost between clear() and the read would leave the flag set and every later
+    wake-up skipped)."""
+    from rtseg.live.loop import Waker
+    w = Waker()
+    try:
+        stop = threading.Event()
+
+        def waker():
+            while not stop.is_set():
+                w.wake()
+                time.sleep(0.0002)
+        t = threading.Thread(target=waker, daemon=True)
+        t.start()
+        p = select.poll()
+        p.register(w.rfd, select.POLLIN)
+        timeouts = 0
+        end = time.monotonic() + 1.5
+        while time.monotonic() < end:
+            if p.poll(200):
+                w.clear()
+            else:
+                timeouts += 1
+        stop.set()
+        t.join(5)
+        assert timeouts == 0, f"{timeouts} waits of 200 ms ran out while woken every 0.2 ms"
+    finally:
+        w.close()

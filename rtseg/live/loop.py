@@ -94,13 +94,17 @@ class Waker:
                 pass
 
     def clear(self) -> None:
-        """Forget the pending wake-up (before the loop looks at what woke it)."""
-        self._pending = False
+        """Forget the pending wake-up (before the loop looks at what woke it): the pipe
+        is emptied first, then the flag cleared, so a ``wake`` between the two finds the
+        flag set and its frames are seen by the look that follows; a ``wake`` after it
+        writes again (clearing the flag first would let a byte written meanwhile be read
+        with the flag left set, and every later wake-up be skipped)."""
         try:
             while os.read(self.rfd, 512):
                 pass
         except OSError:          # BlockingIOError: nothing more to read
             pass
+        self._pending = False
 
     def close(self) -> None:
         with self._lock:
