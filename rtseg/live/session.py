@@ -6,10 +6,12 @@ this module runs it in a session and publishes what it finds.  Where events go
 the summary are ``rtseg.live.stats``.  Their public names (``Pipeline``,
 ``PipelineCut``, ``make_detectors``, ``replay_frames``, ``replay_session``,
 ``build_publishers``, ``wire_methods``, ``LiveStats``, ``SessionSummary``) are re-exported
-here.  Three parts of ``LiveSession`` live in their own modules: ``rtseg.live.process``
-(frames from the ring through the pipeline, overload drops), ``rtseg.live.emitter`` (cut and
-behaviour events built, published, recorded) and ``rtseg.live.health`` (dropouts, status
-events, counters).
+here.  Four parts of ``LiveSession`` live in their own modules: ``rtseg.live.intake``
+(frames from the source, recorded and appended to the ring: polled, woken or by a reader
+thread), ``rtseg.live.process`` (frames from the ring through the pipeline, overload
+drops), ``rtseg.live.emitter`` (cut and behaviour events built, published, recorded) and
+``rtseg.live.health`` (dropouts, status events, counters); ``rtseg.live.loop`` runs
+sessions.
 
 Threads and data flow
 ---------------------
@@ -110,6 +112,7 @@ import numpy as np
 from rtseg.live.emitter import Event, SessionEvents
 from rtseg.live.loop import run_sessions
 from rtseg.live.health import SessionHealth
+from rtseg.live.intake import HAND_BACK_DROPS, SessionInput
 from rtseg.live.process import SessionProcessing
 from rtseg.live.outputs import build_publishers, log_publishers, wire_methods
 from rtseg.live.pipeline import (DEFAULT_FRAME_RATE, Pipeline, PipelineCut, PipelineStats,
@@ -124,9 +127,6 @@ log = logging.getLogger("rtseg.live.session")
 
 #: longest a session goes without a step while other sessions wake the loop, s
 STEP_EVERY_S = 0.05
-#: frames dropped for overload after which a polled source is read in threads again
-#: (``LiveSession._hand_back``): a sustained overload, not a stall of a few frames
-HAND_BACK_DROPS = 64
 
 
 __all__ = ["DEFAULT_FRAME_RATE", "FloatRing", "LiveSession", "LiveStats", "Pipeline",
@@ -156,7 +156,7 @@ def with_suit(url: str, suit: str) -> str:
     return url + ("&" if parts.query else "?") + f"suit={suit}"
 
 
-class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
+class LiveSession(SessionInput, SessionProcessing, SessionEvents, SessionHealth):
     """One live segmentation session.
 
     source: a URL for ``rtseg.drivers.open_source`` or an opened ``Source``.
@@ -293,99 +293,6 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
                       "methods": list(self.pipeline.detectors), "primary": self.primary,
                       "wire_methods": sorted(self.wire)})
 
-    # ---------------------------------------------------------------- input
-    def _receive(self, frame: Any) -> None:
-        """One frame from the source: checked, recorded (every frame received is), appended
-        to the ring buffer in arrival order, counted.  A malformed frame is counted in
-        ``bad_frames`` and logged, never raised."""
-        ring = self.ring
-        J = ring.valid_width
-        try:
-            q = np.asarray(frame.quats, dtype=np.float64).reshape(J, 4)
-            v = np.asarray(frame.valid, dtype=bool).reshape(J)
-            recv = float(frame.recv_time)
-            seq = None if frame.seq is None else int(frame.seq)
-            stime = None if frame.source_time is None else float(frame.source_time)
-        except (TypeError, ValueError, AttributeError) as exc:
-            self.stats.bad_frames += 1
-            self._warn("badframe", "malformed frame dropped (%s)", exc)
-            return
-        if self.recorder is not None:
-            with self._rec_lock:
-                try:
-                    self.recorder.record_frame(frame)
-                except Exception as exc:
-                    self.stats.record_errors += 1
-                    self._warn("record", "recording a frame failed: %s", exc)
-        ring.append(q, recv, stime, seq, v)
-        if self._rate_check is not None and not self._rate_check.done:
-            problem = self._rate_check.feed(recv, stime, seq)
-            if problem is not None:
-                log.warning("%s", problem)
-        if self._first_recv is None:
-            self._first_recv = recv
-            self._first_src = stime if stime is not None and np.isfinite(stime) else None
-        self.stats.frames_received += 1
-
-    def _poll_source(self, now: float) -> None:
-        """The loop's read of a polled source (``Source.poll``): what it decoded,
-        received in order.  A driver error is counted (``source_errors``) and logged."""
-        src, got = self.source, self._got
-        try:
-            src.poll(now)
-            src.take(got)
-        except Exception as exc:  # a driver bug must not end the session
-            self.stats.source_errors += 1
-            self._warn("source", "source read failed (%s: %s); retrying",
-                       type(exc).__name__, exc)
-        if got:
-            for frame in got:
-                self._receive(frame)
-            got.clear()
-
-    def _take_frames(self) -> None:
-        """The frames a woken source's own thread queued (``Source.wake_with``),
-        received in order."""
-        got = self._got
-        try:
-            self.source.take(got)
-        except Exception as exc:  # a driver bug must not end the session
-            self.stats.source_errors += 1
-            self._warn("source", "source read failed (%s: %s); retrying",
-                       type(exc).__name__, exc)
-        if got:
-            for frame in got:
-                self._receive(frame)
-            got.clear()
-
-    def _reader(self) -> None:
-        """Reader thread of a source that must block (``Source.take_over`` False): frames
-        received into the ring buffer, the loop woken for each batch."""
-        src, ring, wake = self.source, self.ring, self._loop.waker.wake
-        assert ring is not None
-        try:
-            while not self._stop.is_set():
-                try:
-                    frame = src.read(timeout=0.1)
-                except EOFError:
-                    self._eof.set()
-                    wake()
-                    return
-                except Exception as exc:  # a driver bug or device error must not end the session
-                    self.stats.source_errors += 1
-                    self._warn("source", "source read failed (%s: %s); retrying",
-                               type(exc).__name__, exc)
-                    self._stop.wait(0.05)
-                    continue
-                if frame is None:
-                    continue
-                self._receive(frame)
-                wake()
-        except BaseException as exc:  # pragma: no cover - defensive
-            self._reader_error = exc
-            log.exception("reader thread failed")
-            wake()
-
     # ---------------------------------------------------------------- run
     def run(self) -> SessionSummary:
         """Run until the duration elapses, the source ends, or stop()/a signal; then shut
@@ -428,66 +335,6 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
         self._cursor = self.ring.cursor(0)
         self._got: list[Any] = []
         self._last_step = 0.0
-
-    def _start_input(self, loop: Any) -> None:
-        """Let the loop read the source (``Source.take_over``), or start a reader thread
-        for a source that must block; attach the monitor."""
-        if self.duration is not None:
-            self._deadline = time.monotonic() + self.duration
-        if self.monitor is not None:
-            self._monitor_call(self.monitor.attach)
-        taken = False
-        try:
-            taken = bool(self.source.take_over())
-        except Exception as exc:  # a driver bug: read it in a thread instead
-            self._warn("source", "the source cannot be polled (%s: %s); a reader thread "
-                       "reads it", type(exc).__name__, exc)
-        woken = False
-        if not taken:
-            try:
-                woken = bool(self.source.wake_with(loop.waker.wake))
-            except Exception as exc:  # a driver bug: read it in a thread instead
-                self._warn("source", "the source cannot wake the loop (%s: %s); a reader "
-                           "thread reads it", type(exc).__name__, exc)
-        if taken:
-            self._polled = True
-            # frames its own thread decoded before the hand-over come first
-            self._poll_source(time.monotonic())
-            loop.add_polled(self)
-        elif woken:
-            self._woken = True
-            self._take_frames()
-            loop.add_woken(self)
-        else:
-            self._reader_thread = threading.Thread(target=self._reader, name="rtseg-reader",
-                                                   daemon=True)
-            self._reader_thread.start()
-
-    def _hand_back(self) -> None:
-        """Overloaded with a polled source (``HAND_BACK_DROPS`` frames dropped to keep
-        up): reading goes back to threads for the rest of the session, the source's own
-        and a reader thread that records and buffers each frame, so that frames are read
-        and recorded while processing runs behind, and a device's small buffer (a pty
-        holds 4 KB) is drained however long a batch takes or however little of the CPU
-        this thread gets."""
-        loop = self._loop
-        loop.drop(self)
-        self._polled = False
-        try:
-            ok = bool(self.source.give_back())
-        except Exception as exc:  # a driver bug: keep polling
-            ok = False
-            self._warn("source", "the source cannot read in its thread (%s: %s)",
-                       type(exc).__name__, exc)
-        if not ok:
-            self._polled = True
-            loop.add_polled(self)
-            return
-        log.info("overloaded: the source is read in threads from now on (%d frames "
-                 "dropped to keep up)", self.stats.overload_drops)
-        self._reader_thread = threading.Thread(target=self._reader, name="rtseg-reader",
-                                               daemon=True)
-        self._reader_thread.start()
 
     def _wait_s(self, now: float) -> float:
         """How long the loop may sleep for this session: 0 while frames wait in the ring,
