@@ -6,7 +6,7 @@
     python3 benchmarks/library_loto.py single [DATA_DIR/cmu_single] # leave-one-person-out
     python3 benchmarks/library_loto.py spliced SPLICED_DIR [DATA_DIR/cmu_single]
     python3 benchmarks/library_loto.py fewshot [DATA_DIR] [--seconds S]  # short examples
-    python3 benchmarks/library_loto.py --by-person DIR [--n N] [--seed K] [--no-hide]
+    python3 benchmarks/library_loto.py --by-person DIR [--n N] [--seed K] [--no-hide] [--truth-cuts]
     (options: --no-reject, --metric model|descriptor, --step S, --name-after S)
 
 --by-person DIR: DIR a source folder laid out like ../shared/data/cmu_single, hdm05 or
@@ -18,7 +18,11 @@ source and pooled: ``known`` (segments of behaviours the library holds: ``accura
 named right, ``unknown_rate``, ``wrong_rate``, ``decision_delay_s`` after the change) and
 ``left_out`` (segments of behaviours missing from the library: ``unknown_rate``).
 ``--segments``: every segment in the JSON too.  ``--threshold-scale F``: every fold
-library's calibrated threshold times F (rejection rules to compare).
+library's calibrated threshold times F (rejection rules to compare).  ``--truth-cuts``:
+the segments are the labelled ones - a cut at every labelled change, delivered at that
+frame, instead of the live detector's cuts - so the naming is measured apart from where
+the detector cuts (names decided ``decide_after_s``, or ``name_after_s``, after the
+change).
 
 mocap6: the three mocap6 takes (13_29, 13_31, 14_14; exercise names); for each take a
 library learned from the other two names its live segments (``contrast`` cuts, decided
@@ -212,7 +216,8 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
         kw["threshold_scale"] = scale
     hide = "--no-hide" not in argv
     segments = "--segments" in argv
-    argv = [a for a in argv if a not in ("--no-hide", "--segments")]
+    kw["cuts"] = "truth" if "--truth-cuts" in argv else "live"
+    argv = [a for a in argv if a not in ("--no-hide", "--segments", "--truth-cuts")]
     if len(argv) != 1:
         print(__doc__, file=sys.stderr)
         return 2
@@ -235,7 +240,7 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
                       "seconds": round(time.perf_counter() - t0, 1),
                       "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
                       "name_after_s": cfg["identity.name_after_s"], "performances": kw["n"],
-                      "seed": kw["seed"], "hidden_names": hide,
+                      "seed": kw["seed"], "hidden_names": hide, "cuts": kw["cuts"],
                       "threshold_scale": kw.get("threshold_scale", 1.0), **doc}, indent=1, default=str))
     return 0
 

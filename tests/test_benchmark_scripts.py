@@ -118,6 +118,17 @@ def test_library_loto_by_person_over_a_source_folder(tmp_path):
     assert {(lib["unit"], lib["without"]) for lib in src["libraries"]} >= {("p1", None), ("p2", "walk")}
     assert doc["pooled"]["known"]["segments"] == k["segments"]
     assert "segments" not in src
+    # with --truth-cuts the segments are the labelled ones, named 1.5-1.75 s after the change
+    # (the tracker decides on 10-frame blocks: up to one block, 1/6 s at 60 Hz, sooner)
+    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
+             "--truth-cuts", "--no-hide", "--segments")
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    assert doc["cuts"] == "truth" and doc["sources"]["synth"]["cuts"] == "truth"
+    segs = doc["sources"]["synth"]["segments"]
+    assert all(s["known"] for s in segs)            # every behaviour is in the others' library
+    delays = [s["delay_s"] for s in segs if s["delay_s"] is not None]
+    assert delays and all(1.3 <= d <= 1.9 for d in delays), delays
     r = _run("library_loto.py", "--by-person", str(tmp_path / "nowhere"))
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
     assert "no source folder" in r.stderr

@@ -137,3 +137,28 @@ def test_learn_from_real_hdm05_amc_and_bandai_bvh(tmp_path):
     assert squats and all("+" in e["source"] for e in squats)    # one squat per clip: joined
     p = _learn(str(lib), "--from", str(root))
     assert f"{len(got.examples)} already in the library" in p.stderr
+
+
+@pytest.mark.skipif(not (DATA / "bandai" / "index.tsv").is_file(),
+                    reason="needs ../shared/data/bandai")
+def test_a_lone_short_take_is_kept_when_one_window_fits(tmp_path):
+    """bandai's bn2_044 (68 frames at 30 Hz, 2.27 s) and bn2_032 (65 frames) are the only
+    short takes of their person and behaviour: nothing to join them with.  bn2_044 still
+    gives one window (1 s after 0.5 s off each end of its fed rows) and is learned;
+    bn2_032's fed rows are too short for one, and the note says so."""
+    from rtseg.evaluation.online import live_config
+    from rtseg.library.examples import learn
+    from rtseg.library.sources import examples_from_source
+    d = tmp_path / "bandai"
+    d.mkdir()
+    (d / "bvh").symlink_to(DATA / "bandai" / "bvh")
+    lines = (DATA / "bandai" / "index.tsv").read_text().splitlines()
+    rows = [r for r in lines[1:] if r.split("\t")[0] in ("bn2_044", "bn2_032", "bn2_001")]
+    (d / "index.tsv").write_text("\n".join(lines[:1] + rows) + "\n")
+    cfg, _ = live_config()
+    ex = examples_from_source(d, cfg)
+    assert sorted(e.take for e in ex) == ["bn2_001", "bn2_032", "bn2_044"]
+    lib, notes = learn(ex)
+    assert sorted(e["source"] for e in lib.examples) == ["bn2_001", "bn2_044"]
+    assert sum(n == "raise_up_right_hand" for n in lib.names) == 1      # one window
+    assert any(n.startswith("bn2_032 ") and "shorter than" in n for n in notes), notes

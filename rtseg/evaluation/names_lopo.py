@@ -14,6 +14,14 @@ of it:
 - with ``hide``, once more per behaviour of P's performances that the library holds, with
   that behaviour left out of the library: its segments must come out ``unknown``.
 
+Cuts (``cuts``): ``"live"`` - the live loop's own detector (``rtseg.evaluation.identity
+.run_identity``), so the figures follow whatever the detector does; ``"truth"`` - an ideal
+detector: a cut at every labelled change (the middle of its cross-fade), delivered at that
+frame, fed with the performance's live rows to the identity tracker with the library
+(``truth_cut_run``).  The segments are then exactly the labelled ones and each name is
+decided ``decide_after_s`` (``name_after_s`` when the library would say ``unknown``
+sooner) after its change: the library's naming, apart from where the detector cuts.
+
 Per source (and pooled over sources): ``known`` (``rtseg.evaluation.library.named_summary``:
 segments of behaviours the library holds named right / unknown / wrong, decision delay
 after the change), ``left_out`` (segments of behaviours missing from their library - P's
@@ -23,6 +31,7 @@ scored and skipped, and each fold's library (``library_summary``).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -53,13 +62,47 @@ def _truth(perf: Any) -> np.ndarray:
     return np.array([names[int(i)] for i in perf.take.meta["frame_labels"]])
 
 
+#: where the segments of a performance come from (module doc, Cuts)
+CUTS = ("live", "truth")
+
+
+@dataclass
+class TruthCutRun:
+    """What ``named_segments`` reads of a run: the identity tracker after the take."""
+    tracker: Any
+
+
+def truth_cut_run(take: Any, truth: np.ndarray, config: Any, library: Any) -> TruthCutRun:
+    """The identity tracker (the session configuration's options, ``library`` naming)
+    fed the live rows of ``take`` (``rtseg.library.examples.take_rows``) with a cut at every
+    change of the per-frame ``truth``, delivered at that frame (module doc, Cuts)."""
+    from rtseg.identity.segments import feed_take
+    from rtseg.identity.tracker import IdentityTracker, tracker_options
+    from rtseg.library.examples import take_rows
+    X, index, _ = take_rows(take, config)
+    t = np.asarray(truth, dtype=str)
+    changes = np.flatnonzero(t[1:] != t[:-1]) + 1
+    tracker = IdentityTracker(float(take.frame_rate), library=library,
+                              **tracker_options(config))
+    feed_take(tracker, X, index, [(int(c), int(c)) for c in changes if index[0] < c <= index[-1]])
+    return TruthCutRun(tracker)
+
+
 def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: bool = True,
                 progress: Callable[[str], None] | None = None,
                 windows: dict[str, float] | None = None, metric: str | None = None,
-                threshold_scale: float = 1.0) -> dict[str, Any]:
+                threshold_scale: float = 1.0, cuts: str = "live") -> dict[str, Any]:
     """Leave-one-person-out over one source folder (module doc); ``threshold_scale``: each
-    fold library's calibrated threshold is multiplied by it (a rejection rule to try)."""
+    fold library's calibrated threshold is multiplied by it (a rejection rule to try);
+    ``cuts``: ``"live"`` or ``"truth"`` (module doc, Cuts)."""
     from rtseg.evaluation.identity import run_identity
+    if cuts not in CUTS:
+        raise ValueError(f"cuts {cuts!r}: expected one of {', '.join(CUTS)}")
+
+    def run(perf: Any, truth: np.ndarray, lib: Any) -> Any:
+        if cuts == "truth":
+            return truth_cut_run(perf.take, truth, config, lib)
+        return run_identity(perf.take, config, lib)
     from rtseg.library.sources import examples_from_source
     examples = examples_from_source(src, config)
     people = sorted({e.person for e in examples})
@@ -92,8 +135,8 @@ def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: b
         for perf in perfs:
             if progress is not None:
                 progress(f"{Path(src).name} {p}: {perf.name}")
-            run = run_identity(perf.take, config, lib)
-            rows = named_segments(run, perf.take, truths[perf.name], lib, perf.name)
+            rows = named_segments(run(perf, truths[perf.name], lib), perf.take,
+                                  truths[perf.name], lib, perf.name)
             known += [r for r in rows if r.known]
             left += [r for r in rows if not r.known]
         if not hide:
@@ -110,10 +153,10 @@ def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: b
                     continue
                 if progress is not None:
                     progress(f"{Path(src).name} {p}: {perf.name} without {nm}")
-                run = run_identity(perf.take, config, lib_h)
-                rows = named_segments(run, perf.take, truths[perf.name], lib_h, perf.name)
+                rows = named_segments(run(perf, truths[perf.name], lib_h), perf.take,
+                                      truths[perf.name], lib_h, perf.name)
                 left += [r for r in rows if r.truth == nm]
-    return {"source": str(src), "people": scored, "skipped": skipped,
+    return {"source": str(src), "cuts": cuts, "people": scored, "skipped": skipped,
             **summarise(known, left), "libraries": libraries,
             "segments": [vars(s) for s in known + left]}
 

@@ -12,7 +12,9 @@ its ends are dropped (``rtseg.evaluation.blend.trim_bounds``).
   and skeleton are joined in take-name order with the 0.3 s slerp cross-fade the spliced
   performances use (``rtseg.evaluation.splice.SpliceConfig.join_fade_s``), into one example (its
   ``take``: the member names joined by ``+``), as a spliced segment of that behaviour joins
-  them.  A lone short take is left out with a note.
+  them.  A lone short take (nothing of its person and behaviour to join it with) is an
+  example of its own: the library keeps it when one window fits (``min_s`` after
+  ``edge_s`` off each end), else notes it.
 
 Every example has a ``key``: a content hash (sha256, 16 hex digits) of the motion it covers
 - joint names, frame rate and the local rotations of its frames - so learning the same
@@ -82,9 +84,12 @@ def examples_from_source(src: str | Path, config: Any, people: Iterable[str] | N
                 else:
                     short.append(r)
             if len(short) < 2:
-                notes += [f"{r.name} [{r.trim[0]}:{r.trim[1]}) {behaviour}: shorter than "
-                          f"{min_example_s:g} s and no other short take of {subject} "
-                          f"{behaviour} to join it with; left out" for r in short]
+                # nothing to join it with: an example of its own, kept by the library
+                # when one window fits (``LibraryBuilder.add`` notes it otherwise)
+                for r in short:
+                    X, index, profile = take_rows(r.take, config)
+                    out.append(Example(behaviour, r.name, subject, X, index, r.trim, profile,
+                                       float(g.frame_rate), motion_key(r.take, *r.trim)))
                 continue
             clip = clip_of(short[0])
             for r in short[1:]:

@@ -1,0 +1,62 @@
+"""Leave-one-person-out naming with truth cuts (``rtseg.evaluation.names_lopo``): the
+segments are the labelled ones, each named by a library of other synthetic performers,
+decided a fixed time after its change; no data folder needed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rtseg.evaluation.library import named_segments
+from rtseg.evaluation.names_lopo import lopo_source, truth_cut_run
+from rtseg.evaluation.online import live_config
+from rtseg.library.behaviours import LibraryBuilder
+from rtseg.library.examples import label_runs, take_rows
+from rtseg.simulators.synth.motion import synthesize
+
+LEARN = "walk:8,punch:8,squat:8"
+PERFORMANCE = "walk:6,punch:6,kick:6,squat:6"            # kick: not in the library
+
+
+def _config():
+    cfg, _ = live_config()
+    cfg["identity.enabled"] = True
+    return cfg
+
+
+def _library(cfg):
+    b = None
+    for seed in (0, 4):
+        res = synthesize(LEARN, seed=seed)
+        X, idx, profile = take_rows(res.take, cfg)
+        b = b or LibraryBuilder(profile, X.shape[1], res.take.frame_rate)
+        for a, e, name in label_runs(res.frame_names()):
+            i, j = np.searchsorted(idx, a), np.searchsorted(idx, e)
+            b.add(X[i:j], name, f"synth{seed}", info={"person": f"synth{seed}"})
+    return b.build()
+
+
+def test_truth_cuts_give_the_labelled_segments_named_at_the_decision_time():
+    cfg = _config()
+    lib = _library(cfg)
+    res = synthesize(PERFORMANCE, seed=2)
+    truth = np.asarray(res.frame_names(), dtype=str)
+    changes = [int(c) for c in np.flatnonzero(truth[1:] != truth[:-1]) + 1]
+    run = truth_cut_run(res.take, truth, cfg, lib)
+    rows = named_segments(run, res.take, truth, lib, "synth2")
+    # one segment per labelled run, starting at the labelled changes
+    assert [r.boundary for r in rows][1:] == changes
+    assert [r.truth for r in rows] == ["walk", "punch", "kick", "squat"]
+    assert [r.known for r in rows] == [True, True, False, True]
+    # each name is decided decide_after_s (or name_after_s) after its change, never sooner
+    fr = res.take.frame_rate
+    lo, hi = cfg["identity.decide_after_s"], cfg["identity.name_after_s"]
+    delays = [r.delay_s for r in rows[1:]]
+    assert all(d is not None and lo - 10 / fr <= d <= hi + 10 / fr for d in delays), delays
+    # the names are the library's: known behaviours named or unknown, never "" (unnamed)
+    assert all(r.name in set(lib.names) | {"unknown"} for r in rows)
+
+
+def test_lopo_source_refuses_an_unknown_cut_mode(tmp_path):
+    with pytest.raises(ValueError, match="cuts 'oracle'"):
+        lopo_source(tmp_path, _config(), cuts="oracle")
