@@ -1,9 +1,13 @@
 #!/usr/bin/env python3
-"""Live-session benchmark: latency, detector delay, CPU use, highest sustained input rate.
+"""Live-session benchmark: latency, CPU use per suit (1, 4, 8 suits in one process), cost
+per frame by stage, detector delay, highest sustained input rate.
 
-    python3 benchmarks/live.py            # readable report (about 1.5 minutes)
-    python3 benchmarks/live.py --json     # {"latency_ms": {"p50", "p99"}, "detector_delay_ms":
-                                          #  {method: ms}, "cpu_fraction", "max_rate_fps"}
+    python3 benchmarks/live.py            # readable report (about 4 minutes)
+    python3 benchmarks/live.py --json     # {"latency_ms": {"p50", "p99", "max"},
+                                          #  "cpu_fraction", "suits": {"1": {...}, "4": ...,
+                                          #  "8": ...}, "stages_us": {...},
+                                          #  "detector_delay_ms": {method: ms},
+                                          #  "max_rate_fps", "core_max_rate_fps"}
     python3 benchmarks/live.py --monitor  # only the CPU cost of the live monitor (rtseg.monitor)
                                           # with one page open in headless Chromium
 
@@ -21,11 +25,27 @@ on 127.0.0.1.
    not included).  The latency of the frames that actually sent a cut is reported too.
    CPU fraction = process CPU time (all threads of this process; the simulated suit is
    another process) / wall time (target < 0.10 of one core).
+1b. **Several suits in one process** (``--suits``, default 1, 4, 8; ``--seconds`` each):
+   that many simulated 17-sensor suits at 120 Hz, each on its own pty, served by one
+   other process (``--serve-suits``: the suits' threads, phases spread over a frame
+   period); this process runs one session per suit, all on one thread
+   (``rtseg.live.loop.run_sessions``).  Reported per count: CPU of this process as a
+   fraction of one core, in all and per suit; frame latency p50/p99/max over every
+   suit's frames; frames received and dropped.
+1c. **Cost per frame by stage** (``--stage-seconds``, one suit at 120 Hz, identity on so
+   that its cost shows): thread CPU time (``time.thread_time``) in microseconds per
+   frame of ``decode`` (the serial driver's ``poll``: read and decode), ``receive``
+   (recording check, ring buffer append), ``features`` (``PoseFeatures.step``),
+   ``detector`` (every detector's ``update``), ``identity`` (the tracker's ``step``),
+   ``pipeline`` (the rest of ``Pipeline.process``: gaps, sanitising, index bookkeeping),
+   ``publish`` (every ``publish_*`` call), ``loop`` (the rest: waiting, the ring cursor,
+   dropouts, status, counters) and ``total`` (the thread's CPU time over the frames).
+   The timers add about 1 µs a call.
 2. **Detector delay** per method: median of ``detected_at - frame`` over the cuts of the
    default synthesised performance (8 behaviour changes, 62 s) replayed through the same
    pipeline, in ms at 120 Hz.  Cuts of the live run in step 1 are included.
 3. **Highest sustained input rate**: the suit is played at rising rates (500, 1000, 2000,
-   3000, 4000, 6000, 8000 frames/s, ``--step-seconds`` each).  A rate is sustained when the
+   3000, 4000, 6000, 8000, 10000, 12000, 16000 frames/s, ``--step-seconds`` each).  A rate is sustained when the
    session receives at least 97 % of the frames the suit sends in that time, loses none
    (no sequence gaps, no ring-buffer overruns, no queue overflow) and the p99 frame latency
    stays under 50 ms.  Reported: the highest sustained rate (target >= 2000).
@@ -56,7 +76,7 @@ sys.path.insert(0, str(REPO))
 from rtseg.live.session import LiveSession, replay_frames  # noqa: E402
 from rtseg.live.config import from_dict  # noqa: E402
 
-RATES = (500, 1000, 2000, 3000, 4000, 6000, 8000)
+RATES = (500, 1000, 2000, 3000, 4000, 6000, 8000, 10000, 12000, 16000)
 
 
 class Suit:
@@ -82,6 +102,177 @@ class Suit:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait(5)
+
+
+class Suits:
+    """``n`` simulated suits at ``rate`` Hz in one subprocess (``--serve-suits``), one pty
+    each; ``paths`` are their devices."""
+
+    def __init__(self, n: int, rate: float = 120.0) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, str(Path(__file__).resolve()), "--serve-suits", str(n),
+             "--rate", f"{rate:g}"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+            stderr=subprocess.DEVNULL, text=True, cwd=REPO)
+        self.paths = [self.proc.stdout.readline().strip() for _ in range(n)]
+        if not all(self.paths):
+            self.close()
+            raise RuntimeError("simulated suits did not start")
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            try:
+                self.proc.stdin.close()         # the server stops when its stdin closes
+                self.proc.wait(10)
+            except (OSError, subprocess.TimeoutExpired):
+                self.proc.kill()
+                self.proc.wait(5)
+
+
+def serve_suits(n: int, rate: float) -> int:
+    """``--serve-suits N``: N suits playing the synthesised performance at ``rate`` Hz,
+    each from its own point of it, their frames' phases spread over one frame period;
+    prints each pty path; stops when stdin closes."""
+    from rtseg.core.take import Take
+    from rtseg.simulators.serial_device import SerialSuit
+    from rtseg.simulators.synth.motion import synthesize
+    take = synthesize(frame_rate=120.0).take
+    suits = []
+    try:
+        for i in range(n):
+            # each suit plays the performance from its own point (performers do not move
+            # in step: their cuts, and the detector's work, come at different times)
+            part = Take(take.joint_names, take.parents, take.frame_rate,
+                        np.roll(take.quats, -i * take.n_frames // n, axis=0),
+                        space=take.space, source="synth")
+            suit = SerialSuit(part, rate=rate, loop=True)
+            print(suit.start(), flush=True)
+            suits.append(suit)
+            time.sleep(1.0 / (rate * n))
+        sys.stdin.read()
+    finally:
+        for suit in suits:
+            suit.stop()
+    return 0
+
+
+class StageMeter:
+    """Thread CPU time spent in each stage of a session's per-frame path (see the module
+    docstring, 1c), installed by wrapping the session's objects' methods."""
+
+    STAGES = ("decode", "receive", "features", "detector", "identity", "pipeline", "publish")
+
+    def __init__(self) -> None:
+        self.us = dict.fromkeys(self.STAGES, 0.0)
+        self.active = False
+
+    def reset(self) -> None:
+        self.us = dict.fromkeys(self.STAGES, 0.0)
+        self.active = True
+
+    def wrap(self, obj: object, name: str, stage: str) -> None:
+        inner = getattr(obj, name)
+        us = self
+        clock = time.thread_time
+
+        def timed(*args, **kwargs):
+            t = clock()
+            try:
+                return inner(*args, **kwargs)
+            finally:
+                if us.active:
+                    us.us[stage] += (clock() - t) * 1e6
+        setattr(obj, name, timed)
+
+    def install(self, session: LiveSession) -> None:
+        """Wrap the parts of ``session`` once it is open (pipeline and publishers built)."""
+        pipe = session.pipeline
+        self.wrap(session.source, "poll", "decode")
+        self.wrap(session, "_receive", "receive")
+        self.wrap(pipe.features, "step", "features")
+        for det in pipe.detectors.values():
+            self.wrap(det, "update", "detector")
+        if pipe.identity is not None:
+            self.wrap(pipe.identity, "step", "identity")
+        self.wrap(pipe, "process", "pipeline")       # then less the three above
+        for name in ("publish_cut", "publish_status", "publish_dropout", "publish_behaviour"):
+            if hasattr(session.publishers, name):
+                self.wrap(session.publishers, name, "publish")
+
+    def per_frame(self, frames: int, total_us: float) -> dict[str, float]:
+        us = dict(self.us)
+        us["pipeline"] -= us["features"] + us["detector"] + us["identity"]
+        out = {k: v / max(frames, 1) for k, v in us.items()}
+        out["total"] = total_us / max(frames, 1)
+        out["loop"] = out["total"] - sum(out[k] for k in self.STAGES)
+        return {k: round(v, 1) for k, v in out.items()}
+
+
+def run_suits(n: int, seconds: float, port: int, warmup: float = 2.0,
+              stages: bool = False) -> dict:
+    """``n`` suits at 120 Hz, one session each on this thread, for ``warmup + seconds``;
+    measured over the last ``seconds``.  ``stages``: one suit, identity on, the
+    :class:`StageMeter` installed (its figures under ``"stages_us"``)."""
+    from rtseg.live.loop import run_sessions
+    suits = Suits(n)
+    meter = StageMeter() if stages else None
+    try:
+        sessions = []
+        for i, path in enumerate(suits.paths):
+            cfg = config(port)
+            if stages:
+                cfg["identity.enabled"] = True
+            s = LiveSession(f"serial://{path}?rate=120", cfg, handle_signals=False,
+                            duration=seconds + warmup, name=f"s{i + 1}" if n > 1 else "")
+            if meter is not None:            # once the session is open, before its input
+                def start_input(loop, s=s, inner=s._start_input):
+                    meter.install(s)
+                    inner(loop)
+                s._start_input = start_input
+            sessions.append(s)
+        marks: dict[str, float] = {}
+        # CPU clock of the loop thread (this one), readable from the timer's thread
+        loop_clock = time.pthread_getcpuclockid(threading.get_ident())
+
+        def start_measuring() -> None:
+            for s in sessions:
+                s.stats.frame_latency_ms.clear()
+            if meter is not None:
+                meter.reset()
+            marks.update(cpu=time.process_time(), thread=time.clock_gettime(loop_clock),
+                         wall=time.monotonic(),
+                         frames=sum(s.stats.frames_processed for s in sessions))
+
+        def end_measuring(ev) -> None:   # at the first session's final status
+            if getattr(ev, "alive", 1) == 0 and "thread_end" not in marks:
+                marks["thread_end"] = time.clock_gettime(loop_clock)
+                marks["frames_end"] = sum(s.stats.frames_processed for s in sessions)
+
+        timer = threading.Timer(warmup, start_measuring)
+        timer.start()
+        sessions[0].listeners.append(end_measuring)
+        summaries = run_sessions(sessions, handle_signals=False)
+        timer.cancel()
+        wall = time.monotonic() - marks["wall"]
+        cpu = (time.process_time() - marks["cpu"]) / wall
+    finally:
+        suits.close()
+    lat = np.concatenate([s.stats.frame_latency_ms.values() for s in sessions])
+    frames = sum(s.stats.frames_processed for s in sessions) - marks["frames"]
+    out = {"suits": n, "seconds": round(wall, 1),
+           "cpu_fraction": round(cpu, 4), "cpu_fraction_per_suit": round(cpu / n, 4),
+           "fps_per_suit": round(frames / wall / n, 1),
+           "latency_ms": {"p50": round(float(np.percentile(lat, 50)), 3),
+                          "p99": round(float(np.percentile(lat, 99)), 3),
+                          "max": round(float(lat.max()), 3)},
+           "frames": int(frames), "dropped": int(sum(x.dropped for x in summaries)),
+           "cuts": int(sum(x.cuts for x in summaries))}
+    if meter is not None:
+        # CPU of the loop thread only (the process also runs the timer, publishers' TCP
+        # threads if any), frames processed
+        thread_us = (marks["thread_end"] - marks["thread"]) * 1e6
+        out["stages_us"] = meter.per_frame(int(marks["frames_end"] - marks["frames"]),
+                                           thread_us)
+    return out
 
 
 def sink() -> socket.socket:
@@ -342,11 +533,21 @@ def main(argv: list[str] | None = None) -> int:
                         "for --seconds; cue latency p50/p99, overload drops, cut times")
     p.add_argument("--max-lag", type=float, metavar="S",
                    help="with --overload: buffer.max_lag_seconds (default the config's)")
+    p.add_argument("--suits", default="1,4,8",
+                   help="suit counts run in one process, comma separated ('' skips)")
+    p.add_argument("--stage-seconds", type=float, default=15.0,
+                   help="length of the run measuring the cost per frame by stage (0 skips)")
+    p.add_argument("--skip-rates", action="store_true",
+                   help="skip the highest sustained input rate steps")
+    p.add_argument("--serve-suits", type=int, metavar="N", help=argparse.SUPPRESS)
+    p.add_argument("--rate", type=float, default=120.0, help=argparse.SUPPRESS)
     p.add_argument("--monitor", action="store_true",
                    help="only the CPU cost of the live monitor: step 1 without it, then with "
                         "the monitor served and one page open in headless Chromium")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
+    if args.serve_suits:
+        return serve_suits(args.serve_suits, args.rate)
 
     def log(msg: str) -> None:
         print(msg, file=sys.stderr if args.json else sys.stdout, flush=True)
@@ -377,22 +578,41 @@ def main(argv: list[str] | None = None) -> int:
             f"p50 {lc['p50']:.3f} ms, p99 {lc['p99']:.3f} ms, max {lc['max']:.2f} ms")
         log(f"   latency of the frames that sent a cut: {lc['cut_latency']} ms")
         log(f"   CPU: {lc['cpu_fraction'] * 100:.1f} % of one core")
+        suits: dict[str, dict] = {}
+        for n in [int(x) for x in args.suits.split(",") if x.strip()]:
+            log(f"1b. {n} suit(s) at 120 Hz in one process, one thread, {args.seconds:g} s ...")
+            r = run_suits(n, args.seconds, port)
+            suits[str(n)] = r
+            log(f"   CPU {r['cpu_fraction']:.4f} of one core in all, "
+                f"{r['cpu_fraction_per_suit']:.4f} per suit; {r['fps_per_suit']:.1f} frames/s "
+                f"per suit; latency p50 {r['latency_ms']['p50']:.3f} ms, p99 "
+                f"{r['latency_ms']['p99']:.3f} ms, max {r['latency_ms']['max']:.2f} ms; "
+                f"{r['dropped']} dropped")
+        stages = None
+        if args.stage_seconds > 0:
+            log(f"1c. cost per frame by stage (one suit, identity on, {args.stage_seconds:g} s) ...")
+            stages = run_suits(1, args.stage_seconds, port, stages=True)["stages_us"]
+            log("   µs per frame: " + ", ".join(f"{k} {v:.1f}" for k, v in stages.items()))
         log("2. detector delay (default synthesised performance, 8 changes, replayed) ...")
         delays = detector_delays({})
         log("   " + ", ".join(f"{m} {v:.0f} ms" for m, v in delays.items()))
-        log(f"3. highest sustained input rate, whole chain through the pty "
-            f"({args.step_seconds:g} s per step) ...")
-        best, _rows = max_rate(args.step_seconds, port, log)
-        log(f"   highest sustained: {best} frames/s")
-        if not args.skip_core:
+        best = core = None
+        if not args.skip_rates:
+            log(f"3. highest sustained input rate, whole chain through the pty "
+                f"({args.step_seconds:g} s per step) ...")
+            best, _rows = max_rate(args.step_seconds, port, log)
+            log(f"   highest sustained: {best} frames/s")
+        if not args.skip_core and not args.skip_rates:
             log("   the session core alone (in-process paced source, no serial driver):")
             core, _ = max_rate(args.step_seconds, port, log, kind="core")
             log(f"   highest sustained by the core: {core} frames/s")
     finally:
         s.close()
-    result = {"latency_ms": {"p50": round(lc["p50"], 3), "p99": round(lc["p99"], 3)},
+    result = {"latency_ms": {"p50": round(lc["p50"], 3), "p99": round(lc["p99"], 3),
+                             "max": round(lc["max"], 3)},
               "detector_delay_ms": {m: round(v, 1) for m, v in delays.items()},
-              "cpu_fraction": round(lc["cpu_fraction"], 4), "max_rate_fps": best}
+              "cpu_fraction": round(lc["cpu_fraction"], 4), "suits": suits,
+              "stages_us": stages, "max_rate_fps": best, "core_max_rate_fps": core}
     log(f"total benchmark time {time.monotonic() - t0:.0f} s")
     if args.json:
         print(json.dumps(result))

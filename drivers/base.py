@@ -6,7 +6,7 @@ import logging
 import threading
 from collections import deque
 from dataclasses import asdict, dataclass
-from typing import Iterator
+from typing import Callable, Iterator
 
 from rtseg.core.frame import Frame
 
@@ -64,6 +64,8 @@ class FrameQueue:
         self._frames: deque[Frame] = deque()
         self._cond = threading.Condition()
         self._closed = False
+        #: called after each ``put`` (outside the lock), e.g. to wake an event loop
+        self.on_put: Callable[[], None] | None = None
 
     def put(self, frame: Frame) -> bool:
         """Append a frame; True if the oldest one had to be dropped to make room."""
@@ -73,6 +75,8 @@ class FrameQueue:
                 self._frames.popleft()
             self._frames.append(frame)
             self._cond.notify()
+        if self.on_put is not None:
+            self.on_put()
         return dropped
 
     def get(self, timeout: float | None = None) -> Frame | None:
@@ -86,6 +90,15 @@ class FrameQueue:
             if not self._frames:
                 return None
             return self._frames.popleft()
+
+    def drain(self, out: list[Frame]) -> int:
+        """Move every queued frame, oldest first, onto ``out`` without waiting; how many."""
+        with self._cond:
+            n = len(self._frames)
+            if n:
+                out.extend(self._frames)
+                self._frames.clear()
+        return n
 
     def close(self) -> None:
         with self._cond:
@@ -107,6 +120,22 @@ class Source:
     ``as_fast_as_read``: True for a source that hands over frames as fast as they are read
     (a replay at ``speed=0``): its frames are never late, so the live loop processes every
     one instead of dropping the oldest under overload.
+
+    Polled reading (optional)
+    -------------------------
+    A source that reads file descriptors (a serial port, a UDP socket) can be read by its
+    owner's event loop instead of its own thread, so that one thread serves every source
+    of a process (``rtseg.live.loop``).  ``take_over()`` switches it (True once its reader
+    thread has ended); from then on the owner waits for ``poll_fds()`` to become readable
+    (or until ``poll_due()``, a monotonic time, whichever comes first), calls
+    ``poll(now)``, which reads without blocking whatever is waiting and decodes it, and
+    takes the decoded frames with ``take(out)``, in arrival order; ``give_back()`` returns
+    reading to the source's thread.  A source that keeps
+    its reader thread but queues its frames (``QueuedSource``) can instead wake the loop
+    whenever frames are ready (``wake_with``), so the loop takes them with ``take``
+    without a thread of its own.  The defaults describe a source read only through
+    ``read`` (a file replay, any source written before this protocol): ``take_over()``
+    and ``wake_with()`` are False and the owner calls ``read`` from a thread.
     """
 
     joint_names: list[str]
@@ -135,6 +164,42 @@ class Source:
 
     def close(self) -> None:
         """Release the device/socket.  Safe to call twice."""
+
+    # ------------------------------------------------------------------ polled reading
+    def take_over(self) -> bool:
+        """Hand reading to the caller's event loop (see the class docstring); False when
+        this source must keep reading in its own thread."""
+        return False
+
+    def give_back(self) -> bool:
+        """Undo ``take_over``: the source reads in its own thread again (``read`` gives
+        what it decodes, after what ``take`` has not taken yet).  False when it cannot."""
+        return False
+
+    def poll_fds(self) -> tuple[int, ...]:
+        """File descriptors whose readability means input is waiting (may change after a
+        reconnect; empty while the device is away)."""
+        return ()
+
+    def poll_due(self) -> float | None:
+        """Monotonic time by which ``poll`` must run even without input (a quiet-gap
+        flush, a staleness check, a reconnect attempt); None when only input matters."""
+        return None
+
+    def poll(self, now: float) -> None:
+        """Read without blocking whatever is waiting, decode it and queue the frames for
+        ``take`` (``now``: ``time.monotonic()``).  Never raises because of the device."""
+
+    def take(self, out: list[Frame]) -> int:
+        """Append the frames decoded so far to ``out`` without waiting; how many."""
+        return 0
+
+    def wake_with(self, wake: Callable[[], None]) -> bool:
+        """For a source that keeps its reader thread: call ``wake`` (from that thread)
+        whenever frames are ready for ``take``, so an event loop can take them without a
+        thread of its own.  False (default) when the source cannot: its owner reads it
+        through ``read``."""
+        return False
 
     def __iter__(self) -> Iterator[Frame]:
         while True:
@@ -166,3 +231,15 @@ class QueuedSource(Source):
             return None
         self.count("frames_ok")
         return frame
+
+    def take(self, out: list[Frame]) -> int:
+        """The queued frames, oldest first, appended to ``out`` without waiting; how many."""
+        n = self._queue.drain(out)
+        if n:
+            self.count("frames_ok", n)
+        return n
+
+    def wake_with(self, wake: Callable[[], None]) -> bool:
+        """``wake`` is called after every frame the reader thread queues."""
+        self._queue.on_put = wake
+        return True

@@ -90,7 +90,16 @@ def run_live(src, sender, take, rate: float, speed: float, cfg=None, start: bool
             frames.append(f)
         return f
 
+    orig_take = src.take
+
+    def take_frames(out):   # the live loop's read of a polled source
+        n0 = len(out)
+        n = orig_take(out)
+        frames.extend(out[n0:])
+        return n
+
     src.read = read
+    src.take = take_frames
     session = LiveSession(src, from_dict({}) if cfg is None else cfg, handle_signals=False,
                           publishers=NoPublish(),
                           listeners=[lambda ev: cuts.append(ev) if type(ev).__name__ ==

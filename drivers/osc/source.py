@@ -85,6 +85,8 @@ VRCHAT_OPTIONS = ("format", "quiet", "queue", "rate", "rcvbuf", "root", "allow",
 SENDER_POLICIES = ("one", "newest", "merge")
 #: seconds of silence from the followed sender after which another sender is followed
 SENDER_HANDOVER = 1.0
+#: most datagrams one ``poll`` takes from the socket (the rest wait for the next)
+POLL_BURST = 256
 #: distinct refused senders remembered (each is logged once); later ones are only counted
 MAX_REFUSED_LOGGED = 1024
 
@@ -223,7 +225,10 @@ class OscUdpSource(QueuedSource):
                         "senders restricted to allow=" + ",".join(map(str, allow)) if allow
                         else "any host that can reach it can send poses (restrict with allow=)")
         # wake up often enough to apply the quiet-gap rule and to notice close()
-        self._sock.settimeout(max(0.001, min(quiet / 2.0, 0.05)))
+        self._quiet_wait = max(0.001, min(quiet / 2.0, 0.05))
+        self._sock.settimeout(self._quiet_wait)
+        self._polled = False
+        self._poll_at: float | None = None
         self._thread = threading.Thread(target=self._run, name=f"rtseg-osc-{self.port}",
                                         daemon=True)
         self._thread.start()
@@ -234,38 +239,111 @@ class OscUdpSource(QueuedSource):
 
     def _run(self) -> None:
         sock = self._sock
-        asm = self._asm
-        while not self._stop.is_set():
+        while not self._stop.is_set() and not self._polled:
             try:
                 data, sender = sock.recvfrom(65536)
             except (socket.timeout, BlockingIOError, InterruptedError):
-                try:
-                    frames = asm.flush(time.monotonic())
-                except Exception:  # pragma: no cover - a decoder bug must not end the loop
-                    log.exception("OSC: flushing the open frame failed")
-                    continue
+                self._flush(time.monotonic())
+                continue
             except OSError as exc:
                 if self._stop.is_set():
                     break
                 log.warning("OSC receive error on port %d: %s", self.port, exc)
                 time.sleep(0.01)
                 continue
-            else:
-                if self.allow is not None and not sender_allowed(sender[0], self.allow):
-                    self._refuse(sender[0])
-                    continue
-                now = time.monotonic()
-                if self.senders != "merge" and not self._follow(sender[:2], now):
-                    continue
-                try:
-                    frames = asm.feed(data, now)
-                except Exception:  # a decoder bug must not kill the live loop
-                    self.count("corrupt")
-                    log.exception("OSC: datagram of %d bytes crashed the decoder; dropped",
-                                  len(data))
-                    continue
-            for frame in frames:
-                self._put(frame)
+            self._datagram(data, sender, time.monotonic())
+
+    def _flush(self, now: float) -> None:
+        """Close an open frame left quiet (the assembler's quiet-gap rule)."""
+        try:
+            frames = self._asm.flush(now)
+        except Exception:  # pragma: no cover - a decoder bug must not end the loop
+            log.exception("OSC: flushing the open frame failed")
+            return
+        for frame in frames:
+            self._put(frame)
+
+    def _datagram(self, data: bytes, sender: tuple, now: float) -> None:
+        """One datagram from ``sender``, received at ``now``: refused (``allow=``, another
+        sender) or decoded, its completed frames queued."""
+        if self.allow is not None and not sender_allowed(sender[0], self.allow):
+            self._refuse(sender[0])
+            return
+        if self.senders != "merge" and not self._follow(sender[:2], now):
+            return
+        try:
+            frames = self._asm.feed(data, now)
+        except Exception:  # a decoder bug must not kill the live loop
+            self.count("corrupt")
+            log.exception("OSC: datagram of %d bytes crashed the decoder; dropped",
+                          len(data))
+            return
+        for frame in frames:
+            self._put(frame)
+
+    # ------------------------------------------------------------------ polled reading
+    # (``rtseg.drivers.base.Source``: the owner's event loop reads the socket instead of
+    # the reader thread, with the thread's quiet-gap rule)
+
+    def take_over(self) -> bool:
+        """End the reader thread and let the caller poll the socket (False for a subclass
+        with a reader loop of its own)."""
+        if self._polled:
+            return True
+        if type(self)._run is not OscUdpSource._run or self._closed \
+                or not self._thread.is_alive():
+            return False
+        self._polled = True
+        self._thread.join(timeout=2.0)
+        if self._thread.is_alive():          # pragma: no cover - a wedged thread
+            self._polled = False
+            return False
+        self._sock.setblocking(False)
+        self._poll_at = time.monotonic() + self._quiet_wait
+        return True
+
+    def give_back(self) -> bool:
+        """Read in the reader thread again (after ``take_over``)."""
+        if not self._polled:
+            return True
+        if self._closed:
+            return False
+        self._sock.settimeout(self._quiet_wait)
+        self._polled = False
+        self._thread = threading.Thread(target=self._run, name=f"rtseg-osc-{self.port}",
+                                        daemon=True)
+        self._thread.start()
+        return True
+
+    def poll_fds(self) -> tuple[int, ...]:
+        return () if self._closed else (self._sock.fileno(),)
+
+    def poll_due(self) -> float | None:
+        return self._poll_at
+
+    def poll(self, now: float) -> None:
+        """Take the datagrams waiting in the socket (at most ``POLL_BURST``) in arrival
+        order; none waiting: the quiet-gap flush, as the reader thread's timeout does."""
+        if self._closed:
+            return
+        sock = self._sock
+        got = 0
+        while got < POLL_BURST:
+            try:
+                data, sender = sock.recvfrom(65536)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError as exc:
+                if not self._closed:
+                    log.warning("OSC receive error on port %d: %s", self.port, exc)
+                break
+            got += 1
+            self._datagram(data, sender, time.monotonic())
+        if got:
+            self._poll_at = time.monotonic() + self._quiet_wait
+        else:
+            self._flush(now)
+            self._poll_at = now + self._quiet_wait
 
     def _follow(self, sender: tuple, now: float) -> bool:
         """Whether a datagram from ``sender`` belongs to the stream followed (switching to

@@ -73,6 +73,7 @@ import collections
 import errno
 import logging
 import os
+import select
 import threading
 import time
 from dataclasses import dataclass
@@ -127,6 +128,13 @@ class _RateLimitedLog:
             msg += " (%d similar in the last %.0f s)"
             args = args + (n, self.interval)
         self.logger.log(level, msg, *args)
+
+
+def _readable(fd: int) -> bool:
+    """Whether ``fd`` reports readiness (data, end of file or an error) without waiting."""
+    p = select.poll()
+    p.register(fd, select.POLLIN | select.POLLPRI)
+    return bool(p.poll(0))
 
 
 _STAT_MAP = {  # decoder counter -> SourceStats field
@@ -198,6 +206,12 @@ class SerialSource(QueuedSource):
         self._connected = threading.Event()
 
         self._not_a_port = False
+        # polled reading (take_over): next poll due, reconnect state
+        self._polled = False
+        self._poll_at: float | None = None
+        self._reopen_after = 0.0
+        self._reopen_backoff = 0.0
+        self._reopen_failed: tuple | None = None
         opened = self._open()
         if not opened and self._not_a_port:
             raise SourceError(f"{path!r} is not a serial port (it refuses serial settings: "
@@ -322,7 +336,7 @@ class SerialSource(QueuedSource):
     def _run(self) -> None:
         backoff = 0.0
         failed_key: tuple | None = None      # the device the last open attempt failed on
-        while not self._stop.is_set():
+        while not self._stop.is_set() and not self._polled:
             if self._ser is None:
                 if not self._wait_to_reopen(backoff, failed_key):
                     break
@@ -351,17 +365,123 @@ class SerialSource(QueuedSource):
                           self.path, exc)
                 self._close_port()
                 continue
-            now = time.monotonic()
+            self._consume(data, time.monotonic())
+
+    def _consume(self, data: bytes, now: float) -> None:
+        """Decode ``data`` read at ``now`` (empty: nothing arrived; a text frame left open
+        past the quiet gap is closed), then check the sensors' staleness."""
+        try:
+            if data:
+                self._last_data = now
+                self._handle(self._decoder.feed(data), now)
+            elif (self.fmt == "text" and self._decoder.has_partial
+                  and now - self._last_data > 1.0 / (3.0 * self.frame_rate)):
+                self._handle(self._decoder.flush(), now)
+            self._check_stale(now)
+        except Exception:  # a bug must not kill the live loop's input
+            log.exception("serial %s: error handling input", self.path)
+
+    # ------------------------------------------------------------------ polled reading
+    # (``rtseg.drivers.base.Source``: the owner's event loop reads the port's descriptor
+    # instead of the reader thread; reconnects as the thread does, without sleeping)
+
+    def take_over(self) -> bool:
+        """End the reader thread and let the caller poll the port (False for pyserial URLs
+        such as ``loop://`` or ``rfc2217://``, which keep the thread)."""
+        if self._polled:
+            return True
+        if "://" in self.path or not self._thread.is_alive():
+            return False
+        self._polled = True
+        ser = self._ser
+        if ser is not None:
             try:
-                if data:
-                    self._last_data = now
-                    self._handle(self._decoder.feed(data), now)
-                elif (self.fmt == "text" and self._decoder.has_partial
-                      and now - self._last_data > 1.0 / (3.0 * self.frame_rate)):
-                    self._handle(self._decoder.flush(), now)
-                self._check_stale(now)
-            except Exception:  # a bug must not kill the live loop's input
-                log.exception("serial %s: error handling input", self.path)
+                ser.cancel_read()
+            except Exception:  # not all pyserial backends support it
+                pass
+        self._thread.join(timeout=2.0)
+        if self._thread.is_alive():          # pragma: no cover - a wedged read
+            self._polled = False
+            return False
+        self._poll_at = time.monotonic()
+        return True
+
+    def give_back(self) -> bool:
+        """Read in the reader thread again (after ``take_over``)."""
+        if not self._polled:
+            return True
+        self._polled = False
+        self._thread = threading.Thread(target=self._run, name=f"rtseg-serial {self.path}",
+                                        daemon=True)
+        self._thread.start()
+        return True
+
+    def poll_fds(self) -> tuple[int, ...]:
+        ser = self._ser
+        if ser is None:
+            return ()
+        try:
+            return (ser.fileno(),)
+        except Exception:
+            return ()
+
+    def poll_due(self) -> float | None:
+        return self._poll_at
+
+    def poll(self, now: float) -> None:
+        """Read what the port holds (or reopen a lost device when due), decode it."""
+        self._poll_at = now + POLL_S
+        if self._stop.is_set():
+            return
+        if self._ser is None:
+            self._poll_reopen(now)
+            return
+        data = b""
+        try:
+            ser = self._ser
+            fd = ser.fileno()
+            # exactly the bytes waiting: a read asking for more waits, once the buffer is
+            # empty, for the kernel to push what a writer just wrote (about a millisecond
+            # on a busy machine), as pyserial's read of ``in_waiting`` bytes avoids too
+            n = ser.in_waiting
+            if n:
+                data = os.read(fd, n)
+            # nothing waiting although the descriptor reports readiness: the device went
+            # away (as pyserial reports it)
+            if not data and _readable(fd):
+                raise serial.SerialException("device reports readiness to read but "
+                                             "returned no data")
+        except BlockingIOError:
+            data = b""
+        except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
+            self.disconnects += 1
+            self._log("unplug", logging.WARNING, "serial %s: device lost (%s); reconnecting",
+                      self.path, exc)
+            self._close_port()
+            self._reopen_backoff = 0.0
+            self._reopen_failed = None
+            self._reopen_after = now
+            self._poll_reopen(now)           # at once, as the reader thread does
+            return
+        self._consume(data, now)
+
+    def _poll_reopen(self, now: float) -> None:
+        """One reopen attempt when due: at once after a loss, then as soon as the path
+        names a device not yet failed on, else after the backoff (``_wait_to_reopen``)."""
+        key = self._device_key()
+        if now < self._reopen_after and (key is None or key == self._reopen_failed):
+            return
+        if not self._open():
+            self._log("open", logging.WARNING, "serial %s: cannot open (%s); retrying",
+                      self.path, self._open_error)
+            self._reopen_failed = key
+            self._reopen_backoff = min(max(self._reopen_backoff * 2, self.backoff_start),
+                                       self.backoff_max)
+            self._reopen_after = now + self._reopen_backoff
+            self._check_stale(now)
+            return
+        self._reopen_backoff = 0.0
+        self._reopen_failed = None
 
     # ------------------------------------------------------------------ decoding
 

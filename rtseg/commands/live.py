@@ -9,6 +9,7 @@ SIGTERM ends the session cleanly (source, publishers and recording closed, summa
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import time
 from typing import Any, Callable, TextIO
@@ -160,13 +161,17 @@ class Console:
     def __init__(self, out: TextIO | None = None, err: TextIO | None = None,
                  print_cuts: bool = True, status: bool = True,
                  session_stats: Callable[[], Any] | None = None,
-                 cut_time: Callable[[CutEvent], float] | None = None) -> None:
+                 cut_time: Callable[[CutEvent], float] | None = None,
+                 name: str = "") -> None:
         # the streams of the moment (not those bound when this module was imported)
         self.out = out if out is not None else sys.stdout
         self.err = err if err is not None else sys.stderr
         self.print_cuts = print_cuts
         self.status = status
-        self.tty = bool(getattr(err, "isatty", lambda: False)())
+        #: the source's name when several run: lines start with it, and the status is a
+        #: plain line (several sessions would overwrite each other's line in place)
+        self.name = name
+        self.tty = bool(getattr(err, "isatty", lambda: False)()) and not name
         self.last_cut: CutEvent | None = None
         self.session_stats = session_stats
         self.cut_time = cut_time     # None: ev.time (seconds since the session started)
@@ -178,6 +183,10 @@ class Console:
         self.behaviour_time: Callable[[BehaviourEvent], float] | None = None
         #: a line printed before the first status line (the features the session uses)
         self.banner: str | None = None
+
+    @property
+    def _tag(self) -> str:
+        return f"{self.name}: " if self.name else ""
 
     def _clear(self) -> None:
         if self.tty and self._line_shown:
@@ -191,23 +200,23 @@ class Console:
             if self.print_cuts:
                 self._clear()
                 t = self.cut_time(ev) if self.cut_time is not None else None
-                print(format_cut(ev, t), file=self.out, flush=True)
+                print(self._tag + format_cut(ev, t), file=self.out, flush=True)
         elif isinstance(ev, BehaviourEvent):
             self.last_behaviour = ev
             first = self.first_segment.setdefault(ev.behaviour, ev.segment)
             if self.print_cuts:
                 self._clear()
                 t = self.behaviour_time(ev) if self.behaviour_time is not None else None
-                print(format_behaviour(ev, first if first != ev.segment else None, t),
-                      file=self.out, flush=True)
+                print(self._tag + format_behaviour(ev, first if first != ev.segment else None,
+                                                   t), file=self.out, flush=True)
         elif isinstance(ev, DropoutEvent):
             self._clear()
-            print(f"rtseg: dropout: {ev.name} {'lost' if ev.lost else 'restored'} "
+            print(f"rtseg: {self._tag}dropout: {ev.name} {'lost' if ev.lost else 'restored'} "
                   f"at t={ev.time:.2f} s", file=self.err, flush=True)
         elif isinstance(ev, StatusEvent) and self.status and ev.alive:
             if self.banner:           # the joints the features use, once the session runs
                 self._clear()
-                print(f"rtseg live: {self.banner}", file=self.err, flush=True)
+                print(f"rtseg live: {self._tag}{self.banner}", file=self.err, flush=True)
                 self.banner = None
             self.show_status(ev)
 
@@ -230,7 +239,7 @@ class Console:
         prev, self._corrupt_at = self._corrupt_at, (ev.time, ev.corrupt)
         if prev is not None and ev.corrupt > prev[1] and ev.time > prev[0]:
             damaged = f" (+{(ev.corrupt - prev[1]) / (ev.time - prev[0]):.1f}/s corrupt)"
-        line = (f"rtseg live: {ev.time:7.1f} s | {ev.frame_rate:6.1f} fps{damaged} | "
+        line = (f"rtseg live: {self._tag}{ev.time:7.1f} s | {ev.frame_rate:6.1f} fps{damaged} | "
                 f"{ev.dropped} dropped"
                 + (f" ({ev.overload_drops} under overload)" if ev.overload_drops else "")
                 + f" | {ev.stale_joints} stale{lag} | last cut: {last}")
@@ -276,13 +285,13 @@ def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: 
                 before_run: Callable[[], None] | None = None,
                 performance_time: bool = False,
                 monitor: tuple[Any, Any] | None = None,
-                check: Callable[[Any], int] | None = None) -> int:
+                check: Callable[[Any], int] | None = None, name: str = "") -> int:
     """Run a live session with console output; returns the exit status (``check``, when
     given, judges the :class:`rtseg.live.stats.SessionSummary` after it is printed:
     its return value is the status).
 
     ``monitor``: ``(feed, server)`` of :func:`start_monitor`; the server is stopped when
-    the session ends.
+    the session ends.  ``name``: the source's name (``NAME=URL``; "" for none).
 
     ``performance_time``: print each cut's ``t=`` as its boundary frame over the source's
     nominal rate (the performance's own clock, for a replay sent faster than real time)
@@ -291,7 +300,7 @@ def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: 
     console = Console(print_cuts=cfg["output.jsonl"] != "-", status=not quiet)
     try:
         session = LiveSession(source, cfg, listeners=[console], duration=duration,
-                              monitor=monitor[0] if monitor else None,
+                              monitor=monitor[0] if monitor else None, name=name,
                               on_start=lambda line: setattr(console, "banner", line))
         console.session_stats = lambda: session.stats
         if performance_time:
@@ -306,6 +315,67 @@ def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: 
             monitor[1].stop()
     print(summary.text(), file=sys.stderr, flush=True)
     return check(summary) if check is not None else 0
+
+
+def run_many(sources: list[tuple[str, str]], cfg: SessionConfig, duration: float | None,
+             quiet: bool) -> int:
+    """Several sources, one session each, on one thread (``rtseg.live.loop.run_sessions``):
+    each with its own detectors and counters; its events carry its name (OSC addresses
+    ``/rtseg/<name>/...``), its recording goes to ``recording.dir/<name>``.  Each
+    summary is printed after its name; the exit status is 0."""
+    import copy
+    from pathlib import Path
+    from rtseg.live.loop import run_sessions
+    from rtseg.live.session import LiveSession
+    sessions, consoles = [], []
+    try:
+        for name, url in sources:
+            c = copy.deepcopy(cfg)
+            if cfg["recording.dir"]:
+                c["recording.dir"] = str(Path(cfg["recording.dir"]) / name)
+            console = Console(print_cuts=cfg["output.jsonl"] != "-", status=not quiet,
+                              name=name)
+            session = LiveSession(url, c, listeners=[console], duration=duration, name=name,
+                                  on_start=lambda line, con=console: setattr(con, "banner",
+                                                                             line))
+            console.session_stats = lambda s=session: s.stats
+            sessions.append(session)
+            consoles.append(console)
+        summaries = run_sessions(sessions)
+    finally:
+        for console in consoles:
+            console.finish()
+    for (name, _), summary in zip(sources, summaries):
+        print(f"{name}: {summary.text()}", file=sys.stderr, flush=True)
+    return 0
+
+
+#: ``NAME=URL`` on the command line: a source named NAME
+_NAMED = re.compile(r"([A-Za-z0-9_-]{1,64})=(.+)")
+
+
+def source_list(given: list[str], cfg: SessionConfig) -> list[tuple[str, str]]:
+    """``(name, url)`` of each source to run: the command line's (``URL`` or
+    ``NAME=URL``), else the configuration's ``[[sources]]``, else its ``source.url``.
+    With several, an unnamed one is ``suit<k>`` (k its 1-based position).  Names used
+    twice raise ConfigError."""
+    out: list[tuple[str, str]] = []
+    if given:
+        for item in given:
+            m = _NAMED.fullmatch(item)
+            out.append((m.group(1), m.group(2)) if m and "://" not in m.group(1)
+                       else ("", item))
+    elif cfg.sources:
+        out = [(e["name"], e["url"]) for e in cfg.sources]
+    elif cfg["source.url"]:
+        out = [("", cfg["source.url"])]
+    if len(out) > 1:
+        out = [(name or f"suit{k}", url) for k, (name, url) in enumerate(out, 1)]
+    names = [n for n, _ in out]
+    twice = sorted({n for n in names if n and names.count(n) > 1})
+    if twice:
+        raise ConfigError(f"source name {twice[0]!r} is given twice")
+    return out
 
 
 def use_library(cfg: Any, path: str, prog: str) -> bool:
@@ -332,15 +402,25 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if getattr(args, "behaviours", None) and not use_library(cfg, args.behaviours, "rtseg live"):
         return 2
-    url = args.source or cfg["source.url"]
-    if not url:
-        print("rtseg live: no source: give SOURCE_URL or set source.url in the configuration",
-              file=sys.stderr)
+    try:
+        sources = source_list(args.source, cfg)
+    except ConfigError as exc:
+        print(f"rtseg live: {exc}", file=sys.stderr)
+        return 2
+    if not sources:
+        print("rtseg live: no source: give SOURCE_URL or set source.url (or [[sources]]) in "
+              "the configuration", file=sys.stderr)
+        return 2
+    if len(sources) > 1 and getattr(args, "monitor", None) is not None:
+        print("rtseg live: --monitor shows one source; give one SOURCE_URL", file=sys.stderr)
         return 2
     from rtseg.drivers import SourceError
     try:
+        if len(sources) > 1:
+            return run_many(sources, cfg, args.duration, args.quiet)
+        name, url = sources[0]
         monitor = start_monitor(getattr(args, "monitor", None), "rtseg live")
-        return run_session(url, cfg, args.duration, args.quiet, monitor=monitor)
+        return run_session(url, cfg, args.duration, args.quiet, monitor=monitor, name=name)
     except (ConfigError, SourceError) as exc:
         print(f"rtseg live: {exc}", file=sys.stderr)
         return 2
@@ -358,8 +438,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "osc://:39539?format=vmc (loopback; write 0.0.0.0 and allow= to listen on the "
                     "network), file://take.amc?skeleton=86.asf, "
                     "sim://synth.")
-    p.add_argument("source", nargs="?", metavar="SOURCE_URL",
-                   help="where frames come from (default: source.url of the configuration)")
+    p.add_argument("source", nargs="*", metavar="SOURCE_URL",
+                   help="where frames come from (default: [[sources]] or source.url of the "
+                        "configuration); several run in one process, one session each, "
+                        "named NAME=URL (default suit1, suit2, ...): their cuts and status go "
+                        "out as /rtseg/NAME/cut, ...")
     add_session_arguments(p)
     p.add_argument("--behaviours", metavar="LIB",
                    help="behaviour library (rtseg learn) naming each segment; turns identity "

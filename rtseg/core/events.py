@@ -20,6 +20,12 @@ Times and frames
 
 ``to_dict()`` gives a JSON-ready dict with a ``"type"`` field ("cut", "status",
 "dropout", "behaviour"); NaN/inf become None.  ``event_from_dict`` reverses it.
+
+Sources
+-------
+Every event has ``source``: the name of the session's source when one process runs
+several (``rtseg live NAME=URL ...``, ``[[sources]]``; ``rtseg.live.loop``), "" for a
+session on its own.  ``to_dict()`` leaves an empty ``source`` out.
 """
 
 from __future__ import annotations
@@ -74,6 +80,7 @@ class CutEvent:
     wire: True when the cut is sent to the OSC targets (the primary detector's cuts by
         default, see ``[output] cut_methods``); False when it only goes to the JSON-lines
         log and the session recording.
+    source: the source's name when one process runs several sessions ("" otherwise).
     """
     event: int
     segment: int
@@ -91,6 +98,7 @@ class CutEvent:
     detected_recv_time: float | None = None
     processing_ms: float | None = None
     wire: bool = True
+    source: str = ""
 
     def __post_init__(self) -> None:
         if not self.label:
@@ -113,6 +121,8 @@ class CutEvent:
     def to_dict(self) -> dict[str, Any]:
         d = {"type": "cut"}
         d.update({k: _clean(v) for k, v in asdict(self).items()})
+        if not d.get("source"):
+            d.pop("source", None)
         return d
 
 
@@ -186,6 +196,7 @@ class StatusEvent:
     refused_senders: int = 0
     other_senders: int = 0
     clock_restarts: int = 0
+    source: str = ""
 
     def input_counts(self) -> dict[str, int]:
         """The input counters by name (``INPUT_COUNTERS`` order)."""
@@ -198,6 +209,8 @@ class StatusEvent:
     def to_dict(self) -> dict[str, Any]:
         d = {"type": "status"}
         d.update({k: _clean(v) for k, v in asdict(self).items()})
+        if not d.get("source"):
+            d.pop("source", None)
         return d
 
 
@@ -211,10 +224,13 @@ class DropoutEvent:
     lost: bool
     time: float = float("nan")
     wall_time: float = field(default_factory=_wall_time)
+    source: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         d = {"type": "dropout"}
         d.update({k: _clean(v) for k, v in asdict(self).items()})
+        if not d.get("source"):
+            d.pop("source", None)
         return d
 
 
@@ -245,6 +261,7 @@ class BehaviourEvent:
     correction: bool = False
     previous: str = ""
     wall_time: float = field(default_factory=_wall_time)
+    source: str = ""
 
     @property
     def label(self) -> str:
@@ -254,6 +271,8 @@ class BehaviourEvent:
     def to_dict(self) -> dict[str, Any]:
         d = {"type": "behaviour"}
         d.update({k: _clean(v) for k, v in asdict(self).items()})
+        if not d.get("source"):
+            d.pop("source", None)
         return d
 
 

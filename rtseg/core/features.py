@@ -161,6 +161,18 @@ class PoseFeatures:
         self._calib_L: np.ndarray | None = None
         self._post: np.ndarray | None = self._axis_M  # combined (K, 4, 4) map after L
         self._prev: np.ndarray | None = None
+        # ``step``'s work buffers (no allocation per frame but the returned row): the
+        # (K, 4, 4) left-multiplication matrices, two (K, 4, 1) products used in turn,
+        # the selected rows, the sign-continuity dots and signs, and two output rows
+        # used in turn (one holds the previous frame's output)
+        k = len(self.indices)
+        self._mat = np.empty((k, 4, 4))
+        self._prod = (np.empty((k, 4, 1)), np.empty((k, 4, 1)))
+        self._rows = np.empty((k, 4))
+        self._dot = np.empty((k, 1, 1))
+        self._sign = np.empty(k)
+        self._outs = (np.empty((k, 4)), np.empty((k, 4)))
+        self._turn = 0
         if calibration is not None:
             self.calibrate(calibration)
 
@@ -226,25 +238,64 @@ class PoseFeatures:
         L = src.reshape(-1)[self._parent_gather] * _CONJ_SIGN
         return (L @ q[self.indices][:, :, None])[:, :, 0]
 
+    def _local_into(self, q: np.ndarray) -> np.ndarray:
+        """``_local_one`` into the work buffers: (K, 4, 1), one of ``_prod``; the same
+        arithmetic (gathers, sign tables, ``matmul``), so the same values to the bit."""
+        mat, prod = self._mat, self._prod
+        if self.space == "local":
+            if not self._composed:
+                q.take(self.indices, 0, prod[0][:, :, 0])
+                return prod[0]
+            src = self._ext
+            src[:-1] = q
+            flat = src.reshape(-1)
+            src.take(self._paths[:, -1], 0, prod[0][:, :, 0])
+            cur = 0
+            for g in self._path_gathers:           # left-multiply by the joints above
+                flat.take(g, None, mat)
+                np.multiply(mat, _SIGN, out=mat)
+                np.matmul(mat, prod[cur], out=prod[1 - cur])
+                cur = 1 - cur
+            return prod[cur]
+        if self._needs_ext:
+            src = self._ext
+            src[:-1] = q
+        else:
+            src = q
+        src.reshape(-1).take(self._parent_gather, None, mat)
+        np.multiply(mat, _CONJ_SIGN, out=mat)
+        rows = self._rows
+        q.take(self.indices, 0, rows)
+        np.matmul(mat, rows[:, :, None], out=self._prod[0])
+        return self._prod[0]
+
     def step(self, quats: np.ndarray) -> np.ndarray:
         """Features (dim,) of one frame (J, 4); the row ``transform`` gives for it in a sequence.
 
-        Keeps the previous output for sign continuity (``reset()`` forgets it).
+        Keeps the previous output for sign continuity (``reset()`` forgets it).  The work
+        happens in preallocated buffers; the row returned is a new array (the caller's).
         """
-        q = np.asarray(quats, dtype=np.float64)
-        if q.shape != self._frame_shape or not q.flags.c_contiguous:
-            q = np.ascontiguousarray(self._check_frame(q))
-        out = self._local_one(q)
+        q = quats
+        if (type(q) is not np.ndarray or q.dtype != np.float64 or q.shape != self._frame_shape
+                or not q.flags.c_contiguous):
+            q = np.ascontiguousarray(self._check_frame(np.asarray(q, dtype=np.float64)))
+        loc = self._local_into(q)
+        self._turn = turn = 1 - self._turn
+        out = self._outs[turn]
         if self._post is not None:
-            out = (self._post @ out[:, :, None])[:, :, 0]
-        elif self.space == "local":
-            out = out.copy()
+            np.matmul(self._post, loc, out=out[:, :, None])
+        else:
+            out[:] = loc[:, :, 0]
         prev = self._prev
+        sign = self._sign
         if prev is None:
-            sign = np.copysign(1.0, out[:, 3] + 0.0)
+            np.add(out[:, 3], 0.0, out=sign)
         else:
             # dot(out_k, prev_k) per joint; +0.0 turns -0.0 into +0.0 (no flip, as make_continuous)
-            sign = np.copysign(1.0, (out[:, None, :] @ prev[:, :, None])[:, 0, 0] + 0.0)
+            dot = self._dot
+            np.matmul(out[:, None, :], prev[:, :, None], out=dot)
+            np.add(dot[:, 0, 0], 0.0, out=sign)
+        np.copysign(1.0, sign, out=sign)
         out *= sign[:, None]
         self._prev = out
         return out.reshape(-1).copy()

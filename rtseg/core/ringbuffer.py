@@ -110,9 +110,12 @@ class RingBuffer:
         ``data`` must have ``width`` elements (any shape, read in C order); ``valid`` must
         have ``valid_width`` elements, or be None for all-valid.
         """
-        row = np.asarray(data, dtype=np.float64).reshape(-1)
-        if row.shape[0] != self.width:
-            raise ValueError(f"frame has {row.shape[0]} values, ring width is {self.width}")
+        row = data if type(data) is np.ndarray and data.dtype == np.float64 \
+            else np.asarray(data, dtype=np.float64)
+        if row.size != self.width:
+            raise ValueError(f"frame has {row.size} values, ring width is {self.width}")
+        if row.ndim != 1:
+            row = row.reshape(-1)
         with self._cond:
             i = self._head
             a = i % self.capacity
@@ -129,7 +132,8 @@ class RingBuffer:
                     self._valid[a] = True
                     self._valid[b] = True
                 else:
-                    v = np.asarray(valid, dtype=bool).reshape(-1)
+                    v = valid if type(valid) is np.ndarray and valid.ndim == 1 \
+                        else np.asarray(valid, dtype=bool).reshape(-1)
                     self._valid[a] = v
                     self._valid[b] = v
             if i >= self.capacity:
@@ -232,8 +236,8 @@ class Cursor:
         ring = self.ring
         with ring._cond:
             start = max(self.position, ring.oldest)
-            if start >= ring._head:
-                return 0
+            if start >= ring._head or ring._recv[start % ring.capacity] >= t:
+                return 0                   # nothing waiting, or nothing as old as t
             recv = ring._slice(start, ring._head).recv_time
             k = int(np.searchsorted(recv, t, side="left"))
             if limit is not None:

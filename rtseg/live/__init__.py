@@ -1,7 +1,8 @@
 """The live session: source -> ring buffer -> pose features -> online detectors -> cut
-events -> publishers.  ``session`` holds :class:`LiveSession`; ``pipeline`` the per-frame
-pipeline it shares with offline replay; ``process``, ``emitter``, ``health`` its
-processing step, events and health; ``config`` the ``config/live.toml`` schema;
+events -> publishers.  ``session`` holds :class:`LiveSession`; ``loop`` runs sessions on one
+thread (``run_sessions``); ``pipeline`` the per-frame pipeline it shares with offline
+replay; ``intake``, ``process``, ``emitter``, ``health`` its frame intake, processing
+step, events and health; ``config`` the ``config/live.toml`` schema;
 ``outputs`` the publishers of ``[output]``; ``stats`` the run-time counters;
 ``rate_check`` the declared-frame-rate check.
 

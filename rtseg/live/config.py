@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -235,10 +236,15 @@ SCHEMA: dict[str, dict[str, Key]] = {
 
 @dataclass
 class SessionConfig:
-    """Validated live-session settings (see ``config/live.toml`` for each key's meaning)."""
+    """Validated live-session settings (see ``config/live.toml`` for each key's meaning).
+
+    ``sources``: the ``[[sources]]`` list, ``{"url": ..., "name": ...}`` per source (name
+    "" when not given): several suits, one session each, in one process (``rtseg live``
+    with no URL on the command line runs them)."""
     values: dict[str, dict[str, Any]]
     origin: str = "live.toml"
     detector_params: dict[str, dict[str, Any]] = field(default_factory=dict)
+    sources: list[dict[str, str]] = field(default_factory=list)
 
     def __getitem__(self, dotted: str) -> Any:
         section, _, key = dotted.partition(".")
@@ -313,6 +319,46 @@ def validate(raw: dict[str, Any], origin: str = "live.toml") -> dict[str, dict[s
     return out
 
 
+#: keys of one ``[[sources]]`` entry
+SOURCE_KEYS = ("url", "name")
+_NAME = re.compile(r"[A-Za-z0-9_-]{1,64}")
+
+
+def parse_sources(raw: Any, origin: str = "live.toml") -> list[dict[str, str]]:
+    """The ``[[sources]]`` array of tables: each needs ``url`` (a source URL) and may
+    have ``name`` (1 to 64 of ``[A-Za-z0-9_-]``, unique: the ``/rtseg/<name>/...``
+    addresses and the recording's sub-folder).  ConfigError names the entry."""
+    if not isinstance(raw, list) or not all(isinstance(e, dict) for e in raw):
+        raise ConfigError(f"{origin}: sources: expected [[sources]] tables, got "
+                          f"{type(raw).__name__}")
+    out, names = [], set()
+    for i, entry in enumerate(raw):
+        where = f"{origin}: sources[{i}]"
+        unknown = sorted(set(entry) - set(SOURCE_KEYS))
+        if unknown:
+            raise ConfigError(f"{where}: unknown key(s) {', '.join(unknown)} "
+                              f"(known: {', '.join(SOURCE_KEYS)})")
+        url, name = entry.get("url"), entry.get("name", "")
+        if not isinstance(url, str) or not url.strip():
+            raise ConfigError(f"{where}: url: expected a source URL, got {url!r}")
+        if not isinstance(name, str) or (name and not _NAME.fullmatch(name)):
+            raise ConfigError(f"{where}: name {name!r}: use 1 to 64 letters, digits, "
+                              "'_' or '-'")
+        if name and name in names:
+            raise ConfigError(f"{where}: name {name!r} is used twice")
+        names.add(name)
+        out.append({"url": url.strip(), "name": name})
+    return out
+
+
+def _split_sources(raw: Any, origin: str) -> tuple[Any, list[dict[str, str]]]:
+    """(the table without ``sources``, the parsed ``[[sources]]`` list)."""
+    if isinstance(raw, dict) and "sources" in raw:
+        raw = dict(raw)
+        return raw, parse_sources(raw.pop("sources"), origin)
+    return raw, []
+
+
 def load_session_config(path: str | Path | None = None,
                         overrides: dict[str, Any] | None = None) -> SessionConfig:
     """Read and validate the live configuration, then apply ``overrides``.
@@ -322,9 +368,9 @@ def load_session_config(path: str | Path | None = None,
     values and named as ``--flag`` origins in errors.
     """
     p = Path(path) if path is not None else config_dir() / "live.toml"
-    raw = load_toml(p)
+    raw, sources = _split_sources(load_toml(p), p.name)
     values = validate(raw, origin=p.name)
-    cfg = SessionConfig(values, origin=str(p))
+    cfg = SessionConfig(values, origin=str(p), sources=sources)
     if overrides:
         apply_overrides(cfg, overrides)
     return cfg
@@ -344,4 +390,5 @@ def apply_overrides(cfg: SessionConfig, overrides: dict[str, Any], origin: str =
 
 def from_dict(raw: dict[str, Any], origin: str = "<dict>") -> SessionConfig:
     """A ``SessionConfig`` from an in-memory table (tests, embedding)."""
-    return SessionConfig(validate(raw, origin=origin), origin=origin)
+    raw, sources = _split_sources(raw, origin)
+    return SessionConfig(validate(raw, origin=origin), origin=origin, sources=sources)

@@ -28,7 +28,10 @@ class SessionEvents:
         return time.monotonic() - self.session_start
 
     def _emit(self, ev: Event) -> Event:
-        """Publish, record and show one event; returns it as sent (cuts: latency stamped)."""
+        """Publish, record and show one event; returns it as sent (cuts: latency stamped),
+        tagged with the session's ``name`` when it has one."""
+        if self.name:
+            ev.source = self.name
         try:
             if isinstance(ev, CutEvent):
                 if ev.wire:

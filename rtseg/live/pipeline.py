@@ -53,6 +53,10 @@ from rtseg.live.config import SessionConfig, load_session_config
 log = logging.getLogger("rtseg.live.session")
 
 DEFAULT_FRAME_RATE = 120.0
+#: squared norms taken as unit without renormalising (|q|^2 - 1 within 1e-6)
+_UNIT_LO, _UNIT_HI = 1.0 - 1e-6, 1.0 + 1e-6
+# the reductions of the per-frame checks, called directly (no method wrappers)
+_all, _min, _max = np.logical_and.reduce, np.minimum.reduce, np.maximum.reduce
 #: index jumps kept for mapping cuts back to session frames (``Pipeline._index_of_fed``):
 #: between MAX_JUMPS and twice that, far more than one detector delay holds
 MAX_JUMPS = 4096
@@ -163,6 +167,7 @@ class Pipeline:
         self._src_long = 0
         self._bad_run = 0
         self._last_good = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (self.n_joints, 1))
+        self._norms = np.empty(self.n_joints)     # squared norms of the frame's quaternions
         # Per detector: session index of the first frame fed since the last (re)start and
         # the detector's own frame count at that moment.
         self._seg_start = {m: -1 for m in self.detectors}
@@ -334,21 +339,26 @@ class Pipeline:
         elif missing:
             bridge = missing
         # --- sanitise values: non-finite or zero quaternions are invalid
-        q = np.asarray(quats, dtype=np.float64)
-        v = np.asarray(valid, dtype=bool)
-        norms = np.einsum("ij,ij->i", q, q)
-        ok = (norms > 1e-12) & (norms < 1e12)          # False for NaN too
-        all_valid = bool(v.all())
-        if not ok.all():
-            bad = ~ok
-            st.bad_values += int(bad.sum())
-            v = v & ok
-            all_valid = False
-        if not all_valid:
-            q = np.where(v[:, None], q, self._last_good)
-            norms = np.where(v, norms, 1.0)
-        if not (np.abs(norms - 1.0) < 1e-6).all():     # drivers normalise; be sure anyway
-            q = q / np.sqrt(np.where(norms > 1e-12, norms, 1.0))[:, None]
+        q = quats if type(quats) is np.ndarray and quats.dtype == np.float64 \
+            else np.asarray(quats, dtype=np.float64)
+        v = valid if type(valid) is np.ndarray and valid.dtype == np.bool_ \
+            else np.asarray(valid, dtype=bool)
+        norms = np.einsum("ij,ij->i", q, q, out=self._norms) \
+            if q.shape == self._last_good.shape else np.einsum("ij,ij->i", q, q)
+        all_valid = bool(_all(v))
+        # the usual frame: every joint valid with a unit norm (NaN fails both tests)
+        if not (all_valid and _min(norms) > _UNIT_LO and _max(norms) < _UNIT_HI):
+            ok = (norms > 1e-12) & (norms < 1e12)          # False for NaN too
+            if not ok.all():
+                bad = ~ok
+                st.bad_values += int(bad.sum())
+                v = v & ok
+                all_valid = False
+            if not all_valid:
+                q = np.where(v[:, None], q, self._last_good)
+                norms = np.where(v, norms, 1.0)
+            if not (np.abs(norms - 1.0) < 1e-6).all():     # drivers normalise; be sure anyway
+                q = q / np.sqrt(np.where(norms > 1e-12, norms, 1.0))[:, None]
         np.copyto(self._last_good, q)       # q may be a ring-buffer view: keep a copy
         # --- invalid required joints
         if not all_valid and not v[self.required].all():

@@ -39,9 +39,12 @@ class SessionProcessing:
             soft = min(old_soft, max(0, self._thin - pending))
         return max(old_hard, soft)
 
-    def _process_window(self, w, now: float) -> None:
+    def _process_window(self, w, now: float, budget: float | None = None) -> None:
         """Process the frames of window ``w`` in order (``now``: monotonic s when it was
-        read), dropping the oldest under overload (``_overload_drop``)."""
+        read), dropping the oldest under overload (``_overload_drop``).  ``budget`` (s):
+        stop after that long, the frames left waiting for the session's next turn (the
+        loop takes its sessions in turn, so one session's burst of work does not hold
+        the others' frames back)."""
         pipe = self.pipeline
         st = self.stats
         J = self.ring.valid_width
@@ -53,6 +56,10 @@ class SessionProcessing:
         recv_all = w.recv_time
         n = len(w)
         i = 0
+        # between frames, the loop reads the polled sources (rtseg.live.loop: at most
+        # once a millisecond), so that frames arriving meanwhile are stamped and waiting
+        pump = self._loop.pump if self._loop is not None else None
+        end_by = None if budget is None else now + budget
         while i < n:
             if self._max_lag > 0 and now - float(recv_all[i]) > 0.5 * self._max_lag:
                 waiting = self.ring.head - (w.start + i)
@@ -98,13 +105,19 @@ class SessionProcessing:
             # cost of one frame (s), a running mean over about 64 frames
             self._frame_cost += (done - now - self._frame_cost) / 64.0
             now = done
+            if i < n:
+                if end_by is not None and done > end_by:
+                    self._cursor.position = w.start + i    # the rest: the next turn
+                    break
+                if pump is not None:
+                    pump(done)
         self._pending_lost = pending
-        if len(w):
+        if i:
             now = time.monotonic()
-            st.lag_s = now - float(w.recv_time[-1])
+            st.lag_s = now - float(recv_all[i - 1])
             st.max_lag_s = max(st.max_lag_s, st.lag_s)
-            self._last_recv = float(w.recv_time[-1])
-            self._last_index = w.start + len(w) - 1
+            self._last_recv = float(recv_all[i - 1])
+            self._last_index = w.start + i - 1
 
 
 

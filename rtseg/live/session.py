@@ -1,24 +1,29 @@
 """The live session: source -> ring buffer -> pose features -> online detectors -> cut events.
 
 The per-frame work (gaps, calibration, features, detectors) is ``rtseg.live.pipeline.Pipeline``;
-this module runs it in a threaded session and publishes what it finds.  Where events go
+this module runs it in a session and publishes what it finds.  Where events go
 (publishers, which detectors' cuts go on the wire) is ``rtseg.live.outputs``; the counters and
 the summary are ``rtseg.live.stats``.  Their public names (``Pipeline``,
 ``PipelineCut``, ``make_detectors``, ``replay_frames``, ``replay_session``,
 ``build_publishers``, ``wire_methods``, ``LiveStats``, ``SessionSummary``) are re-exported
-here.  Three parts of ``LiveSession`` live in their own modules: ``rtseg.live.process``
-(frames from the ring through the pipeline, overload drops), ``rtseg.live.emitter`` (cut and
-behaviour events built, published, recorded) and ``rtseg.live.health`` (dropouts, status
-events, counters).
+here.  Four parts of ``LiveSession`` live in their own modules: ``rtseg.live.intake``
+(frames from the source, recorded and appended to the ring: polled, woken or by a reader
+thread), ``rtseg.live.process`` (frames from the ring through the pipeline, overload
+drops), ``rtseg.live.emitter`` (cut and behaviour events built, published, recorded) and
+``rtseg.live.health`` (dropouts, status events, counters); ``rtseg.live.loop`` runs
+sessions.
 
 Threads and data flow
 ---------------------
-``LiveSession.run()`` starts one **reader thread** that only does
-``source.read()`` -> sanity check -> ``recorder`` (every frame received is recorded) ->
-``RingBuffer.append`` (raw quaternions, valid flags, receive time, source time/seq).  The
-**calling thread** is the processing loop: it sleeps on the ring until frames arrive, takes
-them in order through a ``Cursor`` (at most ``buffer.max_batch`` per wake-up) and hands each
-to the ``Pipeline`` (calibration, gap handling, ``PoseFeatures.step``, every online detector's
+``LiveSession.run()`` runs the session on the calling thread (``rtseg.live.loop``, which
+also runs several sessions in one thread).  A source that can be polled (serial port, UDP
+socket: ``Source.take_over``) is read by that thread when its descriptor is readable:
+decoded -> sanity check -> ``recorder`` (every frame received is recorded) ->
+``RingBuffer.append`` (raw quaternions, valid flags, receive time, source time/seq).  A
+source that must block (a file replay, a TCP client) keeps one **reader thread** that does
+the same and wakes the loop.  The loop then takes the frames from the ring in order
+through a ``Cursor`` (at most ``buffer.max_batch`` per wake-up) and hands each to the
+``Pipeline`` (calibration, gap handling, ``PoseFeatures.step``, every online detector's
 ``update``).  Cuts become ``CutEvent``s that are published at once (OSC/JSON lines) and
 recorded.  Once per ``status.interval`` a ``StatusEvent`` goes out; sensor dropouts produce
 ``DropoutEvent``s.
@@ -28,7 +33,8 @@ also hands it every event and, after each step, a chance to queue a batch (bound
 
 Keeping up
 ----------
-The reader never blocks on processing.  Under overload (frames arrive faster than the
+Reading never waits for processing: a reader thread runs beside it, and a polled source is
+read again between the frames of a batch (every millisecond at most).  Under overload (frames arrive faster than the
 loop processes them) the loop drops the **oldest** waiting frames so that no frame is
 processed more than ``buffer.max_lag_seconds`` (L, default 0.1 s; ``--max-lag``) after it
 arrived, and cues stay timely: while working off what is waiting (at the measured cost
@@ -93,8 +99,8 @@ the loop: malformed frames are counted (``LiveStats.bad_frames``) and logged.
 
 from __future__ import annotations
 
-import gc
 import logging
+import re
 import signal
 import threading
 import time
@@ -104,11 +110,13 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from rtseg.live.emitter import Event, SessionEvents
+from rtseg.live.loop import run_sessions
 from rtseg.live.health import SessionHealth
+from rtseg.live.intake import HAND_BACK_DROPS, SessionInput
 from rtseg.live.process import SessionProcessing
 from rtseg.live.outputs import build_publishers, log_publishers, wire_methods
 from rtseg.live.pipeline import (DEFAULT_FRAME_RATE, Pipeline, PipelineCut, PipelineStats,
-                            _blas_limit, detector_params, make_detectors, replay_frames,
+                            detector_params, make_detectors, replay_frames,
                             replay_session)
 from rtseg.live.rate_check import DeclaredRateCheck
 from rtseg.core.ringbuffer import RingBuffer
@@ -117,11 +125,21 @@ from rtseg.live.stats import FloatRing, LiveStats, SessionSummary, percentile
 
 log = logging.getLogger("rtseg.live.session")
 
+#: longest a session goes without a step while other sessions wake the loop, s
+STEP_EVERY_S = 0.05
+
 
 __all__ = ["DEFAULT_FRAME_RATE", "FloatRing", "LiveSession", "LiveStats", "Pipeline",
            "PipelineCut", "PipelineStats", "SessionSummary", "build_publishers",
            "detector_params", "make_detectors", "replay_frames", "replay_session",
            "wire_methods", "with_suit"]
+
+
+def check_name(name: str) -> str:
+    """``name`` if it can name a source (1 to 64 of ``[A-Za-z0-9_-]``), else ValueError."""
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_-]{1,64}", name):
+        raise ValueError(f"source name {name!r}: use 1 to 64 letters, digits, '_' or '-'")
+    return name
 
 
 def with_suit(url: str, suit: str) -> str:
@@ -138,30 +156,7 @@ def with_suit(url: str, suit: str) -> str:
     return url + ("&" if parts.query else "?") + f"suit={suit}"
 
 
-def _freeze_heap(collect: bool) -> None:
-    """Move every object alive now (modules, configuration, the pipeline's arrays) out of
-    the garbage collector's reach (``gc.freeze``), after one full collection when
-    ``collect``.  A full collection holds the GIL while it walks every tracked object: with
-    numpy and scipy loaded that is about 30 ms, during which the reader thread cannot drain
-    the serial port or socket (a pty holds ~4 KB: 10 ms of a 17-sensor suit at 20x its
-    120 Hz).  Frozen, later collections walk only what the session itself allocates.
-    ``LiveSession.run`` undoes it when the session ends (:func:`_thaw_heap`)."""
-    if collect:
-        gc.collect()
-    gc.freeze()
-
-
-def _thaw_heap(frozen_before: int) -> None:
-    """Return what :func:`_freeze_heap` froze to the collector (``gc.unfreeze``) when
-    nothing was frozen before the session (``frozen_before``, ``gc.get_freeze_count()``
-    then), so a host that runs many sessions in one process still collects the cycles that
-    were alive when each started.  A host that froze objects itself keeps them frozen
-    (``gc.unfreeze`` cannot release only the session's)."""
-    if frozen_before == 0:
-        gc.unfreeze()
-
-
-class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
+class LiveSession(SessionInput, SessionProcessing, SessionEvents, SessionHealth):
     """One live segmentation session.
 
     source: a URL for ``rtseg.drivers.open_source`` or an opened ``Source``.
@@ -176,6 +171,9 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
         ``rtseg.recording.SessionRecorder`` when ``recording.dir`` is set).
     listeners: callables given every event after it is published (the CLI prints them).
     duration: stop after this many seconds (None: until the source ends or a signal).
+    name: the source's name when one process runs several sessions
+        (``rtseg.live.loop.run_sessions``): every event carries it (``source``) and the
+        standard OSC addresses get it (``/rtseg/<name>/cut``); letters, digits, ``_``, ``-``.
     monitor: object with ``attach(session)`` (once the pipeline exists), ``tick(session)``
         (after each processing step, on the processing thread; must not block) and
         ``__call__(event)`` (a listener), e.g. ``rtseg.monitor.MonitorFeed``; its failures
@@ -187,8 +185,11 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
                  listeners: Iterable[Callable[[Event], None]] = (),
                  duration: float | None = None, handle_signals: bool = True,
                  monitor: Any = None,
-                 on_start: Callable[[str], None] | None = None) -> None:
+                 on_start: Callable[[str], None] | None = None, name: str = "") -> None:
         self.config = config if config is not None else load_session_config()
+        #: the source's name, carried by every event (``source``) when one process runs
+        #: several sessions; "" for a session on its own
+        self.name = check_name(name) if name else ""
         #: called once the source is open, with the line naming the joints the features use
         self.on_start = on_start
         detector_params(self.config)          # refuse bad detector settings before opening
@@ -221,6 +222,10 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
         self.stop_reason = "running"
         self._rate_check: DeclaredRateCheck | None = None
         self._warn_at: dict[str, float] = {}
+        self._loop: Any = None                  # the rtseg.live.loop.SessionLoop running it
+        self._reader_thread: threading.Thread | None = None
+        self._polled = False                    # the loop reads the source (no thread)
+        self._woken = False                     # the source's thread wakes the loop
 
     # ---------------------------------------------------------------- control
     def stop(self, reason: str = "stopped") -> None:
@@ -228,8 +233,8 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
         if not self._stop.is_set():
             self.stop_reason = reason
         self._stop.set()
-        if self.ring is not None:
-            self.ring.notify()
+        if self._loop is not None:
+            self._loop.waker.wake()
 
     def _on_signal(self, signum: int, _frame: Any) -> None:
         """SIGINT/SIGTERM handler.  Runs in the main thread between two bytecodes, possibly
@@ -288,156 +293,115 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
                       "methods": list(self.pipeline.detectors), "primary": self.primary,
                       "wire_methods": sorted(self.wire)})
 
-    # ---------------------------------------------------------------- reader thread
-    def _reader(self) -> None:
-        src, ring = self.source, self.ring
-        assert ring is not None
-        J = ring.valid_width
-        try:
-            while not self._stop.is_set():
-                try:
-                    frame = src.read(timeout=0.1)
-                except EOFError:
-                    self._eof.set()
-                    ring.notify()
-                    return
-                except Exception as exc:  # a driver bug or device error must not end the session
-                    self.stats.source_errors += 1
-                    self._warn("source", "source read failed (%s: %s); retrying",
-                               type(exc).__name__, exc)
-                    self._stop.wait(0.05)
-                    continue
-                if frame is None:
-                    continue
-                try:
-                    q = np.asarray(frame.quats, dtype=np.float64).reshape(J, 4)
-                    v = np.asarray(frame.valid, dtype=bool).reshape(J)
-                    recv = float(frame.recv_time)
-                    seq = None if frame.seq is None else int(frame.seq)
-                    stime = None if frame.source_time is None else float(frame.source_time)
-                except (TypeError, ValueError, AttributeError) as exc:
-                    self.stats.bad_frames += 1
-                    self._warn("badframe", "malformed frame dropped (%s)", exc)
-                    continue
-                if self.recorder is not None:
-                    with self._rec_lock:
-                        try:
-                            self.recorder.record_frame(frame)
-                        except Exception as exc:
-                            self.stats.record_errors += 1
-                            self._warn("record", "recording a frame failed: %s", exc)
-                ring.append(q, recv, stime, seq, v)
-                if self._rate_check is not None and not self._rate_check.done:
-                    problem = self._rate_check.feed(recv, stime, seq)
-                    if problem is not None:
-                        log.warning("%s", problem)
-                if self._first_recv is None:
-                    self._first_recv = recv
-                    self._first_src = stime if stime is not None and np.isfinite(stime) else None
-                self.stats.frames_received += 1
-        except BaseException as exc:  # pragma: no cover - defensive
-            self._reader_error = exc
-            log.exception("reader thread failed")
-            ring.notify()
-
     # ---------------------------------------------------------------- run
     def run(self) -> SessionSummary:
         """Run until the duration elapses, the source ends, or stop()/a signal; then shut
-        everything down and return the summary."""
-        old_handlers = {}
-        if self.handle_signals and threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                old_handlers[sig] = signal.signal(sig, self._on_signal)
-        reader = None
-        blas = _blas_limit(int(self.config["buffer.blas_threads"]))
-        frozen_before = gc.get_freeze_count()
-        try:
-            # the time origin precedes the source's first frame (CutEvent.time >= 0)
-            self.session_start = time.monotonic()
-            _freeze_heap(collect=True)
-            self._open()
-            _freeze_heap(collect=False)
-            J = len(self.pipeline.joint_names)
-            monitor = self.monitor
-            rec_start = getattr(self.recorder, "start_monotonic", None)
-            if isinstance(rec_start, float):
-                self.session_start = rec_start
-            self._last_valid = np.full(J, self.session_start)
-            self._joint_lost = np.zeros(J, dtype=bool)
-            self._n_lost = 0
-            self._dropout_s = float(self.config["gaps.dropout_seconds"])
-            self._source_lost = False
-            self._last_recv: float | None = None
-            self._last_index = 0
-            self._status_t = time.monotonic()
-            self._status_frames = 0
-            self._last_rate = 0.0
-            interval = float(self.config["status.interval"])
-            next_status = self._status_t + interval
-            lag_warn = float(self.config["buffer.lag_warn_seconds"])
-            self._max_lag = float(self.config["buffer.max_lag_seconds"])
-            if getattr(self.source, "as_fast_as_read", False) is True:
-                self._max_lag = 0.0          # a replay at speed 0: no frame is ever late
-            self._thin = int(self.config["gaps.max_frames"])
-            self._pending_lost = 0
-            self._frame_cost = 0.0
-            max_batch = int(self.config["buffer.max_batch"])
-            deadline = None if self.duration is None else time.monotonic() + self.duration
-            cursor = self.ring.cursor(0)
-            reader = threading.Thread(target=self._reader, name="rtseg-reader", daemon=True)
-            if monitor is not None:
-                self._monitor_call(monitor.attach)
-            reader.start()
-            while not self._stop.is_set():
-                now = time.monotonic()
-                timeout = max(0.0, min(0.05, next_status - now))
-                if deadline is not None:
-                    timeout = min(timeout, max(0.0, deadline - now))
-                self.ring.wait(cursor.position, timeout)
-                now = time.monotonic()
-                if self._max_lag > 0:
-                    # frames over the maximum lag: dropped at once, oldest first
-                    skipped = cursor.drop_older(now - self._max_lag)
-                    if skipped:
-                        self.stats.overload_drops += skipped
-                        self._pending_lost += skipped
-                w = cursor.read(max_batch)
-                if len(w) or w.lost:
-                    self._process_window(w, now)
-                self.stats.backlog = cursor.backlog
-                self.stats.max_backlog = max(self.stats.max_backlog, self.stats.backlog)
-                now = time.monotonic()
-                if len(w) and self.stats.lag_s > lag_warn:
-                    self.stats.lag_warnings += 1
-                    self._warn("lag", "falling behind the source: frames wait %.0f ms "
-                               "(%d frames queued)", self.stats.lag_s * 1000, cursor.backlog)
-                if not len(w):
-                    self._check_silence(now)
-                    if self.recorder is not None and hasattr(self.recorder, "poll"):
-                        with self._rec_lock:
-                            self.recorder.poll()
-                if monitor is not None:
-                    self._monitor_call(monitor.tick)
-                if now >= next_status:
-                    self._emit(self._status(now))
-                    next_status = max(next_status + interval, now + interval / 2)
-                if deadline is not None and now >= deadline:
-                    self.stop("duration reached")
-                elif self._eof.is_set() and cursor.backlog == 0:
-                    self.stop("end of source")
-                elif self._reader_error is not None:
-                    self.stop(f"reader failed: {self._reader_error}")
-        finally:
-            self._stop.set()
-            if reader is not None:
-                reader.join(timeout=5.0)
-            summary = self._shutdown()
-            for sig, h in old_handlers.items():
-                signal.signal(sig, h)
-            if blas is not None:
-                blas.restore_original_limits()
-            _thaw_heap(frozen_before)
-        return summary
+        everything down and return the summary.  The session runs on the calling thread
+        (``rtseg.live.loop.run_sessions``, which also runs several sessions at once)."""
+        return run_sessions([self], handle_signals=self.handle_signals)[0]
+
+    def _begin(self, loop: Any) -> None:
+        """Open the source and everything the session needs (``loop``: the
+        ``rtseg.live.loop.SessionLoop`` that will run it)."""
+        self._loop = loop
+        # the time origin precedes the source's first frame (CutEvent.time >= 0)
+        self.session_start = time.monotonic()
+        self._open()
+        J = len(self.pipeline.joint_names)
+        rec_start = getattr(self.recorder, "start_monotonic", None)
+        if isinstance(rec_start, float):
+            self.session_start = rec_start
+        self._last_valid = np.full(J, self.session_start)
+        self._joint_lost = np.zeros(J, dtype=bool)
+        self._n_lost = 0
+        self._dropout_s = float(self.config["gaps.dropout_seconds"])
+        self._source_lost = False
+        self._last_recv: float | None = None
+        self._last_index = 0
+        self._status_t = time.monotonic()
+        self._status_frames = 0
+        self._last_rate = 0.0
+        self._interval = float(self.config["status.interval"])
+        self._next_status = self._status_t + self._interval
+        self._lag_warn = float(self.config["buffer.lag_warn_seconds"])
+        self._max_lag = float(self.config["buffer.max_lag_seconds"])
+        if getattr(self.source, "as_fast_as_read", False) is True:
+            self._max_lag = 0.0          # a replay at speed 0: no frame is ever late
+        self._thin = int(self.config["gaps.max_frames"])
+        self._pending_lost = 0
+        self._frame_cost = 0.0
+        self._max_batch = int(self.config["buffer.max_batch"])
+        self._deadline: float | None = None      # set when the input starts
+        self._cursor = self.ring.cursor(0)
+        self._got: list[Any] = []
+        self._last_step = 0.0
+
+    def _wait_s(self, now: float) -> float:
+        """How long the loop may sleep for this session: 0 while frames wait in the ring,
+        else until its next status or deadline."""
+        if self._cursor.backlog > 0 or self._stop.is_set():
+            return 0.0
+        wait = self._next_status - now
+        if self._deadline is not None:
+            wait = min(wait, self._deadline - now)
+        return wait
+
+    def _due(self, now: float) -> bool:
+        """Whether the loop's wake-up concerns this session: frames wait, its status or
+        deadline is due, it must stop, or ``STEP_EVERY_S`` passed since its last step
+        (silence, recorder and monitor are looked after that often)."""
+        return (self._cursor.backlog > 0 or now >= self._next_status
+                or now - self._last_step >= STEP_EVERY_S or self._stop.is_set()
+                or self._eof.is_set() or self._reader_error is not None
+                or (self._deadline is not None and now >= self._deadline))
+
+    def _step(self, now: float) -> None:
+        """One wake-up of the session: frames too old dropped, the next window processed,
+        silence, recorder, monitor and status looked after, stop conditions checked."""
+        self._last_step = now
+        cursor = self._cursor
+        if self._max_lag > 0:
+            # frames over the maximum lag: dropped at once, oldest first
+            skipped = cursor.drop_older(now - self._max_lag)
+            if skipped:
+                self.stats.overload_drops += skipped
+                self._pending_lost += skipped
+        w = cursor.read(self._max_batch)
+        if len(w) or w.lost:
+            self._process_window(w, now, self._loop.turn_s if self._loop is not None else None)
+        self.stats.backlog = cursor.backlog
+        self.stats.max_backlog = max(self.stats.max_backlog, self.stats.backlog)
+        if self._polled and self.stats.overload_drops >= HAND_BACK_DROPS:
+            self._hand_back()
+        now = time.monotonic()
+        if len(w) and self.stats.lag_s > self._lag_warn:
+            self.stats.lag_warnings += 1
+            self._warn("lag", "falling behind the source: frames wait %.0f ms "
+                       "(%d frames queued)", self.stats.lag_s * 1000, cursor.backlog)
+        if not len(w):
+            self._check_silence(now)
+            if self.recorder is not None and hasattr(self.recorder, "poll"):
+                with self._rec_lock:
+                    self.recorder.poll()
+        if self.monitor is not None:
+            self._monitor_call(self.monitor.tick)
+        if now >= self._next_status:
+            self._emit(self._status(now))
+            self._next_status = max(self._next_status + self._interval,
+                                    now + self._interval / 2)
+        if self._deadline is not None and now >= self._deadline:
+            self.stop("duration reached")
+        elif self._eof.is_set() and cursor.backlog == 0:
+            self.stop("end of source")
+        elif self._reader_error is not None:
+            self.stop(f"reader failed: {self._reader_error}")
+
+    def _finish(self) -> SessionSummary:
+        """Stop reading (the reader thread joined), shut everything down; the summary."""
+        self._stop.set()
+        if self._reader_thread is not None:
+            self._reader_thread.join(timeout=5.0)
+        return self._shutdown()
 
     def _monitor_call(self, method: Callable[[Any], None]) -> None:
         try:

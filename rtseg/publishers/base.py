@@ -32,6 +32,11 @@ address                     tags       arguments
                                        StatusEvent``); sent right after ``/rtseg/status``
                                        whenever one of them is not 0
 ==========================  =========  ==================================================
+
+When one process runs several sessions (``rtseg live NAME=URL ...``), each event carries
+its source's name (``source``) and every standard address gets it after ``/rtseg``:
+``/rtseg/<source>/cut``, ``/rtseg/<source>/status``, ... (the name sanitised like a
+label); templates may use ``{source}``.
 """
 
 from __future__ import annotations
@@ -136,6 +141,13 @@ class Publisher:
         return f"{type(self).__name__}({self.target})"
 
 
+def standard_address(ev: Any, tail: str) -> str:
+    """``/rtseg`` + ``tail`` (``"/cut"``), with ``/<source>`` between them when the event
+    names its source."""
+    src = getattr(ev, "source", "")
+    return f"/rtseg/{sanitize_label(src)}{tail}" if src else "/rtseg" + tail
+
+
 def cut_messages(ev: CutEvent, standard: bool = True,
                  templates: Sequence[AddressTemplate] = ()) -> list[bytes]:
     """Encoded OSC messages for one cut: the standard pair (if ``standard``) then one per
@@ -143,10 +155,10 @@ def cut_messages(ev: CutEvent, standard: bool = True,
     validated by ``AddressTemplate``)."""
     out = []
     if standard:
-        out.append(encode_message("/rtseg/cut", "iiffffs", [
+        out.append(encode_message(standard_address(ev, "/cut"), "iiffffs", [
             ev.event, ev.segment, ev.time, ev.confidence, cut_arg_value(ev, "latency_ms"),
             ev.detector_delay_ms, ev.label]))
-        out.append(encode_message("/rtseg/cut/" + sanitize_label(ev.label), "if",
+        out.append(encode_message(standard_address(ev, "/cut/" + sanitize_label(ev.label)), "if",
                                   [ev.segment, ev.confidence]))
     for t in templates:
         address, tags, args = t.render(ev)
@@ -164,14 +176,14 @@ def behaviour_messages(ev: BehaviourEvent, standard: bool = True,
             float(ev.confidence)]
     if standard:
         if ev.correction:
-            out.append(encode_message("/rtseg/behaviour/correct", "iissfs",
+            out.append(encode_message(standard_address(ev, "/behaviour/correct"), "iissfs",
                                       args + [str(ev.previous)]))
         else:
-            out.append(encode_message("/rtseg/behaviour", "iissf", args))
+            out.append(encode_message(standard_address(ev, "/behaviour"), "iissf", args))
     if templates:
         proxy = CutEvent(event=int(ev.event), segment=int(ev.segment), frame=int(ev.frame),
                          time=float(ev.time), method="identity", label=ev.label,
-                         confidence=float(ev.confidence))
+                         confidence=float(ev.confidence), source=ev.source)
         for t in templates:
             address, tags, targs = t.render(proxy)
             out.append(encode_message(address, tags, targs))
@@ -179,17 +191,17 @@ def behaviour_messages(ev: BehaviourEvent, standard: bool = True,
 
 
 def status_message(ev: StatusEvent) -> bytes:
-    return encode_message("/rtseg/status", "ifii",
+    return encode_message(standard_address(ev, "/status"), "ifii",
                           [ev.alive, ev.frame_rate, ev.dropped, ev.stale_joints])
 
 
 def input_message(ev: StatusEvent) -> bytes:
-    return encode_message("/rtseg/input", "iiiii",
+    return encode_message(standard_address(ev, "/input"), "iiiii",
                           [int(getattr(ev, k)) for k in INPUT_COUNTERS])
 
 
 def dropout_message(ev: DropoutEvent) -> bytes:
-    return encode_message("/rtseg/dropout", "si", [ev.name, 1 if ev.lost else 0])
+    return encode_message(standard_address(ev, "/dropout"), "si", [ev.name, 1 if ev.lost else 0])
 
 
 class OscPublisher(Publisher):

@@ -9,7 +9,8 @@ A template is ``ADDRESS [ARG ...]`` separated by spaces, e.g.
 
 Fields usable in ADDRESS (Python ``str.format`` syntax, format specs allowed, e.g.
 ``{segment:03d}``, widths and precisions at most 64): ``label`` and ``method`` (both sanitised to ``[A-Za-z0-9_-]``),
-``segment`` (index of the new segment), ``event`` (cut event number).
+``segment`` (index of the new segment), ``event`` (cut event number), ``source`` (the
+source's name when one process runs several sessions, sanitised; "" otherwise).
 
 ARGs (default: none - the message carries no arguments, which is what QLab's
 ``/cue/{number}/start`` expects) are field names sent with a fixed type:
@@ -26,6 +27,7 @@ latency_ms            f     boundary arrival to send, ms (-1 if unknown)
 detector_delay_ms     f     detector's own delay, ms
 label                 s     label (not sanitised)
 method                s     detector name
+source                s     the source's name ("" for a session on its own)
 ====================  ====  =================================================
 
 or numeric literals: an integer (``1``) is sent as ``i``, a decimal (``0.5``) as ``f``.
@@ -40,10 +42,11 @@ from typing import Any
 
 from rtseg.core.events import CutEvent
 
-ADDRESS_FIELDS = ("label", "method", "segment", "event")
+ADDRESS_FIELDS = ("label", "method", "segment", "event", "source")
 ARG_FIELDS: dict[str, str] = {
     "event": "i", "segment": "i", "frame": "i", "time": "f", "confidence": "f",
     "latency_ms": "f", "detector_delay_ms": "f", "label": "s", "method": "s",
+    "source": "s",
 }
 
 #: largest width or precision in an address field's format spec (``{segment:03d}``)
@@ -124,7 +127,8 @@ class AddressTemplate:
     def render(self, ev: CutEvent) -> tuple[str, str, list[Any]]:
         address = self.address.format(
             label=sanitize_label(ev.label), method=sanitize_label(ev.method),
-            segment=int(ev.segment), event=int(ev.event))
+            segment=int(ev.segment), event=int(ev.event),
+            source=sanitize_label(ev.source) if getattr(ev, "source", "") else "")
         if any(c in _OSC_FORBIDDEN for c in address):
             shown = address if len(address) <= 80 else address[:77] + "..."
             raise ValueError(f"template {self.spec!r} produced an invalid OSC address {shown!r}")
