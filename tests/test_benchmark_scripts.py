@@ -85,6 +85,8 @@ def test_lopo_on_a_folder_of_two_people(tmp_path):
     assert doc["people"] == ["two:bd", "two:bk"]
     # held-out units: a person with same-person performances, or a mixed performance
     assert len(doc["choices"]) >= 2
+    assert [r["params"] for r in doc["sets"]] == [
+        {"early_threshold": e, "place_radius_s": p} for e in (1.5, 2.0) for p in (0.0, 1.0)]
     assert all(u.startswith("two:") or u.startswith("two/seed0/mixed") for u in doc["choices"])
     for key in ("held_out", "shipped"):
         assert 0.0 <= doc[key]["pooled"]["f1"] <= 1.0 and doc[key]["pooled"]["transitions"] > 0
