@@ -182,7 +182,7 @@ def test_non_finite_frame_restarts_and_is_counted(perf):
 
 
 def test_frame_rate_scales_the_windows():
-    det = make_online("contrast", 60.0)
+    det = make_online("contrast", 60.0, {"early_after_s": 1.0})
     # 0.125 s -> 8 frames (7.5 rounded half to even); 3 s -> 22 blocks; 2 s -> 15 blocks;
     # the early look's 1 s -> 8 blocks
     assert (det.step, det.wa, det.wb, det.we) == (8, 22, 15, 8)
@@ -264,7 +264,8 @@ def test_early_look_sends_the_same_changes_sooner(perf):
     """On clean synthetic changes the early look sends every change, each within 0.5 s of
     the labelled middle, and sooner than the full look alone."""
     res, X = perf
-    ungated = {"gate_threshold": 0}          # the gate holds every cut 1.5 s: the looks alone
+    # the gate holds every cut 1.5 s: the looks alone; the early look on (off by default)
+    ungated = {"gate_threshold": 0, "early_after_s": 1.0}
     with_early = make_online("contrast", FR, ungated).run(X)
     det = make_online("contrast", FR, ungated)
     assert det.we > 0
@@ -295,7 +296,7 @@ def test_two_cuts_confirmed_on_one_frame_go_out_one_frame_apart(perf):
     from rtseg.detectors.early import EarlyCut
     from rtseg.detectors.peaks import Peak
     _, X = perf
-    det = make_online("contrast", FR, {"gate_threshold": 0})   # the picker alone
+    det = make_online("contrast", FR, {"gate_threshold": 0, "early_after_s": 1.0})   # the picker alone
 
     class BothAtOnce:
         """Stands in for EarlyCuts: the full look confirms a peak on its first value, the

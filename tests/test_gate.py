@@ -126,19 +126,21 @@ def test_session_summary_counts_the_cuts_the_gate_held_back():
 
 def test_a_gap_while_a_cut_is_held_does_not_lose_it():
     """The detector restarts (a gap) while its gate holds a cut: the cut is decided on the
-    frames before the gap and goes out with the next frame, not lost."""
+    frames before the gap and goes out with the next frame, not lost.  With the early look
+    on, whose cuts come before the gate's decision time."""
+    early = {"early_after_s": 1.0}
     res = synthesize("walk:6,punch:6", seed=3)
     X = take_features(res.take)
-    full = make_online("contrast", FR)
+    full = make_online("contrast", FR, early)
     cuts = full.run(X)
     assert len(cuts) == 1
     c = cuts[0]
     # stop while the cut is held: after the ungated detector made it, before 1.5 s of its
     # segment were in
-    ungated = make_online("contrast", FR, {"gate_threshold": 0}).run(X)
+    ungated = make_online("contrast", FR, {**early, "gate_threshold": 0}).run(X)
     made = ungated[0].detected_at
     assert made < c.frame + full.gate.decide_after
-    det = make_online("contrast", FR)
+    det = make_online("contrast", FR, early)
     assert det.run(X[:made + 1]) == []
     det.restart()
     out = det.update(X[made + 1])

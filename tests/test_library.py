@@ -481,9 +481,11 @@ def test_library_leave_one_take_out_report():
     # each exercise also left out of its take's library once: every segment counted again
     assert doc["unknown_segments"] == doc["known_segments"]
     assert 0 <= doc["accuracy"] <= 1 and 0 <= doc["unknown_rate"] <= 1
-    # left-out behaviours sent as unknown: 14 of 18 with the canonical features
-    # (`rtseg evaluate ../shared/data --online --identity --json`, library.unknown_correct)
-    assert doc["unknown_correct"] >= 0.75
+    # left-out behaviours sent as unknown: 11 of 18 with the shipped detector (14 of 18 with
+    # its early look on, whose earlier cuts cost the unsupervised ids instead: ARI 0.82
+    # against 0.88 on cmu; docs/live_detector.md).  Measured by `rtseg evaluate
+    # ../shared/data --online --identity --json` (library.unknown_correct)
+    assert doc["unknown_correct"] >= 0.6
     assert doc["accuracy"] + doc["unknown_rate"] <= 1.0 + 1e-9
     # the name goes out after the labelled change (its cut comes after the change), and
     # within a few seconds of it; only segments starting near a change are counted

@@ -21,8 +21,9 @@ that question of every cut before it goes out:
 
 The windows and decision time are the identity tracker's own (decision after 1.5 s, 0.5 s
 skipped, windows of at most 3 s); the threshold is the detector's ``gate_threshold``
-(3.5, ``GATE_THRESHOLD``, chosen leave-one-take-out in benchmarks/loto.py's grid; the
-tracker's own is 4.0).  Cost: one row
+(4.0, ``GATE_THRESHOLD``, chosen leave-one-person-out in ``benchmarks/lopo.py``'s grid;
+the tracker's own is 4.0 too).  A dropped cut is handed to ``on_drop`` (the detector
+forgets it).  Cost: one row
 copy per frame into a ring of ``ring`` frames; per held cut two window statistics and two
 model fits (about 0.5 ms, once per cut).  A restart (gap) decides the held cuts on the
 frames that arrived before it.
@@ -50,8 +51,8 @@ log = logging.getLogger("rtseg.detectors")
 GATE_DECIDE_S, GATE_SKIP_S = DEFAULT_DECIDE_AFTER_S, DEFAULT_ID_SKIP_S
 GATE_WINDOW_S, GATE_MIN_AFTER_S = DEFAULT_MAX_WINDOW_S, MIN_WINDOW_S
 #: the shipped ``[contrast] gate_threshold`` (config/detectors.toml; chosen in
-#: benchmarks/loto.py's grid, docs/live_detector.md)
-GATE_THRESHOLD = 3.5
+#: benchmarks/lopo.py's grid, docs/live_detector.md)
+GATE_THRESHOLD = 4.0
 
 
 class SameBehaviourGate:
