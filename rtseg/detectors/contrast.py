@@ -32,9 +32,10 @@ it.  The statistics of every ``step``-frame block are
 summed once (one BLAS call); windows are differences of their prefix sums, and each
 window's PCA model is fitted once (``window_models.fit_pca``: two steps of subspace iteration
 from the previous grid position's window, an exact eigen-decomposition every ``EXACT_EVERY``) and
-reused while the window is in use (A becomes A0 w frames later).  A position's before
-window is fitted with the frame after the block that completes it and its after window
-when that is complete, so no frame fits more than one window.
+reused while the window is in use (A becomes A0 w frames later).  The work a completed
+block makes possible (the next before window's fit, the after window's fit, each look) is
+queued and done one step a frame (``_run_steps``), so no frame fits more than one window:
+a value is known a few frames after its block completes, and ``detected_at`` says when.
 
 Frames are numbered from the detector's creation; ``restart()`` (a gap) starts a new
 segment: the grid, the windows and the peak picker begin again from the next frame.
@@ -215,7 +216,8 @@ class ContrastDetector(OnlineDetector):
         #: the last model of each chain (before / after windows): the next one's warm start
         self._warm: dict[str, PcaWindow] = {}
         self._fits = 0
-        self._pending: tuple[int, int] | None = None   # a window to fit with the next frame
+        #: work queued by completed blocks, one step a frame (``_run_steps``)
+        self._steps: deque[tuple[Any, tuple]] = deque()
         self._last_sent: int | None = None   # block position of the last cut sent
         self._last_placed: int | None = None  # frame of the last cut sent, as placed
         self.peaks.reset()
@@ -250,13 +252,12 @@ class ContrastDetector(OnlineDetector):
         if self._rows is not None:
             self._rows[(self._t - 1) % len(self._rows)] = x
         self._fill += 1
-        if self._fill < self.step:
-            if self._pending is not None:      # spread the work: see _block_done
-                self._model(*self._pending)
-                self._pending = None
-        else:
+        if self._fill == self.step:
             self._fill = 0
             self._block_done()
+        self._run_steps()
+        # two cuts sent on one frame (two changes >= min_gap apart): the second goes out
+        # with the next frame, and its detected_at says so
         cut = self._cut(self._out.popleft(), self._t - 1) if self._out else None
         if self.gate is not None:
             self.gate.push(self._t - 1, x)
@@ -272,34 +273,58 @@ class ContrastDetector(OnlineDetector):
         return cut
 
     def _block_done(self) -> None:
+        """A block is complete: its sums join the prefix ring, and the work it makes possible
+        is queued as steps of about one window fit each (``_run_steps``)."""
         B = self._buf
         k, cap = self._nb, self._cap
         self._P1[(k + 1) % cap] = self._P1[k % cap] + B.sum(axis=0)
         self._P2[(k + 1) % cap] = self._P2[k % cap] + B.T @ B
-        self._nb = k + 1
-        # the before window of position nb (used once its after window is complete) is
-        # fitted with the next frame, so no frame fits two windows (per-frame p99 <= 1 ms)
-        w = self._width(self._nb)
-        self._pending = (self._nb - w, self._nb) if self._nb >= 2 * self.wmin else None
-        now = self._t - 1                            # the frame that completed the block
-        full = early = None
-        c = self._nb - self.wb                       # newest position with a whole B
+        nb = self._nb = k + 1
+        steps = self._steps
+        # the before window of position nb (used once its after window is complete)
+        if nb >= 2 * self.wmin:
+            w = self._width(nb)
+            steps.append((self._model, (nb - w, nb)))
+        c = nb - self.wb                             # newest position with a whole B
         if c >= 2 * self.wmin:
-            value = self._contrast(c)
-            position = self._seg0 + c * self.step
-            if self.keep_trace:
-                self.trace.append((position, value, self.threshold))
-            full = self.peaks.update_full(position, value, now)
-        ce = self._nb - self.we                      # newest position with a whole B'
+            steps.append((self._model, (c, c + self.wb, "after")))
+            steps.append((self._look_full, (c,)))
+        ce = nb - self.we                            # newest position with a whole B'
         if self.we and ce >= 2 * self.wmin:
-            value = self._early(ce)
-            position = self._seg0 + ce * self.step
-            if self.keep_trace:
-                self.trace_early.append((position, value, now))
-            early = self.peaks.update_early(position, value, now)
-        # both looks may send in one block (two changes >= min_gap apart): the second cut
-        # goes out with the next frame, and its detected_at says so
-        self._out.extend(e for e in (full, early) if e is not None)
+            steps.append((self._look_early, (ce,)))
+
+    def _run_steps(self) -> None:
+        """One queued step per frame (more when more than a block's frames of them wait), so
+        no frame fits more than one window model: a position's profile value is known a few
+        frames after its block completes, and the slow frames stay short."""
+        steps = self._steps
+        if steps:
+            fn, args = steps.popleft()
+            fn(*args)
+            while len(steps) > self.step:
+                fn, args = steps.popleft()
+                fn(*args)
+
+    def _look_full(self, c: int) -> None:
+        """The contrast at block position c, known now: to the peak picker."""
+        value = self._contrast(c)
+        position = self._seg0 + c * self.step
+        if self.keep_trace:
+            self.trace.append((position, value, self.threshold))
+        sent = self.peaks.update_full(position, value, self._t - 1)
+        if sent is not None:
+            self._out.append(sent)
+
+    def _look_early(self, c: int) -> None:
+        """The early look at block position c, known now: to the peak picker."""
+        value = self._early(c)
+        position = self._seg0 + c * self.step
+        now = self._t - 1
+        if self.keep_trace:
+            self.trace_early.append((position, value, now))
+        sent = self.peaks.update_early(position, value, now)
+        if sent is not None:
+            self._out.append(sent)
 
     def _cut(self, sent: EarlyCut, at: int) -> Cut:
         """The Cut for a peak sent on frame ``at`` (confidence: see the module docstring)."""
