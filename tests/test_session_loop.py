@@ -332,15 +332,15 @@ def test_sources_tables_in_the_configuration(tmp_path):
 
 
 def test_an_overloaded_polled_source_is_read_in_threads_again(tmp_path, take):
-    """The suit at 30 times its 120 Hz, two detectors: the loop cannot keep up, drops
+    """The suit at 60 times its 120 Hz, three detectors: the loop cannot keep up, drops
     frames for overload, and from then on reads the source in threads (the driver's and
     a reader), so reading and recording go on beside processing; every frame received
     is still recorded, and the drops are counted."""
-    suit = SerialSuit(take, rate=RATE * 30.0, loop=True)
+    suit = SerialSuit(take, rate=RATE * 60.0, loop=True)
     try:
         path = suit.start()
         cfg = from_dict({"output": {"osc": []}, "recording": {"dir": str(tmp_path / "rec")},
-                         "detectors": {"methods": ["contrast", "pca"]},
+                         "detectors": {"methods": ["contrast", "pca", "ppca"]},
                          "buffer": {"max_lag_seconds": 0.1}}, origin="test")
         session = LiveSession(f"serial://{path}?rate={RATE:g}", cfg, handle_signals=False,
                               duration=4.0)

@@ -64,18 +64,13 @@ class SessionInput:
     def _poll_source(self, now: float) -> None:
         """The loop's read of a polled source (``Source.poll``): what it decoded,
         received in order.  A driver error is counted (``source_errors``) and logged."""
-        src, got = self.source, self._got
         try:
-            src.poll(now)
-            src.take(got)
+            self.source.poll(now)
         except Exception as exc:  # a driver bug must not end the session
             self.stats.source_errors += 1
             self._warn("source", "source read failed (%s: %s); retrying",
                        type(exc).__name__, exc)
-        if got:
-            for frame in got:
-                self._receive(frame)
-            got.clear()
+        self._take_frames()
 
     def _take_frames(self) -> None:
         """The frames a woken source's own thread queued (``Source.wake_with``),
