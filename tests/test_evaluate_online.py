@@ -92,7 +92,8 @@ def test_evaluate_tolerance_zero_equals_strict(synth_dir, capsys):
 @pytest.mark.parametrize("args", [["--tolerance", "-1"], ["--tolerance", "nan"],
                                   ["--online", "--method", "gmm"],
                                   ["--config", "x.toml"],
-                                  ["--online", "--params", "x.toml"]])
+                                  ["--online", "--params", "x.toml"],
+                                  ["--online", "--identity", "--params", "x.toml"]])
 def test_evaluate_bad_options_one_line(synth_dir, capsys, args):
     root, _ = synth_dir
     rc = main(["evaluate", str(root), "--no-progress", *args])

@@ -379,6 +379,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--behaviours names the identity's segments: add --online --identity")
     if getattr(args, "identity", False) and (args.workers or args.scheduler):
         raise ValueError("--identity runs in this process: drop --workers/--scheduler")
+    if args.online and (args.params or args.profile):
+        raise ValueError("--online takes the detectors and features of the live "
+                         "configuration: give --config FILE instead of --params/--profile")
     if getattr(args, "identity", False):          # separate path: rtseg.evaluation.identity
         from rtseg.evaluation.report import run_evaluate_identity
         return run_evaluate_identity(args)
@@ -388,9 +391,6 @@ def run(args: argparse.Namespace) -> int:
         if any(m not in ONLINE_METHODS for m in methods):
             raise ValueError(f"--online: {args.method} has no live detector "
                              f"(live: {', '.join(ONLINE_METHODS)})")
-        if args.params or args.profile:
-            raise ValueError("--online takes the detectors and features of the live "
-                             "configuration: give --config FILE instead of --params/--profile")
         online, live_default = live_config(args.config, methods)
     else:
         if args.config:
