@@ -331,8 +331,9 @@ def test_sources_tables_in_the_configuration(tmp_path):
             load_session_config(p)
 
 
-def test_an_overloaded_polled_source_is_read_in_threads_again(tmp_path, take):
-    """The suit at 60 times its 120 Hz, three detectors: the loop cannot keep up, drops
+def test_an_overloaded_polled_source_is_read_in_threads_again(tmp_path, take, busy_core):
+    """The suit at 60 times its 120 Hz, three detectors on a busy core: the loop cannot
+    keep up, drops
     frames for overload, and from then on reads the source in threads (the driver's and
     a reader), so reading and recording go on beside processing; every frame received
     is still recorded, and the drops are counted."""
