@@ -23,7 +23,14 @@ and behaviour identity (``identity.enabled``).  Added to the figures below:
   behaviour and the behaviour id rtseg sent for the segment holding it;
 - ``frames_accounted``: frames sent = frames received + destroyed by faults (corrupted,
   dropped) + lost at unplugs (sent while unplugged, written just before a pull or in the
-  reconnect second after a replug), exactly; ``accounting`` gives the four numbers.
+  reconnect second after a replug), exactly; ``accounting`` gives the four numbers and
+  ``overflow``, frames that met a full pty (the reader did not drain it in time: a busy
+  machine), which are none of them;
+- ``overload_drops``: frames received that the loop dropped to stay within its maximum
+  lag (``buffer.max_lag_seconds``): the machine did not keep up with ``--speed``;
+- ``clean_offline``: F1 of the same performance through the same pipeline offline, with no
+  fault, pty or loop (``soak_score.clean_f1``): the detector's own figure, which the
+  per-hour F1 cannot beat.
 Bar: the hostile mode's (below) plus ``frames_accounted``, live F1 of every hour >= 0.95
 and the last hour within 0.02 of the first.
 
@@ -108,7 +115,8 @@ from rtseg.live.config import from_dict  # noqa: E402
 
 sys.path.insert(0, str(REPO / "benchmarks"))
 from soak_meter import GcPauses, Meter  # noqa: E402
-from soak_score import CutProbe, ari_by_hour, score_by_hour, to_frames, truth  # noqa: E402
+from soak_score import (CutProbe, ari_by_hour, clean_f1, score_by_hour, to_frames,  # noqa: E402
+                        truth)
 
 import numpy as np  # noqa: E402
 
@@ -271,15 +279,21 @@ def _score_cuts(probe: CutProbe, truth_info, info_idx: list[int], result: dict,
     return {"mode": "cuts", "cuts": int(probe.n_cuts), "transitions": len(trans),
             "f1_by_hour": f1, "ari_by_hour": ari, "identity_messages": int(probe.n_ids),
             "frames_accounted": sent == received + destroyed + at_unplugs,
+            # where the frames went; "overflow" (the pty was full: the reader did not
+            # drain it in time) is what stops the account from closing
             "accounting": {"sent": sent, "received": received, "destroyed": destroyed,
-                           "lost_at_unplugs": at_unplugs},
+                           "lost_at_unplugs": at_unplugs,
+                           "overflow": fates.get("overflow", 0)},
+            # received but not processed: dropped by the loop to keep up (max lag)
+            "overload_drops": session.stats.overload_drops,
             "bridged_gaps": session.pipeline.stats.bridged_gaps,
             "filled_frames": session.pipeline.stats.filled_frames,
             "unmapped_events": probe.late}
 
 
 # ============================================================================ measuring
-def soak(hours: float, speed: float, faults: str, log, mode: str = "hostile") -> dict:
+def soak(hours: float, speed: float, faults: str, log, mode: str = "hostile",
+         clean: bool = True) -> dict:
     n_frames = int(round(hours * FRAMES_PER_HOUR))
     window_frames = max(1, min(FRAMES_PER_HOUR, n_frames // 4))
     n_windows = max(1, n_frames // window_frames)
@@ -447,6 +461,8 @@ def soak(hours: float, speed: float, faults: str, log, mode: str = "hostile") ->
                               and result["p99_change"] <= 0.10 and lost == 0)
         if probe is not None:
             result.update(_score_cuts(probe, truth_info, info_idx, result, session))
+            if clean:
+                result["clean_offline"] = clean_f1(RATE)
             f1s = [f for f in result["f1_by_hour"] if f is not None]
             result["pass"] = bool(result["pass"] and result["frames_accounted"] and f1s
                                   and min(f1s) >= 0.95 and abs(f1s[-1] - f1s[0]) <= 0.02)
@@ -483,6 +499,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--faults", default=None,
                    help=f"fault spec of rtseg.simulators.faults (default: cuts {CUTS_FAULTS}; "
                         f"hostile {DEFAULT_FAULTS})")
+    p.add_argument("--no-clean", action="store_true",
+                   help="cuts mode: skip clean_offline (the performance's F1 offline, about "
+                        "15 s of CPU after the run)")
     p.add_argument("--json", action="store_true", help="print only the JSON result")
     args = p.parse_args(argv)
     if not (args.hours > 0 and math.isfinite(args.hours)):
@@ -500,7 +519,7 @@ def main(argv: list[str] | None = None) -> int:
         CUTS_FAULTS if args.mode == "cuts" else DEFAULT_FAULTS)
     log(f"soak ({args.mode}): {args.hours:g} session hours ({int(args.hours * FRAMES_PER_HOUR)} frames) at "
         f"{args.speed:g}x 120 Hz, faults {faults}")
-    r = soak(args.hours, args.speed, faults, log, args.mode)
+    r = soak(args.hours, args.speed, faults, log, args.mode, clean=not args.no_clean)
     if args.json:
         print(json.dumps(r, indent=2))
     else:
@@ -528,7 +547,13 @@ def main(argv: list[str] | None = None) -> int:
             a = r["accounting"]
             print(f"frames accounted: {r['frames_accounted']} (sent {a['sent']} = received "
                   f"{a['received']} + destroyed {a['destroyed']} + lost at unplugs "
-                  f"{a['lost_at_unplugs']})")
+                  f"{a['lost_at_unplugs']}; overflow {a['overflow']}); "
+                  f"overload drops {r['overload_drops']}")
+            if "clean_offline" in r:
+                c = r["clean_offline"]
+                print(f"the same performance offline, no faults: F1 {c['f1']:.3f} "
+                      f"(strict {c['strict_f1']:.3f}), {c['cuts']} cuts of "
+                      f"{c['transitions']} changes")
         print(f"wall time {r['wall_s']} s; {'PASS' if r['pass'] else 'FAIL'}")
     return 0 if r["pass"] else 1
 
