@@ -127,8 +127,7 @@ def _run(args: argparse.Namespace, cfg, script: str, library: str = "") -> int:
                 print(f"truth: {tr.before} -> {tr.after} at frame {tr.mid} "
                       f"(t={tr.mid / args.rate:.2f} s, blend {tr.lo}..{tr.hi})", file=sys.stderr)
         monitor = demo_monitor(args)
-        return run_session(url, cfg, args.duration / args.speed, args.quiet,
-                           performance_time=args.speed != 1, monitor=monitor,
+        return run_session(url, cfg, args.duration / args.speed, args.quiet, monitor=monitor,
                            check=lambda summary: speed_check(summary, args))
     finally:
         suit.stop()

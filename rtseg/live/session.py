@@ -51,7 +51,7 @@ dropped (``LiveStats.overruns``) and treats them as a gap (detectors restart).
 measure how far behind the loop is; a lag above ``buffer.lag_warn_seconds`` is logged
 (rate-limited) and reported in the summary.  Cut times stay on the source clock under
 overload too: a boundary frame the ring no longer holds is placed from the revealing
-frame's source time (``SessionEvents._boundary_time``).
+frame's session time (``SessionClock.time_of``).
 
 Gaps
 ----
@@ -61,7 +61,9 @@ Frame indices
 -------------
 ``CutEvent.frame`` is the 0-based index of the boundary frame among all frames received
 this session (= the row of the recorded session).  ``CutEvent.time`` is that frame's
-receive time minus the session start, in seconds.  Processing latency (frame arrival ->
+time in session seconds (``rtseg.live.clock``: the source's own clock where frames carry
+one, else the receive clock, counted from the session start), the clock of every time the
+session reports (behaviour decisions, dropouts, status, the recording's log lines).  Processing latency (frame arrival ->
 datagram sent) is measured for every frame that revealed a cut (``LiveStats.cut_latency_ms``)
 and, for benchmarking, the arrival -> end-of-processing time of every frame
 (``LiveStats.frame_latency_ms``).
@@ -103,6 +105,7 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
+from rtseg.live.clock import SessionClock
 from rtseg.live.emitter import Event, SessionEvents
 from rtseg.live.health import SessionHealth
 from rtseg.live.process import SessionProcessing
@@ -211,7 +214,8 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
         self._eof = threading.Event()
         self._reader_error: BaseException | None = None
         self._first_recv: float | None = None
-        self._first_src: float | None = None    # the first frame's source time (s)
+        #: session seconds of every reported time (set up by ``run``)
+        self.clock = SessionClock(time.monotonic(), DEFAULT_FRAME_RATE)
         self._rec_lock = threading.Lock()
         self._event_no = 0
         self._segment: dict[str, int] = {}
@@ -333,7 +337,6 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
                         log.warning("%s", problem)
                 if self._first_recv is None:
                     self._first_recv = recv
-                    self._first_src = stime if stime is not None and np.isfinite(stime) else None
                 self.stats.frames_received += 1
         except BaseException as exc:  # pragma: no cover - defensive
             self._reader_error = exc
@@ -362,7 +365,12 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
             rec_start = getattr(self.recorder, "start_monotonic", None)
             if isinstance(rec_start, float):
                 self.session_start = rec_start
-            self._last_valid = np.full(J, self.session_start)
+            self.clock = SessionClock(self.session_start, self.frame_rate,
+                                      capacity=int(self.config["buffer.capacity"]),
+                                      silence_s=float(self.config["gaps.dropout_seconds"]))
+            if self.recorder is not None and hasattr(self.recorder, "clock"):
+                self.recorder.clock = self.session_time     # its log lines' times
+            self._last_valid = np.zeros(J)                  # session seconds
             self._joint_lost = np.zeros(J, dtype=bool)
             self._n_lost = 0
             self._dropout_s = float(self.config["gaps.dropout_seconds"])
