@@ -233,6 +233,9 @@ class Console:
         refused = source_losses_text({k: getattr(ev, k) for k in SENDER_COUNTERS})
         if refused:
             line += " | " + refused[2:]
+        if ev.recording_failed_at >= 0:
+            line += (f" | RECORDING FAILED at frame {ev.recording_failed_at} (it holds "
+                     f"{ev.recording_frames} frames, {ev.recording_cuts} cuts)")
         if self.tty:
             self.err.write("\r\033[K" + line)
             self.err.flush()

@@ -148,7 +148,12 @@ class StatusEvent:
     overload_drops: of ``dropped``, frames the live loop dropped unprocessed, oldest first,
     so that none waits longer than ``buffer.max_lag_seconds`` (JSON output and recordings
     only).
-    time: seconds since session start.
+    time: session seconds (``rtseg.live.clock``).
+
+    The recording (``--record``), once a write to it failed (sent over OSC as
+    ``/rtseg/recording`` after ``/rtseg/status``; -1 while it records, or without one):
+    recording_failed_at: the frame (0-based, among the frames received) whose write failed;
+    recording_frames / recording_cuts: the frames and cuts the closed recording holds.
 
     Input counters, each since the session started (``INPUT_COUNTERS``; sent over OSC as
     ``/rtseg/input``, see ``rtseg.publishers.base``).  They count input the source had to
@@ -186,6 +191,9 @@ class StatusEvent:
     refused_senders: int = 0
     other_senders: int = 0
     clock_restarts: int = 0
+    recording_failed_at: int = -1
+    recording_frames: int = -1
+    recording_cuts: int = -1
 
     def input_counts(self) -> dict[str, int]:
         """The input counters by name (``INPUT_COUNTERS`` order)."""

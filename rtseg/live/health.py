@@ -112,7 +112,21 @@ class SessionHealth:
                            lag_ms=float(self.stats.lag_s * 1000.0),
                            backlog=int(self.stats.backlog),
                            overload_drops=int(self.stats.overload_drops),
-                           **self.sender_counts(), **self.input_counts())
+                           **self.sender_counts(), **self.input_counts(),
+                           **self.recording_counts())
+
+    def recording_counts(self) -> dict[str, int]:
+        """``recording_failed_at`` / ``recording_frames`` / ``recording_cuts`` of the
+        status: the frame whose write failed and what the closed recording holds, once a
+        write failed; -1 each while it records (or without a recording)."""
+        rec = self.recorder
+        fail = getattr(rec, "failure", None) if rec is not None else None
+        if not fail:
+            return {}
+        stats = getattr(rec, "stats", None)
+        return {"recording_failed_at": int(fail.get("at_frame", -1)),
+                "recording_frames": int(getattr(rec, "frames_written", -1)),
+                "recording_cuts": int(getattr(stats, "cuts", -1))}
 
     def _input_rate(self) -> float:
         """Frames per second between the first and the last frame received (0 if < 2)."""
