@@ -113,7 +113,7 @@ from rtseg.live.outputs import build_publishers, log_publishers, wire_methods
 from rtseg.live.pipeline import (DEFAULT_FRAME_RATE, Pipeline, PipelineCut, PipelineStats,
                             _blas_limit, detector_params, make_detectors, replay_frames,
                             replay_session)
-from rtseg.live.rate_check import DeclaredRateCheck
+from rtseg.live.rate_check import DeclaredRateCheck, switch_rate
 from rtseg.core.ringbuffer import RingBuffer
 from rtseg.live.config import SessionConfig, load_session_config
 from rtseg.live.stats import FloatRing, LiveStats, SessionSummary, percentile
@@ -224,6 +224,7 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
         self._log_pubs: Any = None
         self.stop_reason = "running"
         self._rate_check: DeclaredRateCheck | None = None
+        self._measured_rate: float | None = None    # set by the reader: switch to it
         self._warn_at: dict[str, float] = {}
 
     # ---------------------------------------------------------------- control
@@ -335,6 +336,9 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
                     problem = self._rate_check.feed(recv, stime, seq)
                     if problem is not None:
                         log.warning("%s", problem)
+                        chk = self._rate_check
+                        if chk.on_source_clock and chk.mismatch:
+                            self._measured_rate = round(float(chk.measured_hz), 1)
                 if self._first_recv is None:
                     self._first_recv = recv
                 self.stats.frames_received += 1
@@ -409,6 +413,9 @@ class LiveSession(SessionProcessing, SessionEvents, SessionHealth):
                     if skipped:
                         self.stats.overload_drops += skipped
                         self._pending_lost += skipped
+                if self._measured_rate is not None:    # the source's clock disagreed
+                    switch_rate(self, self._measured_rate, cursor.position)
+                    self._measured_rate = None
                 w = cursor.read(max_batch)
                 if len(w) or w.lost:
                     self._process_window(w, now)
