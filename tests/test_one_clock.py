@@ -177,3 +177,13 @@ def test_a_time_reported_in_a_silence_is_never_after_the_next_frame():
     bare = SessionClock(10.0, 100.0)
     assert [bare.feed(i, 10.25 + i * 0.01, None) for i in range(3)] == \
         pytest.approx([0.25, 0.26, 0.27])
+
+
+def test_a_frame_without_a_time_among_timed_ones_shifts_nothing():
+    from rtseg.live.clock import SessionClock
+    clk = SessionClock(0.0, 120.0)
+    # 4x faster than the device clock; frame 5 arrives without its time (a T lost)
+    t = [clk.feed(i, 0.1 + i / 480.0, None if i == 5 else 2.0 + i / 120.0)
+         for i in range(10)]
+    assert all(b > a for a, b in zip(t, t[1:]))
+    assert t[9] - t[0] == pytest.approx(9 / 120.0) and clk.segments == 0

@@ -12,12 +12,14 @@ only for latencies and for silences, where no frame carries a time.
 How frames map to session seconds (``feed``, called for every frame processed, in order):
 
 - the first frame is at its arrival, ``recv - session_start`` (>= 0);
-- each later frame adds the step of the source clock since the previous frame, ``ds``;
-- where that step cannot be trusted, the receive clock's step ``dr`` is added instead and
-  a new **clock segment** begins (counted in ``segments``, warned by the session): the
-  source clock went back (``ds < 0``), jumped ahead far beyond what the receive clock saw
-  (``ds > 100 dr + 1 s``), or a frame has no source time where the previous had one (or
-  the other way round);
+- each later frame with a source time is placed by the source clock's step ``ds`` since
+  the last frame that had one (so a frame without a time in between shifts nothing);
+  a frame without a time is placed by the receive clock's step ``dr`` from the previous
+  frame (a source without a clock runs on the receive clock throughout);
+- where the source clock's step cannot be trusted, the receive clock's step is used and a
+  new **clock segment** begins (counted in ``segments``, warned by the session): it went
+  back (``ds < 0``) or jumped ahead far beyond what the receive clock saw
+  (``ds > 100 dr + 1 s``);
 - no frame is placed before a moment already reported (``now(t, report=True)``: a status
   or a dropout sent during a silence): after a sender restart whose clock continues from
   its last time, the frames follow the silence the session reported.
@@ -61,7 +63,8 @@ class SessionClock:
         self._time = np.zeros(int(capacity), dtype=np.float64)
         #: (index, session s, monotonic receive time) of the latest frame fed
         self._last: tuple[int, float, float] | None = None
-        self._prev_src: float | None = None
+        #: (session s, source s, monotonic receive time) of the latest frame with a time
+        self._anchor: tuple[float, float, float] | None = None
         self._floor = 0.0                     # the latest moment reported
         #: clock segments begun after the first (the source clock could not be followed)
         self.segments = 0
@@ -77,27 +80,24 @@ class SessionClock:
             t = max(0.0, recv - self.session_start)
         else:
             _, t_prev, recv_prev = last
-            dr = max(0.0, recv - recv_prev)
-            prev = self._prev_src
-            why = ""
-            if src is not None and prev is not None:
-                ds = src - prev
+            t = t_prev + max(0.0, recv - recv_prev)       # the receive clock's step
+            anchor = self._anchor
+            if src is not None and anchor is not None:
+                a_t, a_src, a_recv = anchor
+                ds, dr = src - a_src, max(0.0, recv - a_recv)
+                why = ""
                 if ds < 0.0:
                     why = f"the source clock went back {-ds:.3f} s"
                 elif ds > MAX_SPEEDUP * dr + 1.0:
                     why = f"the source clock jumped {ds:.3f} s in {dr:.3f} s"
-            elif src is not None or prev is not None:
-                why = ("frames carry a source time again" if src is not None
-                       else "frames carry no source time")
-                ds = dr
-            else:
-                ds = dr                       # a source without a clock: the receive clock
-            if why:
-                self.segments += 1
-                self.last_break = why
-                ds = dr
-            t = max(t_prev + ds, self._floor)
-        self._prev_src = src
+                if why:
+                    self.segments += 1
+                    self.last_break = why
+                else:
+                    t = max(a_t + ds, t_prev)
+            t = max(t, self._floor)
+        if src is not None:
+            self._anchor = (t, src, float(recv))
         k = index % len(self._index)
         self._index[k] = index
         self._time[k] = t
