@@ -256,3 +256,19 @@ def test_oversized_junk_while_the_reader_waits_costs_no_valid_frame():
         assert src.stats.unknown_names == n_junk * per_bundle
     finally:
         src.close()
+
+
+def test_a_damaged_time_is_refused_not_taken_for_a_clock():
+    """A /VMC/Ext/T whose bytes were damaged into 2.4e24 s: a bad value (counted), the
+    frame keeps the sender's clock - not a clock restart that lost every millisecond."""
+    take = make_take(6, seed=6)
+    asm = VmcAssembler(SUIT)
+    out = []
+    for i, t in enumerate([1.0, 1.0 + 1 / 60, 2.4e24, 1.0 + 3 / 60, 1.0 + 4 / 60, 1.0 + 5 / 60]):
+        out += asm.feed(encode_frame(take.quats[i], SUIT, time=t, max_datagram=60000)[0],
+                        i * 0.01)
+    out += asm.flush(1.0, force=True)
+    times = [f.source_time for f in out]
+    assert asm.stats.clock_restarts == 0 and asm.stats.bad_values == 1
+    assert times[3:] == pytest.approx([1.0 + 3 / 60, 1.0 + 4 / 60, 1.0 + 5 / 60], abs=1e-6)
+    assert all(b > a for a, b in zip(times, times[1:]) if a is not None and b is not None)
