@@ -63,10 +63,10 @@ Frame indices
 this session (= the row of the recorded session).  ``CutEvent.time`` is that frame's
 time in session seconds (``rtseg.live.clock``: the source's own clock where frames carry
 one, else the receive clock, counted from the session start), the clock of every time the
-session reports (behaviour decisions, dropouts, status, the recording's log lines).  Processing latency (frame arrival ->
-datagram sent) is measured for every frame that revealed a cut (``LiveStats.cut_latency_ms``)
-and, for benchmarking, the arrival -> end-of-processing time of every frame
-(``LiveStats.frame_latency_ms``).
+session reports (behaviour decisions, dropouts, status, the recording's log lines).
+Processing latency (frame arrival -> datagram sent) is measured for every frame that
+revealed a cut (``LiveStats.cut_latency_ms``) and, for benchmarking, the arrival ->
+end-of-processing time of every frame (``LiveStats.frame_latency_ms``).
 
 One cut per change on the wire
 ------------------------------
