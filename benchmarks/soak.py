@@ -23,9 +23,11 @@ and behaviour identity (``identity.enabled``).  Added to the figures below:
   behaviour and the behaviour id rtseg sent for the segment holding it;
 - ``frames_accounted``: frames sent = frames received + destroyed by faults (corrupted,
   dropped) + lost at unplugs (sent while unplugged, written just before a pull or in the
-  reconnect second after a replug), exactly; ``accounting`` gives the four numbers and
-  ``overflow``, frames that met a full pty (the reader did not drain it in time: a busy
-  machine), which are none of them;
+  reconnect second after a replug), exactly; ``accounting`` gives the four numbers,
+  ``overflow`` (frames that met a full pty: the serial reader did not drain it in time)
+  and ``queue_drops`` (frames the serial source dropped from its full queue: the session's
+  reader did not take them in time), the two losses of a busy machine, which are none of
+  the four;
 - ``overload_drops``: frames received that the loop dropped to stay within its maximum
   lag (``buffer.max_lag_seconds``): the machine did not keep up with ``--speed``;
 - ``clean_offline``: F1 of the same performance through the same pipeline offline, with no
@@ -279,11 +281,14 @@ def _score_cuts(probe: CutProbe, truth_info, info_idx: list[int], result: dict,
     return {"mode": "cuts", "cuts": int(probe.n_cuts), "transitions": len(trans),
             "f1_by_hour": f1, "ari_by_hour": ari, "identity_messages": int(probe.n_ids),
             "frames_accounted": sent == received + destroyed + at_unplugs,
-            # where the frames went; "overflow" (the pty was full: the reader did not
-            # drain it in time) is what stops the account from closing
+            # where the frames went; "overflow" (the pty was full: the serial reader did
+            # not drain it in time) and "queue_drops" (the source's frame queue was full:
+            # the session's reader did not take them in time) are what a busy machine
+            # adds, and what stops the account from closing
             "accounting": {"sent": sent, "received": received, "destroyed": destroyed,
                            "lost_at_unplugs": at_unplugs,
-                           "overflow": fates.get("overflow", 0)},
+                           "overflow": fates.get("overflow", 0),
+                           "queue_drops": int(getattr(session.source, "overflow_drops", 0))},
             # received but not processed: dropped by the loop to keep up (max lag)
             "overload_drops": session.stats.overload_drops,
             "bridged_gaps": session.pipeline.stats.bridged_gaps,
@@ -547,7 +552,8 @@ def main(argv: list[str] | None = None) -> int:
             a = r["accounting"]
             print(f"frames accounted: {r['frames_accounted']} (sent {a['sent']} = received "
                   f"{a['received']} + destroyed {a['destroyed']} + lost at unplugs "
-                  f"{a['lost_at_unplugs']}; overflow {a['overflow']}); "
+                  f"{a['lost_at_unplugs']}; overflow {a['overflow']}, source queue drops "
+                  f"{a['queue_drops']}); "
                   f"overload drops {r['overload_drops']}")
             if "clean_offline" in r:
                 c = r["clean_offline"]
