@@ -41,10 +41,11 @@ Hostile mode (``--mode hostile``)
 The synthesised default performance (62 s) loops on a simulated 17-sensor suit
 (``rtseg.simulators.serial_device.SerialSuit``) in a **separate process** on a real pty,
 rtseg's binary serial format, with faults (``--faults``, default ``corrupt=0.01`` of bytes,
-an unplug of 0.3 s every 10 s, bursts: jitter of up to 2 ms per message so frames arrive
-bunched, 0.1 % of frames dropped, and two sensors silent for 1 s every 20 s; fault times
-are seconds of the suit's device clock, which runs at ``120 x speed`` frames per second, so
-10 s = 24 000 frames at speed 20: 144 unplugs in 8 session hours).  This
+an unplug of 6 s every 200 s, bursts: jitter of up to 2 ms (wall clock) per message so
+frames arrive bunched, 0.1 % of frames dropped, and two sensors silent for 20 s every
+400 s; fault times are seconds of the suit's device clock, the take's 120 Hz, so at the
+default 20x an unplug of 0.3 s every 10 s of wall-clock time: 144 unplugs in 8 session
+hours).  This
 process runs ``LiveSession("serial://<pty>?rate=120")`` exactly as ``rtseg live`` does
 (serial driver, ring buffer, pose features, every configured online detector, OSC to a
 socket on 127.0.0.1; no recording).  The suit sends ``--speed`` (default 20) times faster
@@ -124,8 +125,8 @@ import numpy as np  # noqa: E402
 
 RATE = 120.0
 FRAMES_PER_HOUR = int(RATE * 3600)
-DEFAULT_FAULTS = ("corrupt=0.01,drop=0.001,jitter=0.002,unplug=10:0.3,"
-                  "dropout=5:10:1:20,dropout=11:15:1:20,seed=11")
+DEFAULT_FAULTS = ("corrupt=0.01,drop=0.001,jitter=0.002,unplug=200:6,"
+                  "dropout=5:200:20:400,dropout=11:300:20:400,seed=11")
 CUTS_FAULTS = ("corrupt=0.0001,unplug=1200:0.3,dropout=5:300:0.05:300,"
                "dropout=11:450:0.05:300,seed=11")
 FATES = ("intact", "corrupted", "dropped", "unplugged", "overflow", "info", "unknown")
@@ -154,12 +155,12 @@ def _suit_main(conn, send_rate: float, faults: str, link: str, n_frames: int,
         info = (take.n_frames, [(t.lo, t.hi, t.mid, t.before, t.after) for t in r.transitions],
                 [(g.name, g.start, g.stop) for g in r.segments])
         del r
-        # the take's clock (device time, fault times) runs at 120 Hz, sent speed x faster
-        suit = SerialSuit(take, rate=RATE, speed=speed, faults=faults, link=link, loop=True)
     else:
         take = synthesize(frame_rate=RATE, seed=0).take
         info = None
-        suit = SerialSuit(take, rate=send_rate, faults=faults, link=link, loop=True)
+    # the take's clock (device time, fault times: what the session's rate= declares) runs
+    # at 120 Hz, sent ``speed`` times faster
+    suit = SerialSuit(take, rate=RATE, speed=speed, faults=faults, link=link, loop=True)
     conn.send((suit.start(), info))
     totals: dict[str, int] = {}
     recent: deque[list] = deque()

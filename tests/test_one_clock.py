@@ -38,6 +38,7 @@ def session(tmp_path_factory):
         proc = subprocess.run(
             [sys.executable, "-m", "rtseg.cli", "demo", "--speed", f"{SPEED:g}",
              "--script", SCRIPT, "--duration", "21", "--faults", FAULTS, "--no-monitor",
+             "--no-names",
              "--osc", f"127.0.0.1:{rx.port}",
              "--target", f"udp:127.0.0.1:{rx.port},standard=off,template=/clock/{{label}} time",
              "--jsonl", str(jsonl), "--record", str(rec)],

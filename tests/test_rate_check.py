@@ -85,7 +85,7 @@ def test_a_sender_faster_than_declared_is_segmented_at_its_own_rate(caplog):
     rate the sender's clock shows - the same cuts as a session told rate=120 (before, the
     detectors' windows were half their length in seconds and cut more often)."""
     from rtseg.simulators.synth.motion import synthesize
-    take = synthesize("idle:4,walk:6,punch:6,squat:6", frame_rate=120.0, seed=0).take
+    take = synthesize("idle:4,walk:5,punch:5,squat:5", frame_rate=120.0, seed=0).take
     wrong, sess, said = _vmc_session_cuts(take, 60.0, caplog)
     assert len(said) == 1 and "uses 120 Hz from now on" in said[0], said
     assert sess.frame_rate == 120.0 and sess.pipeline.frame_rate == 120.0
