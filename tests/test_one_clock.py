@@ -188,3 +188,51 @@ def test_a_frame_without_a_time_among_timed_ones_shifts_nothing():
          for i in range(10)]
     assert all(b > a for a, b in zip(t, t[1:]))
     assert t[9] - t[0] == pytest.approx(9 / 120.0) and clk.segments == 0
+
+
+def test_a_restarted_vmc_sender_keeps_every_reported_time_going_forward(tmp_path):
+    """A VMC sender stops, is silent for longer than the dropout limit, and starts again
+    from /VMC/Ext/T = 0 on a new socket (a restarted app), over real UDP: the session's
+    status, dropout and frame times never go back - the source stitches its clock and the
+    frames after the silence come after the moments reported during it."""
+    import socket
+    import threading
+    import time as _time
+
+    from tests.test_vmc_edge_faults import _send_run
+    from tests.test_vmc_live import make_take
+
+    from rtseg.drivers import open_source
+    from rtseg.live.config import from_dict
+    from rtseg.live.session import LiveSession
+    src = open_source("osc://127.0.0.1:0?format=vmc&rate=60&queue=4096")
+    log = tmp_path / "events.jsonl"
+    cfg = from_dict({"output": {"osc": [], "jsonl": str(log)}, "status": {"interval": 0.2},
+                     "calibration": {"mode": "none"}}, origin="test")
+    session = LiveSession(src, cfg, handle_signals=False)
+    box: dict = {}
+    t = threading.Thread(target=lambda: box.setdefault("s", session.run()), daemon=True)
+    t.start()
+    _time.sleep(0.3)
+    take = make_take(90, seed=4)
+    addr = ("127.0.0.1", src.port)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s1:
+        _send_run(s1, addr, take, pause=1 / 60.0)
+    _time.sleep(1.5)                           # silent: the source is reported lost
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s2:
+        _send_run(s2, addr, take, pause=1 / 60.0)
+    _time.sleep(0.5)
+    session.stop("test done")
+    t.join(10)
+    assert src.stats.clock_restarts == 1 and box["s"].frames_received == 180
+    lines = [json.loads(ln) for ln in log.read_text().splitlines()]
+    reported = [(d["type"], d["time"]) for d in lines if d["type"] in ("status", "dropout")]
+    times = [t for _, t in reported]
+    assert times == sorted(times), reported
+    lost = [d for d in lines if d["type"] == "dropout" and d["name"] == "source"]
+    assert [d["lost"] for d in lost[:2]] == [True, False]
+    # the frame that ended the silence is placed after the moment the loss was reported
+    assert lost[1]["time"] >= lost[0]["time"] + 0.4
+    # and the frames after it go on by the sender's 60 Hz clock
+    clk = session.clock
+    assert clk.time_of(179) - clk.time_of(90) == pytest.approx(89 / 60.0, abs=0.02)
