@@ -345,6 +345,7 @@ def soak(hours: float, speed: float, faults: str, log, mode: str = "hostile",
             def _open(self) -> None:
                 super()._open()
                 meter.wrap(self.pipeline)
+                meter.wrap_source(self.source)
                 if probe is not None:
                     probe.wrap(self.pipeline, meter)
 
@@ -391,8 +392,8 @@ def soak(hours: float, speed: float, faults: str, log, mode: str = "hostile",
             if msg[0] == "done":
                 _, fates, first_kept, near_unplug, overflow_at, info_idx = msg
                 break
-        upto = min(meter.last_abs + 1, meter.seen.size)
-        unseen = np.flatnonzero(~meter.seen[:upto])
+        upto = min(meter.last_abs + 1, meter.got.size)
+        unseen = np.flatnonzero(~meter.got[:upto])       # never received (not: dropped)
         parent.send(unseen)
         why_unseen = parent.recv()[1] if parent.poll(120) else {}
         wall = time.monotonic() - t_start
@@ -414,7 +415,7 @@ def soak(hours: float, speed: float, faults: str, log, mode: str = "hostile",
         processed_matched = meter.processed
         # intact frames written just before a pull (they die with the pty) or just after a
         # replug, before the reader has reopened the port (its open discards them), never read
-        in_flight = sum(1 for i in near_unplug if i < meter.seen.size and not meter.seen[i])
+        in_flight = sum(1 for i in near_unplug if i < meter.got.size and not meter.got[i])
         lost = (max(0, intact - processed_matched - in_flight) + overruns
                 + fates.get("overflow", 0))
         first, lastw = 0, n_windows - 1
