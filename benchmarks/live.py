@@ -338,7 +338,8 @@ def run_session(rate: float, seconds: float, port: int, warmup: float = 1.0,
     page in headless Chromium (another process) during the run; the warm-up is then 3 s
     (the page loads and connects first).
     Returns (session, summary, cpu fraction over the measured part)."""
-    suit = Suit(rate) if kind == "serial" else None
+    # the device clock keeps the take's 120 Hz (the rate= declared), sent rate/120 x faster
+    suit = Suit(120.0, speed=rate / 120.0) if kind == "serial" else None
     feed = server = page = None
     try:
         source = f"serial://{suit.path}?rate=120" if suit else PacedSource(rate)

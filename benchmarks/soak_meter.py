@@ -98,8 +98,11 @@ class Meter:
         self.n_rss = 0
         self.processed = 0
         self.last_abs = -1            # unwrapped sequence number of the last frame processed
-        self.seen = np.ones(n_seen, dtype=bool)   # received message indices
+        self.seen = np.ones(n_seen, dtype=bool)   # processed message indices
         self.seen[:] = False
+        self.last_got = -1            # unwrapped sequence number of the last frame received
+        self.got = np.ones(n_seen, dtype=bool)    # received message indices (the reader's)
+        self.got[:] = False
         self.suit_cpu_end = np.full(n_windows, np.nan)
         self.suit_rss_end = np.full(n_windows, np.nan)
 
@@ -132,6 +135,23 @@ class Meter:
             return out
 
         pipeline.process = timed
+
+    def wrap_source(self, source) -> None:
+        """Mark every frame the session's reader takes from ``source`` in ``got`` (by its
+        unwrapped sequence number), processed or not (the loop may drop it under overload)."""
+        read = source.read
+
+        def counted(timeout=None):
+            f = read(timeout)
+            seq = getattr(f, "seq", None) if f is not None else None
+            if seq is not None:
+                prev = self.last_got
+                self.last_got = seq if prev < 0 else prev + ((seq - prev) & 0xFFFF)
+                if self.last_got < self.got.size:
+                    self.got[self.last_got] = True
+            return f
+
+        source.read = counted
 
     def sample_rss(self) -> None:
         if self.n_rss >= self.rss_mb_samples.size:

@@ -188,3 +188,25 @@ def ari_by_hour(cut_frames: np.ndarray, ids: np.ndarray, starts: np.ndarray,
 
 
 __all__ = ["CutProbe", "ari_by_hour", "score_by_hour", "soak_script", "to_frames", "truth"]
+
+
+def clean_f1(rate: float = 120.0) -> dict:
+    """The live pipeline's F1 (+/- 0.5 s and strict) on one loop of the soak performance,
+    offline: every frame of the clean take, no faults, no pty, no loop (``replay_frames``
+    with the shipped configuration).  The per-hour figures of a soak cannot beat it: what
+    the soak loses against it is what the faults and the machine cost."""
+    from rtseg.evaluation.scoring import pooled_tally, tally
+    from rtseg.live.config import load_session_config
+    from rtseg.live.pipeline import replay_frames
+    from rtseg.simulators.synth.motion import synthesize
+    r = synthesize(soak_script(), frame_rate=rate, seed=0)
+    tk = r.take
+    cfg = load_session_config()
+    valid = np.ones(tk.quats.shape[1], dtype=bool)
+    frames = ((tk.quats[i], valid, i, i / rate, i / rate) for i in range(tk.n_frames))
+    cuts = replay_frames(frames, tk.joint_names, tk.parents, tk.space, rate, cfg)
+    primary = cfg["detectors.primary"] or cfg["detectors.methods"][0]
+    found = [(c.boundary, c.detected) for c in cuts if c.cut.method == primary]
+    t = pooled_tally([tally(found, r.transitions, rate, 0.5)])
+    return {"f1": t["f1"], "strict_f1": t["strict_f1"], "cuts": t["cuts"],
+            "transitions": t["transitions"]}

@@ -75,7 +75,7 @@ def check_shown(summary, rx: OscCollector, tmp_path: Path) -> list[int]:
 def test_corrupt_serial_frames_on_a_pty_are_shown(tmp_path):
     take = synthesize("idle:2,walk:2", frame_rate=RATE, seed=1).take
     play_s = take.n_frames / (RATE * SPEED)
-    suit = SerialSuit(take, rate=RATE * SPEED, faults="corrupt=0.003,seed=5")
+    suit = SerialSuit(take, rate=RATE, speed=SPEED, faults="corrupt=0.003,seed=5")
     rx = OscCollector()
     try:
         path = suit.start()

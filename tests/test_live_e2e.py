@@ -6,8 +6,9 @@ the cuts the same online detectors give when the recorded session is segmented o
 (``rtseg.live.session.replay_frames``).  With fault injection the session keeps running and the
 recording holds every frame the source delivered.  SIGTERM ends ``rtseg live`` cleanly.
 
-Playback is sped up (4x) so each test takes a few seconds; the source URL keeps the
-nominal 120 Hz so the detectors' windows (seconds -> frames) are those of a real suit.
+Playback is sped up (4x) so each test takes a few seconds; the suit's device clock (and
+the VMC sender's /VMC/Ext/T) keep the take's 120 Hz, which the source URL declares, so the
+detectors' windows (seconds -> frames) are those of a real suit.
 """
 
 from __future__ import annotations
@@ -162,7 +163,7 @@ def assert_cuts_match(received: list[list], expected: list, tk, what: str) -> No
 def test_serial_pty_to_osc_matches_offline(tmp_path, take):
     rec = tmp_path / "session"
     osc, dump = OscCollector(), OscDump()
-    suit = SerialSuit(take, rate=RATE * SPEED)
+    suit = SerialSuit(take, rate=RATE, speed=SPEED)
     try:
         path = suit.start()
         # the default detector (primary, on the wire) beside the paper's PCA (log only)
@@ -204,7 +205,7 @@ def test_vmc_over_osc_to_osc_matches_offline(tmp_path, take):
     rec = tmp_path / "session"
     osc = OscCollector()
     source = open_source(f"osc://127.0.0.1:0?format=vmc&rate={RATE:g}")
-    sender = VmcSender(take, "127.0.0.1", source.port, rate=RATE * SPEED)
+    sender = VmcSender(take, "127.0.0.1", source.port, rate=RATE, speed=SPEED)
     try:
         cfg = session_config(rec, [osc.port], detectors={"methods": ["contrast", "pca"]})
         session = LiveSession(source, cfg, handle_signals=False)
@@ -241,8 +242,9 @@ def test_faults_session_survives_and_records_every_frame(tmp_path, take, corrupt
     play_s = take.n_frames / (RATE * SPEED)
     # unplugged 0.8 s: longer than gaps.dropout_seconds (0.5) plus the reader's reconnect
     # back-off, so the source dropout is always reported (0.4 s was borderline)
-    faults = f"corrupt={corrupt},unplug={0.55 * play_s:.2f}:0.8,seed=7"
-    suit = SerialSuit(take, rate=RATE * SPEED, faults=faults)
+    # fault times are the device clock's (the take's 120 Hz): SPEED x the wall clock
+    faults = f"corrupt={corrupt},unplug={0.55 * play_s * SPEED:.2f}:{0.8 * SPEED:g},seed=7"
+    suit = SerialSuit(take, rate=RATE, speed=SPEED, faults=faults)
     try:
         path = suit.start()
         cfg = session_config(rec, [osc.port])
@@ -281,7 +283,7 @@ def test_faults_session_survives_and_records_every_frame(tmp_path, take, corrupt
 def test_sigterm_ends_rtseg_live_cleanly(tmp_path, take):
     rec = tmp_path / "session"
     osc = OscCollector()
-    suit = SerialSuit(take, rate=RATE * SPEED, loop=True)
+    suit = SerialSuit(take, rate=RATE, speed=SPEED, loop=True)
     proc = None
     try:
         path = suit.start()

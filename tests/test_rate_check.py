@@ -46,3 +46,56 @@ def test_vmc_at_120_hz_into_rate_60_warns_over_udp(caplog):
         t.cancel()
     warned = [r for r in caplog.records if "declared rate=60 Hz" in r.getMessage()]
     assert len(warned) == 1 and summary.frames_received > 240
+
+
+def _vmc_session_cuts(take, declared: float, caplog) -> tuple[list, object, list[str]]:
+    """The primary detector's cuts of a live session on a VMC sender playing ``take`` at 4x
+    (its /VMC/Ext/T keeps the take's 120 Hz) over real UDP, read with ``rate=declared``."""
+    import time as _time
+
+    from rtseg.drivers import open_source
+    from rtseg.live.config import from_dict
+    from rtseg.live.session import LiveSession
+    from rtseg.publishers import PublisherSet
+    from rtseg.simulators.vmc_sender import VmcSender
+    src = open_source(f"osc://127.0.0.1:0?format=vmc&rate={declared:g}&queue=4096")
+    cuts: list = []
+    sess = LiveSession(src, from_dict({"buffer": {"max_lag_seconds": 0.0}}),
+                       publishers=PublisherSet(), handle_signals=False,
+                       listeners=[lambda ev: cuts.append(ev) if getattr(ev, "wire", False)
+                                  else None])
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="rtseg"):
+        sender = VmcSender(take, port=src.port, rate=120.0, speed=4.0)
+        box: dict = {}
+        t = threading.Thread(target=lambda: box.setdefault("s", sess.run()), daemon=True)
+        t.start()
+        _time.sleep(0.3)
+        with sender:
+            sender.done.wait(60)
+            _time.sleep(1.0)
+        sess.stop()
+        t.join(20)
+    said = [r.getMessage() for r in caplog.records if "declared rate=" in r.getMessage()]
+    return cuts, sess, said
+
+
+def test_a_sender_faster_than_declared_is_segmented_at_its_own_rate(caplog):
+    """A VMC sender at 120 Hz read as rate=60: one warning, and the session runs at the
+    rate the sender's clock shows - the same cuts as a session told rate=120 (before, the
+    detectors' windows were half their length in seconds and cut more often)."""
+    from rtseg.simulators.synth.motion import synthesize
+    take = synthesize("idle:4,walk:5,punch:5,squat:5", frame_rate=120.0, seed=0).take
+    wrong, sess, said = _vmc_session_cuts(take, 60.0, caplog)
+    assert len(said) == 1 and "uses 120 Hz from now on" in said[0], said
+    assert sess.frame_rate == 120.0 and sess.pipeline.frame_rate == 120.0
+    right, sess2, said2 = _vmc_session_cuts(take, 120.0, caplog)
+    assert not said2 and sess2.frame_rate == 120.0
+    assert len(right) >= 2
+    assert [c.frame for c in wrong] == pytest.approx([c.frame for c in right], abs=3)
+    # times on the sender's clock, from each session's first frame
+    t0, t0_2 = sess.clock.time_of(0), sess2.clock.time_of(0)
+    assert [c.time - t0 for c in wrong] == pytest.approx([c.time - t0_2 for c in right],
+                                                         abs=0.03)
+    assert all(c.detector_delay_ms == pytest.approx(d.detector_delay_ms, abs=30)
+               for c, d in zip(wrong, right))

@@ -78,3 +78,76 @@ def test_disk_full_at_start_names_the_path(small_fs):
         SessionRecorder(d, NAMES, PARENTS, space="global")
     assert str(d) in str(err.value) and "No space left on device" in str(err.value)
     assert not list(d.glob("*.tmp"))
+
+
+def test_live_session_says_its_recording_failed_in_summary_status_and_osc(small_fs, tmp_path):
+    """A live session recording onto the 2 MB tmpfs: the summary, every status after the
+    failure (JSON lines, the console line, ``/rtseg/recording`` over real UDP) and the
+    closed session.json give the same frame and the same counts of what it holds."""
+    from osc_collector import OscCollector
+
+    from rtseg.commands.live import Console
+    from rtseg.core.events import StatusEvent
+    from rtseg.live.config import from_dict
+    from rtseg.live.session import LiveSession
+    script = "idle:3," + ",".join(["walk:8", "punch:8"] * 4)       # 67 s, 8 changes
+    rec = small_fs / "live"
+    log = tmp_path / "events.jsonl"
+    with OscCollector(linger=0.3) as rx:
+        cfg = from_dict({"output": {"osc": [f"127.0.0.1:{rx.port}"], "jsonl": str(log)},
+                         "recording": {"dir": str(rec)}, "status": {"interval": 0.25}},
+                        origin="test")
+        session = LiveSession(f"sim://synth?script={script}&seed=1&speed=15", cfg,
+                              handle_signals=False)
+        summary = session.run()
+    fail = summary.recording_failure
+    assert fail is not None and "No space left on device" in fail["error"]
+    at, held, cuts = fail["at_frame"], summary.recording_frames, summary.recording_cuts
+    assert 0 < at == held < summary.frames_received
+    text = summary.text()
+    assert (f"FAILED at frame {at} (writing {fail['path']}: {fail['error']}); it holds "
+            f"{held} frames and {cuts} cuts") in text
+    # what the folder holds is what every report says
+    assert read_session(rec).n_frames == held and len(read_session_cuts(rec)) == cuts
+    header = json.loads((rec / "session.json").read_text())
+    assert header["closed"] and header["frames"] == held and header["cuts"] == cuts
+    assert not list(rec.glob("*.tmp"))
+    # status in JSON lines: -1 until the failure, then the frame and the counts
+    status = [json.loads(ln) for ln in log.read_text().splitlines()]
+    status = [d for d in status if d["type"] == "status"]
+    failed = [d for d in status if d["recording_failed_at"] >= 0]
+    assert failed and status[0]["recording_failed_at"] == -1
+    assert {d["recording_failed_at"] for d in failed} == {at}
+    assert failed[-1]["recording_frames"] == held and failed[-1]["recording_cuts"] == cuts
+    # over OSC: /rtseg/recording right after each such /rtseg/status
+    osc = rx.args("/rtseg/recording")
+    assert len(osc) == len(failed) and osc[-1] == [at, held, cuts]
+    order = [a for a, _, _ in rx.messages if a in ("/rtseg/status", "/rtseg/recording")]
+    assert all(order[i - 1] == "/rtseg/status" for i, a in enumerate(order)
+               if a == "/rtseg/recording")
+    # the console status line says it
+    out = _Tty()
+    Console(out=out, err=out).show_status(StatusEvent(
+        **{k: v for k, v in failed[-1].items() if k not in ("type", "stale_names")}))
+    assert (f"RECORDING FAILED at frame {at} (it holds {held} frames, {cuts} cuts)"
+            in out.getvalue())
+
+
+class _Tty:
+    """A text stream that says it is a terminal (the console rewrites its status line)."""
+
+    def __init__(self) -> None:
+        self.parts: list[str] = []
+
+    def write(self, s: str) -> int:
+        self.parts.append(s)
+        return len(s)
+
+    def flush(self) -> None:
+        pass
+
+    def isatty(self) -> bool:
+        return True
+
+    def getvalue(self) -> str:
+        return "".join(self.parts)

@@ -125,7 +125,7 @@ def test_polled_serial_text_lines_give_every_frame(take):
 
 def test_polled_vmc_source_assembles_frames_and_closes_the_last_after_the_quiet_gap(take):
     src = open_source("osc://127.0.0.1:0?format=vmc&quiet=0.02")
-    sender = VmcSender(take, "127.0.0.1", src.port, rate=RATE * SPEED)
+    sender = VmcSender(take, "127.0.0.1", src.port, rate=RATE, speed=SPEED)
     try:
         assert src.take_over() is True
         assert not [t for t in threading.enumerate() if t.name.startswith("rtseg-osc-")]
@@ -161,9 +161,9 @@ def test_two_suits_in_one_thread_each_with_its_detectors_recording_and_tagged_cu
     every frame it received, the recording replayed offline gives exactly its live cuts,
     and every cut and status goes out under its source's name."""
     osc = OscCollector()
-    suit = SerialSuit(take, rate=RATE * SPEED)
+    suit = SerialSuit(take, rate=RATE, speed=SPEED)
     vmc_src = open_source(f"osc://127.0.0.1:0?format=vmc&rate={RATE:g}")
-    sender = VmcSender(take, "127.0.0.1", vmc_src.port, rate=RATE * SPEED)
+    sender = VmcSender(take, "127.0.0.1", vmc_src.port, rate=RATE, speed=SPEED)
     log = tmp_path / "events.jsonl"
     seen_threads: set[str] = set()
     try:
@@ -219,7 +219,7 @@ def test_a_blocking_source_keeps_its_thread_beside_a_polled_one(tmp_path, take):
     read by a reader thread; the polled one beside it is not; both finish in one call."""
     osc = OscCollector()
     vmc_src = open_source(f"osc://127.0.0.1:0?format=vmc&rate={RATE:g}")
-    sender = VmcSender(take, "127.0.0.1", vmc_src.port, rate=RATE * SPEED)
+    sender = VmcSender(take, "127.0.0.1", vmc_src.port, rate=RATE, speed=SPEED)
     short = synthesize("idle:2,walk:2", frame_rate=RATE, seed=1).take
     threaded = TakeSource(short)
     try:
@@ -337,7 +337,7 @@ def test_an_overloaded_polled_source_is_read_in_threads_again(tmp_path, take, bu
     frames for overload, and from then on reads the source in threads (the driver's and
     a reader), so reading and recording go on beside processing; every frame received
     is still recorded, and the drops are counted."""
-    suit = SerialSuit(take, rate=RATE * 60.0, loop=True)
+    suit = SerialSuit(take, rate=RATE, speed=60.0, loop=True)
     try:
         path = suit.start()
         cfg = from_dict({"output": {"osc": []}, "recording": {"dir": str(tmp_path / "rec")},

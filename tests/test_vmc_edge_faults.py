@@ -188,3 +188,87 @@ def test_clock_jump_ahead_starts_a_new_segment():
     times = [f.source_time for f in out]
     assert len(times) == 4 and times[3] == pytest.approx(1.0 + 3 / 60, abs=1e-4)
     assert asm.stats.clock_restarts == 1 and asm.stats.dropped == 0
+
+
+def _rmem_max() -> int | None:
+    try:
+        with open("/proc/sys/net/core/rmem_max") as fh:
+            return int(fh.read())
+    except (OSError, ValueError):
+        return None
+
+
+def _junk_bundle_64k() -> tuple[bytes, int]:
+    """A 64 KB bundle of bone messages with unknown names (junk a broken sender emits),
+    and how many messages it holds."""
+    from rtseg.drivers.osc.vmc.encode import encode_pose_message
+    parts, size, i = [], 16, 0
+    while size < 64000:
+        m = encode_pose_message("/VMC/Ext/Bone/Pos", f"NoSuchBone{i}", (0, 0, 0), (0, 0, 0, 1))
+        parts.append(struct.pack(">i", len(m)) + m)
+        size += len(m) + 4
+        i += 1
+    return b"#bundle\x00" + struct.pack(">Q", 1) + b"".join(parts), len(parts)
+
+
+@pytest.mark.skipif((_rmem_max() or 0) < (2 << 20),
+                    reason="net.core.rmem_max below 2 MiB: the kernel cannot grant the "
+                           "receive buffer this test relies on")
+def test_oversized_junk_while_the_reader_waits_costs_no_valid_frame():
+    """30 junk bundles of 64 KB arrive, among 80 valid frames, while the reader thread is
+    held (as a busy machine holds it): the socket's default receive buffer keeps every
+    valid frame.  With the OS default (~200 KB, three such bundles) most are lost."""
+    import threading
+    src = open_source("osc://127.0.0.1:0?format=vmc&suit=default17&queue=4096")
+    try:
+        assert src.rcvbuf >= 4 << 20
+        take = make_take(81, seed=2)
+        held, release = threading.Event(), threading.Event()
+        feed = src.assembler.feed
+
+        def held_feed(data, now):
+            if not held.is_set():
+                held.set()
+                release.wait(10)
+            return feed(data, now)
+
+        src.assembler.feed = held_feed
+        junk, per_bundle = _junk_bundle_64k()
+        n_junk = 0
+        addr = ("127.0.0.1", src.port)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
+            for d in _frame_datagrams(take, 0):
+                out.sendto(d, addr)
+            assert held.wait(5)
+            for i in range(1, len(take.quats)):
+                if i % 8 in (1, 4, 6):
+                    out.sendto(junk, addr)
+                    n_junk += 1
+                for d in _frame_datagrams(take, i):
+                    out.sendto(d, addr)
+            release.set()
+            frames = read_all(src)
+        assert len(frames) == len(take.quats)
+        for i, f in enumerate(frames):
+            assert f.source_time == pytest.approx(i / 60.0, abs=1e-5)
+            assert same_rotation(f.quats, take.quats[i], atol=1e-6)
+        assert n_junk == 30 and src.stats.dropped == 0
+        assert src.stats.unknown_names == n_junk * per_bundle
+    finally:
+        src.close()
+
+
+def test_a_damaged_time_is_refused_not_taken_for_a_clock():
+    """A /VMC/Ext/T whose bytes were damaged into 2.4e24 s: a bad value (counted), the
+    frame keeps the sender's clock - not a clock restart that lost every millisecond."""
+    take = make_take(6, seed=6)
+    asm = VmcAssembler(SUIT)
+    out = []
+    for i, t in enumerate([1.0, 1.0 + 1 / 60, 2.4e24, 1.0 + 3 / 60, 1.0 + 4 / 60, 1.0 + 5 / 60]):
+        out += asm.feed(encode_frame(take.quats[i], SUIT, time=t, max_datagram=60000)[0],
+                        i * 0.01)
+    out += asm.flush(1.0, force=True)
+    times = [f.source_time for f in out]
+    assert asm.stats.clock_restarts == 0 and asm.stats.bad_values == 1
+    assert times[3:] == pytest.approx([1.0 + 3 / 60, 1.0 + 4 / 60, 1.0 + 5 / 60], abs=1e-6)
+    assert all(b > a for a, b in zip(times, times[1:]) if a is not None and b is not None)

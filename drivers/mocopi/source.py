@@ -14,7 +14,7 @@ URL options
 ``queue``      frames held for ``read`` (default 256; when full the *oldest* is dropped,
                counted in ``stats.dropped`` and logged).
 ``rate``       nominal frame rate in Hz to report (default unknown, None).
-``rcvbuf``     SO_RCVBUF bytes (default: the OS default).
+``rcvbuf``     SO_RCVBUF bytes (default 4 MiB, capped by the kernel: see ``rtseg.drivers.osc.source``).
 ``tolerance``  accepted | |q|^2 - 1 | (default 0.05).
 ``allow``      senders accepted, comma separated addresses / CIDR networks; others are
                dropped before decoding, counted in ``stats.refused_senders``, logged once.

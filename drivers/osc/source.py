@@ -27,7 +27,11 @@ URL options (VMC)
              counted in ``stats.dropped`` and logged.
 ``rate``     nominal frame rate in Hz to report as ``frame_rate`` (VMC does not announce it;
              default: unknown, None).
-``rcvbuf``   SO_RCVBUF in bytes (default: the OS default).
+``rcvbuf``   SO_RCVBUF in bytes (default ``DEFAULT_RCVBUF``, 4 MiB; the kernel caps it at
+             ``net.core.rmem_max``, and ``.rcvbuf`` is what it granted).  The socket's
+             buffer is what holds datagrams while the reader thread waits for a core:
+             the OS default (about 200 KB on Linux) holds three 64 KB datagrams, so a
+             sender of oversized junk and a reader paused for 25 ms lose valid frames.
 ``tolerance``  accepted | |q|² - 1 | for incoming quaternions (default 0.05); accepted ones
              are renormalised.
 ``time_order``  ``last`` (default: ``/VMC/Ext/T`` follows the bones it stamps, as
@@ -81,6 +85,8 @@ DEFAULT_HOST = "127.0.0.1"
 OPTIONS = ("format", "suit", "quiet", "queue", "rate", "rcvbuf", "tolerance", "time_order",
            "burst", "allow", "senders")
 VRCHAT_OPTIONS = ("format", "quiet", "queue", "rate", "rcvbuf", "root", "allow", "senders")
+#: SO_RCVBUF asked for when the URL gives no ``rcvbuf=`` (bytes; capped by the kernel)
+DEFAULT_RCVBUF = 4 << 20
 #: ``senders=`` policies (see module docstring)
 SENDER_POLICIES = ("one", "newest", "merge")
 #: seconds of silence from the followed sender after which another sender is followed
@@ -211,14 +217,17 @@ class OscUdpSource(QueuedSource):
         except (OSError, UnicodeError) as exc:
             raise SourceError(f"osc://{host}:{port}: {exc}") from None
         try:
-            if rcvbuf:
-                self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, int(rcvbuf))
+            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF,
+                                  int(rcvbuf) if rcvbuf else DEFAULT_RCVBUF)
             self._sock.bind(addr)
         except (OSError, OverflowError) as exc:
             self._sock.close()
             raise SourceError(f"cannot listen on UDP {host}:{port}: {exc}") from None
         self.host = host
         self.port: int = self._sock.getsockname()[1]
+        #: the receive buffer the kernel granted, bytes (Linux reports twice the request,
+        #: its bookkeeping included)
+        self.rcvbuf: int = self._sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
         if is_wide(host):
             log.warning("OSC: listening on %s:%d - reachable from other machines; %s",
                         host, self.port,

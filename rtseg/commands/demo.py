@@ -113,8 +113,9 @@ def _run(args: argparse.Namespace, cfg, script: str, library: str = "") -> int:
         if args.speed != 1:
             print(f"rtseg demo: --speed {args.speed:g}: frames are sent {args.speed:g}x faster "
                   f"({args.rate * args.speed:g} frames per wall-clock second) on the "
-                  f"performance's {args.rate:g} Hz clock; t= and detector delays are "
-                  f"performance time (divide by {args.speed:g} for wall-clock time), "
+                  f"performance's {args.rate:g} Hz clock; every time (t=, status, dropouts) and "
+                  f"detector delays are performance time (divide by {args.speed:g} for "
+                  f"wall-clock time), "
                   f"processing times are wall-clock", file=sys.stderr)
         print(f"rtseg demo: script {script}", file=sys.stderr)
         if library:
@@ -127,8 +128,7 @@ def _run(args: argparse.Namespace, cfg, script: str, library: str = "") -> int:
                 print(f"truth: {tr.before} -> {tr.after} at frame {tr.mid} "
                       f"(t={tr.mid / args.rate:.2f} s, blend {tr.lo}..{tr.hi})", file=sys.stderr)
         monitor = demo_monitor(args)
-        return run_session(url, cfg, args.duration / args.speed, args.quiet,
-                           performance_time=args.speed != 1, monitor=monitor,
+        return run_session(url, cfg, args.duration / args.speed, args.quiet, monitor=monitor,
                            check=lambda summary: speed_check(summary, args))
     finally:
         suit.stop()

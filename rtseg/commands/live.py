@@ -122,25 +122,23 @@ FLAGS = {"output.osc": "--osc", "output.osc_tcp": "--osc-tcp", "output.templates
          "detectors.methods": "--methods", "buffer.max_lag_seconds": "--max-lag"}
 
 
-def format_cut(ev: CutEvent, time: float | None = None) -> str:
-    """One cut line.  ``time``: the boundary time to show (default ``ev.time``, seconds
-    since the session started; the demo at ``--speed`` shows performance time)."""
+def format_cut(ev: CutEvent) -> str:
+    """One cut line; ``t=`` is ``ev.time``, the boundary in session seconds (the time
+    sent over OSC and written to JSON lines and the recording)."""
     proc = "-" if ev.processing_ms is None else f"{ev.processing_ms:.2f}"
     num = f"#{ev.event:<3d}" if ev.wire else "(log)"    # (log): not sent over OSC
-    t = ev.time if time is None else time
+    t = ev.time
     return (f"cut {num} {ev.method:<5s} segment {ev.segment:<3d} "
             f"frame {ev.frame:<7d} t={t:9.3f} s  confidence {ev.confidence:.2f}  "
             f"detector delay {ev.detector_delay_ms:4.0f} ms  processing {proc} ms")
 
 
-def format_behaviour(ev: BehaviourEvent, first_segment: int | None,
-                     time: float | None = None) -> str:
+def format_behaviour(ev: BehaviourEvent, first_segment: int | None) -> str:
     """One behaviour line (``rtseg.identity.tracker``): which behaviour segment ``ev.segment`` is.
 
     first_segment: the earliest segment of the session with this behaviour id, when that is
-    an earlier one (the behaviour recurs), else None (a new behaviour).  ``time``: when the
-    decision was made, to show (default ``ev.time``, seconds since the session started; the
-    demo at ``--speed`` shows performance time)."""
+    an earlier one (the behaviour recurs), else None (a new behaviour).  ``decided t=`` is
+    ``ev.time``, when the decision was made in session seconds."""
     name = f' "{ev.name}"' if ev.name and ev.name != ev.behaviour else ""
     if ev.correction:
         what = f"corrected from {ev.previous or '-'}"
@@ -148,7 +146,7 @@ def format_behaviour(ev: BehaviourEvent, first_segment: int | None,
         what = "new behaviour"
     else:
         what = f"same as segment {first_segment}"
-    t = ev.time if time is None else time
+    t = ev.time
     return (f"behaviour {ev.behaviour:>3s}{name} segment {ev.segment:<3d} "
             f"from frame {ev.frame:<7d} decided t={t:9.3f} s  ({what})  "
             f"confidence {ev.confidence:.2f}")
@@ -161,7 +159,6 @@ class Console:
     def __init__(self, out: TextIO | None = None, err: TextIO | None = None,
                  print_cuts: bool = True, status: bool = True,
                  session_stats: Callable[[], Any] | None = None,
-                 cut_time: Callable[[CutEvent], float] | None = None,
                  name: str = "") -> None:
         # the streams of the moment (not those bound when this module was imported)
         self.out = out if out is not None else sys.stdout
@@ -174,13 +171,11 @@ class Console:
         self.tty = bool(getattr(err, "isatty", lambda: False)()) and not name
         self.last_cut: CutEvent | None = None
         self.session_stats = session_stats
-        self.cut_time = cut_time     # None: ev.time (seconds since the session started)
         self._line_shown = False
         self._last_plain = 0.0
-        self._corrupt_at: tuple[float, int] | None = None   # (status time s, corrupt count)
+        self._corrupt_at: tuple[float, int] | None = None   # (Unix s, corrupt count)
         self.first_segment: dict[str, int] = {}    # behaviour id -> earliest segment
         self.last_behaviour: BehaviourEvent | None = None
-        self.behaviour_time: Callable[[BehaviourEvent], float] | None = None
         #: a line printed before the first status line (the features the session uses)
         self.banner: str | None = None
 
@@ -199,16 +194,14 @@ class Console:
             self.last_cut = ev
             if self.print_cuts:
                 self._clear()
-                t = self.cut_time(ev) if self.cut_time is not None else None
-                print(self._tag + format_cut(ev, t), file=self.out, flush=True)
+                print(self._tag + format_cut(ev), file=self.out, flush=True)
         elif isinstance(ev, BehaviourEvent):
             self.last_behaviour = ev
             first = self.first_segment.setdefault(ev.behaviour, ev.segment)
             if self.print_cuts:
                 self._clear()
-                t = self.behaviour_time(ev) if self.behaviour_time is not None else None
-                print(self._tag + format_behaviour(ev, first if first != ev.segment else None,
-                                                   t), file=self.out, flush=True)
+                print(self._tag + format_behaviour(ev, first if first != ev.segment else None),
+                      file=self.out, flush=True)
         elif isinstance(ev, DropoutEvent):
             self._clear()
             print(f"rtseg: {self._tag}dropout: {ev.name} {'lost' if ev.lost else 'restored'} "
@@ -228,17 +221,18 @@ class Console:
         last = "-"
         if self.last_cut is not None:
             c = self.last_cut
-            t = self.cut_time(c) if self.cut_time is not None else c.time
-            last = f"{c.method} #{c.event} at {t:.2f} s"
+            last = f"{c.method} #{c.event} at {c.time:.2f} s"
             b = self.last_behaviour
             if b is not None and b.segment == c.segment:
                 last += f" ({b.label})"
         # messages arriving damaged: their rate next to the frames' (0.0 fps of intact
-        # frames while a suit sends 120 corrupt messages a second says so)
+        # frames while a suit sends 120 corrupt messages a second says so); both per
+        # wall-clock second (the events' wall_time)
         damaged = ""
-        prev, self._corrupt_at = self._corrupt_at, (ev.time, ev.corrupt)
-        if prev is not None and ev.corrupt > prev[1] and ev.time > prev[0]:
-            damaged = f" (+{(ev.corrupt - prev[1]) / (ev.time - prev[0]):.1f}/s corrupt)"
+        wall = ev.wall_time
+        prev, self._corrupt_at = self._corrupt_at, (wall, ev.corrupt)
+        if prev is not None and ev.corrupt > prev[1] and wall > prev[0]:
+            damaged = f" (+{(ev.corrupt - prev[1]) / (wall - prev[0]):.1f}/s corrupt)"
         line = (f"rtseg live: {self._tag}{ev.time:7.1f} s | {ev.frame_rate:6.1f} fps{damaged} | "
                 f"{ev.dropped} dropped"
                 + (f" ({ev.overload_drops} under overload)" if ev.overload_drops else "")
@@ -248,6 +242,9 @@ class Console:
         refused = source_losses_text({k: getattr(ev, k) for k in SENDER_COUNTERS})
         if refused:
             line += " | " + refused[2:]
+        if ev.recording_failed_at >= 0:
+            line += (f" | RECORDING FAILED at frame {ev.recording_failed_at} (it holds "
+                     f"{ev.recording_frames} frames, {ev.recording_cuts} cuts)")
         if self.tty:
             self.err.write("\r\033[K" + line)
             self.err.flush()
@@ -283,7 +280,6 @@ def start_monitor(address: str | None, prog: str) -> tuple[Any, Any] | None:
 
 def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: bool,
                 before_run: Callable[[], None] | None = None,
-                performance_time: bool = False,
                 monitor: tuple[Any, Any] | None = None,
                 check: Callable[[Any], int] | None = None, name: str = "") -> int:
     """Run a live session with console output; returns the exit status (``check``, when
@@ -293,9 +289,8 @@ def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: 
     ``monitor``: ``(feed, server)`` of :func:`start_monitor`; the server is stopped when
     the session ends.  ``name``: the source's name (``NAME=URL``; "" for none).
 
-    ``performance_time``: print each cut's ``t=`` as its boundary frame over the source's
-    nominal rate (the performance's own clock, for a replay sent faster than real time)
-    instead of seconds since the session started."""
+    Every time printed (cuts, behaviour decisions, dropouts, status) is in session seconds,
+    the times sent and recorded (``rtseg.live.clock``)."""
     from rtseg.live.session import LiveSession
     console = Console(print_cuts=cfg["output.jsonl"] != "-", status=not quiet)
     try:
@@ -303,9 +298,6 @@ def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: 
                               monitor=monitor[0] if monitor else None, name=name,
                               on_start=lambda line: setattr(console, "banner", line))
         console.session_stats = lambda: session.stats
-        if performance_time:
-            console.cut_time = lambda ev: ev.frame / session.frame_rate
-            console.behaviour_time = lambda ev: ev.decided_frame / session.frame_rate
         if before_run is not None:
             before_run()
         summary = session.run()

@@ -5,9 +5,11 @@ the session recorder (``rtseg.recording``).  They are plain data; nothing here d
 
 Times and frames
 ----------------
-- ``time`` fields are **seconds since session start** on the monotonic clock
-  (``time.monotonic() - session_start``); the live loop owns ``session_start`` (the
-  recorder exposes ``SessionRecorder.start_monotonic`` so both can share one origin).
+- ``time`` fields are **session seconds** (``rtseg.live.clock.SessionClock``): seconds
+  since the session start, on the source's own clock where its frames carry one, else on
+  the receive clock, the same clock for every event kind; the live loop owns
+  ``session_start`` (the recorder exposes ``SessionRecorder.start_monotonic`` so both can
+  share one origin).
 - ``wall_time`` is Unix time (``time.time()``) when the event object was made, for logs.
 - ``CutEvent.frame`` is the 0-based index of the first frame of the new segment among all
   frames *received* this session - the same index as the row of a recorded session
@@ -61,7 +63,7 @@ class CutEvent:
     segment: index of the segment that starts at this boundary in this method's stream
         (the first segment of a session is 0, so a method's first cut starts segment 1).
     frame: boundary frame (first frame of the new segment), 0-based among received frames.
-    time: boundary time, seconds since session start.
+    time: boundary time, session seconds.
     method: detector name ("pca", "ppca", ...).
     label: behaviour label of the new segment; the method name until recognition exists.
     confidence: 0..1, the same for every method: ``1 - threshold / statistic`` - the
@@ -158,7 +160,12 @@ class StatusEvent:
     overload_drops: of ``dropped``, frames the live loop dropped unprocessed, oldest first,
     so that none waits longer than ``buffer.max_lag_seconds`` (JSON output and recordings
     only).
-    time: seconds since session start.
+    time: session seconds (``rtseg.live.clock``).
+
+    The recording (``--record``), once a write to it failed (sent over OSC as
+    ``/rtseg/recording`` after ``/rtseg/status``; -1 while it records, or without one):
+    recording_failed_at: the frame (0-based, among the frames received) whose write failed;
+    recording_frames / recording_cuts: the frames and cuts the closed recording holds.
 
     Input counters, each since the session started (``INPUT_COUNTERS``; sent over OSC as
     ``/rtseg/input``, see ``rtseg.publishers.base``).  They count input the source had to
@@ -197,6 +204,9 @@ class StatusEvent:
     other_senders: int = 0
     clock_restarts: int = 0
     source: str = ""
+    recording_failed_at: int = -1
+    recording_frames: int = -1
+    recording_cuts: int = -1
 
     def input_counts(self) -> dict[str, int]:
         """The input counters by name (``INPUT_COUNTERS`` order)."""
@@ -218,7 +228,7 @@ class StatusEvent:
 class DropoutEvent:
     """A joint's (or sensor's) data was lost (``lost=True``) or came back (``lost=False``).
 
-    time: seconds since session start.
+    time: session seconds (when the dropout was found).
     """
     name: str
     lost: bool
@@ -247,7 +257,7 @@ class BehaviourEvent:
     confidence: 0..1 margin of the decision to its threshold.
     frame: the segment's first frame (session index); decided_frame: the frame whose
         arrival produced the message.
-    time: seconds since session start when the message was made.
+    time: session seconds when the message was made (its decided frame's time).
     previous: for a correction, the id sent before ("" otherwise).
     """
     event: int

@@ -3,9 +3,11 @@
 
 :class:`SessionEvents` is a part of :class:`rtseg.live.session.LiveSession` (a base class; it uses
 the session's ``ring``, ``pipeline``, ``publishers``, ``recorder``, ``listeners``,
-``stats`` and ``_warn``).  Times are seconds since the session start
-(``session_start``, monotonic clock); ``*_ms`` fields are milliseconds; frame indices are
-0-based among the frames received this session.
+``stats`` and ``_warn``).  Event times are session seconds from the session's
+:class:`rtseg.live.clock.SessionClock` (``clock``: the source's own clock where frames carry
+one, counted from the session start), the same for cuts, behaviour decisions, dropouts and
+status; ``*_ms`` fields are milliseconds (wall clock); frame indices are 0-based among the
+frames received this session.
 """
 
 from __future__ import annotations
@@ -25,7 +27,26 @@ class SessionEvents:
     """Event building and sending of a :class:`~rtseg.live.session.LiveSession`."""
 
     def _now(self) -> float:
-        return time.monotonic() - self.session_start
+        """Session seconds now (the latest frame's time while frames flow), reported."""
+        return self.clock.now(time.monotonic(), report=True)
+
+    def session_time(self, now: float | None = None) -> float:
+        """Session seconds at monotonic ``now`` (default: now) on the clock of every
+        event time; never reported (any thread)."""
+        return self.clock.now(time.monotonic() if now is None else now)
+
+    def _clock_frame(self, index: int, recv: float, source_time: float | None) -> float:
+        """Feed frame ``index`` to the session clock (processing thread, in order); its
+        session time.  A new clock segment (the source clock went back or jumped) is
+        warned, at most every 5 s."""
+        clock = self.clock
+        seen = clock.segments
+        t = clock.feed(index, recv, source_time)
+        if clock.segments != seen:
+            self._warn("clock", "session clock: %s at frame %d; times continue from "
+                       "%.3f s on the receive clock (segment %d)", clock.last_break, index,
+                       t, clock.segments + 1)
+        return t
 
     def _emit(self, ev: Event) -> Event:
         """Publish, record and show one event; returns it as sent (cuts: latency stamped),
@@ -93,26 +114,13 @@ class SessionEvents:
 
     def _boundary_time(self, index: int, b_recv: float, at_index: int | None = None,
                        at_source_time: float | None = None) -> float:
-        """Seconds since session start of frame ``index``: on the source's own clock when it
-        has one (a replay sent faster than real time, ``--speed``, keeps the take's clock,
-        so cut times are the take's), counted from the first frame's arrival; else its
-        receive time.  A frame the ring no longer holds (overwritten while a long detector
-        delay ran at a high input rate) is placed on the source clock from a later frame
-        it holds, ``at_index`` with source time ``at_source_time``, one nominal frame
-        period per frame between them.  A source clock that runs backwards or over 100x
-        faster than the frames arrive (a wrap, a restarted device) is not used."""
-        recv_t = float(b_recv - self.session_start)
-        src = self.ring.source_time_at(index) if self.ring is not None else None
-        if (src is None and at_index is not None and at_source_time is not None
-                and np.isfinite(at_source_time)):
-            src = float(at_source_time) - (at_index - index) / self.frame_rate
-        if src is None or self._first_src is None or self._first_recv is None:
-            return recv_t
-        d_src = src - self._first_src
-        d_recv = max(float(b_recv) - self._first_recv, 1.0 / self.frame_rate)
-        if not (0.0 <= d_src <= 100.0 * d_recv + 1.0):
-            return recv_t
-        return float(self._first_recv - self.session_start + d_src)
+        """Session seconds of frame ``index`` (``SessionClock.time_of``: on the source's own
+        clock when it has one, so a replay sent faster than real time reports the take's
+        seconds).  A frame the clock no longer holds (a long detector delay at a high
+        input rate) is placed from the revealing frame ``at_index``, one nominal frame
+        period per frame.  ``b_recv`` and ``at_source_time`` are not needed (kept for
+        callers)."""
+        return self.clock.time_of(index, at_index)
 
     def _behaviour_event(self, d: Any) -> BehaviourEvent:
         """A ``rtseg.identity.tracker.IdentityDecision`` as the event sent (ids as text)."""

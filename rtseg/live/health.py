@@ -3,8 +3,10 @@ the loss / refused-input counters.
 
 :class:`SessionHealth` is a part of :class:`rtseg.live.session.LiveSession` (a base class; it uses
 the session's ``source``, ``pipeline``, ``ring``, ``stats``, ``config`` and ``_emit``, and
-the dropout state ``run`` sets up).  Times: ``recv`` and ``now`` are monotonic seconds;
-event times are seconds since the session start.
+the dropout state ``run`` sets up).  Times: ``now`` is monotonic seconds; joint validity
+is tracked and event times are given in session seconds (``SessionClock``), so a joint is
+lost after ``gaps.dropout_seconds`` of the source's clock (a replay at ``--speed 4``: of
+the take's), a silent source after that long on the wall clock (no frame carries a time).
 """
 
 from __future__ import annotations
@@ -21,16 +23,17 @@ log = logging.getLogger("rtseg.live.session")
 class SessionHealth:
     """Dropout tracking, status events and counters of a :class:`~rtseg.live.session.LiveSession`."""
 
-    def _track_dropouts(self, valid: np.ndarray, recv: float) -> None:
+    def _track_dropouts(self, valid: np.ndarray, t: float) -> None:
+        """Joint dropouts as of the frame at session time ``t`` with flags ``valid``."""
         if self._source_lost:
             self._source_lost = False
             self._emit(DropoutEvent("source", False, self._now()))
         if self._n_lost == 0 and valid.all():      # fast path: everything reporting
-            self._last_valid.fill(recv)
+            self._last_valid.fill(t)
             return
         lim = self._dropout_s
-        np.copyto(self._last_valid, recv, where=valid)
-        lost_now = (recv - self._last_valid) >= lim
+        np.copyto(self._last_valid, t, where=valid)
+        lost_now = (t - self._last_valid) >= lim
         changed = lost_now != self._joint_lost
         if changed.any():
             names = self.pipeline.joint_names
@@ -51,7 +54,7 @@ class SessionHealth:
             self._source_lost = True
             self.stats.dropouts += 1
             log.warning("dropout: no frames from the source for %.2f s", now - last)
-            self._emit(DropoutEvent("source", True, now - self.session_start))
+            self._emit(DropoutEvent("source", True, self.clock.now(now, report=True)))
 
     def dropped(self) -> int:
         """Frames lost since start: the source's counters plus frames the session dropped
@@ -104,11 +107,26 @@ class SessionHealth:
             names = tuple(self.pipeline.joint_names)
         self._last_rate = rate
         return StatusEvent(alive=alive, frame_rate=float(rate), dropped=self.dropped(),
-                           stale_joints=stale, stale_names=names, time=now - self.session_start,
+                           stale_joints=stale, stale_names=names,
+                           time=self.clock.now(now, report=True),
                            lag_ms=float(self.stats.lag_s * 1000.0),
                            backlog=int(self.stats.backlog),
                            overload_drops=int(self.stats.overload_drops),
-                           **self.sender_counts(), **self.input_counts())
+                           **self.sender_counts(), **self.input_counts(),
+                           **self.recording_counts())
+
+    def recording_counts(self) -> dict[str, int]:
+        """``recording_failed_at`` / ``recording_frames`` / ``recording_cuts`` of the
+        status: the frame whose write failed and what the closed recording holds, once a
+        write failed; -1 each while it records (or without a recording)."""
+        rec = self.recorder
+        fail = getattr(rec, "failure", None) if rec is not None else None
+        if not fail:
+            return {}
+        stats = getattr(rec, "stats", None)
+        return {"recording_failed_at": int(fail.get("at_frame", -1)),
+                "recording_frames": int(getattr(rec, "frames_written", -1)),
+                "recording_cuts": int(getattr(stats, "cuts", -1))}
 
     def _input_rate(self) -> float:
         """Frames per second between the first and the last frame received (0 if < 2)."""

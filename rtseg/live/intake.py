@@ -56,9 +56,11 @@ class SessionInput:
             problem = self._rate_check.feed(recv, stime, seq)
             if problem is not None:
                 log.warning("%s", problem)
+                chk = self._rate_check
+                if chk.on_source_clock and chk.mismatch:
+                    self._measured_rate = round(float(chk.measured_hz), 1)
         if self._first_recv is None:
             self._first_recv = recv
-            self._first_src = stime if stime is not None and np.isfinite(stime) else None
         self.stats.frames_received += 1
 
     def _poll_source(self, now: float) -> None:

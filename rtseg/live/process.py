@@ -79,17 +79,18 @@ class SessionProcessing:
             valid = w.valid[i]
             lost, pending = pending, 0
             i += 1
+            src = stime if stime == stime else None
+            t_frame = self._clock_frame(index, recv, src)      # session seconds
             try:
                 cuts = pipe.process(index, w.data[index - w.start].reshape(J, 4), valid,
-                                    None if seq < 0 else seq, recv, lost,
-                                    stime if stime == stime else None)
+                                    None if seq < 0 else seq, recv, lost, src)
             except Exception as exc:  # never let one frame end the session
                 st.bad_frames += 1
                 self._warn("process", "frame %d could not be processed (%s: %s); dropped",
                            index, type(exc).__name__, exc)
                 continue
             st.frames_processed += 1
-            self._track_dropouts(valid, recv)
+            self._track_dropouts(valid, t_frame)
             for pc in cuts:
                 ev = self._emit(self._cut_event(pc, recv, index, stime))
                 st.cuts += 1

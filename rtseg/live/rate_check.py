@@ -5,14 +5,27 @@ carry ``source_time``, else the receive clock) of a session whose source declare
 rate (``rate=`` in the URL).  The measured rate is frames elapsed per second, frames elapsed
 taken from ``seq`` when frames carry it (so frames lost on the way do not lower it), else
 from the count of frames received.  A measured rate off the declared one by more than
-``tolerance`` (a fraction, default 0.10) is a mismatch: the live loop logs one warning and
-keeps the declared rate (an accelerated replay declares the take's rate on purpose), so
-window lengths and times stay as declared.
+``tolerance`` (a fraction, default 0.10) is a mismatch, warned once:
+
+- measured on the **source clock** (the sender's own timestamps: they say how many frames
+  a second of motion holds, at any sending speed), the live session **uses the measured
+  rate** from then on (:func:`switch_rate`): its detectors and identity tracker are built
+  again at that rate and given the frames received so far again, so windows in seconds
+  hold the seconds they should (a VMC sender at 120 Hz read as ``rate=60`` cut 8 times
+  where 6 changes were);
+- measured on the **receive clock** (the frames carry no time), the declared rate is
+  kept: an accelerated replay without timestamps declares its take's rate on purpose.
 """
 
 from __future__ import annotations
 
+import logging
 import math
+from typing import Any
+
+import numpy as np
+
+log = logging.getLogger("rtseg.live.session")
 
 
 class DeclaredRateCheck:
@@ -30,6 +43,17 @@ class DeclaredRateCheck:
         self._seq0: int | None = None
         self._n = 0
         self._use_source: bool | None = None
+
+    @property
+    def on_source_clock(self) -> bool:
+        """Whether the rate is measured on the frames' own clock (``source_time``)."""
+        return bool(self._use_source)
+
+    @property
+    def mismatch(self) -> bool:
+        """Whether the measured rate (once known) is off the declared one."""
+        return (self.measured_hz is not None and abs(self.measured_hz - self.declared_hz)
+                > self.tolerance * self.declared_hz)
 
     def feed(self, recv: float, source_time: float | None, seq: int | None) -> str | None:
         """One frame (receive time s, source time s or None, sequence number or None)."""
@@ -56,11 +80,50 @@ class DeclaredRateCheck:
         self.measured_hz = frames / span
         if abs(self.measured_hz - self.declared_hz) <= self.tolerance * self.declared_hz:
             return None
-        clock = "source" if self._use_source else "receive"
+        if self._use_source:
+            return (f"declared rate={self.declared_hz:g} Hz but the source's clock says "
+                    f"{self.measured_hz:.1f} Hz (measured over {span:.1f} s of its time); "
+                    f"the session uses {round(self.measured_hz, 1):g} Hz from now on "
+                    f"(detectors started again); fix rate= in the source URL")
         return (f"declared rate={self.declared_hz:g} Hz but frames arrive at "
-                f"{self.measured_hz:.1f} Hz (measured over {span:.1f} s of {clock} time); "
-                f"the declared rate is kept; fix rate= in the source URL unless this is "
-                f"an accelerated replay")
+                f"{self.measured_hz:.1f} Hz (measured over {span:.1f} s of receive time; "
+                f"the frames carry no time); the declared rate is kept; fix rate= in the "
+                f"source URL unless this is an accelerated replay")
 
 
-__all__ = ["DeclaredRateCheck"]
+def switch_rate(session: Any, rate: float, upto: int) -> None:
+    """Run live session ``session`` at ``rate`` Hz from now on (processing thread): a new
+    ``Pipeline`` (features, detectors, identity tracker) at that rate, given again the
+    frames ``0 .. upto - 1`` the ring still holds (what they revealed was reported by the
+    old pipeline already, or is not reported: nothing is sent twice), then the session's
+    rate, clock period, wire methods, the recording's declared rate and the monitor follow."""
+    from rtseg.live.outputs import wire_methods
+    from rtseg.live.pipeline import Pipeline
+    old = session.pipeline
+    pipe = Pipeline(old.joint_names, old.parents, old.space, rate, session.config)
+    ring = session.ring
+    J = len(old.joint_names)
+    start = max(0, ring.oldest)
+    if upto > start:
+        w = ring.get(start, upto)
+        for i in range(len(w)):
+            seq = int(w.seq[i])
+            src = float(w.source_time[i])
+            pipe.process(w.start + i, w.data[i].reshape(J, 4), w.valid[i],
+                         None if seq < 0 else seq, float(w.recv_time[i]),
+                         0, src if np.isfinite(src) else None)
+        if pipe.identity is not None:
+            pipe.identity.drain()
+    session.pipeline = pipe
+    session.frame_rate = float(rate)
+    session.clock.period = 1.0 / float(rate)
+    session.primary, session.wire = wire_methods(session.config, pipe.detectors)
+    header = getattr(session.recorder, "header", None)
+    if isinstance(header, dict) and "frame_rate" in header:
+        header["frame_rate"] = float(rate)
+    if session.monitor is not None:
+        session._monitor_call(session.monitor.attach)
+    log.info("session: now at %g Hz (%d frames given again)", rate, max(0, upto - start))
+
+
+__all__ = ["DeclaredRateCheck", "switch_rate"]

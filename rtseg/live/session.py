@@ -57,7 +57,7 @@ dropped (``LiveStats.overruns``) and treats them as a gap (detectors restart).
 measure how far behind the loop is; a lag above ``buffer.lag_warn_seconds`` is logged
 (rate-limited) and reported in the summary.  Cut times stay on the source clock under
 overload too: a boundary frame the ring no longer holds is placed from the revealing
-frame's source time (``SessionEvents._boundary_time``).
+frame's session time (``SessionClock.time_of``).
 
 Gaps
 ----
@@ -67,10 +67,12 @@ Frame indices
 -------------
 ``CutEvent.frame`` is the 0-based index of the boundary frame among all frames received
 this session (= the row of the recorded session).  ``CutEvent.time`` is that frame's
-receive time minus the session start, in seconds.  Processing latency (frame arrival ->
-datagram sent) is measured for every frame that revealed a cut (``LiveStats.cut_latency_ms``)
-and, for benchmarking, the arrival -> end-of-processing time of every frame
-(``LiveStats.frame_latency_ms``).
+time in session seconds (``rtseg.live.clock``: the source's own clock where frames carry
+one, else the receive clock, counted from the session start), the clock of every time the
+session reports (behaviour decisions, dropouts, status, the recording's log lines).
+Processing latency (frame arrival -> datagram sent) is measured for every frame that
+revealed a cut (``LiveStats.cut_latency_ms``) and, for benchmarking, the arrival ->
+end-of-processing time of every frame (``LiveStats.frame_latency_ms``).
 
 One cut per change on the wire
 ------------------------------
@@ -109,6 +111,7 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
+from rtseg.live.clock import SessionClock
 from rtseg.live.emitter import Event, SessionEvents
 from rtseg.live.loop import run_sessions
 from rtseg.live.health import SessionHealth
@@ -118,7 +121,7 @@ from rtseg.live.outputs import build_publishers, log_publishers, wire_methods
 from rtseg.live.pipeline import (DEFAULT_FRAME_RATE, Pipeline, PipelineCut, PipelineStats,
                             detector_params, make_detectors, replay_frames,
                             replay_session)
-from rtseg.live.rate_check import DeclaredRateCheck
+from rtseg.live.rate_check import DeclaredRateCheck, switch_rate
 from rtseg.core.ringbuffer import RingBuffer
 from rtseg.live.config import SessionConfig, load_session_config
 from rtseg.live.stats import FloatRing, LiveStats, SessionSummary, percentile
@@ -212,7 +215,8 @@ class LiveSession(SessionInput, SessionProcessing, SessionEvents, SessionHealth)
         self._eof = threading.Event()
         self._reader_error: BaseException | None = None
         self._first_recv: float | None = None
-        self._first_src: float | None = None    # the first frame's source time (s)
+        #: session seconds of every reported time (set up by ``run``)
+        self.clock = SessionClock(time.monotonic(), DEFAULT_FRAME_RATE)
         self._rec_lock = threading.Lock()
         self._event_no = 0
         self._segment: dict[str, int] = {}
@@ -221,6 +225,7 @@ class LiveSession(SessionInput, SessionProcessing, SessionEvents, SessionHealth)
         self._log_pubs: Any = None
         self.stop_reason = "running"
         self._rate_check: DeclaredRateCheck | None = None
+        self._measured_rate: float | None = None    # set by the reader: switch to it
         self._warn_at: dict[str, float] = {}
         self._loop: Any = None                  # the rtseg.live.loop.SessionLoop running it
         self._reader_thread: threading.Thread | None = None
@@ -311,7 +316,12 @@ class LiveSession(SessionInput, SessionProcessing, SessionEvents, SessionHealth)
         rec_start = getattr(self.recorder, "start_monotonic", None)
         if isinstance(rec_start, float):
             self.session_start = rec_start
-        self._last_valid = np.full(J, self.session_start)
+        self.clock = SessionClock(self.session_start, self.frame_rate,
+                                  capacity=int(self.config["buffer.capacity"]),
+                                  silence_s=float(self.config["gaps.dropout_seconds"]))
+        if self.recorder is not None and hasattr(self.recorder, "clock"):
+            self.recorder.clock = self.session_time     # its log lines' times
+        self._last_valid = np.zeros(J)                  # session seconds
         self._joint_lost = np.zeros(J, dtype=bool)
         self._n_lost = 0
         self._dropout_s = float(self.config["gaps.dropout_seconds"])
@@ -366,6 +376,9 @@ class LiveSession(SessionInput, SessionProcessing, SessionEvents, SessionHealth)
             if skipped:
                 self.stats.overload_drops += skipped
                 self._pending_lost += skipped
+        if self._measured_rate is not None:    # the source's clock disagreed
+            switch_rate(self, self._measured_rate, cursor.position)
+            self._measured_rate = None
         w = cursor.read(self._max_batch)
         if len(w) or w.lost:
             self._process_window(w, now, self._loop.turn_s if self._loop is not None else None)

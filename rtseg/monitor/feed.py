@@ -119,12 +119,9 @@ class MonitorFeed:
         if now < self._next:
             return
         self._next = now + self.interval
-        last = session._last_recv
-        if last is None:
-            t_now = now - session.session_start
-        else:       # the session's clock of cut times (the source's own when it has one)
-            t_now = session._boundary_time(session._last_index, last)
-        batch: dict[str, Any] = {"now": round(t_now + max(0.0, now - (last or now)), 4)}
+        latest = session.clock.latest       # the clock of every event time (source's own)
+        t_now = latest[1] if latest is not None else session.clock.now(now)
+        batch: dict[str, Any] = {"now": round(session.clock.now(now), 4)}
         det = self._det
         if det is not None:
             rate = self.info["frame_rate"]
@@ -159,7 +156,7 @@ class MonitorFeed:
         self._health_t, self._health_frames = now, st.frames_received
         lat = st.frame_latency_ms.recent(LATENCY_WINDOW)
         p50, p99 = (np.percentile(lat, [50, 99]) if lat.size else (float("nan"),) * 2)
-        ages = now - session._last_valid
+        ages = session.clock.now(now) - session._last_valid
         lost = session._joint_lost
         targets = []
         for p in getattr(session.publishers, "publishers", ()):

@@ -31,6 +31,9 @@ address                     tags       arguments
                                        values, unknown names (``rtseg.core.events.
                                        StatusEvent``); sent right after ``/rtseg/status``
                                        whenever one of them is not 0
+``/rtseg/recording``        iii        the recording failed: the frame whose write failed,
+                                       frames and cuts the closed recording holds; sent
+                                       right after ``/rtseg/status`` once it has failed
 ==========================  =========  ==================================================
 
 When one process runs several sessions (``rtseg live NAME=URL ...``), each event carries
@@ -200,6 +203,12 @@ def input_message(ev: StatusEvent) -> bytes:
                           [int(getattr(ev, k)) for k in INPUT_COUNTERS])
 
 
+def recording_message(ev: StatusEvent) -> bytes:
+    return encode_message("/rtseg/recording", "iii", [int(ev.recording_failed_at),
+                                                     int(ev.recording_frames),
+                                                     int(ev.recording_cuts)])
+
+
 def dropout_message(ev: DropoutEvent) -> bytes:
     return encode_message(standard_address(ev, "/dropout"), "si", [ev.name, 1 if ev.lost else 0])
 
@@ -248,8 +257,9 @@ class OscPublisher(Publisher):
     def publish_status(self, ev: StatusEvent) -> None:
         if self.standard:
             self._guarded(lambda: [status_message(ev)] + (
-                [input_message(ev)] if any(getattr(ev, k, 0) for k in INPUT_COUNTERS) else []),
-                "status event")
+                [input_message(ev)] if any(getattr(ev, k, 0) for k in INPUT_COUNTERS) else [])
+                + ([recording_message(ev)] if getattr(ev, "recording_failed_at", -1) >= 0
+                   else []), "status event")
 
     def publish_dropout(self, ev: DropoutEvent) -> None:
         if self.standard:

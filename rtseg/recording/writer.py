@@ -18,7 +18,7 @@ import time
 import zlib
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -161,6 +161,9 @@ class SessionRecorder:
         self.fsync = bool(fsync)
         self.start_monotonic = time.monotonic() if start_monotonic is None else float(start_monotonic)
         self.start_wall_time = time.time()
+        #: session seconds now, from the live session's clock (``rtseg.live.clock``), for
+        #: the times of log lines; None: seconds since ``start_monotonic``
+        self.clock: Callable[[], float] | None = None
         self.stats = RecorderStats()
         self._lock = threading.RLock()
         self._buf = bytearray()
@@ -225,7 +228,13 @@ class SessionRecorder:
 
     @property
     def session_time(self) -> float:
-        """Seconds since the session's start (monotonic clock)."""
+        """Session seconds now: the live session's clock when it set ``clock``, else
+        seconds since the session's start (monotonic clock)."""
+        if self.clock is not None:
+            try:
+                return float(self.clock())
+            except Exception:  # pragma: no cover - a log line must never fail on its time
+                pass
         return time.monotonic() - self.start_monotonic
 
     # -- frames ---------------------------------------------------------------------------

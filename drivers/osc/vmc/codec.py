@@ -53,7 +53,7 @@ from rtseg.drivers.osc.vmc.encode import (_BONE_HEAD, _F7, _I4, _OK_HEAD4, _ROOT
                                             _TIME_HEAD, BONE_ADDRESS, OK_ADDRESS,
                                             ROOT_ADDRESS, TIME_ADDRESS, encode_frame,
                                             encode_pose_message)
-from rtseg.drivers.osc.vmc.frames import VmcFrameRules
+from rtseg.drivers.osc.vmc.frames import MAX_TIME, VmcFrameRules
 from rtseg.drivers.osc.vmc.template import _Template, build_template
 from rtseg.core.frame import Frame
 
@@ -364,7 +364,7 @@ class VmcAssembler(VmcFrameRules):
         can count it exactly."""
         tol = self.unit_tolerance
         t = tup[tpl.t_at]
-        if not math.isfinite(t):
+        if not abs(t) <= MAX_TIME:
             return False
         for _, k in tpl.bones:
             x, y, z, w = tup[k + 3:k + 7]

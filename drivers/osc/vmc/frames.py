@@ -27,6 +27,10 @@ log = logging.getLogger("rtseg.drivers.vmc")
 #: A step of ``/VMC/Ext/T`` larger than this (s), or any step back, is a clock restart:
 #: reported times continue from the last one instead of following T.
 MAX_CLOCK_JUMP = 3.0
+#: ``/VMC/Ext/T`` beyond this (s, about 115 days) is no sender's clock but a damaged value:
+#: refused (``bad_values``) like a non-finite one.  Taken as a clock it would restart the
+#: reported clock at a magnitude where float64 no longer holds milliseconds.
+MAX_TIME = 1e7
 
 
 def _rotate(q: Sequence[float], v: Sequence[float]) -> tuple[float, float, float]:
@@ -235,8 +239,8 @@ class VmcFrameRules:
             self._maybe_complete()
 
     def _on_time(self, t: float) -> None:
-        if not math.isfinite(t):
-            self._bad_value(f"time {t} not finite")
+        if not abs(t) <= MAX_TIME:           # also refuses nan and inf
+            self._bad_value(f"time {t} not finite or beyond {MAX_TIME:g} s")
             return
         if not self._sends_t:
             self._sends_t = True
