@@ -632,7 +632,9 @@ def test_binary_datagrams_fed_together_give_the_frames_fed_one_by_one():
 def test_binary_source_takes_pending_datagrams_as_one_batch():
     """Datagrams sent faster than the reader decodes them wait in the socket buffer; the
     source takes them together (batches of more than one datagram), and every frame still
-    arrives in order with the values of frame-by-frame decoding."""
+    arrives in order with the values of frame-by-frame decoding.  The first datagram's
+    decoding is held 0.2 s (a reader that fell behind), so that the rest are waiting
+    however fast the machine is."""
     rng = np.random.default_rng(6)
     n = 60
     v = np.zeros((n, 59, 6))
@@ -644,6 +646,8 @@ def test_binary_source_takes_pending_datagrams_as_one_batch():
 
     def one(data, now):
         sizes.append(1)
+        if len(sizes) == 1:
+            time.sleep(0.2)          # the sender's 59 other datagrams arrive meanwhile
         return feed(data, now)
 
     def many(batch, now):
