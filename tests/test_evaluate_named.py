@@ -9,18 +9,16 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from rtseg.library.file import save as save_library
 from rtseg.drivers.readers import write_take
-from rtseg.library.behaviours import LibraryBuilder
 from rtseg.evaluation.library import Named, named_summary
-from rtseg.library.examples import label_runs, take_rows
 from rtseg.evaluation.online import live_config
 from rtseg.simulators.synth.motion import synthesize
 
 from synth_identity import SYNTH_DETECTOR, SYNTH_THRESHOLD
+from synth_library import synth_library
 
 LEARN = "walk:8,punch:8,squat:8,wave:8"
 PERFORMANCE = "walk:6,kick:6,punch:6,jump:6,squat:6"     # kick and jump: not in the library
@@ -28,17 +26,7 @@ PERFORMANCE = "walk:6,kick:6,punch:6,jump:6,squat:6"     # kick and jump: not in
 
 def _library(swap: dict[str, str] | None = None):
     """Every behaviour of LEARN by synthetic performers 0 and 4; ``swap`` renames."""
-    cfg, _ = live_config()
-    b = None
-    for seed in (0, 4):
-        res = synthesize(LEARN, seed=seed)
-        X, idx, profile = take_rows(res.take, cfg)
-        b = b or LibraryBuilder(profile, X.shape[1], res.take.frame_rate)
-        for a, e, name in label_runs(res.frame_names()):
-            i, j = np.searchsorted(idx, a), np.searchsorted(idx, e)
-            b.add(X[i:j], (swap or {}).get(name, name), f"synth{seed}",
-                  info={"person": f"synth{seed}"})
-    return b.build()
+    return synth_library(LEARN, live_config()[0], swap=swap)
 
 
 @pytest.fixture(scope="module")

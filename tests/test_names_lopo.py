@@ -10,9 +10,8 @@ import pytest
 from rtseg.evaluation.library import named_segments
 from rtseg.evaluation.names_lopo import lopo_source, truth_cut_run
 from rtseg.evaluation.online import live_config
-from rtseg.library.behaviours import LibraryBuilder
-from rtseg.library.examples import label_runs, take_rows
 from rtseg.simulators.synth.motion import synthesize
+from synth_library import synth_library
 
 LEARN = "walk:8,punch:8,squat:8"
 PERFORMANCE = "walk:6,punch:6,kick:6,squat:6"            # kick: not in the library
@@ -25,15 +24,7 @@ def _config():
 
 
 def _library(cfg):
-    b = None
-    for seed in (0, 4):
-        res = synthesize(LEARN, seed=seed)
-        X, idx, profile = take_rows(res.take, cfg)
-        b = b or LibraryBuilder(profile, X.shape[1], res.take.frame_rate)
-        for a, e, name in label_runs(res.frame_names()):
-            i, j = np.searchsorted(idx, a), np.searchsorted(idx, e)
-            b.add(X[i:j], name, f"synth{seed}", info={"person": f"synth{seed}"})
-    return b.build()
+    return synth_library(LEARN, cfg)
 
 
 def test_truth_cuts_give_the_labelled_segments_named_at_the_decision_time():

@@ -69,10 +69,13 @@ class SessionInput:
         try:
             self.source.poll(now)
         except Exception as exc:  # a driver bug must not end the session
-            self.stats.source_errors += 1
-            self._warn("source", "source read failed (%s: %s); retrying",
-                       type(exc).__name__, exc)
+            self._source_failed(exc)
         self._take_frames()
+
+    def _source_failed(self, exc: Exception) -> None:
+        """A source's read raised: counted (``source_errors``) and logged, rate-limited."""
+        self.stats.source_errors += 1
+        self._warn("source", "source read failed (%s: %s); retrying", type(exc).__name__, exc)
 
     def _take_frames(self) -> None:
         """The frames a woken source's own thread queued (``Source.wake_with``),
@@ -81,9 +84,7 @@ class SessionInput:
         try:
             self.source.take(got)
         except Exception as exc:  # a driver bug must not end the session
-            self.stats.source_errors += 1
-            self._warn("source", "source read failed (%s: %s); retrying",
-                       type(exc).__name__, exc)
+            self._source_failed(exc)
         if got:
             for frame in got:
                 self._receive(frame)
@@ -103,9 +104,7 @@ class SessionInput:
                     wake()
                     return
                 except Exception as exc:  # a driver bug or device error must not end the session
-                    self.stats.source_errors += 1
-                    self._warn("source", "source read failed (%s: %s); retrying",
-                               type(exc).__name__, exc)
+                    self._source_failed(exc)
                     self._stop.wait(0.05)
                     continue
                 if frame is None:
