@@ -43,16 +43,37 @@ def place(rows: np.ndarray, c: int, radius: int, stride: int = 1, ridge: float =
     # candidates on a grid through c, chunk sums between consecutive candidates
     first = c - ((c - lo_b) // stride) * stride
     cand = np.arange(first, hi_b + 1, stride)
+    k = len(cand)
     edges = np.concatenate(([0], cand, [n]))
     S1 = np.add.reduceat(Y, edges[:-1], axis=0)                        # (k+1, d)
-    S2 = np.stack([Y[a:b].T @ Y[a:b] for a, b in zip(edges[:-1], edges[1:])])
-    C1, C2 = np.cumsum(S1, axis=0)[:-1], np.cumsum(S2, axis=0)[:-1]    # sums of [0, b)
+    S2 = np.empty((k + 1, d, d))
+    for i in range(k + 1):
+        chunk = Y[edges[i]:edges[i + 1]]
+        np.matmul(chunk.T, chunk, out=S2[i])
     T1, T2 = S1.sum(axis=0), S2.sum(axis=0)
+    C1, C2 = _running_sums(S1)[:-1], _running_sums(S2)[:-1]            # sums of [0, b)
     nl = cand.astype(np.float64)[:, None]
     nr = n - nl
-    reg = ridge * float(np.einsum("ii", T2)) / (n * d) * np.eye(d)
-    left = C2 / nl[:, :, None] - np.einsum("ki,kj->kij", C1 / nl, C1 / nl) + reg
+    reg = ridge * float(np.einsum("ii", T2)) / (n * d)
+    # both sides' covariances in one stack, each regularised on its diagonal
+    covs = np.empty((2, k, d, d))
+    left, right = covs
+    np.divide(C2, nl[:, :, None], out=left)
+    left_mean = C1 / nl
+    left -= np.einsum("ki,kj->kij", left_mean, left_mean)
     right_mean = (T1 - C1) / nr
-    right = (T2 - C2) / nr[:, :, None] - np.einsum("ki,kj->kij", right_mean, right_mean) + reg
-    cost = nl[:, 0] * np.linalg.slogdet(left)[1] + nr[:, 0] * np.linalg.slogdet(right)[1]
+    np.subtract(T2, C2, out=right)
+    right /= nr[:, :, None]
+    right -= np.einsum("ki,kj->kij", right_mean, right_mean)
+    covs.reshape(2 * k, d * d)[:, ::d + 1] += reg
+    logdet = np.linalg.slogdet(covs)[1]
+    cost = nl[:, 0] * logdet[0] + nr[:, 0] * logdet[1]
     return int(cand[int(np.argmin(cost))])
+
+
+def _running_sums(S: np.ndarray) -> np.ndarray:
+    """S summed along its first axis in place, S[i] = S[0] + ... + S[i] (the same additions
+    in the same order as ``np.cumsum(S, axis=0)``, which is slow along a leading axis)."""
+    for i in range(1, len(S)):
+        S[i] += S[i - 1]
+    return S
