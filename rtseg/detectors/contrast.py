@@ -90,7 +90,7 @@ import numpy as np
 
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.detectors.early import EarlyCut, EarlyCuts
-from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, place
+from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, Placer
 from rtseg.detectors.gate import (GATE_DECIDE_S, GATE_MIN_AFTER_S, GATE_SKIP_S, GATE_WINDOW_S,
                                   SameBehaviourGate)
 from rtseg.detectors.window_models import PcaWindow, WindowStats, fit_pca, pca_distance, pca_error
@@ -235,6 +235,9 @@ class ContrastDetector(OnlineDetector):
         self._cap = cap
         if self.place_radius:
             self._rows = np.zeros((self.place_window + self.delay_frames + self.step, dim))
+            self._span = np.empty_like(self._rows)      # a cut's rows, in order
+            self._placer = Placer(dim, len(self._rows), self.place_radius, self.place_stride,
+                                  self.place_ridge, margin=self.place_margin)
         # prefix sums at block boundaries k (blocks < k), ring of cap entries
         self._P1 = np.zeros((cap, dim))
         self._P2 = np.zeros((cap, dim, dim))
@@ -346,9 +349,9 @@ class ContrastDetector(OnlineDetector):
         hi = min(now, cut.frame + self.place_window)
         if hi - lo < 4 or not lo <= cut.frame < hi:
             return cut
-        rows = self._rows[np.arange(lo, hi) % len(self._rows)]
-        b = lo + place(rows, cut.frame - lo, self.place_radius, self.place_stride,
-                       self.place_ridge, margin=self.place_margin)
+        rows = np.take(self._rows, np.arange(lo, hi) % len(self._rows), axis=0,
+                       out=self._span[:hi - lo])
+        b = lo + self._placer(rows, cut.frame - lo)
         return cut if b == cut.frame else replace(cut, frame=b)
 
     def _stats(self, lo: int, hi: int) -> WindowStats:
