@@ -184,10 +184,10 @@ def pca_error(y: WindowStats, m: WindowModel) -> float:
     W = m.pca_basis
     kept = 0.0
     if W.shape[1]:
-        proj = W.T @ dm
+        proj = W.T @ dm                 # ``@``, not ndarray.dot: W may have reversed columns
         kept = (float(np.einsum("ij,ij->", W, y.scatter @ W))
                 + n * float(np.add.reduce(proj * proj)))
-    tr = y.trace + n * float(dm @ dm)
+    tr = y.trace + n * float(dm.dot(dm))
     return (tr - kept) / n / m.pca_own
 
 
