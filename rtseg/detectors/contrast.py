@@ -230,8 +230,7 @@ class ContrastDetector(OnlineDetector):
 
     def _alloc(self, dim: int) -> None:
         self._dim = dim
-        self._buf = np.empty((self.step, dim))
-        self._buf_rows = list(self._buf)        # its rows, as views (one per frame of a block)
+        self._buf = np.empty((self.step, dim))  # the block being filled
         self._BtB = np.empty((dim, dim))        # a block's sum of outer products
         cap = 2 * self.wa + self.wb + 2
         self._cap = cap
@@ -255,7 +254,7 @@ class ContrastDetector(OnlineDetector):
         if self._ref is None:
             self._ref = x.copy()
         fill = self._fill
-        np.subtract(x, self._ref, out=self._buf_rows[fill])
+        self._buf[fill] = x                          # made relative to _ref with its block
         if self._rows is not None:
             self._rows[t % len(self._rows)] = x
         if fill + 1 == self.step:
@@ -268,12 +267,8 @@ class ContrastDetector(OnlineDetector):
         # two cuts sent on one frame (two changes >= min_gap apart): the second goes out
         # with the next frame, and its detected_at says so
         cut = self._cut(self._out.popleft(), t) if self._out else None
-        gate = self.gate
-        if gate is not None:
-            gate.push(t, x)
-            if cut is not None:
-                gate.hold(cut)
-            cut = gate.poll()
+        if self.gate is not None:
+            cut = self.gate.frame(t, x, cut)
         if cut is not None:
             # the windows follow the detector's own grid position, not the placed frame
             self._last_sent = (cut.frame - self._seg0) // self.step
@@ -285,7 +280,7 @@ class ContrastDetector(OnlineDetector):
     def _block_done(self) -> None:
         """A block is complete: its sums join the prefix ring, and the work it makes possible
         is queued as steps of about one window fit each (``_run_steps``)."""
-        B = self._buf
+        B = np.subtract(self._buf, self._ref, out=self._buf)   # about the segment's first frame
         k, cap = self._nb, self._cap
         np.add(self._P1[k % cap], B.sum(axis=0), out=self._P1[(k + 1) % cap])
         np.add(self._P2[k % cap], np.matmul(B.T, B, out=self._BtB), out=self._P2[(k + 1) % cap])
