@@ -15,16 +15,21 @@ from scipy.linalg import lapack
 
 
 def rank_for_energy(lam: np.ndarray, total: float, tau: float) -> int:
-    """Smallest r with sum(lam[:r]) / total > tau (lam sorted descending, Eq. 6).
+    """Smallest r with sum(lam[:r]) / total > tau (lam >= 0 sorted descending, Eq. 6).
 
     Returns len(lam) + 1 when the given eigenvalues do not reach tau (caller must look at
-    more of the spectrum), and 1 when total is 0 (a constant segment).
+    more of the spectrum), and 1 when total is 0 (a constant segment).  The running sum is
+    ``np.cumsum``'s (the same additions in order), scanned in Python: a few of these
+    spectra are ranked per window fit, and numpy's per-call cost exceeds the scan's.
     """
-    if total <= 0.0:
+    if not total > 0.0:          # 0 (constant) or not a number: as the cumsum search gives
         return 1
-    c = np.cumsum(lam) / total
-    idx = int(np.searchsorted(c, tau, side="right"))
-    return idx + 1 if idx < len(lam) else len(lam) + 1
+    acc = 0.0
+    for i, v in enumerate(lam.tolist()):
+        acc += v
+        if acc / total > tau:
+            return i + 1
+    return len(lam) + 1
 
 
 def full_eigh(S: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -43,11 +48,15 @@ def subspace_step(S: np.ndarray, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     (a few frames added), one step keeps the leading Ritz values within rounding error of
     the true eigenvalues; callers re-run ``full_eigh`` now and then as a safeguard.
     """
-    qr, tau, _, info = lapack.dgeqrf(S @ V)
+    # ``@`` picks BLAS or numpy's own loop by the operands' strides (V and U[:, ::-1] may
+    # have reversed columns: the loop), so it stays for those; Q (LAPACK's, Fortran order)
+    # is always BLAS's, and ndarray.dot makes the same BLAS call for half a microsecond less
+    SV = S @ V
+    qr, tau, _, info = lapack.dgeqrf(SV)
     Q, _, info2 = lapack.dorgqr(qr, tau)
     if info or info2:
-        Q, _ = np.linalg.qr(S @ V)
-    T = Q.T @ (S @ Q)
+        Q, _ = np.linalg.qr(SV)
+    T = Q.T.dot(S.dot(Q))
     w, U, info = lapack.dsyevd(T, compute_v=1, lower=1)
     if info != 0:
         w, U = np.linalg.eigh((T + T.T) * 0.5)

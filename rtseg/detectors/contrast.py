@@ -90,7 +90,7 @@ import numpy as np
 
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.detectors.early import EarlyCut, EarlyCuts
-from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, place
+from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, Placer
 from rtseg.detectors.gate import (GATE_DECIDE_S, GATE_MIN_AFTER_S, GATE_SKIP_S, GATE_WINDOW_S,
                                   SameBehaviourGate)
 from rtseg.detectors.window_models import PcaWindow, WindowStats, fit_pca, pca_distance, pca_error
@@ -230,11 +230,15 @@ class ContrastDetector(OnlineDetector):
 
     def _alloc(self, dim: int) -> None:
         self._dim = dim
-        self._buf = np.empty((self.step, dim))
+        self._buf = np.empty((self.step, dim))  # the block being filled
+        self._BtB = np.empty((dim, dim))        # a block's sum of outer products
         cap = 2 * self.wa + self.wb + 2
         self._cap = cap
         if self.place_radius:
             self._rows = np.zeros((self.place_window + self.delay_frames + self.step, dim))
+            self._span = np.empty_like(self._rows)      # a cut's rows, in order
+            self._placer = Placer(dim, len(self._rows), self.place_radius, self.place_stride,
+                                  self.place_ridge, margin=self.place_margin)
         # prefix sums at block boundaries k (blocks < k), ring of cap entries
         self._P1 = np.zeros((cap, dim))
         self._P2 = np.zeros((cap, dim, dim))
@@ -245,25 +249,26 @@ class ContrastDetector(OnlineDetector):
         x = self._admit(x)
         if x is None:
             return None
-        self._t += 1
+        t = self._t                                  # this frame's number
+        self._t = t + 1
         if self._ref is None:
             self._ref = x.copy()
-        self._buf[self._fill] = x - self._ref
+        fill = self._fill
+        self._buf[fill] = x                          # made relative to _ref with its block
         if self._rows is not None:
-            self._rows[(self._t - 1) % len(self._rows)] = x
-        self._fill += 1
-        if self._fill == self.step:
+            self._rows[t % len(self._rows)] = x
+        if fill + 1 == self.step:
             self._fill = 0
             self._block_done()
-        self._run_steps()
+        else:
+            self._fill = fill + 1
+        if self._steps:
+            self._run_steps()
         # two cuts sent on one frame (two changes >= min_gap apart): the second goes out
         # with the next frame, and its detected_at says so
-        cut = self._cut(self._out.popleft(), self._t - 1) if self._out else None
+        cut = self._cut(self._out.popleft(), t) if self._out else None
         if self.gate is not None:
-            self.gate.push(self._t - 1, x)
-            if cut is not None:
-                self.gate.hold(cut)
-            cut = self.gate.poll()
+            cut = self.gate.frame(t, x, cut)
         if cut is not None:
             # the windows follow the detector's own grid position, not the placed frame
             self._last_sent = (cut.frame - self._seg0) // self.step
@@ -275,10 +280,10 @@ class ContrastDetector(OnlineDetector):
     def _block_done(self) -> None:
         """A block is complete: its sums join the prefix ring, and the work it makes possible
         is queued as steps of about one window fit each (``_run_steps``)."""
-        B = self._buf
+        B = np.subtract(self._buf, self._ref, out=self._buf)   # about the segment's first frame
         k, cap = self._nb, self._cap
-        self._P1[(k + 1) % cap] = self._P1[k % cap] + B.sum(axis=0)
-        self._P2[(k + 1) % cap] = self._P2[k % cap] + B.T @ B
+        np.add(self._P1[k % cap], B.sum(axis=0), out=self._P1[(k + 1) % cap])
+        np.add(self._P2[k % cap], np.matmul(B.T, B, out=self._BtB), out=self._P2[(k + 1) % cap])
         nb = self._nb = k + 1
         steps = self._steps
         # the before window of position nb (used once its after window is complete)
@@ -296,14 +301,14 @@ class ContrastDetector(OnlineDetector):
     def _run_steps(self) -> None:
         """One queued step per frame (more when more than a block's frames of them wait), so
         no frame fits more than one window model: a position's profile value is known a few
-        frames after its block completes, and the slow frames stay short."""
+        frames after its block completes, and the slow frames stay short.  Called only when
+        a step waits."""
         steps = self._steps
-        if steps:
+        fn, args = steps.popleft()
+        fn(*args)
+        while len(steps) > self.step:
             fn, args = steps.popleft()
             fn(*args)
-            while len(steps) > self.step:
-                fn, args = steps.popleft()
-                fn(*args)
 
     def _look_full(self, c: int) -> None:
         """The contrast at block position c, known now: to the peak picker."""
@@ -346,9 +351,9 @@ class ContrastDetector(OnlineDetector):
         hi = min(now, cut.frame + self.place_window)
         if hi - lo < 4 or not lo <= cut.frame < hi:
             return cut
-        rows = self._rows[np.arange(lo, hi) % len(self._rows)]
-        b = lo + place(rows, cut.frame - lo, self.place_radius, self.place_stride,
-                       self.place_ridge, margin=self.place_margin)
+        rows = np.take(self._rows, np.arange(lo, hi) % len(self._rows), axis=0,
+                       out=self._span[:hi - lo])
+        b = lo + self._placer(rows, cut.frame - lo)
         return cut if b == cut.frame else replace(cut, frame=b)
 
     def _stats(self, lo: int, hi: int) -> WindowStats:
@@ -394,9 +399,10 @@ class ContrastDetector(OnlineDetector):
         """The contrast at block position c (see the module docstring)."""
         a0, a = self._before(c)
         b = self._model(c, c + self.wb, "after")
-        oldest = c + 1 - 2 * self.wa
-        for key in [k for k in self._models if k[0] < oldest]:
-            del self._models[key]
+        if c % self.wa == 0:     # models no later position uses (none starts before c - 2w)
+            oldest = c + 1 - 2 * self.wa
+            for key in [k for k in self._models if k[0] < oldest]:
+                del self._models[key]
         return self._stated(pca_distance(a, b) / max(pca_distance(a0, a), 1e-300), a)
 
     def _early(self, c: int) -> float:

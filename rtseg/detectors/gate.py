@@ -99,6 +99,18 @@ class SameBehaviourGate:
         self._rows[t % self.ring] = x
         self._t = t + 1
 
+    def frame(self, t: int, x: np.ndarray, cut: Cut | None) -> Cut | None:
+        """``push(t, x)``, ``hold(cut)`` when there is one, then ``poll()``: the detector's
+        one call a frame (``poll`` only when a cut is held or waits)."""
+        rows = self._rows
+        if rows is None:
+            rows = self._rows = np.zeros((self.ring, len(x)))
+        rows[t % self.ring] = x
+        self._t = t + 1
+        if cut is not None:
+            self._held.append(cut)
+        return self.poll() if self._held or self._out else None
+
     def hold(self, cut: Cut) -> None:
         """A cut of the detector, to be decided once its new segment has arrived."""
         self._held.append(cut)
@@ -146,14 +158,18 @@ class SameBehaviourGate:
 
     # ------------------------------------------------------------------ internals
     _source: np.ndarray | None = None          # all rows (``replay``), else the ring
+    _span: np.ndarray | None = None            # a window's rows gathered from the ring
     #: window distances by (lo, hi, a, b), shared by replays of one take (benchmarks)
     memo: dict | None = None
 
     def _stats(self, lo: int, hi: int) -> WindowStats:
         if self._source is not None:
             return WindowStats.of(self._source[lo:hi])
-        idx = np.arange(lo, hi) % self.ring
-        return WindowStats.of(self._rows[idx])
+        if self._span is None or self._span.shape[1] != self._rows.shape[1]:
+            self._span = np.empty((self.max_window, self._rows.shape[1]))
+        rows = np.take(self._rows, np.arange(lo, hi) % self.ring, axis=0,
+                       out=self._span[:hi - lo])       # a window's rows, in order
+        return WindowStats.of(rows)
 
     def _decide(self, cut: Cut, now: int) -> None:
         b = cut.frame

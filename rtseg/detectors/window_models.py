@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -53,7 +54,14 @@ class WindowStats:
     def from_sums(cls, n: int, s1: np.ndarray, s2: np.ndarray) -> "WindowStats":
         """From the raw sums s1 = sum x (d,) and s2 = sum x x^T (d, d) of n >= 1 frames."""
         mean = s1 / n
-        return cls(n, mean, s2 - n * np.outer(mean, mean))
+        outer = mean[:, None] * mean            # np.outer(mean, mean), in one temporary
+        outer *= n
+        return cls(n, mean, np.subtract(s2, outer, out=outer))
+
+    @cached_property
+    def trace(self) -> float:
+        """tr(scatter): the frames' summed squared distance to their mean (computed once)."""
+        return float(np.trace(self.scatter))
 
     @classmethod
     def of(cls, X: np.ndarray) -> "WindowStats":
@@ -134,11 +142,11 @@ def fit_pca(stats: WindowStats, pca_energy: float = 0.9, warm: PcaWindow | None 
     if warm is not None and warm.ritz.shape[0] == d and warm.ritz.shape[1]:
         w, Q = subspace_step(S, warm.ritz)
         w, Q = subspace_step(S, Q)
-        total = float(np.trace(S))
+        total = stats.trace
         r = rank_for_energy(w, total, pca_energy) if total > 0.0 else len(w) + 1
         if r < len(w):
             r = max(0, min(r, n, warm.nonnull - 1))
-            own = max((total - float(w[:r].sum())) / n, 1e-12 * total / n + 1e-300)
+            own = max((total - float(np.add.reduce(w[:r]))) / n, 1e-12 * total / n + 1e-300)
             p = min(d, r + PCA_GUARD, Q.shape[1])
             return PcaWindow(stats, Q[:, :r], own, warm.nonnull, Q[:, :max(p, r + 1)], False)
     lam, V = full_eigh(S)
@@ -160,7 +168,7 @@ def _errors(y: WindowStats, m: WindowModel) -> tuple[float, float]:
         quad = np.einsum("ij,ij->j", W, y.scatter @ W) + n * (W.T @ dm) ** 2
     else:
         quad = np.zeros(0)
-    tr = float(np.trace(y.scatter)) + n * float(dm @ dm)
+    tr = y.trace + n * float(dm @ dm)
     r, q = m.pca_basis.shape[1], m.ppca_basis.shape[1]
     pca = (tr - float(quad[:r].sum())) / n / m.pca_own
     P = quad[:q] / n
@@ -174,8 +182,12 @@ def pca_error(y: WindowStats, m: WindowModel) -> float:
     n = y.n
     dm = y.mean - m.stats.mean
     W = m.pca_basis
-    kept = float(np.einsum("ij,ij->", W, y.scatter @ W) + n * np.sum((W.T @ dm) ** 2)) if W.shape[1] else 0.0
-    tr = float(np.trace(y.scatter)) + n * float(dm @ dm)
+    kept = 0.0
+    if W.shape[1]:
+        proj = W.T @ dm                 # ``@``, not ndarray.dot: W may have reversed columns
+        kept = (float(np.einsum("ij,ij->", W, y.scatter @ W))
+                + n * float(np.add.reduce(proj * proj)))
+    tr = y.trace + n * float(dm.dot(dm))
     return (tr - kept) / n / m.pca_own
 
 
