@@ -137,21 +137,35 @@ class Meter:
         pipeline.process = timed
 
     def wrap_source(self, source) -> None:
-        """Mark every frame the session's reader takes from ``source`` in ``got`` (by its
-        unwrapped sequence number), processed or not (the loop may drop it under overload)."""
-        read = source.read
+        """Mark every frame the session takes from ``source`` in ``got`` (by its unwrapped
+        sequence number), processed or not (the loop may drop it under overload): frames
+        read by a reader thread (``read``) and frames the session's loop takes after a
+        poll (``take``)."""
+        read, take = source.read, source.take
 
         def counted(timeout=None):
             f = read(timeout)
-            seq = getattr(f, "seq", None) if f is not None else None
-            if seq is not None:
-                prev = self.last_got
-                self.last_got = seq if prev < 0 else prev + ((seq - prev) & 0xFFFF)
-                if self.last_got < self.got.size:
-                    self.got[self.last_got] = True
+            if f is not None:
+                self._got(f)
             return f
 
+        def taken(out):
+            n = len(out)
+            r = take(out)
+            for f in out[n:]:
+                self._got(f)
+            return r
+
         source.read = counted
+        source.take = taken
+
+    def _got(self, frame) -> None:
+        seq = getattr(frame, "seq", None)
+        if seq is not None:
+            prev = self.last_got
+            self.last_got = seq if prev < 0 else prev + ((seq - prev) & 0xFFFF)
+            if self.last_got < self.got.size:
+                self.got[self.last_got] = True
 
     def sample_rss(self) -> None:
         if self.n_rss >= self.rss_mb_samples.size:
