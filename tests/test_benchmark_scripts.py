@@ -164,11 +164,11 @@ def test_faults_benchmark_refuses_an_unknown_condition():
 
 def test_soak_cuts_mode_scores_a_short_run():
     """36 session seconds of the soak's performance through the pty suit with its faults
-    and an unplug 30 s in: cuts scored against the truth, frames accounted for (the four
+    and an unplug 24 s in: cuts scored against the truth, frames accounted for (the four
     numbers add up when it says so; the frames the session's loop takes after a replug
     count as received, not as lost at the unplug)."""
     r = _run("soak.py", "--hours", "0.01", "--no-clean", "--json",
-             "--faults", "corrupt=0.0001,unplug=30:0.3,seed=11")
+             "--faults", "corrupt=0.0001,unplug=24:0.3,seed=11")
     assert r.returncode in (0, 1), r.stderr[-2000:]
     doc = json.loads(r.stdout)
     assert doc["mode"] == "cuts" and doc["crashes"] == 0
@@ -178,7 +178,7 @@ def test_soak_cuts_mode_scores_a_short_run():
     a = doc["accounting"]
     assert a["sent"] == doc["frames"] >= 0.01 * 432000
     assert a["destroyed"] > 0                      # 0.01 % of bytes corrupted
-    assert doc["reconnects"] == 1 and a["lost_at_unplugs"] > 0
+    assert doc["reconnects"] >= 1 and a["lost_at_unplugs"] > 0
     assert doc["frames_accounted"] == (a["sent"] == a["received"] + a["destroyed"]
                                        + a["lost_at_unplugs"])
     # every frame went somewhere: what a busy machine loses (a full pty, the source's full
