@@ -378,6 +378,29 @@ def test_down_tcp_target_queues_drops_oldest_then_delivers_newest():
     assert not pub._thread.is_alive()
 
 
+def test_tcp_connection_that_meets_itself_is_not_a_receiver(monkeypatch):
+    """With no receiver on a local port, a reconnect may be given that port as its own
+    source port and connect to itself (TCP simultaneous open): not a connection, nothing
+    sent into it."""
+    import rtseg.publishers.osc.tcp as tcp
+
+    def self_connect(address, timeout=None):
+        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        s.bind((HOST, 0))
+        s.connect((HOST, s.getsockname()[1]))
+        return s
+
+    monkeypatch.setattr(tcp.socket, "create_connection", self_connect)
+    port = free_port(socket.SOCK_STREAM)
+    pub = OscTcpPublisher(HOST, port, queue_size=3, max_age_s=30, backoff_s=(0.02, 0.05))
+    try:
+        pub.publish_status(StatusEvent(alive=1, frame_rate=60.0, dropped=0, stale_joints=0))
+        time.sleep(0.2)
+        assert not pub.connected and pub.stats.sent == 0 and pub.queued() == 1
+    finally:
+        pub.close()
+
+
 def test_tcp_expired_messages_are_dropped_not_sent_late():
     port = free_port(socket.SOCK_STREAM)
     pub = OscTcpPublisher(HOST, port, max_age_s=0.05, backoff_s=(0.02, 0.05))

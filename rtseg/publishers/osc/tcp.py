@@ -106,6 +106,17 @@ class OscTcpPublisher(OscPublisher):
         except OSError as exc:
             self.warn("connect", f"cannot connect ({exc}); retrying")
             return None
+        try:
+            looped = s.getsockname() == s.getpeername()
+        except OSError:
+            looped = True
+        if looped:
+            # no receiver on a local port in the ephemeral range: the kernel may give the
+            # connection that port as its own, and the socket talks to itself
+            s.close()
+            self.warn("connect", "cannot connect (nothing listening: the connection met "
+                      "itself); retrying")
+            return None
         s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         s.settimeout(self.connect_timeout_s)
         return s
