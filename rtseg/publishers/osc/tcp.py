@@ -108,8 +108,10 @@ class OscTcpPublisher(OscPublisher):
             return None
         try:
             looped = s.getsockname() == s.getpeername()
-        except OSError:
-            looped = True
+        except OSError as exc:                  # reset as soon as it was made
+            s.close()
+            self.warn("connect", f"cannot connect ({exc}); retrying")
+            return None
         if looped:
             # no receiver on a local port in the ephemeral range: the kernel may give the
             # connection that port as its own, and the socket talks to itself
