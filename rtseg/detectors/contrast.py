@@ -96,6 +96,8 @@ from rtseg.detectors.gate import (GATE_DECIDE_S, GATE_MIN_AFTER_S, GATE_SKIP_S, 
 from rtseg.detectors.window_models import PcaWindow, WindowStats, fit_pca, pca_distance, pca_error
 
 
+_ndarray, _F8, _add_reduce, _isfinite = np.ndarray, np.dtype(np.float64), np.add.reduce, math.isfinite
+
 #: every this many window fits one is exact (``fit_pca`` without a warm start): it
 #: refreshes the input's effective dimension and bounds any drift of the warm starts
 EXACT_EVERY = 24
@@ -166,7 +168,9 @@ class ContrastDetector(OnlineDetector):
                 ring=self.delay_frames + gate_decide + gate_window + 2 * self.step,
                 fit_args=self.fit_args, on_drop=self.peaks.forget)
         self._t = 0
-        self._rows: np.ndarray | None = None   # ring of the newest frames (placement)
+        #: ring of the newest frames (the blocks, placement and the gate read it)
+        self._rows: np.ndarray | None = None
+        self._shared = False                   # the gate reads ``_rows`` (``_alloc``)
         self._dim: int | None = None
         self._buf: np.ndarray | None = None
         self.restart()
@@ -230,14 +234,25 @@ class ContrastDetector(OnlineDetector):
 
     def _alloc(self, dim: int) -> None:
         self._dim = dim
-        self._buf = np.empty((self.step, dim))  # the block being filled
+        self._buf = np.empty((self.step, dim))  # a completed block, about the segment's start
         self._BtB = np.empty((dim, dim))        # a block's sum of outer products
         cap = 2 * self.wa + self.wb + 2
         self._cap = cap
+        # one ring of rows, written once a frame: the block being filled, the rows cut
+        # placement may look at (``_place_len``) and, when it holds at least as many, the
+        # gate's ring (its own length, so it reads what its own ring would hold)
+        self._place_len = self.place_window + self.delay_frames + self.step
+        n = max(self._place_len if self.place_radius else 0, self.step)
+        self._shared = self.gate is not None and self.gate.ring >= n
+        if self._shared:
+            n = self.gate.ring
+        self._rows = np.zeros((n, dim))
+        self._ringlen = n
+        if self._shared:
+            self.gate.share(self._rows)
         if self.place_radius:
-            self._rows = np.zeros((self.place_window + self.delay_frames + self.step, dim))
-            self._span = np.empty_like(self._rows)      # a cut's rows, in order
-            self._placer = Placer(dim, len(self._rows), self.place_radius, self.place_stride,
+            self._span = np.empty((self._place_len, dim))    # a cut's rows, in order
+            self._placer = Placer(dim, self._place_len, self.place_radius, self.place_stride,
                                   self.place_ridge, margin=self.place_margin)
         # prefix sums at block boundaries k (blocks < k), ring of cap entries
         self._P1 = np.zeros((cap, dim))
@@ -246,43 +261,56 @@ class ContrastDetector(OnlineDetector):
     # ------------------------------------------------------------------ streaming
     def update(self, x: np.ndarray) -> Cut | None:
         """Feed one frame (1-D feature vector); a Cut when a change is confirmed."""
-        x = self._admit(x)
-        if x is None:
-            return None
+        # a float64 vector of the right width is checked here (``_admit``'s checks, fewer
+        # calls); anything else goes through ``_admit``
+        if (x.__class__ is _ndarray and x.dtype is _F8 and x.ndim == 1
+                and x.shape[0] == self._dim):
+            if not _isfinite(_add_reduce(x)):
+                return self._reject(x)
+        else:
+            x = self._admit(x)
+            if x is None:
+                return None
         t = self._t                                  # this frame's number
         self._t = t + 1
         if self._ref is None:
             self._ref = x.copy()
-        fill = self._fill
-        self._buf[fill] = x                          # made relative to _ref with its block
-        if self._rows is not None:
-            self._rows[t % len(self._rows)] = x
-        if fill + 1 == self.step:
+        self._rows[t % self._ringlen] = x
+        fill = self._fill + 1
+        if fill == self.step:
             self._fill = 0
-            self._block_done()
+            self._block_done(t)
         else:
-            self._fill = fill + 1
+            self._fill = fill
         if self._steps:
             self._run_steps()
         # two cuts sent on one frame (two changes >= min_gap apart): the second goes out
         # with the next frame, and its detected_at says so
         cut = self._cut(self._out.popleft(), t) if self._out else None
-        if self.gate is not None:
-            cut = self.gate.frame(t, x, cut)
+        gate = self.gate
+        if gate is not None:
+            cut = gate.tick(t, cut) if self._shared else gate.frame(t, x, cut)
         if cut is not None:
             # the windows follow the detector's own grid position, not the placed frame
             self._last_sent = (cut.frame - self._seg0) // self.step
-            if self._rows is not None:             # only cuts the gate lets through
+            if self.place_radius:                  # only cuts the gate lets through
                 cut = self._placed(cut)
                 self._last_placed = cut.frame
         return cut
 
-    def _block_done(self) -> None:
-        """A block is complete: its sums join the prefix ring, and the work it makes possible
-        is queued as steps of about one window fit each (``_run_steps``)."""
-        B = np.subtract(self._buf, self._ref, out=self._buf)   # about the segment's first frame
+    def _block_done(self, t: int) -> None:
+        """A block (frames up to t) is complete: its sums join the prefix ring, and the work
+        it makes possible is queued as steps of about one window fit each (``_run_steps``)."""
+        rows, ref, B = self._rows, self._ref, self._buf   # about the segment's first frame
+        hi = t % self._ringlen + 1
+        lo = hi - self.step
+        if lo >= 0:
+            np.subtract(rows[lo:hi], ref, out=B)
+        else:                                        # the block wraps round the ring
+            np.subtract(rows[lo:], ref, out=B[:-lo])
+            np.subtract(rows[:hi], ref, out=B[-lo:])
         k, cap = self._nb, self._cap
-        np.add(self._P1[k % cap], B.sum(axis=0), out=self._P1[(k + 1) % cap])
+        np.add(self._P1[k % cap], _add_reduce(B, 0), out=self._P1[(k + 1) % cap])
         np.add(self._P2[k % cap], np.matmul(B.T, B, out=self._BtB), out=self._P2[(k + 1) % cap])
         nb = self._nb = k + 1
         steps = self._steps
@@ -345,13 +373,13 @@ class ContrastDetector(OnlineDetector):
         ``place_window`` of it (``rtseg.detectors.placement``), never before the segment's
         start nor onto or before the last cut sent."""
         now = self._t                           # frames [lo, now) are in the ring
-        lo = max(cut.frame - self.place_window, self._seg0, now - len(self._rows))
+        lo = max(cut.frame - self.place_window, self._seg0, now - self._place_len)
         if self._last_placed is not None:
             lo = max(lo, self._last_placed + 1)
         hi = min(now, cut.frame + self.place_window)
         if hi - lo < 4 or not lo <= cut.frame < hi:
             return cut
-        rows = np.take(self._rows, np.arange(lo, hi) % len(self._rows), axis=0,
+        rows = np.take(self._rows, np.arange(lo, hi) % self._ringlen, axis=0,
                        out=self._span[:hi - lo])
         b = lo + self._placer(rows, cut.frame - lo)
         return cut if b == cut.frame else replace(cut, frame=b)

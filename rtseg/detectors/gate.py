@@ -24,7 +24,8 @@ skipped, windows of at most 3 s); the threshold is the detector's ``gate_thresho
 (4.0, ``GATE_THRESHOLD``, chosen leave-one-person-out in ``benchmarks/lopo.py``'s grid;
 the tracker's own is 4.0 too).  A dropped cut is handed to ``on_drop`` (the detector
 forgets it).  Cost: one row
-copy per frame into a ring of ``ring`` frames; per held cut two window statistics and two
+copy per frame into a ring of ``ring`` frames (none of its own when it reads the contrast
+detector's ring, ``share``); per held cut two window statistics and two
 model fits (about 0.5 ms, once per cut).  A restart (gap) decides the held cuts on the
 frames that arrived before it.
 """
@@ -106,6 +107,20 @@ class SameBehaviourGate:
         if rows is None:
             rows = self._rows = np.zeros((self.ring, len(x)))
         rows[t % self.ring] = x
+        self._t = t + 1
+        if cut is not None:
+            self._held.append(cut)
+        return self.poll() if self._held or self._out else None
+
+    def share(self, rows: np.ndarray) -> None:
+        """Read the rows from ``rows`` (``ring`` x dims), a ring the caller writes frame t
+        into at ``t % ring`` before calling ``tick`` (one row copy a frame for both)."""
+        if len(rows) != self.ring:
+            raise ValueError(f"shared ring of {len(rows)} rows, the gate's is {self.ring}")
+        self._rows = rows
+
+    def tick(self, t: int, cut: Cut | None) -> Cut | None:
+        """``frame(t, x, cut)`` when frame t's row is already in the shared ring (``share``)."""
         self._t = t + 1
         if cut is not None:
             self._held.append(cut)
