@@ -100,6 +100,34 @@ def test_polled_serial_source_reads_every_frame_and_reconnects_after_an_unplug(t
         suit.stop()
 
 
+def test_bytes_arriving_after_in_waiting_looked_are_read_not_taken_for_an_unplug(
+        take, monkeypatch):
+    """A poll that finds nothing counted waiting, then the descriptor ready (the writer's
+    bytes reached the port in between), reads them: no false unplug, no frame lost."""
+    suit = SerialSuit(take, rate=200.0)
+    suit.start(send=False)
+    src = open_source(f"serial://{suit.path}")
+    try:
+        assert src.wait_connected(2.0) and src.take_over() is True
+        suit.begin()
+        first = poll_frames(src, lambda fr: len(fr) >= 5)
+        real = type(src._ser).in_waiting
+        looked: list[int] = []
+
+        def late_in_waiting(ser):        # the bytes are there, but not yet when counted
+            looked.append(1)
+            return 0 if len(looked) <= 3 else real.fget(ser)
+        monkeypatch.setattr(type(src._ser), "in_waiting", property(late_in_waiting))
+        more = poll_frames(src, lambda fr: len(looked) > 3 and len(fr) >= 20)
+    finally:
+        src.close()
+        suit.stop()
+    assert len(looked) > 3
+    assert src.disconnects == 0 and src.stats.reconnects == 0
+    seqs = [f.seq for f in first + more]
+    assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))     # none lost
+
+
 def test_polled_serial_text_lines_give_every_frame(take):
     """Text lines (``id,w,x,y,z``) read by polls: every frame, in order, values as sent."""
     from rtseg.core.quat import global_from_local

@@ -72,6 +72,7 @@ from __future__ import annotations
 import collections
 import errno
 import logging
+import math
 import os
 import select
 import threading
@@ -190,6 +191,11 @@ class SerialSource(QueuedSource):
         self._state = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (n, 1))
         self._last_valid = np.full(n, time.monotonic())
         self._lost = np.zeros(n, dtype=bool)
+        self._any_lost = False
+        # the suit's rows are its sensor ids' order: a complete frame needs no lookup
+        self._in_order = len(set(self.suit.sensor_ids)) == n
+        # the oldest last valid time of the sensors not lost (None: to be recomputed)
+        self._oldest_valid: float | None = None
         self._streaming = False   # set by the first frame: staleness counts from there
         self._last_seq: int | None = None
         self._last_was_frame = False
@@ -446,11 +452,16 @@ class SerialSource(QueuedSource):
             n = ser.in_waiting
             if n:
                 data = os.read(fd, n)
-            # nothing waiting although the descriptor reports readiness: the device went
-            # away (as pyserial reports it)
-            if not data and _readable(fd):
-                raise serial.SerialException("device reports readiness to read but "
-                                             "returned no data")
+            elif _readable(fd):
+                # readiness with nothing counted waiting: bytes that arrived since
+                # ``in_waiting`` looked (a writer's bytes reach the port's buffer
+                # asynchronously), or a device that went away.  A read tells them apart:
+                # end of file (no bytes although ready) is the device gone, as pyserial
+                # reports it
+                data = os.read(fd, 4096)
+                if not data:
+                    raise serial.SerialException("device reports readiness to read but "
+                                                 "returned no data")
         except BlockingIOError:
             data = b""
         except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
@@ -565,6 +576,20 @@ class SerialSource(QueuedSource):
         return True
 
     def _frame(self, m: codec.DecodedFrame, now: float) -> None:
+        if m.complete and self._in_order:
+            # every sensor of the suit, in its order, valid: the frame is the suit's rows
+            if not self._streaming:
+                self._streaming = True
+            self._last_valid.fill(now)
+            self._oldest_valid = now
+            if self._any_lost:
+                self._restore(np.flatnonzero(self._lost), now)
+            np.copyto(self._state, m.quats)
+            self._put(Frame(recv_time=now, quats=m.quats, valid=m.valid,
+                            source_time=self._time_acc / 1e6 if m.time_us is not None else None,
+                            seq=m.seq))
+            return
+        self._oldest_valid = None
         rows = self._lut[m.ids]
         take = (rows >= 0) & m.valid
         j = rows[take]
@@ -576,16 +601,24 @@ class SerialSource(QueuedSource):
             self._state[j] = m.quats[take]
             valid[j] = True
             self._last_valid[j] = now
-            back = j[self._lost[j]]
-            if len(back):
-                self._lost[back] = False
-                for k in back.tolist():
-                    self._event(k, False, now)
-                log.info("serial %s: sensor(s) restored: %s", self.path,
-                         ", ".join(self.joint_names[k] for k in back.tolist()))
-        frame = Frame(recv_time=now, quats=self._state.copy(), valid=valid,
-                      source_time=self._time_acc / 1e6 if m.time_us is not None else None,
-                      seq=m.seq)
+            if self._any_lost:
+                back = j[self._lost[j]]
+                if len(back):
+                    self._restore(back, now)
+        self._put(Frame(recv_time=now, quats=self._state.copy(), valid=valid,
+                        source_time=self._time_acc / 1e6 if m.time_us is not None else None,
+                        seq=m.seq))
+
+    def _restore(self, back: np.ndarray, now: float) -> None:
+        """Sensors ``back`` (rows) have a valid value again after being lost."""
+        self._lost[back] = False
+        self._any_lost = bool(self._lost.any())
+        for k in back.tolist():
+            self._event(k, False, now)
+        log.info("serial %s: sensor(s) restored: %s", self.path,
+                 ", ".join(self.joint_names[k] for k in back.tolist()))
+
+    def _put(self, frame: Frame) -> None:
         if self._queue.put(frame):
             self.overflow_drops += 1
             self.count("dropped")
@@ -595,9 +628,18 @@ class SerialSource(QueuedSource):
     def _check_stale(self, now: float) -> None:
         if not self._streaming:
             return
+        oldest = self._oldest_valid
+        if oldest is not None and now - oldest <= self.stale:
+            return                       # no sensor's last valid value is that old
         newly = (now - self._last_valid > self.stale) & ~self._lost
-        if newly.any():
+        if not newly.any():
+            # the oldest last value among the sensors not lost yet (inf: all lost)
+            self._oldest_valid = (float(self._last_valid[~self._lost].min())
+                                  if not self._lost.all() else math.inf)
+        else:
+            self._oldest_valid = None
             self._lost |= newly
+            self._any_lost = True
             ks = np.flatnonzero(newly).tolist()
             for k in ks:
                 self._event(k, True, now)
