@@ -344,3 +344,36 @@ def test_c_reference_encoder_matches(tmp_path):
         assert (f.seq, f.time_us, list(f.ids)) == (seq, t & 0xFFFFFFFF, list(rec[:, 4]))
     assert dec.stats.corrupt == 0
     assert n_ff >= 1  # the zero-free 60-sensor frame exercised 0xFF blocks
+
+
+def test_complete_frames_take_the_short_path_with_the_same_values():
+    """A frame of exactly the suit's sensors, in order, all valid, is flagged ``complete``
+    (the serial source then uses it without a lookup); its values are those the checked
+    path gives.  One damaged record, another order or a missing sensor is not complete."""
+    q, data = wire_frames(6)
+    dec = SerialFrameDecoder(known_ids=IDS17)
+    fast = dec.feed(b"".join(data))
+    assert [f.complete for f in fast] == [True] * 6
+    plain = SerialFrameDecoder(known_ids=None).feed(b"".join(data))   # no suit: checked path
+    assert not any(f.complete for f in plain)
+    for a, b, want in zip(fast, plain, q):
+        np.testing.assert_allclose(a.quats, b.quats, rtol=0, atol=1e-15)
+        assert a.valid.all() and b.valid.all()
+        np.testing.assert_allclose(a.quats, want, atol=codec.Q14_RESOLUTION)
+    # one frame alone per feed (the live case) is complete too
+    dec1 = SerialFrameDecoder(known_ids=IDS17)
+    assert all(dec1.feed(d)[0].complete for d in data[1:4])
+    # sensors in another order, one sensor missing, one not valid, a non-unit value
+    base = q[0]
+    cases = {
+        "reversed": (IDS17[::-1], base[::-1], None),
+        "missing": (IDS17[:-1], base[:-1], None),
+        "invalid": (IDS17, base, [codec.STATUS_DEFAULT] * 16 + [0x06]),
+        "norm": (IDS17, np.vstack([base[:16], base[16:] * 1.2]), None),
+    }
+    for name, (ids, qq, status) in cases.items():
+        dec = SerialFrameDecoder(known_ids=IDS17)
+        (f,) = dec.feed(b"\x00" + codec.encode_frame(1, 0, ids, qq, status))
+        assert not f.complete, name
+        assert list(f.ids) == list(ids), name
+        assert f.valid.sum() == len(ids) - (name in ("invalid", "norm")), name

@@ -26,6 +26,9 @@ class DecodedFrame:
     ``valid`` (n,) bool: status bit 0 set, error bit 3 clear, quaternion finite and within
     :data:`NORM_TOLERANCE` of unit norm.
     ``info``: the ``key=value`` pairs of a type-3 message, else None.
+    ``complete``: True when the frame holds exactly the decoder's ``known_ids``, in that
+    order, every one valid (the usual frame of a healthy suit: readers may then take
+    ``quats`` as the suit's rows without a lookup).
     Arrays may be views into a buffer shared by the frames of one ``feed`` call: copy
     before modifying.
     """
@@ -37,6 +40,7 @@ class DecodedFrame:
     quats: np.ndarray
     valid: np.ndarray
     info: dict[str, str] | None = None
+    complete: bool = False
 
 
 @dataclass
