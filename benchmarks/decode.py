@@ -16,6 +16,8 @@ only, on one core, median of ``--repeat`` runs:
 
 - ``serial``: ``rtseg.drivers.serial.codec.SerialFrameDecoder`` fed the binary wire
   stream (COBS + CRC, Q14) in 4096-byte chunks, as a serial read loop would deliver it.
+  ``serial_one_frame``: the same frames fed one frame per call (a live suit's reads at
+  its rate each hold one frame: numpy's per-call cost is then the cost).
 - ``vmc``: ``rtseg.drivers.osc.vmc.codec.VmcAssembler`` fed one UDP datagram at a time
   (17 Bone/Pos + Root/Pos + T + OK per frame, bundles of at most 1472 bytes: one datagram),
   frames closed and converted to rtseg's frame exactly as the live OSC source does (the
@@ -268,7 +270,7 @@ def bench_axis_burst(n: int, repeat: int, burst: int = 16, space: str = "global"
             "bytes_per_frame": len(dgrams[0]), "burst": burst}
 
 
-def bench_serial(q: np.ndarray, repeat: int) -> dict | None:
+def bench_serial(q: np.ndarray, repeat: int, one_frame: bool = False) -> dict | None:
     try:
         from rtseg.drivers.serial.codec import SerialFrameDecoder, encode_frame as ser_encode
     except ImportError as exc:
@@ -277,7 +279,10 @@ def bench_serial(q: np.ndarray, repeat: int) -> dict | None:
     n = q.shape[0]
     ids = list(range(17))
     stream = b"".join(ser_encode(i, i * 8333, ids, q[i]) for i in range(n))
-    chunks = [stream[k:k + SERIAL_CHUNK] for k in range(0, len(stream), SERIAL_CHUNK)]
+    if one_frame:         # what a live read delivers at the suit's rate: one frame a read
+        chunks = [ser_encode(i, i * 8333, ids, q[i]) for i in range(n)]
+    else:
+        chunks = [stream[k:k + SERIAL_CHUNK] for k in range(0, len(stream), SERIAL_CHUNK)]
     rates = []
     for _ in range(repeat):
         dec = SerialFrameDecoder(known_ids=ids)
@@ -291,7 +296,8 @@ def bench_serial(q: np.ndarray, repeat: int) -> dict | None:
         rates.append(n / dt)
     return {"frames_per_s": round(statistics.median(rates)),
             "runs": [round(r) for r in rates],
-            "bytes_per_frame": len(stream) / n, "chunk_bytes": SERIAL_CHUNK}
+            "bytes_per_frame": len(stream) / n,
+            "chunk_bytes": None if one_frame else SERIAL_CHUNK}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -322,6 +328,7 @@ def main(argv: list[str] | None = None) -> int:
     n, rep = args.frames, args.repeat
     rows = {
         "serial": lambda: bench_serial(q, rep) or {"frames_per_s": None},
+        "serial_one_frame": lambda: bench_serial(q, rep, one_frame=True),
         "vmc": lambda: bench_vmc(q, rep),
         "vmc_general_path": lambda: bench_vmc(q, rep, fast=False),
         "vmc_55_bones": lambda: bench_vmc(q, rep, full=True),
@@ -366,6 +373,9 @@ def main(argv: list[str] | None = None) -> int:
     if serial is not None and serial["frames_per_s"] is not None:
         print(f"  serial (COBS+CRC, {serial['bytes_per_frame']:.0f} B/frame, "
               f"{SERIAL_CHUNK} B reads): {serial['frames_per_s']:>9,} frames/s")
+    one = result.get("serial_one_frame")
+    if one is not None:
+        print(f"  serial, one frame per read:          {one['frames_per_s']:>9,} frames/s")
     if "vmc" in result:
         v = result["vmc"]
         print(f"  VMC (OSC/UDP, {v['datagrams_per_frame']:.1f} datagrams, "

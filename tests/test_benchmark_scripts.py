@@ -37,10 +37,12 @@ def test_fuzzer_refuses_an_unknown_format():
 
 def test_decode_throughput_rows_decode_every_frame():
     # _time_feed raises when a codec decodes fewer frames than were encoded
-    r = _run("decode.py", "--frames", "40", "--repeat", "1", "--json", "--only", "mvn,axis,rokoko")
+    r = _run("decode.py", "--frames", "40", "--repeat", "1", "--json", "--only",
+             "mvn,axis,rokoko,serial")
     assert r.returncode == 0, r.stderr[-2000:]
     doc = json.loads(r.stdout)
-    for row in ("mvn", "mvn_tcp", "rokoko", "rokoko_lz4", "axis_binary", "axis_text_global"):
+    for row in ("mvn", "mvn_tcp", "rokoko", "rokoko_lz4", "axis_binary", "axis_text_global",
+                "serial", "serial_one_frame"):
         assert doc[row]["frames_per_s"] > 0, row
     assert "vmc" not in doc
 

@@ -149,10 +149,11 @@ class SerialFrameDecoder:
 
     Speed: messages are split on 0x00 with ``bytes.split``, COBS-decoded by visiting only
     code bytes, checked with the C ``crc_hqx``, and the sensor records of all frames of one
-    ``feed`` call are converted together with one ``np.frombuffer``.  Measured for a
-    17-sensor suit on the shared 2-core build machine (``benchmarks/decode.py``): about
-    180 000 frames/s fed 4 KB at a time and 28 000 frames/s fed one frame per call when the
-    machine was quiet; 70 000 and 12 000 frames/s under a load average of 9.
+    ``feed`` call are converted together with one ``np.frombuffer``; a feed of complete
+    frames (``DecodedFrame.complete``) skips the record-by-record checks.  Measured for a
+    17-sensor suit (``python3 benchmarks/decode.py --only serial --cpu-time``, 2026-12-05,
+    shared 2-core machine): about 294 000 frames/s fed 4 KB at a time and 68 000 frames/s
+    fed one frame per call.
     """
 
     def __init__(self, known_ids: Iterable[int] | None = None,
