@@ -5,7 +5,7 @@ per frame by stage, detector delay, highest sustained input rate.
     python3 benchmarks/live.py            # readable report (about 4 minutes)
     python3 benchmarks/live.py --json     # {"latency_ms": {"p50", "p99", "max"},
                                           #  "cpu_fraction", "suits": {"1": {...}, "4": ...,
-                                          #  "8": ...}, "stages_us": {...},
+                                          #  "8": ...}, "stages_us": {...}, "wakeup": {...},
                                           #  "detector_delay_ms": {method: ms},
                                           #  "max_rate_fps", "core_max_rate_fps"}
     python3 benchmarks/live.py --monitor  # only the CPU cost of the live monitor (rtseg.monitor)
@@ -41,6 +41,9 @@ on 127.0.0.1.
    ``publish`` (every ``publish_*`` call), ``loop`` (the rest: waiting, the ring cursor,
    dropouts, status, counters) and ``total`` (the thread's CPU time over the frames).
    The timers add about 1 µs a call.
+1d. **The machine's cost of a wake-up** (with 1c; ``benchmarks/wakeup.py``): CPU of an empty
+   wake-up at 120 Hz (the floor under any suit's cost) and one frame's serial decode in a
+   tight loop against once per wake-up (how much cold caches multiply a frame's work).
 2. **Detector delay** per method: median of ``detected_at - frame`` over the cuts of the
    default synthesised performance (8 behaviour changes, 62 s) replayed through the same
    pipeline, in ms at 120 Hz.  Cuts of the live run in step 1 are included.
@@ -589,11 +592,17 @@ def main(argv: list[str] | None = None) -> int:
                 f"per suit; latency p50 {r['latency_ms']['p50']:.3f} ms, p99 "
                 f"{r['latency_ms']['p99']:.3f} ms, max {r['latency_ms']['max']:.2f} ms; "
                 f"{r['dropped']} dropped")
-        stages = None
+        stages = wake = None
         if args.stage_seconds > 0:
             log(f"1c. cost per frame by stage (one suit, identity on, {args.stage_seconds:g} s) ...")
             stages = run_suits(1, args.stage_seconds, port, stages=True)["stages_us"]
             log("   µs per frame: " + ", ".join(f"{k} {v:.1f}" for k, v in stages.items()))
+            log("1d. the machine's cost of a wake-up (benchmarks/wakeup.py, 8 s) ...")
+            from wakeup import measure as wakeup_cost
+            wake = wakeup_cost(8.0, 120.0)
+            log(f"   empty wake-up {wake['empty_wakeup_us']} µs ({100 * wake['empty_cpu_fraction']:.2f} "
+                f"% of a core at 120 Hz); one frame's serial decode {wake['decode_tight_us']} µs "
+                f"in a tight loop, {wake['decode_woken_us']} µs woken (x{wake['woken_over_tight']})")
         log("2. detector delay (default synthesised performance, 8 changes, replayed) ...")
         delays = detector_delays({})
         log("   " + ", ".join(f"{m} {v:.0f} ms" for m, v in delays.items()))
@@ -613,7 +622,8 @@ def main(argv: list[str] | None = None) -> int:
                              "max": round(lc["max"], 3)},
               "detector_delay_ms": {m: round(v, 1) for m, v in delays.items()},
               "cpu_fraction": round(lc["cpu_fraction"], 4), "suits": suits,
-              "stages_us": stages, "max_rate_fps": best, "core_max_rate_fps": core}
+              "stages_us": stages, "wakeup": wake, "max_rate_fps": best,
+              "core_max_rate_fps": core}
     log(f"total benchmark time {time.monotonic() - t0:.0f} s")
     if args.json:
         print(json.dumps(result))

@@ -196,3 +196,17 @@ def test_soak_hostile_mode_still_runs():
     doc = json.loads(r.stdout)
     assert doc["crashes"] == 0 and "f1_by_hour" not in doc
     assert doc["destroyed_by_faults"] > 0.5 * doc["frames"]
+
+
+def test_wakeup_cost_measures_an_empty_and_a_working_wakeup():
+    r = _run("wakeup.py", "--seconds", "1", "--json")
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    assert doc["rate_hz"] == 120.0
+    # about 60 wake-ups each way: the CPU shares are per wake-up, never zero
+    assert doc["empty_wakeup_us"] > 0 and 0 < doc["empty_cpu_fraction"] < 1
+    assert doc["decode_tight_us"] > 0 and doc["decode_woken_us"] > 0
+    # the ratio is of the unrounded times: within rounding of the rounded ones
+    ratio = doc["decode_woken_us"] / doc["decode_tight_us"]
+    assert abs(doc["woken_over_tight"] - ratio) < 0.01 * ratio + 0.01
+    assert _run("wakeup.py", "--seconds", "0").returncode == 2
