@@ -97,6 +97,10 @@ from rtseg.detectors.window_models import PcaWindow, WindowStats, fit_pca, pca_d
 
 
 _ndarray, _F8, _add_reduce, _isfinite = np.ndarray, np.dtype(np.float64), np.add.reduce, math.isfinite
+try:    # np.vdot without its dispatch layer; unlike ndarray.dot it does not warn on overflow
+    from numpy._core._multiarray_umath import vdot as _vdot
+except ImportError:  # pragma: no cover - numpy < 2
+    _vdot = np.vdot
 
 #: every this many window fits one is exact (``fit_pca`` without a warm start): it
 #: refreshes the input's effective dimension and bounds any drift of the warm starts
@@ -262,10 +266,11 @@ class ContrastDetector(OnlineDetector):
     def update(self, x: np.ndarray) -> Cut | None:
         """Feed one frame (1-D feature vector); a Cut when a change is confirmed."""
         # a float64 vector of the right width is checked here (``_admit``'s checks, fewer
-        # calls); anything else goes through ``_admit``
+        # calls: a finite x.x implies a finite sum, and only when it is not is the sum
+        # taken); anything else goes through ``_admit``
         if (x.__class__ is _ndarray and x.dtype is _F8 and x.ndim == 1
                 and x.shape[0] == self._dim):
-            if not _isfinite(_add_reduce(x)):
+            if not _isfinite(_vdot(x, x)) and not _isfinite(_add_reduce(x)):
                 return self._reject(x)
         else:
             x = self._admit(x)
