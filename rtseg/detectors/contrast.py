@@ -36,6 +36,11 @@ reused while the window is in use (A becomes A0 w frames later).  The work a com
 block makes possible (the next before window's fit, the after window's fit, each look) is
 queued and done one step a frame (``_run_steps``), so no frame fits more than one window:
 a value is known a few frames after its block completes, and ``detected_at`` says when.
+Each frame is copied once, into a ring the blocks, the gate and placement read.  Cost on
+one core (``OMP_NUM_THREADS=1 taskset -c 0 python3 benchmarks/speed.py``: CMU 86_01, 48
+dims, the shipped parameters): about 55 000 frames/s; a median frame 1.2 us, p99 about
+175 us (the frames of an exact window fit, about 150 us), and about 3 ms on the frame that
+sends a cut (the gate's two fits and placement).
 
 Frames are numbered from the detector's creation; ``restart()`` (a gap) starts a new
 segment: the grid, the windows and the peak picker begin again from the next frame.

@@ -198,21 +198,31 @@ def _errors(y: WindowStats, m: WindowModel) -> tuple[float, float]:
 def pca_error(y: WindowStats, m: WindowModel) -> float:
     """Mean per-frame projection error of y's frames off m's mean + hyperplane, over m's own
     (from y's statistics: tr M - sum of v^T M v over m's PCA basis, M as in ``_errors``)."""
-    n = y.n
     dm = y.mean - m.stats.mean
+    return _pca_error(y, m, dm, float(dm.dot(dm)))
+
+
+def _pca_error(y: WindowStats, m: WindowModel, dm: np.ndarray, dd: float) -> float:
+    """``pca_error(y | m)`` given dm = y's mean - m's mean (or its negation: the same
+    value, bit for bit) and dd = dm . dm."""
+    n = y.n
     W = m.pca_basis
     kept = 0.0
     if W.shape[1]:
         proj = W.T @ dm                 # ``@``, not ndarray.dot: W may have reversed columns
         kept = (float(_einsum("ij,ij->", W, y.scatter @ W))
                 + n * float(np.add.reduce(proj * proj)))
-    tr = y.trace + n * float(dm.dot(dm))
+    tr = y.trace + n * dd
     return (tr - kept) / n / m.pca_own
 
 
 def pca_distance(a: WindowModel, b: WindowModel) -> float:
-    """sqrt(pca_error(b | a) x pca_error(a | b)): 1 for two windows of the same motion."""
-    return math.sqrt(max(pca_error(b.stats, a), 0.0) * max(pca_error(a.stats, b), 0.0))
+    """sqrt(pca_error(b | a) x pca_error(a | b)): 1 for two windows of the same motion (the
+    two directions share the difference of the means)."""
+    dm = b.stats.mean - a.stats.mean
+    dd = float(dm.dot(dm))
+    return math.sqrt(max(_pca_error(b.stats, a, dm, dd), 0.0)
+                     * max(_pca_error(a.stats, b, dm, dd), 0.0))
 
 
 def ppca_msq(y: WindowStats, m: WindowModel) -> float:
