@@ -31,16 +31,19 @@ frames): 2 + <= 1 s at the defaults; about 1 + <= 0.5 s when the early look (bel
 it.  The statistics of every ``step``-frame block are
 summed once (one BLAS call); windows are differences of their prefix sums, and each
 window's PCA model is fitted once (``window_models.fit_pca``: two steps of subspace iteration
-from the previous grid position's window, an exact eigen-decomposition every ``EXACT_EVERY``) and
-reused while the window is in use (A becomes A0 w frames later).  The work a completed
+from the previous grid position's window; an exact eigen-decomposition only at a chain's
+start and when the Ritz residuals do not bound the warm fit's hyperplane within
+``window_models.RITZ_TOL`` of the exact one) and reused while the window is in use (A
+becomes A0 w frames later).  The work a completed
 block makes possible (the next before window's fit, the after window's fit, each look) is
 queued and done one step a frame (``_run_steps``), so no frame fits more than one window:
 a value is known a few frames after its block completes, and ``detected_at`` says when.
 Each frame is copied once, into a ring the blocks, the gate and placement read.  Cost on
 one core (``OMP_NUM_THREADS=1 taskset -c 0 python3 benchmarks/speed.py``: CMU 86_01, 48
-dims, the shipped parameters): about 55 000 frames/s; a median frame 1.2 us, p99 about
-175 us (the frames of an exact window fit, about 150 us), and about 3 ms on the frame that
-sends a cut (the gate's two fits and placement).
+dims, the shipped parameters): about 58 000 frames/s; a median frame 1.2 us, p99 about
+110 us (frames of a warm window fit, or of a look that fits a window; 3 of the 785 fits
+are exact, about 150 us each), and about 3 ms on the frame that sends a cut (the gate's
+two fits and placement).
 
 Frames are numbered from the detector's creation; ``restart()`` (a gap) starts a new
 segment: the grid, the windows and the peak picker begin again from the next frame.
@@ -107,9 +110,10 @@ try:    # np.vdot without its dispatch layer; unlike ndarray.dot it does not war
 except ImportError:  # pragma: no cover - numpy < 2
     _vdot = np.vdot
 
-#: every this many window fits one is exact (``fit_pca`` without a warm start): it
-#: refreshes the input's effective dimension and bounds any drift of the warm starts
-EXACT_EVERY = 24
+#: every this many window fits the window's varying directions (the input's effective
+#: dimension) are counted afresh (``fit_pca``'s ``recount``); the others carry their
+#: chain's count over
+RECOUNT_EVERY = 24
 
 
 class ContrastDetector(OnlineDetector):
@@ -404,12 +408,13 @@ class ContrastDetector(OnlineDetector):
     def _model(self, lo: int, hi: int, chain: str = "before") -> PcaWindow:
         """The PCA model of blocks [lo, hi), fitted once (``window_models.fit_pca``), warm
         started from the last model of its ``chain`` (the window at the previous grid
-        position), exactly every ``EXACT_EVERY`` fits."""
+        position; exact when the warm fit's residuals do not vouch for it), its varying
+        directions counted every ``RECOUNT_EVERY`` fits."""
         m = self._models.get((lo, hi))
         if m is None:
             self._fits += 1
-            warm = self._warm.get(chain) if self._fits % EXACT_EVERY else None
-            m = fit_pca(self._stats(lo, hi), self.fit_args["pca_energy"], warm)
+            m = fit_pca(self._stats(lo, hi), self.fit_args["pca_energy"], self._warm.get(chain),
+                        recount=not self._fits % RECOUNT_EVERY)
             self._models[(lo, hi)] = self._warm[chain] = m
         return m
 
