@@ -135,8 +135,7 @@ PCA_GUARD = 8
 #: refitted exactly.  On the 72 cached performances' windows (the contrast detector's
 #: 54 671 fits, shipped parameters) the kept fits' hyperplanes were within 0.015 rad of
 #: the exact ones and their own errors within 1.5e-4 (the largest; p99 0.0037 and 9e-6),
-#: with 503 fits exact, chain starts included; with an exact fit every 24th instead and no
-#: check: 2389 exact, the others within 0.30 rad and 2.2e-2 (p99 0.0051 and 1.6e-5)
+#: with 503 fits exact, chain starts included
 RITZ_TOL = 0.03
 
 
