@@ -132,7 +132,8 @@ PCA_GUARD = 8
 
 #: a warm-started fit is kept when its hyperplane is within about this angle (radians) of
 #: the exact one by the Ritz residuals' bound (``_linalg.ritz_settled``), else it is
-#: refitted exactly.  On the 72 cached performances' windows (the contrast detector's
+#: refitted exactly.  On the windows of the 72 performances of
+#: ``benchmarks/lopo.py ../shared/data --seeds 0 1`` (the contrast detector's
 #: 54 671 fits, shipped parameters) the kept fits' hyperplanes were within 0.015 rad of
 #: the exact ones and their own errors within 1.5e-4 (the largest; p99 0.0037 and 9e-6),
 #: with 503 fits exact, chain starts included
