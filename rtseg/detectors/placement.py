@@ -117,8 +117,8 @@ def _cholesky_logdets(covs: np.ndarray) -> np.ndarray | None:
     """log det of each matrix of a stack of symmetric ones (C order), from its Cholesky
     factor (LAPACK dpotrf in place: the stack is overwritten): half the arithmetic of
     ``np.linalg.slogdet``'s LU, the same values to rounding (1e-15 relative on the 440
-    placements of the performances of ``benchmarks/lopo.py``, whose best split leads the next by at least
-    4e-8).  None when one is not positive definite."""
+    placements of the performances of ``benchmarks/lopo.py``, whose best split leads the
+    next by at least 4e-8).  None when one is not positive definite."""
     n, d = covs.shape[0], covs.shape[1]
     for q in range(n):
         # symmetric: the C-order matrix is its own Fortran-order transpose (no copy)
