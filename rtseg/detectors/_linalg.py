@@ -11,9 +11,9 @@ import numpy as np
 from scipy.linalg import lapack
 
 try:        # np.einsum without its dispatch layer (the same computation, ~0.7 us less a call)
-    from numpy._core.multiarray import c_einsum as _einsum
+    from numpy._core.multiarray import c_einsum as einsum_nodispatch
 except ImportError:  # pragma: no cover - numpy < 2
-    _einsum = np.einsum
+    einsum_nodispatch = np.einsum
 
 # LAPACK called directly: for 56x56 matrices numpy.linalg's wrappers cost as much as the
 # arithmetic, and these run every few frames of a live stream.
@@ -111,7 +111,7 @@ def ritz_settled(w: np.ndarray, SX: np.ndarray, r: int, tol: float) -> bool:
     gap = lam[r - 1] - lam[r]
     if not gap > 1e-6 * lam[0]:
         return False
-    norms = _einsum("ij,ij->j", SX, SX).tolist()
+    norms = einsum_nodispatch("ij,ij->j", SX, SX).tolist()
     res2 = 0.0
     for i in range(r):
         res2 += norms[i] - lam[i] * lam[i]

@@ -103,14 +103,8 @@ class SameBehaviourGate:
     def frame(self, t: int, x: np.ndarray, cut: Cut | None) -> Cut | None:
         """``push(t, x)``, ``hold(cut)`` when there is one, then ``poll()``: the detector's
         one call a frame (``poll`` only when a cut is held or waits)."""
-        rows = self._rows
-        if rows is None:
-            rows = self._rows = np.zeros((self.ring, len(x)))
-        rows[t % self.ring] = x
-        self._t = t + 1
-        if cut is not None:
-            self._held.append(cut)
-        return self.poll() if self._held or self._out else None
+        self.push(t, x)
+        return self.tick(t, cut)
 
     def share(self, rows: np.ndarray) -> None:
         """Read the rows from ``rows`` (``ring`` x dims), a ring the caller writes frame t

@@ -27,14 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rtseg.detectors._linalg import (count_above, full_eigh, rank_for_energy, ritz_settled,
-                                    subspace_ritz)
+from rtseg.detectors._linalg import (count_above, einsum_nodispatch as _einsum, full_eigh,
+                                    rank_for_energy, ritz_settled, subspace_ritz)
 from rtseg.detectors.pca.distance import pca_rank
-
-try:        # np.einsum without its dispatch layer (the same computation, ~0.7 us less a call)
-    from numpy._core.multiarray import c_einsum as _einsum
-except ImportError:  # pragma: no cover - numpy < 2
-    _einsum = np.einsum
 
 
 #: The identity decision window (``rtseg.identity.tracker``; the same-behaviour gate,
