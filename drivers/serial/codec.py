@@ -131,8 +131,7 @@ from rtseg.drivers.serial.wire import HEADER, HEADER_SIZE, MSG_TYPES
 
 #: wire order w, x, y, z -> rtseg's scalar-last x, y, z, w
 _WXYZ_TO_XYZW = np.array([1, 2, 3, 0])
-# whole-array reductions without the ndarray-method dispatch (one frame's arrays are small)
-_all, _min, _max = np.logical_and.reduce, np.minimum.reduce, np.maximum.reduce
+_all = np.logical_and.reduce      # without the ndarray-method dispatch (small arrays)
 
 
 # --------------------------------------------------------------------------- binary decoder
@@ -149,11 +148,11 @@ class SerialFrameDecoder:
 
     Speed: messages are split on 0x00 with ``bytes.split``, COBS-decoded by visiting only
     code bytes, checked with the C ``crc_hqx``, and the sensor records of all frames of one
-    ``feed`` call are converted together with one ``np.frombuffer``; a feed of complete
-    frames (``DecodedFrame.complete``) skips the record-by-record checks.  Measured for a
-    17-sensor suit (``python3 benchmarks/decode.py --only serial --cpu-time``, 2026-12-05,
-    shared 2-core machine): about 294 000 frames/s fed 4 KB at a time and 68 000 frames/s
-    fed one frame per call.
+    ``feed`` call are converted together with one ``np.frombuffer``, their norms checked
+    with a few whole-array reductions when all are within the tolerance (the usual feed).
+    Measured for a 17-sensor suit (``python3 benchmarks/decode.py --only serial
+    --cpu-time``, 2026-12-05, shared 2-core machine): about 284 000 frames/s fed 4 KB at
+    a time and 61 800 frames/s fed one frame per call.
     """
 
     def __init__(self, known_ids: Iterable[int] | None = None,
@@ -161,13 +160,11 @@ class SerialFrameDecoder:
         self.stats = DecoderStats()
         self.norm_tolerance = float(norm_tolerance)
         self._known = _known_lut(known_ids)
-        # the suit's ids in order (bytes), for the short path of ``_convert``
+        # the suit's ids in order (bytes; None when they are not distinct): a frame of
+        # exactly these is ``complete`` when every record is valid
         self._order = bytes(int(i) for i in known_ids) if known_ids is not None else None
         if self._order is not None and (not self._order or len(set(self._order)) != len(self._order)):
             self._order = None
-        # the accepted squared norms in raw Q14 units (as ``_check_quats``'s test)
-        self._sq_lo = ((1.0 - self.norm_tolerance) * Q14_SCALE) ** 2
-        self._sq_hi = ((1.0 + self.norm_tolerance) * Q14_SCALE) ** 2
         self._buf = b""
         self._synced = False
         self._corrupt_at_good = 0     # stats.corrupt when the last intact message was decoded
@@ -293,33 +290,23 @@ class SerialFrameDecoder:
             self.stats.unknown_ids += int(np.count_nonzero(~self._known[ids]))
 
     def _convert(self, heads: list[tuple[int, int, int]], blocks: list[bytes]) -> list[DecodedFrame]:
-        """Convert the sensor records of all frames of one feed at once.
-
-        The usual feed - every record of every frame valid, of unit norm within the
-        tolerance, the ids those of the suit in its order - takes a short path of a few
-        whole-array operations (a live suit's feed is one frame, where numpy's per-call
-        cost is the cost); anything else goes through ``_check_quats`` record by record."""
+        """Convert the sensor records of all frames of one feed at once.  A feed whose
+        frames each hold the suit's ids in order, every record valid, gives ``complete``
+        frames (and needs no unknown-id count)."""
         rec = np.frombuffer(blocks[0] if len(blocks) == 1 else b"".join(blocks),
                             dtype=SENSOR_DTYPE)
         ids = rec["id"]
         status = rec["status"]
         q = rec["q"].take(_WXYZ_TO_XYZW, axis=1).astype(np.float64)  # scalar-last
-        sq = np.einsum("ij,ij->i", q, q)                # squared norms in Q14 units
+        claims = (status & (STATUS_VALID | STATUS_ERROR)) == STATUS_VALID
+        q, valid, n_bad = _check_quats(q, claims, self.norm_tolerance, Q14_RESOLUTION, True)
+        self.stats.bad_values += n_bad
         order = self._order
-        if (len(sq) and order is not None and _min(sq) >= self._sq_lo and _max(sq) <= self._sq_hi
-                and _all(np.bitwise_and(status, STATUS_VALID | STATUS_ERROR) == STATUS_VALID)
-                and (ids.tobytes() == order if len(heads) == 1
-                     else all(n == len(order) for _, _, n in heads)
-                     and ids.tobytes() == order * len(heads))):
-            q /= np.sqrt(sq)[:, None]
-            valid = np.ones(len(sq), dtype=bool)
-            complete = True
-        else:
-            claims = (status & (STATUS_VALID | STATUS_ERROR)) == STATUS_VALID
-            q, valid, n_bad = _check_quats(q, claims, self.norm_tolerance, Q14_RESOLUTION, True)
-            self.stats.bad_values += n_bad
+        in_order = (order is not None and all(n == len(order) for _, _, n in heads)
+                    and ids.tobytes() == order * len(heads))
+        if not in_order:
             self._count_unknown(ids)
-            complete = False
+        complete = in_order and bool(_all(valid))
         out = []
         a = 0
         for seq, time_us, n in heads:

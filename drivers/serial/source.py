@@ -192,8 +192,6 @@ class SerialSource(QueuedSource):
         self._last_valid = np.full(n, time.monotonic())
         self._lost = np.zeros(n, dtype=bool)
         self._any_lost = False
-        # the suit's rows are its sensor ids' order: a complete frame needs no lookup
-        self._in_order = len(set(self.suit.sensor_ids)) == n
         # the oldest last valid time of the sensors not lost (None: to be recomputed)
         self._oldest_valid: float | None = None
         self._streaming = False   # set by the first frame: staleness counts from there
@@ -576,18 +574,18 @@ class SerialSource(QueuedSource):
         return True
 
     def _frame(self, m: codec.DecodedFrame, now: float) -> None:
-        if m.complete and self._in_order:
-            # every sensor of the suit, in its order, valid: the frame is the suit's rows
-            if not self._streaming:
-                self._streaming = True
+        src_time = self._time_acc / 1e6 if m.time_us is not None else None
+        if m.complete:
+            # every sensor of the suit (the decoder's known ids), in its order, valid: the
+            # frame is the suit's rows
+            self._streaming = True
             self._last_valid.fill(now)
             self._oldest_valid = now
             if self._any_lost:
                 self._restore(np.flatnonzero(self._lost), now)
             np.copyto(self._state, m.quats)
             self._put(Frame(recv_time=now, quats=m.quats, valid=m.valid,
-                            source_time=self._time_acc / 1e6 if m.time_us is not None else None,
-                            seq=m.seq))
+                            source_time=src_time, seq=m.seq))
             return
         self._oldest_valid = None
         rows = self._lut[m.ids]
@@ -606,8 +604,7 @@ class SerialSource(QueuedSource):
                 if len(back):
                     self._restore(back, now)
         self._put(Frame(recv_time=now, quats=self._state.copy(), valid=valid,
-                        source_time=self._time_acc / 1e6 if m.time_us is not None else None,
-                        seq=m.seq))
+                        source_time=src_time, seq=m.seq))
 
     def _restore(self, back: np.ndarray, now: float) -> None:
         """Sensors ``back`` (rows) have a valid value again after being lost."""
