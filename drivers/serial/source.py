@@ -512,6 +512,9 @@ class SerialSource(QueuedSource):
                           self.path, d, k.replace("_", " "), v)
 
     def _handle(self, messages: list[codec.DecodedFrame], now: float) -> None:
+        # the decoder's counts of this read first: a reader that takes a frame of it sees
+        # the damage decoded with it already counted
+        self._sync_stats()
         for m in messages:
             if m.seq is not None and not self._track(m.seq, m.time_us, m.msg_type):
                 continue
@@ -528,7 +531,6 @@ class SerialSource(QueuedSource):
                     log.info("serial %s: device %s", self.path,
                              ", ".join(f"{k}={v}" for k, v in m.info.items()))
                 self.device_info = dict(m.info)
-        self._sync_stats()
 
     def _track(self, seq: int, time_us: int, msg_type: int) -> bool:
         """Sequence gaps and clock unwrapping; False to drop a duplicate frame.
