@@ -99,6 +99,7 @@ import numpy as np
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.detectors.early import EarlyCut, EarlyCuts
 from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, Placer
+from rtseg.detectors.relative import RelativeFloor
 from rtseg.detectors.gate import (GATE_DECIDE_S, GATE_MIN_AFTER_S, GATE_SKIP_S, GATE_WINDOW_S,
                                   SameBehaviourGate)
 from rtseg.detectors.window_models import PcaWindow, WindowStats, fit_pca, pca_distance, pca_error
@@ -130,7 +131,8 @@ class ContrastDetector(OnlineDetector):
                  early_threshold: float = 1.5, early_hold: int = 60,
                  gate_threshold: float = 0.0, gate_decide: int = 180, gate_skip: int = 60,
                  gate_window: int = 360, gate_min_after: int = 120,
-                 bound_before: bool = False, place_radius: int = 0, place_window: int = 240,
+                 relative_floor: float = 0.0, bound_before: bool = False,
+                 place_radius: int = 0, place_window: int = 240,
                  place_ridge: float = 0.01, place_stride: int = 4, place_margin: int = 30,
                  keep_trace: bool = False) -> None:
         if step < 1:
@@ -173,6 +175,8 @@ class ContrastDetector(OnlineDetector):
         self.trace_early: list[tuple[int, float, int]] = []
         self.rejected_frames = 0
         #: the same-behaviour gate (``rtseg.detectors.gate``), None when off
+        #: the floor set by the stream's recent changes (``rtseg.detectors.relative``)
+        self.relative = RelativeFloor(relative_floor)
         self.gate: SameBehaviourGate | None = None
         if gate_threshold > 0:
             self.gate = SameBehaviourGate(
@@ -209,6 +213,7 @@ class ContrastDetector(OnlineDetector):
                    gate_skip=frames(GATE_SKIP_S, frame_rate),
                    gate_window=frames(GATE_WINDOW_S, frame_rate),
                    gate_min_after=frames(GATE_MIN_AFTER_S, frame_rate),
+                   relative_floor=p.get("relative_floor", 0.0),
                    bound_before=bool(p.get("bound_before", False)),
                    place_radius=frames(p["place_radius_s"], frame_rate) if p.get("place_radius_s") else 0,
                    place_window=frames(p.get("place_window_s", 2.0), frame_rate),
@@ -301,10 +306,14 @@ class ContrastDetector(OnlineDetector):
         # two cuts sent on one frame (two changes >= min_gap apart): the second goes out
         # with the next frame, and its detected_at says so
         cut = self._cut(self._out.popleft(), t) if self._out else None
+        if cut is not None and not self.relative.admits(cut.score):
+            self.peaks.forget(cut.frame)             # as a cut the gate drops
+            cut = None
         gate = self.gate
         if gate is not None:
             cut = gate.tick(t, cut) if self._shared else gate.frame(t, x, cut)
         if cut is not None:
+            self.relative.sent(cut.score)
             # the windows follow the detector's own grid position, not the placed frame
             self._last_sent = (cut.frame - self._seg0) // self.step
             if self.place_radius:                  # only cuts the gate lets through
