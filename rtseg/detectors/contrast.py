@@ -177,6 +177,9 @@ class ContrastDetector(OnlineDetector):
         #: the same-behaviour gate (``rtseg.detectors.gate``), None when off
         #: the floor set by the stream's recent changes (``rtseg.detectors.relative``)
         self.relative = RelativeFloor(relative_floor)
+        #: full looks remembered for it: a maximum is sent at most ``hold`` frames after
+        #: its value is known
+        self._energy_len = int(hold) // self.step + 4
         self.gate: SameBehaviourGate | None = None
         if gate_threshold > 0:
             self.gate = SameBehaviourGate(
@@ -244,6 +247,8 @@ class ContrastDetector(OnlineDetector):
         self._last_placed: int | None = None  # frame of the last cut sent, as placed
         self.peaks.reset()
         self._out: deque[EarlyCut] = deque()  # cuts to send (a queued one is dropped)
+        #: (block position, after / before energy) of the newest full looks (``_energy_at``)
+        self._energy: deque[tuple[int, float]] = deque(maxlen=self._energy_len)
         if self._dim is not None:              # the ring restarts at block 0
             self._P1[0] = 0.0
             self._P2[0] = 0.0
@@ -306,7 +311,7 @@ class ContrastDetector(OnlineDetector):
         # two cuts sent on one frame (two changes >= min_gap apart): the second goes out
         # with the next frame, and its detected_at says so
         cut = self._cut(self._out.popleft(), t) if self._out else None
-        if cut is not None and not self.relative.admits(cut.score):
+        if cut is not None and not self.relative.admits(cut.score, self._energy_at(cut.frame)):
             self.peaks.forget(cut.frame)             # as a cut the gate drops
             cut = None
         gate = self.gate
@@ -391,6 +396,15 @@ class ContrastDetector(OnlineDetector):
                    confidence=float(min(max(conf, 0.0), 1.0)),
                    detected_at=at, score=float(peak.value))
 
+    def _energy_at(self, frame: int) -> float:
+        """The after / before energy of the full look at ``frame`` (1.0 when it is no
+        longer remembered, or the cut came from the early look before its full look)."""
+        c = (frame - self._seg0) // self.step
+        for position, energy in reversed(self._energy):
+            if position == c:
+                return energy
+        return 1.0
+
     def _placed(self, cut: Cut) -> Cut:
         """``cut`` moved to the best two-Gaussian split of the frames within
         ``place_window`` of it (``rtseg.detectors.placement``), never before the segment's
@@ -455,6 +469,8 @@ class ContrastDetector(OnlineDetector):
             oldest = c + 1 - 2 * self.wa
             for key in [k for k in self._models if k[0] < oldest]:
                 del self._models[key]
+        ea = a.stats.trace / a.stats.n
+        self._energy.append((c, b.stats.trace / b.stats.n / ea if ea > 0 else math.inf))
         return self._stated(pca_distance(a, b) / max(pca_distance(a0, a), 1e-300), a)
 
     def _early(self, c: int) -> float:

@@ -5,9 +5,14 @@ contrasts of tens at its changes; the small drifts inside a quiet behaviour (wei
 shifts, looking around) can still reach the detector's fixed threshold, two to six times
 the motion before them, while being a small fraction of what a change of this stream looks
 like.  ``RelativeFloor`` keeps the contrasts of the last ``count`` cuts sent and admits a
-new maximum only when it reaches ``fraction`` x their median.  Where every change is
-subtle, the median is low and the floor lies under the fixed threshold: it never makes a
-cut easier, only a cut far weaker than the stream's recent changes harder.
+new maximum only when it reaches ``fraction`` x their median, or when the motion's energy
+changes at it: the after window's mean variance per frame is at least ``ENERGY_CHANGE``
+times the before window's, or at most its inverse.  A quiet behaviour's drift keeps its
+energy; a change out of a quiet behaviour into a vigorous one (idle -> punch, weak as a
+contrast because the quiet windows already differ among themselves) does not.  Where
+every change is subtle, the median is low and the floor lies under the fixed threshold:
+the floor never makes a cut easier, only a cut far weaker than the stream's recent
+changes, at an unchanged energy, harder.
 
 Before ``warm`` cuts have been sent there is no floor.  The floor outlives the detector's
 restarts (a gap in the stream is not a new performer).  Scores are the contrast detector's
@@ -24,11 +29,15 @@ import numpy as np
 RELATIVE_COUNT = 10
 #: no floor until this many cuts have been sent
 RELATIVE_WARM = 3
+#: a maximum where the after window's energy (mean variance per frame) is this many times
+#: the before window's, or less than its inverse, is admitted whatever its contrast
+ENERGY_CHANGE = 2.0
 
 
 class RelativeFloor:
-    """``admits(score)``: is ``score`` at least ``fraction`` x the median of the last
-    ``count`` scores passed to ``sent``?  ``fraction`` 0 = always."""
+    """``admits(score, energy)``: is ``score`` at least ``fraction`` x the median of the
+    last ``count`` scores passed to ``sent``, or ``energy`` (after / before) a change of at
+    least ``ENERGY_CHANGE`` either way?  ``fraction`` 0 = always."""
 
     def __init__(self, fraction: float, count: int = RELATIVE_COUNT,
                  warm: int = RELATIVE_WARM) -> None:
@@ -49,9 +58,10 @@ class RelativeFloor:
             return 0.0
         return self.fraction * float(np.median(self._scores))
 
-    def admits(self, score: float) -> bool:
-        """Whether a maximum of contrast ``score`` may become a cut (counts a refusal)."""
-        if score >= self.floor:
+    def admits(self, score: float, energy: float = 1.0) -> bool:
+        """Whether a maximum of contrast ``score`` may become a cut, ``energy`` the after
+        window's mean variance over the before window's (counts a refusal)."""
+        if score >= self.floor or not 1.0 / ENERGY_CHANGE < energy < ENERGY_CHANGE:
             return True
         self.refused += 1
         return False
