@@ -79,6 +79,11 @@ motion after it is another behaviour than the motion before it (the identity tra
 window distance above ``gate_threshold``); ``detected_at`` is the deciding frame.  A cut
 the gate drops is forgotten: it keeps no later maximum ``min_gap`` away.
 
+Relative floor (``relative_floor`` > 0, ``rtseg.detectors.relative``): a maximum far below
+the contrasts of the last cuts sent, at an unchanged motion energy (the after window's mean
+variance per frame over the before window's, remembered per position for ``hold``), is
+dropped before the gate and forgotten as the gate's drops are.
+
 Cut placement (``place_radius`` > 0 frames, ``rtseg.detectors.placement``): each cut the
 gate lets through (every cut when the gate is off) is moved to the best two-Gaussian split
 of the frames within ``place_window`` of it that have arrived, at most ``place_radius``
@@ -311,9 +316,11 @@ class ContrastDetector(OnlineDetector):
         # two cuts sent on one frame (two changes >= min_gap apart): the second goes out
         # with the next frame, and its detected_at says so
         cut = self._cut(self._out.popleft(), t) if self._out else None
-        if cut is not None and not self.relative.admits(cut.score, self._energy_at(cut.frame)):
-            self.peaks.forget(cut.frame)             # as a cut the gate drops
-            cut = None
+        if cut is not None:
+            f = cut.frame
+            if not self.relative.admits(cut.score, self._energy_at(f), f):
+                self.peaks.forget(f)                 # as a cut the gate drops
+                cut = None
         gate = self.gate
         if gate is not None:
             cut = gate.tick(t, cut) if self._shared else gate.frame(t, x, cut)

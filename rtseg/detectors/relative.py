@@ -21,9 +21,12 @@ restarts (a gap in the stream is not a new performer).  Scores are the contrast 
 
 from __future__ import annotations
 
+import logging
 from collections import deque
 
 import numpy as np
+
+log = logging.getLogger("rtseg.detectors")
 
 #: cuts sent whose contrasts set the floor (their median)
 RELATIVE_COUNT = 10
@@ -58,12 +61,17 @@ class RelativeFloor:
             return 0.0
         return self.fraction * float(np.median(self._scores))
 
-    def admits(self, score: float, energy: float = 1.0) -> bool:
-        """Whether a maximum of contrast ``score`` may become a cut, ``energy`` the after
-        window's mean variance over the before window's (counts a refusal)."""
-        if score >= self.floor or not 1.0 / ENERGY_CHANGE < energy < ENERGY_CHANGE:
+    def admits(self, score: float, energy: float = 1.0, frame: int = -1) -> bool:
+        """Whether a maximum of contrast ``score`` at ``frame`` may become a cut, ``energy``
+        the after window's mean variance over the before window's (a refusal is counted
+        and logged)."""
+        floor = self.floor
+        if score >= floor or not 1.0 / ENERGY_CHANGE < energy < ENERGY_CHANGE:
             return True
         self.refused += 1
+        log.info("contrast maximum at frame %d dropped: %.2f is below %.2f (%.2f x the median "
+                 "of the last cuts), energy after / before %.2f (%d dropped so far)", frame,
+                 score, floor, self.fraction, energy, self.refused)
         return False
 
     def sent(self, score: float) -> None:

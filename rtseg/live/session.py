@@ -481,6 +481,8 @@ class LiveSession(SessionInput, SessionProcessing, SessionEvents, SessionHealth)
             input=self.input_counts() if self.pipeline is not None else {},
             gated={m: d.gate.dropped for m, d in self.pipeline.detectors.items()
                    if getattr(d, "gate", None) is not None} if self.pipeline else {},
+            floored={m: d.relative.refused for m, d in self.pipeline.detectors.items()
+                     if getattr(d, "relative", None) is not None} if self.pipeline else {},
             identity=(asdict(self.pipeline.identity.stats)
                       if self.pipeline is not None and self.pipeline.identity is not None
                       else {}))

@@ -108,6 +108,8 @@ class SessionSummary:
     input: dict[str, int] = field(default_factory=dict)
     #: per method, cuts its same-behaviour gate held back (``rtseg.detectors.gate``)
     gated: dict[str, int] = field(default_factory=dict)
+    #: per method, maxima its relative floor dropped (``rtseg.detectors.relative``)
+    floored: dict[str, int] = field(default_factory=dict)
     #: the identity tracker's counters (``rtseg.identity.tracker.IdentityStats``; {} when off)
     identity: dict[str, int] = field(default_factory=dict)
     #: per output target (``osc:``/``osc-tcp:``/``jsonl:``), its counters after closing:
@@ -150,6 +152,8 @@ class SessionSummary:
                 f"{input_text(self.input)}, "
                 f"{self.cuts} cuts ({methods}; {targets_text(self.targets)}"
                 + "".join(f"; {k} gate held back {v}" for k, v in sorted(self.gated.items()))
+                + "".join(f"; {k} relative floor held back {v}"
+                          for k, v in sorted(self.floored.items()) if v)
                 + "), "
                 + identity_text(self.identity) +
                 f"processing latency {lat}, "
