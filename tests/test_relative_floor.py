@@ -75,19 +75,6 @@ def test_a_drift_inside_idle_is_no_change_and_the_change_out_of_it_is():
     assert found(on) and not inside_idle(on), on    # with it: none, and idle -> punch kept
 
 
-def test_the_session_summary_counts_what_the_floor_held_back():
-    from rtseg.live.stats import SessionSummary
-    s = SessionSummary(duration_s=1.0, frames_received=120, frames_processed=120,
-                       frame_rate=120.0, cuts=2, cuts_by_method={"contrast": 2}, dropped=0,
-                       source_stats={}, pipeline={}, overruns=0, bad_frames=0, max_lag_ms=0.0,
-                       cut_latency_ms_p50=None, cut_latency_ms_p99=None, recording=None,
-                       stop_reason="test", wire_cuts=2, floored={"contrast": 4})
-    assert "contrast relative floor held back 4" in s.text()
-    assert s.as_dict()["floored"] == {"contrast": 4}
-    quiet = SessionSummary(**{**s.as_dict(), "floored": {"contrast": 0}})
-    assert "relative floor" not in quiet.text()
-
-
 def test_the_detector_counts_its_refusals_and_logs_them(caplog):
     script = [("jump", 8.0), ("run", 8.0), ("kick", 8.0), ("idle", 18.0), ("punch", 8.0)]
     take = synthesize(script, frame_rate=RATE, seed=1).take

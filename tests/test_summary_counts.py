@@ -50,3 +50,10 @@ def test_gap_costs_are_in_the_summary():
                               "discarded_cuts": 1}).text()
     assert "gaps: 4 bridged (9 frames filled), 2 detector restarts, 1 cuts discarded" in text
     assert "gaps:" not in _summary(pipeline={"restarts": 0}).text()
+
+
+def test_the_cuts_the_relative_floor_held_back_are_counted():
+    s = _summary(cuts_by_method={"contrast": 2}, floored={"contrast": 4})
+    assert "contrast relative floor held back 4" in s.text()
+    assert s.as_dict()["floored"] == {"contrast": 4}
+    assert "relative floor" not in _summary(floored={"contrast": 0}).text()
