@@ -86,3 +86,16 @@ def test_the_detector_counts_its_refusals_and_logs_them(caplog):
     assert det.relative.refused >= 1
     assert sum("below" in r.getMessage() and "median" in r.getMessage()
                for r in caplog.records) == det.relative.refused
+
+
+def test_the_energy_change_is_measured_against_the_segments_range():
+    det = ContrastDetector.from_params(load_params()["contrast"], RATE)
+    for c, ea in enumerate((1.0, 2.0, 1.5)):
+        assert det._energy_change(c, ea, ea) == 1.0          # within the range so far
+    assert det._energy_change(3, 1.5, 5.0) == pytest.approx(2.5)   # over the highest (2)
+    assert det._energy_change(4, 1.5, 0.4) == pytest.approx(0.4)   # under the lowest (1)
+    assert det._energy_change(5, 1.5, 1.9) == 1.0
+    # after a cut, the windows that straddle it leave the range: only this position's
+    det._last_sent = 6
+    start = 6 + 2 * det.wmin
+    assert det._energy_change(start, 1.0, 1.9) == pytest.approx(1.9)

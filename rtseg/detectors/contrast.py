@@ -104,7 +104,7 @@ import numpy as np
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.detectors.early import EarlyCut, EarlyCuts
 from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, Placer
-from rtseg.detectors.relative import RelativeFloor
+from rtseg.detectors.relative import ENERGY_SPAN, RelativeFloor
 from rtseg.detectors.gate import (GATE_DECIDE_S, GATE_MIN_AFTER_S, GATE_SKIP_S, GATE_WINDOW_S,
                                   SameBehaviourGate)
 from rtseg.detectors.window_models import PcaWindow, WindowStats, fit_pca, pca_distance, pca_error
@@ -252,8 +252,10 @@ class ContrastDetector(OnlineDetector):
         self._last_placed: int | None = None  # frame of the last cut sent, as placed
         self.peaks.reset()
         self._out: deque[EarlyCut] = deque()  # cuts to send (a queued one is dropped)
-        #: (block position, after / before energy) of the newest full looks (``_energy_at``)
+        #: (block position, energy change) of the newest full looks (``_energy_at``)
         self._energy: deque[tuple[int, float]] = deque(maxlen=self._energy_len)
+        #: (block position, before window's energy) since the last cut (``_energy_change``)
+        self._energies: deque[tuple[int, float]] = deque(maxlen=ENERGY_SPAN * self.wa)
         if self._dim is not None:              # the ring restarts at block 0
             self._P1[0] = 0.0
             self._P2[0] = 0.0
@@ -403,6 +405,29 @@ class ContrastDetector(OnlineDetector):
                    confidence=float(min(max(conf, 0.0), 1.0)),
                    detected_at=at, score=float(peak.value))
 
+    def _energy_change(self, c: int, ea: float, eb: float) -> float:
+        """How far the after window's energy ``eb`` (mean variance per frame) at block
+        position c lies outside the range of the before windows' energies since the last
+        cut sent (``ea``, this position's, included; the last ``ENERGY_SPAN`` before
+        windows at most; positions whose windows straddle that cut left out): eb / highest
+        above it, eb / lowest below it, 1.0 within it."""
+        hist = self._energies
+        last = self._last_sent
+        if last is not None:
+            start = last + 2 * self.wmin
+            while hist and hist[0][0] < start:
+                hist.popleft()
+        lo = hi = ea
+        for _, e in hist:
+            if e < lo:
+                lo = e
+            elif e > hi:
+                hi = e
+        hist.append((c, ea))
+        if eb > hi:
+            return eb / hi if hi > 0 else math.inf
+        return eb / lo if eb < lo else 1.0
+
     def _energy_at(self, frame: int) -> float:
         """The after / before energy of the full look at ``frame`` (1.0 when it is no
         longer remembered, or the cut came from the early look before its full look)."""
@@ -476,8 +501,8 @@ class ContrastDetector(OnlineDetector):
             oldest = c + 1 - 2 * self.wa
             for key in [k for k in self._models if k[0] < oldest]:
                 del self._models[key]
-        ea = a.stats.trace / a.stats.n
-        self._energy.append((c, b.stats.trace / b.stats.n / ea if ea > 0 else math.inf))
+        self._energy.append((c, self._energy_change(c, a.stats.trace / a.stats.n,
+                                                    b.stats.trace / b.stats.n)))
         return self._stated(pca_distance(a, b) / max(pca_distance(a0, a), 1e-300), a)
 
     def _early(self, c: int) -> float:

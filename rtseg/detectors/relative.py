@@ -6,10 +6,12 @@ shifts, looking around) can still reach the detector's fixed threshold, two to s
 the motion before them, while being a small fraction of what a change of this stream looks
 like.  ``RelativeFloor`` keeps the contrasts of the last ``count`` cuts sent and admits a
 new maximum only when it reaches ``fraction`` x their median, or when the motion's energy
-changes at it: the after window's mean variance per frame is at least ``ENERGY_CHANGE``
-times the before window's, or at most its inverse.  A quiet behaviour's drift keeps its
-energy; a change out of a quiet behaviour into a vigorous one (idle -> punch, weak as a
-contrast because the quiet windows already differ among themselves) does not.  Where
+changes at it: the after window's mean variance per frame lies at least ``ENERGY_CHANGE``
+times above the highest of the before windows' since the last cut (their last
+``ENERGY_SPAN`` window lengths), or as far below the lowest.  A quiet behaviour's drift
+stays within the energies that behaviour has shown (looking around comes and goes); a
+change out of it into a vigorous one (idle -> punch, weak as a contrast because the quiet
+windows already differ among themselves) does not.  Where
 every change is subtle, the median is low and the floor lies under the fixed threshold:
 the floor never makes a cut easier, only a cut far weaker than the stream's recent
 changes, at an unchanged energy, harder.
@@ -32,14 +34,18 @@ log = logging.getLogger("rtseg.detectors")
 RELATIVE_COUNT = 10
 #: no floor until this many cuts have been sent
 RELATIVE_WARM = 3
-#: a maximum where the after window's energy (mean variance per frame) is this many times
-#: the before window's, or less than its inverse, is admitted whatever its contrast
+#: a maximum where the after window's energy (mean variance per frame) lies this many times
+#: above the highest energy of the before windows since the last cut, or below the lowest
+#: by as much, is admitted whatever its contrast
 ENERGY_CHANGE = 2.0
+#: ... of the last this many before windows' lengths at most
+ENERGY_SPAN = 8
 
 
 class RelativeFloor:
     """``admits(score, energy)``: is ``score`` at least ``fraction`` x the median of the
-    last ``count`` scores passed to ``sent``, or ``energy`` (after / before) a change of at
+    last ``count`` scores passed to ``sent``, or ``energy`` (the after window's energy over
+    the nearest end of the recent before windows' range, 1.0 within it) a change of at
     least ``ENERGY_CHANGE`` either way?  ``fraction`` 0 = always."""
 
     def __init__(self, fraction: float, count: int = RELATIVE_COUNT,
@@ -63,14 +69,13 @@ class RelativeFloor:
 
     def admits(self, score: float, energy: float = 1.0, frame: int = -1) -> bool:
         """Whether a maximum of contrast ``score`` at ``frame`` may become a cut, ``energy``
-        the after window's mean variance over the before window's (a refusal is counted
-        and logged)."""
+        its energy change (class docstring; a refusal is counted and logged)."""
         floor = self.floor
         if score >= floor or not 1.0 / ENERGY_CHANGE < energy < ENERGY_CHANGE:
             return True
         self.refused += 1
         log.info("contrast maximum at frame %d dropped: %.2f is below %.2f (%.2f x the median "
-                 "of the last cuts), energy after / before %.2f (%d dropped so far)", frame,
+                 "of the last cuts), energy change %.2f (%d dropped so far)", frame,
                  score, floor, self.fraction, energy, self.refused)
         return False
 
