@@ -80,9 +80,10 @@ window distance above ``gate_threshold``); ``detected_at`` is the deciding frame
 the gate drops is forgotten: it keeps no later maximum ``min_gap`` away.
 
 Relative floor (``relative_floor`` > 0, ``rtseg.detectors.relative``): a maximum far below
-the contrasts of the last cuts sent, at an unchanged motion energy (the after window's mean
-variance per frame over the before window's, remembered per position for ``hold``), is
-dropped before the gate and forgotten as the gate's drops are.
+the contrasts of the last cuts sent, where the motion's energy does not change (the after
+window's mean variance per frame within twice the range of the before windows' since the
+last cut; ``_energy_change``, remembered per position for ``hold``), is dropped before the
+gate and forgotten as the gate's drops are.
 
 Cut placement (``place_radius`` > 0 frames, ``rtseg.detectors.placement``): each cut the
 gate lets through (every cut when the gate is off) is moved to the best two-Gaussian split
@@ -179,12 +180,12 @@ class ContrastDetector(OnlineDetector):
         #: early-look profile when keep_trace: (position, value, frame that made it known)
         self.trace_early: list[tuple[int, float, int]] = []
         self.rejected_frames = 0
-        #: the same-behaviour gate (``rtseg.detectors.gate``), None when off
         #: the floor set by the stream's recent changes (``rtseg.detectors.relative``)
         self.relative = RelativeFloor(relative_floor)
         #: full looks remembered for it: a maximum is sent at most ``hold`` frames after
         #: its value is known
         self._energy_len = int(hold) // self.step + 4
+        #: the same-behaviour gate (``rtseg.detectors.gate``), None when off
         self.gate: SameBehaviourGate | None = None
         if gate_threshold > 0:
             self.gate = SameBehaviourGate(
@@ -429,8 +430,9 @@ class ContrastDetector(OnlineDetector):
         return eb / lo if eb < lo else 1.0
 
     def _energy_at(self, frame: int) -> float:
-        """The after / before energy of the full look at ``frame`` (1.0 when it is no
-        longer remembered, or the cut came from the early look before its full look)."""
+        """The energy change (``_energy_change``) of the full look at ``frame`` (1.0 when
+        it is no longer remembered, or the cut came from the early look before its full
+        look)."""
         c = (frame - self._seg0) // self.step
         for position, energy in reversed(self._energy):
             if position == c:

@@ -11,10 +11,10 @@ times above the highest of the before windows' since the last cut (their last
 ``ENERGY_SPAN`` window lengths), or as far below the lowest.  A quiet behaviour's drift
 stays within the energies that behaviour has shown (looking around comes and goes); a
 change out of it into a vigorous one (idle -> punch, weak as a contrast because the quiet
-windows already differ among themselves) does not.  Where
-every change is subtle, the median is low and the floor lies under the fixed threshold:
-the floor never makes a cut easier, only a cut far weaker than the stream's recent
-changes, at an unchanged energy, harder.
+windows already differ among themselves) does not.  Where every change is subtle, the
+median is low and the floor lies under the fixed threshold: the floor never makes a cut
+easier, only a cut far weaker than the stream's recent changes, at an unchanged energy,
+harder.
 
 Before ``warm`` cuts have been sent there is no floor.  The floor outlives the detector's
 restarts (a gap in the stream is not a new performer).  Scores are the contrast detector's
