@@ -178,7 +178,12 @@ def test_soak_cuts_mode_scores_a_short_run():
     assert len(doc["f1_by_hour"]) == 1 == len(doc["ari_by_hour"])
     assert doc["f1_by_hour"][0] is not None and 0 <= doc["f1_by_hour"][0] <= 1
     a = doc["accounting"]
-    assert a["sent"] == doc["frames"] >= 0.01 * 432000
+    # frames are counted up to the last one the session received: the few the suit wrote
+    # just before it stopped for good may die in the pty, uncounted (4319 of 4320 on a
+    # loaded machine); the suit checks its count every 50 ms, so it may overshoot by a
+    # few sends (at most a second of them here, 1 200 frames at 10x)
+    assert a["sent"] == doc["frames"]
+    assert 0.98 * 0.01 * 432000 <= doc["frames"] <= 0.01 * 432000 + 1200
     assert a["destroyed"] > 0                      # 0.01 % of bytes corrupted
     assert doc["reconnects"] >= 1 and a["lost_at_unplugs"] > 0
     assert doc["frames_accounted"] == (a["sent"] == a["received"] + a["destroyed"]
