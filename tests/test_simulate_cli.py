@@ -112,6 +112,43 @@ def test_simulate_serial_through_a_real_pty(tmp_path):
     assert not link.exists()                                         # device removed on exit
 
 
+def _ignore_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def test_ctrl_c_stops_a_simulator_started_with_sigint_ignored(tmp_path):
+    """A process started while its parent ignores SIGINT (a caller inside system(3), a
+    shell's background job) inherits the ignored disposition; Ctrl-C must still stop it
+    with its summary.  (In full suite runs the pty test's simulator was started with
+    SIGINT and SIGQUIT ignored, /proc SigIgn 0x1001006, and ran on past its 45 s.)"""
+    link = tmp_path / "suit"
+    proc = subprocess.Popen(
+        [sys.executable, "-u", "-m", "rtseg.cli", "simulate", "serial", "--synth", SCRIPT,
+         "--seed", str(SEED), "--link", str(link), "--loop"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=os.getcwd(),
+        preexec_fn=_ignore_sigint)
+    try:
+        _read_until(proc, r"^serial device: (\S+)")
+        status = open(f"/proc/{proc.pid}/status").read()
+        ignored = int(re.search(r"^SigIgn:\s*([0-9a-f]+)", status, re.M).group(1), 16)
+        assert ignored & (1 << (signal.SIGINT - 1)) == 0, "SIGINT still ignored after start"
+        with serial.Serial(str(link), timeout=0.05) as port:
+            deadline = time.monotonic() + 10.0
+            got = 0
+            while got < 2000 and time.monotonic() < deadline:
+                got += len(port.read(4096))
+        assert got >= 2000
+        proc.send_signal(signal.SIGINT)
+        rc, out, err = _finish(proc, timeout=20.0)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert rc == 0, err
+    assert "stopped: interrupted" in out
+    assert not link.exists()
+
+
 def test_simulate_vmc_through_a_real_udp_socket(tmp_path):
     from rtseg.drivers.osc.source import OscVmcSource
 

@@ -487,10 +487,14 @@ def run(args: argparse.Namespace) -> int:
     if args.save:
         from rtseg.drivers.readers import write_take
         _out(f"saved take to {write_take(args.save, take)}")
-    # SIGTERM ends the run like Ctrl-C (device closed, summary printed).
-    old = None
+    # SIGTERM ends the run like Ctrl-C (device closed, summary printed); Ctrl-C does so even
+    # when the process was started with SIGINT ignored (a shell's background job, a caller
+    # inside system(3): the disposition is inherited, and Python then leaves it ignored)
+    old: dict[int, object] = {}
     try:
-        old = signal.signal(signal.SIGTERM, _raise_interrupt)
+        for sig, handler in ((signal.SIGTERM, _raise_interrupt),
+                             (signal.SIGINT, signal.default_int_handler)):
+            old[sig] = signal.signal(sig, handler)
     except ValueError:  # not the main thread
         pass
     try:
@@ -500,8 +504,8 @@ def run(args: argparse.Namespace) -> int:
             serve = _sender(args.device)
         reason, lines = serve(args, part)
     finally:
-        if old is not None:
-            signal.signal(signal.SIGTERM, old)
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
     _out(f"stopped: {reason}")
     for line in lines:
         _out(line)
