@@ -9,12 +9,32 @@ import pytest
 
 from rtseg.detectors import load_params
 from rtseg.detectors.contrast import ContrastDetector
-from rtseg.detectors.relative import ENERGY_CHANGE, RelativeFloor
+from rtseg.detectors.relative import ENERGY_CHANGE, EnergyRange, RelativeFloor
 from rtseg.evaluation.online import fed_features
 from rtseg.live.config import load_session_config
 from rtseg.simulators.synth.motion import synthesize
 
 RATE = 120.0
+
+
+def test_energy_range_is_the_range_of_the_last_span_values_since_the_cut_off():
+    """Against a scan of a plain list: the last ``span`` values pushed, those before the
+    latest cut-off left out for good, the new value included; ties and repeats too."""
+    rng = np.random.default_rng(5)
+    r = EnergyRange(span=7)
+    kept: list[tuple[int, float]] = []            # (position, energy) pushed, in order
+    cut_off = 0
+    for position in range(400):
+        if rng.random() < 0.05:                   # a cut: earlier positions leave
+            cut_off = max(cut_off, position - int(rng.integers(0, 4)))
+            r.drop_before(cut_off)
+        e = float(rng.integers(1, 6)) if rng.random() < 0.3 else float(rng.random())
+        window = [v for p, v in kept[-7:] if p >= cut_off]
+        assert r.range_with(e) == (min(window + [e]), max(window + [e]))
+        r.push(position, e)
+        kept.append((position, e))
+    with pytest.raises(ValueError, match="span"):
+        EnergyRange(0)
 
 
 def test_no_floor_until_warm_then_a_fraction_of_the_median():

@@ -105,7 +105,7 @@ import numpy as np
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.detectors.early import EarlyCut, EarlyCuts
 from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, Placer
-from rtseg.detectors.relative import ENERGY_SPAN, RelativeFloor
+from rtseg.detectors.relative import ENERGY_SPAN, EnergyRange, RelativeFloor
 from rtseg.detectors.gate import (GATE_DECIDE_S, GATE_MIN_AFTER_S, GATE_SKIP_S, GATE_WINDOW_S,
                                   SameBehaviourGate)
 from rtseg.detectors.window_models import PcaWindow, WindowStats, fit_pca, pca_distance, pca_error
@@ -255,8 +255,8 @@ class ContrastDetector(OnlineDetector):
         self._out: deque[EarlyCut] = deque()  # cuts to send (a queued one is dropped)
         #: (block position, energy change) of the newest full looks (``_energy_at``)
         self._energy: deque[tuple[int, float]] = deque(maxlen=self._energy_len)
-        #: (block position, before window's energy) since the last cut (``_energy_change``)
-        self._energies: deque[tuple[int, float]] = deque(maxlen=ENERGY_SPAN * self.wa)
+        #: the before windows' energies since the last cut (``_energy_change``)
+        self._energies = EnergyRange(ENERGY_SPAN * self.wa)
         if self._dim is not None:              # the ring restarts at block 0
             self._P1[0] = 0.0
             self._P2[0] = 0.0
@@ -415,16 +415,9 @@ class ContrastDetector(OnlineDetector):
         hist = self._energies
         last = self._last_sent
         if last is not None:
-            start = last + 2 * self.wmin
-            while hist and hist[0][0] < start:
-                hist.popleft()
-        lo = hi = ea
-        for _, e in hist:
-            if e < lo:
-                lo = e
-            elif e > hi:
-                hi = e
-        hist.append((c, ea))
+            hist.drop_before(last + 2 * self.wmin)
+        lo, hi = hist.range_with(ea)
+        hist.push(c, ea)
         if eb > hi:
             return eb / hi if hi > 0 else math.inf
         return eb / lo if eb < lo else 1.0

@@ -82,3 +82,50 @@ class RelativeFloor:
     def sent(self, score: float) -> None:
         """A cut of contrast ``score`` was sent."""
         self._scores.append(float(score))
+
+
+class EnergyRange:
+    """The lowest and highest of the last ``span`` energies pushed (one per grid position,
+    positions increasing), those at positions before a cut-off left out for good
+    (``drop_before``): two monotone queues, so each push costs O(1) amortised instead of a
+    scan of the span."""
+
+    def __init__(self, span: int) -> None:
+        if span < 1:
+            raise ValueError(f"span must be >= 1, got {span}")
+        self.span = int(span)
+        self._n = 0                                        # values pushed so far
+        self._low: deque[tuple[int, int, float]] = deque()   # (seq, position, energy)
+        self._high: deque[tuple[int, int, float]] = deque()
+
+    def drop_before(self, position: int) -> None:
+        """Forget every value pushed at a position before ``position``."""
+        for q in (self._low, self._high):
+            while q and q[0][1] < position:
+                q.popleft()
+
+    def range_with(self, energy: float) -> tuple[float, float]:
+        """(lowest, highest) of the remembered values and ``energy``."""
+        oldest = self._n - self.span
+        lo = hi = energy
+        for q in (self._low, self._high):
+            while q and q[0][0] < oldest:
+                q.popleft()
+        if self._low and self._low[0][2] < lo:
+            lo = self._low[0][2]
+        if self._high and self._high[0][2] > hi:
+            hi = self._high[0][2]
+        return lo, hi
+
+    def push(self, position: int, energy: float) -> None:
+        """Remember ``energy`` at ``position`` (after every earlier position's)."""
+        item = (self._n, position, energy)
+        self._n += 1
+        low, high = self._low, self._high
+        while low and low[-1][2] >= energy:
+            low.pop()
+        low.append(item)
+        while high and high[-1][2] <= energy:
+            high.pop()
+        high.append(item)
+
