@@ -45,7 +45,8 @@ def test_demo_names_recurring_behaviours():
         re.match(r'behaviour\s+(\d+)(?: "[^"]*")? segment (\d+)', ln) for ln in lines) if m}
     cut_segments = [int(m.group(1)) for m in (
         re.match(r"cut .* segment (\d+)", ln) for ln in lines) if m]
-    assert len(cut_segments) == 4, proc.stdout
+    # the session's own account (frames received, gaps, drops) says why if a cut is missing
+    assert len(cut_segments) == 4, proc.stdout + proc.stderr[-3000:]
     # every segment (the first one and one per cut) gets exactly one behaviour line
     assert sorted(ids) == [0] + cut_segments, proc.stdout
     # walk = segments 0 and 2, punch = 1 and 3, squat = 4
