@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parent.parent
 
 
@@ -31,10 +33,13 @@ def test_demo_speed_prints_performance_time():
 
 def test_demo_names_recurring_behaviours():
     """The demo turns identity on: each cut line is followed by its segment's behaviour id,
-    and a behaviour that recurs (walk, punch, walk, punch) gets its earlier id back.  At 2x
-    (240 frames/s): at 4x, on two cores with four busy processes, the cut frames came out
-    8 frames earlier after 12 s (frames missing from the stream) and the walk -> punch
-    cut at 18 s was lost; unloaded they are 713, 1380, 2176, 2889 run after run."""
+    and a behaviour that recurs (walk, punch, walk, punch) gets its earlier id back.
+
+    Unloaded the cuts are at frames 713, 1380, 2176, 2889 run after run.  A machine too busy
+    to read the suit in time loses frames at the pty (the simulated suit, like a real one,
+    does not wait): the session reports them ("messages missing", dropped frames, a
+    detector restart at the gap) and a cut can go with them.  Then the exact cuts cannot be
+    asked for and the test skips, saying so; a cut missing without a reported loss fails."""
     proc = subprocess.run(
         [sys.executable, "-m", "rtseg.cli", "demo", "--speed", "2", "--duration", "30",
          "--script", "walk:6,punch:6,walk:6,punch:6,squat:6", "--no-osc"],
@@ -45,8 +50,15 @@ def test_demo_names_recurring_behaviours():
         re.match(r'behaviour\s+(\d+)(?: "[^"]*")? segment (\d+)', ln) for ln in lines) if m}
     cut_segments = [int(m.group(1)) for m in (
         re.match(r"cut .* segment (\d+)", ln) for ln in lines) if m]
-    # the session's own account (frames received, gaps, drops) says why if a cut is missing
-    assert len(cut_segments) == 4, proc.stdout + proc.stderr[-3000:]
+    if len(cut_segments) != 4:
+        summary = re.search(r"^session ended .*$", proc.stderr, re.M)
+        summary = summary.group(0) if summary else ""
+        dropped = re.search(r" (\d+) dropped", summary)
+        lost = ("messages missing" in proc.stderr or "detector restarts" in summary
+                or (dropped is not None and int(dropped.group(1)) > 0))
+        assert lost, proc.stdout + proc.stderr[-3000:]
+        pytest.skip(f"the machine starved the session and it lost frames (it says so: "
+                    f"{summary[:300]}); the exact cuts need a stream without losses")
     # every segment (the first one and one per cut) gets exactly one behaviour line
     assert sorted(ids) == [0] + cut_segments, proc.stdout
     # walk = segments 0 and 2, punch = 1 and 3, squat = 4
