@@ -11,6 +11,8 @@ import sys
 import threading
 import time
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import serial
@@ -24,11 +26,11 @@ SCRIPT = "idle:2,walk:2"
 SEED = 4
 
 
-def _spawn(*args: str) -> subprocess.Popen:
+def _spawn(*args: str, preexec_fn=None) -> subprocess.Popen:
     # -u: unbuffered, so a simulator that does not stop shows how far it got
     return subprocess.Popen([sys.executable, "-u", "-m", "rtseg.cli", "simulate", *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=os.getcwd())
+                            cwd=os.getcwd(), preexec_fn=preexec_fn)
 
 
 def _read_until(proc: subprocess.Popen, pattern: str, timeout: float = 20.0) -> tuple[re.Match, list[str]]:
@@ -122,14 +124,11 @@ def test_ctrl_c_stops_a_simulator_started_with_sigint_ignored(tmp_path):
     with its summary.  (In full suite runs the pty test's simulator was started with
     SIGINT and SIGQUIT ignored, /proc SigIgn 0x1001006, and ran on past its 45 s.)"""
     link = tmp_path / "suit"
-    proc = subprocess.Popen(
-        [sys.executable, "-u", "-m", "rtseg.cli", "simulate", "serial", "--synth", SCRIPT,
-         "--seed", str(SEED), "--link", str(link), "--loop"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=os.getcwd(),
-        preexec_fn=_ignore_sigint)
+    proc = _spawn("serial", "--synth", SCRIPT, "--seed", str(SEED), "--link", str(link),
+                  "--loop", preexec_fn=_ignore_sigint)
     try:
         _read_until(proc, r"^serial device: (\S+)")
-        status = open(f"/proc/{proc.pid}/status").read()
+        status = Path(f"/proc/{proc.pid}/status").read_text()
         ignored = int(re.search(r"^SigIgn:\s*([0-9a-f]+)", status, re.M).group(1), 16)
         assert ignored & (1 << (signal.SIGINT - 1)) == 0, "SIGINT still ignored after start"
         with serial.Serial(str(link), timeout=0.05) as port:
