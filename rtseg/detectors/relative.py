@@ -128,4 +128,3 @@ class EnergyRange:
         while high and high[-1][2] <= energy:
             high.pop()
         high.append(item)
-
