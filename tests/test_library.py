@@ -562,8 +562,7 @@ def test_learn_says_when_people_share_no_behaviour(tmp_path):
     who perform different behaviours says how the threshold was calibrated."""
     from rtseg.drivers.readers import write_take
     args = []
-    for who, name, seeds in (("ann", "walk", (0, 1)), ("bob", "punch", (4, 5)),
-                             ("ann", "squat", (2,))):
+    for who, name, seeds in (("ann", "walk", (0, 1)), ("bob", "punch", (4, 5))):
         for seed in seeds:
             take = tmp_path / f"{who}_{seed}.npz"
             write_take(take, synthesize(f"{name}:8", seed=seed).take)
@@ -574,10 +573,6 @@ def test_learn_says_when_people_share_no_behaviour(tmp_path):
     assert p.returncode == 0, p.stderr
     assert "(calibrated on each person's other examples)" in p.stdout
     assert "no behaviour has examples from two people" in p.stderr
-    # squat's one example has no second one, from anybody (the calibration's known
-    # cases are each person's own)
-    assert "squat: 1 example(s)" in p.stdout and "(no second example:" in p.stdout
-    assert "from another person" not in p.stdout
     assert load(lib).calibration["known_from_same_person"] is True
 
 

@@ -106,11 +106,9 @@ def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
         near = probe.calibration.get("nearest_other")
     near = near or {}
     # a known case is another example's window: another person's when the examples name
-    # several people who share a behaviour (rtseg.library.behaviours.Library.calibrate),
-    # else another take or recording's
+    # several people (rtseg.library.behaviours.Library.calibrate), else another take or recording's
     people = {str(e["person"]) for e in lib.examples if e.get("person")}
-    second = "second example" + (" from another person" if len(people) > 1 and not
-                                 lib.calibration.get("known_from_same_person") else "")
+    second = "second example" + (" from another person" if len(people) > 1 else "")
     for k in sorted(by_name):
         nb = near.get(k)
         close = ""
