@@ -524,58 +524,6 @@ def test_without_a_second_example_the_threshold_is_the_default():
     assert two.threshold != DEFAULT_THRESHOLD["model"]
 
 
-def _people_library(parts):
-    """A library of ``parts``: (behaviour, synthetic seed, person) each one example."""
-    b = None
-    for name, seed, who in parts:
-        res = synthesize(f"{name}:8", seed=seed)
-        X, _, profile = take_rows(res.take, _config())
-        b = b or LibraryBuilder(profile, X.shape[1], res.take.frame_rate)
-        assert b.add(X, name, f"synth{seed}", info={"person": who}) > 0
-    return b.build()
-
-
-def test_people_who_share_no_behaviour_calibrate_on_their_own_other_examples():
-    """Two people, each with two examples of a behaviour the other does not perform: no
-    known case from another person exists, so the library is calibrated on each person's
-    other examples (as a library of one person), not left at the default threshold; one
-    shared behaviour brings the other-person calibration back."""
-    from rtseg.library.calibration import DEFAULT_THRESHOLD
-    apart = _people_library([("walk", 0, "a"), ("walk", 1, "a"),
-                             ("punch", 4, "b"), ("punch", 5, "b")])
-    assert apart.calibration["calibrated"] is True
-    assert apart.calibration["known_from_same_person"] is True
-    assert apart.threshold != DEFAULT_THRESHOLD["model"]
-    one = _people_library([("walk", 0, "x"), ("walk", 1, "x"),
-                           ("punch", 4, "x"), ("punch", 5, "x")])
-    assert "known_from_same_person" not in one.calibration
-    assert apart.threshold == pytest.approx(one.threshold) and apart.ratio == one.ratio
-    shared = _people_library([("walk", 0, "a"), ("walk", 1, "b"),
-                              ("punch", 4, "b"), ("punch", 5, "b")])
-    assert shared.calibration["calibrated"] is True
-    assert "known_from_same_person" not in shared.calibration
-    assert shared.calibration["same"] < one.calibration["same"]    # walk's windows only
-
-
-def test_learn_says_when_people_share_no_behaviour(tmp_path):
-    """``rtseg learn`` from takes of two people (the name before the take's first ``_``)
-    who perform different behaviours says how the threshold was calibrated."""
-    from rtseg.drivers.readers import write_take
-    args = []
-    for who, name, seeds in (("ann", "walk", (0, 1)), ("bob", "punch", (4, 5))):
-        for seed in seeds:
-            take = tmp_path / f"{who}_{seed}.npz"
-            write_take(take, synthesize(f"{name}:8", seed=seed).take)
-            args += ["--take", str(take), "--label", name]
-    lib = tmp_path / "lib.json"
-    p = subprocess.run([sys.executable, "-m", "rtseg.cli", "learn", str(lib), *args],
-                       capture_output=True, text=True, timeout=120)
-    assert p.returncode == 0, p.stderr
-    assert "(calibrated on each person's other examples)" in p.stdout
-    assert "no behaviour has examples from two people" in p.stderr
-    assert load(lib).calibration["known_from_same_person"] is True
-
-
 def test_learn_says_when_the_threshold_is_the_default(tmp_path):
     from rtseg.drivers.readers import write_take
     res = synthesize("walk:6,punch:6", seed=0)

@@ -92,9 +92,7 @@ def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
            f"{len(lib.names)} windows; profile {lib.profile} ({lib.dims} dims); "
            f"unknown beyond distance {lib.threshold:.3f} or ratio {lib.ratio:.2f} to the "
            f"next name"
-           + (" (given)" if given else " (default)" if not calibrated else
-              " (calibrated on each person's other examples)"
-              if lib.calibration.get("known_from_same_person") else " (calibrated)")]
+           + (" (given)" if given else " (calibrated)" if calibrated else " (default)")]
     if sources:
         out.append(f"  {lib.metric} distance, windows of {lib.window_s:g} s every "
                    f"{lib.step_s:g} s, {lib.frame_rate:g} Hz")
@@ -209,11 +207,6 @@ def run(args: argparse.Namespace) -> int:
               "recording), so nothing tells how near a new performance lies: the threshold "
               "is the default; add a second example of a behaviour to calibrate it, or give "
               "--threshold D", file=sys.stderr)
-    elif not given and lib.calibration.get("known_from_same_person"):
-        print("rtseg learn: note: no behaviour has examples from two people, so the "
-              "threshold is calibrated on each person's other examples, which lie nearer "
-              "than a new performer's do; add examples of a behaviour by a second person",
-              file=sys.stderr)
     return 0
 
 

@@ -39,12 +39,9 @@ nearest same-name windows).  When the library holds more than one person
 (examples' ``person``), each window is compared only with other people's windows, as a new
 performer would be.  Nothing held out is looked at.  A known case needs a second example
 of the name (another take or recording; another person's when the library holds several):
-windows of one example lie nearer each other than a new performance does.  A library of
-several people of which no behaviour has examples from two is calibrated as a library of
-one person would be, its known cases other examples of the same person
-(``calibration["known_from_same_person"]``).  A library where no behaviour has a second
-example at all cannot be calibrated: its threshold is ``DEFAULT_THRESHOLD`` of its metric
-and its ratio 1 (``calibration["calibrated"]`` False).
+windows of one example lie nearer each other than a new performance does.  A library where
+no behaviour has a second example cannot be calibrated: its threshold is
+``DEFAULT_THRESHOLD`` of its metric and its ratio 1 (``calibration["calibrated"]`` False).
 
 Windows: ``window_s`` (2 s) long every ``step_s`` (0.5 s) inside each labelled range after
 ``edge_s`` (0.5 s) is cut off each end (transitions); a range shorter than that gives one
@@ -263,48 +260,21 @@ class Library:
     # ------------------------------------------------------------------ calibration
     def calibrate(self) -> float:
         """Set ``threshold`` and ``ratio`` from the library's own windows (module doc);
-        returns the threshold.  ``calibration`` keeps the medians and counts,
+        returns the threshold.  ``calibration`` keeps the medians and counts, and
         ``calibrated``: False when no behaviour has a second example (the threshold is then
-        ``DEFAULT_THRESHOLD``), and ``known_from_same_person``: True when the library holds
-        several people but no behaviour is performed by two of them, so its known cases are
-        other examples of the same person (as in a library of one person)."""
+        ``DEFAULT_THRESHOLD``)."""
+        names = np.array(self.names)
+        src = np.array(self.sources)
         who = [str(e.get("person") or e.get("source", k)) for k, e in enumerate(self.examples)]
         person = np.array([who[k] for k in self.sources])
         by_person = len(set(who)) > 1
-        same, other, o1, o2, near = self._cases(person if by_person else None)
-        alone = False
-        if by_person and not same:
-            cases = self._cases(None)
-            if cases[0]:
-                same, other, o1, o2, near = cases
-                alone = True
-        factor = MODEL_ONE_NAME_FACTOR if self.metric == "model" else ONE_NAME_FACTOR
-        self.threshold, self.ratio = separating_rule(same, other, o1, o2, factor,
-                                                     DEFAULT_THRESHOLD[self.metric])
-        self.calibration = {"same_median": median_or_none(same),
-                            "other_median": median_or_none(o1),
-                            "same": len(same), "other": len(o1), "calibrated": bool(same),
-                            **({"known_from_same_person": True} if alone else {}),
-                            "nearest_other": nearest_others(near)}
-        return self.threshold
-
-    def _cases(self, person: np.ndarray | None) -> tuple[list[float], list[float],
-                                                        list[float], list[float],
-                                                        dict[str, list[Any]]]:
-        """The calibration's cases (module doc): per window its known case (nearest
-        same-name window of another example) with its nearest other name, and its unknown
-        case (own name left out: the nearest two other names); with ``person`` (per
-        window) only other people's windows are looked at.  Returns (same, other, o1, o2,
-        near): ``near`` per name, per window (nearest other name, its distance, the known
-        case's distance or None)."""
-        names = np.array(self.names)
-        src = np.array(self.sources)
         same, other = [], []             # distances: nearest same name / nearest other name
         o1, o2 = [], []                  # the window's name left out: nearest two other names
+        # name -> per window: its nearest other name, that distance, its known case's
         near: dict[str, list[tuple[str, float, float | None]]] = {}
         for i in range(len(names)):
             d = self.window_distances(i)
-            if person is not None:       # as a new person would be met: others' windows only
+            if by_person:                # as a new person would be met: others' windows only
                 d = np.where(person != person[i], d, np.inf)
             s = d[(names == names[i]) & (src != src[i])]
             s = s[np.isfinite(s)]
@@ -321,7 +291,14 @@ class Library:
             if per:
                 o1.append(per[0])
                 o2.append(per[1] if len(per) > 1 else math.inf)
-        return same, other, o1, o2, near
+        factor = MODEL_ONE_NAME_FACTOR if self.metric == "model" else ONE_NAME_FACTOR
+        self.threshold, self.ratio = separating_rule(same, other, o1, o2, factor,
+                                                     DEFAULT_THRESHOLD[self.metric])
+        self.calibration = {"same_median": median_or_none(same),
+                            "other_median": median_or_none(o1),
+                            "same": len(same), "other": len(o1), "calibrated": bool(same),
+                            "nearest_other": nearest_others(near)}
+        return self.threshold
 
     def merged(self, other: "Library") -> "Library":
         """This library with ``other``'s examples added (same profile, dims and windows;
