@@ -524,6 +524,30 @@ def test_without_a_second_example_the_threshold_is_the_default():
     assert two.threshold != DEFAULT_THRESHOLD["model"]
 
 
+def test_learn_says_when_every_example_is_of_one_person(tmp_path):
+    """Takes of one person (the name before the take's first ``_``) calibrate the library
+    on that person's other takes: ``rtseg learn`` says a new performer may be rejected
+    more often; a second person's takes make the note go away."""
+    from rtseg.drivers.readers import write_take
+    args = []
+    for seed, name in ((0, "walk"), (1, "walk"), (2, "punch"), (3, "punch")):
+        take = tmp_path / f"ann_{seed}.npz"
+        write_take(take, synthesize(f"{name}:8", seed=seed).take)
+        args += ["--take", str(take), "--label", name]
+    run = lambda lib, *a: subprocess.run([sys.executable, "-m", "rtseg.cli", "learn",
+                                          str(tmp_path / lib), *a],
+                                         capture_output=True, text=True, timeout=120)
+    p = run("one.json", *args)
+    assert p.returncode == 0, p.stderr
+    assert "every example is of one person (ann)" in p.stderr
+    assert load(tmp_path / "one.json").calibration["calibrated"] is True
+    take = tmp_path / "bob_4.npz"
+    write_take(take, synthesize("walk:8", seed=4).take)
+    p = run("two.json", *args, "--take", str(take), "--label", "walk")
+    assert p.returncode == 0, p.stderr
+    assert "one person" not in p.stderr
+
+
 def test_learn_says_when_the_threshold_is_the_default(tmp_path):
     from rtseg.drivers.readers import write_take
     res = synthesize("walk:6,punch:6", seed=0)

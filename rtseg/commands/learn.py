@@ -207,6 +207,14 @@ def run(args: argparse.Namespace) -> int:
               "recording), so nothing tells how near a new performance lies: the threshold "
               "is the default; add a second example of a behaviour to calibrate it, or give "
               "--threshold D", file=sys.stderr)
+    elif not given:
+        people = {str(e.get("person") or "") for e in lib.examples}
+        if len(people) == 1 and "" not in people:
+            print(f"rtseg learn: note: every example is of one person ({people.pop()}): "
+                  "the threshold is calibrated on that person's other takes, which lie "
+                  "nearer each other than another performer's do, so a new performer's "
+                  "segments may come out unknown more often; add examples from a second "
+                  "person", file=sys.stderr)
     return 0
 
 
