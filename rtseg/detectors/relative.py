@@ -106,11 +106,7 @@ class EnergyRange:
 
     def range_with(self, energy: float) -> tuple[float, float]:
         """(lowest, highest) of the remembered values and ``energy``."""
-        oldest = self._n - self.span
         lo = hi = energy
-        for q in (self._low, self._high):
-            while q and q[0][0] < oldest:
-                q.popleft()
         if self._low and self._low[0][2] < lo:
             lo = self._low[0][2]
         if self._high and self._high[0][2] > hi:
@@ -128,3 +124,7 @@ class EnergyRange:
         while high and high[-1][2] <= energy:
             high.pop()
         high.append(item)
+        oldest = self._n - self.span                     # the last span values stay
+        for q in (low, high):
+            while q[0][0] < oldest:
+                q.popleft()
