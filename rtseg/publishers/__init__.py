@@ -45,8 +45,9 @@ import re
 from typing import Any, Iterable, Sequence
 
 from rtseg.core.events import CutEvent, DropoutEvent, StatusEvent
-from rtseg.publishers.base import (OscPublisher, Publisher, PublisherStats, RateLimitedLog,
-                                   cut_messages, dropout_message, status_message)
+from rtseg.core.ratelog import RateLimitedLog
+from rtseg.publishers.base import (OscPublisher, Publisher, PublisherStats, cut_messages,
+                                   dropout_message, status_message)
 from rtseg.publishers.jsonl import JsonlPublisher
 from rtseg.publishers.osc.tcp import OscTcpPublisher
 from rtseg.publishers.osc.udp import DEFAULT_HOST, DEFAULT_PORT, OscUdpPublisher

@@ -1,8 +1,9 @@
-"""Publisher interface, counters, rate-limited logging, and the standard OSC messages.
+"""Publisher interface, counters, and the standard OSC messages.
 
 Every publisher has ``publish_cut(ev)``, ``publish_status(ev)``, ``publish_dropout(ev)`` and
 ``close()``; none of them blocks on the network or raises because a target is down -
-failures are counted in ``stats`` and logged at most once per ``LOG_INTERVAL_S`` per kind.
+failures are counted in ``stats`` and logged at most once per kind every 5 s
+(``rtseg.core.ratelog``).
 
 Standard OSC messages (``/rtseg/...``), see ``/work/shared/design/conventions.md``:
 
@@ -46,17 +47,15 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 from dataclasses import asdict, dataclass
 from typing import Any, Callable, Sequence
 
 from rtseg.core.events import INPUT_COUNTERS, BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
+from rtseg.core.ratelog import RateLimitedLog
 from rtseg.publishers.osc.message import encode_message
 from rtseg.publishers.templates import AddressTemplate, cut_arg_value, sanitize_label
 
 log = logging.getLogger("rtseg.publishers")
-
-LOG_INTERVAL_S = 5.0
 
 
 @dataclass
@@ -78,31 +77,6 @@ class PublisherStats:
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)
-
-
-class RateLimitedLog:
-    """Log a recurring problem at most once per ``interval`` seconds per key, with the
-    number of occurrences suppressed in between."""
-
-    def __init__(self, logger: logging.Logger, interval: float = LOG_INTERVAL_S) -> None:
-        self.logger = logger
-        self.interval = interval
-        self._last: dict[str, float] = {}
-        self._suppressed: dict[str, int] = {}
-        self._lock = threading.Lock()
-
-    def __call__(self, key: str, msg: str, level: int = logging.WARNING) -> None:
-        now = time.monotonic()
-        with self._lock:
-            last = self._last.get(key)
-            if last is not None and now - last < self.interval:
-                self._suppressed[key] = self._suppressed.get(key, 0) + 1
-                return
-            n = self._suppressed.pop(key, 0)
-            self._last[key] = now
-        if n:
-            msg = f"{msg} ({n} similar suppressed in the last {self.interval:.0f} s)"
-        self.logger.log(level, msg)
 
 
 class Publisher:
