@@ -21,23 +21,14 @@ Options (all optional):
 
 Behaviour
 ---------
-- A reader thread reads whatever bytes are waiting (at most 20 ms of blocking), feeds the
-  decoder and turns each orientation message into a :class:`rtseg.core.frame.Frame`: ``quats``
-  (J, 4) scalar-last in the suit's bone order, ``valid`` (J,), ``recv_time`` =
-  ``time.monotonic()`` when the bytes arrived, ``seq`` = the u16 wire sequence number,
-  ``source_time`` = device clock in seconds, unwrapped across u32 wrap-around (every
-  ~71.6 min) so it keeps increasing.  A sensor absent from a frame, or present but not
-  valid, keeps its last good value with ``valid`` False (identity before its first value).
-- Sequence gaps: each discontinuity adds 1 to ``stats.gaps`` and the number of missing
-  messages to ``stats.dropped``.  A jump backwards in device time means the device
-  restarted: sequence and clock tracking start afresh (logged, not counted as a gap), and
-  ``source_time`` continues from its previous value plus one frame period.
-- Sensors: a sensor with no valid value for more than ``stale`` seconds is *lost*; the
-  first valid value afterwards *restores* it.  The clock starts at the first frame
-  received: a port that is open but silent (a suit not yet streaming) is not a dropout
-  of every sensor (the live loop reports a silent source as such).  Each change is a :class:`SensorEvent`,
-  queued for :meth:`SerialSource.dropouts` and passed to ``on_dropout`` (called on the
-  reader thread; keep it short).  ``stale_joints`` lists the sensors lost now.
+- A reader thread reads whatever bytes are waiting (at most 20 ms of blocking); or, once
+  the live loop takes the port over (``take_over``), the loop polls its descriptor and
+  calls ``poll``.  Either way the bytes go to a
+  :class:`rtseg.drivers.serial.stream.SuitStream`, which decodes them into frames
+  (:class:`rtseg.core.frame.Frame`) and keeps their accounting:
+  sequence gaps, the device clock unwrapped, sensors lost and restored
+  (:class:`SensorEvent`, :meth:`SerialSource.dropouts`, ``on_dropout``, ``stale_joints``),
+  damaged messages and the decoder's counters in ``stats`` (see that module).
 - Slow consumer: the frame queue is bounded (``queue``); when full the **oldest** frame is
   discarded and counted in ``stats.dropped`` (and ``overflow_drops``), so ``read`` always
   returns recent data.
@@ -49,19 +40,8 @@ Behaviour
   ``backoff``: a path that stays but cannot be opened, or a pyserial URL).  So reading
   resumes within ~20 ms + open time of the device's return, and an unplug costs the frames
   sent while it lasted plus what the port's input flush at open discards (about 20 ms
-  worth); each successful reopen counts in ``stats.reconnects``.  The decoder drops any half-received message.  ``read`` never
-  raises because of the device.
-- Damaged messages (binary format): those after the last intact message count in
-  ``stats.dropped`` as soon as they arrive, one frame each, so a suit whose every message
-  is damaged shows its frames destroyed; the next intact message's sequence gap then gives
-  the exact count, which replaces that estimate (a damaged zero byte can merge two
-  messages into one; damage before the first intact message - a boot log - is no longer
-  counted once it arrives).
-- Counters map from the decoder: corrupt messages and boot-log garbage -> ``corrupt``,
-  non-unit / NaN quaternions -> ``bad_values``, ids not in the suit -> ``unknown_names``,
-  malformed text lines / unknown message types / a frame repeating the previous frame's
-  sequence number -> ``bad_messages``.  Warnings are logged at most once per kind per 5 s, with the count of
-  suppressed repeats.
+  worth); each successful reopen counts in ``stats.reconnects``.  The decoder drops any
+  half-received message.  ``read`` never raises because of the device.
 - Text format: no sequence numbers or device clock (``seq``/``source_time`` None); a
   partial frame is closed after a quiet gap of a third of a frame period (see
   ``rtseg.drivers.serial.codec`` for the other closing rules).
@@ -69,66 +49,30 @@ Behaviour
 
 from __future__ import annotations
 
-import collections
 import errno
 import logging
-import math
 import os
 import select
 import threading
 import time
-from dataclasses import dataclass
 from typing import Callable
 
-import numpy as np
 import serial
 
-from rtseg.drivers.serial import codec
-from rtseg.drivers.base import FrameQueue, QueuedSource, SourceError
 from rtseg.core.frame import Frame
 from rtseg.core.profiles import SuitProfile, suit_profile
+from rtseg.core.ratelog import RateLimitedLog
+from rtseg.drivers.base import FrameQueue, QueuedSource, SourceError
+from rtseg.drivers.serial.stream import SensorEvent, SuitStream
 
 log = logging.getLogger("rtseg.drivers.serial")
 
 DEFAULT_BAUD = 921600
 #: highest baud rate accepted (fast USB UARTs reach 12 Mbaud)
 MAX_BAUD = 50_000_000
-LOG_INTERVAL_S = 5.0
 #: while the device is away, its path is checked this often (s) to reopen it as soon as it
 #: is back
 POLL_S = 0.02
-
-
-@dataclass(frozen=True, slots=True)
-class SensorEvent:
-    """A sensor lost (``lost`` True) or restored, at ``time`` (``time.monotonic()`` s)."""
-    name: str
-    sensor_id: int
-    lost: bool
-    time: float
-
-
-class _RateLimitedLog:
-    """At most one message per key per ``interval`` seconds; counts the suppressed ones."""
-
-    def __init__(self, logger: logging.Logger, interval: float = LOG_INTERVAL_S) -> None:
-        self.logger = logger
-        self.interval = interval
-        self._last: dict[str, float] = {}
-        self._suppressed: dict[str, int] = collections.defaultdict(int)
-
-    def __call__(self, key: str, level: int, msg: str, *args: object) -> None:
-        now = time.monotonic()
-        last = self._last.get(key)
-        if last is not None and now - last < self.interval:
-            self._suppressed[key] += 1
-            return
-        n = self._suppressed.pop(key, 0)
-        self._last[key] = now
-        if n:
-            msg += " (%d similar in the last %.0f s)"
-            args = args + (n, self.interval)
-        self.logger.log(level, msg, *args)
 
 
 def _readable(fd: int) -> bool:
@@ -136,12 +80,6 @@ def _readable(fd: int) -> bool:
     p = select.poll()
     p.register(fd, select.POLLIN | select.POLLPRI)
     return bool(p.poll(0))
-
-
-_STAT_MAP = {  # decoder counter -> SourceStats field
-    "corrupt": "corrupt", "garbage_lines": "corrupt", "bad_values": "bad_values",
-    "unknown_ids": "unknown_names", "bad_messages": "bad_messages", "bad_crc": "crc_failures",
-}
 
 
 class SerialSource(QueuedSource):
@@ -175,36 +113,14 @@ class SerialSource(QueuedSource):
         self.backoff_max = float(backoff_max)
         self.exclusive = exclusive
         self.read_timeout = float(read_timeout)
-        self.on_dropout = on_dropout
-        self.device_info: dict[str, str] = {}
-        self.sensor_status: dict[int, int] = {}
         self.disconnects = 0
         self.overflow_drops = 0
-        self.restarts = 0
-
-        n = len(self.joint_names)
-        self._lut = np.full(256, -1, dtype=np.int64)
-        for k, sid in enumerate(self.suit.sensor_ids):
-            self._lut[sid] = k
-        self._decoder = codec.decoder_for(fmt, self.suit.sensor_ids)
-        self._dec_seen = {k: 0 for k in _STAT_MAP}
-        self._state = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (n, 1))
-        self._last_valid = np.full(n, time.monotonic())
-        self._lost = np.zeros(n, dtype=bool)
-        self._any_lost = False
-        # the oldest last valid time of the sensors not lost (None: to be recomputed)
-        self._oldest_valid: float | None = None
-        self._streaming = False   # set by the first frame: staleness counts from there
-        self._last_seq: int | None = None
-        self._last_was_frame = False
-        self._last_time_raw: int | None = None
-        self._time_acc = 0
-        self._last_data = 0.0
-        self._estimated = 0       # damaged messages counted in dropped as an estimate
-        self._events: collections.deque[SensorEvent] = collections.deque(maxlen=4096)
         self._queue = FrameQueue(queue_size)
+        #: the bytes read, decoded into frames with their accounting (``stream``)
+        self._stream = SuitStream(self.suit, fmt, self.frame_rate, self.stale, self.count,
+                                  self._put, path, on_dropout, now=time.monotonic())
         self._stop = threading.Event()
-        self._log = _RateLimitedLog(log)
+        self._log = RateLimitedLog(log)
         self._ser: serial.SerialBase | None = None
         self._ever_connected = False
         self._connected = threading.Event()
@@ -239,17 +155,35 @@ class SerialSource(QueuedSource):
     @property
     def stale_joints(self) -> list[str]:
         """Sensors (bone names) currently lost."""
-        return [self.joint_names[j] for j in np.flatnonzero(self._lost)]
+        return self._stream.stale_joints
 
     def dropouts(self) -> list[SensorEvent]:
         """Sensor lost/restored events since the last call, oldest first."""
-        out = []
-        while self._events:
-            try:
-                out.append(self._events.popleft())
-            except IndexError:
-                break
-        return out
+        return self._stream.dropouts()
+
+    @property
+    def on_dropout(self) -> Callable[[SensorEvent], None] | None:
+        """Called with every :class:`SensorEvent` (on the reading thread; keep it short)."""
+        return self._stream.on_dropout
+
+    @on_dropout.setter
+    def on_dropout(self, callback: Callable[[SensorEvent], None] | None) -> None:
+        self._stream.on_dropout = callback
+
+    @property
+    def device_info(self) -> dict[str, str]:
+        """What the device's info message said (``fw``, ``sensors``, ...)."""
+        return self._stream.device_info
+
+    @property
+    def sensor_status(self) -> dict[int, int]:
+        """The last status byte of each sensor id (``codec.STATUS_*`` bits)."""
+        return self._stream.sensor_status
+
+    @property
+    def restarts(self) -> int:
+        """Times the device's clock went back (the device restarted)."""
+        return self._stream.restarts
 
     def close(self) -> None:
         """Stop the reader thread and close the port.  Safe to call twice."""
@@ -284,8 +218,7 @@ class SerialSource(QueuedSource):
                                 or "Inappropriate ioctl" in str(exc))
             return False
         self._ser = ser
-        self._decoder.reset()
-        self._last_data = time.monotonic()
+        self._stream.restart(time.monotonic())
         if self._ever_connected:
             self.count("reconnects")
             log.warning("serial %s: reconnected", self.path)
@@ -346,11 +279,11 @@ class SerialSource(QueuedSource):
                     break
                 key = self._device_key()
                 if not self._open():
-                    self._log("open", logging.WARNING, "serial %s: cannot open (%s); retrying",
+                    self._log("open", "serial %s: cannot open (%s); retrying",
                               self.path, self._open_error)
                     failed_key = key
                     backoff = min(max(backoff * 2, self.backoff_start), self.backoff_max)
-                    self._check_stale(time.monotonic())
+                    self._stream.check_stale(time.monotonic())
                     continue
                 backoff = 0.0
                 failed_key = None
@@ -365,7 +298,7 @@ class SerialSource(QueuedSource):
                 if self._stop.is_set():
                     break
                 self.disconnects += 1
-                self._log("unplug", logging.WARNING, "serial %s: device lost (%s); reconnecting",
+                self._log("unplug", "serial %s: device lost (%s); reconnecting",
                           self.path, exc)
                 self._close_port()
                 continue
@@ -375,13 +308,7 @@ class SerialSource(QueuedSource):
         """Decode ``data`` read at ``now`` (empty: nothing arrived; a text frame left open
         past the quiet gap is closed), then check the sensors' staleness."""
         try:
-            if data:
-                self._last_data = now
-                self._handle(self._decoder.feed(data), now)
-            elif (self.fmt == "text" and self._decoder.has_partial
-                  and now - self._last_data > 1.0 / (3.0 * self.frame_rate)):
-                self._handle(self._decoder.flush(), now)
-            self._check_stale(now)
+            self._stream.consume(data, now)
         except Exception:  # a bug must not kill the live loop's input
             log.exception("serial %s: error handling input", self.path)
 
@@ -464,7 +391,7 @@ class SerialSource(QueuedSource):
             data = b""
         except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
             self.disconnects += 1
-            self._log("unplug", logging.WARNING, "serial %s: device lost (%s); reconnecting",
+            self._log("unplug", "serial %s: device lost (%s); reconnecting",
                       self.path, exc)
             self._close_port()
             self._reopen_backoff = 0.0
@@ -481,179 +408,25 @@ class SerialSource(QueuedSource):
         if now < self._reopen_after and (key is None or key == self._reopen_failed):
             return
         if not self._open():
-            self._log("open", logging.WARNING, "serial %s: cannot open (%s); retrying",
+            self._log("open", "serial %s: cannot open (%s); retrying",
                       self.path, self._open_error)
             self._reopen_failed = key
             self._reopen_backoff = min(max(self._reopen_backoff * 2, self.backoff_start),
                                        self.backoff_max)
             self._reopen_after = now + self._reopen_backoff
-            self._check_stale(now)
+            self._stream.check_stale(now)
             return
         self._reopen_backoff = 0.0
         self._reopen_failed = None
 
-    # ------------------------------------------------------------------ decoding
-
-    def _sync_stats(self) -> None:
-        # damaged messages since the last intact one: frames destroyed that no sequence
-        # gap has counted yet, in dropped as an estimate until the next intact message
-        est = int(getattr(self._decoder, "corrupt_since_good", 0))
-        if est != self._estimated:
-            self.count("dropped", est - self._estimated)
-            self._estimated = est
-        st = self._decoder.stats
-        for k, field in _STAT_MAP.items():
-            v = getattr(st, k)
-            d = v - self._dec_seen[k]
-            if d:
-                self._dec_seen[k] = v
-                self.count(field, d)
-                self._log(k, logging.WARNING, "serial %s: %d %s (total %d)",
-                          self.path, d, k.replace("_", " "), v)
-
-    def _handle(self, messages: list[codec.DecodedFrame], now: float) -> None:
-        # the decoder's counts of this read first: a reader that takes a frame of it sees
-        # the damage decoded with it already counted
-        self._sync_stats()
-        for m in messages:
-            if m.seq is not None and not self._track(m.seq, m.time_us, m.msg_type):
-                continue
-            if m.msg_type == codec.MSG_FRAME:
-                self._frame(m, now)
-            elif m.msg_type == codec.MSG_STATUS:
-                for sid, st in zip(m.ids.tolist(), m.status.tolist()):
-                    self.sensor_status[sid] = st
-                    if st & codec.STATUS_ERROR:
-                        self._log(f"err{sid}", logging.WARNING,
-                                  "serial %s: sensor %d reports an error", self.path, sid)
-            elif m.msg_type == codec.MSG_INFO and m.info is not None:
-                if m.info != self.device_info:
-                    log.info("serial %s: device %s", self.path,
-                             ", ".join(f"{k}={v}" for k, v in m.info.items()))
-                self.device_info = dict(m.info)
-
-    def _track(self, seq: int, time_us: int, msg_type: int) -> bool:
-        """Sequence gaps and clock unwrapping; False to drop a duplicate frame.
-
-        Lenient with firmware that numbers only its frames: a status/info message may
-        repeat the sequence number of the frame before or after it without counting as a
-        duplicate or a gap.  Only frames drive the clock (firmware may stamp status/info
-        messages carelessly)."""
-        if msg_type != codec.MSG_FRAME:
-            pass
-        elif self._last_time_raw is None:
-            self._time_acc = time_us
-            self._last_time_raw = time_us
-        else:
-            dt = (time_us - self._last_time_raw) & 0xFFFFFFFF
-            if dt >= 0x80000000:  # clock went backwards: the device restarted
-                self.restarts += 1
-                self._log("restart", logging.WARNING,
-                          "serial %s: device clock went back; device restarted?", self.path)
-                self._time_acc += int(round(1e6 / self.frame_rate))
-                self._last_seq = None
-            else:
-                self._time_acc += dt
-            self._last_time_raw = time_us
-        if self._last_seq is not None:
-            d = (seq - self._last_seq) & 0xFFFF
-            is_frame = msg_type == codec.MSG_FRAME
-            if d == 0 and not (is_frame and self._last_was_frame):
-                self._last_was_frame = is_frame
-                return True
-            if d == 0:
-                self.count("bad_messages")
-                self._log("dup", logging.WARNING, "serial %s: duplicate sequence number %d",
-                          self.path, seq)
-                return False
-            if 1 < d < 0x8000:
-                self.count("gaps")
-                self.count("dropped", d - 1)
-                self._log("gap", logging.WARNING, "serial %s: %d messages missing before seq %d",
-                          self.path, d - 1, seq)
-        self._last_seq = seq
-        self._last_was_frame = msg_type == codec.MSG_FRAME
-        return True
-
-    def _frame(self, m: codec.DecodedFrame, now: float) -> None:
-        src_time = self._time_acc / 1e6 if m.time_us is not None else None
-        if m.complete:
-            # every sensor of the suit (the decoder's known ids), in its order, valid: the
-            # frame is the suit's rows
-            self._streaming = True
-            self._last_valid.fill(now)
-            self._oldest_valid = now
-            if self._any_lost:
-                self._restore(np.flatnonzero(self._lost), now)
-            np.copyto(self._state, m.quats)
-            self._put(Frame(recv_time=now, quats=m.quats, valid=m.valid,
-                            source_time=src_time, seq=m.seq))
-            return
-        self._oldest_valid = None
-        rows = self._lut[m.ids]
-        take = (rows >= 0) & m.valid
-        j = rows[take]
-        valid = np.zeros(len(self.joint_names), dtype=bool)
-        if not self._streaming:
-            self._streaming = True
-            self._last_valid[:] = now
-        if len(j):
-            self._state[j] = m.quats[take]
-            valid[j] = True
-            self._last_valid[j] = now
-            if self._any_lost:
-                back = j[self._lost[j]]
-                if len(back):
-                    self._restore(back, now)
-        self._put(Frame(recv_time=now, quats=self._state.copy(), valid=valid,
-                        source_time=src_time, seq=m.seq))
-
-    def _restore(self, back: np.ndarray, now: float) -> None:
-        """Sensors ``back`` (rows) have a valid value again after being lost."""
-        self._lost[back] = False
-        self._any_lost = bool(self._lost.any())
-        for k in back.tolist():
-            self._event(k, False, now)
-        log.info("serial %s: sensor(s) restored: %s", self.path,
-                 ", ".join(self.joint_names[k] for k in back.tolist()))
+    # ------------------------------------------------------------------ frames
 
     def _put(self, frame: Frame) -> None:
         if self._queue.put(frame):
             self.overflow_drops += 1
             self.count("dropped")
-            self._log("overflow", logging.WARNING,
+            self._log("overflow",
                       "serial %s: consumer too slow, oldest frame dropped", self.path)
-
-    def _check_stale(self, now: float) -> None:
-        if not self._streaming:
-            return
-        oldest = self._oldest_valid
-        if oldest is not None and now - oldest <= self.stale:
-            return                       # no sensor's last valid value is that old
-        newly = (now - self._last_valid > self.stale) & ~self._lost
-        if not newly.any():
-            # the oldest last value among the sensors not lost yet (inf: all lost)
-            self._oldest_valid = (float(self._last_valid[~self._lost].min())
-                                  if not self._lost.all() else math.inf)
-        else:
-            self._oldest_valid = None
-            self._lost |= newly
-            self._any_lost = True
-            ks = np.flatnonzero(newly).tolist()
-            for k in ks:
-                self._event(k, True, now)
-            self._log("lost", logging.WARNING, "serial %s: sensor(s) lost (no valid value for "
-                      "%.2f s): %s", self.path, self.stale,
-                      ", ".join(self.joint_names[k] for k in ks))
-
-    def _event(self, k: int, lost: bool, now: float) -> None:
-        ev = SensorEvent(self.joint_names[k], int(self.suit.sensor_ids[k]), lost, now)
-        self._events.append(ev)
-        if self.on_dropout is not None:
-            try:
-                self.on_dropout(ev)
-            except Exception:
-                log.exception("serial %s: on_dropout callback failed", self.path)
 
 
 _OPTIONS = {"baud", "format", "suit", "suits", "stale", "rate", "queue", "backoff", "wait",
