@@ -14,8 +14,8 @@ import pytest
 
 from rtseg.drivers import SourceError, open_source
 from rtseg.drivers.osc.vmc.codec import encode_frame
-from rtseg.drivers.osc.source import (DEFAULT_HOST, _parse_location, is_wide, parse_allow,
-                                      sender_allowed)
+from rtseg.drivers.osc.url import (DEFAULT_HOST, is_wide, parse_allow, parse_location,
+                                   sender_allowed)
 from rtseg.core.events import StatusEvent
 from rtseg.publishers.osc.udp import OscUdpPublisher
 
@@ -25,7 +25,7 @@ BONES = ["Hips", "Spine", "Head"]
 @pytest.mark.parametrize("url, port", [("osc://", 39539), ("osc://:0", 0),
                                        ("osc://?format=vrchat", 9000), ("osc://:0?format=vrchat", 0)])
 def test_no_address_means_loopback(url, port):
-    host, p = _parse_location(url[len("osc://"):].split("?")[0],
+    host, p = parse_location(url[len("osc://"):].split("?")[0],
                               9000 if "vrchat" in url else 39539)
     assert (host, p) == ("127.0.0.1", port)
     if port == 0:                      # really bound: on loopback only
@@ -37,8 +37,8 @@ def test_no_address_means_loopback(url, port):
 
 
 def test_wide_addresses_only_when_written():
-    assert _parse_location("0.0.0.0:39539") == ("0.0.0.0", 39539)
-    assert _parse_location("[::]:39539") == ("::", 39539)
+    assert parse_location("0.0.0.0:39539", 39539) == ("0.0.0.0", 39539)
+    assert parse_location("[::]:39539", 39539) == ("::", 39539)
     assert is_wide("0.0.0.0") and is_wide("::") and is_wide("192.168.1.4")
     assert not is_wide("127.0.0.1") and not is_wide("::1") and not is_wide("localhost")
 

@@ -67,9 +67,9 @@ import time
 from rtseg.drivers.base import FrameQueue, QueuedSource, Source, SourceError
 from rtseg.drivers.axis.codec import BINARY_PORT, JOINTS, PARENTS, TEXT_PORT
 from rtseg.drivers.axis.frames import AxisFrames, TextStream, _BinaryAdapter
-from rtseg.drivers.osc.source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
-                                      allow_option, check_options, number_option, renamed,
-                                      sender_allowed)
+from rtseg.drivers.osc.source import OscUdpSource
+from rtseg.drivers.osc.url import (DEFAULT_HOST, Network, allow_option, check_options,
+                                   number_option, parse_location, renamed, sender_allowed)
 from rtseg.core.frame import Frame
 
 log = logging.getLogger("rtseg.drivers.axis")
@@ -306,7 +306,7 @@ def open_url(location: str, options: dict[str, str]) -> Source:
     unit = (options.get("unit") or "cm").lower()
     if unit not in UNITS:
         raise SourceError(f"axis:// unit={unit!r}: one of {', '.join(UNITS)}")
-    host, port = renamed("axis", _parse_location, location,
+    host, port = renamed("axis", parse_location, location,
                          BINARY_PORT if fmt == "binary" else TEXT_PORT)
     kw = dict(avatar=options.get("avatar") or None, order=order,
               rate=_num(options, "rate", 60.0), unit_scale=UNITS[unit], space=space,

@@ -43,9 +43,9 @@ import numpy as np
 from rtseg.drivers.base import SourceError
 from rtseg.drivers.mocopi.codec import DEFAULT_PORT
 from rtseg.drivers.mocopi.assembler import MocopiAssembler
-from rtseg.drivers.mvn.source import (VendorUdpSource, check_options, number_option,
-                                      parse_location)
-from rtseg.drivers.osc.source import DEFAULT_HOST, Network, allow_option, load_suit
+from rtseg.drivers.mvn.source import VendorUdpSource, number_option
+from rtseg.drivers.osc.url import (DEFAULT_HOST, Network, allow_option, check_options, load_suit,
+                                   parse_location)
 
 OPTIONS = ("suit", "queue", "rate", "rcvbuf", "tolerance", "allow", "space")
 #: socket poll interval, s (also how soon ``close`` is noticed); no frame waits on it
@@ -140,7 +140,7 @@ def open_url(location: str, options: dict[str, str]) -> MocopiSource:
     """Open ``mocopi://location?options`` (see module docstring)."""
     check_options("mocopi", options, OPTIONS)
     allow = allow_option(options)
-    host, port = parse_location("mocopi", location, DEFAULT_PORT)
+    host, port = parse_location(location, DEFAULT_PORT, "mocopi")
     num = number_option
     return MocopiSource(
         host, port, suit=options.get("suit") or "mocopi",

@@ -53,11 +53,11 @@ import time
 from rtseg.drivers.base import FrameQueue, QueuedSource, SourceError
 from rtseg.drivers.mvn.codec import DEFAULT_PORT, MxtpStream
 from rtseg.drivers.mvn.assembler import MvnAssembler
-from rtseg.drivers.osc.source import (DEFAULT_HOST, Network, OscUdpSource, _parse_location,
-                                      allow_option, check_options, is_wide, load_suit,
-                                      sender_allowed)
 from rtseg.core.frame import Frame
-from rtseg.drivers.osc.source import number_option as osc_number_option
+from rtseg.drivers.osc.source import OscUdpSource
+from rtseg.drivers.osc.url import (DEFAULT_HOST, Network, allow_option, check_options, is_wide,
+                                   load_suit, parse_location, sender_allowed)
+from rtseg.drivers.osc.url import number_option as osc_number_option
 
 log = logging.getLogger("rtseg.drivers.mvn")
 
@@ -67,12 +67,6 @@ TCP_OPTIONS = tuple(o for o in OPTIONS if o != "rcvbuf")
 TRANSPORTS = ("udp", "tcp")
 _RANGES = {"character": (0, 255), "quiet": (1e-4, 60.0), "queue": (1, 1_000_000),
            "rate": (1e-3, 1e5), "rcvbuf": (1, 1 << 30), "tolerance": (0.0, 1.0)}
-
-
-def parse_location(scheme: str, location: str, default_port: int) -> tuple[str, int]:
-    """``host:port`` / ``:port`` / ``[v6]:port`` / ``""`` -> (host, port); loopback when no
-    host is written."""
-    return _parse_location(location, default_port, scheme)
 
 
 def number_option(scheme: str, options: dict[str, str], key: str, default, kind=float,
@@ -282,7 +276,7 @@ def open_url(location: str, options: dict[str, str]) -> MvnSource | MvnTcpSource
         raise SourceError(f"mvn:// transport={options.get('transport')!r}: udp or tcp")
     check_options("mvn", options, OPTIONS if transport == "udp" else TCP_OPTIONS)
     allow = allow_option(options)
-    host, port = parse_location("mvn", location, DEFAULT_PORT)
+    host, port = parse_location(location, DEFAULT_PORT, "mvn")
     num = number_option
     kw = dict(suit=options.get("suit") or "xsens-mvn",
               character=num("mvn", options, "character", 0, int),
@@ -295,5 +289,5 @@ def open_url(location: str, options: dict[str, str]) -> MvnSource | MvnTcpSource
     return MvnSource(host, port, rcvbuf=num("mvn", options, "rcvbuf", None, int), **kw)
 
 
-__all__ = ["MvnSource", "MvnTcpSource", "VendorUdpSource", "open_url", "parse_location", "number_option",
-           "check_options", "DEFAULT_PORT"]
+__all__ = ["DEFAULT_PORT", "MvnSource", "MvnTcpSource", "VendorUdpSource", "number_option",
+           "open_url"]
