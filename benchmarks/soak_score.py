@@ -197,7 +197,7 @@ def clean_f1(rate: float = 120.0) -> dict:
     the soak loses against it is what the faults and the machine cost."""
     from rtseg.evaluation.scoring import pooled_tally, tally
     from rtseg.live.config import load_session_config
-    from rtseg.live.pipeline import replay_frames
+    from rtseg.live.replay import replay_frames
     from rtseg.simulators.synth.motion import synthesize
     r = synthesize(soak_script(), frame_rate=rate, seed=0)
     tk = r.take

@@ -802,7 +802,7 @@ def test_real_take_cuts_match_the_serial_suit(data_dir):
     (offline pipeline, the live loop's own).  (With space=local and the default
     calibration.mode = auto, the first of 86_01's six cuts moves from frame 530 to 450:
     why global is the default.)"""
-    from rtseg.live.pipeline import replay_frames
+    from rtseg.live.replay import replay_frames
 
     take, serial, ref = serial_reference(data_dir)
     rate = take.frame_rate

@@ -289,7 +289,7 @@ def test_rtseg_simulate_mocopi_command_reaches_the_source():
 def test_real_take_cuts_match_the_serial_suit(data_dir):
     """86_01 (CMU, 38 s) through the mocopi codec and the source's default global
     conversion gives the cuts the 17-sensor serial suit gives, within 0.25 s."""
-    from rtseg.live.pipeline import replay_frames
+    from rtseg.live.replay import replay_frames
 
     take, serial, ref = serial_reference(data_dir)
     rate = take.frame_rate

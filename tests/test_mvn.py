@@ -337,7 +337,7 @@ def test_real_take_cuts_match_the_serial_suit(data_dir):
     """86_01 (CMU, 38 s) through the MVN codec gives the cuts the 17-sensor serial suit
     gives through its codec, within 0.25 s: the suit changes the features only where the
     joints differ (offline pipeline, the live loop's own, no sockets)."""
-    from rtseg.live.pipeline import replay_frames
+    from rtseg.live.replay import replay_frames
 
     take, serial, ref = serial_reference(data_dir)
     rate = take.frame_rate

@@ -14,7 +14,7 @@ from rtseg.evaluation.scoring import score, widen
 from rtseg.labels.takes import find_labelled_takes
 from rtseg.live.session import LiveSession
 from rtseg.evaluation.online import live_config, live_cuts
-from rtseg.live.pipeline import replay_session
+from rtseg.live.replay import replay_session
 from rtseg.recording import read_session
 from rtseg.live.config import from_dict
 from rtseg.simulators.serial_device import SerialSuit

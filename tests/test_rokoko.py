@@ -402,7 +402,7 @@ def test_a_take_with_rokoko_names_replays_unchanged():
 def test_real_take_cuts_match_the_serial_suit(data_dir):
     """86_01 (CMU, 38 s) through the Rokoko codec gives the cuts the 17-sensor serial suit
     gives through its codec, within 0.25 s (offline pipeline, the live loop's own)."""
-    from rtseg.live.pipeline import replay_frames
+    from rtseg.live.replay import replay_frames
 
     take, serial, ref = serial_reference(data_dir)
     rate = take.frame_rate

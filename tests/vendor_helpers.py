@@ -159,7 +159,7 @@ def serial_reference(data_dir):
     reference cuts the take at least 3 times."""
     from rtseg.drivers.serial.codec import SerialFrameDecoder, encode_frame as ser_encode
     from rtseg.drivers.readers import read_take
-    from rtseg.live.pipeline import replay_frames
+    from rtseg.live.replay import replay_frames
     from rtseg.core.profiles import suit_profile
     from rtseg.simulators.retarget import retarget
 

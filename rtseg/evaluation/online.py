@@ -13,7 +13,8 @@ from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
-from rtseg.live.pipeline import PipelineCut, replay_frames
+from rtseg.live.pipeline import PipelineCut
+from rtseg.live.replay import replay_frames
 from rtseg.live.config import SessionConfig, load_session_config
 
 

@@ -1,10 +1,10 @@
 """The live session: source -> ring buffer -> pose features -> online detectors -> cut
 events -> publishers.  ``session`` holds :class:`LiveSession`; ``loop`` runs sessions on one
 thread (``run_sessions``); ``pipeline`` the per-frame pipeline it shares with offline
-replay; ``intake``, ``process``, ``emitter``, ``health`` its frame intake, processing
-step, events and health; ``config`` the ``config/live.toml`` schema;
-``outputs`` the publishers of ``[output]``; ``stats`` the run-time counters;
-``rate_check`` the declared-frame-rate check.
+replay (``replay``: recorded frames or a session folder through it); ``intake``,
+``process``, ``emitter``, ``health`` its frame intake, processing step, events and health;
+``config`` the ``config/live.toml`` schema; ``outputs`` the publishers of ``[output]``;
+``stats`` the run-time counters; ``rate_check`` the declared-frame-rate check.
 
 May import ``rtseg.identity``, ``rtseg.detectors``, ``rtseg.recording``,
 ``rtseg.publishers``, ``rtseg.core``, ``rtseg.config`` and ``rtseg.drivers``; no command

@@ -2,10 +2,11 @@
 
 ``Pipeline.process()`` takes one received frame and returns the cuts its arrival revealed:
 gap handling (short sequence/clock gaps bridged with interpolated frames; longer gaps,
-silence and runs of invalid required joints restart the detectors), value sanitising, calibration, ``PoseFeatures.step`` and every online
-detector's ``update``.  It does no I/O and no threading: ``rtseg.live.session.LiveSession`` runs it
-on frames from a ring buffer, ``replay_frames`` / ``replay_session`` run it on recorded
-frames, so live output can be checked against a recording.
+silence and runs of invalid required joints restart the detectors), value sanitising,
+calibration, ``PoseFeatures.step`` and every online detector's ``update``.  It does no I/O
+and no threading: ``rtseg.live.session.LiveSession`` runs it on frames from a ring buffer,
+``rtseg.live.replay`` on recorded frames, so live output can be checked against a
+recording.
 
 Gaps
 ----
@@ -48,7 +49,7 @@ import numpy as np
 
 from rtseg.config import ConfigError
 from rtseg.detectors.base import Cut, OnlineDetector
-from rtseg.live.config import SessionConfig, load_session_config
+from rtseg.live.config import SessionConfig
 
 log = logging.getLogger("rtseg.live.session")
 
@@ -505,34 +506,5 @@ def _blas_limit(n: int) -> Any:
     return threadpool_limits(n, user_api="blas")
 
 
-def replay_frames(frames: Iterable[tuple], joint_names: list[str], parents: list[int],
-                  space: str, frame_rate: float | None,
-                  config: SessionConfig | None = None) -> list[PipelineCut]:
-    """Run recorded frames ``(quats (J,4), valid (J,), seq, recv_time[, source_time])``
-    through the same ``Pipeline`` as the live loop; the cuts in order (session frame
-    indices).  ``replay_session(dir)`` does this for a recorded session folder."""
-    cfg = config if config is not None else load_session_config()
-    pipe = Pipeline(joint_names, parents, space, frame_rate, cfg)
-    cuts: list[PipelineCut] = []
-    blas = _blas_limit(int(cfg["buffer.blas_threads"]))
-    try:
-        for i, f in enumerate(frames):
-            stime = f[4] if len(f) > 4 else None
-            cuts.extend(pipe.process(i, f[0], f[1], f[2], f[3], 0, stime))
-    finally:
-        if blas is not None:
-            blas.restore_original_limits()
-    return cuts
-
-
-def replay_session(directory: str, config: SessionConfig | None = None) -> list[PipelineCut]:
-    """The cuts the live loop's detectors give on a recorded session folder
-    (``rtseg.recording``), offline: every recorded frame with its sequence number, receive
-    time and source time, through ``replay_frames``."""
-    from rtseg.recording import read_session
-    tk = read_session(directory)
-    m = tk.meta
-    seq, recv, src = m["seq"], m["recv_time"], m["source_time"]
-    frames = ((tk.quats[i], tk.valid[i], None if seq[i] < 0 else int(seq[i]), float(recv[i]),
-               None if not np.isfinite(src[i]) else float(src[i])) for i in range(tk.n_frames))
-    return replay_frames(frames, tk.joint_names, tk.parents, tk.space, tk.frame_rate, config)
+__all__ = ["DEFAULT_FRAME_RATE", "Pipeline", "PipelineCut", "PipelineStats", "detector_params",
+           "make_detectors"]

@@ -119,8 +119,8 @@ from rtseg.live.intake import HAND_BACK_DROPS, SessionInput
 from rtseg.live.process import SessionProcessing
 from rtseg.live.outputs import build_publishers, log_publishers, wire_methods
 from rtseg.live.pipeline import (DEFAULT_FRAME_RATE, Pipeline, PipelineCut, PipelineStats,
-                            detector_params, make_detectors, replay_frames,
-                            replay_session)
+                                 detector_params, make_detectors)
+from rtseg.live.replay import replay_frames, replay_session
 from rtseg.live.rate_check import DeclaredRateCheck, switch_rate
 from rtseg.core.ringbuffer import RingBuffer
 from rtseg.live.config import SessionConfig, load_session_config
