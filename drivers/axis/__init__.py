@@ -3,5 +3,6 @@
 C ``kernel``), decoded frames to rtseg frames (``frames``) and the live source ``axis://``
 (``source``).
 
-May import ``rtseg.core``, ``rtseg.drivers.base``, ``rtseg.drivers.vendor_seq`` and
-``rtseg.drivers.osc.source`` (the UDP listener)."""
+May import ``rtseg.core``, ``rtseg.drivers.base``, ``rtseg.drivers.vendor_seq``,
+``rtseg.drivers.osc.source`` (the UDP listener) and ``rtseg.drivers.osc.url`` (its URL
+options)."""

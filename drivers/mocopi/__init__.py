@@ -2,5 +2,5 @@
 frames (``assembler``) and the live source ``mocopi://`` (``source``).
 
 May import ``rtseg.core``, ``rtseg.drivers.base``, ``rtseg.drivers.vendor_seq``,
-``rtseg.drivers.osc.source`` (the UDP listener) and ``rtseg.drivers.mvn.source`` (the
-global-to-local conversion)."""
+``rtseg.drivers.osc.source`` (the UDP listener), ``rtseg.drivers.osc.url`` (its URL options)
+and ``rtseg.drivers.mvn.source`` (the global-to-local conversion)."""

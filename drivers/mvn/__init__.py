@@ -2,5 +2,6 @@
 messages to frames of one character (``assembler``) and the live source ``mvn://``
 (``source``).
 
-May import ``rtseg.core``, ``rtseg.drivers.base``, ``rtseg.drivers.vendor_seq`` and
-``rtseg.drivers.osc.source`` (the UDP listener)."""
+May import ``rtseg.core``, ``rtseg.drivers.base``, ``rtseg.drivers.vendor_seq``,
+``rtseg.drivers.osc.source`` (the UDP listener) and ``rtseg.drivers.osc.url`` (its URL
+options)."""
