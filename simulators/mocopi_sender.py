@@ -24,7 +24,7 @@ from rtseg.drivers.mocopi.codec import DEFAULT_PORT, encode_frame, encode_skelet
 from rtseg.core.profiles import SuitProfile
 from rtseg.simulators.retarget import ImuModel
 from rtseg.simulators.udp_take_sender import (UdpTakeSender, cli_arguments, cli_take,
-                                               cli_timing)
+                                               cli_timing, serve_options, serve_sender)
 from rtseg.simulators.vmc_sender import send_until_done, take_parser
 from rtseg.core.take import Take
 
@@ -77,6 +77,14 @@ class MocopiSender(UdpTakeSender):
                                 bone_ids=self.bone_ids, time=int(round(source_time * 1000.0)),
                                 uttm=self.unix_start + source_time, port=self.port))
         return out
+
+
+def serve(args, take: Take, host) -> tuple[str, list[str]]:
+    """``rtseg simulate mocopi``: send ``take`` (``host``: a
+    :class:`rtseg.commands.simulate.Host`); returns (stop reason, summary lines)."""
+    port = host.port(DEFAULT_PORT, faults=True)
+    sender = MocopiSender(take, args.host, port, **serve_options(args, host))
+    return serve_sender(args, host, sender, port, f"mocopi://{args.host}:{port}")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -37,7 +37,7 @@ from rtseg.drivers.mvn.codec import DEFAULT_MAX_DATAGRAM, DEFAULT_PORT, encode_d
 from rtseg.core.profiles import SuitProfile
 from rtseg.simulators.retarget import ImuModel
 from rtseg.simulators.udp_take_sender import (UdpTakeSender, cli_arguments, cli_take,
-                                               cli_timing)
+                                               cli_timing, serve_options, serve_sender)
 from rtseg.simulators.vmc_sender import send_until_done, take_parser
 from rtseg.core.take import Take
 
@@ -155,6 +155,22 @@ class MvnSender(UdpTakeSender):
         return encode_datagrams(slot, int(round(source_time * 1000.0)), self.segment_ids,
                                 self._quats[index], self._pos[index], character=self.character,
                                 max_datagram=self.max_datagram)
+
+
+def serve(args, take: Take, host) -> tuple[str, list[str]]:
+    """``rtseg simulate mvn``: send ``take`` over UDP, or ``--transport tcp`` to a receiver
+    that listens (``host``: a :class:`rtseg.commands.simulate.Host`); returns (stop reason,
+    summary lines)."""
+    port = host.port(DEFAULT_PORT, faults=True)
+    tcp = args.transport == "tcp"
+    sender = MvnSender(take, args.host, port, character=args.character,
+                       transport=args.transport,
+                       wait_server=host.wait_for_peer() if tcp else None,
+                       **serve_options(args, host))
+    query = [f"character={args.character}"] if args.character else []
+    query += ["transport=tcp"] if tcp else []
+    url = f"mvn://{args.host}:{port}" + ("?" + "&".join(query) if query else "")
+    return serve_sender(args, host, sender, port, url)
 
 
 def main(argv: list[str] | None = None) -> int:

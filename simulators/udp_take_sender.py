@@ -118,6 +118,35 @@ class UdpTakeSender(StreamSender):
                         self.port, exc)
 
 
+def serve_options(args, host) -> dict:
+    """The keyword arguments ``rtseg simulate mvn|mocopi`` gives a :class:`UdpTakeSender`
+    (``host``: a :class:`rtseg.commands.simulate.Host`): speed, loop, faults and
+    retargeting, and the suit when ``--suit`` names another than the default (its ids must
+    fit the format)."""
+    kw = dict(speed=args.speed, loop=args.loop, faults=args.faults or None, **host.retarget_kw)
+    if args.suit != "default17":
+        kw["suit"] = args.suit
+    return kw
+
+
+def serve_sender(args, host, sender: UdpTakeSender, port: int, url: str) -> tuple[str, list[str]]:
+    """Announce ``sender`` (what it sends where, the ``rtseg live`` URL that receives it),
+    run it until the take ends, ``--duration`` passes or Ctrl-C; (stop reason, summary
+    lines)."""
+    out = host.out
+    out(f"  {sender.describe()}")
+    how = getattr(sender, "transport", "udp")
+    out(f"{sender.name} sender: {len(sender.suit.bones)}-segment suit {sender.suit.name} to "
+        f"{how} {args.host}:{port} at {sender.rate:g} Hz (stream clock in take time), sent at "
+        f"x{sender.speed:g}" + (f"; faults {args.faults}" if args.faults else ""))
+    out(f"  receive it with: rtseg live {url}")
+    if how == "tcp":
+        out(f"  {'not waiting' if args.no_wait else 'waiting'} for the receiver to listen "
+            f"on tcp {args.host}:{port}" + (" (--no-wait)" if args.no_wait else ""))
+    reason, elapsed = host.drive(sender)
+    return reason, host.summary(sender, elapsed)
+
+
 def cli_take(args) -> Take:
     """The take of a sender's command line: ``--take`` read, or ``--script`` synthesised
     with ``--seed``."""
@@ -142,4 +171,4 @@ def cli_timing(p) -> None:
 
 
 __all__ = ["UdpTakeSender", "SentFrame", "retarget_filled", "feature_bones", "root_metres",
-           "cli_take", "cli_arguments", "cli_timing"]
+           "serve_options", "serve_sender", "cli_take", "cli_arguments", "cli_timing"]

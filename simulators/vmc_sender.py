@@ -45,7 +45,8 @@ from typing import Any
 
 import numpy as np
 
-from rtseg.drivers.osc.vmc.codec import DEFAULT_MAX_DATAGRAM, canonical_bone_name, encode_frame
+from rtseg.drivers.osc.vmc.codec import (DEFAULT_MAX_DATAGRAM, DEFAULT_PORT, canonical_bone_name,
+                                        encode_frame)
 from rtseg.core.profiles import SuitProfile, suit_profile
 from rtseg.simulators.retarget import ImuModel, retarget
 from rtseg.core.take import Take
@@ -177,7 +178,7 @@ class VmcSender(SenderThread):
     ``send_time``: include ``/VMC/Ext/T``; ``send_root``: include ``/VMC/Ext/Root/Pos``.
     """
 
-    def __init__(self, take: Take, host: str = "127.0.0.1", port: int = 39539,
+    def __init__(self, take: Take, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
                  rate: float | None = None, faults: Any = None, loop: bool = False, *,
                  speed: float = 1.0, suit: str | SuitProfile = "default17",
                  skeleton_map: str | None = None, joint_map: dict[str, str] | None = None,
@@ -334,12 +335,38 @@ def send_until_done(sender: SenderThread) -> None:
             pass
 
 
+def serve(args, take: Take, host) -> tuple[str, list[str]]:
+    """``rtseg simulate vmc``: send ``take`` (``host``: a
+    :class:`rtseg.commands.simulate.Host`); returns (stop reason, summary lines)."""
+    out = host.out
+    args.port = host.port(DEFAULT_PORT, faults=True)
+    sender = VmcSender(take, args.host, args.port, faults=args.faults or None, loop=args.loop,
+                       speed=args.speed, suit=args.suit, **host.retarget_kw)
+    out(f"  {sender.retargeted.describe(take.joint_names)}")
+    out(f"VMC sender: {len(sender.bone_names)} bones to udp {args.host}:{args.port} "
+        f"at {sender.rate:g} Hz (T in take seconds), sent at x{sender.speed:g}")
+    out(f"  receive it with: rtseg live \"osc://{args.host}:{args.port}?format=vmc"
+        f"&suit={sender.suit.name}\"")
+    reason, elapsed = host.drive(sender)
+    log = list(sender.sent_log)
+    sent = [f for f in log if not f.dropped]
+    lines = [f"sent {len(sent)} frames ({sum(f.datagrams for f in sent)} datagrams) in "
+             f"{elapsed:.2f} s; {len(log) - len(sent)} dropped by faults, "
+             f"{sum(1 for f in sent if f.corrupted)} corrupted, "
+             f"{sum(1 for f in sent if f.omitted)} with bones omitted, "
+             f"{sender.send_errors} send errors"]
+    if sent:
+        lines.append(f"take frames {sent[0].index}..{sent[-1].index}, "
+                     f"last T {sent[-1].source_time:.3f} s")
+    return reason, lines
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m rtseg.simulators.vmc_sender``: send a synthetic or recorded take."""
     p = take_parser("python -m rtseg.simulators.vmc_sender", "Send a take as VMC over OSC/UDP.")
     p.add_argument("--skeleton", help="ASF skeleton for --take .amc")
     p.add_argument("--host", default="127.0.0.1")
-    p.add_argument("--port", type=int, default=39539)
+    p.add_argument("--port", type=int, default=DEFAULT_PORT)
     p.add_argument("--rate", type=float, help="frames per second (default: the take's)")
     p.add_argument("--speed", type=float, default=1.0,
                    help="send this many times faster; /VMC/Ext/T keeps the take's clock")

@@ -69,12 +69,10 @@ from typing import Any, Callable
 from rtseg.core.take import Take
 
 DEVICES = ("serial", "vmc", "mvn", "mocopi", "rokoko", "axis")
-#: devices served by ``rtseg.simulators.<device>_sender.serve(args, take, host)`` (host: a
-#: :class:`Host`)
-SENDER_MODULES = {"rokoko": "rtseg.simulators.rokoko_sender",
-                  "axis": "rtseg.simulators.axis_sender"}
-#: default UDP port of each network device
-DEFAULT_PORTS = {"vmc": 39539, "mvn": 9763, "mocopi": 12351}
+#: the network devices, each sent by its simulator module's ``serve(args, take, host)``
+#: (host: a :class:`Host`); the serial pty is served here
+SENDER_MODULES = {device: f"rtseg.simulators.{device}_sender"
+                  for device in ("vmc", "mvn", "mocopi", "rokoko", "axis")}
 
 
 def register(subparsers: Any) -> None:
@@ -417,66 +415,6 @@ def _serve_serial(args, take: Take) -> tuple[str, list[str]]:
     return reason, lines
 
 
-def _serve_vmc(args, take: Take) -> tuple[str, list[str]]:
-    from rtseg.simulators.vmc_sender import VmcSender
-
-    host = Host(args)
-    args.port = host.port(DEFAULT_PORTS["vmc"], faults=True)
-    sender = VmcSender(take, args.host, args.port, faults=args.faults or None, loop=args.loop,
-                       speed=args.speed, suit=args.suit, **host.retarget_kw)
-    _out(f"  {sender.retargeted.describe(take.joint_names)}")
-    _out(f"VMC sender: {len(sender.bone_names)} bones to udp {args.host}:{args.port} "
-         f"at {sender.rate:g} Hz (T in take seconds), sent at x{sender.speed:g}")
-    _out(f"  receive it with: rtseg live \"osc://{args.host}:{args.port}?format=vmc"
-         f"&suit={sender.suit.name}\"")
-    reason, elapsed = host.drive(sender)
-    log = list(sender.sent_log)
-    sent = [f for f in log if not f.dropped]
-    lines = [f"sent {len(sent)} frames ({sum(f.datagrams for f in sent)} datagrams) in "
-             f"{elapsed:.2f} s; {len(log) - len(sent)} dropped by faults, "
-             f"{sum(1 for f in sent if f.corrupted)} corrupted, "
-             f"{sum(1 for f in sent if f.omitted)} with bones omitted, "
-             f"{sender.send_errors} send errors"]
-    if sent:
-        lines.append(f"take frames {sent[0].index}..{sent[-1].index}, last T {sent[-1].source_time:.3f} s")
-    return reason, lines
-
-
-def _serve_vendor(args, take: Take) -> tuple[str, list[str]]:
-    """``mvn`` / ``mocopi``: a UDP sender of that format (its own suit unless --suit names
-    another whose ids fit the format)."""
-    host = Host(args)
-    port = host.port(DEFAULT_PORTS[args.device], faults=True)
-    kw = dict(speed=args.speed, loop=args.loop, faults=args.faults or None,
-              **host.retarget_kw)
-    if args.suit != "default17":
-        kw["suit"] = args.suit
-    if args.device == "mvn":
-        from rtseg.simulators.mvn_sender import MvnSender
-        sender = MvnSender(take, args.host, port, character=args.character,
-                           transport=args.transport,
-                           wait_server=host.wait_for_peer() if args.transport == "tcp"
-                           else None, **kw)
-        query = [f"character={args.character}"] if args.character else []
-        query += ["transport=tcp"] if args.transport == "tcp" else []
-        url = f"mvn://{args.host}:{port}" + ("?" + "&".join(query) if query else "")
-    else:
-        from rtseg.simulators.mocopi_sender import MocopiSender
-        sender = MocopiSender(take, args.host, port, **kw)
-        url = f"mocopi://{args.host}:{port}"
-    _out(f"  {sender.describe()}")
-    how = getattr(sender, "transport", "udp")
-    _out(f"{sender.name} sender: {len(sender.suit.bones)}-segment suit {sender.suit.name} to "
-         f"{how} {args.host}:{port} at {sender.rate:g} Hz (stream clock in take time), sent at "
-         f"x{sender.speed:g}" + (f"; faults {args.faults}" if args.faults else ""))
-    _out(f"  receive it with: rtseg live {url}")
-    if how == "tcp":
-        _out(f"  {'not waiting' if args.no_wait else 'waiting'} for the receiver to listen "
-             f"on tcp {args.host}:{port}" + (" (--no-wait)" if args.no_wait else ""))
-    reason, elapsed = host.drive(sender)
-    return reason, host.summary(sender, elapsed)
-
-
 def run(args: argparse.Namespace) -> int:
     take, result = load(args)
     describe(take, result)
@@ -498,10 +436,7 @@ def run(args: argparse.Namespace) -> int:
     except ValueError:  # not the main thread
         pass
     try:
-        serve = {"serial": _serve_serial, "mvn": _serve_vendor,
-                 "mocopi": _serve_vendor}.get(args.device, _serve_vmc)
-        if args.device in SENDER_MODULES:
-            serve = _sender(args.device)
+        serve = _serve_serial if args.device == "serial" else _sender(args.device)
         reason, lines = serve(args, part)
     finally:
         for sig, handler in old.items():

@@ -59,6 +59,9 @@ from rtseg.core.frame import Frame
 
 _MISSING = object()
 
+#: UDP port of a VMC receiver ("Marionette") that no URL or option names otherwise
+DEFAULT_PORT = 39539
+
 
 #: Bundles remembered to recognise a truncated copy of one of them.
 RECENT_BUNDLES = 4
@@ -414,7 +417,7 @@ class VmcAssembler(VmcFrameRules):
 
 
 __all__ = [
-    "BONE_ADDRESS", "ROOT_ADDRESS", "TIME_ADDRESS", "OK_ADDRESS", "DEFAULT_MAX_DATAGRAM",
+    "BONE_ADDRESS", "ROOT_ADDRESS", "TIME_ADDRESS", "OK_ADDRESS", "DEFAULT_MAX_DATAGRAM", "DEFAULT_PORT",
     "HUMAN_BODY_BONES", "canonical_bone_name", "OscParseError", "OscMessage",
     "parse_message", "parse_packet", "encode_message", "encode_bundle", "pack_bundles",
     "encode_pose_message", "encode_frame", "VmcAssembler", "bundle_structure_error",
