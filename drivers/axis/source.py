@@ -69,7 +69,7 @@ from rtseg.drivers.axis.codec import BINARY_PORT, JOINTS, PARENTS, TEXT_PORT
 from rtseg.drivers.axis.frames import AxisFrames, TextStream, _BinaryAdapter
 from rtseg.drivers.osc.source import OscUdpSource
 from rtseg.drivers.osc.url import (DEFAULT_HOST, Network, allow_option, check_options,
-                                   number_option, parse_location, renamed, sender_allowed)
+                                   number_option, parse_location, sender_allowed)
 from rtseg.core.frame import Frame
 
 log = logging.getLogger("rtseg.drivers.axis")
@@ -306,8 +306,7 @@ def open_url(location: str, options: dict[str, str]) -> Source:
     unit = (options.get("unit") or "cm").lower()
     if unit not in UNITS:
         raise SourceError(f"axis:// unit={unit!r}: one of {', '.join(UNITS)}")
-    host, port = renamed("axis", parse_location, location,
-                         BINARY_PORT if fmt == "binary" else TEXT_PORT)
+    host, port = parse_location(location, BINARY_PORT if fmt == "binary" else TEXT_PORT, "axis")
     kw = dict(avatar=options.get("avatar") or None, order=order,
               rate=_num(options, "rate", 60.0), unit_scale=UNITS[unit], space=space,
               queue_size=_num(options, "queue", 256, int))

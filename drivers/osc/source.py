@@ -70,11 +70,11 @@ from typing import Any, Sequence
 
 from rtseg.core.frame import Frame
 from rtseg.drivers.base import FrameQueue, QueuedSource, SourceError
+from rtseg.drivers.osc.url import (DEFAULT_HOST, Network, allow_option, check_options, is_wide,
+                                   load_suit, number_option, parse_location, sender_allowed)
 from rtseg.drivers.osc.vmc.codec import DEFAULT_PORT, VmcAssembler
 from rtseg.drivers.osc.vrchat import DEFAULT_PORT as VRCHAT_PORT
 from rtseg.drivers.osc.vrchat import JOINT_NAMES as VRCHAT_JOINTS
-from rtseg.drivers.osc.url import (DEFAULT_HOST, Network, allow_option, check_options, is_wide,
-                                   load_suit, number_option, parse_location, sender_allowed)
 from rtseg.drivers.osc.vrchat import VrchatAssembler
 
 log = logging.getLogger("rtseg.drivers.osc")

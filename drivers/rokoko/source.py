@@ -41,7 +41,7 @@ from rtseg.drivers.rokoko.codec import (BODY_BONES, BODY_PARENTS, DEFAULT_PORT, 
                                         RokokoError, decode_packet)
 from rtseg.drivers.osc.source import OscUdpSource
 from rtseg.drivers.osc.url import (DEFAULT_HOST, Network, allow_option, check_options,
-                                   number_option, parse_location, renamed)
+                                   number_option, parse_location)
 from rtseg.core.frame import Frame
 
 log = logging.getLogger("rtseg.drivers.rokoko")
@@ -156,7 +156,7 @@ def _num(options: dict[str, str], key: str, default, kind=float):
 def open_url(location: str, options: dict[str, str]) -> RokokoSource:
     """Open ``rokoko://location?options`` (see module docstring)."""
     check_options("rokoko", options, OPTIONS)
-    host, port = renamed("rokoko", parse_location, location, DEFAULT_PORT)
+    host, port = parse_location(location, DEFAULT_PORT, "rokoko")
     allow = allow_option(options, "rokoko")
     return RokokoSource(host, port, actor=options.get("actor") or None,
                         rate=_num(options, "rate", 60.0),

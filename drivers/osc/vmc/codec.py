@@ -417,7 +417,8 @@ class VmcAssembler(VmcFrameRules):
 
 
 __all__ = [
-    "BONE_ADDRESS", "ROOT_ADDRESS", "TIME_ADDRESS", "OK_ADDRESS", "DEFAULT_MAX_DATAGRAM", "DEFAULT_PORT",
+    "BONE_ADDRESS", "ROOT_ADDRESS", "TIME_ADDRESS", "OK_ADDRESS", "DEFAULT_MAX_DATAGRAM",
+    "DEFAULT_PORT",
     "HUMAN_BODY_BONES", "canonical_bone_name", "OscParseError", "OscMessage",
     "parse_message", "parse_packet", "encode_message", "encode_bundle", "pack_bundles",
     "encode_pose_message", "encode_frame", "VmcAssembler", "bundle_structure_error",
