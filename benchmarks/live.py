@@ -556,6 +556,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="only the CPU cost of the live monitor: step 1 without it, then with "
                         "the monitor served and one page open in headless Chromium")
     args = p.parse_args(argv)
+    if args.repeat < 1:
+        p.error(f"--repeat must be at least 1, got {args.repeat}")
     logging.basicConfig(level=logging.ERROR, format="%(levelname)s %(name)s: %(message)s")
     if args.serve_suits:
         return serve_suits(args.serve_suits, args.rate)
@@ -581,8 +583,6 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             s.close()
     try:
-        if args.repeat < 1:
-            raise SystemExit("--repeat must be at least 1")
         log(f"1. 17-sensor suit at 120 Hz over a pty for {args.seconds:g} s"
             + (f", {args.repeat} runs" if args.repeat > 1 else "") + " ...")
         runs = [latency_and_cpu(args.seconds, port) for _ in range(args.repeat)]
