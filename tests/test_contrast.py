@@ -153,6 +153,37 @@ def test_causal_a_prefix_gives_the_cuts_already_sent(perf):
         assert part.trace == full.trace[:len(part.trace)]
 
 
+def _quiet_runs(det, X):
+    """Feed X; (cut frames by update number, quiet count before each update)."""
+    sent, quiet = [], []
+    for i, x in enumerate(X):
+        quiet.append(det.quiet_frames)
+        if det.update(x) is not None:
+            sent.append(i)
+    return sent, np.array(quiet)
+
+
+@pytest.mark.parametrize("kw", [{}, {"early_after_s": 1.0}, {"gate_threshold": 0.0},
+                                {"gate_threshold": 1e9}])
+def test_quiet_frames_never_hide_a_cut(perf, kw):
+    """quiet_frames is a promise the live loop relies on: none of the next that many
+    frames sends a cut (with the early look, without the gate, with a gate dropping
+    every cut).  Most frames are quiet, so the promise is worth having."""
+    _, X = perf
+    from rtseg.detectors import load_params
+    p = dict(load_params()["contrast"], **kw)
+    det = ContrastDetector.from_params(p, FR)
+    sent, quiet = _quiet_runs(det, X)
+    for i, q in enumerate(quiet):
+        assert not any(i <= c < i + q for c in sent), (i, q, sent)
+    assert (quiet > 0).mean() > 0.85          # about one frame in a step may send
+    assert quiet.max() == det.step + (0 if det.we else 1)
+    if kw.get("gate_threshold") == 1e9:
+        assert not sent and det.gate.dropped > 0     # held cuts were decided on time
+    else:
+        assert sent
+
+
 def test_offline_segment_runs_the_same_core(perf):
     _, X = perf
     live = make_online("contrast", FR).run(X)

@@ -55,6 +55,14 @@ class OnlineDetector:
     def restart(self) -> None:
         raise NotImplementedError
 
+    @property
+    def quiet_frames(self) -> int:
+        """How many of the next frames certainly reveal no cut, whatever they hold: the
+        live loop may read that many late, in one batch (``rtseg.live.loop``, "Quiet
+        frames").  0 (the default) when the detector cannot tell: every frame is read
+        as it arrives."""
+        return 0
+
     def _admit(self, x: np.ndarray) -> np.ndarray | None:
         """Validate one incoming frame: a 1-D float64 vector of the detector's width (the
         first frame fixes the width; ``self._alloc(dim)`` is called whenever the frame

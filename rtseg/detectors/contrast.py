@@ -236,6 +236,36 @@ class ContrastDetector(OnlineDetector):
         d = self.wb * self.step + self.peaks.full.hold + self.step
         return d if self.gate is None else max(d, self.gate.decide_after)
 
+    @property
+    def quiet_frames(self) -> int:
+        """How many of the next frames certainly send no cut (``OnlineDetector``).  A cut
+        goes out only on a frame that runs a look at a position, sends a queued cut or
+        decides a cut the gate holds.  Each frame runs one queued step (while no more than
+        a block's frames of them wait); the frame that completes a block queues a window
+        fit first and runs it, then the after window's fit (without the early look) and
+        the look.  So with no step queued the frames up to the block's completion are
+        quiet, and the one after it too without the early look (at most ``step`` + 1);
+        with steps queued, the frames that run the fits before the first look."""
+        if self._out or self._dim is None:
+            return 0
+        steps = self._steps
+        if not steps:
+            q = self.step - self._fill + (0 if self.we else 1)
+        elif len(steps) > self.step:
+            return 0
+        else:
+            model = self._model
+            q = 0
+            for fn, _args in steps:
+                if fn != model:
+                    break
+                q += 1
+        if self.gate is not None:
+            g = self.gate.quiet_frames(self._t)
+            if g is not None:
+                q = min(q, g)
+        return max(q, 0)
+
     # ------------------------------------------------------------------ state
     def restart(self) -> None:
         """Forget the current segment; the next frame starts a new one."""

@@ -120,6 +120,16 @@ class SameBehaviourGate:
             self._held.append(cut)
         return self.poll() if self._held or self._out else None
 
+    def quiet_frames(self, t: int) -> int | None:
+        """Of the frames from number ``t`` on (the next one the detector feeds), how many
+        come before one that decides or sends a cut: 0 when a cut waits to go out, None
+        when no cut is held."""
+        if self._out:
+            return 0
+        if not self._held:
+            return None
+        return max(0, self._held[0].frame + self.decide_after - t)
+
     def hold(self, cut: Cut) -> None:
         """A cut of the detector, to be decided once its new segment has arrived."""
         self._held.append(cut)
