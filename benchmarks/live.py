@@ -242,6 +242,8 @@ def run_suits(n: int, seconds: float, port: int, warmup: float = 2.0,
         def start_measuring() -> None:
             for s in sessions:
                 s.stats.frame_latency_ms.clear()
+                s.stats.open_latency_ms.clear()
+                marks[f"quiet{id(s)}"] = _quiet_counts(s)
             if meter is not None:
                 meter.reset()
             marks.update(cpu=time.process_time(), thread=time.clock_gettime(loop_clock),
@@ -262,14 +264,15 @@ def run_suits(n: int, seconds: float, port: int, warmup: float = 2.0,
         cpu = (time.process_time() - marks["cpu"]) / wall
     finally:
         suits.close()
-    lat = np.concatenate([s.stats.frame_latency_ms.values() for s in sessions])
+    lat = np.concatenate([s.stats.open_latency_ms.values() for s in sessions])
+    every = np.concatenate([s.stats.frame_latency_ms.values() for s in sessions])
     frames = sum(s.stats.frames_processed for s in sessions) - marks["frames"]
+    quiet = {k: sum(_quiet_counts(s)[k] - marks[f"quiet{id(s)}"][k] for s in sessions)
+             for k in ("batches", "frames", "late_open")}
     out = {"suits": n, "seconds": round(wall, 1),
            "cpu_fraction": round(cpu, 4), "cpu_fraction_per_suit": round(cpu / n, 4),
            "fps_per_suit": round(frames / wall / n, 1),
-           "latency_ms": {"p50": round(float(np.percentile(lat, 50)), 3),
-                          "p99": round(float(np.percentile(lat, 99)), 3),
-                          "max": round(float(lat.max()), 3)},
+           "latency_ms": _pcts(lat), "every_frame_latency_ms": _pcts(every), "quiet": quiet,
            "frames": int(frames), "dropped": int(sum(x.dropped for x in summaries)),
            "cuts": int(sum(x.cuts for x in summaries))}
     if meter is not None:
@@ -288,9 +291,12 @@ def sink() -> socket.socket:
     return s
 
 
-def config(port: int):
+def config(port: int, batch_quiet: bool = True):
+    """The session settings: defaults, OSC to ``port``; ``batch_quiet`` False reads every
+    frame as it arrives (``buffer.batch_quiet``)."""
     return from_dict({"output": {"osc": [f"127.0.0.1:{port}"]},
-                      "status": {"interval": 1.0}}, origin="benchmark")
+                      "status": {"interval": 1.0},
+                      "buffer": {"batch_quiet": batch_quiet}}, origin="benchmark")
 
 
 class PacedSource:
@@ -337,7 +343,7 @@ class PacedSource:
 
 
 def run_session(rate: float, seconds: float, port: int, warmup: float = 1.0,
-                kind: str = "serial", monitor: bool = False):
+                kind: str = "serial", monitor: bool = False, batch_quiet: bool = True):
     """Play the suit at ``rate`` for ``warmup + seconds``; latency statistics cover the
     last ``seconds`` only (start-up reads a burst of frames the pty buffered).
     ``monitor``: serve the live monitor (``rtseg.monitor``, in this process) and open its
@@ -357,15 +363,17 @@ def run_session(rate: float, seconds: float, port: int, warmup: float = 1.0,
             server = MonitorServer(feed, "127.0.0.1", 0)
             page = HeadlessPage(server.start())
             warmup = max(warmup, 3.0)
-        session = LiveSession(source, config(port), handle_signals=False,
+        session = LiveSession(source, config(port, batch_quiet), handle_signals=False,
                               duration=seconds + warmup, monitor=feed)
         marks: dict[str, float] = {}
 
         def start_measuring() -> None:
             session.stats.frame_latency_ms.clear()
+            session.stats.open_latency_ms.clear()
             session.stats.cut_latency_ms.clear()
             marks.update(cpu=time.process_time(), wall=time.monotonic(),
                          frames=session.stats.frames_received)
+            session.quiet_marks = _quiet_counts(session)
 
         timer = threading.Timer(warmup, start_measuring)
         timer.start()
@@ -389,14 +397,33 @@ def run_session(rate: float, seconds: float, port: int, warmup: float = 1.0,
     return session, summary, cpu, measured_fps
 
 
-def latency_and_cpu(seconds: float, port: int, monitor: bool = False) -> dict:
-    session, summary, cpu, fps = run_session(120.0, seconds, port, monitor=monitor)
-    lat = np.fromiter(session.stats.frame_latency_ms, float)
+def _quiet_counts(session) -> dict[str, int]:
+    st = session.stats
+    return {"batches": st.quiet_batches, "frames": st.quiet_frames, "late_open": st.late_open}
+
+
+def _pcts(lat: np.ndarray) -> dict[str, float]:
+    """p50 / p99 / max of latencies in ms (None when there are none)."""
+    if not lat.size:
+        return {"p50": None, "p99": None, "max": None}
+    return {"p50": round(float(np.percentile(lat, 50)), 3),
+            "p99": round(float(np.percentile(lat, 99)), 3), "max": round(float(lat.max()), 3)}
+
+
+def latency_and_cpu(seconds: float, port: int, monitor: bool = False,
+                    batch_quiet: bool = True) -> dict:
+    session, summary, cpu, fps = run_session(120.0, seconds, port, monitor=monitor,
+                                             batch_quiet=batch_quiet)
+    lat = np.fromiter(session.stats.open_latency_ms, float)
+    every = np.fromiter(session.stats.frame_latency_ms, float)
     cut_lat = np.fromiter(session.stats.cut_latency_ms, float)
+    now = _quiet_counts(session)
+    marks = getattr(session, "quiet_marks", {k: 0 for k in now})
     return {
-        "frames": len(lat), "rate": fps,
+        "frames": len(every), "open_frames": len(lat), "rate": fps,
         "p50": float(np.percentile(lat, 50)), "p99": float(np.percentile(lat, 99)),
-        "max": float(lat.max()),
+        "max": float(lat.max()), "every_frame": _pcts(every),
+        "quiet": {k: now[k] - marks[k] for k in now},
         "cut_latency": [round(float(x), 3) for x in cut_lat],
         "cpu_fraction": cpu, "dropped": summary.dropped, "cuts": summary.cuts,
     }
@@ -593,10 +620,21 @@ def main(argv: list[str] | None = None) -> int:
                 + "; the median run's figures follow")
         log(f"   {lc['frames']} frames measured ({lc['rate']:.1f}/s, after 1 s warm-up), "
             f"{lc['dropped']} dropped, {lc['cuts']} cuts")
-        log(f"   processing latency per frame (arrival -> processed/sent): "
-            f"p50 {lc['p50']:.3f} ms, p99 {lc['p99']:.3f} ms, max {lc['max']:.2f} ms")
+        ev, qt = lc["every_frame"], lc["quiet"]
+        log(f"   processing latency of the {lc['open_frames']} frames that could send "
+            f"(arrival -> processed/sent): p50 {lc['p50']:.3f} ms, p99 {lc['p99']:.3f} ms, "
+            f"max {lc['max']:.2f} ms")
+        log(f"   every frame, the quiet ones read in batches too: p50 {ev['p50']:.3f} ms, "
+            f"p99 {ev['p99']:.3f} ms, max {ev['max']:.2f} ms; {qt['frames']} quiet frames "
+            f"in {qt['batches']} batches, {qt['late_open']} frames that could send read late")
         log(f"   latency of the frames that sent a cut: {lc['cut_latency']} ms")
         log(f"   CPU: {lc['cpu_fraction'] * 100:.1f} % of one core")
+        log("   the same without quiet-frame batching (buffer.batch_quiet = false) ...")
+        unb = latency_and_cpu(args.seconds, port, batch_quiet=False)
+        log(f"   CPU: {unb['cpu_fraction'] * 100:.1f} % of one core "
+            f"(batched / unbatched {lc['cpu_fraction'] / unb['cpu_fraction']:.2f}); latency "
+            f"of the frames that could send p50 {unb['p50']:.3f} ms, p99 {unb['p99']:.3f} ms; "
+            f"every frame p99 {unb['every_frame']['p99']:.3f} ms")
         suits: dict[str, dict] = {}
         for n in [int(x) for x in args.suits.split(",") if x.strip()]:
             log(f"1b. {n} suit(s) at 120 Hz in one process, one thread, {args.seconds:g} s ...")
@@ -605,8 +643,10 @@ def main(argv: list[str] | None = None) -> int:
             log(f"   CPU {r['cpu_fraction']:.4f} of one core in all, "
                 f"{r['cpu_fraction_per_suit']:.4f} per suit; {r['fps_per_suit']:.1f} frames/s "
                 f"per suit; latency p50 {r['latency_ms']['p50']:.3f} ms, p99 "
-                f"{r['latency_ms']['p99']:.3f} ms, max {r['latency_ms']['max']:.2f} ms; "
-                f"{r['dropped']} dropped")
+                f"{r['latency_ms']['p99']:.3f} ms, max {r['latency_ms']['max']:.2f} ms "
+                f"(frames that could send; every frame p99 "
+                f"{r['every_frame_latency_ms']['p99']:.3f} ms); {r['dropped']} dropped, "
+                f"{r['quiet']['late_open']} read late")
         stages = wake = None
         if args.stage_seconds > 0:
             log(f"1c. cost per frame by stage (one suit, identity on, {args.stage_seconds:g} s) ...")
@@ -635,6 +675,12 @@ def main(argv: list[str] | None = None) -> int:
         s.close()
     result = {"latency_ms": {"p50": round(lc["p50"], 3), "p99": round(lc["p99"], 3),
                              "max": round(lc["max"], 3)},
+              "every_frame_latency_ms": lc["every_frame"], "quiet": lc["quiet"],
+              "unbatched": {"cpu_fraction": round(unb["cpu_fraction"], 4),
+                            "latency_ms": {"p50": round(unb["p50"], 3),
+                                           "p99": round(unb["p99"], 3),
+                                           "max": round(unb["max"], 3)},
+                            "every_frame_latency_ms": unb["every_frame"]},
               "detector_delay_ms": {m: round(v, 1) for m, v in delays.items()},
               "cpu_fraction": round(lc["cpu_fraction"], 4),
               "cpu_fraction_runs": [round(r["cpu_fraction"], 4) for r in runs], "suits": suits,

@@ -186,6 +186,13 @@ class Source:
         flush, a staleness check, a reconnect attempt); None when only input matters."""
         return None
 
+    def hold_frames(self) -> int:
+        """How many frames a polled source's input may wait unread in the kernel without
+        risk of loss, while the live loop sleeps through frames that cannot send anything
+        (``rtseg.live.loop``, "Quiet frames"); 0 (default): read every frame as it
+        arrives."""
+        return 0
+
     def poll(self, now: float) -> None:
         """Read without blocking whatever is waiting, decode it and queue the frames for
         ``take`` (``now``: ``time.monotonic()``).  Never raises because of the device."""

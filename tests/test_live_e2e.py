@@ -201,6 +201,46 @@ def test_serial_pty_to_osc_matches_offline(tmp_path, take):
     assert summary.cut_latency_ms_p50 is not None and summary.cut_latency_ms_p50 < 100
 
 
+@pytest.mark.parametrize("batch_quiet", [True, False])
+def test_quiet_frames_read_in_batches_give_the_same_cuts(tmp_path, take, batch_quiet):
+    """The default detector alone promises most frames quiet, and the loop reads those in
+    batches (rtseg.live.loop, "Quiet frames"): the cuts on the wire are still exactly the
+    offline ones, every frame is recorded, and only promised-quiet frames are counted as
+    batched.  Off (buffer.batch_quiet = false), no batch is read."""
+    rec = tmp_path / "session"
+    osc = OscCollector()
+    suit = SerialSuit(take, rate=RATE, speed=SPEED)
+    try:
+        path = suit.start()
+        cfg = session_config(rec, [osc.port], buffer={"batch_quiet": batch_quiet})
+        session = LiveSession(f"serial://{path}?rate={RATE:g}", cfg, handle_signals=False)
+        t, box = run_in_thread(session)
+        assert suit.wait_done(take.n_frames / (RATE * SPEED) + 10)
+        time.sleep(0.3)
+        session.stop("test done")
+        t.join(10)
+        assert not t.is_alive()
+        time.sleep(0.2)
+    finally:
+        suit.stop()
+        osc.close()
+    summary, st = box["summary"], session.stats
+    expected, tk = offline_cuts(rec, cfg)
+    assert tk.n_frames == summary.frames_received >= 0.98 * take.n_frames
+    assert len(expected) >= 2
+    assert_cuts_match(osc.cuts(), on_wire(expected, session), tk, "python-osc")
+    if batch_quiet:
+        # most frames are quiet (the detector looks once per 15 frames); with the suit at
+        # 4x its rate a batch holds up to 16 frames (the pty's 3 KB)
+        assert st.quiet_batches > 10
+        assert st.quiet_frames > 0.3 * summary.frames_received
+        assert st.quiet_frames + st.late_open <= summary.frames_received
+    else:
+        assert st.quiet_batches == st.quiet_frames == st.late_open == 0
+    # the frames that could send were processed as they came (their latency is measured)
+    assert 0 < len(st.open_latency_ms) < 0.5 * summary.frames_received
+
+
 def test_vmc_over_osc_to_osc_matches_offline(tmp_path, take):
     rec = tmp_path / "session"
     osc = OscCollector()

@@ -73,6 +73,10 @@ MAX_BAUD = 50_000_000
 #: while the device is away, its path is checked this often (s) to reopen it as soon as it
 #: is back
 POLL_S = 0.02
+#: bytes a polled port may leave waiting while the live loop reads quiet frames late, in
+#: one batch (``hold_frames``): three quarters of what a pty holds (about 4 KB); a USB
+#: serial adapter's kernel buffer holds far more
+HOLD_BYTES = 3072
 
 
 def _readable(fd: int) -> bool:
@@ -358,6 +362,15 @@ class SerialSource(QueuedSource):
 
     def poll_due(self) -> float | None:
         return self._poll_at
+
+    def hold_frames(self) -> int:
+        """Frames that may wait unread (``Source.hold_frames``): as many as ``HOLD_BYTES``
+        holds at the most bytes per frame of the last reads; 0 before the first frame and
+        while the device is away."""
+        if self._ser is None or not self._polled:
+            return 0
+        size = self._stream.frame_bytes
+        return int(HOLD_BYTES // size) if size > 0 else 0
 
     def poll(self, now: float) -> None:
         """Read what the port holds (or reopen a lost device when due), decode it."""

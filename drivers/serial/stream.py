@@ -109,6 +109,10 @@ class SuitStream:
         self._last_data = 0.0
         self._estimated = 0       # damaged messages counted in dropped as an estimate
         self._events: collections.deque[SensorEvent] = collections.deque(maxlen=4096)
+        #: bytes per frame of the last reads that held a frame (all their bytes over their
+        #: frames: status, info and garbage count too)
+        self._read_sizes: collections.deque[float] = collections.deque(maxlen=64)
+        self._frames_put = 0
 
     # ------------------------------------------------------------------ public API
 
@@ -127,6 +131,12 @@ class SuitStream:
                 break
         return out
 
+    @property
+    def frame_bytes(self) -> float:
+        """The most bytes per frame over the last 64 reads that held a frame (0 before the
+        first): what a frame costs the port's buffer."""
+        return max(self._read_sizes, default=0.0)
+
     def restart(self, now: float) -> None:
         """The port was (re)opened: a half-received message is dropped."""
         self.decoder.reset()
@@ -137,7 +147,10 @@ class SuitStream:
         past a third of a frame period is closed), then check the sensors' staleness."""
         if data:
             self._last_data = now
+            before = self._frames_put
             self._handle(self.decoder.feed(data), now)
+            if self._frames_put > before:
+                self._read_sizes.append(len(data) / (self._frames_put - before))
         elif (self.fmt == "text" and self.decoder.has_partial
               and now - self._last_data > 1.0 / (3.0 * self.frame_rate)):
             self._handle(self.decoder.flush(), now)
@@ -257,6 +270,7 @@ class SuitStream:
             if self._any_lost:
                 self._restore(np.flatnonzero(self._lost), now)
             np.copyto(self._state, m.quats)
+            self._frames_put += 1
             self._put(Frame(recv_time=now, quats=m.quats, valid=m.valid,
                             source_time=src_time, seq=m.seq))
             return
@@ -276,6 +290,7 @@ class SuitStream:
                 back = j[self._lost[j]]
                 if len(back):
                     self._restore(back, now)
+        self._frames_put += 1
         self._put(Frame(recv_time=now, quats=self._state.copy(), valid=valid,
                         source_time=src_time, seq=m.seq))
 

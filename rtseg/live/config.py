@@ -230,6 +230,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                    "frames are dropped, oldest first (0 = never drop)"),
         "blas_threads": Key("int", 1, _range(0, 1024),
                             doc="BLAS threads while the session runs (0 = leave as is)"),
+        "batch_quiet": Key("bool", True,
+                           doc="frames that cannot send anything are read late, in one "
+                               "batch (rtseg.live.loop, 'Quiet frames'); false = every "
+                               "frame is read as it arrives"),
     },
 }
 

@@ -35,6 +35,26 @@ Either way the ring buffer holds every frame received in arrival order; the reco
 gets every frame before it is appended, so ``replay_session`` of a recording reproduces
 the live cuts.
 
+Quiet frames
+------------
+Most frames cannot send anything: the contrast detector looks at a new position once per
+``step_s`` (every 15th frame at 120 Hz), and a cut goes out only on a frame that runs a
+look, sends a queued cut or decides a cut its gate holds.  After each step a polled
+session says how many of the next frames are certainly quiet
+(``Pipeline.quiet_frames``, at most what the source's buffer holds:
+``Source.hold_frames``) and until when its source may be left unread
+(``LiveSession._quiet_until``: half a frame period before the last quiet frame is due,
+at most ``MAX_DEFER_S``); the loop then watches its descriptors for errors and hang-ups
+only (:meth:`SessionLoop.quiet`) and reads the frames that arrived, in one batch, when
+that time comes.  The frames that may send are read as they arrive, so no cut, no OSC
+message waits; what is saved is the wake-ups in between (each costs reloading the
+interpreter's working set into a cold cache, several times a frame's arithmetic).
+Batched frames are stamped when read (``recv_time``), up to ``MAX_DEFER_S`` after they
+arrived, which the session's clock does not see when frames carry a source time (it
+places frames by the source clock); so only frames with a source clock are batched.
+Off with ``buffer.batch_quiet = false``, with behaviour identity (its decisions fall on
+any frame) and with the live monitor on (its plots move as frames are processed).
+
 Several sessions in one loop each keep their own source, pipeline (features, detectors,
 identity), ring buffer, publishers, recording and counters; they share the thread, the
 process's signal handling (SIGINT/SIGTERM stop every session), the BLAS thread limit and
@@ -64,6 +84,10 @@ PUMP_EVERY_S = 0.001
 
 #: with several sessions, the longest one processes before the next one's turn, s
 TURN_S = 0.002
+
+#: longest a source is left unread while its frames cannot send anything, s
+#: (``LiveSession._quiet_until``; well under ``gaps.max_seconds`` and the staleness times)
+MAX_DEFER_S = 0.1
 
 _READ = select.POLLIN | select.POLLPRI | select.POLLERR | select.POLLHUP
 
@@ -128,6 +152,9 @@ class SessionLoop:
         self._polled: list[Any] = []            # sessions whose source this loop reads
         self._woken: list[Any] = []             # sessions whose source's thread wakes it
         self._last_pump = 0.0
+        #: id(session) -> monotonic time until which its source is left unread (quiet
+        #: frames); its descriptors are watched for errors and hang-ups only meanwhile
+        self._quiet: dict[int, float] = {}
         #: longest a session processes in one turn when there are several (s; None for
         #: one): the others' frames wait at most about that long per session
         self.turn_s: float | None = TURN_S if len(self.sessions) > 1 else None
@@ -142,6 +169,7 @@ class SessionLoop:
 
     def drop(self, session: Any) -> None:
         """Stop watching ``session``'s source (it has stopped)."""
+        self._quiet.pop(id(session), None)
         if session in self._polled:
             self._polled.remove(session)
         if session in self._woken:
@@ -167,6 +195,7 @@ class SessionLoop:
             fds = ()
         if self._watched.get(id(session)) == fds:
             return                             # the usual case: nothing changed
+        self.resume(session)                   # a reopened device is read at once
         self._watched[id(session)] = fds
         want = set(fds)
         have = {fd for fd, s in self._fds.items() if s is session}
@@ -177,6 +206,42 @@ class SessionLoop:
                 continue
             self._fds[fd] = session
             self._poller.register(fd, _READ)
+
+    # ------------------------------------------------------------------ quiet frames
+    def quiet(self, session: Any, until: float) -> None:
+        """Leave the polled ``session``'s source unread until ``until`` (monotonic s): its
+        next frames cannot send anything (module docstring, "Quiet frames")."""
+        if session not in self._polled or id(session) in self._quiet:
+            return
+        fds = self._watched.get(id(session), ())
+        if not fds:
+            return
+        self._quiet[id(session)] = until
+        for fd in fds:
+            self._poller.modify(fd, 0)         # errors and hang-ups still wake the loop
+
+    def is_quiet(self, session: Any) -> bool:
+        """Whether ``session``'s source is being left unread (``quiet``)."""
+        return id(session) in self._quiet
+
+    def resume(self, session: Any) -> None:
+        """Read ``session``'s source as frames arrive again."""
+        if self._quiet.pop(id(session), None) is None:
+            return
+        for fd in self._watched.get(id(session), ()):
+            if self._fds.get(fd) is session:
+                self._poller.modify(fd, _READ)
+
+    def _quiet_now(self, session: Any, now: float) -> bool:
+        """Whether ``session``'s source is still left unread at ``now`` (resumed once its
+        time has come)."""
+        until = self._quiet.get(id(session))
+        if until is None:
+            return False
+        if now < until:
+            return True
+        self.resume(session)
+        return False
 
     # ------------------------------------------------------------------ reading
     def wait(self, timeout: float) -> set[Any]:
@@ -200,6 +265,7 @@ class SessionLoop:
             if ev & select.POLLNVAL:           # closed under us: forget it
                 self._unregister(fd)
                 self._watched.pop(id(s), None)     # looked at again after the next poll
+            self.resume(s)                     # an error or hang-up is read at once
             ready.add(s)
         return ready
 
@@ -211,6 +277,12 @@ class SessionLoop:
         for s in self._polled:
             if s in ready:
                 s._poll_source(now)
+                self.sync(s)
+                continue
+            if self._quiet and id(s) in self._quiet:
+                if self._quiet_now(s, now):
+                    continue
+                s._read_quiet(now)             # the quiet frames, in one batch
                 self.sync(s)
                 continue
             try:
@@ -239,6 +311,10 @@ class SessionLoop:
         most)."""
         wait = MAX_WAIT_S
         for s in self._polled:
+            until = self._quiet.get(id(s)) if self._quiet else None
+            if until is not None:
+                wait = min(wait, until - now)
+                continue
             try:
                 due = s.source.poll_due()
             except Exception:                  # pragma: no cover - a driver bug
@@ -321,6 +397,10 @@ def run_sessions(sessions: Sequence[Any], handle_signals: bool = True) -> list[A
                     running.remove(s)
                     loop.drop(s)
                     summaries[id(s)] = s._finish()
+                elif s._polled and not loop.is_quiet(s):
+                    until = s._quiet_until(time.monotonic())
+                    if until is not None:
+                        loop.quiet(s, until)
     finally:
         for s in started:
             if id(s) not in summaries:
@@ -335,4 +415,4 @@ def run_sessions(sessions: Sequence[Any], handle_signals: bool = True) -> list[A
     return [summaries[id(s)] for s in sessions]
 
 
-__all__ = ["MAX_WAIT_S", "PUMP_EVERY_S", "TURN_S", "SessionLoop", "Waker", "run_sessions"]
+__all__ = ["MAX_DEFER_S", "MAX_WAIT_S", "PUMP_EVERY_S", "TURN_S", "SessionLoop", "Waker", "run_sessions"]

@@ -419,6 +419,16 @@ class Pipeline:
                                 index, type(exc).__name__, exc, n)
         return out
 
+    def quiet_frames(self) -> int:
+        """How many of the next received frames certainly reveal no cut and no behaviour
+        message: the fewest of the detectors' ``quiet_frames``; 0 with behaviour identity
+        on (its decisions fall on any frame) or without detectors.  A bridged gap feeds the
+        detectors more frames than arrived, so a decision can come sooner than counted:
+        the live loop reads quiet frames at most ``rtseg.live.loop.MAX_DEFER_S`` late."""
+        if self.identity is not None or not self.detectors:
+            return 0
+        return min(int(getattr(d, "quiet_frames", 0)) for d in self.detectors.values())
+
     def _to_session(self, method: str, cut: Cut, index: int) -> PipelineCut | None:
         """Map the detector's frame numbers to session indices.
 

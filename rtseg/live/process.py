@@ -53,6 +53,8 @@ class SessionProcessing:
             self._warn("overrun", "processing fell behind: %d frames overwritten before use "
                        "(treated as a gap)", w.lost)
         pending = self._pending_lost + w.lost     # frames missing before the next processed
+        quiet = pipe.quiet_frames()               # the first this many cannot send
+        open_lat = st.open_latency_ms
         recv_all = w.recv_time
         n = len(w)
         i = 0
@@ -103,6 +105,8 @@ class SessionProcessing:
                     self._emit(self._behaviour_event(d))
             done = time.monotonic()
             st.frame_latency_ms.append((done - recv) * 1000.0)
+            if i > quiet:
+                open_lat.append((done - recv) * 1000.0)
             # cost of one frame (s), a running mean over about 64 frames
             self._frame_cost += (done - now - self._frame_cost) / 64.0
             now = done
@@ -118,6 +122,8 @@ class SessionProcessing:
             st.lag_s = now - float(recv_all[i - 1])
             st.max_lag_s = max(st.max_lag_s, st.lag_s)
             self._last_recv = float(recv_all[i - 1])
+            last_src = float(w.source_time[i - 1])
+            self._last_clocked = last_src == last_src      # not NaN: the frame had a time
             self._last_index = w.start + i - 1
 
 

@@ -83,6 +83,12 @@ class LiveStats:
     last_cut: CutEvent | None = None
     cut_latency_ms: FloatRing = field(default_factory=lambda: FloatRing(100_000))
     frame_latency_ms: FloatRing = field(default_factory=lambda: FloatRing(200_000))
+    #: arrival -> end of processing of the frames that could send something (those not
+    #: promised quiet by ``Pipeline.quiet_frames``: read as they arrive, rtseg.live.loop)
+    open_latency_ms: FloatRing = field(default_factory=lambda: FloatRing(200_000))
+    quiet_batches: int = 0       # reads of a source left unread while its frames were quiet
+    quiet_frames: int = 0        # frames those reads took that had been promised quiet
+    late_open: int = 0           # frames those reads took beyond the promise (read late)
 
 
 @dataclass
