@@ -235,6 +235,10 @@ def test_quiet_frames_read_in_batches_give_the_same_cuts(tmp_path, take, batch_q
         assert st.quiet_batches > 10
         assert st.quiet_frames > 0.3 * summary.frames_received
         assert st.quiet_frames + st.late_open <= summary.frames_received
+        assert summary.quiet == {"batches": st.quiet_batches, "frames": st.quiet_frames,
+                                 "late_open": st.late_open}
+        assert f"{st.quiet_frames} quiet frames read in {st.quiet_batches} batches" in \
+            summary.text()
     else:
         assert st.quiet_batches == st.quiet_frames == st.late_open == 0
     # the frames that could send were processed as they came (their latency is measured)

@@ -527,6 +527,8 @@ class LiveSession(SessionInput, SessionProcessing, SessionEvents, SessionHealth)
             latency_ms_p50=percentile(st.frame_latency_ms, 50),
             latency_ms_p99=percentile(st.frame_latency_ms, 99),
             latency_frames=len(st.frame_latency_ms),
+            quiet={"batches": st.quiet_batches, "frames": st.quiet_frames,
+                   "late_open": st.late_open},
             cut_latency_ms_p50=percentile(st.cut_latency_ms, 50),
             cut_latency_ms_p99=percentile(st.cut_latency_ms, 99),
             recording=str(rec) if rec else None,

@@ -136,6 +136,9 @@ class SessionSummary:
     latency_ms_p50: float | None = None
     latency_ms_p99: float | None = None
     latency_frames: int = 0
+    #: quiet frames read late, in one batch (``rtseg.live.loop``): ``batches``, ``frames``
+    #: (promised quiet) and ``late_open`` (frames that could send, read in a batch)
+    quiet: dict[str, int] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -164,12 +167,21 @@ class SessionSummary:
                 + identity_text(self.identity) +
                 f"processing latency {lat}, "
                 f"max lag {self.max_lag_ms:.1f} ms"
+                + quiet_text(self.quiet)
                 + gaps_text(self.pipeline)
                 + source_losses_text(self.source_stats)
                 + recording_text(self))
 
     def cut_latency_items(self) -> list[tuple[str, int]]:
         return sorted(self.cuts_by_method.items())
+
+
+def quiet_text(quiet: dict[str, int]) -> str:
+    """The summary's words for the quiet frames read in batches ('' when none were)."""
+    if not quiet.get("batches"):
+        return ""
+    return (f", {quiet['frames']} quiet frames read in {quiet['batches']} batches"
+            f" ({quiet.get('late_open', 0)} that could send read late)")
 
 
 #: source counters of refused or lost input, as the summary names them
