@@ -2,7 +2,8 @@
 events -> publishers.  ``session`` holds :class:`LiveSession`; ``loop`` runs sessions on one
 thread (``run_sessions``); ``pipeline`` the per-frame pipeline it shares with offline
 replay (``replay``: recorded frames or a session folder through it); ``intake``,
-``process``, ``emitter``, ``health`` its frame intake, processing step, events and health;
+``process``, ``quiet``, ``emitter``, ``health`` its frame intake, processing step,
+quiet-frame batching, events and health;
 ``config`` the ``config/live.toml`` schema; ``outputs`` the publishers of ``[output]``;
 ``stats`` the run-time counters; ``rate_check`` the declared-frame-rate check.
 

@@ -43,7 +43,7 @@ look, sends a queued cut or decides a cut its gate holds.  After each step a pol
 session says how many of the next frames are certainly quiet
 (``Pipeline.quiet_frames``, at most what the source's buffer holds:
 ``Source.hold_frames``) and until when its source may be left unread
-(``LiveSession._quiet_until``: half a frame period before the last quiet frame is due,
+(``rtseg.live.quiet``: half a frame period before the last quiet frame is due,
 at most ``MAX_DEFER_S``); the loop then watches its descriptors for errors and hang-ups
 only (:meth:`SessionLoop.quiet`) and reads the frames that arrived, in one batch, when
 that time comes.  The frames that may send are read as they arrive, so no cut, no OSC
@@ -86,7 +86,7 @@ PUMP_EVERY_S = 0.001
 TURN_S = 0.002
 
 #: longest a source is left unread while its frames cannot send anything, s
-#: (``LiveSession._quiet_until``; well under ``gaps.max_seconds`` and the staleness times)
+#: (``rtseg.live.quiet``; well under ``gaps.max_seconds`` and the staleness times)
 MAX_DEFER_S = 0.1
 
 _READ = select.POLLIN | select.POLLPRI | select.POLLERR | select.POLLHUP

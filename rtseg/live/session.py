@@ -113,10 +113,11 @@ import numpy as np
 
 from rtseg.live.clock import SessionClock
 from rtseg.live.emitter import Event, SessionEvents
-from rtseg.live.loop import MAX_DEFER_S, run_sessions
+from rtseg.live.loop import run_sessions
 from rtseg.live.health import SessionHealth
 from rtseg.live.intake import HAND_BACK_DROPS, SessionInput
 from rtseg.live.process import SessionProcessing
+from rtseg.live.quiet import SessionQuiet
 from rtseg.live.outputs import build_publishers, log_publishers, wire_methods
 from rtseg.live.pipeline import (DEFAULT_FRAME_RATE, Pipeline, PipelineCut, PipelineStats,
                                  detector_params, make_detectors)
@@ -159,7 +160,7 @@ def with_suit(url: str, suit: str) -> str:
     return url + ("&" if parts.query else "?") + f"suit={suit}"
 
 
-class LiveSession(SessionInput, SessionProcessing, SessionEvents, SessionHealth):
+class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, SessionHealth):
     """One live segmentation session.
 
     source: a URL for ``rtseg.drivers.open_source`` or an opened ``Source``.
@@ -341,12 +342,7 @@ class LiveSession(SessionInput, SessionProcessing, SessionEvents, SessionHealth)
         self._pending_lost = 0
         self._frame_cost = 0.0
         self._max_batch = int(self.config["buffer.max_batch"])
-        self._batch_quiet = bool(self.config["buffer.batch_quiet"])
-        self._last_clocked = False               # the last frame processed had a source time
-        self._rate_ref: tuple[float, int] | None = None   # (recv time, index) a second ago
-        self._arrival_period: float | None = None  # s between frames over the last second
-        self._quiet_from = 0                      # ring index of the first frame left unread
-        self._quiet_promised = 0                  # ... and how many of them are quiet
+        self._begin_quiet()
         self._deadline: float | None = None      # set when the input starts
         self._cursor = self.ring.cursor(0)
         self._got: list[Any] = []
@@ -361,53 +357,6 @@ class LiveSession(SessionInput, SessionProcessing, SessionEvents, SessionHealth)
         if self._deadline is not None:
             wait = min(wait, self._deadline - now)
         return wait
-
-    def _quiet_until(self, now: float) -> float | None:
-        """Until when (monotonic s) the loop may leave this session's source unread: the
-        frames due before then cannot send anything (``rtseg.live.loop``, "Quiet
-        frames").  None: read as frames arrive (frames waiting, a source read by a
-        thread or one that cannot hold frames, frames without a source clock, identity
-        or the monitor on, ``buffer.batch_quiet`` off, or too few quiet frames)."""
-        if (not self._batch_quiet or not self._polled or self.monitor is not None
-                or self._last_recv is None or not self._last_clocked
-                or self._cursor.backlog > 0 or self._stop.is_set()):
-            return None
-        # frames come at the nominal rate or faster (a replay sped up): the shorter period
-        # of the two, the measured one over a second or more (none before that)
-        ref = self._rate_ref
-        if ref is None or self._last_index <= ref[1]:
-            self._rate_ref = (self._last_recv, self._last_index)
-        elif self._last_recv - ref[0] >= 1.0:
-            self._arrival_period = (self._last_recv - ref[0]) / (self._last_index - ref[1])
-            self._rate_ref = (self._last_recv, self._last_index)
-        if self._arrival_period is None:
-            return None
-        period = min(1.0 / self.frame_rate, self._arrival_period)
-        try:
-            hold = int(self.source.hold_frames())
-        except Exception:                      # pragma: no cover - a driver bug
-            return None
-        q = min(self.pipeline.quiet_frames(), hold)
-        # the loop wakes half a period before the last quiet frame is due, so the frame
-        # after it (which may send) is read as it arrives even when it comes up to 1.5
-        # periods early
-        until = self._last_recv + min((q - 0.5) * period, MAX_DEFER_S)
-        if until - now < 2.0 * period:
-            return None
-        self._quiet_from = self.ring.head
-        self._quiet_promised = q
-        return until
-
-    def _read_quiet(self, now: float) -> None:
-        """The loop's read of what arrived while the source was left unread: counted in
-        ``quiet_batches`` / ``quiet_frames``, and frames beyond the promised quiet ones
-        (which could send, and so were read late) in ``late_open``."""
-        self._poll_source(now)
-        st = self.stats
-        n = self.ring.head - self._quiet_from
-        st.quiet_batches += 1
-        st.quiet_frames += min(n, self._quiet_promised)
-        st.late_open += max(0, n - self._quiet_promised)
 
     def _due(self, now: float) -> bool:
         """Whether the loop's wake-up concerns this session: frames wait, its status or
