@@ -71,11 +71,16 @@ def test_polled_serial_source_reads_every_frame_and_reconnects_after_an_unplug(t
     src = open_source(f"serial://{suit.path}?stale=0.1")
     try:
         assert src.wait_connected(2.0)
+        assert src.hold_frames() == 0          # read by its thread: nothing may wait
         assert src.take_over() is True
+        assert src.hold_frames() == 0          # no frame yet: its size is unknown
         assert not [t for t in threading.enumerate() if t.name.startswith("rtseg-serial /")]
         suit.begin()
         frames = poll_frames(src, lambda fr: len(fr) >= 100)
         assert len(frames) >= 100
+        # what may wait unread for the loop's quiet-frame batching: 3 KB of 184-byte
+        # frames (fewer when a read held an info message too)
+        assert 8 <= src.hold_frames() <= 3072 // 184
         # in order, none missing, values as sent (Q14 resolution)
         seqs = [f.seq for f in frames]
         assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))
