@@ -418,3 +418,61 @@ def test_the_wake_up_pipe_never_loses_a_wake_up():
         assert timeouts == 0, f"{timeouts} waits of 200 ms ran out while woken every 0.2 ms"
     finally:
         w.close()
+
+
+class _PipeSource:
+    """A polled source on a pipe: its read end is the descriptor the loop watches."""
+
+    def __init__(self) -> None:
+        import os
+        self.rfd, self.wfd = os.pipe()
+
+    def poll_fds(self) -> tuple[int, ...]:
+        return (self.rfd,)
+
+    def poll_due(self):
+        return None
+
+
+class _PolledSession:
+    def __init__(self) -> None:
+        self.source = _PipeSource()
+        self.reads: list[str] = []
+
+    def _poll_source(self, now: float) -> None:
+        self.reads.append("poll")
+
+    def _read_quiet(self, now: float) -> None:
+        self.reads.append("quiet")
+
+
+def test_loop_leaves_a_quiet_source_unread_until_its_time_or_a_hang_up():
+    """SessionLoop.quiet: input waiting on a quiet source wakes nothing until the time
+    given, then the source is read once as a batch and watched again; a hang-up (or error)
+    on it ends the quiet at once."""
+    import os
+    from rtseg.live.loop import SessionLoop
+    s = _PolledSession()
+    loop = SessionLoop([s])
+    try:
+        loop.add_polled(s)
+        os.write(s.source.wfd, b"x")
+        assert loop.wait(0.0) == {s}                    # watched: input wakes the loop
+        now = time.monotonic()
+        loop.quiet(s, now + 0.2)
+        assert loop.is_quiet(s)
+        assert 0.015 < loop.next_due(now + 0.18) <= 0.02  # the loop wakes at its time
+        t0 = time.monotonic()
+        assert loop.wait(0.1) == set()                   # the byte waits unread
+        assert time.monotonic() - t0 >= 0.09
+        loop.read_sources(set(), time.monotonic())
+        assert s.reads == [] and loop.is_quiet(s)        # not before its time
+        loop.read_sources(set(), now + 0.2)
+        assert s.reads == ["quiet"] and not loop.is_quiet(s)
+        assert loop.wait(0.0) == {s}                     # watched again
+        loop.quiet(s, time.monotonic() + 10.0)
+        os.close(s.source.wfd)                           # the device goes away
+        assert loop.wait(1.0) == {s} and not loop.is_quiet(s)
+    finally:
+        loop.close()
+        os.close(s.source.rfd)
