@@ -105,6 +105,31 @@ def test_decision_sent_once_within_the_bound():
         assert i <= due + tr.block, f"segment {seg} decided at {i}, due at {due}"
 
 
+@pytest.mark.parametrize("seed", [2, 5])
+def test_quiet_frames_hide_no_cut_and_no_behaviour_message(seed):
+    """Pipeline.quiet_frames with identity on: none of the next that many frames reveals
+    a cut or makes an identity message (the live loop reads them late, in one batch);
+    about one frame in a block of each may, so most frames are still quiet."""
+    res = synthesize(SCRIPT, seed=seed)
+    from rtseg.live.pipeline import Pipeline
+    take = res.take
+    fr = take.frame_rate
+    pipe = Pipeline(take.joint_names, take.parents, take.space, fr,
+                    _config(threshold=SYNTH_THRESHOLD, decide_after_s=1.5))
+    quiet, out = [], []
+    ok = np.ones(take.n_joints, bool)
+    for i in range(take.n_frames):
+        quiet.append(pipe.quiet_frames())
+        cuts = pipe.process(i, take.quats[i], ok, i, i / fr, 0, i / fr)
+        messages = pipe.identity.drain()
+        if cuts or messages:
+            out.append(i)
+    assert len(out) >= 4
+    for i, q in enumerate(quiet):
+        assert not any(i <= o < i + q for o in out), (i, q, out)
+    assert np.mean(np.array(quiet) > 0) > 0.7
+
+
 def _blob(rng, n, basis, scale):
     z = rng.standard_normal((n, basis.shape[1])) * scale
     return z @ basis.T + 0.01 * rng.standard_normal((n, basis.shape[0]))

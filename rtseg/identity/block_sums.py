@@ -59,6 +59,12 @@ class BlockSums:
         self._fill = 0
         return True
 
+    @property
+    def to_complete(self) -> int:
+        """Rows still to add before the block being filled completes (``block`` when none
+        is being filled)."""
+        return self.block - self._fill
+
     def complete(self) -> int:
         """Absolute index one past the last complete block."""
         return self.started - (1 if self._fill else 0)

@@ -224,6 +224,17 @@ class IdentityTracker:
         """Blocks of a new segment summed before its first decision attempt."""
         return self._id_blocks
 
+    @property
+    def quiet_frames(self) -> int:
+        """How many of the next fed rows certainly make no decision (the live loop reads
+        quiet frames late, in one batch: ``rtseg.live.loop``).  A decision is made only
+        when a row completes a block (``update``) or with a cut (``on_cut``, on a frame
+        the detector does not promise quiet), so the rows before the one that completes
+        the block being filled are quiet; 0 before the first row."""
+        if self._d == 0:
+            return 0
+        return self._sums.to_complete - 1
+
     # ------------------------------------------------------------------ streaming state
     def _init(self, d: int) -> None:
         self._d = d

@@ -39,7 +39,8 @@ Quiet frames
 ------------
 Most frames cannot send anything: the contrast detector looks at a new position once per
 ``step_s`` (every 15th frame at 120 Hz), and a cut goes out only on a frame that runs a
-look, sends a queued cut or decides a cut its gate holds.  After each step a polled
+look, sends a queued cut or decides a cut its gate holds; behaviour identity decides only
+when a block of its own completes or with a cut.  After each step a polled
 session says how many of the next frames are certainly quiet
 (``Pipeline.quiet_frames``, at most what the source's buffer holds:
 ``Source.hold_frames``) and until when its source may be left unread
@@ -52,8 +53,8 @@ interpreter's working set into a cold cache, several times a frame's arithmetic)
 Batched frames are stamped when read (``recv_time``), up to ``MAX_DEFER_S`` after they
 arrived, which the session's clock does not see when frames carry a source time (it
 places frames by the source clock); so only frames with a source clock are batched.
-Off with ``buffer.batch_quiet = false``, with behaviour identity (its decisions fall on
-any frame) and with the live monitor on (its plots move as frames are processed).
+Off with ``buffer.batch_quiet = false`` and with the live monitor on (its plots move as
+frames are processed).
 
 Several sessions in one loop each keep their own source, pipeline (features, detectors,
 identity), ring buffer, publishers, recording and counters; they share the thread, the

@@ -421,13 +421,16 @@ class Pipeline:
 
     def quiet_frames(self) -> int:
         """How many of the next received frames certainly reveal no cut and no behaviour
-        message: the fewest of the detectors' ``quiet_frames``; 0 with behaviour identity
-        on (its decisions fall on any frame) or without detectors.  A bridged gap feeds the
-        detectors more frames than arrived, so a decision can come sooner than counted:
-        the live loop reads quiet frames at most ``rtseg.live.loop.MAX_DEFER_S`` late."""
-        if self.identity is not None or not self.detectors:
+        message: the fewest of the detectors' and the identity tracker's
+        ``quiet_frames``; 0 without detectors.  A bridged gap feeds the detectors more
+        frames than arrived, so a decision can come sooner than counted: the live loop
+        reads quiet frames at most ``rtseg.live.loop.MAX_DEFER_S`` late."""
+        if not self.detectors:
             return 0
-        return min(int(getattr(d, "quiet_frames", 0)) for d in self.detectors.values())
+        q = min(int(getattr(d, "quiet_frames", 0)) for d in self.detectors.values())
+        if self.identity is not None:
+            q = min(q, int(getattr(self.identity, "quiet_frames", 0)))
+        return q
 
     def _to_session(self, method: str, cut: Cut, index: int) -> PipelineCut | None:
         """Map the detector's frame numbers to session indices.

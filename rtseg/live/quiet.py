@@ -30,8 +30,8 @@ class SessionQuiet:
         """Until when (monotonic s) the loop may leave this session's source unread: the
         frames due before then cannot send anything (``rtseg.live.loop``, "Quiet
         frames").  None: read as frames arrive (frames waiting, a source read by a
-        thread or one that cannot hold frames, frames without a source clock, identity
-        or the monitor on, ``buffer.batch_quiet`` off, or too few quiet frames)."""
+        thread or one that cannot hold frames, frames without a source clock, the
+        monitor on, ``buffer.batch_quiet`` off, or too few quiet frames)."""
         if (not self._batch_quiet or not self._polled or self.monitor is not None
                 or self._last_recv is None or not self._last_clocked
                 or self._cursor.backlog > 0 or self._stop.is_set()):
