@@ -114,6 +114,21 @@ def run_in_thread(session: LiveSession) -> tuple[threading.Thread, dict]:
     return t, box
 
 
+def play_through_session(suit: SerialSuit, take, config) -> tuple[LiveSession, object]:
+    """A session on the suit's pty while the suit plays ``take`` once; stopped after it
+    (the last datagrams given time to arrive): (session, summary)."""
+    path = suit.start()
+    session = LiveSession(f"serial://{path}?rate={RATE:g}", config, handle_signals=False)
+    t, box = run_in_thread(session)
+    assert suit.wait_done(take.n_frames / (RATE * SPEED) + 10)
+    time.sleep(0.3)
+    session.stop("test done")
+    t.join(10)
+    assert not t.is_alive()
+    time.sleep(0.2)       # let the last datagrams arrive
+    return session, box["summary"]
+
+
 def offline_cuts(rec: Path, config) -> tuple[list, object]:
     """The recorded session through the same online detectors, offline."""
     tk = read_session(rec)
@@ -165,23 +180,14 @@ def test_serial_pty_to_osc_matches_offline(tmp_path, take):
     osc, dump = OscCollector(), OscDump()
     suit = SerialSuit(take, rate=RATE, speed=SPEED)
     try:
-        path = suit.start()
         # the default detector (primary, on the wire) beside the paper's PCA (log only)
         cfg = session_config(rec, [osc.port, dump.port],
                              detectors={"methods": ["contrast", "pca"]})
-        session = LiveSession(f"serial://{path}?rate={RATE:g}", cfg, handle_signals=False)
-        t, box = run_in_thread(session)
-        assert suit.wait_done(take.n_frames / (RATE * SPEED) + 10)
-        time.sleep(0.3)
-        session.stop("test done")
-        t.join(10)
-        assert not t.is_alive()
-        time.sleep(0.2)       # let the last datagrams arrive
+        session, summary = play_through_session(suit, take, cfg)
     finally:
         suit.stop()
         osc.close()
         dump.close()
-    summary = box["summary"]
     expected, tk = offline_cuts(rec, cfg)
     assert tk.n_frames == summary.frames_received == session.source.stats.frames_ok
     assert tk.n_frames >= 0.98 * take.n_frames
@@ -211,20 +217,12 @@ def test_quiet_frames_read_in_batches_give_the_same_cuts(tmp_path, take, batch_q
     osc = OscCollector()
     suit = SerialSuit(take, rate=RATE, speed=SPEED)
     try:
-        path = suit.start()
         cfg = session_config(rec, [osc.port], buffer={"batch_quiet": batch_quiet})
-        session = LiveSession(f"serial://{path}?rate={RATE:g}", cfg, handle_signals=False)
-        t, box = run_in_thread(session)
-        assert suit.wait_done(take.n_frames / (RATE * SPEED) + 10)
-        time.sleep(0.3)
-        session.stop("test done")
-        t.join(10)
-        assert not t.is_alive()
-        time.sleep(0.2)
+        session, summary = play_through_session(suit, take, cfg)
     finally:
         suit.stop()
         osc.close()
-    summary, st = box["summary"], session.stats
+    st = session.stats
     expected, tk = offline_cuts(rec, cfg)
     assert tk.n_frames == summary.frames_received >= 0.98 * take.n_frames
     assert len(expected) >= 2
