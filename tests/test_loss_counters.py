@@ -140,3 +140,9 @@ def test_summary_latency_is_over_every_frame_processed():
     assert f"(p50/p99 over {summary.frames_processed} frames" in summary.text()
     cues = session.stats.cut_latency_ms.values()
     assert len(cues) == summary.cuts < summary.frames_processed
+    # and over the frames that could send (the detector looks once per 15 frames)
+    could = session.stats.open_latency_ms.values()
+    assert 0 < summary.open_latency_frames == len(could) < summary.frames_processed / 5
+    assert summary.open_latency_ms_p99 == pytest.approx(float(np.percentile(could, 99)))
+    assert f"; {len(could)} that could send {summary.open_latency_ms_p50:.2f}/" in \
+        summary.text()

@@ -136,6 +136,10 @@ class SessionSummary:
     latency_ms_p50: float | None = None
     latency_ms_p99: float | None = None
     latency_frames: int = 0
+    #: the same over the frames that could send something (not promised quiet)
+    open_latency_ms_p50: float | None = None
+    open_latency_ms_p99: float | None = None
+    open_latency_frames: int = 0
     #: quiet frames read late, in one batch (``rtseg.live.loop``): ``batches``, ``frames``
     #: (promised quiet) and ``late_open`` (frames that could send, read in a batch)
     quiet: dict[str, int] = field(default_factory=dict)
@@ -148,6 +152,9 @@ class SessionSummary:
                f"{self.latency_ms_p50:.2f}/{self.latency_ms_p99:.2f} ms (p50/p99 over "
                f"{self.latency_frames} frames")
         if self.latency_ms_p50 is not None:
+            lat += ("" if self.open_latency_ms_p50 is None else
+                    f"; {self.open_latency_frames} that could send "
+                    f"{self.open_latency_ms_p50:.2f}/{self.open_latency_ms_p99:.2f} ms")
             lat += ("" if self.cut_latency_ms_p50 is None else
                     f"; cues {self.cut_latency_ms_p50:.2f}/{self.cut_latency_ms_p99:.2f} ms")
             lat += ")"
