@@ -53,8 +53,8 @@ interpreter's working set into a cold cache, several times a frame's arithmetic)
 Batched frames are stamped when read (``recv_time``), up to ``MAX_DEFER_S`` after they
 arrived, which the session's clock does not see when frames carry a source time (it
 places frames by the source clock); so only frames with a source clock are batched.
-Off with ``buffer.batch_quiet = false`` and with the live monitor on (its plots move as
-frames are processed).
+Off with ``buffer.batch_quiet = false``.  The live monitor then moves in steps of a batch
+(about 0.1 s at 120 Hz).
 
 Several sessions in one loop each keep their own source, pipeline (features, detectors,
 identity), ring buffer, publishers, recording and counters; they share the thread, the

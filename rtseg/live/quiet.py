@@ -3,7 +3,7 @@ when the loop may leave a polled source unread because the frames due before the
 send anything, and the accounting of the batch read when that time comes.
 
 :class:`SessionQuiet` is a part of :class:`rtseg.live.session.LiveSession` (a base class; it
-uses the session's ``config``, ``source``, ``pipeline``, ``ring``, ``stats``, ``monitor``,
+uses the session's ``config``, ``source``, ``pipeline``, ``ring``, ``stats``,
 ``frame_rate``, ``_cursor``, ``_polled``, ``_stop`` and the last processed frame's
 ``_last_recv`` / ``_last_index`` / ``_last_clocked``, set by ``rtseg.live.process``).
 Times are monotonic seconds.
@@ -30,9 +30,9 @@ class SessionQuiet:
         """Until when (monotonic s) the loop may leave this session's source unread: the
         frames due before then cannot send anything (``rtseg.live.loop``, "Quiet
         frames").  None: read as frames arrive (frames waiting, a source read by a
-        thread or one that cannot hold frames, frames without a source clock, the
-        monitor on, ``buffer.batch_quiet`` off, or too few quiet frames)."""
-        if (not self._batch_quiet or not self._polled or self.monitor is not None
+        thread or one that cannot hold frames, frames without a source clock,
+        ``buffer.batch_quiet`` off, or too few quiet frames)."""
+        if (not self._batch_quiet or not self._polled
                 or self._last_recv is None or not self._last_clocked
                 or self._cursor.backlog > 0 or self._stop.is_set()):
             return None
