@@ -412,3 +412,25 @@ def test_sigkilled_demo_leaves_no_stale_suit_folder(take):
         alive.stop()
     assert not mine.exists()
     assert Path(tempfile.gettempdir()) == folder.parent
+
+
+def test_a_session_ending_while_its_source_is_quiet_reads_what_had_arrived(tmp_path, take):
+    """The duration ends while the loop leaves the port unread (quiet frames): the frames
+    that arrived before the end are still read, recorded and processed."""
+    suit = SerialSuit(take, rate=RATE, loop=True)        # real time: batches of ~0.1 s
+    try:
+        path = suit.start()
+        cfg = session_config(tmp_path / "rec", [])
+        session = LiveSession(f"serial://{path}?rate={RATE:g}", cfg, handle_signals=False,
+                              duration=3.0)
+        summary = session.run()
+        deadline = session._deadline
+    finally:
+        suit.stop()
+    assert session.stats.quiet_batches > 5
+    # every frame written more than 20 ms before the end (time for the pty to pass it on)
+    due = sum(1 for m in suit.sent_log if m.frame >= 0 and m.fate == "intact"
+              and m.send_time < deadline - 0.02)
+    assert summary.frames_received >= due
+    assert summary.frames_processed == summary.frames_received
+    assert read_session(tmp_path / "rec").n_frames == summary.frames_received

@@ -395,6 +395,10 @@ def run_sessions(sessions: Sequence[Any], handle_signals: bool = True) -> list[A
                     continue                   # another session's wake-up
                 s._step(now)
                 if s._stop.is_set():
+                    if loop.is_quiet(s):       # what arrived while it was left unread
+                        loop.resume(s)
+                        s._read_quiet(time.monotonic())
+                        s._step(time.monotonic())
                     running.remove(s)
                     loop.drop(s)
                     summaries[id(s)] = s._finish()
