@@ -79,8 +79,8 @@ def test_polled_serial_source_reads_every_frame_and_reconnects_after_an_unplug(t
         frames = poll_frames(src, lambda fr: len(fr) >= 100)
         assert len(frames) >= 100
         # what may wait unread for the loop's quiet-frame batching: 3 KB of 184-byte
-        # frames (fewer when a read held an info message too)
-        assert 8 <= src.hold_frames() <= 3072 // 184
+        # frames (fewer when a read held an info message or part of the next frame too)
+        assert 4 <= src.hold_frames() <= 3072 // 184
         # in order, none missing, values as sent (Q14 resolution)
         seqs = [f.seq for f in frames]
         assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))
