@@ -36,6 +36,12 @@ class SessionQuiet:
                 or self._last_recv is None or not self._last_clocked
                 or self._cursor.backlog > 0 or self._stop.is_set()):
             return None
+        try:
+            hold = int(self.source.hold_frames())
+        except Exception:                      # pragma: no cover - a driver bug
+            return None
+        if hold <= 0:                          # a source that cannot hold frames
+            return None
         # frames come at the nominal rate or faster (a replay sped up): the shorter period
         # of the two, the measured one over a second or more (none before that)
         ref = self._rate_ref
@@ -47,10 +53,6 @@ class SessionQuiet:
         if self._arrival_period is None:
             return None
         period = min(1.0 / self.frame_rate, self._arrival_period)
-        try:
-            hold = int(self.source.hold_frames())
-        except Exception:                      # pragma: no cover - a driver bug
-            return None
         q = min(self.pipeline.quiet_frames(), hold)
         # the loop wakes half a period before the last quiet frame is due, so the frame
         # after it (which may send) is read as it arrives even when it comes up to 1.5
