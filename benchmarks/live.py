@@ -241,9 +241,7 @@ def run_suits(n: int, seconds: float, port: int, warmup: float = 2.0,
 
         def start_measuring() -> None:
             for s in sessions:
-                s.stats.frame_latency_ms.clear()
-                s.stats.open_latency_ms.clear()
-                marks[f"quiet{id(s)}"] = _quiet_counts(s)
+                _restart_counts(s.stats)
             if meter is not None:
                 meter.reset()
             marks.update(cpu=time.process_time(), thread=time.clock_gettime(loop_clock),
@@ -267,7 +265,7 @@ def run_suits(n: int, seconds: float, port: int, warmup: float = 2.0,
     lat = np.concatenate([s.stats.open_latency_ms.values() for s in sessions])
     every = np.concatenate([s.stats.frame_latency_ms.values() for s in sessions])
     frames = sum(s.stats.frames_processed for s in sessions) - marks["frames"]
-    quiet = {k: sum(_quiet_counts(s)[k] - marks[f"quiet{id(s)}"][k] for s in sessions)
+    quiet = {k: sum(_quiet_counts(s)[k] for s in sessions)
              for k in ("batches", "frames", "late_open")}
     out = {"suits": n, "seconds": round(wall, 1),
            "cpu_fraction": round(cpu, 4), "cpu_fraction_per_suit": round(cpu / n, 4),
@@ -368,12 +366,9 @@ def run_session(rate: float, seconds: float, port: int, warmup: float = 1.0,
         marks: dict[str, float] = {}
 
         def start_measuring() -> None:
-            session.stats.frame_latency_ms.clear()
-            session.stats.open_latency_ms.clear()
-            session.stats.cut_latency_ms.clear()
+            _restart_counts(session.stats)
             marks.update(cpu=time.process_time(), wall=time.monotonic(),
                          frames=session.stats.frames_received)
-            session.quiet_marks = _quiet_counts(session)
 
         timer = threading.Timer(warmup, start_measuring)
         timer.start()
@@ -397,17 +392,32 @@ def run_session(rate: float, seconds: float, port: int, warmup: float = 1.0,
     return session, summary, cpu, measured_fps
 
 
+def _restart_counts(st) -> None:
+    """Latencies and quiet-frame counts of ``LiveStats`` from the measured part on."""
+    st.frame_latency_ms.clear()
+    st.open_latency_ms.clear()
+    st.cut_latency_ms.clear()
+    st.quiet_batches = st.quiet_frames = st.late_open = 0
+
+
 def _quiet_counts(session) -> dict[str, int]:
     st = session.stats
     return {"batches": st.quiet_batches, "frames": st.quiet_frames, "late_open": st.late_open}
 
 
-def _pcts(lat: np.ndarray) -> dict[str, float]:
-    """p50 / p99 / max of latencies in ms (None when there are none)."""
+def _pcts(lat: np.ndarray) -> dict[str, float | None]:
+    """p50 / p99 / max of latencies in ms (None when there are none: in a run shorter
+    than the detector's first look no frame could send)."""
     if not lat.size:
         return {"p50": None, "p99": None, "max": None}
     return {"p50": round(float(np.percentile(lat, 50)), 3),
             "p99": round(float(np.percentile(lat, 99)), 3), "max": round(float(lat.max()), 3)}
+
+
+def _pcts_text(p: dict[str, float | None]) -> str:
+    """``_pcts`` in words ("-" for none)."""
+    return ", ".join(f"{k} " + ("-" if p[k] is None else f"{p[k]:.3f} ms")
+                     for k in ("p50", "p99", "max"))
 
 
 def latency_and_cpu(seconds: float, port: int, monitor: bool = False,
@@ -417,13 +427,10 @@ def latency_and_cpu(seconds: float, port: int, monitor: bool = False,
     lat = np.fromiter(session.stats.open_latency_ms, float)
     every = np.fromiter(session.stats.frame_latency_ms, float)
     cut_lat = np.fromiter(session.stats.cut_latency_ms, float)
-    now = _quiet_counts(session)
-    marks = getattr(session, "quiet_marks", {k: 0 for k in now})
     return {
         "frames": len(every), "open_frames": len(lat), "rate": fps,
-        "p50": float(np.percentile(lat, 50)), "p99": float(np.percentile(lat, 99)),
-        "max": float(lat.max()), "every_frame": _pcts(every),
-        "quiet": {k: now[k] - marks[k] for k in now},
+        "latency_ms": _pcts(lat), "every_frame": _pcts(every),
+        "quiet": _quiet_counts(session),
         "cut_latency": [round(float(x), 3) for x in cut_lat],
         "cpu_fraction": cpu, "dropped": summary.dropped, "cuts": summary.cuts,
     }
@@ -538,19 +545,19 @@ def monitor_cost(seconds: float, port: int, log, as_json: bool) -> int:
     thread) at 120 Hz without the monitor and with it serving one Chromium page."""
     log(f"17-sensor suit at 120 Hz over a pty, {seconds:g} s: without the monitor ...")
     off = latency_and_cpu(seconds, port)
-    log(f"   CPU {off['cpu_fraction'] * 100:.2f} % of one core, latency p50 "
-        f"{off['p50']:.3f} ms p99 {off['p99']:.3f} ms, {off['dropped']} dropped")
+    log(f"   CPU {off['cpu_fraction'] * 100:.2f} % of one core, latency of every frame "
+        f"{_pcts_text(off['every_frame'])}, {off['dropped']} dropped")
     log("   with the monitor and one page open in headless Chromium ...")
     on = latency_and_cpu(seconds, port, monitor=True)
-    log(f"   CPU {on['cpu_fraction'] * 100:.2f} % of one core, latency p50 "
-        f"{on['p50']:.3f} ms p99 {on['p99']:.3f} ms, {on['dropped']} dropped")
+    log(f"   CPU {on['cpu_fraction'] * 100:.2f} % of one core, latency of every frame "
+        f"{_pcts_text(on['every_frame'])}, {on['dropped']} dropped")
     extra = on["cpu_fraction"] - off["cpu_fraction"]
     log(f"   the monitor costs {extra:+.4f} of a core (target <= 0.01)")
     result = {"cpu_fraction": {"without": round(off["cpu_fraction"], 4),
                                "with_monitor": round(on["cpu_fraction"], 4),
                                "monitor": round(extra, 4)},
-              "latency_ms_p99": {"without": round(off["p99"], 3),
-                                 "with_monitor": round(on["p99"], 3)}}
+              "latency_ms_p99": {"without": off["every_frame"]["p99"],
+                                 "with_monitor": on["every_frame"]["p99"]}}
     print(json.dumps(result) if as_json else json.dumps(result, indent=2))
     return 0
 
@@ -622,19 +629,18 @@ def main(argv: list[str] | None = None) -> int:
             f"{lc['dropped']} dropped, {lc['cuts']} cuts")
         ev, qt = lc["every_frame"], lc["quiet"]
         log(f"   processing latency of the {lc['open_frames']} frames that could send "
-            f"(arrival -> processed/sent): p50 {lc['p50']:.3f} ms, p99 {lc['p99']:.3f} ms, "
-            f"max {lc['max']:.2f} ms")
-        log(f"   every frame, the quiet ones read in batches too: p50 {ev['p50']:.3f} ms, "
-            f"p99 {ev['p99']:.3f} ms, max {ev['max']:.2f} ms; {qt['frames']} quiet frames "
-            f"in {qt['batches']} batches, {qt['late_open']} frames that could send read late")
+            f"(arrival -> processed/sent): {_pcts_text(lc['latency_ms'])}")
+        log(f"   every frame, the quiet ones read in batches too: {_pcts_text(ev)}; "
+            f"{qt['frames']} quiet frames in {qt['batches']} batches, {qt['late_open']} "
+            f"frames that could send read late")
         log(f"   latency of the frames that sent a cut: {lc['cut_latency']} ms")
         log(f"   CPU: {lc['cpu_fraction'] * 100:.1f} % of one core")
         log("   the same without quiet-frame batching (buffer.batch_quiet = false) ...")
         unb = latency_and_cpu(args.seconds, port, batch_quiet=False)
         log(f"   CPU: {unb['cpu_fraction'] * 100:.1f} % of one core "
             f"(batched / unbatched {lc['cpu_fraction'] / unb['cpu_fraction']:.2f}); latency "
-            f"of the frames that could send p50 {unb['p50']:.3f} ms, p99 {unb['p99']:.3f} ms; "
-            f"every frame p99 {unb['every_frame']['p99']:.3f} ms")
+            f"of the frames that could send {_pcts_text(unb['latency_ms'])}; every frame "
+            f"{_pcts_text(unb['every_frame'])}")
         suits: dict[str, dict] = {}
         for n in [int(x) for x in args.suits.split(",") if x.strip()]:
             log(f"1b. {n} suit(s) at 120 Hz in one process, one thread, {args.seconds:g} s ...")
@@ -642,11 +648,9 @@ def main(argv: list[str] | None = None) -> int:
             suits[str(n)] = r
             log(f"   CPU {r['cpu_fraction']:.4f} of one core in all, "
                 f"{r['cpu_fraction_per_suit']:.4f} per suit; {r['fps_per_suit']:.1f} frames/s "
-                f"per suit; latency p50 {r['latency_ms']['p50']:.3f} ms, p99 "
-                f"{r['latency_ms']['p99']:.3f} ms, max {r['latency_ms']['max']:.2f} ms "
-                f"(frames that could send; every frame p99 "
-                f"{r['every_frame_latency_ms']['p99']:.3f} ms); {r['dropped']} dropped, "
-                f"{r['quiet']['late_open']} read late")
+                f"per suit; latency of the frames that could send "
+                f"{_pcts_text(r['latency_ms'])}; every frame {_pcts_text(r['every_frame_latency_ms'])}; "
+                f"{r['dropped']} dropped, {r['quiet']['late_open']} read late")
         stages = wake = None
         if args.stage_seconds > 0:
             log(f"1c. cost per frame by stage (one suit, identity on, {args.stage_seconds:g} s) ...")
@@ -673,13 +677,10 @@ def main(argv: list[str] | None = None) -> int:
             log(f"   highest sustained by the core: {core} frames/s")
     finally:
         s.close()
-    result = {"latency_ms": {"p50": round(lc["p50"], 3), "p99": round(lc["p99"], 3),
-                             "max": round(lc["max"], 3)},
+    result = {"latency_ms": lc["latency_ms"],
               "every_frame_latency_ms": lc["every_frame"], "quiet": lc["quiet"],
               "unbatched": {"cpu_fraction": round(unb["cpu_fraction"], 4),
-                            "latency_ms": {"p50": round(unb["p50"], 3),
-                                           "p99": round(unb["p99"], 3),
-                                           "max": round(unb["max"], 3)},
+                            "latency_ms": unb["latency_ms"],
                             "every_frame_latency_ms": unb["every_frame"]},
               "detector_delay_ms": {m: round(v, 1) for m, v in delays.items()},
               "cpu_fraction": round(lc["cpu_fraction"], 4),

@@ -215,3 +215,18 @@ def test_wakeup_cost_measures_an_empty_and_a_working_wakeup():
     ratio = doc["decode_woken_us"] / doc["decode_tight_us"]
     assert abs(doc["woken_over_tight"] - ratio) < 0.01 * ratio + 0.01
     assert _run("wakeup.py", "--seconds", "0").returncode == 2
+
+
+def test_live_benchmark_reports_a_run_too_short_for_any_frame_that_could_send():
+    """2 s is shorter than the detector's first look: no frame could send, and the latency
+    of those frames is reported as none, beside every frame's (batched and not)."""
+    r = _run("live.py", "--seconds", "2", "--suits", "", "--stage-seconds", "0",
+             "--skip-rates", "--json")
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    assert doc["latency_ms"] == {"p50": None, "p99": None, "max": None}
+    assert doc["unbatched"]["latency_ms"] == {"p50": None, "p99": None, "max": None}
+    for every in (doc["every_frame_latency_ms"], doc["unbatched"]["every_frame_latency_ms"]):
+        assert 0 < every["p50"] <= every["p99"] <= every["max"]
+    assert doc["quiet"]["batches"] > 0
+    assert "frames that could send (arrival -> processed/sent): p50 -" in r.stderr
