@@ -61,6 +61,13 @@ def library():
     return _library()
 
 
+def test_saved_into_a_missing_folder(tmp_path, library):
+    """``rtseg learn sets/new/lib.json`` makes the folder, and leaves no temporary file."""
+    path = save_library(library, tmp_path / "sets" / "new" / "lib.json")
+    assert path.parent.is_dir() and [p.name for p in path.parent.iterdir()] == ["lib.json"]
+    assert load(path, library.profile, library.dims).names == library.names
+
+
 def test_round_trip_through_the_file(tmp_path, library):
     path = save_library(library, tmp_path / "lib.json")
     doc = json.loads(path.read_text())

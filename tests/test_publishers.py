@@ -474,6 +474,19 @@ def test_jsonl_file_one_object_per_event(tmp_path):
     assert isinstance(back, CutEvent) and back.frame == 412 and math.isnan(back.score)
 
 
+def test_jsonl_file_in_a_missing_folder(tmp_path):
+    """The folder is made (as ``--record`` and ``segment --out`` do); a file standing where
+    the folder should be is a clear error naming the target."""
+    path = tmp_path / "a" / "b" / "events.jsonl"
+    pub = JsonlPublisher(str(path))
+    pub.publish_dropout(DropoutEvent("Head", True))
+    pub.close()
+    assert json.loads(path.read_text())["name"] == "Head"
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(ValueError, match=r"jsonl:.*f/events.jsonl: cannot open"):
+        JsonlPublisher(str(tmp_path / "f" / "events.jsonl"))
+
+
 def test_jsonl_stdout(capsys):
     pub = parse_target("-")
     pub.publish_dropout(DropoutEvent("Head", False))

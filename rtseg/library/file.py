@@ -49,8 +49,10 @@ def to_dict(lib: Library) -> dict[str, Any]:
 
 
 def save(lib: Library, path: str | Path) -> Path:
-    """Write the library as JSON, atomically (a temporary file renamed)."""
+    """Write the library as JSON, atomically (a temporary file renamed); a missing folder
+    is made."""
     p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
     tmp = p.with_name(p.name + ".tmp")
     tmp.write_text(json.dumps(to_dict(lib), allow_nan=False) + "\n", encoding="utf-8")
     tmp.replace(p)

@@ -15,6 +15,7 @@ logged, never raised.
 from __future__ import annotations
 
 import json
+import os
 import sys
 import threading
 from typing import IO, Any
@@ -31,6 +32,8 @@ class JsonlPublisher(Publisher):
         self._fh: IO[str] | None = None
         if path != "-":
             try:
+                # a missing folder is made, as for ``--record`` and ``segment --out``
+                os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
                 self._fh = open(path, "a", encoding="utf-8")
             except OSError as exc:
                 raise ValueError(f"output target {self.target}: cannot open: {exc}") from None
