@@ -70,6 +70,13 @@ def test_learn_from_a_parent_of_sources_of_two_rigs_and_frame_rates(parent, tmp_
     assert p.returncode == 0, p.stderr
     assert "12 already in the library" in p.stderr
     assert lib.read_bytes() == before
+    # with a take too short to give a window: noted, nothing new, still a success
+    short = make_source(tmp_path / "short", ["s1"], ["walk"], seconds=1.6)
+    p = _learn(str(lib), "--from", str(parent), "--take", str(short / "bvh" / "s1_001.bvh"),
+               "--label", "walk")
+    assert p.returncode == 0, p.stderr
+    assert "s1_001" in p.stderr and "shorter than 2 s" in p.stderr
+    assert "12 already in the library" in p.stderr and lib.read_bytes() == before
     # one take of it given by hand (the same frames: rest at the ends dropped as --from
     # does) and a copy of the source folder under another name: the same motion
     copy = tmp_path / "copy"

@@ -8,7 +8,8 @@
 
 Learning an example the library already holds (the same motion: its content key,
 ``rtseg.library.sources.motion_key``) adds nothing ("N already in the library"); when
-nothing is new the file is left as it was.  ``--take`` starts an example; the ``--label``, ``--frames`` (take frames [A, B), 0-based)
+nothing is new (examples too short to give a window are noted, not new) the file is left
+as it was and the command succeeds.  ``--take`` starts an example; the ``--label``, ``--frames`` (take frames [A, B), 0-based)
 or ``--segment`` (of a session recording, ``rtseg live --record DIR``: segment K as the
 session numbered it) and ``--skeleton`` after it belong to it.  ``--from``: every labelled take of a folder
 (``rtseg.library.examples.examples_from_dir``).  An existing LIB is extended (its examples
@@ -132,7 +133,7 @@ def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     from rtseg.library.behaviours import DEFAULT_STEP_S
     from rtseg.library.file import load
-    from rtseg.library.examples import example_of_take, learn, unique_examples
+    from rtseg.library.examples import example_of_take, learn, learnable, unique_examples
     from rtseg.library.sources import examples_from_dir
     from rtseg.evaluation.online import live_config
     takes = getattr(args, "takes", None) or []
@@ -178,6 +179,9 @@ def run(args: argparse.Namespace) -> int:
             src_notes.append(f"{e.take} [{e.frames[0]}:{e.frames[1]}) {e.name}: already in "
                              f"the library as {was!r}; not added again")
     held = sum(e.key in known for e in repeated)
+    if old is not None:          # too short to learn: noted here, so they are not "new"
+        examples, short = learnable(examples, step_s=step)
+        src_notes += short
     for n in src_notes:
         print(f"rtseg learn: note: {n}", file=sys.stderr)
     if held:

@@ -29,7 +29,7 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from rtseg.library.behaviours import DEFAULT_METRIC, Library, LibraryBuilder
+from rtseg.library.behaviours import DEFAULT_METRIC, Library, LibraryBuilder, window_bounds
 
 log = logging.getLogger(__name__)
 
@@ -171,6 +171,11 @@ def learn(examples: Sequence[Example], profile: str | None = None,
               f"earlier example; learned once" for e in repeated]
     rates = [e.frame_rate for e in use]
     rate = max(set(rates), key=lambda r: (rates.count(r), r))
+    use, short = learnable(use, **windows)
+    notes += short
+    if not use:
+        raise ValueError("no example long enough to learn from"
+                         + (f" ({'; '.join(short[:3])})" if short else ""))
     b = LibraryBuilder(profile, use[0].X.shape[1], rate, **windows)
     for e in use:
         i, j = e.rows()
@@ -180,6 +185,22 @@ def learn(examples: Sequence[Example], profile: str | None = None,
                     **({"key": e.key} if e.key else {})})
     notes += b.skipped
     return b.build(threshold, metric or DEFAULT_METRIC), notes
+
+
+def learnable(examples: Sequence[Example], **windows: float) -> tuple[list[Example], list[str]]:
+    """The examples long enough to give at least one library window (``LibraryBuilder``
+    window options ``windows``, its defaults for the others), and a note for each of the
+    others, in take frames."""
+    b = LibraryBuilder("", 1, 1.0, **windows)
+    keep, notes = [], []
+    for e in examples:
+        i, j = e.rows()
+        if window_bounds(0, j - i, e.frame_rate, b.window_s, b.step_s, b.edge_s, b.min_s):
+            keep.append(e)
+        else:
+            notes.append(f"{e.take} [{e.frames[0]}:{e.frames[1]}) {e.name}: shorter than "
+                         f"{b.min_s + 2 * b.edge_s:g} s")
+    return keep, notes
 
 
 def motion_key(take: Any, a: int, b: int) -> str:
