@@ -53,9 +53,10 @@ TOL_S = 0.5
 #: the candidates (every combination); the shipped defaults fill the other keys
 GRIDS = {
     "none": {},
-    "default": {                    # the two thresholds that decide a cut
-        "threshold": [1.5, 1.75, 2.0],
+    "default": {                    # the two thresholds that decide a cut, and the floor
+        "threshold": [1.25, 1.5, 1.75],  # under the models' own residuals
         "gate_threshold": [3.5, 4.0, 4.5],
+        "residual_floor": [0.1, 0.25, 0.4],
     },
     "looks": {                      # the early look and cut placement
         "early_threshold": [1.5, 2.0],

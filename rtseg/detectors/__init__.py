@@ -64,6 +64,7 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "early_hold_s": ((int, float), _nonneg),
         "gate_threshold": ((int, float), _nonneg),
         "relative_floor": ((int, float), (lambda v: 0 <= v < 1, "in [0, 1)")),
+        "residual_floor": ((int, float), (lambda v: 0 <= v < 1, "in [0, 1)")),
         "bound_before": ((bool,), (lambda v: True, "true or false")),
         "place_radius_s": ((int, float), _nonneg),
         "place_window_s": ((int, float), _pos),

@@ -85,6 +85,12 @@ window's mean variance per frame within twice the range of the before windows' s
 last cut; ``_energy_change``, remembered per position for ``hold``), is dropped before the
 gate and forgotten as the gate's drops are.
 
+Residual floor (``residual_floor`` > 0, ``rtseg.detectors.residual``): in every window
+distance, each model's own error is taken as at least ``residual_floor`` x the median own
+error of the before windows of the last ``RESIDUAL_LOOKS`` full looks, so a near-still
+window's tiny own error does not turn the errors over it into large ratios (the early
+look uses the same floor).
+
 Cut placement (``place_radius`` > 0 frames, ``rtseg.detectors.placement``): each cut the
 gate lets through (every cut when the gate is off) is moved to the best two-Gaussian split
 of the frames within ``place_window`` of it that have arrived, at most ``place_radius``
@@ -106,6 +112,7 @@ from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.detectors.early import EarlyCut, EarlyCuts
 from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, Placer
 from rtseg.detectors.relative import ENERGY_SPAN, EnergyRange, RelativeFloor
+from rtseg.detectors.residual import RESIDUAL_LOOKS, ResidualFloor
 from rtseg.detectors.gate import (GATE_DECIDE_S, GATE_MIN_AFTER_S, GATE_SKIP_S, GATE_WINDOW_S,
                                   SameBehaviourGate)
 from rtseg.detectors.window_models import PcaWindow, WindowStats, fit_pca, pca_distance, pca_error
@@ -137,7 +144,8 @@ class ContrastDetector(OnlineDetector):
                  early_threshold: float = 1.5, early_hold: int = 60,
                  gate_threshold: float = 0.0, gate_decide: int = 180, gate_skip: int = 60,
                  gate_window: int = 360, gate_min_after: int = 120,
-                 relative_floor: float = 0.0, bound_before: bool = False,
+                 relative_floor: float = 0.0, residual_floor: float = 0.0,
+                 bound_before: bool = False,
                  place_radius: int = 0, place_window: int = 240,
                  place_ridge: float = 0.01, place_stride: int = 4, place_margin: int = 30,
                  keep_trace: bool = False) -> None:
@@ -182,6 +190,9 @@ class ContrastDetector(OnlineDetector):
         self.rejected_frames = 0
         #: the floor set by the stream's recent changes (``rtseg.detectors.relative``)
         self.relative = RelativeFloor(relative_floor)
+        #: the floor under the models' own residuals (``rtseg.detectors.residual``); it
+        #: outlives restarts
+        self.residual = ResidualFloor(residual_floor, RESIDUAL_LOOKS)
         #: full looks remembered for it: a maximum is sent at most ``hold`` frames after
         #: its value is known
         self._energy_len = int(hold) // self.step + 4
@@ -223,6 +234,7 @@ class ContrastDetector(OnlineDetector):
                    gate_window=frames(GATE_WINDOW_S, frame_rate),
                    gate_min_after=frames(GATE_MIN_AFTER_S, frame_rate),
                    relative_floor=p.get("relative_floor", 0.0),
+                   residual_floor=p.get("residual_floor", 0.0),
                    bound_before=bool(p.get("bound_before", False)),
                    place_radius=frames(p["place_radius_s"], frame_rate) if p.get("place_radius_s") else 0,
                    place_window=frames(p.get("place_window_s", 2.0), frame_rate),
@@ -528,14 +540,16 @@ class ContrastDetector(OnlineDetector):
                 del self._models[key]
         self._energy.append((c, self._energy_change(c, a.stats.trace / a.stats.n,
                                                     b.stats.trace / b.stats.n)))
-        return self._stated(pca_distance(a, b) / max(pca_distance(a0, a), 1e-300), a)
+        f = self.residual.push(a.pca_own)
+        return self._stated(pca_distance(a, b, f) / max(pca_distance(a0, a, f), 1e-300), a)
 
     def _early(self, c: int) -> float:
         """The early look at block position c (module docstring): B' = [c, c + we) under
         A's PCA model, over A under A0's (both already fitted)."""
         a0, a = self._before(c)
-        e_b = pca_error(self._stats(c, c + self.we), a)
-        return self._stated(e_b / max(pca_error(a.stats, a0), 1e-300), a)
+        f = self.residual.value
+        e_b = pca_error(self._stats(c, c + self.we), a, f)
+        return self._stated(e_b / max(pca_error(a.stats, a0, f), 1e-300), a)
 
 
 def segment_contrast(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,

@@ -207,14 +207,16 @@ def _errors(y: WindowStats, m: WindowModel) -> tuple[float, float]:
     return pca, ppca
 
 
-def pca_error(y: WindowStats, m: WindowModel) -> float:
+def pca_error(y: WindowStats, m: WindowModel, floor: float = 0.0) -> float:
     """Mean per-frame projection error of y's frames off m's mean + hyperplane, over m's own
-    (from y's statistics: tr M - sum of v^T M v over m's PCA basis, M as in ``_errors``)."""
+    (from y's statistics: tr M - sum of v^T M v over m's PCA basis, M as in ``_errors``);
+    m's own error taken as at least ``floor`` (``rtseg.detectors.residual``)."""
     dm = y.mean - m.stats.mean
-    return _pca_error(y, m, dm, float(dm.dot(dm)))
+    return _pca_error(y, m, dm, float(dm.dot(dm)), floor)
 
 
-def _pca_error(y: WindowStats, m: WindowModel, dm: np.ndarray, dd: float) -> float:
+def _pca_error(y: WindowStats, m: WindowModel, dm: np.ndarray, dd: float,
+               floor: float = 0.0) -> float:
     """``pca_error(y | m)`` given dm = y's mean - m's mean (or its negation: the same
     value, bit for bit) and dd = dm . dm."""
     n = y.n
@@ -225,16 +227,18 @@ def _pca_error(y: WindowStats, m: WindowModel, dm: np.ndarray, dd: float) -> flo
         kept = (float(_einsum("ij,ij->", W, y.scatter @ W))
                 + n * float(np.add.reduce(proj * proj)))
     tr = y.trace + n * dd
-    return (tr - kept) / n / m.pca_own
+    own = m.pca_own
+    return (tr - kept) / n / (floor if own < floor else own)
 
 
-def pca_distance(a: WindowModel, b: WindowModel) -> float:
+def pca_distance(a: WindowModel, b: WindowModel, floor: float = 0.0) -> float:
     """sqrt(pca_error(b | a) x pca_error(a | b)): 1 for two windows of the same motion (the
-    two directions share the difference of the means)."""
+    two directions share the difference of the means); each model's own error taken as at
+    least ``floor``."""
     dm = b.stats.mean - a.stats.mean
     dd = float(dm.dot(dm))
-    return math.sqrt(max(_pca_error(b.stats, a, dm, dd), 0.0)
-                     * max(_pca_error(a.stats, b, dm, dd), 0.0))
+    return math.sqrt(max(_pca_error(b.stats, a, dm, dd, floor), 0.0)
+                     * max(_pca_error(a.stats, b, dm, dd, floor), 0.0))
 
 
 def ppca_msq(y: WindowStats, m: WindowModel) -> float:
