@@ -9,7 +9,7 @@ import pytest
 
 from rtseg.detectors import load_params
 from rtseg.detectors.contrast import ContrastDetector
-from rtseg.detectors.relative import ENERGY_CHANGE, EnergyRange, RelativeFloor
+from rtseg.detectors.relative import ENERGY_CHANGE, EnergyChanges, EnergyRange, RelativeFloor
 from rtseg.evaluation.online import fed_features
 from rtseg.live.config import load_session_config
 from rtseg.simulators.synth.motion import synthesize
@@ -109,13 +109,14 @@ def test_the_detector_counts_its_refusals_and_logs_them(caplog):
 
 
 def test_the_energy_change_is_measured_against_the_segments_range():
-    det = ContrastDetector.from_params(load_params()["contrast"], RATE)
+    e = EnergyChanges(span=8, keep=3)
     for c, ea in enumerate((1.0, 2.0, 1.5)):
-        assert det._energy_change(c, ea, ea) == 1.0          # within the range so far
-    assert det._energy_change(3, 1.5, 5.0) == pytest.approx(2.5)   # over the highest (2)
-    assert det._energy_change(4, 1.5, 0.4) == pytest.approx(0.4)   # under the lowest (1)
-    assert det._energy_change(5, 1.5, 1.9) == 1.0
+        assert e.look(c, ea, ea) == 1.0                      # within the range so far
+    assert e.look(3, 1.5, 5.0) == pytest.approx(2.5)         # over the highest (2)
+    assert e.look(4, 1.5, 0.4) == pytest.approx(0.4)         # under the lowest (1)
+    assert e.look(5, 1.5, 1.9) == 1.0
     # after a cut, the windows that straddle it leave the range: only this position's
-    det._last_sent = 6
-    start = 6 + 2 * det.wmin
-    assert det._energy_change(start, 1.0, 1.9) == pytest.approx(1.9)
+    assert e.look(8, 1.0, 1.9, cut_off=8) == pytest.approx(1.9)
+    # the newest ``keep`` looks are remembered by position
+    assert e.at(8) == pytest.approx(1.9) and e.at(5) == 1.0 and e.at(4) == pytest.approx(0.4)
+    assert e.at(3) == 1.0                     # 2.5, but no longer among the newest 3

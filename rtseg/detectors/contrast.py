@@ -82,8 +82,8 @@ the gate drops is forgotten: it keeps no later maximum ``min_gap`` away.
 Relative floor (``relative_floor`` > 0, ``rtseg.detectors.relative``): a maximum far below
 the contrasts of the last cuts sent, where the motion's energy does not change (the after
 window's mean variance per frame within twice the range of the before windows' since the
-last cut; ``_energy_change``, remembered per position for ``hold``), is dropped before the
-gate and forgotten as the gate's drops are.
+last cut; ``relative.EnergyChanges``, remembered per position for ``hold``), is dropped
+before the gate and forgotten as the gate's drops are.
 
 Residual floor (``residual_floor`` > 0, ``rtseg.detectors.residual``): in every window
 distance, each model's own error is taken as at least ``residual_floor`` x the median own
@@ -111,7 +111,7 @@ import numpy as np
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.detectors.early import EarlyCut, EarlyCuts
 from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, Placer
-from rtseg.detectors.relative import ENERGY_SPAN, EnergyRange, RelativeFloor
+from rtseg.detectors.relative import ENERGY_SPAN, EnergyChanges, RelativeFloor
 from rtseg.detectors.residual import RESIDUAL_LOOKS, ResidualFloor
 from rtseg.detectors.gate import (GATE_DECIDE_S, GATE_MIN_AFTER_S, GATE_SKIP_S, GATE_WINDOW_S,
                                   SameBehaviourGate)
@@ -295,10 +295,8 @@ class ContrastDetector(OnlineDetector):
         self._last_placed: int | None = None  # frame of the last cut sent, as placed
         self.peaks.reset()
         self._out: deque[EarlyCut] = deque()  # cuts to send (a queued one is dropped)
-        #: (block position, energy change) of the newest full looks (``_energy_at``)
-        self._energy: deque[tuple[int, float]] = deque(maxlen=self._energy_len)
-        #: the before windows' energies since the last cut (``_energy_change``)
-        self._energies = EnergyRange(ENERGY_SPAN * self.wa)
+        #: the energy change of the newest full looks (``relative.EnergyChanges``)
+        self._energy = EnergyChanges(ENERGY_SPAN * self.wa, self._energy_len)
         if self._dim is not None:              # the ring restarts at block 0
             self._P1[0] = 0.0
             self._P2[0] = 0.0
@@ -363,7 +361,8 @@ class ContrastDetector(OnlineDetector):
         cut = self._cut(self._out.popleft(), t) if self._out else None
         if cut is not None:
             f = cut.frame
-            if not self.relative.admits(cut.score, self._energy_at(f), f):
+            energy = self._energy.at((f - self._seg0) // self.step)
+            if not self.relative.admits(cut.score, energy, f):
                 self.peaks.forget(f)                 # as a cut the gate drops
                 cut = None
         gate = self.gate
@@ -448,32 +447,6 @@ class ContrastDetector(OnlineDetector):
                    confidence=float(min(max(conf, 0.0), 1.0)),
                    detected_at=at, score=float(peak.value))
 
-    def _energy_change(self, c: int, ea: float, eb: float) -> float:
-        """How far the after window's energy ``eb`` (mean variance per frame) at block
-        position c lies outside the range of the before windows' energies since the last
-        cut sent (``ea``, this position's, included; the last ``ENERGY_SPAN`` before
-        windows at most; positions whose windows straddle that cut left out): eb / highest
-        above it, eb / lowest below it, 1.0 within it."""
-        hist = self._energies
-        last = self._last_sent
-        if last is not None:
-            hist.drop_before(last + 2 * self.wmin)
-        lo, hi = hist.range_with(ea)
-        hist.push(c, ea)
-        if eb > hi:
-            return eb / hi if hi > 0 else math.inf
-        return eb / lo if eb < lo else 1.0
-
-    def _energy_at(self, frame: int) -> float:
-        """The energy change (``_energy_change``) of the full look at ``frame`` (1.0 when
-        it is no longer remembered, or the cut came from the early look before its full
-        look)."""
-        c = (frame - self._seg0) // self.step
-        for position, energy in reversed(self._energy):
-            if position == c:
-                return energy
-        return 1.0
-
     def _placed(self, cut: Cut) -> Cut:
         """``cut`` moved to the best two-Gaussian split of the frames within
         ``place_window`` of it (``rtseg.detectors.placement``), never before the segment's
@@ -538,8 +511,9 @@ class ContrastDetector(OnlineDetector):
             oldest = c + 1 - 2 * self.wa
             for key in [k for k in self._models if k[0] < oldest]:
                 del self._models[key]
-        self._energy.append((c, self._energy_change(c, a.stats.trace / a.stats.n,
-                                                    b.stats.trace / b.stats.n)))
+        last = self._last_sent          # before windows straddling the last cut left out
+        self._energy.look(c, a.stats.trace / a.stats.n, b.stats.trace / b.stats.n,
+                          None if last is None else last + 2 * self.wmin)
         f = self.residual.push(a.pca_own)
         return self._stated(pca_distance(a, b, f) / max(pca_distance(a0, a, f), 1e-300), a)
 

@@ -24,6 +24,7 @@ restarts (a gap in the stream is not a new performer).  Scores are the contrast 
 from __future__ import annotations
 
 import logging
+import math
 from collections import deque
 
 import numpy as np
@@ -128,3 +129,39 @@ class EnergyRange:
         for q in (low, high):
             while q[0][0] < oldest:
                 q.popleft()
+
+
+class EnergyChanges:
+    """The energy change at each grid position the detector looks at: how far the after
+    window's energy (mean variance per frame) lies outside the range of the before
+    windows' energies since the last cut (``look``), and the newest ``keep`` of them by
+    position (``at``: a maximum is sent at most ``hold`` after its look)."""
+
+    def __init__(self, span: int, keep: int) -> None:
+        #: the before windows' energies: the last ``span`` positions since the last cut
+        self.before = EnergyRange(span)
+        self._changes: deque[tuple[int, float]] = deque(maxlen=int(keep))
+
+    def look(self, c: int, ea: float, eb: float, cut_off: int | None = None) -> float:
+        """Position c's before window energy ``ea`` and after window energy ``eb``; the
+        before windows of positions before ``cut_off`` (those that straddle the last cut
+        sent) are left out for good first.  Returns eb / the highest energy above the
+        range (``ea`` included), eb / the lowest below it, 1.0 within it."""
+        rng = self.before
+        if cut_off is not None:
+            rng.drop_before(cut_off)
+        lo, hi = rng.range_with(ea)
+        rng.push(c, ea)
+        if eb > hi:
+            change = eb / hi if hi > 0 else math.inf
+        else:
+            change = eb / lo if eb < lo else 1.0
+        self._changes.append((c, change))
+        return change
+
+    def at(self, c: int) -> float:
+        """The energy change of the look at position c (1.0 when no longer remembered)."""
+        for position, change in reversed(self._changes):
+            if position == c:
+                return change
+        return 1.0
