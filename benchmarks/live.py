@@ -11,6 +11,8 @@ per frame by stage, detector delay, highest sustained input rate.
                                           #  "max_rate_fps", "core_max_rate_fps"}
     python3 benchmarks/live.py --monitor  # only the CPU cost of the live monitor (rtseg.monitor)
                                           # with one page open in headless Chromium
+    python3 benchmarks/live.py --vmc      # only a VMC performer over UDP: CPU and latency,
+                                          # quiet frames batched and not
 
 Everything goes through the real chain: the synthetic 17-sensor suit
 (``rtseg.simulators.serial_device``, default synthesised performance) runs in a **separate
@@ -350,9 +352,17 @@ def run_session(rate: float, seconds: float, port: int, warmup: float = 1.0,
     Returns (session, summary, cpu fraction over the measured part)."""
     # the device clock keeps the take's 120 Hz (the rate= declared), sent rate/120 x faster
     suit = Suit(120.0, speed=rate / 120.0) if kind == "serial" else None
-    feed = server = page = None
+    feed = server = page = sender = None
     try:
-        source = f"serial://{suit.path}?rate=120" if suit else PacedSource(rate)
+        if kind == "vmc":                    # a VMC performer in another process, over UDP
+            from rtseg.drivers import open_source
+            source = open_source("osc://127.0.0.1:0?format=vmc&rate=120")
+            sender = subprocess.Popen(
+                [sys.executable, "-m", "rtseg.cli", "simulate", "vmc", "--rate", "120",
+                 "--speed", f"{rate / 120.0:g}", "--loop", "--port", str(source.port)],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=REPO)
+        else:
+            source = f"serial://{suit.path}?rate=120" if suit else PacedSource(rate)
         if monitor:
             from rtseg.monitor import MonitorFeed
             from rtseg.monitor.headless import HeadlessPage
@@ -385,6 +395,9 @@ def run_session(rate: float, seconds: float, port: int, warmup: float = 1.0,
     finally:
         if suit is not None:
             suit.close()
+        if sender is not None:
+            sender.terminate()
+            sender.wait(5)
         if page is not None:
             page.close()
         if server is not None:
@@ -421,9 +434,10 @@ def _pcts_text(p: dict[str, float | None]) -> str:
 
 
 def latency_and_cpu(seconds: float, port: int, monitor: bool = False,
-                    batch_quiet: bool = True) -> dict:
+                    batch_quiet: bool = True, kind: str = "serial") -> dict:
     session, summary, cpu, fps = run_session(120.0, seconds, port, monitor=monitor,
-                                             batch_quiet=batch_quiet)
+                                             batch_quiet=batch_quiet, kind=kind,
+                                             warmup=2.0 if kind == "vmc" else 1.0)
     lat = np.fromiter(session.stats.open_latency_ms, float)
     every = np.fromiter(session.stats.frame_latency_ms, float)
     cut_lat = np.fromiter(session.stats.cut_latency_ms, float)
@@ -562,6 +576,29 @@ def monitor_cost(seconds: float, port: int, log, as_json: bool) -> int:
     return 0
 
 
+def vmc_cost(seconds: float, port: int, log, as_json: bool) -> int:
+    """``--vmc``: one VMC performer at 120 Hz (``rtseg simulate vmc`` in another process,
+    UDP on 127.0.0.1, 17 bones, /VMC/Ext/T sent) into one session on ``osc://``, with the
+    quiet frames batched and without: CPU of this process, latencies, quiet counts."""
+    out = {}
+    for name, batched in (("batched", True), ("unbatched", False)):
+        log(f"VMC performer at 120 Hz over UDP, {seconds:g} s, quiet frames "
+            f"{'batched' if batched else 'read as they arrive'} ...")
+        r = latency_and_cpu(seconds, port, batch_quiet=batched, kind="vmc")
+        log(f"   CPU {r['cpu_fraction'] * 100:.2f} % of one core; {r['frames']} frames, "
+            f"{r['dropped']} dropped; frames that could send {_pcts_text(r['latency_ms'])}; "
+            f"every frame {_pcts_text(r['every_frame'])}; {r['quiet']['frames']} quiet "
+            f"frames in {r['quiet']['batches']} batches")
+        out[name] = {"cpu_fraction": round(r["cpu_fraction"], 4), "frames": r["frames"],
+                     "dropped": r["dropped"], "latency_ms": r["latency_ms"],
+                     "every_frame_latency_ms": r["every_frame"], "quiet": r["quiet"]}
+    out["ratio"] = round(out["batched"]["cpu_fraction"]
+                         / max(out["unbatched"]["cpu_fraction"], 1e-9), 3)
+    log(f"   batched / unbatched CPU {out['ratio']:.2f}")
+    print(json.dumps(out) if as_json else json.dumps(out, indent=2))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--json", action="store_true", help="print only the JSON result")
@@ -586,6 +623,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="skip the highest sustained input rate steps")
     p.add_argument("--serve-suits", type=int, metavar="N", help=argparse.SUPPRESS)
     p.add_argument("--rate", type=float, default=120.0, help=argparse.SUPPRESS)
+    p.add_argument("--vmc", action="store_true",
+                   help="only a VMC performer over UDP into one session, quiet frames "
+                        "batched and not: CPU and latency of each")
     p.add_argument("--monitor", action="store_true",
                    help="only the CPU cost of the live monitor: step 1 without it, then with "
                         "the monitor served and one page open in headless Chromium")
@@ -614,6 +654,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.monitor:
         try:
             return monitor_cost(args.seconds, port, log, args.json)
+        finally:
+            s.close()
+    if args.vmc:
+        try:
+            return vmc_cost(args.seconds, port, log, args.json)
         finally:
             s.close()
     try:

@@ -231,3 +231,21 @@ def test_live_benchmark_reports_a_run_too_short_for_any_frame_that_could_send():
         assert 0 < every["p50"] <= every["p99"] <= every["max"]
     assert doc["quiet"]["batches"] > 0
     assert "frames that could send (arrival -> processed/sent): p50 -" in r.stderr
+
+
+def test_live_benchmark_vmc_mode_compares_batched_and_unbatched():
+    """``--vmc``: a VMC performer in another process over real UDP into one session, with
+    the quiet frames batched (the VMC source holds frames once they close by content) and
+    read as they arrive."""
+    r = _run("live.py", "--vmc", "--seconds", "4", "--json")
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    on, off = doc["batched"], doc["unbatched"]
+    for run in (on, off):
+        assert run["frames"] >= 0.9 * 4 * 120 and run["dropped"] == 0
+        assert 0 < run["cpu_fraction"] < 1
+        every = run["every_frame_latency_ms"]
+        assert 0 < every["p50"] <= every["p99"] <= every["max"]
+    assert on["quiet"]["batches"] > 10 and on["quiet"]["frames"] > 0.3 * on["frames"]
+    assert off["quiet"] == {"batches": 0, "frames": 0, "late_open": 0}
+    assert doc["ratio"] == round(on["cpu_fraction"] / off["cpu_fraction"], 3)

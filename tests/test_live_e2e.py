@@ -273,6 +273,57 @@ def test_vmc_over_osc_to_osc_matches_offline(tmp_path, take):
     assert_cuts_match(osc.cuts(), on_wire(expected, session), tk, "python-osc (VMC input)")
 
 
+@pytest.mark.parametrize("batch_quiet,send_time", [(True, True), (False, True), (True, False)])
+def test_vmc_quiet_frames_read_in_batches_give_the_same_frames_and_cuts(tmp_path, take,
+                                                                       batch_quiet, send_time):
+    """A VMC source is batched like the serial one once its frames close by their content
+    (the sender's T seen, its message order learned): every frame sent is assembled once,
+    whole (every bone valid, one T each, in order), and the cuts on the wire are the
+    offline ones.  Off, no batch is read; nor from a sender without T (its frames have
+    no clock, and the assembler closes some of them by arrival times)."""
+    rec = tmp_path / "session"
+    osc = OscCollector()
+    source = open_source(f"osc://127.0.0.1:0?format=vmc&rate={RATE:g}")
+    sender = VmcSender(take, "127.0.0.1", source.port, rate=RATE, speed=SPEED,
+                       send_time=send_time)
+    try:
+        cfg = session_config(rec, [osc.port], buffer={"batch_quiet": batch_quiet})
+        session = LiveSession(source, cfg, handle_signals=False)
+        t, box = run_in_thread(session)
+        time.sleep(0.2)
+        sender.start()
+        assert sender.wait(take.n_frames / (RATE * SPEED) + 10)
+        hold = source.hold_frames()
+        time.sleep(0.3)
+        session.stop("test done")
+        t.join(10)
+        assert not t.is_alive()
+        time.sleep(0.2)
+    finally:
+        sender.stop()
+        osc.close()
+    summary = box["summary"]
+    st = session.stats
+    expected, tk = offline_cuts(rec, cfg)
+    assert tk.n_frames == summary.frames_received == source.stats.frames_ok
+    assert tk.n_frames >= 0.98 * take.n_frames
+    assert tk.valid.all(), "a frame lost bones: frames split or merged"
+    if send_time:
+        assert np.allclose(np.diff(tk.meta["source_time"]), 1.0 / RATE, atol=1e-4)
+    assert len(expected) >= 2
+    assert_cuts_match(osc.cuts(), on_wire(expected, session), tk, "python-osc (VMC, batched)"
+                      if batch_quiet else "python-osc (VMC)")
+    if not send_time:
+        assert hold == 0 and st.quiet_batches == st.quiet_frames == 0
+        return
+    assert 1 <= hold <= 16                  # the source could hold frames either way
+    if batch_quiet:
+        assert st.quiet_batches > 10 and st.quiet_frames > 0.3 * summary.frames_received
+        assert st.quiet_frames + st.late_open <= summary.frames_received
+    else:
+        assert st.quiet_batches == st.quiet_frames == st.late_open == 0
+
+
 @pytest.mark.parametrize("corrupt,min_cuts", [(0.01, 0), (0.0003, 1)])
 def test_faults_session_survives_and_records_every_frame(tmp_path, take, corrupt, min_cuts):
     """1 % corrupt bytes ruin ~80 % of the 173-byte frames (gaps everywhere: the detectors

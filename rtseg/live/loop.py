@@ -52,7 +52,9 @@ message waits; what is saved is the wake-ups in between (each costs reloading th
 interpreter's working set into a cold cache, several times a frame's arithmetic).
 Batched frames are stamped when read (``recv_time``), up to ``MAX_DEFER_S`` after they
 arrived, which the session's clock does not see when frames carry a source time (it
-places frames by the source clock); so only frames with a source clock are batched.
+places frames by the source clock); so only frames with a source clock are batched, and
+only from sources whose frames do not depend on arrival times (the serial driver, a VMC
+source once its frames close by their content).
 Off with ``buffer.batch_quiet = false``.  The live monitor then moves in steps of a batch
 (about 0.1 s at 120 Hz).
 

@@ -105,6 +105,14 @@ class VmcFrameRules:
         #: Last root rotation (rtseg frame, scalar-last) or None.
         self.root_rotation: tuple[float, float, float, float] | None = None
 
+    @property
+    def closes_by_content(self) -> bool:
+        """Whether frames are now closed by what arrives (the sender's T seen and its
+        message order learned: rules 1-4 of ``VmcAssembler`` without a timing rule), so a
+        batch of datagrams read together gives the frames they would give read one by
+        one (a frame whose root was lost may take the next frame's root then)."""
+        return self._sends_t and self._learned
+
     def flush(self, now: float, force: bool = False) -> list[Frame]:
         """Close the open frame if ``quiet`` seconds passed since the last datagram (or
         ``force``); returns the frames closed (0 or 1)."""
