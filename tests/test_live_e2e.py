@@ -129,6 +129,30 @@ def play_through_session(suit: SerialSuit, take, config) -> tuple[LiveSession, o
     return session, box["summary"]
 
 
+def play_vmc_through_session(take, config, **sender_options):
+    """A session on an ``osc://`` VMC source while a simulated performer sends ``take`` once
+    to it; stopped after it (the last datagrams given time to arrive): (session, summary,
+    source, the source's ``hold_frames()`` once the take was sent)."""
+    source = open_source(f"osc://127.0.0.1:0?format=vmc&rate={RATE:g}")
+    sender = VmcSender(take, "127.0.0.1", source.port, rate=RATE, speed=SPEED,
+                       **sender_options)
+    try:
+        session = LiveSession(source, config, handle_signals=False)
+        t, box = run_in_thread(session)
+        time.sleep(0.2)
+        sender.start()
+        assert sender.wait(take.n_frames / (RATE * SPEED) + 10)
+        hold = source.hold_frames()
+        time.sleep(0.3)
+        session.stop("test done")
+        t.join(10)
+        assert not t.is_alive()
+        time.sleep(0.2)
+    finally:
+        sender.stop()
+    return session, box["summary"], source, hold
+
+
 def offline_cuts(rec: Path, config) -> tuple[list, object]:
     """The recorded session through the same online detectors, offline."""
     tk = read_session(rec)
@@ -246,24 +270,11 @@ def test_quiet_frames_read_in_batches_give_the_same_cuts(tmp_path, take, batch_q
 def test_vmc_over_osc_to_osc_matches_offline(tmp_path, take):
     rec = tmp_path / "session"
     osc = OscCollector()
-    source = open_source(f"osc://127.0.0.1:0?format=vmc&rate={RATE:g}")
-    sender = VmcSender(take, "127.0.0.1", source.port, rate=RATE, speed=SPEED)
     try:
         cfg = session_config(rec, [osc.port], detectors={"methods": ["contrast", "pca"]})
-        session = LiveSession(source, cfg, handle_signals=False)
-        t, box = run_in_thread(session)
-        time.sleep(0.2)
-        sender.start()
-        assert sender.wait(take.n_frames / (RATE * SPEED) + 10)
-        time.sleep(0.3)
-        session.stop("test done")
-        t.join(10)
-        assert not t.is_alive()
-        time.sleep(0.2)
+        session, summary, source, _ = play_vmc_through_session(take, cfg)
     finally:
-        sender.stop()
         osc.close()
-    summary = box["summary"]
     expected, tk = offline_cuts(rec, cfg)
     assert tk.space == "local"
     assert tk.n_frames == summary.frames_received == source.stats.frames_ok
@@ -283,26 +294,12 @@ def test_vmc_quiet_frames_read_in_batches_give_the_same_frames_and_cuts(tmp_path
     no clock, and the assembler closes some of them by arrival times)."""
     rec = tmp_path / "session"
     osc = OscCollector()
-    source = open_source(f"osc://127.0.0.1:0?format=vmc&rate={RATE:g}")
-    sender = VmcSender(take, "127.0.0.1", source.port, rate=RATE, speed=SPEED,
-                       send_time=send_time)
     try:
         cfg = session_config(rec, [osc.port], buffer={"batch_quiet": batch_quiet})
-        session = LiveSession(source, cfg, handle_signals=False)
-        t, box = run_in_thread(session)
-        time.sleep(0.2)
-        sender.start()
-        assert sender.wait(take.n_frames / (RATE * SPEED) + 10)
-        hold = source.hold_frames()
-        time.sleep(0.3)
-        session.stop("test done")
-        t.join(10)
-        assert not t.is_alive()
-        time.sleep(0.2)
+        session, summary, source, hold = play_vmc_through_session(take, cfg,
+                                                                  send_time=send_time)
     finally:
-        sender.stop()
         osc.close()
-    summary = box["summary"]
     st = session.stats
     expected, tk = offline_cuts(rec, cfg)
     assert tk.n_frames == summary.frames_received == source.stats.frames_ok
