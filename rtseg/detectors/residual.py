@@ -18,7 +18,7 @@ stream is not a new performer).
 ``fraction`` 0.25 is the shipped ``[contrast] residual_floor``, chosen leave-one-person-out
 over the 15 people of ../shared/data with the thresholds (``benchmarks/lopo.py``,
 docs/live_detector.md); ``count`` 400 looks is 50 s at the 0.125 s step (200 or 800 give
-the same cuts there).  ``fraction`` 0 = no floor.
+the same scores there).  ``fraction`` 0 = no floor.
 """
 
 from __future__ import annotations
