@@ -63,4 +63,3 @@ class ResidualFloor:
         median = srt[mid] if n % 2 else 0.5 * (srt[mid - 1] + srt[mid])
         self.value = self.fraction * median
         return self.value
-

@@ -349,6 +349,17 @@ class LibraryBuilder:
         self.examples: list[dict[str, Any]] = []
         self.skipped: list[str] = []
 
+    def windows(self, a: int, b: int, frame_rate: float) -> list[tuple[int, int]]:
+        """The example windows [s, e) (frames) of the labelled range [a, b) at
+        ``frame_rate`` Hz (``window_bounds`` with this builder's options; none: too
+        short)."""
+        return window_bounds(a, b, frame_rate, self.window_s, self.step_s, self.edge_s,
+                             self.min_s)
+
+    def too_short(self, source: str, a: int, b: int, name: str) -> str:
+        """The note for a range [a, b) of ``source`` that gives no window."""
+        return f"{source} [{a}:{b}) {name}: shorter than {self.min_s + 2 * self.edge_s:g} s"
+
     def add(self, X: np.ndarray, name: str, source: str, frames: tuple[int, int] | None = None,
             frame_rate: float | None = None, info: dict[str, Any] | None = None) -> int:
         """Add the labelled range ``frames`` [a, b) (default all) of feature rows X; returns
@@ -371,10 +382,9 @@ class LibraryBuilder:
         a, b = (0, len(X)) if frames is None else (int(frames[0]), int(frames[1]))
         if not 0 <= a < b <= len(X):
             raise ValueError(f"{source}: frames {a}:{b} outside the take (0:{len(X)})")
-        wins = window_bounds(a, b, fr, self.window_s, self.step_s, self.edge_s, self.min_s)
+        wins = self.windows(a, b, fr)
         if not wins:
-            self.skipped.append(f"{source} [{a}:{b}) {name}: shorter than "
-                                f"{self.min_s + 2 * self.edge_s:g} s")
+            self.skipped.append(self.too_short(source, a, b, name))
             return 0
         k = len(self.examples)
         self.examples.append({"name": name, "source": str(source), "frames": [a, b],

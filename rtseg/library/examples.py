@@ -29,7 +29,7 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from rtseg.library.behaviours import DEFAULT_METRIC, Library, LibraryBuilder, window_bounds
+from rtseg.library.behaviours import DEFAULT_METRIC, Library, LibraryBuilder
 
 log = logging.getLogger(__name__)
 
@@ -195,11 +195,10 @@ def learnable(examples: Sequence[Example], **windows: float) -> tuple[list[Examp
     keep, notes = [], []
     for e in examples:
         i, j = e.rows()
-        if window_bounds(0, j - i, e.frame_rate, b.window_s, b.step_s, b.edge_s, b.min_s):
+        if b.windows(0, j - i, e.frame_rate):
             keep.append(e)
         else:
-            notes.append(f"{e.take} [{e.frames[0]}:{e.frames[1]}) {e.name}: shorter than "
-                         f"{b.min_s + 2 * b.edge_s:g} s")
+            notes.append(b.too_short(e.take, e.frames[0], e.frames[1], e.name))
     return keep, notes
 
 
