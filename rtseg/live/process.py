@@ -53,7 +53,7 @@ class SessionProcessing:
             self._warn("overrun", "processing fell behind: %d frames overwritten before use "
                        "(treated as a gap)", w.lost)
         pending = self._pending_lost + w.lost     # frames missing before the next processed
-        quiet = pipe.quiet_frames()               # the first this many cannot send
+        quiet_left = 0                            # next frames promised quiet (below)
         open_lat = st.open_latency_ms
         recv_all = w.recv_time
         n = len(w)
@@ -70,6 +70,7 @@ class SessionProcessing:
                     st.overload_drops += drop
                     pending += drop
                     i += drop
+                    quiet_left = 0                # the promise was for the frames dropped
                     self._warn("overload", "overloaded: frames dropped, oldest first, so "
                                "none waits over %.0f ms (%d so far)", self._max_lag * 1000,
                                st.overload_drops)
@@ -82,6 +83,16 @@ class SessionProcessing:
             lost, pending = pending, 0
             i += 1
             src = stime if stime == stime else None
+            # could this frame send?  Asked again once the last promise is used up, so a
+            # frame counts as one that could send only when the pipeline, just before it,
+            # did not promise it quiet (a frame after missing ones feeds the detectors
+            # filled rows too, more than the promise counts: it could send)
+            if lost:
+                quiet_left = 0
+            elif quiet_left <= 0:
+                quiet_left = pipe.quiet_frames()
+            could_send = quiet_left <= 0
+            quiet_left -= 1
             t_frame = self._clock_frame(index, recv, src)      # session seconds
             try:
                 cuts = pipe.process(index, w.data[index - w.start].reshape(J, 4), valid,
@@ -105,7 +116,7 @@ class SessionProcessing:
                     self._emit(self._behaviour_event(d))
             done = time.monotonic()
             st.frame_latency_ms.append((done - recv) * 1000.0)
-            if i > quiet:
+            if could_send:
                 open_lat.append((done - recv) * 1000.0)
             # cost of one frame (s), a running mean over about 64 frames
             self._frame_cost += (done - now - self._frame_cost) / 64.0
