@@ -619,3 +619,44 @@ def test_pipeline_survives_garbage(frames_):
         np.testing.assert_allclose(np.linalg.norm(pipe._last_good, axis=1), 1.0, rtol=1e-9)
     assert pipe.stats.frames == len(frames_)
     assert pipe.stats.fed + pipe.stats.filled_frames == len(seen)
+
+
+def test_a_cut_goes_out_before_the_identity_step_of_its_frame():
+    """The live loop sends a frame's cuts, then runs the behaviour identity's step of that
+    frame (its window fits), then sends its behaviour messages: a cue does not wait for
+    the identity, and the messages keep their order."""
+    from rtseg.identity.tracker import IdentityTracker
+    from rtseg.core.events import BehaviourEvent
+    seen = []                              # (cuts the step got, cut events published by then)
+    orig = IdentityTracker.step
+
+    def step(self, index, x, cuts):
+        if cuts:
+            seen.append((len(cuts), sum(isinstance(e, CutEvent) for e in pubs.events)))
+        return orig(self, index, x, cuts)
+
+    class Pubs(FakePublishers):
+        def publish_behaviour(self, ev):
+            self.events.append(ev)
+
+    pubs = Pubs()
+    config = from_dict({"calibration": {"mode": "none"}, "status": {"interval": 0.05},
+                        "identity": {"enabled": True}})
+    src = FakeSource(frames(900, 300), pace=0.0002)
+    s = LiveSession(src, config, publishers=pubs, recorder=FakeRecorder(),
+                    handle_signals=False)
+    import rtseg.live.pipeline as pipe_mod
+    orig_make = pipe_mod.make_detectors
+    pipe_mod.make_detectors = lambda c, r: {"step": StepDetector()}
+    IdentityTracker.step = step
+    try:
+        s.run()
+    finally:
+        pipe_mod.make_detectors = orig_make
+        IdentityTracker.step = orig
+    assert seen == [(1, 1)]                # the cut was out when the identity saw it
+    events = [e for e in pubs.events if isinstance(e, (CutEvent, BehaviourEvent))]
+    cut_at = [i for i, e in enumerate(events) if isinstance(e, CutEvent)]
+    after = [e.segment for e in events[cut_at[0] + 1:]]
+    assert len(cut_at) == 1 and 1 in after   # the new segment's decision follows its cut
+    assert all(e.segment == 0 for e in events[:cut_at[0]])

@@ -190,6 +190,8 @@ class Pipeline:
         self._filled_at_start = {m: 0 for m in self.detectors}
         self._last_cut_row = {m: 0 for m in self.detectors}
         self._prev_fed: np.ndarray | None = None
+        #: (index, row, cuts) of a frame whose identity step waits (``process(identify=False)``)
+        self._identity_due: tuple[int, np.ndarray, list[PipelineCut]] | None = None
 
     def _feature_joints(self) -> np.ndarray:
         """Input joints the pose features depend on: the profile's joints and, for global
@@ -315,7 +317,14 @@ class Pipeline:
 
     def process(self, index: int, quats: np.ndarray, valid: np.ndarray,
                 seq: int | None = None, recv_time: float | None = None,
-                lost: int = 0, source_time: float | None = None) -> list[PipelineCut]:
+                lost: int = 0, source_time: float | None = None,
+                identify: bool = True) -> list[PipelineCut]:
+        """The frame's cuts (class docstring).  With ``identify`` False the behaviour
+        identity's step for the frame waits for ``identify_pending()`` (the live loop sends
+        the cuts first, so a cue does not wait for the identity's window fits; the tracker
+        sees the same rows and cuts in the same order either way)."""
+        if self._identity_due is not None:       # the previous frame's, first
+            self.identify_pending()
         st = self.stats
         st.frames += 1
         # --- gaps in the input (sequence numbers or source clock, silence, frames the live
@@ -409,15 +418,30 @@ class Pipeline:
         else:
             np.copyto(self._prev_fed, q)
         if self.identity is not None:
-            try:
-                self.identity.step(index, x, out)
-            except Exception as exc:  # identity must never cost a cut
-                self.stats.identity_errors += 1
-                n = self.stats.identity_errors
-                if n & (n - 1) == 0:            # logged at the 1st, 2nd, 4th, 8th, ... failure
-                    log.warning("behaviour identity failed at frame %d (%s: %s; %d so far)",
-                                index, type(exc).__name__, exc, n)
+            if identify:
+                self._identify(index, x, out)
+            else:
+                self._identity_due = (index, x, out)
         return out
+
+    def identify_pending(self) -> None:
+        """The behaviour identity's step of the last frame processed with ``identify``
+        False (nothing when there is none: a frame that fed no row, or already done)."""
+        due = self._identity_due
+        if due is not None:
+            self._identity_due = None
+            self._identify(*due)
+
+    def _identify(self, index: int, x: np.ndarray, out: list[PipelineCut]) -> None:
+        """The identity tracker's step for fed row ``x`` of frame ``index`` and its cuts."""
+        try:
+            self.identity.step(index, x, out)
+        except Exception as exc:  # identity must never cost a cut
+            self.stats.identity_errors += 1
+            n = self.stats.identity_errors
+            if n & (n - 1) == 0:            # logged at the 1st, 2nd, 4th, 8th, ... failure
+                log.warning("behaviour identity failed at frame %d (%s: %s; %d so far)",
+                            index, type(exc).__name__, exc, n)
 
     def quiet_frames(self) -> int:
         """How many of the next received frames certainly reveal no cut and no behaviour

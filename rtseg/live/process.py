@@ -96,7 +96,8 @@ class SessionProcessing:
             t_frame = self._clock_frame(index, recv, src)      # session seconds
             try:
                 cuts = pipe.process(index, w.data[index - w.start].reshape(J, 4), valid,
-                                    None if seq < 0 else seq, recv, lost, src)
+                                    None if seq < 0 else seq, recv, lost, src,
+                                    identify=False)
             except Exception as exc:  # never let one frame end the session
                 st.bad_frames += 1
                 self._warn("process", "frame %d could not be processed (%s: %s); dropped",
@@ -112,6 +113,8 @@ class SessionProcessing:
                 st.last_cut = ev
                 st.cut_latency_ms.append((time.monotonic() - recv) * 1000.0)
             if pipe.identity is not None:
+                # after the cuts went out: a cue does not wait for the identity's fits
+                pipe.identify_pending()
                 for d in pipe.identity.drain():
                     self._emit(self._behaviour_event(d))
             done = time.monotonic()
