@@ -724,8 +724,10 @@ def main(argv: list[str] | None = None) -> int:
         s.close()
     result = {"latency_ms": lc["latency_ms"],
               "every_frame_latency_ms": lc["every_frame"], "quiet": lc["quiet"],
+              "cut_latency_ms": lc["cut_latency"],
               "unbatched": {"cpu_fraction": round(unb["cpu_fraction"], 4),
                             "latency_ms": unb["latency_ms"],
+                            "cut_latency_ms": unb["cut_latency"],
                             "every_frame_latency_ms": unb["every_frame"]},
               "detector_delay_ms": {m: round(v, 1) for m, v in delays.items()},
               "cpu_fraction": round(lc["cpu_fraction"], 4),

@@ -265,6 +265,10 @@ def test_quiet_frames_read_in_batches_give_the_same_cuts(tmp_path, take, batch_q
         assert st.quiet_batches == st.quiet_frames == st.late_open == 0
     # the frames that could send were processed as they came (their latency is measured)
     assert 0 < len(st.open_latency_ms) < 0.5 * summary.frames_received
+    # between frames the loop worked ahead (placement, the gate's window before), and the
+    # cuts above are still exactly the offline ones
+    det = session.pipeline.detectors["contrast"]
+    assert st.ahead_pieces > 10 and det._placement.made_ahead >= 1
 
 
 def test_vmc_over_osc_to_osc_matches_offline(tmp_path, take):

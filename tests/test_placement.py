@@ -64,3 +64,56 @@ def test_placement_moves_the_default_detectors_cuts_and_never_adds_or_drops_one(
     assert all(abs(m) <= fr for m in moves)
     assert any(moves)                                 # placement did act
     assert all(a.frame < b.frame for a, b in zip(placed, placed[1:]))
+
+
+def test_a_placement_made_in_pieces_gives_the_split_of_one_call():
+    """begin / advance / best do the one call's arithmetic: the same split on spans of
+    every shape, ``pending`` names the placement held until another replaces it."""
+    from rtseg.detectors.placement import Placer
+    rng = np.random.default_rng(5)
+    for trial in range(60):
+        d, n = int(rng.integers(3, 30)), int(rng.integers(12, 400))
+        c = int(rng.integers(0, n))
+        X = rng.standard_normal((n, d)) * rng.uniform(0.2, 3.0, d)
+        X[c:] += rng.standard_normal(d)
+        radius, stride = int(rng.integers(1, 100)), int(rng.integers(1, 5))
+        one = Placer(d, 400, radius, stride, margin=3)(X, c)
+        p = Placer(d, 400, radius, stride, margin=3)
+        p.begin(X, c, ("span", trial))
+        assert p.pending(("span", trial)) and not p.pending(("span", trial + 1))
+        pieces = 1
+        while not p.advance():
+            pieces += 1
+        assert p.done() and p.best() == one
+        assert pieces <= 1 + (2 * radius // stride + 1 + 7) // 8
+        p(X, c)                                   # a call replaces what was held
+        assert not p.pending(("span", trial))
+
+
+def test_work_ahead_changes_no_cut_and_leaves_the_cut_frames_little_to_do():
+    """``ContrastDetector.ahead`` between frames (the live loop's idle time) places the
+    waiting maximum and fits the gate's window before it: every cut is the one made
+    without it (frame, detection frame, score), and every cut sent found its placement
+    made ahead."""
+    from rtseg.evaluation.online import fed_features, live_config
+    from rtseg.simulators.synth.motion import synthesize
+
+    take = synthesize("idle:4,walk:5,punch:4,walk:5,squat:5,punch:4", seed=3).take
+    X, _, _ = fed_features(take, live_config()[0])
+    p = load_params()["contrast"]
+    plain = ContrastDetector.from_params(p, take.frame_rate).run(X)
+    det = ContrastDetector.from_params(p, take.frame_rate)
+    cuts, pieces = [], 0
+    for x in X:
+        c = det.update(x)
+        if c is not None:
+            cuts.append(c)
+        while det.ahead():
+            pieces += 1
+    key = [(c.frame, c.detected_at, c.score, c.confidence) for c in plain]
+    assert len(plain) >= 3
+    assert [(c.frame, c.detected_at, c.score, c.confidence) for c in cuts] == key
+    assert det._placement.made_ahead == len(cuts)
+    assert det.gate.made_ahead >= len(cuts)          # dropped cuts are decided too
+    assert pieces > 10 * len(cuts)
+    assert not det.ahead()                           # nothing waits at the end

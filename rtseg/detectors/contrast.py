@@ -42,8 +42,8 @@ Each frame is copied once, into a ring the blocks, the gate and placement read. 
 one core (``OMP_NUM_THREADS=1 taskset -c 0 python3 benchmarks/speed.py``: CMU 86_01, 48
 dims, the shipped parameters): about 58 000 frames/s; a median frame 1.2 us, p99 about
 110 us (frames of a warm window fit, or of a look that fits a window; 3 of the 785 fits
-are exact, about 150 us each), and about 3 ms on the frame that sends a cut (the gate's
-two fits and placement).
+are exact, about 150 us each), and about 2 ms on the frame that sends a cut (the gate's
+two fits and placement) unless the work ahead (below) has been done.
 
 Frames are numbered from the detector's creation; ``restart()`` (a gap) starts a new
 segment: the grid, the windows and the peak picker begin again from the next frame.
@@ -97,6 +97,15 @@ of the frames within ``place_window`` of it that have arrived, at most ``place_r
 from the grid position and never onto or before the last cut sent.  The gate and the
 bounded windows work on the unplaced positions, so placement moves cuts and never adds or
 removes one.
+
+Work ahead (``ahead()``, called by the live loop between frames while the next ones cannot
+send): the maximum waiting for confirmation (``EarlyCuts.candidate``) is placed, a piece of
+at most ``PLACE_BATCH`` candidate splits at a time, once its whole placement span has
+arrived (``placement.RingPlacement``), and the gate fits its window before it
+(``SameBehaviourGate.prepare``).  The frame that sends the cut then finds both done when
+its span and window are the ones prepared (a span's rows do not change once arrived), so
+nothing ahead changes a cut; it costs the placements of maxima a later look replaces.
+Offline nothing calls it.
 """
 
 from __future__ import annotations
@@ -110,7 +119,7 @@ import numpy as np
 
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.detectors.early import EarlyCut, EarlyCuts
-from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, Placer
+from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, RingPlacement
 from rtseg.detectors.relative import ENERGY_SPAN, EnergyChanges, RelativeFloor
 from rtseg.detectors.residual import RESIDUAL_LOOKS, ResidualFloor
 from rtseg.detectors.gate import (GATE_DECIDE_S, GATE_MIN_AFTER_S, GATE_SKIP_S, GATE_WINDOW_S,
@@ -322,9 +331,9 @@ class ContrastDetector(OnlineDetector):
         if self._shared:
             self.gate.share(self._rows)
         if self.place_radius:
-            self._span = np.empty((self._place_len, dim))    # a cut's rows, in order
-            self._placer = Placer(dim, self._place_len, self.place_radius, self.place_stride,
-                                  self.place_ridge, margin=self.place_margin)
+            self._placement = RingPlacement(self._rows, self.place_window, self._place_len,
+                                            self.place_radius, self.place_stride,
+                                            self.place_ridge, self.place_margin)
         # prefix sums at block boundaries k (blocks < k), ring of cap entries
         self._P1 = np.zeros((cap, dim))
         self._P2 = np.zeros((cap, dim, dim))
@@ -451,17 +460,20 @@ class ContrastDetector(OnlineDetector):
         """``cut`` moved to the best two-Gaussian split of the frames within
         ``place_window`` of it (``rtseg.detectors.placement``), never before the segment's
         start nor onto or before the last cut sent."""
-        now = self._t                           # frames [lo, now) are in the ring
-        lo = max(cut.frame - self.place_window, self._seg0, now - self._place_len)
-        if self._last_placed is not None:
-            lo = max(lo, self._last_placed + 1)
-        hi = min(now, cut.frame + self.place_window)
-        if hi - lo < 4 or not lo <= cut.frame < hi:
-            return cut
-        rows = np.take(self._rows, np.arange(lo, hi) % self._ringlen, axis=0,
-                       out=self._span[:hi - lo])
-        b = lo + self._placer(rows, cut.frame - lo)
+        b = self._placement.place(cut.frame, self._t, self._seg0, self._last_placed)
         return cut if b == cut.frame else replace(cut, frame=b)
+
+    def ahead(self) -> bool:
+        """One piece of the work the frame that sends the waiting maximum would do, done
+        now (the live loop calls it while its next frames cannot send: "Work ahead" in the
+        module docstring); False when there is none.  Changes no cut."""
+        pos = self.peaks.candidate if self._dim is not None else None
+        if pos is None:
+            return False
+        if self.place_radius and self._placement.ahead(pos, self._t, self._seg0,
+                                                       self._last_placed):
+            return True
+        return self.gate is not None and self.gate.prepare(pos)
 
     def _stats(self, lo: int, hi: int) -> WindowStats:
         """Statistics of blocks [lo, hi), from the prefix-sum ring."""

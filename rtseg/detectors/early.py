@@ -63,6 +63,15 @@ class EarlyCuts:
                       if early_threshold is not None else None)
         self.reset()
 
+    @property
+    def candidate(self) -> int | None:
+        """The position of the full look's maximum waiting for confirmation, else the
+        early look's, else None."""
+        pos = self.full.candidate
+        if pos is None and self.early is not None:
+            pos = self.early.candidate
+        return pos
+
     def reset(self) -> None:
         """Forget both profiles and the cuts sent (after a gap)."""
         self.full.reset()

@@ -87,6 +87,10 @@ class SameBehaviourGate:
         self._floor = 0                  # before windows start no earlier than this frame
         self.dropped = 0
         self.sent = 0
+        #: ((a, b), model) of the window before a cut fitted ahead (``prepare``)
+        self._ahead: tuple[tuple[int, int], object] | None = None
+        #: decisions whose window before was fitted ahead
+        self.made_ahead = 0
         #: (boundary, distance, sent) of every decision, for plots and benchmarks
         self.decisions: list[tuple[int, float, bool]] = []
         #: called with the frame of every cut dropped (the detector forgets it: a dropped
@@ -143,6 +147,19 @@ class SameBehaviourGate:
             return None
         cut = self._out.popleft()
         return replace(cut, detected_at=max(cut.detected_at, self._t - 1))
+
+    def prepare(self, b: int) -> bool:
+        """Fit now the window before a cut at ``b`` decided now (the live loop's work
+        ahead, ``ContrastDetector.ahead``): a later decision whose window before is the
+        same frames uses it instead of fitting it again (``made_ahead`` counts those).
+        False when there was nothing to fit (no rows, too few frames, already fitted)."""
+        if self._rows is None or self._source is not None or b > self._t:
+            return False
+        a = max(b - self.max_window, self._floor, self._t - self.ring)
+        if b - a < 2 or (self._ahead is not None and self._ahead[0] == (a, b)):
+            return False
+        self._ahead = ((a, b), fit(self._stats(a, b), **self.fit_args))
+        return True
 
     def restart(self) -> None:
         """A gap: decide every held cut on the frames so far; later windows start after."""
@@ -201,9 +218,13 @@ class SameBehaviourGate:
         if have_rows and hi - lo >= 2 and b - a >= 2:
             d = self.memo.get((lo, hi, a, b)) if self.memo is not None else None
             if d is None:
-                d = behaviour_distance(fit(self._stats(lo, hi), **self.fit_args),
-                                       fit(self._stats(a, b), **self.fit_args),
-                                       self.reference_dims)
+                after = fit(self._stats(lo, hi), **self.fit_args)
+                if self._ahead is not None and self._ahead[0] == (a, b):
+                    before = self._ahead[1]
+                    self.made_ahead += 1
+                else:
+                    before = fit(self._stats(a, b), **self.fit_args)
+                d = behaviour_distance(after, before, self.reference_dims)
                 if self.memo is not None:
                     self.memo[(lo, hi, a, b)] = d
         same = d <= self.threshold

@@ -42,6 +42,11 @@ class CausalPeaks:
         self._cand: tuple[int, float] | None = None
         self._last = None
 
+    @property
+    def candidate(self) -> int | None:
+        """The position of the maximum waiting for confirmation, if any."""
+        return None if self._cand is None else self._cand[0]
+
     def forget(self, position: int) -> None:
         """The event at ``position`` was withdrawn: it no longer holds the next one
         ``min_gap`` away (a later maximum must still exceed the values before it)."""

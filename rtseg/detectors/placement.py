@@ -45,7 +45,15 @@ def place(rows: np.ndarray, c: int, radius: int, stride: int = 1, ridge: float =
 
 class Placer:
     """``place`` for spans of at most ``max_rows`` rows of ``dim`` dims, with its work
-    arrays allocated once (module docstring)."""
+    arrays allocated once (module docstring).
+
+    Besides the one call (``placer(rows, c)``), a placement can be made in pieces:
+    ``begin(rows, c, key)`` (the span's chunk sums, about 0.2 ms at d = 48), then
+    ``advance()`` once per ``PLACE_BATCH`` candidates (their log-determinants, about
+    0.15 ms each) until it returns True, then ``best()``; ``pending(key)`` says whether
+    the placement begun with ``key`` is still held (a call or another ``begin`` replaces
+    it).  The pieces do the one call's arithmetic in the same order, so a placement made
+    ahead gives the split the one call gives."""
 
     def __init__(self, dim: int, max_rows: int, radius: int, stride: int = 1,
                  ridge: float = 0.01, margin: int = 2) -> None:
@@ -58,16 +66,33 @@ class Placer:
         self._S2 = np.empty((k + 1, d, d))                 # chunk scatters, then their sums
         self._covs = np.empty((2 * b, d, d))               # a batch's left, then right sides
         self._outer = np.empty((b, d, d))                  # a side's mean outer products
+        self._logdet = np.empty((2, k))                    # left sides, right sides
+        self._key: object = None                           # the placement held (``begin``)
+        self._cand: np.ndarray | None = None               # its candidates (None: c itself)
+        self._next = 0                                     # its next candidate to evaluate
 
     def __call__(self, rows: np.ndarray, c: int) -> int:
         """The best split of ``rows`` (n <= ``max_rows`` frames x ``dim``) within ``radius``
         of ``c`` (``place``)."""
+        self.begin(rows, c)
+        while not self.advance():
+            pass
+        return self.best()
+
+    def pending(self, key: object) -> bool:
+        """Whether the placement begun with ``key`` is held (done or not)."""
+        return key is not None and self._key == key
+
+    def begin(self, rows: np.ndarray, c: int, key: object = None) -> None:
+        """Start placing ``rows`` (n <= ``max_rows`` frames x ``dim``) around ``c``: the
+        span's chunk sums; ``key`` names it for ``pending``."""
+        self._key, self._c, self._cand, self._next = key, int(c), None, 0
         n, d = rows.shape
         stride, margin = self.stride, self.margin
         lo_b = max(margin, c - self.radius)
         hi_b = min(n - margin, c + self.radius)
         if n < 2 * margin or lo_b > hi_b:
-            return int(c)
+            return
         Y = np.subtract(rows, rows.mean(axis=0), out=self._Y[:n])
         # candidates on a grid through c, chunk sums between consecutive candidates
         first = c - ((c - lo_b) // stride) * stride
@@ -79,38 +104,139 @@ class Placer:
         for i in range(k + 1):
             chunk = Y[edges[i]:edges[i + 1]]
             np.matmul(chunk.T, chunk, out=S2[i])
-        T1, T2 = S1.sum(axis=0), S2.sum(axis=0)
-        C1, C2 = _running_sums(S1)[:-1], _running_sums(S2)[:-1]        # sums of [0, b)
-        nl = cand.astype(np.float64)[:, None]
-        nr = n - nl
-        reg = self.ridge * float(np.einsum("ii", T2)) / (n * d)
-        left_mean = C1 / nl
-        right_mean = (T1 - C1) / nr
-        logdet = np.empty((2, k))                          # left sides, right sides
+        self._T1, self._T2 = S1.sum(axis=0), S2.sum(axis=0)
+        self._C1, self._C2 = _running_sums(S1)[:-1], _running_sums(S2)[:-1]  # sums of [0, b)
+        self._nl = nl = cand.astype(np.float64)[:, None]
+        self._nr = n - nl
+        self._reg = self.ridge * float(np.einsum("ii", self._T2)) / (n * d)
+        self._left_mean = self._C1 / nl
+        self._right_mean = (self._T1 - self._C1) / self._nr
+        self._cand = cand
 
-        def covariances(i: int, j: int) -> np.ndarray:
-            """Both sides' covariances at candidates [i, j), each regularised on its
-            diagonal: the left sides, then the right sides."""
-            m = j - i
-            covs, outer = self._covs[:2 * m], self._outer[:m]
-            left, right = covs[:m], covs[m:]
-            np.divide(C2[i:j], nl[i:j, :, None], out=left)
-            left -= np.einsum("ki,kj->kij", left_mean[i:j], left_mean[i:j], out=outer)
-            np.subtract(T2, C2[i:j], out=right)
-            right /= nr[i:j, :, None]
-            right -= np.einsum("ki,kj->kij", right_mean[i:j], right_mean[i:j], out=outer)
-            covs.reshape(2 * m, d * d)[:, ::d + 1] += reg
-            return covs
+    def advance(self) -> bool:
+        """Evaluate the next ``PLACE_BATCH`` candidates of the placement begun; True when
+        every candidate is evaluated (``best`` is known)."""
+        cand = self._cand
+        if cand is None:
+            return True
+        k = len(cand)
+        i = self._next
+        if i >= k:
+            return True
+        j = min(k, i + PLACE_BATCH)
+        ld = _cholesky_logdets(self._covariances(i, j))
+        if ld is None:                     # not positive definite (ridge 0): by LU
+            ld = np.linalg.slogdet(self._covariances(i, j))[1]
+        self._logdet[:, i:j] = ld.reshape(2, j - i)
+        self._next = j
+        return j >= k
 
-        # a batch of candidates at a time: work arrays that stay in cache
-        for i in range(0, k, PLACE_BATCH):
-            j = min(k, i + PLACE_BATCH)
-            ld = _cholesky_logdets(covariances(i, j))
-            if ld is None:                     # not positive definite (ridge 0): by LU
-                ld = np.linalg.slogdet(covariances(i, j))[1]
-            logdet[:, i:j] = ld.reshape(2, j - i)
-        cost = nl[:, 0] * logdet[0] + nr[:, 0] * logdet[1]
+    def done(self) -> bool:
+        """Whether every candidate of the placement begun is evaluated."""
+        return self._cand is None or self._next >= len(self._cand)
+
+    def best(self) -> int:
+        """The split of the placement begun (``advance`` must have returned True)."""
+        cand = self._cand
+        if cand is None:
+            return self._c
+        k = len(cand)
+        if self._next < k:
+            raise RuntimeError("placement not finished")
+        logdet = self._logdet[:, :k]
+        cost = self._nl[:, 0] * logdet[0] + self._nr[:, 0] * logdet[1]
         return int(cand[int(np.argmin(cost))])
+
+    def _covariances(self, i: int, j: int) -> np.ndarray:
+        """Both sides' covariances at candidates [i, j), each regularised on its diagonal:
+        the left sides, then the right sides (work arrays that stay in cache)."""
+        m = j - i
+        d = self._covs.shape[1]
+        nl, nr = self._nl, self._nr
+        covs, outer = self._covs[:2 * m], self._outer[:m]
+        left, right = covs[:m], covs[m:]
+        np.divide(self._C2[i:j], nl[i:j, :, None], out=left)
+        lm, rm = self._left_mean[i:j], self._right_mean[i:j]
+        left -= np.einsum("ki,kj->kij", lm, lm, out=outer)
+        np.subtract(self._T2, self._C2[i:j], out=right)
+        right /= nr[i:j, :, None]
+        right -= np.einsum("ki,kj->kij", rm, rm, out=outer)
+        covs.reshape(2 * m, d * d)[:, ::d + 1] += self._reg
+        return covs
+
+
+class RingPlacement:
+    """A live detector's cut placement: the span of a cut at frame f, read from the
+    detector's ring of rows (``ring``: frame u at row u % len(ring); frames numbered as
+    the detector's), placed by a ``Placer``; and placements made ahead.
+
+    The span of a cut sent when ``now`` frames have arrived (frames [0, now)) is [lo, hi):
+    lo = max(f - ``window``, ``seg0`` (its segment's first frame), now - ``keep`` (the
+    oldest frame the ring is sure to hold), ``last`` + 1 (the last cut sent, as placed)),
+    hi = min(now, f + ``window``).  ``ahead(f, ...)`` does one piece of the placement of a
+    cut at f that would be sent now, once its whole span has arrived (now >= f +
+    ``window``): ``place`` of the same span later finishes it instead of starting again,
+    so the frame that sends the cut does not pay for it (``made_ahead`` counts those
+    cuts).  Nothing placed ahead changes a cut: a span's rows do not change once arrived."""
+
+    def __init__(self, ring: np.ndarray, window: int, keep: int, radius: int, stride: int,
+                 ridge: float, margin: int) -> None:
+        dim = ring.shape[1]
+        self.window, self.keep = int(window), int(keep)
+        self._ring = ring
+        self._span = np.empty((self.keep, dim))           # a cut's rows, in order
+        self._placer = Placer(dim, self.keep, radius, stride, ridge, margin)
+        #: cuts whose placement was made (wholly or partly) ahead
+        self.made_ahead = 0
+
+    def span(self, f: int, now: int, seg0: int, last: int | None) -> tuple[int, int] | None:
+        """[lo, hi) of a cut at ``f`` sent with frames [0, ``now``) arrived (class
+        docstring); None when it leaves nothing to place."""
+        lo = max(f - self.window, seg0, now - self.keep)
+        if last is not None:
+            lo = max(lo, last + 1)
+        hi = min(now, f + self.window)
+        if hi - lo < 4 or not lo <= f < hi:
+            return None
+        return lo, hi
+
+    def place(self, f: int, now: int, seg0: int, last: int | None) -> int:
+        """The frame a cut at ``f`` sent now is placed on (``f`` when its span leaves no
+        choice)."""
+        span = self.span(f, now, seg0, last)
+        if span is None:
+            return f
+        lo, hi = span
+        placer = self._placer
+        if placer.pending((lo, hi, f)):
+            self.made_ahead += 1
+            while not placer.advance():
+                pass
+            return lo + placer.best()
+        return lo + placer(self._rows(lo, hi), f - lo)
+
+    def ahead(self, f: int, now: int, seg0: int, last: int | None) -> bool:
+        """One piece of the placement of a cut at ``f`` sent now (class docstring); False
+        when there is nothing to do (its span not whole yet, or already placed)."""
+        if now < f + self.window:
+            return False
+        span = self.span(f, now, seg0, last)
+        if span is None:
+            return False
+        lo, hi = span
+        placer = self._placer
+        if not placer.pending((lo, hi, f)):
+            placer.begin(self._rows(lo, hi), f - lo, (lo, hi, f))
+            return True
+        if placer.done():
+            return False
+        placer.advance()
+        return True
+
+    def _rows(self, lo: int, hi: int) -> np.ndarray:
+        """Frames [lo, hi) of the ring, in order (in the span's work array)."""
+        ring = self._ring
+        return np.take(ring, np.arange(lo, hi) % len(ring), axis=0, out=self._span[:hi - lo])
 
 
 def _cholesky_logdets(covs: np.ndarray) -> np.ndarray | None:

@@ -58,6 +58,14 @@ source once its frames close by their content).
 Off with ``buffer.batch_quiet = false``.  The live monitor then moves in steps of a batch
 (about 0.1 s at 120 Hz).
 
+Work ahead
+----------
+After a wake-up's frames, while no session has a frame waiting and every session's next
+frame is promised quiet, the loop lets the detectors do, for at most ``AHEAD_S``, work the
+frame that sends the waiting cut would otherwise do (``Pipeline.ahead``, the contrast
+detector's placement and gate window of its waiting maximum): that frame then sends its
+cut sooner, with the same cut (``LiveStats.ahead_pieces`` counts the pieces).
+
 Several sessions in one loop each keep their own source, pipeline (features, detectors,
 identity), ring buffer, publishers, recording and counters; they share the thread, the
 process's signal handling (SIGINT/SIGTERM stop every session), the BLAS thread limit and
@@ -87,6 +95,11 @@ PUMP_EVERY_S = 0.001
 
 #: with several sessions, the longest one processes before the next one's turn, s
 TURN_S = 0.002
+
+#: longest the detectors' work ahead takes per wake-up, s (``LiveSession._work_ahead``: done
+#: only while every session's next frame is promised quiet, so it delays no frame that
+#: could send)
+AHEAD_S = 0.001
 
 #: longest a source is left unread while its frames cannot send anything, s
 #: (``rtseg.live.quiet``; well under ``gaps.max_seconds`` and the staleness times)
@@ -408,6 +421,12 @@ def run_sessions(sessions: Sequence[Any], handle_signals: bool = True) -> list[A
                     until = s._quiet_until(time.monotonic())
                     if until is not None:
                         loop.quiet(s, until)
+            if running and all(s._next_quiet() for s in running):
+                end = time.monotonic() + AHEAD_S   # work ahead: no next frame can send
+                for s in running:
+                    s._work_ahead(end)
+                    if time.monotonic() >= end:
+                        break
     finally:
         for s in started:
             if id(s) not in summaries:
@@ -422,4 +441,4 @@ def run_sessions(sessions: Sequence[Any], handle_signals: bool = True) -> list[A
     return [summaries[id(s)] for s in sessions]
 
 
-__all__ = ["MAX_DEFER_S", "MAX_WAIT_S", "PUMP_EVERY_S", "TURN_S", "SessionLoop", "Waker", "run_sessions"]
+__all__ = ["AHEAD_S", "MAX_DEFER_S", "MAX_WAIT_S", "PUMP_EVERY_S", "TURN_S", "SessionLoop", "Waker", "run_sessions"]

@@ -443,6 +443,18 @@ class Pipeline:
                 log.warning("behaviour identity failed at frame %d (%s: %s; %d so far)",
                             index, type(exc).__name__, exc, n)
 
+    def ahead(self) -> bool:
+        """One piece of the work ahead of the first detector that has some
+        (``ContrastDetector.ahead``: the placement and the gate's window before of the
+        maximum waiting for confirmation), done while the next frames cannot send; False
+        when none has any.  Changes no cut: a frame that sends a cut only finds part of its
+        work done."""
+        for d in self.detectors.values():
+            fn = getattr(d, "ahead", None)
+            if fn is not None and fn():
+                return True
+        return False
+
     def quiet_frames(self) -> int:
         """How many of the next received frames certainly reveal no cut and no behaviour
         message: the fewest of the detectors' and the identity tracker's

@@ -141,5 +141,23 @@ class SessionProcessing:
             self._last_index = w.start + i - 1
 
 
+    def _next_quiet(self) -> bool:
+        """Whether no frame waits and the next one cannot send (``Pipeline.quiet_frames``)."""
+        pipe = self.pipeline
+        return (pipe is not None and self._cursor.backlog == 0 and not self._stop.is_set()
+                and pipe.quiet_frames() >= 1)
+
+    def _work_ahead(self, end: float) -> None:
+        """The detectors' work ahead (``Pipeline.ahead``), piece by piece until monotonic
+        ``end`` or none is left (the loop calls it while every session's next frame is
+        quiet, ``_next_quiet``): so the frame that confirms a cut finds its placement and
+        the gate's window before already fitted (``LiveStats.ahead_pieces`` counts the
+        pieces)."""
+        pipe, st = self.pipeline, self.stats
+        while pipe.ahead():
+            st.ahead_pieces += 1
+            if time.monotonic() >= end:
+                break
+
 
 __all__ = ["SessionProcessing"]

@@ -89,6 +89,7 @@ class LiveStats:
     quiet_batches: int = 0       # reads of a source left unread while its frames were quiet
     quiet_frames: int = 0        # frames those reads took that had been promised quiet
     late_open: int = 0           # frames those reads took beyond the promise (read late)
+    ahead_pieces: int = 0        # pieces of the detectors' work ahead done between frames
 
 
 @dataclass
