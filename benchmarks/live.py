@@ -4,6 +4,7 @@ per frame by stage, detector delay, highest sustained input rate.
 
     python3 benchmarks/live.py            # readable report (about 4 minutes)
     python3 benchmarks/live.py --json     # {"latency_ms": {"p50", "p99", "max"},
+                                          #  "cut_latency_ms": [ms of each cut],
                                           #  "cpu_fraction", "cpu_fraction_runs",
                                           #  "suits": {"1": {...}, "4": ...,
                                           #  "8": ...}, "stages_us": {...}, "wakeup": {...},
@@ -43,7 +44,8 @@ on 127.0.0.1.
    (recording check, ring buffer append), ``features`` (``PoseFeatures.step``),
    ``detector`` (every detector's ``update``), ``identity`` (the tracker's ``step``),
    ``pipeline`` (the rest of ``Pipeline.process``: gaps, sanitising, index bookkeeping),
-   ``publish`` (every ``publish_*`` call), ``loop`` (the rest: waiting, the ring cursor,
+   ``publish`` (every ``publish_*`` call), ``ahead`` (the detectors' work ahead between
+   frames, ``Pipeline.ahead``), ``loop`` (the rest: waiting, the ring cursor,
    dropouts, status, counters) and ``total`` (the thread's CPU time over the frames).
    The timers add about 1 µs a call.
 1d. **The machine's cost of a wake-up** (with 1c; ``benchmarks/wakeup.py``): CPU of an empty
@@ -167,7 +169,8 @@ class StageMeter:
     """Thread CPU time spent in each stage of a session's per-frame path (see the module
     docstring, 1c), installed by wrapping the session's objects' methods."""
 
-    STAGES = ("decode", "receive", "features", "detector", "identity", "pipeline", "publish")
+    STAGES = ("decode", "receive", "features", "detector", "identity", "pipeline", "publish",
+              "ahead")
 
     def __init__(self) -> None:
         self.us = dict.fromkeys(self.STAGES, 0.0)
@@ -202,6 +205,8 @@ class StageMeter:
         if pipe.identity is not None:
             self.wrap(pipe.identity, "step", "identity")
         self.wrap(pipe, "process", "pipeline")       # then less the three above
+        self.wrap(pipe, "identify_pending", "pipeline")   # identity's step after the cuts
+        self.wrap(pipe, "ahead", "ahead")
         for name in ("publish_cut", "publish_status", "publish_dropout", "publish_behaviour"):
             if hasattr(session.publishers, name):
                 self.wrap(session.publishers, name, "publish")

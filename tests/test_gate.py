@@ -145,3 +145,35 @@ def test_a_gap_while_a_cut_is_held_does_not_lose_it():
     det.restart()
     out = det.update(X[made + 1])
     assert out is not None and out.frame == c.frame and out.detected_at == made + 1
+
+
+def test_a_decision_worked_out_ahead_is_the_decision_made_on_the_frame():
+    """The deciding frame's own row is not in the window after the cut, so
+    ``prepare_decision`` before that frame arrives finds the distance the decision finds
+    (used, and counted in ``made_ahead``); a wild row on the deciding frame changes
+    nothing."""
+    rng = np.random.default_rng(3)
+    X = np.vstack([_motion(0, 1200, rng), _motion(1, 1200, rng)])
+    decide_at = 1200 + 180
+    results = []
+    for ahead, wild in ((False, False), (True, False), (False, True)):
+        Y = X.copy()
+        if wild:
+            Y[decide_at] = 1e3
+        gate = SameBehaviourGate()
+        gate.share(np.zeros((gate.ring, Y.shape[1])))
+        out = []
+        for t, x in enumerate(Y):
+            if ahead and t == decide_at:
+                assert gate.prepare_decision(1200, t)          # before frame t arrives
+                assert not gate.prepare_decision(1200, t)      # once
+            gate._rows[t % gate.ring] = x
+            c = gate.tick(t, Cut(1200, "contrast", detected_at=1210) if t == 1210 else None)
+            if c is not None:
+                out.append(c)
+        results.append(([(c.frame, c.detected_at) for c in out], gate.decisions,
+                         gate.made_ahead))
+    (plain, dec, n0), (early, dec_ahead, n1), (wild, dec_wild, _) = results
+    assert plain == early == wild == [(1200, decide_at)]
+    assert dec == dec_ahead == dec_wild and dec[0][2]
+    assert (n0, n1) == (0, 1)

@@ -98,14 +98,16 @@ from the grid position and never onto or before the last cut sent.  The gate and
 bounded windows work on the unplaced positions, so placement moves cuts and never adds or
 removes one.
 
-Work ahead (``ahead()``, called by the live loop between frames while the next ones cannot
-send): the maximum waiting for confirmation (``EarlyCuts.candidate``) is placed, a piece of
-at most ``PLACE_BATCH`` candidate splits at a time, once its whole placement span has
-arrived (``placement.RingPlacement``), and the gate fits its window before it
-(``SameBehaviourGate.prepare``).  The frame that sends the cut then finds both done when
-its span and window are the ones prepared (a span's rows do not change once arrived), so
-nothing ahead changes a cut; it costs the placements of maxima a later look replaces.
-Offline nothing calls it.
+Work ahead (``ahead()``, called by the live loop between frames): the maximum waiting for
+confirmation (``EarlyCuts.candidate``) is placed, a piece of at most ``PLACE_BATCH``
+candidate splits at a time, once its whole placement span has arrived
+(``placement.RingPlacement``), and the gate fits its window before it
+(``SameBehaviourGate.prepare``); when the next frame may send, the gate works out the
+distance its decision on that frame would find (``prepare_decision``: the held cut that
+frame decides, else the waiting maximum).  The frame that sends the cut then finds that
+work done when its span and windows are the ones prepared (rows do not change once
+arrived), so nothing ahead changes a cut; it costs the work on maxima a later look
+replaces.  Offline nothing calls it.
 """
 
 from __future__ import annotations
@@ -467,13 +469,21 @@ class ContrastDetector(OnlineDetector):
         """One piece of the work the frame that sends the waiting maximum would do, done
         now (the live loop calls it while its next frames cannot send: "Work ahead" in the
         module docstring); False when there is none.  Changes no cut."""
-        pos = self.peaks.candidate if self._dim is not None else None
+        if self._dim is None:
+            return False
+        gate, pos, t = self.gate, self.peaks.candidate, self._t
+        if gate is not None and self.quiet_frames == 0:
+            # the next frame may decide a cut: the held one it decides, else the waiting
+            # maximum (a look may confirm it)
+            b = gate.next_decision(t)
+            b = pos if b is None else b
+            if b is not None and gate.prepare_decision(b, t):
+                return True
         if pos is None:
             return False
-        if self.place_radius and self._placement.ahead(pos, self._t, self._seg0,
-                                                       self._last_placed):
+        if self.place_radius and self._placement.ahead(pos, t, self._seg0, self._last_placed):
             return True
-        return self.gate is not None and self.gate.prepare(pos)
+        return gate is not None and gate.prepare(pos)
 
     def _stats(self, lo: int, hi: int) -> WindowStats:
         """Statistics of blocks [lo, hi), from the prefix-sum ring."""

@@ -10,8 +10,10 @@ that question of every cut before it goes out:
 - a cut at boundary b (frame numbers of the detector: frames since its creation) is held
   until ``decide_after`` frames from b have arrived (at once when it arrives later, as
   most full-look cuts do);
-- the window after it, [b + ``skip``, decision frame] (from b when fewer than 1 s would
-  remain), at most ``max_window`` frames, is compared with the ``max_window`` frames
+- the window after it, [b + ``skip``, decision frame) (from b when fewer than 1 s would
+  remain; the deciding frame's own row is left out, so the decision can be worked out
+  before that frame arrives: ``prepare_decision``), at most ``max_window`` frames, is
+  compared with the ``max_window`` frames
   before b (no further back than the last cut sent or the last restart) by the identity
   tracker's distance (``window_models.behaviour_distance``: PCA x PPCA window models,
   stated for 8 dimensions);
@@ -88,8 +90,10 @@ class SameBehaviourGate:
         self.dropped = 0
         self.sent = 0
         #: ((a, b), model) of the window before a cut fitted ahead (``prepare``)
-        self._ahead: tuple[tuple[int, int], object] | None = None
-        #: decisions whose window before was fitted ahead
+        self._before: tuple[tuple[int, int], object] | None = None
+        #: ((lo, hi, a, b), distance) of a decision worked out ahead (``prepare_decision``)
+        self._ready: tuple[tuple[int, int, int, int], float] | None = None
+        #: decisions that found their distance, or their window before, made ahead
         self.made_ahead = 0
         #: (boundary, distance, sent) of every decision, for plots and benchmarks
         self.decisions: list[tuple[int, float, bool]] = []
@@ -148,23 +152,43 @@ class SameBehaviourGate:
         cut = self._out.popleft()
         return replace(cut, detected_at=max(cut.detected_at, self._t - 1))
 
+    def next_decision(self, t: int) -> int | None:
+        """The frame of the held cut that frame ``t`` decides, if any."""
+        if self._held and self._held[0].frame + self.decide_after <= t:
+            return self._held[0].frame
+        return None
+
     def prepare(self, b: int) -> bool:
         """Fit now the window before a cut at ``b`` decided now (the live loop's work
         ahead, ``ContrastDetector.ahead``): a later decision whose window before is the
-        same frames uses it instead of fitting it again (``made_ahead`` counts those).
-        False when there was nothing to fit (no rows, too few frames, already fitted)."""
+        same frames uses it instead of fitting it again.  False when there was nothing
+        to fit (no rows, too few frames, already fitted)."""
         if self._rows is None or self._source is not None or b > self._t:
             return False
-        a = max(b - self.max_window, self._floor, self._t - self.ring)
-        if b - a < 2 or (self._ahead is not None and self._ahead[0] == (a, b)):
+        a = self._windows(b, self._t, self._t)[2]
+        if b - a < 2 or (self._before is not None and self._before[0] == (a, b)):
             return False
-        self._ahead = ((a, b), fit(self._stats(a, b), **self.fit_args))
+        self._before = ((a, b), fit(self._stats(a, b), **self.fit_args))
+        return True
+
+    def prepare_decision(self, b: int, t: int) -> bool:
+        """Work out now the distance a decision on frame ``t`` (the next frame to come)
+        of a cut at ``b`` would find: its windows end before frame t, so they have
+        arrived; the decision, if it comes, only compares the distance with the
+        threshold.  False when there was nothing to do (no rows, already done)."""
+        if self._rows is None or self._source is not None or t != self._t:
+            return False
+        lo, hi, a = self._windows(b, t, t + 1)
+        key = (lo, hi, a, b)
+        if self._ready is not None and self._ready[0] == key:
+            return False
+        self._ready = (key, self._distance(lo, hi, a, b))
         return True
 
     def restart(self) -> None:
         """A gap: decide every held cut on the frames so far; later windows start after."""
         while self._held:
-            self._decide(self._held.popleft(), self._t - 1)
+            self._decide(self._held.popleft(), self._t - 1, end=self._t)
         self._floor = self._t
 
     def replay(self, X: np.ndarray, cuts: list[tuple[int, int]]) -> list[tuple[int, int]]:
@@ -207,26 +231,46 @@ class SameBehaviourGate:
                        out=self._span[:hi - lo])       # a window's rows, in order
         return WindowStats.of(rows)
 
-    def _decide(self, cut: Cut, now: int) -> None:
+    def _windows(self, b: int, end: int, pushed: int) -> tuple[int, int, int]:
+        """(lo, hi, a): the window after a cut at ``b``, [lo, hi), on the rows before
+        frame ``end``, and the start of its window before, [a, b), with ``pushed``
+        frames pushed (the ring holds the last ``ring`` of them)."""
+        oldest = self._floor if self._source is not None else max(self._floor,
+                                                                  pushed - self.ring)
+        lo = b + self.skip if end - (b + self.skip) >= self.min_after else b
+        return lo, min(end, lo + self.max_window), max(b - self.max_window, oldest)
+
+    def _distance(self, lo: int, hi: int, a: int, b: int) -> float:
+        """The distance between the windows [lo, hi) and [a, b) (inf when either holds
+        fewer than two frames); the window before's fit made ahead (``prepare``) is
+        used when it is of the same frames."""
+        if hi - lo < 2 or b - a < 2 or (self._source is None and self._rows is None):
+            return math.inf
+        after = fit(self._stats(lo, hi), **self.fit_args)
+        if self._before is not None and self._before[0] == (a, b):
+            before = self._before[1]
+        else:
+            before = fit(self._stats(a, b), **self.fit_args)
+        return behaviour_distance(after, before, self.reference_dims)
+
+    def _decide(self, cut: Cut, now: int, end: int | None = None) -> None:
+        """Decide ``cut`` on frame ``now`` from the rows before frame ``end`` (``now``
+        itself: the deciding frame's own row is not used, so the work can be done
+        before it arrives, ``prepare_decision``)."""
         b = cut.frame
-        oldest = self._floor if self._source is not None else max(self._floor, self._t - self.ring)
-        lo = b + self.skip if now + 1 - (b + self.skip) >= self.min_after else b
-        hi = min(now + 1, lo + self.max_window)
-        a = max(b - self.max_window, oldest)
-        d = math.inf
-        have_rows = self._source is not None or self._rows is not None
-        if have_rows and hi - lo >= 2 and b - a >= 2:
-            d = self.memo.get((lo, hi, a, b)) if self.memo is not None else None
+        lo, hi, a = self._windows(b, now if end is None else end, self._t)
+        key = (lo, hi, a, b)
+        if self._ready is not None and self._ready[0] == key:
+            d = self._ready[1]
+            self.made_ahead += 1
+        else:
+            d = self.memo.get(key) if self.memo is not None else None
             if d is None:
-                after = fit(self._stats(lo, hi), **self.fit_args)
-                if self._ahead is not None and self._ahead[0] == (a, b):
-                    before = self._ahead[1]
+                if self._before is not None and self._before[0] == (a, b):
                     self.made_ahead += 1
-                else:
-                    before = fit(self._stats(a, b), **self.fit_args)
-                d = behaviour_distance(after, before, self.reference_dims)
+                d = self._distance(lo, hi, a, b)
                 if self.memo is not None:
-                    self.memo[(lo, hi, a, b)] = d
+                    self.memo[key] = d
         same = d <= self.threshold
         self.decisions.append((b, d, not same))
         if same:

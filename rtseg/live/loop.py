@@ -61,10 +61,11 @@ Off with ``buffer.batch_quiet = false``.  The live monitor then moves in steps o
 Work ahead
 ----------
 After a wake-up's frames, while no session has a frame waiting and every session's next
-frame is promised quiet, the loop lets the detectors do, for at most ``AHEAD_S``, work the
-frame that sends the waiting cut would otherwise do (``Pipeline.ahead``, the contrast
-detector's placement and gate window of its waiting maximum): that frame then sends its
-cut sooner, with the same cut (``LiveStats.ahead_pieces`` counts the pieces).
+frame is promised quiet or not due for a while (``LiveSession._may_work_ahead``), the
+loop lets the detectors do, for at most ``AHEAD_S``, work the frame that sends the waiting
+cut would otherwise do (``Pipeline.ahead``: the contrast detector's placement of its
+waiting maximum and its gate's distance): that frame then sends its cut sooner, with the
+same cut (``LiveStats.ahead_pieces`` counts the pieces).
 
 Several sessions in one loop each keep their own source, pipeline (features, detectors,
 identity), ring buffer, publishers, recording and counters; they share the thread, the
@@ -97,8 +98,7 @@ PUMP_EVERY_S = 0.001
 TURN_S = 0.002
 
 #: longest the detectors' work ahead takes per wake-up, s (``LiveSession._work_ahead``: done
-#: only while every session's next frame is promised quiet, so it delays no frame that
-#: could send)
+#: only while no session's frame that may send is due, so it delays none)
 AHEAD_S = 0.001
 
 #: longest a source is left unread while its frames cannot send anything, s
@@ -421,8 +421,9 @@ def run_sessions(sessions: Sequence[Any], handle_signals: bool = True) -> list[A
                     until = s._quiet_until(time.monotonic())
                     if until is not None:
                         loop.quiet(s, until)
-            if running and all(s._next_quiet() for s in running):
-                end = time.monotonic() + AHEAD_S   # work ahead: no next frame can send
+            now = time.monotonic()
+            if running and all(s._may_work_ahead(now) for s in running):
+                end = now + AHEAD_S            # work ahead: no frame that may send is due
                 for s in running:
                     s._work_ahead(end)
                     if time.monotonic() >= end:

@@ -15,6 +15,10 @@ import time
 
 import numpy as np
 
+#: the detectors work ahead before a frame that may send only when it is not due within
+#: this long, s (``SessionProcessing._may_work_ahead``; a piece takes at most 0.3 ms)
+AHEAD_CLEAR_S = 0.004
+
 
 class SessionProcessing:
     """Frame processing of a :class:`~rtseg.live.session.LiveSession`."""
@@ -141,18 +145,23 @@ class SessionProcessing:
             self._last_index = w.start + i - 1
 
 
-    def _next_quiet(self) -> bool:
-        """Whether no frame waits and the next one cannot send (``Pipeline.quiet_frames``)."""
+    def _may_work_ahead(self, now: float) -> bool:
+        """Whether the detectors may work ahead now (monotonic ``now``): no frame waits,
+        and the next one cannot send (``Pipeline.quiet_frames``) or is not due within
+        ``AHEAD_CLEAR_S`` (one nominal frame period after the last one's arrival)."""
         pipe = self.pipeline
-        return (pipe is not None and self._cursor.backlog == 0 and not self._stop.is_set()
-                and pipe.quiet_frames() >= 1)
+        if pipe is None or self._cursor.backlog > 0 or self._stop.is_set():
+            return False
+        if pipe.quiet_frames() >= 1:
+            return True
+        last = self._last_recv
+        return last is not None and last + 1.0 / self.frame_rate - now > AHEAD_CLEAR_S
 
     def _work_ahead(self, end: float) -> None:
         """The detectors' work ahead (``Pipeline.ahead``), piece by piece until monotonic
-        ``end`` or none is left (the loop calls it while every session's next frame is
-        quiet, ``_next_quiet``): so the frame that confirms a cut finds its placement and
-        the gate's window before already fitted (``LiveStats.ahead_pieces`` counts the
-        pieces)."""
+        ``end`` or none is left (the loop calls it when every session may,
+        ``_may_work_ahead``): so the frame that sends a cut finds its placement and the
+        gate's distance worked out (``LiveStats.ahead_pieces`` counts the pieces)."""
         pipe, st = self.pipeline, self.stats
         while pipe.ahead():
             st.ahead_pieces += 1
