@@ -125,12 +125,13 @@ class _Probe:
         self.cuts: list[tuple[int, int]] = []
         inner = pipe.process
 
-        def process(index, quats, valid, seq=None, recv_time=None, lost=0, source_time=None):
+        def process(index, quats, valid, seq=None, recv_time=None, lost=0, source_time=None,
+                    **kw):
             self.seq.append(seq)
             self.src.append(source_time)
             if self.quats is not None:
                 self.quats.append(np.array(quats, dtype=np.float64))
-            out = inner(index, quats, valid, seq, recv_time, lost, source_time)
+            out = inner(index, quats, valid, seq, recv_time, lost, source_time, **kw)
             for c in out:
                 if c.cut.method == self.primary:
                     self.cuts.append((c.boundary, c.detected))

@@ -110,17 +110,31 @@ class Meter:
         return min(max(self.last_abs, 0) // self.window_frames, self.n_windows - 1)
 
     def wrap(self, pipeline) -> None:
-        process = pipeline.process
+        """Time every frame's processing: ``Pipeline.process`` and, when the live loop runs
+        the frame's behaviour identity step after sending its cuts (``identify=False``),
+        that step too (``identify_pending``), as one frame."""
+        process, identify = pipeline.process, pipeline.identify_pending
         perf = time.perf_counter_ns
         cpu = time.thread_time_ns
         log = math.log
         hist, cpu_hist = self.hist, self.cpu_hist
         top = N_BINS - 1
+        held: list[tuple[int, int]] = []          # a frame whose identity step is to come
 
-        def timed(index, quats, valid, seq=None, recv_time=None, lost=0, source_time=None):
+        def commit(dt: int, dc: int) -> None:
+            w = self.window()
+            hist[w, min(int(log(max(dt, 1)) * BINS_PER_E), top)] += 1
+            cpu_hist[w, min(int(log(max(dc, 1)) * BINS_PER_E), top)] += 1
+            self.processed += 1
+
+        def timed(index, quats, valid, seq=None, recv_time=None, lost=0, source_time=None,
+                  identify=True):
+            if held:                              # its identity step did not come
+                commit(*held.pop())
             c0 = cpu()
             t0 = perf()
-            out = process(index, quats, valid, seq, recv_time, lost, source_time)
+            out = process(index, quats, valid, seq, recv_time, lost, source_time,
+                          identify=identify)
             dt = perf() - t0
             dc = cpu() - c0
             if seq is not None:
@@ -128,13 +142,22 @@ class Meter:
                 self.last_abs = seq if prev < 0 else prev + ((seq - prev) & 0xFFFF)
                 if self.last_abs < self.seen.size:
                     self.seen[self.last_abs] = True
-            w = self.window()
-            hist[w, min(int(log(max(dt, 1)) * BINS_PER_E), top)] += 1
-            cpu_hist[w, min(int(log(max(dc, 1)) * BINS_PER_E), top)] += 1
-            self.processed += 1
+            if identify or pipeline.identity is None:
+                commit(dt, dc)
+            else:
+                held.append((dt, dc))
             return out
 
+        def timed_identify() -> None:
+            c0 = cpu()
+            t0 = perf()
+            identify()
+            if held:
+                dt, dc = held.pop()
+                commit(dt + perf() - t0, dc + cpu() - c0)
+
         pipeline.process = timed
+        pipeline.identify_pending = timed_identify
 
     def wrap_source(self, source) -> None:
         """Mark every frame the session takes from ``source`` in ``got`` (by its unwrapped

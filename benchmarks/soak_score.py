@@ -69,8 +69,9 @@ class CutProbe:
         primary = pipeline.config["detectors.primary"] or next(iter(pipeline.detectors))
         ring = self.ring
 
-        def process(index, quats, valid, seq=None, recv_time=None, lost=0, source_time=None):
-            out = inner(index, quats, valid, seq, recv_time, lost, source_time)
+        def process(index, quats, valid, seq=None, recv_time=None, lost=0, source_time=None,
+                    **kw):
+            out = inner(index, quats, valid, seq, recv_time, lost, source_time, **kw)
             ring[index % RING] = meter.last_abs
             for c in out:
                 if c.cut.method == primary and self.n_cuts < MAX_EVENTS:
