@@ -467,8 +467,8 @@ class ContrastDetector(OnlineDetector):
 
     def ahead(self) -> bool:
         """One piece of the work the frame that sends the waiting maximum would do, done
-        now (the live loop calls it while its next frames cannot send: "Work ahead" in the
-        module docstring); False when there is none.  Changes no cut."""
+        now (the live loop calls it between frames when no frame that may send is due:
+        "Work ahead" in the module docstring); False when there is none.  Changes no cut."""
         if self._dim is None:
             return False
         gate, pos, t = self.gate, self.peaks.candidate, self._t

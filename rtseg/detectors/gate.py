@@ -44,8 +44,8 @@ import numpy as np
 
 from rtseg.detectors.base import Cut
 from rtseg.detectors.window_models import (DEFAULT_DECIDE_AFTER_S, DEFAULT_ID_SKIP_S,
-                                          DEFAULT_MAX_WINDOW_S, MIN_WINDOW_S, WindowStats,
-                                          behaviour_distance, fit)
+                                          DEFAULT_MAX_WINDOW_S, MIN_WINDOW_S, WindowModel,
+                                          WindowStats, behaviour_distance, fit)
 
 log = logging.getLogger("rtseg.detectors")
 
@@ -90,7 +90,7 @@ class SameBehaviourGate:
         self.dropped = 0
         self.sent = 0
         #: ((a, b), model) of the window before a cut fitted ahead (``prepare``)
-        self._before: tuple[tuple[int, int], object] | None = None
+        self._before: tuple[tuple[int, int], WindowModel] | None = None
         #: ((lo, hi, a, b), distance) of a decision worked out ahead (``prepare_decision``)
         self._ready: tuple[tuple[int, int, int, int], float] | None = None
         #: decisions that found their distance, or their window before, made ahead
@@ -166,7 +166,7 @@ class SameBehaviourGate:
         if self._rows is None or self._source is not None or b > self._t:
             return False
         a = self._windows(b, self._t, self._t)[2]
-        if b - a < 2 or (self._before is not None and self._before[0] == (a, b)):
+        if b - a < 2 or self._fitted_before(a, b) is not None:
             return False
         self._before = ((a, b), fit(self._stats(a, b), **self.fit_args))
         return True
@@ -247,11 +247,15 @@ class SameBehaviourGate:
         if hi - lo < 2 or b - a < 2 or (self._source is None and self._rows is None):
             return math.inf
         after = fit(self._stats(lo, hi), **self.fit_args)
-        if self._before is not None and self._before[0] == (a, b):
-            before = self._before[1]
-        else:
+        before = self._fitted_before(a, b)
+        if before is None:
             before = fit(self._stats(a, b), **self.fit_args)
         return behaviour_distance(after, before, self.reference_dims)
+
+    def _fitted_before(self, a: int, b: int) -> WindowModel | None:
+        """The window [a, b)'s model when ``prepare`` fitted it, else None."""
+        held = self._before
+        return held[1] if held is not None and held[0] == (a, b) else None
 
     def _decide(self, cut: Cut, now: int, end: int | None = None) -> None:
         """Decide ``cut`` on frame ``now`` from the rows before frame ``end`` (``now``
@@ -266,7 +270,7 @@ class SameBehaviourGate:
         else:
             d = self.memo.get(key) if self.memo is not None else None
             if d is None:
-                if self._before is not None and self._before[0] == (a, b):
+                if self._fitted_before(a, b) is not None:
                     self.made_ahead += 1
                 d = self._distance(lo, hi, a, b)
                 if self.memo is not None:

@@ -50,7 +50,7 @@ class Placer:
     Besides the one call (``placer(rows, c)``), a placement can be made in pieces:
     ``begin(rows, c, key)`` (the span's chunk sums, about 0.2 ms at d = 48), then
     ``advance()`` once per ``PLACE_BATCH`` candidates (their log-determinants, about
-    0.15 ms each) until it returns True, then ``best()``; ``pending(key)`` says whether
+    0.15 ms each) until it returns True, then ``best()`` (``finish()``: the rest at once); ``pending(key)`` says whether
     the placement begun with ``key`` is still held (a call or another ``begin`` replaces
     it).  The pieces do the one call's arithmetic in the same order, so a placement made
     ahead gives the split the one call gives."""
@@ -75,9 +75,7 @@ class Placer:
         """The best split of ``rows`` (n <= ``max_rows`` frames x ``dim``) within ``radius``
         of ``c`` (``place``)."""
         self.begin(rows, c)
-        while not self.advance():
-            pass
-        return self.best()
+        return self.finish()
 
     def pending(self, key: object) -> bool:
         """Whether the placement begun with ``key`` is held (done or not)."""
@@ -116,13 +114,9 @@ class Placer:
     def advance(self) -> bool:
         """Evaluate the next ``PLACE_BATCH`` candidates of the placement begun; True when
         every candidate is evaluated (``best`` is known)."""
-        cand = self._cand
-        if cand is None:
+        if self.done():
             return True
-        k = len(cand)
-        i = self._next
-        if i >= k:
-            return True
+        k, i = len(self._cand), self._next
         j = min(k, i + PLACE_BATCH)
         ld = _cholesky_logdets(self._covariances(i, j))
         if ld is None:                     # not positive definite (ridge 0): by LU
@@ -134,6 +128,12 @@ class Placer:
     def done(self) -> bool:
         """Whether every candidate of the placement begun is evaluated."""
         return self._cand is None or self._next >= len(self._cand)
+
+    def finish(self) -> int:
+        """The split of the placement begun, its candidates left evaluated now."""
+        while not self.advance():
+            pass
+        return self.best()
 
     def best(self) -> int:
         """The split of the placement begun (``advance`` must have returned True)."""
@@ -210,9 +210,7 @@ class RingPlacement:
         placer = self._placer
         if placer.pending((lo, hi, f)):
             self.made_ahead += 1
-            while not placer.advance():
-                pass
-            return lo + placer.best()
+            return lo + placer.finish()
         return lo + placer(self._rows(lo, hi), f - lo)
 
     def ahead(self, f: int, now: int, seg0: int, last: int | None) -> bool:

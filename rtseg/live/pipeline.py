@@ -445,10 +445,10 @@ class Pipeline:
 
     def ahead(self) -> bool:
         """One piece of the work ahead of the first detector that has some
-        (``ContrastDetector.ahead``: the placement and the gate's window before of the
-        maximum waiting for confirmation), done while the next frames cannot send; False
-        when none has any.  Changes no cut: a frame that sends a cut only finds part of its
-        work done."""
+        (``ContrastDetector.ahead``: the placement of the maximum waiting for confirmation
+        and its gate's windows and decision), done between frames when no frame that may
+        send is due (``rtseg.live.loop``, "Work ahead"); False when none has any.  Changes
+        no cut: a frame that sends a cut only finds part of its work done."""
         for d in self.detectors.values():
             fn = getattr(d, "ahead", None)
             if fn is not None and fn():

@@ -144,7 +144,6 @@ class SessionProcessing:
             self._last_clocked = last_src == last_src      # not NaN: the frame had a time
             self._last_index = w.start + i - 1
 
-
     def _may_work_ahead(self, now: float) -> bool:
         """Whether the detectors may work ahead now (monotonic ``now``): no frame waits,
         and the next one cannot send (``Pipeline.quiet_frames``) or is not due within
