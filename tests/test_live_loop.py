@@ -660,3 +660,22 @@ def test_a_cut_goes_out_before_the_identity_step_of_its_frame():
     after = [e.segment for e in events[cut_at[0] + 1:]]
     assert len(cut_at) == 1 and 1 in after   # the new segment's decision follows its cut
     assert all(e.segment == 0 for e in events[:cut_at[0]])
+
+
+def test_work_ahead_that_fails_is_counted_and_the_session_goes_on(caplog):
+    """A detector whose work ahead raises never ends the session: the failures are
+    counted in the pipeline's stats and logged, and its cuts still go out."""
+    class FailingAhead(StepDetector):
+        quiet_frames = 1                   # every next frame quiet: the loop works ahead
+
+        def ahead(self):
+            raise RuntimeError("ahead broke")
+
+    src = FakeSource(frames(600, 300), pace=0.0005)
+    with caplog.at_level("WARNING", logger="rtseg.live.session"):
+        s, summary = session(src, det=FailingAhead())
+    cuts = [e for e in s.publishers.events if isinstance(e, CutEvent)]
+    assert [c.frame for c in cuts] == [300] and summary.stop_reason == "end of source"
+    assert summary.frames_processed == 600
+    assert s.pipeline.stats.ahead_errors > 10
+    assert "work ahead failed (RuntimeError: ahead broke" in caplog.text

@@ -84,12 +84,14 @@ class Placer:
     def begin(self, rows: np.ndarray, c: int, key: object = None) -> None:
         """Start placing ``rows`` (n <= ``max_rows`` frames x ``dim``) around ``c``: the
         span's chunk sums; ``key`` names it for ``pending``."""
-        self._key, self._c, self._cand, self._next = key, int(c), None, 0
+        # named only once begun whole, so a placement cut short is never taken as held
+        self._key, self._c, self._cand, self._next = None, int(c), None, 0
         n, d = rows.shape
         stride, margin = self.stride, self.margin
         lo_b = max(margin, c - self.radius)
         hi_b = min(n - margin, c + self.radius)
         if n < 2 * margin or lo_b > hi_b:
+            self._key = key
             return
         Y = np.subtract(rows, rows.mean(axis=0), out=self._Y[:n])
         # candidates on a grid through c, chunk sums between consecutive candidates
@@ -109,7 +111,7 @@ class Placer:
         self._reg = self.ridge * float(np.einsum("ii", self._T2)) / (n * d)
         self._left_mean = self._C1 / nl
         self._right_mean = (self._T1 - self._C1) / self._nr
-        self._cand = cand
+        self._cand, self._key = cand, key
 
     def advance(self) -> bool:
         """Evaluate the next ``PLACE_BATCH`` candidates of the placement begun; True when

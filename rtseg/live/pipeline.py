@@ -85,6 +85,8 @@ class PipelineStats:
     bad_values: int = 0        # non-finite / zero quaternions replaced by the last good ones
     discarded_cuts: int = 0    # cuts whose boundary preceded a restart
     identity_errors: int = 0   # frames on which rtseg.identity.tracker failed (cuts still sent)
+    ahead_errors: int = 0      # pieces of the detectors' work ahead that failed (logged; the
+                               # frame that sends the cut then does that work itself)
 
 
 def _average_quats(q: np.ndarray) -> np.ndarray:
@@ -449,10 +451,20 @@ class Pipeline:
         and its gate's windows and decision), done between frames when no frame that may
         send is due (``rtseg.live.loop``, "Work ahead"); False when none has any.  Changes
         no cut: a frame that sends a cut only finds part of its work done."""
-        for d in self.detectors.values():
+        for m, d in self.detectors.items():
             fn = getattr(d, "ahead", None)
-            if fn is not None and fn():
-                return True
+            if fn is None:
+                continue
+            try:
+                if fn():
+                    return True
+            except Exception as exc:  # work ahead is optional: it must never end a session
+                self.stats.ahead_errors += 1
+                n = self.stats.ahead_errors
+                if n & (n - 1) == 0:            # logged at the 1st, 2nd, 4th, 8th, ... failure
+                    log.warning("%s: work ahead failed (%s: %s; %d so far)", m,
+                                type(exc).__name__, exc, n)
+                return False
         return False
 
     def quiet_frames(self) -> int:
