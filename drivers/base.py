@@ -6,7 +6,7 @@ import logging
 import threading
 from collections import deque
 from dataclasses import asdict, dataclass
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
 from rtseg.core.frame import Frame
 
@@ -115,7 +115,9 @@ class Source:
     Subclasses set ``joint_names`` (sensor/joint order of ``Frame.quats``), ``parents``
     (-1 for roots; all -1 when the source has no hierarchy), ``space`` ("global" for IMU
     orientations, "local" for parent-relative rotations such as VMC) and ``frame_rate``
-    (nominal Hz, or None if unknown), and implement ``read``.
+    (nominal Hz, or None if unknown), and implement ``read``.  ``rest_pose``: the rig's rest
+    geometry (``rtseg.core.posture.RestPose``) when the source knows it (a file replay),
+    else None; with it a behaviour library names segments by posture too.
 
     ``as_fast_as_read``: True for a source that hands over frames as fast as they are read
     (a replay at ``speed=0``): its frames are never late, so the live loop processes every
@@ -143,6 +145,7 @@ class Source:
     space: str = "global"
     frame_rate: float | None = None
     as_fast_as_read: bool = False
+    rest_pose: Any = None
 
     def __init__(self) -> None:
         self.stats = SourceStats()

@@ -34,6 +34,7 @@ from typing import Mapping
 import numpy as np
 
 from rtseg.core import quat
+from rtseg.core.posture import RestPose
 from rtseg.drivers.base import Source, SourceError
 from rtseg.core.frame import Frame
 from rtseg.core.take import Take
@@ -124,6 +125,7 @@ class ReplaySource(Source):
         self.parents = list(take.parents)
         self.frame_rate = float(take.frame_rate)
         self.space = take.space if space is None else space
+        self.rest_pose = RestPose.find(take)
         q = take.quats[a:b]
         if self.space != take.space:
             if self.space == "global":

@@ -94,6 +94,12 @@ def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
            f"unknown beyond distance {lib.threshold:.3f} or ratio {lib.ratio:.2f} to the "
            f"next name"
            + (" (given)" if given else " (calibrated)" if calibrated else " (default)")]
+    if getattr(lib, "names_by_posture", False):
+        out.append(f"  with posture (sessions whose rig geometry is known): unknown beyond "
+                   f"{lib.posture_rule['threshold']:.3f} or ratio "
+                   f"{lib.posture_rule['ratio']:.2f}")
+    elif getattr(lib, "has_posture", False):
+        out.append("  posture kept, not used until a behaviour has a second example")
     if sources:
         out.append(f"  {lib.metric} distance, windows of {lib.window_s:g} s every "
                    f"{lib.step_s:g} s, {lib.frame_rate:g} Hz")
@@ -199,6 +205,8 @@ def run(args: argparse.Namespace) -> int:
         lib = old.merged(lib)
     if args.threshold is not None:
         lib.threshold = float(args.threshold)
+        if lib.names_by_posture:
+            lib.posture_rule["threshold"] = float(args.threshold)
         lib.calibration["threshold_given"] = True
     for n in notes:
         print(f"rtseg learn: note: {n}", file=sys.stderr)

@@ -113,6 +113,13 @@ class RestPose:
             return None
 
 
+def rest_meta(take: Any) -> dict[str, Any]:
+    """``{"rest_positions": (J, 3)}`` of ``take``'s rest geometry for the meta of a take
+    made from it (joined clips, spliced performances); {} when it has none."""
+    rest = RestPose.find(take)
+    return {} if rest is None else {"rest_positions": rest.positions.copy()}
+
+
 def _order(parents: Sequence[int]) -> list[int]:
     """Joint indices with every parent before its children (ValueError on a cycle)."""
     done: list[int] = []

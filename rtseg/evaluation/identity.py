@@ -44,7 +44,9 @@ def run_identity(take: Any, config: Any, library: Any = None) -> IdentityRun:
                            dict(config.detector_params))
         cfg["identity.enabled"] = True
     n, fr = take.n_frames, float(take.frame_rate)
-    pipe = Pipeline(take.joint_names, take.parents, take.space, fr, cfg)
+    from rtseg.core.posture import RestPose
+    pipe = Pipeline(take.joint_names, take.parents, take.space, fr, cfg,
+                    rest=RestPose.find(take))
     tracker = pipe.identity
     if library is not None:
         tracker.library = library

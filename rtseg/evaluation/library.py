@@ -192,4 +192,7 @@ def library_summary(lib: Library, unit: str, without: str | None = None) -> dict
             "examples": len(lib.examples),
             "threshold": round(float(lib.threshold), 4) if np.isfinite(lib.threshold) else None,
             "ratio": round(float(lib.ratio), 4),
-            "calibrated": bool(lib.calibration.get("calibrated", True))}
+            "calibrated": bool(lib.calibration.get("calibrated", True)),
+            **({"posture_threshold": round(float(lib.posture_rule["threshold"]), 4),
+                "posture_ratio": round(float(lib.posture_rule["ratio"]), 4)}
+               if lib.names_by_posture else {})}

@@ -76,15 +76,18 @@ def truth_cut_run(take: Any, truth: np.ndarray, config: Any, library: Any) -> Tr
     """The identity tracker (the session configuration's options, ``library`` naming)
     fed the live rows of ``take`` (``rtseg.library.examples.take_rows``) with a cut at every
     change of the per-frame ``truth``, delivered at that frame (module doc, Cuts)."""
-    from rtseg.identity.segments import feed_take
+    from rtseg.identity.segments import feed_take, take_posture_of
     from rtseg.identity.tracker import IdentityTracker, tracker_options
     from rtseg.library.examples import take_rows
     X, index, _ = take_rows(take, config)
+    posture = take_posture_of(take, library)
     t = np.asarray(truth, dtype=str)
     changes = np.flatnonzero(t[1:] != t[:-1]) + 1
     tracker = IdentityTracker(float(take.frame_rate), library=library,
                               **tracker_options(config))
-    feed_take(tracker, X, index, [(int(c), int(c)) for c in changes if index[0] < c <= index[-1]])
+    tracker.set_posture(posture)
+    feed_take(tracker, X, index, [(int(c), int(c)) for c in changes if index[0] < c <= index[-1]],
+              None if posture is None else take.quats[index])
     return TruthCutRun(tracker)
 
 
@@ -116,7 +119,11 @@ def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: b
         lib, _ = learn(use, metric=metric, **(windows or {}))
         if le.NO_REJECT:                 # benchmarks/library_loto.py --no-reject: the ceiling
             lib.threshold, lib.ratio = float("inf"), 1.0
+            if lib.names_by_posture:
+                lib.posture_rule.update(threshold=float("inf"), ratio=1.0)
         lib.threshold *= threshold_scale
+        if lib.names_by_posture:
+            lib.posture_rule["threshold"] *= threshold_scale
         return lib
 
     for p in people:

@@ -87,7 +87,7 @@ def library_loto(takes: Sequence[LabelledTake], config: Any) -> dict[str, Any] |
     exercise of the held-out take also left out of its library in turn - the share named
     ``unknown``.  None with fewer than two."""
     from rtseg.evaluation.library import run_folds
-    from rtseg.library.examples import Example, take_rows
+    from rtseg.library.examples import Example, posture_rows, take_rows
     m6 = [t for t in takes if "mocap6" in t.labels.source]
     if len(m6) < 2:
         return None
@@ -98,9 +98,10 @@ def library_loto(takes: Sequence[LabelledTake], config: Any) -> dict[str, Any] |
         take = lt.load()
         truth = named_truth_labels(lt, take.n_frames)
         X, index, profile = take_rows(take, config)
+        P = posture_rows(take, index)
         for a, b, name in label_runs(truth):
             examples.append(Example(name, lt.name, lt.name.split("_")[0], X, index, (a, b),
-                                    profile, float(take.frame_rate)))
+                                    profile, float(take.frame_rate), P=P))
         tk[lt.name] = (take, truth)
     units = {n: (lambda e, n=n: e.take == n) for n in tk}
     res = run_folds(examples, units, tk, {n: n for n in tk}, config, hide_names=True)

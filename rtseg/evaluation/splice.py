@@ -45,6 +45,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from rtseg.core import quat as Q
+from rtseg.core.posture import rest_meta
 from rtseg.evaluation.blend import (  # noqa: F401  (re-exported)
     Clip, crossfade, fade_weights, slerp, smoothstep, trim_bounds,
 )
@@ -344,6 +345,7 @@ def make_performance(name: str, kind: str, groups: Sequence[Group], seed: int, i
         "transitions": [list(t) for t in transitions],
         "frame_label_names": names,
         "frame_labels": labels,
+        **rest_meta(pools[0].takes[0].take),
     }
     take = Take(joint_names=list(g.joint_names), parents=list(g.parents), frame_rate=g.frame_rate,
                 quats=quats, root_position=out.root, space="local", length_unit=g.length_unit,

@@ -22,7 +22,12 @@ correction of such a segment's id to an id that holds the name gives it back.
 
 Frames are the pipeline's session indices (0-based among received frames); the rows are
 the pose-feature rows the detectors are fed (``rtseg.core.features``), d columns, of the
-library's feature profile.
+library's feature profile.  When the session has posture (``posture``: a
+``rtseg.core.posture.Posture`` of the source's rig, whose rest geometry is known) and the
+library names by it too, a second ring keeps each frame's rotations (joints x 4, one copy
+per frame) and the named window's posture rows are worked out from them in one batch when
+the segment is named (``rtseg.library.posture_distance``); a frame fed without its
+rotations leaves the segment to the pose features alone.
 """
 
 from __future__ import annotations
@@ -57,6 +62,17 @@ class SegmentNamer:
         self._rows: np.ndarray | None = None
         self._ridx = np.full(self._R, -1, dtype=np.int64)
         self._rn = 0
+        #: the session rig's posture (``rtseg.core.posture.Posture``), or None
+        self.posture: Any = None
+        self._poses: np.ndarray | None = None       # each frame's rotations, ring as _rows
+        self._has_pose = np.zeros(self._R, dtype=bool)
+
+    @property
+    def wants_poses(self) -> bool:
+        """Whether ``update`` should be given each frame's rotations: the session has
+        posture and the library names by it."""
+        return self.posture is not None and bool(getattr(self.library, "names_by_posture",
+                                                         False))
 
     def start(self, d: int) -> bool:
         """Allocate the ring for d-column rows; False (logged) when the library holds
@@ -68,32 +84,50 @@ class SegmentNamer:
         self._rows = np.zeros((self._R, d))
         return True
 
-    def update(self, index: int, x: np.ndarray) -> None:
-        """One fed row ``x`` (d,) of session frame ``index`` into the ring."""
+    def update(self, index: int, x: np.ndarray, pose: np.ndarray | None = None) -> None:
+        """One fed row ``x`` (d,) of session frame ``index`` into the ring, with the
+        frame's rotations ``pose`` (joints, 4) or None."""
         k = self._rn % self._R
         self._rows[k] = x
         self._ridx[k] = index
         self._rn += 1
+        if pose is None:
+            self._has_pose[k] = False
+            return
+        if self._poses is None or self._poses.shape[1:] != np.shape(pose):
+            self._poses = np.zeros((self._R, *np.shape(pose)))
+            self._has_pose[:] = False
+        self._poses[k] = pose
+        self._has_pose[k] = True
 
-    def rows(self, boundary: int, frame: int) -> np.ndarray:
-        """The fed rows named for a segment starting at ``boundary`` decided at ``frame``
-        (module doc), oldest first, (frames, d)."""
+    def _positions(self, boundary: int, frame: int) -> np.ndarray:
+        """Ring positions of the rows named for a segment starting at ``boundary`` decided
+        at ``frame`` (module doc), oldest first."""
         lo, hi = boundary + self.skip, frame + 1
         if hi - lo < self._min_named:
             lo = boundary
         hi = min(hi, lo + self._max_window)
         pos = np.flatnonzero((self._ridx >= lo) & (self._ridx < hi))
-        pos = pos[np.argsort(self._ridx[pos], kind="stable")]
-        return self._rows[pos]
+        return pos[np.argsort(self._ridx[pos], kind="stable")]
+
+    def rows(self, boundary: int, frame: int) -> np.ndarray:
+        """The fed rows named for a segment starting at ``boundary`` decided at ``frame``
+        (module doc), oldest first, (frames, d)."""
+        return self._rows[self._positions(boundary, frame)]
 
     def name(self, boundary: int, frame: int) -> tuple[str, float]:
         """(name, library distance) of the segment starting at ``boundary`` when decided
         at ``frame``; (``unknown``, inf) with fewer than 2 rows."""
-        W = self.rows(boundary, frame)
-        if len(W) < 2:
+        pos = self._positions(boundary, frame)
+        if len(pos) < 2:
             from rtseg.library.behaviours import UNKNOWN
             return UNKNOWN, math.inf
-        nm = self.library.name(W, self.frame_rate)
+        P = None
+        if self.posture is not None and self._poses is not None and self._has_pose[pos].all():
+            P = self.posture.transform(self._poses[pos])
+        W = self._rows[pos]
+        nm = (self.library.name(W, self.frame_rate) if P is None
+              else self.library.name(W, self.frame_rate, P))
         return nm.name, nm.distance
 
 

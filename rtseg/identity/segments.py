@@ -92,21 +92,36 @@ def identify_segments(X: np.ndarray, frame_rate: float,
 
 
 def feed_take(tracker: Any, X: np.ndarray, index: Sequence[int],
-              cuts: Sequence[tuple[int, int]]) -> None:
+              cuts: Sequence[tuple[int, int]], poses: np.ndarray | None = None) -> None:
     """Replay a take through ``tracker`` (an ``IdentityTracker``) as the live loop would:
-    each row of X with its session frame ``index``, each cut (boundary, detected) once the
-    frame ``max(detected, boundary)`` has been fed (those detected after the last frame at
-    the end), then ``close`` at the last frame."""
+    each row of X with its session frame ``index`` (and, when given, the rotations of
+    that frame ``poses[r]`` - the take's rotations at ``index`` - for a tracker that names
+    by posture), each cut (boundary, detected) once the frame ``max(detected, boundary)``
+    has been fed (those detected after the last frame at the end), then ``close`` at the
+    last frame."""
     pending = sorted((max(int(d), int(b)), int(b)) for b, d in cuts)
     k = 0
-    for x, f in zip(X, index):
-        tracker.update(int(f), x)
+    for r, (x, f) in enumerate(zip(X, index)):
+        tracker.update(int(f), x, None if poses is None else poses[r])
         while k < len(pending) and pending[k][0] <= f:
             tracker.on_cut(pending[k][1], pending[k][0])
             k += 1
     for d, b in pending[k:]:
         tracker.on_cut(b, d)
     tracker.close(int(index[-1]))
+
+
+def take_posture_of(take: Any, library: Any) -> Any:
+    """The posture of ``take``'s rig (``rtseg.core.posture.Posture``) when ``library``
+    names by posture and the take's rest geometry is known, else None."""
+    if not getattr(library, "names_by_posture", False):
+        return None
+    from rtseg.core.posture import Posture, PostureError
+    from rtseg.core.rig import RigError
+    try:
+        return Posture.for_take(take)
+    except (PostureError, RigError):
+        return None
 
 
 def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,
@@ -130,13 +145,16 @@ def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,
     options = tracker_options(config)
     if threshold is not None:
         options["threshold"] = float(threshold)
+    posture = take_posture_of(take, library)
     out: dict[str, list[str]] = {}
     for m, r in results.items():
         first, last = int(index[0]), int(index[-1])
         tr = IdentityTracker(fr, m, library=library, **options)
+        tr.set_posture(posture)
         feed_take(tr, X, index, [(int(c.frame), int(c.frame if c.detected_at is None
                                                         else c.detected_at))
-                                 for c in r.cuts if first < int(c.frame) <= last])
+                                 for c in r.cuts if first < int(c.frame) <= last],
+                  None if posture is None else take.quats[index])
         named = sorted((b, n) for b, n in tr.segment_names(corrected=True).values())
         names = []
         for s in r.segments:

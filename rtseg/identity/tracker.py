@@ -203,6 +203,7 @@ class IdentityTracker:
         self._holders = NameHolders(exclusive_names)
         self._namer_kw = {"skip_s": name_skip_s, "max_window_s": max_window_s,
                           "min_window_s": MIN_WINDOW_S, "block": step}
+        self._posture: Any = None     # the session rig's posture (set_posture)
         self.library = library
         self._skip_blocks = max(0, int(round(id_skip_s * frame_rate / step)))
         self._min_blocks = max(2, int(round(MIN_WINDOW_S * frame_rate / step)))
@@ -218,6 +219,8 @@ class IdentityTracker:
             raise RuntimeError("the library is set before the first fed row")
         self.namer = None if library is None else SegmentNamer(
             library, self.frame_rate, **self._namer_kw)
+        if self.namer is not None:
+            self.namer.posture = self._posture
 
     @property
     def decide_blocks(self) -> int:
@@ -242,13 +245,27 @@ class IdentityTracker:
         if self.namer is not None and not self.namer.start(d):
             self.namer = None
 
-    def update(self, index: int, x: np.ndarray) -> None:
-        """One fed feature row ``x`` (d,) of session frame ``index``."""
+    def set_posture(self, posture: Any) -> None:
+        """The session rig's posture (``rtseg.core.posture.Posture``; None: none): with it,
+        and a library that names by posture, segments are named by posture too (give
+        ``update`` each frame's rotations while ``wants_poses``)."""
+        self._posture = posture
+        if self.namer is not None:
+            self.namer.posture = posture
+
+    @property
+    def wants_poses(self) -> bool:
+        """Whether ``update`` should be given each frame's rotations (``set_posture``)."""
+        return self.namer is not None and self.namer.wants_poses
+
+    def update(self, index: int, x: np.ndarray, pose: np.ndarray | None = None) -> None:
+        """One fed feature row ``x`` (d,) of session frame ``index``; ``pose``: the
+        frame's rotations (joints, 4) when ``wants_poses``."""
         if self._d == 0:
             self._init(len(x))
         completed = self._sums.add(index, x)
         if self.namer is not None:
-            self.namer.update(index, x)
+            self.namer.update(index, x, pose)
         if self._seg is None:
             self._open(index, 0, self._sums.started - 1)
         if completed:
@@ -274,11 +291,12 @@ class IdentityTracker:
         if self._complete() >= new.decide_block:
             self._attempt(new, min(self._complete(), new.block + self.max_blocks), detected)
 
-    def step(self, index: int, x: np.ndarray | None, cuts: Sequence[Any]) -> None:
-        """The pipeline hook: the fed row (None when the frame was not fed) and the cuts its
-        arrival revealed (``PipelineCut``)."""
+    def step(self, index: int, x: np.ndarray | None, cuts: Sequence[Any],
+             pose: np.ndarray | None = None) -> None:
+        """The pipeline hook: the fed row (None when the frame was not fed), the cuts its
+        arrival revealed (``PipelineCut``) and the frame's rotations (or None)."""
         if x is not None:
-            self.update(index, x)
+            self.update(index, x, pose)
         for c in cuts:
             self.on_cut(c.boundary, c.detected, c.cut.method)
 

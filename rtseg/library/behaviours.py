@@ -12,6 +12,12 @@ dims), short windows cut from labelled examples, each with its name and the exam
 - ``descriptor`` (version-1 files): a hand-made descriptor, below; a name's distance is
   the mean of its 3 nearest windows' (``k_nearest`` 3).
 
+A model library learned from takes whose rest geometry is known (``rtseg.core.posture``:
+ASF/AMC, BVH) also keeps each window's posture descriptor; a session that has posture too
+is named by the geometric mean of the model and posture distances
+(``rtseg.library.posture_distance``), with a rejection rule calibrated for it
+(``posture_rule``); a session without posture (an IMU suit) by the model distance alone.
+
 Descriptor of a window W (frames, 4J) of pose-feature rows (unit quaternions per joint,
 frame rate ``fr`` Hz), three groups, all logarithms:
 
@@ -47,11 +53,11 @@ Windows: ``window_s`` (2 s) long every ``step_s`` (0.5 s) inside each labelled r
 ``edge_s`` (0.5 s) is cut off each end (transitions); a range shorter than that gives one
 window of what is left if it is at least ``min_s`` (1 s).
 
-File: JSON (data only), ``{"format": "rtseg-behaviour-library", "version": 2, "profile",
+File: JSON (data only), ``{"format": "rtseg-behaviour-library", "version": 3, "profile",
 "dims", "frame_rate", "window_s", ..., "threshold", "ratio", "k_nearest", "metric",
 "lag_s", "scale", "names", "sources", "starts", "descriptors", "window_stats",
-"examples"}`` (``rtseg.library.file``).  ``load`` refuses another format, version (1 and
-2 are read), profile or dims with one ``LibraryError`` line.
+"posture", "posture_rule", "examples"}`` (``rtseg.library.file``).  ``load`` refuses
+another format, version (1 to 3 are read), profile or dims with one ``LibraryError`` line.
 """
 
 from __future__ import annotations
@@ -66,12 +72,14 @@ from rtseg.config import ConfigError
 from rtseg.library.calibration import (DEFAULT_THRESHOLD, MODEL_ONE_NAME_FACTOR,
                                        ONE_NAME_FACTOR, k_mean, median_or_none,
                                        nearest_others, separating_rule)
+from rtseg.core.posture import window_descriptor
 from rtseg.library.distance import LAG_S, window_stats
 
 FORMAT = "rtseg-behaviour-library"
-VERSION = 2
-#: versions this rtseg reads: 1 (descriptor distance only), 2 (window statistics: model distance)
-READS = (1, 2)
+VERSION = 3
+#: versions this rtseg reads: 1 (descriptor distance only), 2 (window statistics: model
+#: distance), 3 (window posture descriptors, optional)
+READS = (1, 2, 3)
 METRICS = ("model", "descriptor")
 #: the distance a library is learned with: "model" (``rtseg.library.distance``); held
 #: out it names more segments right than "descriptor" (mocap6 0.90 against 0.80,
@@ -163,6 +171,41 @@ class Library:
     metric: str = "descriptor"               # "model" (window models) or "descriptor"
     window_stats: list[Any] = field(default_factory=list)   # per window (model metric)
     lag_s: float = LAG_S                     # angular-velocity lag (model metric), s
+    #: per window its posture descriptor (rtseg.core.posture.window_descriptor), or empty
+    posture: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    #: the rejection rule of the model x posture distance: {"threshold", "ratio", "scale"}
+    posture_rule: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def has_posture(self) -> bool:
+        """Whether every window has its posture descriptor."""
+        return (self.metric == "model" and len(self.names) > 0
+                and np.shape(self.posture)[0] == len(self.names))
+
+    @property
+    def names_by_posture(self) -> bool:
+        """Whether a session with posture is named by the model x posture distance: the
+        library has posture and a rule calibrated for it (a library no behaviour of which
+        has a second example has none: no default threshold was measured for it)."""
+        return self.has_posture and "threshold" in self.posture_rule
+
+    @property
+    def posture_bank(self) -> Any:
+        """The windows' posture descriptors (``rtseg.library.posture_distance.PostureBank``)."""
+        b = getattr(self, "_posture_bank", None)
+        if b is None or len(b) != len(self.names):
+            from rtseg.library.posture_distance import PostureBank
+            b = self._posture_bank = PostureBank(self.posture)
+        return b
+
+    def _posture_scale(self) -> float:
+        s = self.posture_rule.get("scale")
+        if s is None:
+            from rtseg.library.posture_distance import posture_scale
+            s = posture_scale(self.bank.pairwise(), self.posture_bank.pairwise(),
+                              np.asarray(self.sources))
+            self.posture_rule["scale"] = s
+        return float(s)
 
     @property
     def behaviour_names(self) -> list[str]:
@@ -196,21 +239,28 @@ class Library:
             b = self._bank = ModelBank(self.window_stats)
         return b
 
-    def window_distances(self, i: int) -> np.ndarray:
-        """Distances of window i to every window (the library's metric)."""
+    def window_distances(self, i: int, posture: bool = False) -> np.ndarray:
+        """Distances of window i to every window (the library's metric; ``posture``: the
+        model x posture distance)."""
+        if posture:
+            from rtseg.library.posture_distance import combined
+            return combined(self.bank.pairwise()[i], self.posture_bank.pairwise()[i],
+                            self._posture_scale())
         if self.metric == "model":
             return self.bank.pairwise()[i].copy()
         return self.distances(self.descriptors[i])
 
-    def decide(self, d: np.ndarray) -> Naming:
-        """Name from the distances ``d`` to every window (module doc, Decision)."""
+    def decide(self, d: np.ndarray, posture: bool = False) -> Naming:
+        """Name from the distances ``d`` to every window (module doc, Decision); with
+        ``posture`` the distances are model x posture ones, judged by ``posture_rule``."""
         per = self.name_distances(d)
         if not per:
             return Naming(UNKNOWN, "", math.inf, 0.0)
         order = sorted(per, key=per.get)
         best, dist = order[0], per[order[0]]
         second = per[order[1]] if len(order) > 1 else math.inf
-        t, r = self.threshold, self.ratio
+        t, r = ((self.posture_rule["threshold"], self.posture_rule["ratio"]) if posture
+                else (self.threshold, self.ratio))
         ratio = dist / second if second > 0 else 1.0
         if dist <= t and ratio <= r:
             conf = min(1.0 - dist / t, 1.0 - ratio / r if r > 0 else 0.0)
@@ -245,8 +295,11 @@ class Library:
             self._rows_cache = cache
         return cache[1]
 
-    def name(self, W: np.ndarray, frame_rate: float | None = None) -> Naming:
-        """Name a window of feature rows (frames, dims) of this library's profile."""
+    def name(self, W: np.ndarray, frame_rate: float | None = None,
+             P: np.ndarray | None = None) -> Naming:
+        """Name a window of feature rows (frames, dims) of this library's profile; ``P``:
+        the same frames' posture rows (``rtseg.core.posture``), used when the library has
+        posture too (module doc)."""
         W = np.asarray(W, dtype=np.float64)
         if W.ndim != 2 or W.shape[1] != self.dims:
             raise ValueError(f"library wants {self.dims} feature dims, got {W.shape}")
@@ -254,7 +307,13 @@ class Library:
         if self.metric == "model":
             if not len(self.names):
                 return Naming(UNKNOWN, "", math.inf, 0.0)
-            return self.decide(self.bank.distances(self.bank.query(W, fr, self.lag_s)))
+            d = self.bank.distances(self.bank.query(W, fr, self.lag_s))
+            if P is None or not self.names_by_posture or not len(P):
+                return self.decide(d)
+            from rtseg.core.posture import window_descriptor
+            from rtseg.library.posture_distance import combined
+            dp = self.posture_bank.distances(window_descriptor(P))
+            return self.decide(combined(d, dp, self._posture_scale()), posture=True)
         return self.name_descriptor(descriptor(W, fr))
 
     # ------------------------------------------------------------------ calibration
@@ -262,7 +321,22 @@ class Library:
         """Set ``threshold`` and ``ratio`` from the library's own windows (module doc);
         returns the threshold.  ``calibration`` keeps the medians and counts, and
         ``calibrated``: False when no behaviour has a second example (the threshold is then
-        ``DEFAULT_THRESHOLD``)."""
+        ``DEFAULT_THRESHOLD``).  A library with posture calibrates ``posture_rule`` the
+        same way on the model x posture distance (its figures in ``calibration["posture"]``)."""
+        self.threshold, self.ratio, self.calibration = self._calibrated_rule(False)
+        self.posture_rule = {}
+        if self.has_posture and self.calibration["calibrated"]:
+            self.posture_rule = {"scale": None}
+            t, r, cal = self._calibrated_rule(True)
+            self.posture_rule.update(threshold=t, ratio=r)
+            self.calibration["posture"] = {k: cal[k] for k in
+                                           ("same_median", "other_median", "threshold")}
+            self.calibration["posture"]["ratio"] = r
+        return self.threshold
+
+    def _calibrated_rule(self, posture: bool) -> tuple[float, float, dict[str, Any]]:
+        """(threshold, ratio, calibration figures) of the separating rule on the library's
+        distance (``posture``: the model x posture one)."""
         names = np.array(self.names)
         src = np.array(self.sources)
         who = [str(e.get("person") or e.get("source", k)) for k, e in enumerate(self.examples)]
@@ -273,7 +347,7 @@ class Library:
         # name -> per window: its nearest other name, that distance, its known case's
         near: dict[str, list[tuple[str, float, float | None]]] = {}
         for i in range(len(names)):
-            d = self.window_distances(i)
+            d = self.window_distances(i, posture)
             if by_person:                # as a new person would be met: others' windows only
                 d = np.where(person != person[i], d, np.inf)
             s = d[(names == names[i]) & (src != src[i])]
@@ -292,13 +366,11 @@ class Library:
                 o1.append(per[0])
                 o2.append(per[1] if len(per) > 1 else math.inf)
         factor = MODEL_ONE_NAME_FACTOR if self.metric == "model" else ONE_NAME_FACTOR
-        self.threshold, self.ratio = separating_rule(same, other, o1, o2, factor,
-                                                     DEFAULT_THRESHOLD[self.metric])
-        self.calibration = {"same_median": median_or_none(same),
-                            "other_median": median_or_none(o1),
-                            "same": len(same), "other": len(o1), "calibrated": bool(same),
-                            "nearest_other": nearest_others(near)}
-        return self.threshold
+        t, r = separating_rule(same, other, o1, o2, factor, DEFAULT_THRESHOLD[self.metric])
+        return t, r, {"same_median": median_or_none(same), "other_median": median_or_none(o1),
+                      "threshold": round(t, 4) if math.isfinite(t) else None,
+                      "same": len(same), "other": len(o1), "calibrated": bool(same),
+                      "nearest_other": nearest_others(near)}
 
     def merged(self, other: "Library") -> "Library":
         """This library with ``other``'s examples added (same profile, dims and windows;
@@ -324,6 +396,8 @@ class Library:
                       k_nearest=self.k_nearest, metric=self.metric,
                       window_stats=list(self.window_stats) + list(other.window_stats),
                       lag_s=self.lag_s)
+        if self.has_posture and other.has_posture:
+            lib.posture = np.concatenate([self.posture, other.posture])
         lib.fit_scale()
         lib.calibrate()
         return lib
@@ -346,6 +420,7 @@ class LibraryBuilder:
         self.sources: list[int] = []
         self.starts: list[float] = []
         self.stats: list[Any] = []           # per window: angular-velocity statistics
+        self.posture: list[np.ndarray | None] = []   # per window: posture descriptor or None
         self.examples: list[dict[str, Any]] = []
         self.skipped: list[str] = []
 
@@ -361,12 +436,15 @@ class LibraryBuilder:
         return f"{source} [{a}:{b}) {name}: shorter than {self.min_s + 2 * self.edge_s:g} s"
 
     def add(self, X: np.ndarray, name: str, source: str, frames: tuple[int, int] | None = None,
-            frame_rate: float | None = None, info: dict[str, Any] | None = None) -> int:
+            frame_rate: float | None = None, info: dict[str, Any] | None = None,
+            posture: np.ndarray | None = None) -> int:
         """Add the labelled range ``frames`` [a, b) (default all) of feature rows X; returns
         the number of windows it gave (0: too short, noted in ``skipped``).  ``frame_rate``
         (Hz; default the builder's): the example's own - windows are cut in seconds at it
         and the window statistics are per second, so examples of any frame rate mix.
-        ``info``: extra fields of the example's record (e.g. take frames, person, key)."""
+        ``info``: extra fields of the example's record (e.g. take frames, person, key).
+        ``posture``: the posture rows of X's frames (``rtseg.core.posture``), or None; the
+        library keeps posture only when every window has it."""
         name = str(name).strip()
         if not name:
             raise ValueError(f"{source}: empty behaviour name")
@@ -382,6 +460,9 @@ class LibraryBuilder:
         a, b = (0, len(X)) if frames is None else (int(frames[0]), int(frames[1]))
         if not 0 <= a < b <= len(X):
             raise ValueError(f"{source}: frames {a}:{b} outside the take (0:{len(X)})")
+        if posture is not None and np.shape(posture)[0] != len(X):
+            raise ValueError(f"{source}: {np.shape(posture)[0]} posture rows for {len(X)} "
+                             f"feature rows")
         wins = self.windows(a, b, fr)
         if not wins:
             self.skipped.append(self.too_short(source, a, b, name))
@@ -395,6 +476,7 @@ class LibraryBuilder:
             self.sources.append(k)
             self.starts.append(float(s))
             self.stats.append(window_stats(X[s:e], fr))
+            self.posture.append(None if posture is None else window_descriptor(posture[s:e]))
         return len(wins)
 
     def build(self, threshold: float | None = None, metric: str = DEFAULT_METRIC) -> Library:
@@ -411,11 +493,15 @@ class LibraryBuilder:
                       min_s=self.min_s, starts=list(self.starts), metric=metric,
                       k_nearest=MODEL_K_NEAREST if metric == "model" else K_NEAREST,
                       window_stats=list(self.stats))
+        if metric == "model" and all(p is not None for p in self.posture):
+            lib.posture = np.array(self.posture)
         lib.fit_scale()
         lib.calibrate()
         if threshold is not None:
             if not threshold > 0:
                 raise ValueError(f"threshold must be positive, got {threshold}")
             lib.threshold = float(threshold)
+            if lib.names_by_posture:
+                lib.posture_rule["threshold"] = float(threshold)
             lib.calibration["threshold_given"] = True
         return lib

@@ -47,6 +47,7 @@ class Example:
     profile: str
     frame_rate: float
     key: str = ""                    # content hash of the motion (rtseg.library.sources)
+    P: np.ndarray | None = None      # posture rows of X's frames (rtseg.core.posture), or None
 
     def rows(self) -> tuple[int, int]:
         """[i, j) rows of X covering the take frames [a, b)."""
@@ -62,6 +63,19 @@ def take_rows(take: Any, config: Any) -> tuple[np.ndarray, np.ndarray, str]:
                            profile=config["features.profile"] or None).profile
     X, index, _ = fed_features(take, config)
     return X, index, profile
+
+
+def posture_rows(take: Any, index: np.ndarray) -> np.ndarray | None:
+    """The posture rows (``rtseg.core.posture``) of the take frames ``index`` (one per fed
+    row), or None when the take's rest geometry is unknown or its rig has no posture."""
+    from rtseg.core.posture import Posture, PostureError
+    from rtseg.core.rig import RigError
+    try:
+        post = Posture.for_take(take)
+    except (PostureError, RigError):
+        return None
+    idx = np.asarray(index, dtype=np.int64)
+    return post.transform(take.quats[idx]) if len(idx) else np.zeros((0, 0))
 
 
 def example_of_take(path: str | Path, name: str, config: Any,
@@ -86,7 +100,7 @@ def example_of_take(path: str | Path, name: str, config: Any,
         raise ValueError(f"{path}: --frames {a}:{b} outside the take (0:{n})")
     stem = Path(path).stem
     return Example(name, stem, person or stem.split("_")[0], X, index, (a, b), profile,
-                   float(take.frame_rate), motion_key(take, a, b))
+                   float(take.frame_rate), motion_key(take, a, b), posture_rows(take, index))
 
 
 def synthetic_examples(behaviours: Sequence[str], seeds: Sequence[int], config: Any,
@@ -101,9 +115,10 @@ def synthetic_examples(behaviours: Sequence[str], seeds: Sequence[int], config: 
     for seed in seeds:
         res = synthesize(script, frame_rate=frame_rate, seed=int(seed))
         X, index, profile = take_rows(res.take, config)
+        P = posture_rows(res.take, index)
         for a, b, name in label_runs(res.frame_names()):
             out.append(Example(name, f"synth{seed}", f"synth{seed}", X, index, (a, b),
-                               profile, float(frame_rate), motion_key(res.take, a, b)))
+                               profile, float(frame_rate), motion_key(res.take, a, b), P))
     return out
 
 
@@ -182,7 +197,8 @@ def learn(examples: Sequence[Example], profile: str | None = None,
         b.add(e.X[i:j], e.name, e.take, None, e.frame_rate,
               info={"frames": list(e.frames), "person": e.person,
                     "frame_rate": round(float(e.frame_rate), 2),
-                    **({"key": e.key} if e.key else {})})
+                    **({"key": e.key} if e.key else {})},
+              posture=None if e.P is None else e.P[i:j])
     notes += b.skipped
     return b.build(threshold, metric or DEFAULT_METRIC), notes
 

@@ -1,8 +1,9 @@
 """A behaviour library file (``rtseg.library.behaviours.Library``): writing (``to_dict``,
 ``save``) and reading (``load``); ``rtseg.library.save`` / ``rtseg.library.load``.
 
-The file is JSON, data only: ``format`` (``rtseg-behaviour-library``), ``version`` (2;
-version-1 files hold the descriptor distance only and are read as descriptor libraries),
+The file is JSON, data only: ``format`` (``rtseg-behaviour-library``), ``version`` (3;
+version-1 files hold the descriptor distance only and are read as descriptor libraries;
+version-2 files have no posture),
 ``profile`` and ``dims`` (the pose-feature profile and its dims), the window settings,
 ``threshold`` and ``ratio`` (the rejection rule), ``k_nearest`` (a name's distance is the
 mean of its k nearest windows'; a file without it reads as 1, the rule its threshold
@@ -10,7 +11,10 @@ was calibrated for), ``scale`` (per descriptor dim), per
 window its ``names`` / ``sources`` (example index) / ``starts`` / ``descriptors``, the
 distance ``metric`` (``model`` or ``descriptor``) and, for ``model``, ``lag_s`` and per
 window its ``window_stats`` (``rtseg.library.distance.stats_to_json``: frame count, mean and
-upper-triangle scatter of the joints' angular velocities, 3J dims), and the
+upper-triangle scatter of the joints' angular velocities, 3J dims), ``posture`` (per
+window its posture descriptor, ``rtseg.core.posture.window_descriptor``; absent when the
+examples' rest geometry was unknown) with ``posture_rule`` (threshold, ratio and scale of
+the model x posture distance, ``rtseg.library.posture_distance``), and the
 ``examples`` (name, source, frames, person).  Everything is checked on load; any problem
 is one ``LibraryError`` line naming the file.
 """
@@ -45,6 +49,10 @@ def to_dict(lib: Library) -> dict[str, Any]:
             "descriptors": [[round(float(v), 6) for v in row] for row in lib.descriptors],
             **({"window_stats": stats_to_json(lib.window_stats)}
                if lib.metric == "model" else {}),
+            **({"posture": [[round(float(v), 6) for v in row] for row in lib.posture],
+                "posture_rule": {k: (float(v) if v is not None and math.isfinite(v) else None)
+                                 for k, v in lib.posture_rule.items()}}
+               if lib.has_posture else {}),
             "examples": lib.examples}
 
 
@@ -67,7 +75,8 @@ _TYPES = {"profile": "str", "dims": "int", "frame_rate": "num", "window_s": "num
           "examples": "[dict]"}
 #: fields that may be absent (files written before them)
 _OPTIONAL_TYPES = {"ratio": "num", "k_nearest": "int", "metric": "str", "lag_s": "num",
-                   "starts": "[num]", "calibration": "dict?"}
+                   "starts": "[num]", "calibration": "dict?", "posture": "[[num]]",
+                   "posture_rule": "dict"}
 _WHAT = {"str": "a string", "int": "a whole number", "num": "a number", "dict": "an object",
          "[num]": "a list of numbers"}
 
@@ -194,6 +203,8 @@ def load(path: str | Path, profile: str | None = None, dims: int | None = None) 
         except (KeyError, TypeError, ValueError, np.linalg.LinAlgError) as exc:
             raise LibraryError(f"behaviour library {p}: malformed ({type(exc).__name__}: "
                                f"{exc})") from None
+    if "posture" in doc:
+        _load_posture(lib, doc, p)
     if (not math.isfinite(lib.threshold) and not lib.calibration.get("threshold_given")
             and str(p.resolve()) not in _WARNED):
         _WARNED.add(str(p.resolve()))    # once per file (rtseg live checks it, then loads it)
@@ -203,3 +214,22 @@ def load(path: str | Path, profile: str | None = None, dims: int | None = None) 
             "learn it again ('rtseg learn %s --new ...'), or add an example to it, which "
             "calibrates it anew", p, p)
     return lib
+
+
+def _load_posture(lib: Library, doc: dict, p: Path) -> None:
+    """The posture descriptors and rule of a version-3 file (LibraryError when malformed)."""
+    from rtseg.core.posture import DIM
+    P = np.asarray(doc["posture"], dtype=np.float64)
+    rule = doc.get("posture_rule") or {}
+    t, r, s = rule.get("threshold"), rule.get("ratio"), rule.get("scale")
+    num = lambda v: isinstance(v, (int, float)) and not isinstance(v, bool)   # noqa: E731
+    ok = (lib.metric == "model" and P.shape == (len(lib.names), 2 * DIM)
+          and bool(np.all(np.isfinite(P)))
+          and (not rule or ((t is None or num(t) and t > 0) and num(r) and 0 < r <= 1
+                            and num(s) and s > 0)))
+    if not ok:
+        raise LibraryError(f"behaviour library {p}: malformed (posture descriptors or rule "
+                           f"do not agree with its {len(lib.names)} windows)")
+    lib.posture = P
+    lib.posture_rule = {} if not rule else {
+        "threshold": math.inf if t is None else float(t), "ratio": float(r), "scale": float(s)}

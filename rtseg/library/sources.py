@@ -28,8 +28,10 @@ import logging
 from pathlib import Path
 from typing import Any, Iterable
 
+from rtseg.core.posture import rest_meta
 from rtseg.labels.truth import MOCAP6_NAMES, truth_labels
-from rtseg.library.examples import Example, label_runs, motion_key, joined_key, take_rows
+from rtseg.library.examples import (Example, joined_key, label_runs, motion_key, posture_rows,
+                                   take_rows)
 
 log = logging.getLogger(__name__)
 
@@ -77,7 +79,8 @@ def examples_from_source(src: str | Path, config: Any, people: Iterable[str] | N
             for r in sorted(pool.takes, key=lambda r: r.name):
                 X, index, profile = take_rows(r.take, config)
                 e = Example(behaviour, r.name, subject, X, index, r.trim, profile,
-                            float(g.frame_rate), motion_key(r.take, *r.trim))
+                            float(g.frame_rate), motion_key(r.take, *r.trim),
+                            posture_rows(r.take, index))
                 i, j = e.rows()
                 if j - i >= need:
                     out.append(e)
@@ -89,7 +92,8 @@ def examples_from_source(src: str | Path, config: Any, people: Iterable[str] | N
                 for r in short:
                     X, index, profile = take_rows(r.take, config)
                     out.append(Example(behaviour, r.name, subject, X, index, r.trim, profile,
-                                       float(g.frame_rate), motion_key(r.take, *r.trim)))
+                                       float(g.frame_rate), motion_key(r.take, *r.trim),
+                                       posture_rows(r.take, index)))
                 continue
             clip = clip_of(short[0])
             for r in short[1:]:
@@ -99,11 +103,12 @@ def examples_from_source(src: str | Path, config: Any, people: Iterable[str] | N
             take = Take(joint_names=list(g.joint_names), parents=list(g.parents),
                         frame_rate=g.frame_rate, quats=clip.quats, root_position=clip.root,
                         space=t0.space, length_unit=t0.length_unit,
-                        source="+".join(r.name for r in short), meta={})
+                        source="+".join(r.name for r in short), meta=rest_meta(t0))
             X, index, profile = take_rows(take, config)
             key = joined_key(motion_key(r.take, *r.trim) for r in short)
             e = Example(behaviour, "+".join(r.name for r in short), subject, X, index,
-                        (0, take.n_frames), profile, float(g.frame_rate), key)
+                        (0, take.n_frames), profile, float(g.frame_rate), key,
+                        posture_rows(take, index))
             i, j = e.rows()
             if j - i < need:
                 notes.append(f"{e.take} {behaviour}: {len(short)} short takes joined are "
@@ -143,6 +148,7 @@ def examples_from_dir(data_dir: str | Path, config: Any,
             continue
         take = lt.load()
         X, index, profile = take_rows(take, config)
+        P = posture_rows(take, index)
         truth = truth_labels(lt, take.n_frames)
         mocap6 = "mocap6" in lt.labels.source
         for a, b, lab in label_runs(truth):
@@ -150,5 +156,5 @@ def examples_from_dir(data_dir: str | Path, config: Any,
                 continue
             name = MOCAP6_NAMES.get(lab, lab) if mocap6 else lab
             out.append(Example(name, lt.name, lt.name.split("_")[0], X, index, (a, b),
-                               profile, float(take.frame_rate), motion_key(take, a, b)))
+                               profile, float(take.frame_rate), motion_key(take, a, b), P))
     return out

@@ -119,11 +119,16 @@ class Pipeline:
     ``lost`` frames known lost just before it, ``source_time`` the source's clock in
     seconds or None) and returns the cuts its arrival revealed, in session frame indices.  Deterministic: the
     same frames give the same cuts, which is how live output is checked against a recording.
+
+    ``rest``: the source rig's rest geometry (``rtseg.core.posture.RestPose``; file
+    replays know it, IMU suits do not) - with it, and a behaviour library that names by
+    posture, the identity tracker gets each frame's rotations too and names by posture.
     """
 
     def __init__(self, joint_names: list[str], parents: list[int], space: str,
                  frame_rate: float | None, config: SessionConfig,
-                 features: Any = None, detectors: dict[str, OnlineDetector] | None = None) -> None:
+                 features: Any = None, detectors: dict[str, OnlineDetector] | None = None,
+                 rest: Any = None) -> None:
         self.joint_names = list(joint_names)
         self.parents = list(parents)
         self.space = space
@@ -192,8 +197,11 @@ class Pipeline:
         self._filled_at_start = {m: 0 for m in self.detectors}
         self._last_cut_row = {m: 0 for m in self.detectors}
         self._prev_fed: np.ndarray | None = None
-        #: (index, row, cuts) of a frame whose identity step waits (``process(identify=False)``)
-        self._identity_due: tuple[int, np.ndarray, list[PipelineCut]] | None = None
+        #: (index, row, cuts, rotations) of a frame whose identity step waits
+        #: (``process(identify=False)``)
+        self._identity_due: tuple[int, np.ndarray, list[PipelineCut], np.ndarray] | None = None
+        self.rest = rest
+        self._posture: Any = None             # rtseg.core.posture.Posture, made when wanted
 
     def _feature_joints(self) -> np.ndarray:
         """Input joints the pose features depend on: the profile's joints and, for global
@@ -421,9 +429,10 @@ class Pipeline:
             np.copyto(self._prev_fed, q)
         if self.identity is not None:
             if identify:
-                self._identify(index, x, out)
+                self._identify(index, x, out, q)
             else:
-                self._identity_due = (index, x, out)
+                self._identity_due = (index, x, out,
+                                      q.copy() if self._wants_poses() else None)
         return out
 
     def identify_pending(self) -> None:
@@ -434,10 +443,38 @@ class Pipeline:
             self._identity_due = None
             self._identify(*due)
 
-    def _identify(self, index: int, x: np.ndarray, out: list[PipelineCut]) -> None:
-        """The identity tracker's step for fed row ``x`` of frame ``index`` and its cuts."""
+    def _wants_poses(self) -> bool:
+        """Whether the identity tracker names by posture and so takes each frame's
+        rotations: the rig's rest geometry is known and the library names by posture (the
+        rig's posture is made the first time; a rig without one is logged once and named
+        by its pose features alone)."""
+        if self.rest is None:
+            return False
+        if self._posture is None:
+            namer = getattr(self.identity, "namer", None)
+            if namer is None or not getattr(namer.library, "names_by_posture", False):
+                return False
+            from rtseg.core.posture import Posture, PostureError
+            from rtseg.core.rig import RigError
+            try:
+                self._posture = Posture(self.joint_names, self.parents, self.rest, self.space)
+            except (PostureError, RigError) as exc:
+                log.warning("no posture for behaviour names (%s): named by pose features "
+                            "alone", exc)
+                self.rest = None
+                return False
+            self.identity.set_posture(self._posture)
+        return self.identity.wants_poses
+
+    def _identify(self, index: int, x: np.ndarray, out: list[PipelineCut],
+                  q: np.ndarray | None) -> None:
+        """The identity tracker's step for fed row ``x`` of frame ``index`` (rotations
+        ``q``) and its cuts."""
         try:
-            self.identity.step(index, x, out)
+            if q is not None and self._wants_poses():
+                self.identity.step(index, x, out, q)
+            else:
+                self.identity.step(index, x, out)
         except Exception as exc:  # identity must never cost a cut
             self.stats.identity_errors += 1
             n = self.stats.identity_errors

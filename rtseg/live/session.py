@@ -273,7 +273,8 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
             log.warning("source has no nominal frame rate; assuming %.0f Hz", DEFAULT_FRAME_RATE)
         self.frame_rate = float(rate or DEFAULT_FRAME_RATE)
         self._rate_check = DeclaredRateCheck(float(rate)) if rate else None
-        self.pipeline = Pipeline(names, parents, space, self.frame_rate, self.config)
+        self.pipeline = Pipeline(names, parents, space, self.frame_rate, self.config,
+                                 rest=getattr(src, "rest_pose", None))
         if hasattr(self.pipeline.features, "summary"):
             line = self.pipeline.features.summary()
             log.info("%s", line)

@@ -58,7 +58,8 @@ from rtseg.simulators.synth.script import (DEFAULT_SCRIPT, MIN_DURATION, ScriptE
                                            parse_script)
 from rtseg.simulators.synth.skeleton import (CHANNELS, FEATURE_JOINTS, FOOT_POINTS, J,
                                              JOINT_NAMES, N_JOINTS, PARENTS, TWIST,
-                                             joint_positions, local_quats, mirror)
+                                             joint_positions, local_quats, mirror,
+                                             rest_positions)
 from rtseg.core.take import Take
 
 #: Blend span range, seconds.
@@ -235,6 +236,7 @@ def synthesize(script: str | list[tuple[str, float]] = DEFAULT_SCRIPT, frame_rat
         quats=local, root_position=root, space="local", length_unit="m",
         source=f"synth:{script_text}#seed={seed}",
         meta={"synth_script": script_text, "synth_seed": int(seed),
+              "rest_positions": rest_positions(),
               "segments": [[s.name, s.start, s.stop] for s in segments],
               "transitions": [[t.lo, t.mid, t.hi, t.before, t.after] for t in transitions]})
     result = SynthResult(take=take, segments=segments, transitions=transitions, script=items)

@@ -103,6 +103,16 @@ def local_quats(A: np.ndarray) -> np.ndarray:
     return q
 
 
+def rest_positions() -> np.ndarray:
+    """(17, 3) joint locations of the rest pose (T-pose), metres, the root at the origin:
+    the take's rest geometry (``rtseg.core.posture.RestPose``)."""
+    pos = np.zeros((N_JOINTS, 3))
+    for j, p in enumerate(PARENTS):
+        if p >= 0:
+            pos[j] = pos[p] + OFFSETS[j]
+    return pos
+
+
 def joint_positions(global_q: np.ndarray, root: np.ndarray | None = None) -> np.ndarray:
     """World joint positions (frames, 17, 3) in metres by forward kinematics of the global
     rotations (frames, 17, 4) and the rest offsets; root at ``root`` (frames, 3) or origin."""
