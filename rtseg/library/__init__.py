@@ -1,6 +1,7 @@
 """Named behaviour libraries: learn behaviour names from labelled examples, name segments,
 and say ``unknown`` for a segment unlike every example.  ``behaviours`` holds the library
-and its builder, ``distance`` the model distance, ``calibration`` the rejection rule,
+and its builder, ``distance`` the model distance, ``posture_distance`` its posture half,
+``descriptor`` the version-1 descriptor distance, ``calibration`` the rejection rule,
 ``file`` the library file, ``examples`` and ``sources`` the labelled examples (from takes
 and from source folders).
 

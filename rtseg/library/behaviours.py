@@ -9,28 +9,14 @@ dims), short windows cut from labelled examples, each with its name and the exam
   the window's per-joint body-frame angular velocities, compared with the segmenter's own
   PCA / PPCA window models - the identity tracker's distance D (1 for two windows of one
   motion).  A name's distance is its nearest window's (``k_nearest`` 1).
-- ``descriptor`` (version-1 files): a hand-made descriptor, below; a name's distance is
-  the mean of its 3 nearest windows' (``k_nearest`` 3).
+- ``descriptor`` (version-1 files): a hand-made descriptor (``rtseg.library.descriptor``);
+  a name's distance is the mean of its 3 nearest windows' (``k_nearest`` 3).
 
 A model library learned from takes whose rest geometry is known (``rtseg.core.posture``:
 ASF/AMC, BVH) also keeps each window's posture descriptor; a session that has posture too
-is named by the geometric mean of the model and posture distances
+is named by a weighted geometric mean of the model and posture distances
 (``rtseg.library.posture_distance``), with a rejection rule calibrated for it
 (``posture_rule``); a session without posture (an IMU suit) by the model distance alone.
-
-Descriptor of a window W (frames, 4J) of pose-feature rows (unit quaternions per joint,
-frame rate ``fr`` Hz), three groups, all logarithms:
-
-- ``spread`` (J): per joint log(sqrt(sum of the 4 components' variances) + 0.01) - about
-  half the joint's angular spread in rad; unchanged by any fixed rotation before or after
-  the joint's rotation (rest pose, axis conventions);
-- ``speed`` (J): per joint log(mean |q[t+1] - q[t]| x fr + 0.05) - about half its mean
-  angular speed in rad/s; unchanged by the same fixed rotations;
-- ``dims`` (4J): per feature dim log(std + 0.005) - which axes each joint moves about.
-
-Descriptor distance between a query q and an example e: each dim standardised by the
-library's ``scale`` (per-dim std over all its windows, floored at ``SCALE_FLOOR``), then
-``sqrt(mean over groups of mean over the group's dims of z^2)``.
 
 Decision (``Library.name``): d1, d2 = the distances of the nearest and second-nearest
 *name* (a name's distance: the mean of its ``k_nearest`` nearest windows').  The segment
@@ -73,6 +59,8 @@ from rtseg.library.calibration import (DEFAULT_THRESHOLD, MODEL_ONE_NAME_FACTOR,
                                        ONE_NAME_FACTOR, k_mean, median_or_none,
                                        nearest_others, separating_rule)
 from rtseg.core.posture import window_descriptor
+from rtseg.library.descriptor import (GROUPS, K_NEAREST, SCALE_FLOOR,  # noqa: F401 (re-exported)
+                                     descriptor, group_slices)
 from rtseg.library.distance import LAG_S, window_stats
 
 FORMAT = "rtseg-behaviour-library"
@@ -90,9 +78,6 @@ DEFAULT_METRIC = "model"
 #: descriptor's, let 3 more left-out mocap6 exercises through, docs/identity.md)
 MODEL_K_NEAREST = 1
 UNKNOWN = "unknown"
-GROUPS = ("spread", "speed", "dims")
-SCALE_FLOOR = 0.05
-K_NEAREST = 3
 #: example windows start every this many seconds: the nearest window is then likely to
 #: meet a query's phase of the movement (held-out figures: docs/identity.md)
 DEFAULT_STEP_S = 0.5
@@ -100,28 +85,6 @@ DEFAULT_STEP_S = 0.5
 
 class LibraryError(ConfigError):
     """A library file that cannot be used (one line: path and reason)."""
-
-
-def descriptor(W: np.ndarray, frame_rate: float) -> np.ndarray:
-    """Descriptor (6J,) of a window W (frames >= 2, 4J) of feature rows (module doc):
-    spread (J), speed (J), dims (4J) concatenated."""
-    W = np.asarray(W, dtype=np.float64)
-    n, d = W.shape
-    if n < 2 or d % 4:
-        raise ValueError(f"a descriptor needs >= 2 frames of 4J features, got {W.shape}")
-    J = d // 4
-    var = W.var(axis=0)
-    spread = np.log(np.sqrt(var.reshape(J, 4).sum(axis=1)) + 0.01)
-    step = np.linalg.norm(np.diff(W, axis=0).reshape(n - 1, J, 4), axis=2)
-    speed = np.log(step.mean(axis=0) * float(frame_rate) + 0.05)
-    dims = np.log(np.sqrt(var) + 0.005)
-    return np.concatenate([spread, speed, dims])
-
-
-def group_slices(dims: int) -> list[slice]:
-    """Slices of the descriptor groups for ``dims`` feature dims (4J)."""
-    J = dims // 4
-    return [slice(0, J), slice(J, 2 * J), slice(2 * J, 6 * J)]
 
 
 def window_bounds(a: int, b: int, frame_rate: float, window_s: float, step_s: float,
