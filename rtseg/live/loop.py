@@ -84,7 +84,7 @@ import threading
 import time
 from typing import Any, Sequence
 
-from rtseg.live.pipeline import _blas_limit
+from rtseg.live.detector_setup import _blas_limit
 
 log = logging.getLogger("rtseg.live.session")
 

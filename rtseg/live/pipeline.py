@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import bisect
 import logging
-import math
 from array import array
 from dataclasses import dataclass
 from typing import Any, Iterable
@@ -50,6 +49,8 @@ import numpy as np
 from rtseg.config import ConfigError
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.live.config import SessionConfig
+from rtseg.live.detector_setup import detector_params, make_detectors
+from rtseg.live.input_gaps import InputGaps
 
 log = logging.getLogger("rtseg.live.session")
 
@@ -167,12 +168,7 @@ class Pipeline:
         self._calib: list[np.ndarray] = []
         self.calibrated = mode == "none"
         self.stats = PipelineStats()
-        self._prev_seq: int | None = None
-        self._prev_recv: float | None = None
-        self._prev_src: float | None = None
-        self._src_period: float | None = None
-        self._src_steps = 0
-        self._src_long = 0
+        self._gaps = InputGaps(self.max_gap_frames)
         self._bad_run = 0
         self._last_good = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (self.n_joints, 1))
         self._norms = np.empty(self.n_joints)     # squared norms of the frame's quaternions
@@ -218,22 +214,6 @@ class Pipeline:
         return np.array(sorted(need), dtype=np.intp)
 
     # ---------------------------------------------------------------- gap logic
-    def _seq_missing(self, seq: int | None) -> int:
-        """Frames missing between the previous sequence number and ``seq``.
-
-        A backwards jump (device restart) counts as a gap beyond any limit; a jump back by
-        more than half of 16 bits from near the top is taken as a u16 wrap.
-        """
-        prev = self._prev_seq
-        if seq is None or prev is None:
-            return 0
-        d = seq - prev
-        if d <= 0 and prev < 65536 and seq < 65536 and prev - seq > 32768:
-            d += 65536
-        if d <= 0:
-            return self.max_gap_frames + 1 if d < 0 else 0
-        return d - 1
-
     def restart(self, index: int, reason: str) -> None:
         """Forget the current segment in every detector (and the feature state)."""
         if self._fed_since_restart:
@@ -292,39 +272,6 @@ class Pipeline:
             self._pruned += k
 
     # ---------------------------------------------------------------- main step
-    def _time_missing(self, source_time: float | None, known_lost: int = 0) -> int:
-        """Frames missing according to the source's clock, for sources whose sequence
-        numbers cannot show a loss (VMC numbers the frames it assembles).
-
-        The frame period is learned from the source's own time steps (running mean of the
-        steps that are not gaps, after 16 steps), so it does not depend on the nominal
-        rate.  Returns 0 until then, for steps backwards (clock reset) and for steps below
-        2.5 periods; after 8 long steps in a row the source is taken to have slowed down
-        and the period is learned again.  A step over frames the caller knows are lost
-        (``known_lost`` > 0: dropped by the live loop) is measured but not learned from."""
-        prev = self._prev_src
-        if source_time is None or prev is None or not math.isfinite(source_time):
-            return 0
-        d = source_time - prev
-        if d <= 0:
-            return 0
-        p = self._src_period
-        if known_lost > 0:
-            return 0 if p is None else max(0, int(round(d / p)) - 1)
-        if p is None:
-            self._src_period, self._src_steps = d, 1
-            return 0
-        if d < 2.5 * p or self._src_steps < 16:
-            self._src_period = p + (d - p) / min(self._src_steps + 1, 64)
-            self._src_steps += 1
-            self._src_long = 0
-            return 0
-        self._src_long += 1
-        if self._src_long >= 8:          # the source slowed down for good: new period
-            self._src_period, self._src_steps, self._src_long = d, 1, 0
-            return 0
-        return max(0, int(round(d / p)) - 1)
-
     def process(self, index: int, quats: np.ndarray, valid: np.ndarray,
                 seq: int | None = None, recv_time: float | None = None,
                 lost: int = 0, source_time: float | None = None,
@@ -340,17 +287,8 @@ class Pipeline:
         # --- gaps in the input (sequence numbers or source clock, silence, frames the live
         # loop lost or dropped): those are all between the previous frame and this one, so
         # the largest count is the gap (a sequence gap includes the frames dropped)
-        lost = max(0, int(lost))
-        missing = max(self._seq_missing(seq), self._time_missing(source_time, lost), lost)
+        missing, silence = self._gaps.step(seq, recv_time, source_time, lost)
         st.gap_frames += missing
-        silence = (recv_time - self._prev_recv
-                   if recv_time is not None and self._prev_recv is not None else 0.0)
-        if seq is not None:
-            self._prev_seq = int(seq)
-        if recv_time is not None:
-            self._prev_recv = float(recv_time)
-        if source_time is not None and math.isfinite(source_time):
-            self._prev_src = float(source_time)
         bridge = 0
         if missing > self.bridge_frames:
             self.restart(index, f"{missing} frames missing")
@@ -558,50 +496,6 @@ class Pipeline:
         if not self._jump_fed:
             return fed
         return self._jump_index[k] + (fed - self._jump_fed[k])
-
-
-def detector_params(config: SessionConfig) -> dict[str, dict[str, Any]]:
-    """Validated parameters of each configured method: ``detectors.params`` (default
-    ``config/detectors.toml``) overridden by ``[detectors.<method>]``.  ConfigError names
-    the key."""
-    from rtseg import detectors as det_mod
-    params_file = config["detectors.params"] or None
-    try:
-        all_params = det_mod.load_params(params_file)
-    except (ValueError, OSError) as exc:
-        raise ConfigError(f"detectors.params: {exc}") from None
-    out = {}
-    for m in det_mod.ONLINE_METHODS:     # every override is checked, run or not
-        p = dict(all_params.get(m, {}))
-        try:
-            p.update(det_mod.validate(m, config[f"detectors.{m}"]))
-        except ValueError as exc:
-            raise ConfigError(f"detectors.{m}: {exc}") from None
-        out[m] = p
-    return {m: out[m] for m in config["detectors.methods"]}
-
-
-def make_detectors(config: SessionConfig, frame_rate: float) -> dict[str, OnlineDetector]:
-    """The configured online detectors (``detectors.methods``) with ``detector_params``."""
-    from rtseg import detectors as det_mod
-    out: dict[str, OnlineDetector] = {}
-    for m, p in detector_params(config).items():
-        try:
-            out[m] = det_mod.make_online(m, frame_rate, p)
-        except (TypeError, ValueError, KeyError) as exc:
-            raise ConfigError(f"detectors.{m}: {exc}") from None
-    return out
-
-
-def _blas_limit(n: int) -> Any:
-    """Limit BLAS threads to ``n`` (0: no change); the limiter, or None."""
-    if n <= 0:
-        return None
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - threadpoolctl comes with scikit-learn
-        return None
-    return threadpool_limits(n, user_api="blas")
 
 
 __all__ = ["DEFAULT_FRAME_RATE", "Pipeline", "PipelineCut", "PipelineStats", "detector_params",

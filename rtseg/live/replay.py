@@ -13,7 +13,8 @@ from typing import Iterable
 import numpy as np
 
 from rtseg.live.config import SessionConfig, load_session_config
-from rtseg.live.pipeline import Pipeline, PipelineCut, _blas_limit
+from rtseg.live.detector_setup import _blas_limit
+from rtseg.live.pipeline import Pipeline, PipelineCut
 
 
 def replay_frames(frames: Iterable[tuple], joint_names: list[str], parents: list[int],
