@@ -402,6 +402,8 @@ class Pipeline:
                 self.rest = None
                 return False
             self.identity.set_posture(self._posture)
+            log.info("behaviour names by posture too (rig geometry known; leg length %.3g)",
+                     self._posture.leg_length)
         return self.identity.wants_poses
 
     def _identify(self, index: int, x: np.ndarray, out: list[PipelineCut],
