@@ -1,6 +1,7 @@
 """Behaviour identity: which earlier behaviour each new segment is (``tracker``, live and
-offline), the names a behaviour library gives them (``names``), ids for the segments of a
-recorded take (``segments``) and the running block sums the tracker's window models use.
+offline; ``messages``: what it sends and counts), the names a behaviour library gives them
+(``names``), ids for the segments of a recorded take (``segments``) and the running block
+sums the tracker's window models use.
 
 May import ``rtseg.core``, ``rtseg.detectors`` and ``rtseg.library``; nothing above them."""
 
