@@ -11,8 +11,11 @@ finish a segment).  Also the whole pipeline per frame with identity off and on.
                                          [--library LIB [--compare LIB2]]
 
 ``--library LIB`` (``rtseg learn``): the tracker also names every decided segment
-(``rtseg.library.behaviours``, the library's distance: ``model`` or, version-1 files, ``descriptor``);
-the per-decision naming time is printed too (median of 50 namings of one 2.5 s window).
+(``rtseg.library.behaviours``, the library's distance: ``model`` or, version-1 files, ``descriptor``;
+with posture when the library names by it and the take's rig geometry is known: the
+tracker is then given every frame's rotations, as the pipeline gives them);
+the per-decision naming time is printed too (median of 50 namings of one 2.5 s window;
+with posture, the posture rows of that window worked out as the namer does, and apart).
 ``--compare LIB2``: the same window named by LIB and LIB2 alternately, 300 times each (one
 BLAS thread): medians, p90s and their ratio, side by side in one run.
 
@@ -30,7 +33,8 @@ import numpy as np
 
 from rtseg.identity.tracker import IdentityTracker
 from rtseg.evaluation.online import fed_features, live_config, live_cuts
-from rtseg.live.pipeline import _blas_limit
+from rtseg.identity.segments import take_posture_of
+from rtseg.live.detector_setup import _blas_limit
 
 DEFAULT_TAKE = Path(__file__).resolve().parents[2] / "shared" / "data" / "cmu" / "86_01.amc"
 
@@ -103,15 +107,20 @@ def main(argv: list[str] | None = None) -> int:
     for c in cuts:
         by_frame.setdefault(int(c.detected), []).append(_Cut(primary, c.boundary, c.detected))
     fr = float(take.frame_rate)
+    posture = take_posture_of(take, library) if library is not None else None
     means, per = [], []
     for _ in range(args.repeat):
         tr = IdentityTracker(fr, primary, library=library)
+        tr.set_posture(posture)
         t = np.empty(len(X))
         t_all = time.perf_counter()
         for k in range(len(X)):
             i = int(index[k])
             t0 = time.perf_counter()
-            tr.step(i, X[k], by_frame.get(i, ()))
+            if posture is None:
+                tr.step(i, X[k], by_frame.get(i, ()))
+            else:
+                tr.step(i, X[k], by_frame.get(i, ()), take.quats[i])
             tr.drain()
             t[k] = time.perf_counter() - t0
         means.append((time.perf_counter() - t_all) / len(X) * 1e6)
@@ -136,6 +145,20 @@ def main(argv: list[str] | None = None) -> int:
               f"{library.metric} distance; "
               f"one naming (2.5 s window) median {np.median(reps):.0f} us; names sent: "
               f"{', '.join(names)}")
+        if posture is not None:
+            pos = np.searchsorted(index, [last - int(fr * 2.5), last + 1])
+            Q = take.quats[index[pos[0]:pos[1]]]
+            rows, both = [], []
+            for _ in range(50):
+                t0 = time.perf_counter()
+                P = posture.transform(Q)
+                t1 = time.perf_counter()
+                library.name(W, fr, P)
+                t2 = time.perf_counter()
+                rows.append((t1 - t0) * 1e6)
+                both.append((t2 - t0) * 1e6)
+            print(f"with posture ({take.n_joints} joints): the window's posture rows median "
+                  f"{np.median(rows):.0f} us, naming with them median {np.median(both):.0f} us")
         if other is not None:
             compare_naming(library, other, W, fr, args.library, args.compare)
     off, on = [], []

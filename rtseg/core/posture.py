@@ -36,7 +36,6 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from rtseg.core import quat as Q
 from rtseg.core.rig import map_rig
 
 #: The points of a posture row, in order; each is a rig joint's location (module doc).
@@ -62,11 +61,15 @@ class PostureError(ValueError):
     """A take or rig whose posture cannot be computed (one line: what is missing)."""
 
 
-def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Vectors v (..., 3) rotated by unit quaternions q (..., 4), scalar-last."""
-    u, w = q[..., :3], q[..., 3:4]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+def _matrices(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of unit quaternions q (..., 4), scalar-last."""
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz, wx, wy, wz = x * y, x * z, y * z, w * x, w * y, w * z
+    return np.stack([1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy),
+                     2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx),
+                     2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)],
+                    axis=-1).reshape(q.shape[:-1] + (3, 3))
 
 
 @dataclass(frozen=True)
@@ -191,17 +194,18 @@ class Posture:
         """Rows (frames, ``DIM``) of rotations ``quats`` (frames, J, 4) (module doc)."""
         q = np.asarray(quats, dtype=np.float64)
         F = q.shape[0]
+        R = _matrices(q[:, self._order])                     # (F, needed, 3, 3)
         G: dict[int, np.ndarray] = {}
         P: dict[int, np.ndarray] = {}
         par = self.parents
-        for j in self._order:
+        for k, j in enumerate(self._order):
             p = par[j]
             if p < 0:
-                G[j] = q[:, j]
+                G[j] = R[:, k]
                 P[j] = np.zeros((F, 3))
                 continue
-            G[j] = q[:, j] if self.space == "global" else Q.multiply(G[p], q[:, j])
-            P[j] = P[p] + _rotate(G[p], np.broadcast_to(self._step[j], (F, 3)))
+            G[j] = R[:, k] if self.space == "global" else np.matmul(G[p], R[:, k])
+            P[j] = P[p] + np.matmul(G[p], self._step[j])
         pts = np.stack([P[int(j)] for j in self._cols], axis=1)          # (F, points, 3)
         li, ri = self._hips
         pelvis = 0.5 * (P[li] + P[ri])
