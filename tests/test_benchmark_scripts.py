@@ -249,3 +249,25 @@ def test_live_benchmark_vmc_mode_compares_batched_and_unbatched():
     assert on["quiet"]["batches"] > 10 and on["quiet"]["frames"] > 0.3 * on["frames"]
     assert off["quiet"] == {"batches": 0, "frames": 0, "late_open": 0}
     assert doc["ratio"] == round(on["cpu_fraction"] / off["cpu_fraction"], 3)
+
+
+def test_identity_speed_times_naming_with_posture(tmp_path):
+    """benchmarks/identity_speed.py with a library that names by posture, on a take whose
+    rig geometry is known: the tracker is given the rotations and the posture naming is
+    timed (a run of the script itself, one repeat)."""
+    from rtseg.drivers.readers import write_take
+    from rtseg.evaluation.online import live_config
+    from rtseg.library.examples import learn, synthetic_examples
+    from rtseg.library.file import save
+    from rtseg.simulators.synth.motion import synthesize
+    cfg, _ = live_config()
+    lib, _ = learn(synthetic_examples(["walk", "squat", "wave"], [11, 12], cfg, seconds=6.0))
+    assert lib.names_by_posture
+    save(lib, tmp_path / "lib.json")
+    take = synthesize("walk:6,squat:6,wave:6,walk:6", seed=3).take
+    write_take(tmp_path / "take.npz", take)
+    r = _run("identity_speed.py", "--take", str(tmp_path / "take.npz"), "--repeat", "1",
+             "--library", str(tmp_path / "lib.json"))
+    assert r.returncode == 0, r.stderr
+    assert "with posture (17 joints): the window's posture rows median" in r.stdout
+    assert "names sent:" in r.stdout
