@@ -36,9 +36,9 @@ class IdentityDecision:
     name_distance: float = math.inf
 
 
-
 @dataclass
 class IdentityStats:
+    """The session's identity counts (``IdentityTracker.stats``)."""
     segments: int = 0
     decisions: int = 0
     corrections: int = 0
