@@ -105,7 +105,19 @@ def test_global_orientations_give_the_same_rows_as_local_ones():
     g = Q.global_from_local(q, local.parents)
     glob = Posture(local.joint_names, local.parents, RestPose.of_take(local), "global")
     np.testing.assert_allclose(glob.transform(g), take_posture(local), atol=1e-12)
-    np.testing.assert_allclose(glob.step(g[4]), take_posture(local)[4], atol=1e-12)
+    np.testing.assert_allclose(glob.transform(g[4:5])[0], take_posture(local)[4], atol=1e-12)
+
+
+def test_a_rig_with_a_joint_before_its_parent_is_refused_with_one_line():
+    t = rig_take(rest_quats())
+    order = [1, 0] + list(range(2, len(_RIG)))             # LeftUpLeg listed before Hips
+    t.joint_names = [t.joint_names[k] for k in order]
+    t.parents = [order.index(t.parents[k]) if t.parents[k] >= 0 else -1 for k in order]
+    t.quats = t.quats[:, order]
+    t.meta = {"format": "bvh", "offsets": t.meta["offsets"][order]}
+    with pytest.raises(PostureError, match="comes before its parent"):
+        take_posture(t)
+    assert Posture.find(t) is None
 
 
 def test_a_take_without_rest_geometry_says_so():
@@ -113,7 +125,7 @@ def test_a_take_without_rest_geometry_says_so():
     t.meta = {}
     with pytest.raises(PostureError, match="no rest geometry"):
         take_posture(t)
-    assert RestPose.find(t) is None
+    assert RestPose.find(t) is None and Posture.find(t) is None
 
 
 @pytest.mark.skipif(not (DATA / "cmu" / "86_01.amc").exists(),

@@ -35,8 +35,9 @@ from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
-from rtseg.core.rig import map_rig
+from rtseg.core.rig import RigError, map_rig
 
 #: The points of a posture row, in order; each is a rig joint's location (module doc).
 POINTS: tuple[str, ...] = (
@@ -61,17 +62,6 @@ class PostureError(ValueError):
     """A take or rig whose posture cannot be computed (one line: what is missing)."""
 
 
-def _matrices(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) of unit quaternions q (..., 4), scalar-last."""
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz, wx, wy, wz = x * y, x * z, y * z, w * x, w * y, w * z
-    return np.stack([1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy),
-                     2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx),
-                     2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)],
-                    axis=-1).reshape(q.shape[:-1] + (3, 3))
-
-
 @dataclass(frozen=True)
 class RestPose:
     """A rig's rest geometry: ``positions`` (J, 3) each joint's location with every
@@ -88,6 +78,7 @@ class RestPose:
         (``meta["rest_positions"]``); PostureError when the take has none."""
         meta, parents = take.meta, list(take.parents)
         J = len(parents)
+        _check_order(parents, take.source)
         kept = meta.get("rest_positions")
         if kept is not None and np.shape(kept) == (J, 3):
             return cls(np.asarray(kept, dtype=np.float64))
@@ -102,9 +93,9 @@ class RestPose:
             raise PostureError(f"{take.source or 'take'}: no rest geometry (bone offsets) "
                                f"to compute a posture from")
         pos = np.zeros((J, 3))
-        for j in _order(parents):
-            if parents[j] >= 0:
-                pos[j] = pos[parents[j]] + step[j]
+        for j, p in enumerate(parents):
+            if p >= 0:
+                pos[j] = pos[p] + step[j]
         return cls(pos)
 
     @classmethod
@@ -116,29 +107,19 @@ class RestPose:
             return None
 
 
+def _check_order(parents: Sequence[int], where: str = "") -> None:
+    """PostureError unless every joint comes after its parent (the order of every reader,
+    as ``rtseg.core.quat.global_from_local`` requires)."""
+    if any(p >= j for j, p in enumerate(parents)):
+        raise PostureError(f"{where or 'rig'}: a joint comes before its parent; posture "
+                           f"needs parents first")
+
+
 def rest_meta(take: Any) -> dict[str, Any]:
     """``{"rest_positions": (J, 3)}`` of ``take``'s rest geometry for the meta of a take
     made from it (joined clips, spliced performances); {} when it has none."""
     rest = RestPose.find(take)
     return {} if rest is None else {"rest_positions": rest.positions.copy()}
-
-
-def _order(parents: Sequence[int]) -> list[int]:
-    """Joint indices with every parent before its children (ValueError on a cycle)."""
-    done: list[int] = []
-    seen = [False] * len(parents)
-    for j in range(len(parents)):
-        chain = []
-        k = j
-        while k >= 0 and not seen[k]:
-            if k in chain:
-                raise ValueError(f"joint hierarchy has a cycle through joint {k}")
-            chain.append(k)
-            k = parents[k]
-        for k in reversed(chain):
-            seen[k] = True
-            done.append(k)
-    return done
 
 
 class Posture:
@@ -154,6 +135,7 @@ class Posture:
         if np.shape(rest.positions) != (len(names), 3):
             raise PostureError(f"rest geometry of {np.shape(rest.positions)} for "
                                f"{len(names)} joints")
+        _check_order(parents)
         rig = map_rig(names, parents)
         at = {p: rig.index[c] for p, c in _AT.items()}
         for p, c in _BELOW.items():
@@ -172,7 +154,7 @@ class Posture:
             while j >= 0 and j not in need:
                 need.add(int(j))
                 j = parents[j]
-        self._order = [j for j in _order(parents) if j in need]
+        self._order = sorted(need)                   # parents first (_check_order)
         R = np.asarray(rest.positions, dtype=np.float64)
         self._step = {j: R[j] - R[parents[j]] for j in self._order if parents[j] >= 0}
         up = np.asarray(rest.up, dtype=np.float64)
@@ -190,11 +172,21 @@ class Posture:
         """The posture of ``take``'s rig (PostureError without rest geometry)."""
         return cls(take.joint_names, take.parents, RestPose.of_take(take), take.space)
 
+    @classmethod
+    def find(cls, take: Any) -> "Posture | None":
+        """``for_take``, or None when the take has no rest geometry or its rig no posture
+        (it cannot be mapped, or a wrist or ankle has no joint below it)."""
+        try:
+            return cls.for_take(take)
+        except (PostureError, RigError):
+            return None
+
     def transform(self, quats: np.ndarray) -> np.ndarray:
         """Rows (frames, ``DIM``) of rotations ``quats`` (frames, J, 4) (module doc)."""
         q = np.asarray(quats, dtype=np.float64)
         F = q.shape[0]
-        R = _matrices(q[:, self._order])                     # (F, needed, 3, 3)
+        R = Rotation.from_quat(q[:, self._order].reshape(-1, 4)).as_matrix().reshape(
+            F, len(self._order), 3, 3)                          # (F, needed, 3, 3)
         G: dict[int, np.ndarray] = {}
         P: dict[int, np.ndarray] = {}
         par = self.parents
@@ -219,10 +211,6 @@ class Posture:
         rel = pts - pelvis[:, None, :]
         out = np.einsum("fij,fpj->fpi", basis, rel) / self.leg_length
         return out.reshape(F, DIM)
-
-    def step(self, quats: np.ndarray) -> np.ndarray:
-        """The row (``DIM``,) of one frame's rotations (J, 4)."""
-        return self.transform(np.asarray(quats, dtype=np.float64)[None])[0]
 
     def report(self) -> dict:
         """JSON-ready: point -> rig joint, the leg length in the rig's units."""

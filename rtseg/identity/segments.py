@@ -116,12 +116,8 @@ def take_posture_of(take: Any, library: Any) -> Any:
     names by posture and the take's rest geometry is known, else None."""
     if not getattr(library, "names_by_posture", False):
         return None
-    from rtseg.core.posture import Posture, PostureError
-    from rtseg.core.rig import RigError
-    try:
-        return Posture.for_take(take)
-    except (PostureError, RigError):
-        return None
+    from rtseg.core.posture import Posture
+    return Posture.find(take)
 
 
 def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,

@@ -68,11 +68,9 @@ def take_rows(take: Any, config: Any) -> tuple[np.ndarray, np.ndarray, str]:
 def posture_rows(take: Any, index: np.ndarray) -> np.ndarray | None:
     """The posture rows (``rtseg.core.posture``) of the take frames ``index`` (one per fed
     row), or None when the take's rest geometry is unknown or its rig has no posture."""
-    from rtseg.core.posture import Posture, PostureError
-    from rtseg.core.rig import RigError
-    try:
-        post = Posture.for_take(take)
-    except (PostureError, RigError):
+    from rtseg.core.posture import Posture
+    post = Posture.find(take)
+    if post is None:
         return None
     idx = np.asarray(index, dtype=np.int64)
     return post.transform(take.quats[idx]) if len(idx) else np.zeros((0, 0))

@@ -74,27 +74,26 @@ def examples_from_source(src: str | Path, config: Any, people: Iterable[str] | N
     for g in build_groups(rows, cfg):
         join = int(round(SpliceConfig().join_fade_s * g.frame_rate))
         for (subject, behaviour), pool in sorted(g.pools.items()):
-            short = []
+            pending: list[tuple[Any, Example]] = []      # (take, example) too short alone
             need = min_example_s * g.frame_rate          # fed rows (one per frame)
             for r in sorted(pool.takes, key=lambda r: r.name):
                 X, index, profile = take_rows(r.take, config)
                 e = Example(behaviour, r.name, subject, X, index, r.trim, profile,
-                            float(g.frame_rate), motion_key(r.take, *r.trim),
-                            posture_rows(r.take, index))
+                            float(g.frame_rate), motion_key(r.take, *r.trim))
                 i, j = e.rows()
                 if j - i >= need:
+                    e.P = posture_rows(r.take, index)
                     out.append(e)
                 else:
-                    short.append(r)
-            if len(short) < 2:
+                    pending.append((r, e))
+            if len(pending) < 2:
                 # nothing to join it with: an example of its own, kept by the library
                 # when one window fits (``LibraryBuilder.add`` notes it otherwise)
-                for r in short:
-                    X, index, profile = take_rows(r.take, config)
-                    out.append(Example(behaviour, r.name, subject, X, index, r.trim, profile,
-                                       float(g.frame_rate), motion_key(r.take, *r.trim),
-                                       posture_rows(r.take, index)))
+                for r, e in pending:
+                    e.P = posture_rows(r.take, e.index)
+                    out.append(e)
                 continue
+            short = [r for r, _ in pending]
             clip = clip_of(short[0])
             for r in short[1:]:
                 clip, _ = crossfade(clip, clip_of(r), max(1, min(join, len(clip), r.n_frames)),
@@ -107,13 +106,13 @@ def examples_from_source(src: str | Path, config: Any, people: Iterable[str] | N
             X, index, profile = take_rows(take, config)
             key = joined_key(motion_key(r.take, *r.trim) for r in short)
             e = Example(behaviour, "+".join(r.name for r in short), subject, X, index,
-                        (0, take.n_frames), profile, float(g.frame_rate), key,
-                        posture_rows(take, index))
+                        (0, take.n_frames), profile, float(g.frame_rate), key)
             i, j = e.rows()
             if j - i < need:
                 notes.append(f"{e.take} {behaviour}: {len(short)} short takes joined are "
                              f"still shorter than {min_example_s:g} s; left out")
                 continue
+            e.P = posture_rows(take, index)
             out.append(e)
             log.info("%s %s: %d short takes joined into one example of %d frames",
                      subject, behaviour, len(short), take.n_frames)

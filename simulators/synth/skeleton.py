@@ -105,12 +105,9 @@ def local_quats(A: np.ndarray) -> np.ndarray:
 
 def rest_positions() -> np.ndarray:
     """(17, 3) joint locations of the rest pose (T-pose), metres, the root at the origin:
-    the take's rest geometry (``rtseg.core.posture.RestPose``)."""
-    pos = np.zeros((N_JOINTS, 3))
-    for j, p in enumerate(PARENTS):
-        if p >= 0:
-            pos[j] = pos[p] + OFFSETS[j]
-    return pos
+    the take's rest geometry (``rtseg.core.posture.RestPose``): ``joint_positions`` of
+    identity rotations."""
+    return joint_positions(np.tile(quat.IDENTITY, (1, N_JOINTS, 1)))[0]
 
 
 def joint_positions(global_q: np.ndarray, root: np.ndarray | None = None) -> np.ndarray:
