@@ -62,6 +62,7 @@ from rtseg.core.posture import window_descriptor
 from rtseg.library.descriptor import (GROUPS, K_NEAREST, SCALE_FLOOR,  # noqa: F401 (re-exported)
                                      descriptor, group_slices)
 from rtseg.library.distance import LAG_S, window_stats
+from rtseg.library.posture_distance import PostureBank, combined, posture_scale
 
 FORMAT = "rtseg-behaviour-library"
 VERSION = 3
@@ -157,14 +158,12 @@ class Library:
         """The windows' posture descriptors (``rtseg.library.posture_distance.PostureBank``)."""
         b = getattr(self, "_posture_bank", None)
         if b is None or len(b) != len(self.names):
-            from rtseg.library.posture_distance import PostureBank
             b = self._posture_bank = PostureBank(self.posture)
         return b
 
     def _posture_scale(self) -> float:
         s = self.posture_rule.get("scale")
         if s is None:
-            from rtseg.library.posture_distance import posture_scale
             s = posture_scale(self.bank.pairwise(), self.posture_bank.pairwise(),
                               np.asarray(self.sources))
             self.posture_rule["scale"] = s
@@ -206,7 +205,6 @@ class Library:
         """Distances of window i to every window (the library's metric; ``posture``: the
         model x posture distance)."""
         if posture:
-            from rtseg.library.posture_distance import combined
             return combined(self.bank.pairwise()[i], self.posture_bank.pairwise()[i],
                             self._posture_scale())
         if self.metric == "model":
@@ -273,8 +271,6 @@ class Library:
             d = self.bank.distances(self.bank.query(W, fr, self.lag_s))
             if P is None or not self.names_by_posture or not len(P):
                 return self.decide(d)
-            from rtseg.core.posture import window_descriptor
-            from rtseg.library.posture_distance import combined
             dp = self.posture_bank.distances(window_descriptor(P))
             return self.decide(combined(d, dp, self._posture_scale()), posture=True)
         return self.name_descriptor(descriptor(W, fr))
