@@ -139,3 +139,23 @@ def test_the_live_pipeline_names_by_posture_when_the_rig_is_known(lib):
         namer = pipe.identity.namer
         seen[rest is not None] = bool(namer._has_pose.any())
     assert seen == {True: True, False: False}
+
+
+def test_a_rig_geometry_that_gives_no_posture_is_logged_once_and_the_session_names_on(lib, caplog):
+    """Rest geometry that does not fit the source's rig (here, of another joint count):
+    one warning, and the segments are named by the pose features alone."""
+    from rtseg.evaluation.online import live_config
+    from rtseg.live.pipeline import Pipeline
+    take = swing(80.0, 3, seconds=6.0)
+    cfg, _ = live_config()
+    cfg["identity.enabled"] = True
+    bad = RestPose(RestPose.of_take(take).positions[:-1])
+    pipe = Pipeline(take.joint_names, take.parents, "local", FR, cfg, rest=bad)
+    pipe.identity.library = lib
+    with caplog.at_level("WARNING", logger="rtseg.live.pipeline"):
+        for i, q in enumerate(take.quats):
+            pipe.process(i, q, np.ones(len(q), dtype=bool), i, i / FR, 0, i / FR)
+    warned = [r for r in caplog.records if "no posture for behaviour names" in r.getMessage()]
+    assert len(warned) == 1
+    assert pipe.stats.identity_errors == 0 and not pipe.identity.namer._has_pose.any()
+    assert pipe.identity.stats.decisions >= 1
