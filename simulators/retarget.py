@@ -241,6 +241,23 @@ class Retargeted:
         q_parent⁻¹ ⊗ q_child, (frames, sensors, 4), sign-continuous in time."""
         return Q.make_continuous(Q.local_from_global(self.quats, list(self.suit.parents)), 0)
 
+    def bone_offsets(self, rest_positions: np.ndarray) -> np.ndarray:
+        """Each sensor's rest location minus its suit parent's (the local positions a VMC
+        sender sends), (sensors, 3), from the take's joint rest locations
+        ``rest_positions`` (``rtseg.core.posture.RestPose.positions``, the take's units);
+        zero for roots and unmapped sensors, and from the nearest mapped ancestor when the
+        parent is unmapped."""
+        R = np.asarray(rest_positions, dtype=np.float64)
+        out = np.zeros((len(self.columns), 3))
+        parents = self.suit.parents
+        for k, c in enumerate(self.columns):
+            p = parents[k]
+            while p >= 0 and self.columns[p] < 0:
+                p = parents[p]
+            if c >= 0 and p >= 0:
+                out[k] = R[c] - R[self.columns[p]]
+        return out
+
     def describe(self, take_names: list[str]) -> str:
         pairs = [f"{b}<-{take_names[c]}" for b, c in zip(self.suit.bones, self.columns) if c >= 0]
         miss = [b for b, c in zip(self.suit.bones, self.columns) if c < 0]

@@ -16,7 +16,10 @@ and each bone is sent **relative to its parent in the suit's hierarchy**
 VMC receiver (``osc://...?format=vmc&suit=...``) chains them.  Take joints that no bone
 uses are listed in ``.skipped_joints``.  ``take.root_position`` is sent as the Root/Pos
 position (scaled to metres when the take says how: ``meta["metres_per_unit"]`` or a known
-``length_unit``); bone positions are zero.
+``length_unit``).  Bone positions are each bone's rest offset from its parent bone (the
+take's rest geometry, ``rtseg.core.posture.RestPose``, in metres), as a VRM avatar's local
+positions are; zero when the take has no rest geometry.  The hips' position is zero (the
+root's place travels in Root/Pos).
 
 Clock: ``/VMC/Ext/T`` is the take's frame clock: slot ``k`` carries T = ``k / rate`` and
 is sent ``k / (rate * speed)`` seconds after start, so ``speed`` > 1 replays faster while
@@ -47,6 +50,7 @@ import numpy as np
 
 from rtseg.drivers.osc.vmc.codec import (DEFAULT_MAX_DATAGRAM, DEFAULT_PORT, canonical_bone_name,
                                         encode_frame)
+from rtseg.core.posture import RestPose
 from rtseg.core.profiles import SuitProfile, suit_profile
 from rtseg.simulators.retarget import ImuModel, retarget
 from rtseg.core.take import Take
@@ -58,15 +62,20 @@ UNIT_SCALE = {"m": 1.0, "metre": 1.0, "metres": 1.0, "meter": 1.0, "meters": 1.0
               "cm": 0.01, "mm": 0.001, "in": 0.0254, "inch": 0.0254, "inches": 0.0254}
 
 
-def root_metres(take: Take, default: float = 1.0) -> np.ndarray | None:
-    """``take.root_position`` in metres (``meta["metres_per_unit"]`` or ``length_unit``;
-    ``default`` metres per unit when neither says)."""
-    if take.root_position is None:
-        return None
+def metres_per_unit(take: Take, default: float = 1.0) -> float:
+    """Metres per unit of ``take``'s lengths (``meta["metres_per_unit"]`` or
+    ``length_unit``; ``default`` when neither says)."""
     scale = take.meta.get("metres_per_unit")
     if not isinstance(scale, (int, float)) or not scale > 0:
         scale = UNIT_SCALE.get(str(take.length_unit).lower(), default)
-    return np.asarray(take.root_position, dtype=np.float64) * float(scale)
+    return float(scale)
+
+
+def root_metres(take: Take, default: float = 1.0) -> np.ndarray | None:
+    """``take.root_position`` in metres (``metres_per_unit``)."""
+    if take.root_position is None:
+        return None
+    return np.asarray(take.root_position, dtype=np.float64) * metres_per_unit(take, default)
 
 
 def take_clock(take: Take, rate: float | None, speed: float) -> tuple[float, float]:
@@ -210,6 +219,10 @@ class VmcSender(SenderThread):
         self._quats = np.ascontiguousarray(rt.local()[:, sent, :])
         self._valid = None if rt.valid[:, sent].all() else rt.valid[:, sent]
         self._root = root_metres(take) if send_root else None
+        rest = RestPose.find(take)
+        #: Bone local positions sent (metres; the take's rest geometry), or None: zeros.
+        self.bone_positions = None if rest is None else np.ascontiguousarray(
+            rt.bone_offsets(rest.positions)[sent] * metres_per_unit(take))
         #: The FaultInjector in use (its ``record`` says what was damaged), or None.
         self.injector = _make_injector(faults)
         self._init_thread()
@@ -235,6 +248,7 @@ class VmcSender(SenderThread):
             time=source_time if self.send_time else None,
             root_position=None if self._root is None else self._root[index],
             ok=self.ok, include=None if include.all() else include,
+            bone_positions=self.bone_positions,
             max_datagram=self.max_datagram)
         return dgrams, omitted
 

@@ -368,7 +368,8 @@ class OscVmcSource(OscUdpSource):
         if time_order not in ("last", "first"):
             raise SourceError(f"time_order must be 'last' or 'first', not {time_order!r}")
         self._asm = VmcAssembler(bones, quiet=quiet, unit_tolerance=tolerance,
-                                 time_order=time_order, burst=burst, stats=self.stats)
+                                 time_order=time_order, burst=burst, stats=self.stats,
+                                 parents=pars)
         self._start(host, port, quiet, queue_size, rcvbuf, allow, senders)
 
     def hold_frames(self) -> int:
@@ -389,6 +390,13 @@ class OscVmcSource(OscUdpSource):
     def ok_state(self) -> tuple[int, ...] | None:
         """Last ``/VMC/Ext/OK`` arguments (loaded, calibration state, mode, tracking)."""
         return self._asm.ok_state
+
+    @property
+    def rest_pose(self) -> Any:
+        """The sender's rest geometry from the bone positions it sends
+        (``rtseg.drivers.osc.vmc.rest``: a ``RestPose`` in profile order), or None before
+        the first frames have arrived and when it sends no positions."""
+        return self._asm.offsets.rest_pose()
 
 
 class OscVrchatSource(OscUdpSource):

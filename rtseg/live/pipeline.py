@@ -122,8 +122,10 @@ class Pipeline:
     same frames give the same cuts, which is how live output is checked against a recording.
 
     ``rest``: the source rig's rest geometry (``rtseg.core.posture.RestPose``; file
-    replays know it, IMU suits do not) - with it, and a behaviour library that names by
-    posture, the identity tracker gets each frame's rotations too and names by posture.
+    replays know it, IMU suits do not), or a callable returning it once known and None
+    before (a VMC sender's, from the bone positions of its first frames) - with it, and a
+    behaviour library that names by posture, the identity tracker gets each frame's
+    rotations too and names by posture.
     """
 
     def __init__(self, joint_names: list[str], parents: list[int], space: str,
@@ -383,28 +385,37 @@ class Pipeline:
 
     def _wants_poses(self) -> bool:
         """Whether the identity tracker names by posture and so takes each frame's
-        rotations: the rig's rest geometry is known and the library names by posture (the
+        rotations: the library names by posture and the rig's rest geometry is known (the
         rig's posture is made the first time; a rig without one is logged once and named
         by its pose features alone)."""
+        if self._posture is None and not self._make_posture():
+            return False
+        return self.identity.wants_poses
+
+    def _make_posture(self) -> bool:
+        """Make the rig's posture when the library names by posture and the rest geometry
+        is known (``rest``, or what its callable returns once the source knows it)."""
         if self.rest is None:
             return False
-        if self._posture is None:
-            namer = getattr(self.identity, "namer", None)
-            if namer is None or not getattr(namer.library, "names_by_posture", False):
-                return False
-            from rtseg.core.posture import Posture, PostureError
-            from rtseg.core.rig import RigError
-            try:
-                self._posture = Posture(self.joint_names, self.parents, self.rest, self.space)
-            except (PostureError, RigError) as exc:
-                log.warning("no posture for behaviour names (%s): named by pose features "
-                            "alone", exc)
-                self.rest = None
-                return False
-            self.identity.set_posture(self._posture)
-            log.info("behaviour names by posture too (rig geometry known; leg length %.3g)",
-                     self._posture.leg_length)
-        return self.identity.wants_poses
+        namer = getattr(self.identity, "namer", None)
+        if namer is None or not getattr(namer.library, "names_by_posture", False):
+            return False
+        rest = self.rest() if callable(self.rest) else self.rest
+        if rest is None:
+            return False                  # not known yet (a VMC sender's first frames)
+        from rtseg.core.posture import Posture, PostureError
+        from rtseg.core.rig import RigError
+        try:
+            self._posture = Posture(self.joint_names, self.parents, rest, self.space)
+        except (PostureError, RigError) as exc:
+            log.warning("no posture for behaviour names (%s): named by pose features "
+                        "alone", exc)
+            self.rest = None
+            return False
+        self.identity.set_posture(self._posture)
+        log.info("behaviour names by posture too (rig geometry known; leg length %.3g)",
+                 self._posture.leg_length)
+        return True
 
     def _identify(self, index: int, x: np.ndarray, out: list[PipelineCut],
                   q: np.ndarray | None) -> None:

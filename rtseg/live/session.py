@@ -274,7 +274,7 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
         self.frame_rate = float(rate or DEFAULT_FRAME_RATE)
         self._rate_check = DeclaredRateCheck(float(rate)) if rate else None
         self.pipeline = Pipeline(names, parents, space, self.frame_rate, self.config,
-                                 rest=getattr(src, "rest_pose", None))
+                                 rest=lambda: getattr(src, "rest_pose", None))
         if hasattr(self.pipeline.features, "summary"):
             line = self.pipeline.features.summary()
             log.info("%s", line)

@@ -144,10 +144,11 @@ class VmcAssembler(VmcFrameRules):
     def __init__(self, bone_names: Sequence[str], *, quiet: float = 0.02,
                  unit_tolerance: float = 0.05, continuous: bool = True,
                  time_order: str = "last", burst: float = 0.004,
-                 stats: SourceStats | None = None, fast: bool = True) -> None:
+                 stats: SourceStats | None = None, fast: bool = True,
+                 parents: Sequence[int] | None = None) -> None:
         super().__init__(bone_names, quiet=quiet, unit_tolerance=unit_tolerance,
                          continuous=continuous, time_order=time_order, burst=burst,
-                         stats=stats)
+                         stats=stats, parents=parents)
         self.fast = fast
         # the last few bundles received: one arriving as a strict prefix of one of them is a
         # truncated copy (a valid bundle cut at an element boundary still parses)
@@ -220,6 +221,7 @@ class VmcAssembler(VmcFrameRules):
         n_got = self._n_got
         stats = self.stats
         unknown_seen = self._unknown_seen
+        offsets = self.offsets
         while pos < end:
             if pos + 4 > end:
                 self._corrupt(f"truncated bundle element size at byte {pos}")
@@ -264,6 +266,8 @@ class VmcAssembler(VmcFrameRules):
                         if idx == root_bone:
                             self._root_bone_pos = (px, py, -pz) if math.isfinite(
                                 px + py + pz) else self._root_bone_pos
+                        if offsets.capturing:
+                            offsets.note(idx, px, py, -pz)
                         if n_got == nb:
                             self._n_got = n_got
                             self._maybe_complete()
@@ -274,6 +278,10 @@ class VmcAssembler(VmcFrameRules):
                     continue
                 if idx == -3:
                     stats.unknown_names += 1
+                    if offsets.capturing:
+                        px, py, pz = unpack_7(data, stop - 28)[:3]
+                        offsets.note_extra(padded.rstrip(b"\x00").decode("utf-8", "replace"),
+                                           px, py, -pz)
                     if padded not in unknown_seen:
                         self._unknown(padded, count=False)
                     pos = stop
@@ -391,6 +399,9 @@ class VmcAssembler(VmcFrameRules):
         q = self._q
         continuous = self.continuous
         sqrt = math.sqrt
+        if self.offsets.capturing:
+            for idx, k in tpl.bones:
+                self.offsets.note(idx, tup[k], tup[k + 1], -tup[k + 2])
         for idx, k in tpl.bones:
             x, y, z, w = tup[k + 3:k + 7]
             s = 1.0 / sqrt(x * x + y * y + z * z + w * w)

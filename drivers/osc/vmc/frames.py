@@ -20,6 +20,7 @@ from typing import Sequence
 import numpy as np
 
 from rtseg.drivers.base import SourceStats
+from rtseg.drivers.osc.vmc.rest import BoneOffsets
 from rtseg.core.frame import Frame
 
 log = logging.getLogger("rtseg.drivers.vmc")
@@ -54,7 +55,8 @@ class VmcFrameRules:
     def __init__(self, bone_names: Sequence[str], *, quiet: float = 0.02,
                  unit_tolerance: float = 0.05, continuous: bool = True,
                  time_order: str = "last", burst: float = 0.004,
-                 stats: SourceStats | None = None) -> None:
+                 stats: SourceStats | None = None,
+                 parents: Sequence[int] | None = None) -> None:
         if not bone_names:
             raise ValueError("VmcAssembler needs at least one bone name")
         lowered = [n.lower() for n in bone_names]
@@ -87,6 +89,8 @@ class VmcFrameRules:
         self._root: tuple | None = None       # raw Root/Pos floats of the open frame
         self._last_root: tuple | None = None  # last root pose (rtseg frame): pos, quat
         self._root_bone_pos: tuple | None = None
+        #: the bone positions the sender sends: its rest geometry (``rest.BoneOffsets``)
+        self.offsets = BoneOffsets(bone_names, parents)
         self._sends_t = False
         self._sends_root = False
         self._last_closed_t: float | None = None
@@ -196,10 +200,12 @@ class VmcFrameRules:
         idx = self._cache.get(raw)
         if idx is None:
             idx = self._resolve(raw)
+        px, py, pz, x, y, z, w = vals
         if idx < 0:
+            if self.offsets.capturing:
+                self.offsets.note_extra(name, px, py, -pz)
             self._unknown(raw)
             return
-        px, py, pz, x, y, z, w = vals
         n2 = x * x + y * y + z * z + w * w
         if not abs(n2 - 1.0) <= self.unit_tolerance:
             self._bad_value(f"bone {name!r}: quaternion norm² {n2}")
@@ -220,6 +226,8 @@ class VmcFrameRules:
         self._n_got += 1
         if idx == self._root_bone and math.isfinite(px + py + pz):
             self._root_bone_pos = (px, py, -pz)
+        if self.offsets.capturing:
+            self.offsets.note(idx, px, py, -pz)
         if self._n_got == self.n_bones:
             self._maybe_complete()
 
@@ -326,6 +334,8 @@ class VmcFrameRules:
         return self._period
 
     def _close(self) -> None:
+        if self.offsets.capturing:
+            self.offsets.frame_closed()
         J = self.n_bones
         quats = np.array(self._q, dtype=np.float64).reshape(J, 4)
         valid = np.array(self._got, dtype=bool)
