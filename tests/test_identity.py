@@ -387,6 +387,49 @@ def test_a_name_held_by_another_behaviour_id_is_sent_as_unknown(exclusive, names
     assert tr.stats.names_contested == contested
 
 
+class _TwoDistanceLibrary(_LengthLibrary):
+    """Names every window ``walk``, at distance 1.0 when its energy lies mostly in the
+    directions ``basis`` spans, else at ``other``."""
+
+    def __init__(self, dims: int, basis: np.ndarray, other: float) -> None:
+        super().__init__(dims, 0)
+        self.basis, self.other = basis, other
+
+    def name(self, W, frame_rate=None):
+        from rtseg.library.behaviours import Naming
+        W = np.asarray(W)
+        inside = np.sum((W @ self.basis) ** 2) / np.sum(W ** 2)
+        return Naming("walk", "walk", 1.0 if inside > 0.5 else self.other, 0.5)
+
+
+@pytest.mark.parametrize("other, names, claimed", [
+    (0.5, ["walk", "walk", "walk"], 1),      # B is twice as near to walk as A: it may hold it
+    (0.9, ["walk", "unknown", "walk"], 0),   # nearer, but not by CLAIM_MARGIN: refused
+])
+def test_a_segment_clearly_nearer_to_a_held_name_than_its_holders_gets_it(other, names, claimed):
+    """Behaviours A, B, A with exclusive names: B's id may share A's ``walk`` only when B
+    lies clearly nearer to it (distance below CLAIM_MARGIN x A's)."""
+    from rtseg.identity.names import CLAIM_MARGIN
+    assert 0.5 < CLAIM_MARGIN < 0.9
+    rng = np.random.default_rng(5)
+    d, fr = 6, 100.0
+    A = np.linalg.qr(rng.standard_normal((d, d)))[0]
+    X = np.concatenate([_blob(rng, 800, A[:, :3], 1.0), _blob(rng, 800, A[:, 3:], 1.0),
+                        _blob(rng, 800, A[:, :3], 1.0)])
+    tr = IdentityTracker(fr, "x", decide_after_s=1.5, threshold=4.0,
+                         library=_TwoDistanceLibrary(d, A[:, :3], other))
+    cuts = {900: 800, 1700: 1600}
+    for i, x in enumerate(X):
+        tr.update(i, x)
+        if i in cuts:
+            tr.on_cut(cuts[i], i, "x")
+    sent = [(m.behaviour, m.name) for m in tr.history if not m.correction]
+    assert [b for b, _ in sent] == [1, 2, 1]
+    assert [n for _, n in sent] == names
+    assert tr.stats.names_claimed == claimed
+    assert tr.stats.names_contested == 1 - claimed
+
+
 def test_exclusive_names_is_read_from_the_configuration():
     """``[identity] exclusive_names`` reaches the tracker the live pipeline builds."""
     from rtseg.identity.tracker import tracker_from_config

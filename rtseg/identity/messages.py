@@ -49,3 +49,4 @@ class IdentityStats:
     names_unknown: int = 0            # decisions sent as `unknown` (with a library)
     names_contested: int = 0          # of those, names held by other ids only
     names_restored: int = 0           # contested names a correction to a holder's id gave back
+    names_claimed: int = 0            # names other ids held, granted as clearly nearer (CLAIM_MARGIN)

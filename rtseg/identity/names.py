@@ -17,8 +17,11 @@ on by default): a name that only earlier segments of *other* ids hold is sent as
 ``unknown`` - the tracker, comparing one performer within one session, says the segment is
 another behaviour than those, while the library compares across performers; the two
 conflict, and a forced wrong name is what null rejection exists to avoid (a behaviour
-missing from the library is usually nearest to one the session has already shown).  A
-correction of such a segment's id to an id that holds the name gives it back.
+missing from the library is usually nearest to one the session has already shown) - unless
+the segment lies clearly nearer to the name than every segment holding it
+(``CLAIM_MARGIN``: its distance below 0.8 x theirs), when both ids hold it: a repeat the
+tracker split off, or a real instance after a wrong earlier holder.  A correction of a
+refused segment's id to an id that holds the name gives it back.
 
 Frames are the pipeline's session indices (0-based among received frames); the rows are
 the pose-feature rows the detectors are fed (``rtseg.core.features``), d columns, of the
@@ -39,6 +42,12 @@ from typing import Any
 import numpy as np
 
 log = logging.getLogger(__name__)
+
+#: a name only other ids hold is still granted to a segment whose library distance is below
+#: this x the nearest holder's (module doc).  Measured over the naming protocols of
+#: ``benchmarks/library_loto.py`` (docs/identity.md, "Exclusive names"): 1.0 and 0.9 also
+#: named left-out segments of the spliced CMU sets, 0.7 named one known segment fewer.
+CLAIM_MARGIN = 0.8
 
 
 class SegmentNamer:
@@ -134,18 +143,26 @@ class SegmentNamer:
 class NameHolders:
     """Which segments (so which behaviour ids) hold each library name this session.
 
-    exclusive: with False every name is granted (the rule off)."""
+    exclusive: with False every name is granted (the rule off).  claim_margin: a segment
+    this much nearer to a name than every holder may hold it too (``CLAIM_MARGIN``).
+    ``claimed`` counts those grants."""
 
-    def __init__(self, exclusive: bool = True) -> None:
+    def __init__(self, exclusive: bool = True, claim_margin: float = CLAIM_MARGIN) -> None:
         self.exclusive = bool(exclusive)
+        self.claim_margin = float(claim_margin)
+        self.claimed = 0
         self._holders: dict[str, list[Any]] = {}
 
     def grant(self, seg: Any, name: str) -> bool:
         """May ``seg`` (anything with a ``behaviour`` id, read when asked: corrections
-        move it) carry ``name``?  No when earlier segments hold the name and none of them
-        has ``seg``'s id; yes otherwise, and ``seg`` then holds it too."""
+        move it, and a ``name_distance``) carry ``name``?  No when earlier segments hold
+        the name, none of them has ``seg``'s id and ``seg`` is not ``claim_margin`` x
+        nearer to it than each of them; yes otherwise, and ``seg`` then holds it too."""
         holders = self._holders.setdefault(name, [])
         if self.exclusive and holders and all(h.behaviour != seg.behaviour for h in holders):
-            return False
+            nearest = min(getattr(h, "name_distance", math.inf) for h in holders)
+            if not getattr(seg, "name_distance", math.inf) < self.claim_margin * nearest:
+                return False
+            self.claimed += 1
         holders.append(seg)
         return True

@@ -57,7 +57,8 @@ the segment (``IdentityDecision.name``; the id is the unsupervised one either wa
 frame] with the library's nearest name, or ``unknown`` when the segment is unlike every
 example.  A correction keeps the segment's name.  With ``exclusive_names`` (default) a name
 only earlier segments of other ids hold is sent as ``unknown`` (``names_contested``;
-``rtseg.identity.names.NameHolders``); a correction to an id that holds it gives it back
+``rtseg.identity.names.NameHolders``) unless the segment is clearly nearer to it than they
+were (``names_claimed``); a correction to an id that holds it gives it back
 (``names_restored``).
 
 Cost: per frame one row copy into the block buffer; per block one (step x d)^T (step x d)
@@ -373,7 +374,9 @@ class IdentityTracker:
     def _held_name(self, seg: _Segment, name: str, count: bool = True) -> str:
         """``name`` for ``seg``, or ``unknown`` when other ids hold it (``NameHolders``;
         counted in ``names_contested`` when ``count``)."""
+        claimed = self._holders.claimed
         if name in ("", UNKNOWN) or self._holders.grant(seg, name):
+            self.stats.names_claimed += self._holders.claimed - claimed
             return name
         self.stats.names_contested += int(count)
         return UNKNOWN

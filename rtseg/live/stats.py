@@ -250,6 +250,8 @@ def identity_text(counts: dict[str, int]) -> str:
                 f"{counts['names_contested']} held by another id")
         if counts.get("names_restored", 0):
             out += f", {counts['names_restored']} given back by a correction"
+        if counts.get("names_claimed", 0):
+            out += f"; {counts['names_claimed']} names other ids held given as clearly nearer"
     return out + "), "
 
 
