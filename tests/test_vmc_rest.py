@@ -115,3 +115,40 @@ def test_a_live_pipeline_names_by_posture_once_the_sender_geometry_is_known(rece
             pipe.process(i, f.quats, f.valid, f.seq, i / FR, 0, i / FR)
         seen[label] = bool(pipe.identity.namer._has_pose.any())
     assert seen == {"vmc": True, "none": False}
+
+
+def test_a_recorded_vmc_session_keeps_the_sender_geometry_for_its_replays(tmp_path):
+    """A live session over UDP records the sender's rest geometry (session.json meta); the
+    recording read back as a take has it, so a replay names by posture as the live session
+    did."""
+    import socket
+    import threading
+    from rtseg.core.posture import RestPose
+    from rtseg.drivers.readers import read_take
+    from rtseg.live.config import from_dict
+    from rtseg.live.session import LiveSession
+    take = swing(80.0, 3, seconds=3.0)
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    rec = tmp_path / "rec"
+    cfg = from_dict({"output": {"osc": []}, "recording": {"dir": str(rec)}}, origin="test")
+    session = LiveSession(f"osc://127.0.0.1:{port}?format=vmc&rate=120", cfg,
+                          handle_signals=False, duration=take.n_frames / 120.0 / 4.0 + 1.5)
+    sender = VmcSender(take, "127.0.0.1", port, speed=4.0)
+    t = threading.Timer(0.5, sender.start)
+    t.start()
+    try:
+        session.run()
+    finally:
+        t.cancel()
+        sender.stop()
+    live_rest = session.source.rest_pose
+    assert live_rest is not None
+    replay = read_take(rec)
+    rest = RestPose.find(replay)
+    assert rest is not None
+    np.testing.assert_allclose(rest.positions, live_rest.positions)
+    rows = Posture(replay.joint_names, replay.parents, rest, replay.space).transform(replay.quats)
+    assert np.isfinite(rows).all() and rows.shape == (replay.n_frames, 42)

@@ -439,8 +439,11 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
         if self.recorder is not None and hasattr(self.recorder, "note_session"):
             try:
                 self.recorder.note_session(self.loss_counts())
+                rest = getattr(self.source, "rest_pose", None)
+                if rest is not None:
+                    self.recorder.note_rest(rest.positions)
             except Exception as exc:  # pragma: no cover - defensive
-                log.warning("session counters not recorded: %s", exc)
+                log.warning("session counters or rest geometry not recorded: %s", exc)
         for name, obj in (("source", self.source), ("publishers", self.publishers),
                           ("recorder", self.recorder)):
             if obj is None:

@@ -260,6 +260,9 @@ def read_session(directory: str | Path) -> Take:
         "frame_rate_source": rate_src, "estimated_frame_rate": est,
         "session_meta": header.get("meta", {}),
     }
+    rest = (header.get("meta") or {}).get("rest_positions")
+    if rest is not None and np.shape(rest) == (len(names), 3):
+        meta["rest_positions"] = np.asarray(rest, dtype=np.float64)   # RestPose.of_take
     return Take(joint_names=names, parents=parents, frame_rate=rate, quats=quats,
                 root_position=root, space=header["space"], valid=valid,
                 length_unit="m" if root is not None else "unknown",

@@ -374,6 +374,18 @@ class SessionRecorder:
         with self._lock:
             self.header["session"] = dict(counts)
 
+    def note_rest(self, positions: Any) -> None:
+        """The source rig's rest geometry (``rtseg.core.posture.RestPose.positions``: (J, 3)
+        each joint's rest location, the source's units), written to session.json's
+        ``meta["rest_positions"]`` at :meth:`close`: a replay of the recording then has the
+        posture the live session had.  ValueError for another shape."""
+        rest = np.asarray(positions, dtype=np.float64)
+        if rest.shape != (len(self.joint_names), 3) or not np.isfinite(rest).all():
+            raise ValueError(f"session {self.dir}: rest geometry of shape {rest.shape} for "
+                             f"{len(self.joint_names)} joints")
+        with self._lock:
+            self.header["meta"]["rest_positions"] = rest.tolist()
+
     # -- end ------------------------------------------------------------------------------
     def close(self) -> None:
         """Flush everything, close the files and rewrite session.json with ``closed: true``,
