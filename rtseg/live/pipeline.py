@@ -51,6 +51,7 @@ from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.live.config import SessionConfig
 from rtseg.live.detector_setup import detector_params, make_detectors
 from rtseg.live.input_gaps import InputGaps
+from rtseg.live.session_posture import SessionPosture
 
 log = logging.getLogger("rtseg.live.session")
 
@@ -198,8 +199,8 @@ class Pipeline:
         #: (index, row, cuts, rotations) of a frame whose identity step waits
         #: (``process(identify=False)``)
         self._identity_due: tuple[int, np.ndarray, list[PipelineCut], np.ndarray] | None = None
-        self.rest = rest
-        self._posture: Any = None             # rtseg.core.posture.Posture, made when wanted
+        #: whether behaviour names use posture (made when the library and rest say so)
+        self.posture = SessionPosture(self.joint_names, self.parents, space, rest)
 
     def _feature_joints(self) -> np.ndarray:
         """Input joints the pose features depend on: the profile's joints and, for global
@@ -385,37 +386,8 @@ class Pipeline:
 
     def _wants_poses(self) -> bool:
         """Whether the identity tracker names by posture and so takes each frame's
-        rotations: the library names by posture and the rig's rest geometry is known (the
-        rig's posture is made the first time; a rig without one is logged once and named
-        by its pose features alone)."""
-        if self._posture is None and not self._make_posture():
-            return False
-        return self.identity.wants_poses
-
-    def _make_posture(self) -> bool:
-        """Make the rig's posture when the library names by posture and the rest geometry
-        is known (``rest``, or what its callable returns once the source knows it)."""
-        if self.rest is None:
-            return False
-        namer = getattr(self.identity, "namer", None)
-        if namer is None or not getattr(namer.library, "names_by_posture", False):
-            return False
-        rest = self.rest() if callable(self.rest) else self.rest
-        if rest is None:
-            return False                  # not known yet (a VMC sender's first frames)
-        from rtseg.core.posture import Posture, PostureError
-        from rtseg.core.rig import RigError
-        try:
-            self._posture = Posture(self.joint_names, self.parents, rest, self.space)
-        except (PostureError, RigError) as exc:
-            log.warning("no posture for behaviour names (%s): named by pose features "
-                        "alone", exc)
-            self.rest = None
-            return False
-        self.identity.set_posture(self._posture)
-        log.info("behaviour names by posture too (rig geometry known; leg length %.3g)",
-                 self._posture.leg_length)
-        return True
+        rotations (``rtseg.live.session_posture``)."""
+        return self.identity is not None and self.posture.wanted(self.identity)
 
     def _identify(self, index: int, x: np.ndarray, out: list[PipelineCut],
                   q: np.ndarray | None) -> None:
