@@ -5,109 +5,44 @@ arrived, the motion just after c is compared with the motion just before it:
 
     A0 = [c-2w, c-w)   A = [c-w, c)   B = [c, c+after)          (w = before, frames)
 
-    contrast(c) = Dpca(A, B) / Dpca(A0, A)
+    contrast(c) = Dpca(A, B) / Dpca(A0, A),  stated as 1 + (contrast - 1) x sqrt(d_eff / reference_dims)
 
 ``Dpca`` is the PCA window distance of ``rtseg.detectors.window_models`` (Barbič et al.
-2004, 3.1: the geometric mean of each window's projection error off the other's mean and
-top-r hyperplane, r from ``pca_energy``, each over that model's own error).  The ratio is
-then stated for ``reference_dims`` effective input dimensions: 1 + (contrast - 1) x
-sqrt(d_eff / reference_dims), d_eff = the before window's varying directions (ratios
-estimated from fewer dimensions scatter more; 48 = the canonical 12-joint features, which
-are unchanged by it; on the 4-channel tsseg4d features, d_eff 8, a contrast of 3.4 counts
-as 2).  The paper's second model, PPCA, is left out of the contrast: chosen
-leave-one-person-out over the 15 people of ../shared/data (``benchmarks/lopo.py``,
-docs/live_detector.md) the PCA ratio alone finds more changes with fewer false ones.  The
-same-behaviour gate still compares windows with both models.  A behaviour change makes
-the window after c unlike the one before it, more than that one is unlike its own
-predecessor (contrast well above 1); within a behaviour whose cycle is shorter than the
-windows it stays about 1.  Near the start of a segment (after the stream starts or a gap)
-w shrinks to half the frames so far, down to ``min_before``.  The profile's maxima are
-picked causally (``rtseg.detectors.peaks.CausalPeaks``: at least ``threshold``,
-``min_gap`` apart, confirmed after at most ``hold`` frames or as soon as the profile drops
-below ``drop`` x the maximum) and each is sent once, as a cut at c.
+2004, 3.1), d_eff the before window's varying directions.  Near a segment's start (the
+stream's, or after a gap: ``restart()``) w shrinks to half the frames so far, down to
+``min_before``.  The profile's maxima are picked causally (``rtseg.detectors.peaks``:
+at least ``threshold``, ``min_gap`` apart, confirmed after at most ``hold`` frames or once
+the profile drops below ``drop`` x the maximum) and each is sent once, as a cut at c.
+So a cut is known ``after`` frames plus its confirmation after c (2 s + at most 1 s at the
+defaults).
 
-Delay: a cut at c is known ``after`` frames later plus the confirmation (at most ``hold``
-frames): 2 + <= 1 s at the defaults; about 1 + <= 0.5 s when the early look (below) sends
-it.  The statistics of every ``step``-frame block are
-summed once (one BLAS call); windows are differences of their prefix sums, and each
-window's PCA model is fitted once (``window_models.fit_pca``: two steps of subspace iteration
-from the previous grid position's window; an exact eigen-decomposition only at a chain's
-start and when the Ritz residuals do not bound the warm fit's hyperplane within
-``window_models.RITZ_TOL`` of the exact one) and reused while the window is in use (A
-becomes A0 w frames later).  The work a completed
-block makes possible (the next before window's fit, the after window's fit, each look) is
-queued and done one step a frame (``_run_steps``), so no frame fits more than one window:
-a value is known a few frames after its block completes, and ``detected_at`` says when.
-Each frame is copied once, into a ring the blocks, the gate and placement read.  Cost on
-one core (``OMP_NUM_THREADS=1 taskset -c 0 python3 benchmarks/speed.py``: CMU 86_01, 48
-dims, the shipped parameters): about 58 000 frames/s; a median frame 1.2 us, p99 about
-110 us (frames of a warm window fit, or of a look that fits a window; 3 of the 785 fits
-are exact, about 150 us each), and about 2 ms on the frame that sends a cut (the gate's
-two fits and placement) unless the work ahead (below) has been done.
+Stages after a maximum, each its own module (all described, with the measurements that
+chose them, in docs/live_detector.md): the relative floor (``relative_floor``,
+``rtseg.detectors.relative``), the same-behaviour gate (``gate_threshold``,
+``rtseg.detectors.gate``: the cut waits for ``gate_decide`` frames of its new segment),
+cut placement (``place_radius``, ``rtseg.detectors.placement``); the residual floor
+(``residual_floor``, ``rtseg.detectors.residual``) bounds every window model's own error,
+the bounded before windows (``bound_before``) keep A0 and A inside the behaviour since the
+last cut sent, and the early look (``early_after`` > 0, ``rtseg.detectors.early``; off by
+default) also scores each position one-sided once ``early_after`` frames have arrived,
+``early(c) = Epca(B'|A) / Epca(A|A0)``, and sends its maxima when the full contrast backs
+them.  A cut the gate or the floor drops is forgotten (it keeps no later maximum away).
 
-Frames are numbered from the detector's creation; ``restart()`` (a gap) starts a new
-segment: the grid, the windows and the peak picker begin again from the next frame.
-``Cut.frame`` = c, ``detected_at`` = the frame whose arrival confirmed it, ``score`` = the
-contrast at c, ``confidence`` = 1 - threshold / contrast (0 at the threshold, -> 1 for a
-change far above it; the same meaning as every rtseg detector's confidence).
+Work per frame: each ``step``-frame block's statistics are summed once (one BLAS call),
+windows are differences of prefix sums, each window's PCA model is fitted once
+(``window_models.fit_pca``, warm-started) and reused while in use, and the work a completed
+block makes possible is queued and done one step a frame (``_run_steps``), so no frame
+fits more than one window; ``detected_at`` says which frame's arrival produced a cut.
+``ahead()`` (the live loop, between frames) places the maximum waiting for confirmation and
+prepares the gate's decision, so the frame that sends the cut finds that work done; it
+never changes a cut, and offline nothing calls it.  Cost: ``benchmarks/speed.py``.
 
-Early look (``early_after`` > 0 frames): each position is also scored as soon as the
-``early_after`` frames from c on have arrived, one-sided and without fitting that window:
-
-    early(c) = Epca(B'|A) / Epca(A|A0),  B' = [c, c+early_after)
-
-(E: the per-frame PCA projection error off the second window's model, over that model's
-own), stated for ``reference_dims`` like the contrast.  Its maxima (at least ``early_threshold``, confirmed within ``early_hold``) are
-sent when the full contrast corroborates them (``rtseg.detectors.early``): so a clear
-change is sent about ``after - early_after`` frames sooner, and a change the early look
-misses or that the full look does not back is still sent from the full look.
-``Cut.score`` and ``confidence`` then come from the early look and its threshold.  When
-both looks send a cut on the same frame (two changes at least ``min_gap`` apart), the
-second goes out with the next frame (its ``detected_at`` says so); a restart drops it.
-
-Bounded before windows (``bound_before``): once the last cut sent lies at least
-``2 x min_before`` frames before c, w is at most half the frames since it, so A0 and A
-hold only the behaviour since that cut (a behaviour of 3-6 s is compared with itself, not
-with itself and the one before it); closer to the cut they straddle it as without the
-bound.  The windows then depend on the cuts sent (after the gate), and a bounded window is
-fitted afresh at each position for a while after every cut (its cost in frames/s:
-``python3 benchmarks/speed.py``).
-
-Same-behaviour gate (``gate_threshold`` > 0, ``rtseg.detectors.gate``): every cut is then
-held until ``gate_decide`` frames of its new segment have arrived and sent only when the
-motion after it is another behaviour than the motion before it (the identity tracker's
-window distance above ``gate_threshold``); ``detected_at`` is the deciding frame.  A cut
-the gate drops is forgotten: it keeps no later maximum ``min_gap`` away.
-
-Relative floor (``relative_floor`` > 0, ``rtseg.detectors.relative``): a maximum far below
-the contrasts of the last cuts sent, where the motion's energy does not change (the after
-window's mean variance per frame within twice the range of the before windows' since the
-last cut; ``relative.EnergyChanges``, remembered per position for ``hold``), is dropped
-before the gate and forgotten as the gate's drops are.
-
-Residual floor (``residual_floor`` > 0, ``rtseg.detectors.residual``): in every window
-distance, each model's own error is taken as at least ``residual_floor`` x the median own
-error of the before windows of the last ``RESIDUAL_LOOKS`` full looks, so a near-still
-window's tiny own error does not turn the errors over it into large ratios (the early
-look uses the same floor).
-
-Cut placement (``place_radius`` > 0 frames, ``rtseg.detectors.placement``): each cut the
-gate lets through (every cut when the gate is off) is moved to the best two-Gaussian split
-of the frames within ``place_window`` of it that have arrived, at most ``place_radius``
-from the grid position and never onto or before the last cut sent.  The gate and the
-bounded windows work on the unplaced positions, so placement moves cuts and never adds or
-removes one.
-
-Work ahead (``ahead()``, called by the live loop between frames): the maximum waiting for
-confirmation (``EarlyCuts.candidate``) is placed, a piece of at most ``PLACE_BATCH``
-candidate splits at a time, once its whole placement span has arrived
-(``placement.RingPlacement``), and the gate fits its window before it
-(``SameBehaviourGate.prepare``); when the next frame may send, the gate works out the
-distance its decision on that frame would find (``prepare_decision``: the held cut that
-frame decides, else the waiting maximum).  The frame that sends the cut then finds that
-work done when its span and windows are the ones prepared (rows do not change once
-arrived), so nothing ahead changes a cut; it costs the work on maxima a later look
-replaces.  Offline nothing calls it.
+Frames are numbered from the detector's creation.  ``Cut.frame`` = c (placed),
+``detected_at`` = the frame whose arrival confirmed it, ``score`` = the contrast at c,
+``confidence`` = 1 - threshold / contrast (0 at the threshold, -> 1 far above it; the
+early look's own when it sent the cut).  When both looks send a cut on the same frame (two
+changes at least ``min_gap`` apart), the second goes out with the next frame; a restart
+drops it.
 """
 
 from __future__ import annotations
