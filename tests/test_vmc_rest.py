@@ -113,8 +113,11 @@ def test_a_live_pipeline_names_by_posture_once_the_sender_geometry_is_known(rece
         pipe.identity.library = library()
         for i, f in enumerate(frames):
             pipe.process(i, f.quats, f.valid, f.seq, i / FR, 0, i / FR)
-        seen[label] = bool(pipe.identity.namer._has_pose.any())
-    assert seen == {"vmc": True, "none": False}
+        st = pipe.identity.stats
+        assert st.decisions >= 1
+        seen[label] = (bool(pipe.identity.namer._has_pose.any()),
+                       st.posture_namings == st.decisions)
+    assert seen == {"vmc": (True, True), "none": (False, False)}
 
 
 def test_a_recorded_vmc_session_keeps_the_sender_geometry_for_its_replays(tmp_path):

@@ -50,3 +50,4 @@ class IdentityStats:
     names_contested: int = 0          # of those, names held by other ids only
     names_restored: int = 0           # contested names a correction to a holder's id gave back
     names_claimed: int = 0            # names other ids held, granted as clearly nearer (CLAIM_MARGIN)
+    posture_namings: int = 0          # decisions whose naming compared posture too

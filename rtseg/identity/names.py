@@ -75,6 +75,8 @@ class SegmentNamer:
         self.posture: Any = None
         self._poses: np.ndarray | None = None       # each frame's rotations, ring as _rows
         self._has_pose = np.zeros(self._R, dtype=bool)
+        #: whether the last ``name`` call compared posture too
+        self.last_by_posture = False
 
     @property
     def wants_poses(self) -> bool:
@@ -134,6 +136,7 @@ class SegmentNamer:
         P = None
         if self.posture is not None and self._poses is not None and self._has_pose[pos].all():
             P = self.posture.transform(self._poses[pos])
+        self.last_by_posture = P is not None
         W = self._rows[pos]
         nm = (self.library.name(W, self.frame_rate) if P is None
               else self.library.name(W, self.frame_rate, P))

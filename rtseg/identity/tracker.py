@@ -362,6 +362,7 @@ class IdentityTracker:
         if self.namer is not None:
             seg.library_name, seg.name_distance = naming or self.namer.name(seg.boundary,
                                                                              int(frame))
+            self.stats.posture_namings += int(self.namer.last_by_posture)
             seg.name = self._held_name(seg, seg.library_name)
             if seg.name == UNKNOWN:
                 self.stats.names_unknown += 1

@@ -252,6 +252,8 @@ def identity_text(counts: dict[str, int]) -> str:
             out += f", {counts['names_restored']} given back by a correction"
         if counts.get("names_claimed", 0):
             out += f"; {counts['names_claimed']} names other ids held given as clearly nearer"
+        if counts.get("posture_namings", 0):
+            out += f"; {counts['posture_namings']} decided by posture too"
     return out + "), "
 
 
