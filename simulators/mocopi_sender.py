@@ -6,8 +6,10 @@ torso_1/3/5/7 or neck_2, take their parent's orientation) and sends one ``fram``
 per frame: ``fnum`` = frame slot, ``time`` = take time in ms (u32; the unit mocopi uses is
 not documented), ``uttm`` = Unix time at start + take time (s), ``btrs`` with each bone's
 rotation **relative to its parent** (scalar-last, right-handed Y-up, as mocopi sends it)
-and position (root: the take's root in metres; other bones: 0).  A ``skdf`` skeleton
-packet is sent before the first frame and every ``skeleton_every`` frames.  See
+and position (root: the take's root in metres; other bones: their rest offset from the
+parent bone, from the take's rest geometry in metres - zero when the take has none).  A
+``skdf`` skeleton packet (identity rotations, the same offsets) is sent before the first
+frame and every ``skeleton_every`` frames.  See
 :mod:`rtseg.drivers.mocopi.codec`.
 
 Read it with ``rtseg live mocopi://127.0.0.1:12351``.
@@ -25,7 +27,8 @@ from rtseg.core.profiles import SuitProfile
 from rtseg.simulators.retarget import ImuModel
 from rtseg.simulators.udp_take_sender import (UdpTakeSender, cli_arguments, cli_take,
                                                cli_timing, serve_options, serve_sender)
-from rtseg.simulators.vmc_sender import send_until_done, take_parser
+from rtseg.core.posture import RestPose
+from rtseg.simulators.vmc_sender import metres_per_unit, send_until_done, take_parser
 from rtseg.core.take import Take
 
 
@@ -52,13 +55,17 @@ class MocopiSender(UdpTakeSender):
         self._local = np.ascontiguousarray(Q.make_continuous(
             Q.local_from_global(self.retargeted.quats, list(self.suit.parents)), 0))
         n, s = self._local.shape[:2]
-        self._pos = np.zeros((n, s, 3))
+        geometry = RestPose.find(take)
+        offsets = np.zeros((s, 3)) if geometry is None else (
+            self.retargeted.bone_offsets(geometry.positions) * metres_per_unit(take))
+        self._pos = np.tile(offsets, (n, 1, 1))
         if self.root is not None:
             root = self.suit.parents.index(-1)
             self._pos[:, root] = self.root
         parents = [self.bone_ids[p] if p >= 0 else -1 for p in self.suit.parents]
         rest = np.zeros((s, 7))
         rest[:, 3] = 1.0
+        rest[:, 4:] = offsets
         self._skdf = encode_skeleton(parents, rest, bone_ids=self.bone_ids, port=self.port)
 
     @property

@@ -152,7 +152,7 @@ def test_a_rig_geometry_that_gives_no_posture_is_logged_once_and_the_session_nam
     bad = RestPose(RestPose.of_take(take).positions[:-1])
     pipe = Pipeline(take.joint_names, take.parents, "local", FR, cfg, rest=bad)
     pipe.identity.library = lib
-    with caplog.at_level("WARNING", logger="rtseg.live.session_posture"):
+    with caplog.at_level("WARNING", logger="rtseg.live.posture_switch"):
         for i, q in enumerate(take.quats):
             pipe.process(i, q, np.ones(len(q), dtype=bool), i, i / FR, 0, i / FR)
     warned = [r for r in caplog.records if "no posture for behaviour names" in r.getMessage()]

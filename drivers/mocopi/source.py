@@ -28,7 +28,9 @@ identity for every bone, so they carry no rig rest orientation to calibrate away
 (:class:`ForwardKinematics`; a bone is valid only when its whole chain is), and the live
 loop takes parent-relative rotations again with no calibration pose - the same features a
 global IMU suit gives.  ``space=local`` passes them through as sent (the live loop then
-calibrates them like VMC, ``calibration.mode = "auto"``).  ``seq`` = ``fnum``; ``source_time`` =
+calibrates them like VMC, ``calibration.mode = "auto"``).  ``rest_pose``: the rest geometry
+the bone translations give (``rtseg.drivers.mocopi.rest``; behaviour names by posture).
+``seq`` = ``fnum``; ``source_time`` =
 ``uttm`` (sender Unix time, s) when sent, else None; ``root_position`` = root bone position
 (m).  Bad datagrams are counted (``corrupt``, ``bad_values``, ``bad_messages``,
 ``unknown_names``), never raised.  Port 0 binds an ephemeral port: read ``.port``.
@@ -36,13 +38,14 @@ calibrates them like VMC, ``calibration.mode = "auto"``).  ``seq`` = ``fnum``; `
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
 from rtseg.drivers.base import SourceError
 from rtseg.drivers.mocopi.codec import DEFAULT_PORT
 from rtseg.drivers.mocopi.assembler import MocopiAssembler
+from rtseg.drivers.mocopi.rest import rest_pose
 from rtseg.drivers.mvn.source import VendorUdpSource, number_option
 from rtseg.drivers.osc.url import (DEFAULT_HOST, Network, allow_option, check_options, load_suit,
                                    parse_location)
@@ -133,7 +136,17 @@ class MocopiSource(VendorUdpSource):
         root = ids[parents.index(-1)] if -1 in parents else ids[0]
         asm = MocopiAssembler(ids, unit_tolerance=tolerance, root_id=root, stats=self.stats)
         self._asm = asm if space == "local" else _GlobalAssembler(asm, parents)
+        self._rest: Any = None
         self._start(host, port, POLL * 2, queue_size, rcvbuf, allow)
+
+    @property
+    def rest_pose(self) -> Any:
+        """The sender's rest geometry from the bone translations it sends
+        (``rtseg.drivers.mocopi.rest``: a ``RestPose`` in profile order), or None before
+        the first skeleton or frame and when they carry no offsets."""
+        if self._rest is None:
+            self._rest = rest_pose(self.bone_ids, self._asm.skeleton, self._asm.last_frame)
+        return self._rest
 
 
 def open_url(location: str, options: dict[str, str]) -> MocopiSource:

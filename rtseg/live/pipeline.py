@@ -51,7 +51,7 @@ from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.live.config import SessionConfig
 from rtseg.live.detector_setup import detector_params, make_detectors
 from rtseg.live.input_gaps import InputGaps
-from rtseg.live.session_posture import SessionPosture
+from rtseg.live.posture_switch import SessionPosture
 
 log = logging.getLogger("rtseg.live.session")
 
@@ -386,7 +386,7 @@ class Pipeline:
 
     def _wants_poses(self) -> bool:
         """Whether the identity tracker names by posture and so takes each frame's
-        rotations (``rtseg.live.session_posture``)."""
+        rotations (``rtseg.live.posture_switch``)."""
         return self.identity is not None and self.posture.wanted(self.identity)
 
     def _identify(self, index: int, x: np.ndarray, out: list[PipelineCut],
