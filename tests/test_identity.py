@@ -369,22 +369,29 @@ def test_a_name_held_by_another_behaviour_id_is_sent_as_unknown(exclusive, names
     """Behaviours A, B, A: the library calls all three ``walk``; the tracker gives B its own
     id, so with exclusive names B's ``walk`` conflicts with A's and goes out ``unknown``,
     while A's return (A's id again) keeps the name."""
+    tr, sent = _a_b_a(lambda d, A: _OneNameLibrary(d), exclusive_names=exclusive)
+    assert [b for b, _ in sent] == [1, 2, 1]
+    assert [n for _, n in sent] == names
+    assert tr.stats.names_contested == contested
+
+
+def _a_b_a(library, **options):
+    """Behaviours A, B, A (8 s each, 100 Hz, cut 1 s late) named by ``library(d, A)`` (A:
+    the directions' basis, A's in its first three columns): the tracker and the first
+    decisions sent, (id, name)."""
     rng = np.random.default_rng(5)
     d, fr = 6, 100.0
     A = np.linalg.qr(rng.standard_normal((d, d)))[0]
     X = np.concatenate([_blob(rng, 800, A[:, :3], 1.0), _blob(rng, 800, A[:, 3:], 1.0),
                         _blob(rng, 800, A[:, :3], 1.0)])
-    tr = IdentityTracker(fr, "x", decide_after_s=1.5, threshold=4.0,
-                         library=_OneNameLibrary(d), exclusive_names=exclusive)
+    tr = IdentityTracker(fr, "x", decide_after_s=1.5, threshold=4.0, library=library(d, A),
+                         **options)
     cuts = {900: 800, 1700: 1600}
     for i, x in enumerate(X):
         tr.update(i, x)
         if i in cuts:
             tr.on_cut(cuts[i], i, "x")
-    sent = [(m.behaviour, m.name) for m in tr.history if not m.correction]
-    assert [b for b, _ in sent] == [1, 2, 1]
-    assert [n for _, n in sent] == names
-    assert tr.stats.names_contested == contested
+    return tr, [(m.behaviour, m.name) for m in tr.history if not m.correction]
 
 
 class _TwoDistanceLibrary(_LengthLibrary):
@@ -411,19 +418,7 @@ def test_a_segment_clearly_nearer_to_a_held_name_than_its_holders_gets_it(other,
     lies clearly nearer to it (distance below CLAIM_MARGIN x A's)."""
     from rtseg.identity.names import CLAIM_MARGIN
     assert 0.5 < CLAIM_MARGIN < 0.9
-    rng = np.random.default_rng(5)
-    d, fr = 6, 100.0
-    A = np.linalg.qr(rng.standard_normal((d, d)))[0]
-    X = np.concatenate([_blob(rng, 800, A[:, :3], 1.0), _blob(rng, 800, A[:, 3:], 1.0),
-                        _blob(rng, 800, A[:, :3], 1.0)])
-    tr = IdentityTracker(fr, "x", decide_after_s=1.5, threshold=4.0,
-                         library=_TwoDistanceLibrary(d, A[:, :3], other))
-    cuts = {900: 800, 1700: 1600}
-    for i, x in enumerate(X):
-        tr.update(i, x)
-        if i in cuts:
-            tr.on_cut(cuts[i], i, "x")
-    sent = [(m.behaviour, m.name) for m in tr.history if not m.correction]
+    tr, sent = _a_b_a(lambda d, A: _TwoDistanceLibrary(d, A[:, :3], other))
     assert [b for b, _ in sent] == [1, 2, 1]
     assert [n for _, n in sent] == names
     assert tr.stats.names_claimed == claimed
