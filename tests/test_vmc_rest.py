@@ -12,7 +12,7 @@ import pytest
 from rtseg.core.posture import Posture, take_posture
 from rtseg.drivers.osc.source import OscVmcSource
 from rtseg.drivers.osc.vmc.codec import VmcAssembler, encode_frame
-from rtseg.drivers.osc.vmc.rest import CAPTURE_FRAMES
+from rtseg.drivers.osc.vmc.rest import CAPTURE_FRAMES, CAPTURE_LIMIT
 from rtseg.simulators.vmc_sender import VmcSender
 
 from test_library_posture import FR, swing, library
@@ -72,6 +72,22 @@ def test_no_rest_geometry_before_the_first_frames_nor_from_zero_positions():
     fed(zero, avatar_frames(names, None, CAPTURE_FRAMES + 2))
     assert zero.offsets.rest_pose() is None
     assert not zero.offsets.capturing                     # decided: no geometry
+
+
+def test_a_profile_bone_never_sent_ends_the_capture_all_the_same():
+    """No Neck from this sender: capture ends after CAPTURE_LIMIT frames and the head hangs
+    at the upper chest (the bones it does send keep their places)."""
+    names = [n for n in AVATAR if n != "Neck"]
+    pos = np.array([AVATAR[n] for n in names])
+    asm = VmcAssembler(SUIT, parents=PARENTS)
+    fed(asm, avatar_frames(names, pos, CAPTURE_LIMIT - 1))
+    assert asm.offsets.capturing and asm.offsets.rest_pose() is None
+    fed(asm, avatar_frames(names, pos, 2))
+    rest = asm.offsets.rest_pose()
+    assert rest is not None
+    np.testing.assert_allclose(rest.positions[SUIT.index("Head")], [0.0, 0.42, 0.0], atol=1e-6)
+    np.testing.assert_allclose(rest.positions[SUIT.index("LeftUpperArm")], [0.15, 0.4, 0.0],
+                               atol=1e-6)
 
 
 @pytest.fixture

@@ -7,10 +7,11 @@ VRM avatars, which VMC senders drive, rest in a T-pose with every local rotation
 so chaining the offsets from the hips gives every bone's rest location: the rig geometry
 ``rtseg.core.posture`` needs to tell where the body is (behaviour names by posture).
 
-What is chained: the offsets as first received per bone, during the first ``CAPTURE_FRAMES``
-frames (and until every profile bone has been seen), of the profile's bones and of any
-other Unity body bone the sender sends (its shoulders and upper chest when the profile
-leaves them out: an upper arm's local position is from its shoulder).  A bone hangs from its
+What is chained: the offsets as first received per bone, until ``CAPTURE_FRAMES`` frames
+after every profile bone has been seen (``CAPTURE_LIMIT`` frames at most: a profile bone
+never sent hangs at its parent), of the profile's bones and of any other Unity body bone
+the sender sends (its shoulders and upper chest when the profile leaves them out: an upper
+arm's local position is from its shoulder).  A bone hangs from its
 nearest ancestor the sender sent in Unity's humanoid hierarchy (``HUMANOID_PARENTS``); a
 profile bone that is not a Unity body bone hangs from its profile parent.  Frame: rtseg's
 (right-handed, Y-up; Unity's z negated), the sender's units (metres for every VMC
@@ -27,9 +28,12 @@ import numpy as np
 
 from rtseg.core.posture import RestPose
 
-#: Frames whose bone positions are kept after the first (a sender's extra bones arrive in
-#: every frame; the offsets do not change).
+#: Frames whose bone positions are kept after every profile bone has been seen (a sender's
+#: extra bones arrive in every frame; the offsets do not change).
 CAPTURE_FRAMES = 8
+#: Frames after which capture ends even if a profile bone was never sent (its offset is then
+#: taken as zero: it hangs at its parent).
+CAPTURE_LIMIT = 120
 #: Offsets whose largest length is below this (sender units) are "no positions sent".
 ZERO_OFFSETS = 1e-6
 
@@ -64,6 +68,7 @@ class BoneOffsets:
         self.missing = n
         self.extra: dict[str, tuple[float, float, float]] = {}
         self._frames_left = CAPTURE_FRAMES
+        self._frames_seen = 0
         #: True while positions are still kept (the assembler asks before each note).
         self.capturing = True
         self._rest: RestPose | None = None
@@ -81,15 +86,16 @@ class BoneOffsets:
             self.extra[body] = (x, y, z)
 
     def frame_closed(self) -> None:
+        self._frames_seen += 1
         if self.missing == 0:
             self._frames_left -= 1
-            if self._frames_left <= 0:
-                self.capturing = False
+        if self._frames_left <= 0 or self._frames_seen >= CAPTURE_LIMIT:
+            self.capturing = False
 
     def rest_pose(self) -> RestPose | None:
-        """The rest geometry (``RestPose``, profile order, hips at the origin) once every
-        profile bone's position and ``CAPTURE_FRAMES`` more frames have arrived; None before,
-        and when the sender sends no positions.  Worked out once."""
+        """The rest geometry (``RestPose``, profile order, hips at the origin) once capture
+        has ended (module doc); None before, and when the sender sends no positions.
+        Worked out once."""
         if self._done:
             return self._rest
         if self.capturing:
@@ -122,4 +128,4 @@ class BoneOffsets:
         return self._rest
 
 
-__all__ = ["BoneOffsets", "HUMANOID_PARENTS", "CAPTURE_FRAMES"]
+__all__ = ["BoneOffsets", "HUMANOID_PARENTS", "CAPTURE_FRAMES", "CAPTURE_LIMIT"]
