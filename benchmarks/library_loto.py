@@ -7,7 +7,7 @@
     python3 benchmarks/library_loto.py spliced SPLICED_DIR [DATA_DIR/cmu_single]
     python3 benchmarks/library_loto.py fewshot [DATA_DIR] [--seconds S]  # short examples
     python3 benchmarks/library_loto.py --by-person DIR [--n N] [--seed K] [--no-hide] [--truth-cuts]
-    (options: --no-reject, --metric model|descriptor, --step S, --name-after S)
+    (options: --no-reject, --metric model|descriptor, --step S, --name-after S, --claim-margin M)
 
 --by-person DIR: DIR a source folder laid out like ../shared/data/cmu_single, hdm05 or
 bandai, or their parent (../shared/data): per source, leave-one-person-out - the library
@@ -46,7 +46,8 @@ take alone (``one_name``: that exercise's segments must get its name, every othe
 ``--no-reject``: no null rejection (every segment its nearest name), the ceiling.
 ``--metric descriptor``: libraries of the earlier descriptor distance (default: model).
 ``--step S``: example windows every S seconds (default ``rtseg.library.behaviours.DEFAULT_STEP_S``);
-``--name-after S``: the tracker's ``name_after_s`` (default: config/live.toml's).
+``--name-after S``: the tracker's ``name_after_s`` (default: config/live.toml's);
+``--claim-margin M``: its ``claim_margin`` (0-1; 0 = exclusive names without claims).
 Prints one JSON document; parameters are the library's own (calibrated inside it).
 ``held_out``: the held-out takes' segments (``unknown_correct`` over those whose behaviour
 the library lacks); ``hidden_names``: the segments of each name left out in turn;
@@ -95,6 +96,14 @@ def _pop_number(argv: list[str], flag: str, kind: type, what: str,
         raise _Usage(f"{flag}: {not_positive}")
     del argv[k:k + 2]
     return value
+
+
+def _identity_options(cfg, opts: dict) -> None:
+    """``--name-after`` and ``--claim-margin`` into the session configuration ``cfg``."""
+    if "--name-after" in opts:
+        cfg["identity.name_after_s"] = opts["--name-after"]
+    if "--claim-margin" in opts:
+        cfg["identity.claim_margin"] = opts["--claim-margin"]
 
 
 def _progress(msg: str) -> None:
@@ -223,8 +232,7 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
         return 2
     cfg, _ = live_config()
     cfg["identity.enabled"] = True
-    if "--name-after" in opts:
-        cfg["identity.name_after_s"] = opts["--name-after"]
+    _identity_options(cfg, opts)
     t0 = time.perf_counter()
     try:
         doc = lopo_sources(Path(argv[0]), cfg, hide=hide, progress=_progress,
@@ -239,7 +247,8 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
     print(json.dumps({"protocol": "leave-one-person-out over source folders",
                       "seconds": round(time.perf_counter() - t0, 1),
                       "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
-                      "name_after_s": cfg["identity.name_after_s"], "performances": kw["n"],
+                      "name_after_s": cfg["identity.name_after_s"],
+                      "claim_margin": cfg["identity.claim_margin"], "performances": kw["n"],
                       "seed": kw["seed"], "hidden_names": hide, "cuts": kw["cuts"],
                       "threshold_scale": kw.get("threshold_scale", 1.0), **doc}, indent=1, default=str))
     return 0
@@ -269,6 +278,11 @@ def main(argv: list[str] | None = None) -> int:
             value = _pop_number(argv, flag, float, "seconds, a number", "seconds, > 0")
             if value is not None:
                 opts[flag] = value
+        margin = _pop_number(argv, "--claim-margin", float, "a number from 0 to 1")
+        if margin is not None:
+            if not 0.0 <= margin <= 1.0:
+                raise _Usage("--claim-margin: a number from 0 to 1")
+            opts["--claim-margin"] = margin
     except _Usage as exc:
         print(exc, file=sys.stderr)
         return 2
@@ -285,8 +299,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     cfg, _ = live_config()
     cfg["identity.enabled"] = True
-    if "--name-after" in opts:
-        cfg["identity.name_after_s"] = opts["--name-after"]
+    _identity_options(cfg, opts)
     t0 = time.perf_counter()
     if argv[0] in ("mocap6", "fewshot"):
         data = Path(argv[1]) if len(argv) > 1 else DATA
@@ -323,7 +336,8 @@ def main(argv: list[str] | None = None) -> int:
     doc = {"protocol": argv[0] + (" by person" if by_person else ""),
            "seconds": round(time.perf_counter() - t0, 1),
            "step_s": opts.get("--step", DEFAULT_STEP_S),
-           "name_after_s": cfg["identity.name_after_s"], **doc}
+           "name_after_s": cfg["identity.name_after_s"],
+           "claim_margin": cfg["identity.claim_margin"], **doc}
     print(json.dumps(doc, indent=1, default=str))
     return 0
 

@@ -432,6 +432,21 @@ def test_exclusive_names_is_read_from_the_configuration():
     assert tracker_from_config(_config(exclusive_names=False), 120.0, "contrast").exclusive_names is False
 
 
+def test_the_claim_margin_is_read_from_the_configuration_and_checked():
+    """``[identity] claim_margin`` reaches the names the tracker grants; a value outside
+    0-1 is refused with one line naming the key."""
+    from rtseg.config import ConfigError
+    from rtseg.identity.tracker import tracker_from_config
+    from rtseg.live.config import from_dict
+    tr, sent = _a_b_a(lambda d, A: _TwoDistanceLibrary(d, A[:, :3], 0.5),
+                      **{"claim_margin": 0.0})
+    assert [n for _, n in sent] == ["walk", "unknown", "walk"]       # 0: never claimed
+    tr = tracker_from_config(_config(claim_margin=0.3), 120.0, "contrast")
+    assert tr._holders.claim_margin == 0.3
+    with pytest.raises(ConfigError, match="claim_margin"):
+        from_dict({"identity": {"claim_margin": 1.5}}, origin="test")
+
+
 def test_a_correction_to_the_id_that_holds_the_name_gives_the_name_back():
     """Segment 1 starts with one of A's three directions turned a right angle (its own id;
     the library's ``walk`` is held by A's id, so it goes out ``unknown``), then is A for

@@ -79,7 +79,7 @@ from rtseg.detectors.window_models import (DEFAULT_DECIDE_AFTER_S, DEFAULT_ID_SK
                                           WindowStats, behaviour_distance, fit)
 from rtseg.identity.block_sums import BlockSums
 from rtseg.identity.messages import IdentityDecision, IdentityStats
-from rtseg.identity.names import NameHolders, SegmentNamer
+from rtseg.identity.names import CLAIM_MARGIN, NameHolders, SegmentNamer
 from rtseg.library.behaviours import UNKNOWN
 
 #: defaults (also the ``[identity]`` keys of ``config/live.toml``; the decision window's
@@ -124,6 +124,8 @@ class IdentityTracker:
         be the previous behaviour).
     exclusive_names: with a library, a name only earlier segments of other ids hold is
         sent as ``unknown`` (module doc, Names).
+    claim_margin: ... unless the segment's library distance is below this x every
+        holder's (``rtseg.identity.names.CLAIM_MARGIN``; 0 = never).
     """
 
     def __init__(self, frame_rate: float, method: str = "", *,
@@ -133,7 +135,8 @@ class IdentityTracker:
                  step: int = 10, history_s: float = 30.0, reference_dims: int = 8,
                  library: Any = None, name_skip_s: float = 0.5,
                  name_after_s: float = DEFAULT_NAME_AFTER_S,
-                 id_skip_s: float = DEFAULT_ID_SKIP_S, exclusive_names: bool = True) -> None:
+                 id_skip_s: float = DEFAULT_ID_SKIP_S, exclusive_names: bool = True,
+                 claim_margin: float = CLAIM_MARGIN) -> None:
         if not frame_rate > 0:
             raise ValueError(f"frame_rate must be positive, got {frame_rate}")
         if not decide_after_s > 0:
@@ -159,7 +162,7 @@ class IdentityTracker:
         self._behaviours: list[list[Any]] = []       # [n, s1, s2, model or None]
         self._seg: _Segment | None = None
         self._next_seg = 0
-        self._holders = NameHolders(exclusive_names)
+        self._holders = NameHolders(exclusive_names, claim_margin)
         self._namer_kw = {"skip_s": name_skip_s, "max_window_s": max_window_s,
                           "min_window_s": MIN_WINDOW_S, "block": step}
         self._posture: Any = None     # the session rig's posture (set_posture)
@@ -468,11 +471,13 @@ class IdentityTracker:
 
 def tracker_options(config: Any) -> dict[str, Any]:
     """The ``IdentityTracker`` keyword arguments a session configuration's ``[identity]``
-    section sets (decision time, threshold, naming wait, exclusive names)."""
+    section sets (decision time, threshold, naming wait, exclusive names and their claim
+    margin)."""
     return {"decide_after_s": float(config["identity.decide_after_s"]),
             "threshold": float(config["identity.threshold"]),
             "name_after_s": float(config["identity.name_after_s"]),
-            "exclusive_names": bool(config["identity.exclusive_names"])}
+            "exclusive_names": bool(config["identity.exclusive_names"]),
+            "claim_margin": float(config["identity.claim_margin"])}
 
 
 def tracker_from_config(config: Any, frame_rate: float, method: str,

@@ -20,6 +20,7 @@ from typing import Any, Callable
 
 from rtseg.config import ConfigError, config_dir, load_toml
 from rtseg.detectors import ONLINE_METHODS as KNOWN_METHODS
+from rtseg.identity.names import CLAIM_MARGIN
 from rtseg.identity.tracker import DEFAULT_DECIDE_AFTER_S, DEFAULT_NAME_AFTER_S, DEFAULT_THRESHOLD
 
 CALIBRATION_MODES = ("auto", "first", "average", "none")
@@ -218,6 +219,9 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "exclusive_names": Key("bool", True,
                                doc="with a library: a name held only by segments of other "
                                    "behaviour ids is sent as 'unknown'"),
+        "claim_margin": Key("float", CLAIM_MARGIN, _range(0.0, 1.0),
+                            doc="with exclusive names: a segment whose library distance is "
+                                "below this x every holder's gets the name too (0 = never)"),
     },
     "buffer": {
         "capacity": Key("int", 4096, _range(16, MAX_CAPACITY), doc="ring buffer frames"),
