@@ -68,10 +68,13 @@ def test_no_rest_geometry_before_the_first_frames_nor_from_zero_positions():
     asm = VmcAssembler(SUIT, parents=PARENTS)
     fed(asm, avatar_frames(names, pos, 2))
     assert asm.offsets.rest_pose() is None                 # still capturing
-    zero = VmcAssembler(SUIT, parents=PARENTS)
-    fed(zero, avatar_frames(names, None, CAPTURE_FRAMES + 2))
-    assert zero.offsets.rest_pose() is None
-    assert not zero.offsets.capturing                     # decided: no geometry
+    hips_only = np.zeros_like(pos)                          # the hips' travel alone
+    hips_only[names.index("Hips")] = (0.2, 0.9, -1.0)
+    for sent in (None, hips_only):
+        zero = VmcAssembler(SUIT, parents=PARENTS)
+        fed(zero, avatar_frames(names, sent, CAPTURE_FRAMES + 2))
+        assert not zero.offsets.capturing                 # decided: no geometry
+        assert zero.offsets.rest_pose() is None
 
 
 def test_a_profile_bone_never_sent_ends_the_capture_all_the_same():

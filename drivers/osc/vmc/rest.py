@@ -106,8 +106,9 @@ class BoneOffsets:
         body = [_BODY_LOWER.get(n.lower()) for n in self.names]
         for i, b in enumerate(body):
             off[b or self.names[i]] = self.values[i]
-        if max(float(np.linalg.norm(v)) for v in off.values()) < ZERO_OFFSETS:
-            return None
+        if max((float(np.linalg.norm(v)) for n, v in off.items() if n != "Hips"),
+               default=0.0) < ZERO_OFFSETS:
+            return None                   # only the hips' travel: no offsets sent
         pos: dict[str, np.ndarray] = {}
 
         def place(name: str) -> np.ndarray:
