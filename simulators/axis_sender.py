@@ -20,8 +20,8 @@ What is sent: the take retargeted (:mod:`rtseg.simulators.stream_sender`) onto s
 split the Spine -> Chest (Spine3) rotation in equal thirds, fingers (and shoulders a take
 lacks) are rigid with their parent; each joint's rotation relative to its Axis parent is
 written as Euler angles in ``order`` (default YXZ), degrees.  With displacement (default)
-the Hips carry the take's root position in cm and the other joints zero displacement
-(receivers read only the root's); without it, root position + 3 angles per joint.  Suit
+the Hips carry the take's root position in cm and the other joints their rest offset from
+the parent in cm (the take's rest geometry, zero without one: ``joint_offsets_cm``); without it, root position + 3 angles per joint.  Suit
 bones not valid in a frame (``allow_missing``) are sent as NaN angles.
 
 Faults (``faults=``, as the other vendor simulators, :mod:`rtseg.simulators.stream_sender`):
@@ -45,7 +45,9 @@ from rtseg.core import quat as Q
 from rtseg.drivers.axis.codec import (BINARY_PORT, JOINTS, PARENTS, SUIT_SEGMENTS, TEXT_PORT,
                                       encode_binary, quat_to_euler)
 from rtseg.drivers.axis.text import encode_text
-from rtseg.simulators.stream_sender import StreamSender
+from rtseg.simulators.stream_sender import FAMILY_UNITS, StreamSender
+from rtseg.simulators.vmc_sender import metres_per_unit
+from rtseg.core.posture import RestPose
 from rtseg.core.take import Take
 
 __all__ = ["AxisSender", "axis_globals", "serve"]
@@ -109,6 +111,7 @@ class AxisSender(StreamSender):
         if displacement:
             v = np.zeros((self.n_frames, len(JOINTS), 6))
             v[:, :, 3:] = angles
+            v[:, :, :3] = self.joint_offsets_cm()
             v[:, 0, :3] = root
             v = v.reshape(self.n_frames, -1)
         else:
@@ -120,6 +123,37 @@ class AxisSender(StreamSender):
         self._clients_lock = threading.Lock()
         self._accepting = threading.Event()
         self.client_connected = threading.Event()
+
+    def joint_offsets_cm(self) -> np.ndarray:
+        """Each Axis joint's rest offset from its parent, cm (59, 3): the take's rest
+        geometry (``rtseg.core.posture.RestPose``) at the suit bones, Spine1 and Spine2 a
+        third and two thirds of the way from Spine to Spine3, every other joint (fingers,
+        absent shoulders) at its parent; zeros when the take has no rest geometry."""
+        rest = RestPose.find(self.take)
+        out = np.zeros((len(JOINTS), 3))
+        if rest is None:
+            return out
+        scale = 100.0 * metres_per_unit(self.take, FAMILY_UNITS.get(self.retargeted.family, 1.0))
+        cols = dict(zip((b.lower() for b in self.suit.bones), self.retargeted.columns))
+        at: dict[str, np.ndarray] = {}
+        for bone, joint in SUIT_SEGMENTS.items():
+            c = cols.get(bone.lower(), -1)
+            if c >= 0:
+                at[joint] = rest.positions[c] * scale
+        pos = np.zeros((len(JOINTS), 3))
+        for j, name in enumerate(JOINTS):
+            p = PARENTS[j]
+            if name in at:
+                pos[j] = at[name]
+            elif name in ("Spine1", "Spine2") and "Spine" in at and "Spine3" in at:
+                frac = 1.0 / 3.0 if name == "Spine1" else 2.0 / 3.0
+                pos[j] = at["Spine"] + frac * (at["Spine3"] - at["Spine"])
+            elif p >= 0:
+                pos[j] = pos[p]
+        for j, p in enumerate(PARENTS):
+            if p >= 0:
+                out[j] = pos[j] - pos[p]
+        return out
 
     def encode(self, index: int, slot: int, t: float) -> list[bytes]:
         n = self.n_frames

@@ -7,7 +7,9 @@ Frames: the 59 Axis joints, ``space`` global (world orientations, BVH rotations 
 forward kinematics) or local (the BVH's parent-relative rotations), right-handed Y-up,
 scalar-last float64; ``root_position`` = Hips position in metres; ``seq`` = binary frame
 index (text: count of frames received); ``valid`` False for joints whose angles are not
-finite (in global space also for their descendants).  See :mod:`rtseg.drivers.axis.source`
+finite (in global space also for their descendants).  ``AxisFrames.rest``: the avatar's rest
+geometry from the position channels of a stream with displacement (each joint's offset
+from its parent), None without them.  See :mod:`rtseg.drivers.axis.source`
 for the sources and their options.
 """
 
@@ -20,13 +22,17 @@ import numpy as np
 
 from rtseg.drivers.axis.codec import (JOINTS, PARENTS, AxisError, AxisFrame, BinaryAssembler,
                                       decode_binary, global_pose, poses, to_pose)
+from rtseg.drivers.axis.pose import rest_positions
 from rtseg.drivers.axis.text import TextSplitter, decode_texts
 from rtseg.drivers.vendor_seq import SeqGaps
 from rtseg.core.frame import Frame
+from rtseg.core.posture import RestPose
 
 log = logging.getLogger("rtseg.drivers.axis")
 
 _ALL_VALID = np.ones(len(JOINTS), dtype=bool)
+#: frames with displacement looked at for the rest geometry before giving up
+REST_TRIES = 8
 
 
 class AxisFrames:
@@ -49,6 +55,10 @@ class AxisFrames:
         self._last = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (len(JOINTS), 1))
         self._log_at: dict[str, float] = {}
         self._gaps = SeqGaps(32)
+        #: the avatar's rest geometry (``rtseg.core.posture.RestPose``) from the first
+        #: frame with displacement that gives one (``pose.rest_positions``), else None
+        self.rest: RestPose | None = None
+        self._rest_tries = 0
 
     def warn(self, key: str, now: float, msg: str, *args) -> None:
         if now - self._log_at.get(key, -math.inf) >= 5.0:
@@ -89,7 +99,16 @@ class AxisFrames:
             return None
         return self._convert(f, now)
 
+    def _note_rest(self, f: AxisFrame) -> None:
+        """Take the rest geometry from ``f`` (the first few frames with displacement)."""
+        if self.rest is None and f.with_disp and self._rest_tries < REST_TRIES:
+            self._rest_tries += 1
+            pos = rest_positions(f.values, f.with_ref, self.unit_scale)
+            if pos is not None:
+                self.rest = RestPose(pos)
+
     def _convert(self, f: AxisFrame, now: float) -> Frame:
+        self._note_rest(f)
         if not (f.finite or (f.finite is None and np.isfinite(f.values).all())):
             return self._convert_bad(f, now)
         q, self._last, pos = poses(f.values, f.with_disp, f.with_ref, self.order,
@@ -151,6 +170,7 @@ class AxisFrames:
             out.extend(self._convert(f, now) for f in run)   # some non-finite values
             return
         f0 = run[0]
+        self._note_rest(f0)
         q, local, root = poses(values, f0.with_disp, f0.with_ref, self.order,
                                self.unit_scale, self.space)
         self._last = local[-1]

@@ -23,7 +23,7 @@ import numpy as np
 from rtseg.drivers.axis import kernel as axis_kernel
 
 __all__ = ["JOINTS", "PARENTS", "euler_to_quat", "quat_to_euler", "global_pose", "poses",
-           "to_poses", "to_pose"]
+           "to_poses", "to_pose", "rest_positions"]
 
 #: Axis Neuron's 59 BVH joints, in stream order (parents before children).
 JOINTS: tuple[str, ...] = (
@@ -381,3 +381,24 @@ def to_pose(frame: Any, order: str = "YXZ", unit_scale: float = 0.01,
     q = euler_to_quat(order, np.where(valid[:, None], angles, 0.0))
     pos = root * unit_scale if np.isfinite(root).all() else None
     return q, valid, pos
+
+
+def rest_positions(values: np.ndarray, with_ref: bool, unit_scale: float = 0.01
+                   ) -> np.ndarray | None:
+    """Each joint's rest location (59, 3), metres, the Hips at the origin, from one frame's
+    values **with displacement**: a joint's position channels are its offset from its
+    parent (BVH), the avatar's bone, constant but for the Hips' (the body's travel, left
+    out).  None when the values are not finite or every offset is zero (a sender that
+    streams displacement without offsets: no rig geometry)."""
+    v = np.asarray(values, dtype=np.float64)[6 if with_ref else 0:]
+    if v.size != 6 * len(JOINTS) or not np.isfinite(v).all():
+        return None
+    off = v.reshape(len(JOINTS), 6)[:, :3] * unit_scale
+    off[0] = 0.0
+    if not np.abs(off).max() > 1e-9:
+        return None
+    pos = np.zeros((len(JOINTS), 3))
+    for j, p in enumerate(PARENTS):
+        if p >= 0:
+            pos[j] = pos[p] + off[j]
+    return pos

@@ -63,6 +63,7 @@ import logging
 import socket
 import threading
 import time
+from typing import Any
 
 from rtseg.drivers.base import FrameQueue, QueuedSource, Source, SourceError
 from rtseg.drivers.axis.codec import BINARY_PORT, JOINTS, PARENTS, TEXT_PORT
@@ -110,6 +111,12 @@ class AxisBinarySource(OscUdpSource):
     @property
     def other_avatars(self) -> int:
         return self._frames.other_avatars
+
+    @property
+    def rest_pose(self) -> Any:
+        """The avatar's rest geometry from a stream with displacement
+        (``AxisFrames.rest``), or None."""
+        return self._frames.rest
 
     def _run(self) -> None:
         """:class:`OscUdpSource`'s reader loop, except that the datagrams already waiting
@@ -203,6 +210,12 @@ class AxisTextSource(QueuedSource):
     @property
     def other_avatars(self) -> int:
         return self._frames.other_avatars
+
+    @property
+    def rest_pose(self) -> Any:
+        """The avatar's rest geometry from a stream with displacement
+        (``AxisFrames.rest``), or None."""
+        return self._frames.rest
 
     def _connect(self) -> socket.socket | None:
         try:
