@@ -4,8 +4,8 @@
 23 body segments of suit ``xsens-mvn`` (:mod:`rtseg.simulators.udp_take_sender`: global
 orientations by forward kinematics; segments the take lacks, e.g. L3 or the toes, take
 their parent's orientation) and sends, per frame, type-02 datagrams of at most
-``max_datagram`` bytes: segment id, position (pelvis: the take's root in metres; other
-segments: 0), orientation w x y z in MVN's Z-up frame (see
+``max_datagram`` bytes: segment id, world position in metres (``world_positions``: the
+pelvis at the take's root, the others placed by the take's rest geometry), orientation w x y z in MVN's Z-up frame (see
 :mod:`rtseg.drivers.mvn.codec`).  Sample counter = frame slot; time code = take time in
 ms (so ``speed`` > 1 sends faster while the time code keeps the take's clock).  Before the
 first frame it sends a type-12 meta datagram (``name:<character_name>``).
@@ -31,14 +31,16 @@ import socket
 import time
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from rtseg.drivers.mvn.codec import DEFAULT_MAX_DATAGRAM, DEFAULT_PORT, encode_datagrams, \
     encode_message
+from rtseg.core.posture import RestPose
 from rtseg.core.profiles import SuitProfile
 from rtseg.simulators.retarget import ImuModel
 from rtseg.simulators.udp_take_sender import (UdpTakeSender, cli_arguments, cli_take,
                                                cli_timing, serve_options, serve_sender)
-from rtseg.simulators.vmc_sender import send_until_done, take_parser
+from rtseg.simulators.vmc_sender import metres_per_unit, send_until_done, take_parser
 from rtseg.core.take import Take
 
 
@@ -79,10 +81,27 @@ class MvnSender(UdpTakeSender):
         self.max_datagram = int(max_datagram)
         self.segment_ids = list(self.suit.sensor_ids)
         self._quats = np.ascontiguousarray(self.retargeted.quats)
+        self._pos = self.world_positions()
+
+    def world_positions(self) -> np.ndarray:
+        """(frames, segments, 3) each segment's world position in metres, as MVN sends
+        it: the pelvis at the take's root, every other segment where its rest offset from
+        its parent (the take's rest geometry) puts it under the parent's orientation; every
+        segment at the root when the take has no rest geometry."""
         n, s = self._quats.shape[:2]
-        self._pos = np.zeros((n, s, 3))
+        pos = np.zeros((n, s, 3))
         if self.root is not None:
-            self._pos[:, 0] = self.root
+            pos[:, 0] = self.root
+        rest = RestPose.find(self.take)
+        if rest is None:
+            pos[:, 1:] = pos[:, :1]
+            return pos
+        off = self.retargeted.bone_offsets(rest.positions) * metres_per_unit(self.take)
+        R = Rotation.from_quat(self._quats.reshape(-1, 4)).as_matrix().reshape(n, s, 3, 3)
+        for j, p in enumerate(self.suit.parents):
+            if p >= 0:
+                pos[:, j] = pos[:, p] + R[:, p] @ off[j]
+        return pos
 
     def preamble(self) -> list[bytes]:
         return [encode_message("12", f"name:{self.character_name}\n".encode(),

@@ -97,6 +97,10 @@ class MvnAssembler:
         self.meta: dict[str, str] = {}
         #: latest type-13 scaling: segment name -> null-pose position (rtseg frame, m)
         self.scaling: dict[str, tuple[float, float, float]] = {}
+        #: (positions (n, 3) m, orientations (n, 4)) of the first frame with every segment
+        #: valid, rtseg frame, suit order: the rig geometry the source's ``rest_pose``
+        #: works out; None before
+        self.first_pose: tuple[np.ndarray, np.ndarray] | None = None
         #: latest type-24 centre of mass (rtseg frame, m) or None
         self.center_of_mass: tuple[float, float, float] | None = None
         #: latest type-25 time code text (``HH:MM:SS.mmm``) or None
@@ -241,6 +245,10 @@ class MvnAssembler:
                 pos = sel_pos[hit[0]].astype(np.float64)
                 if np.isfinite(pos).all():
                     root = from_mvn_pos(pos)
+            if self.first_pose is None and valid.all():
+                full = np.zeros((self.n, 3))
+                full[rows] = from_mvn_pos(np.asarray(sel_pos, dtype=np.float64))
+                self.first_pose = (full, q.copy())
         self._q = q
         return Frame(recv_time=now, quats=q, valid=valid, source_time=p.time_ms / 1000.0,
                      seq=p.sample, root_position=root)
@@ -260,6 +268,8 @@ class MvnAssembler:
             if dots.min() < 0:
                 q[dots < 0] *= -1.0
         self._q = q
+        if self.first_pose is None:
+            self.first_pose = (raw[:, _PCOLS].copy(), q.copy())
         pos = raw[self._root_row, _PCOLS]
         return Frame(recv_time=now, quats=q, valid=self._all_valid.copy(),
                      source_time=p.time_ms / 1000.0, seq=p.sample,

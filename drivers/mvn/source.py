@@ -49,7 +49,11 @@ import math
 import socket
 import threading
 import time
+from typing import Any
 
+import numpy as np
+
+from rtseg.core.posture import PostureError, RestPose
 from rtseg.drivers.base import FrameQueue, QueuedSource, SourceError
 from rtseg.drivers.mvn.codec import DEFAULT_PORT, MxtpStream
 from rtseg.drivers.mvn.assembler import MvnAssembler
@@ -82,7 +86,28 @@ class VendorUdpSource(OscUdpSource):
     _log = log
 
 
-class MvnSource(VendorUdpSource):
+class _RigGeometry:
+    """``rest_pose`` of an MVN source: the rig's rest geometry from the first frame with
+    every segment valid (each segment's world position and orientation:
+    ``RestPose.from_world``), None before and when the stream sends no positions."""
+
+    _rest: Any = None
+
+    @property
+    def rest_pose(self) -> Any:
+        first = self._asm.first_pose
+        if self._rest is None and first is not None:
+            others = [j for j, p in enumerate(self.parents) if p >= 0]
+            if not np.abs(first[0][others]).max() > 1e-6:
+                return None                  # only the pelvis placed: no positions sent
+            try:
+                self._rest = RestPose.from_world(first[0], first[1], self.parents)
+            except PostureError:
+                return None
+        return self._rest
+
+
+class MvnSource(_RigGeometry, VendorUdpSource):
     """Xsens MVN receiver (see module docstring).  ``.port`` is the bound port."""
 
     space = "global"
@@ -113,7 +138,7 @@ def _suit_ids(suit: str) -> tuple[list[str], list[int], list[int]]:
     return bones, parents, list(suit_profile(suit).sensor_ids)
 
 
-class MvnTcpSource(QueuedSource):
+class MvnTcpSource(_RigGeometry, QueuedSource):
     """Xsens MVN receiver over TCP (see module docstring): listens on ``host:port``
     (``.port``: the bound port), one connection at a time."""
 

@@ -99,6 +99,29 @@ class RestPose:
         return cls(pos)
 
     @classmethod
+    def from_world(cls, positions: np.ndarray, orientations: np.ndarray,
+                   parents: Sequence[int]) -> "RestPose":
+        """The rest geometry of a rig from one frame of its joints' world ``positions``
+        (J, 3) and global ``orientations`` (J, 4, scalar-last), as streams that send both
+        give them (Xsens MVN): a joint's position relative to its parent, in the parent's
+        frame, is the same in every pose (rigid segments), so it is the parent's step at
+        rest.  ``parents`` before children; PostureError otherwise or for non-finite
+        values."""
+        P = np.asarray(positions, dtype=np.float64)
+        G = np.asarray(orientations, dtype=np.float64)
+        _check_order(parents)
+        if P.shape != (len(parents), 3) or G.shape != (len(parents), 4) or not (
+                np.isfinite(P).all() and np.isfinite(G).all()):
+            raise PostureError(f"world positions {P.shape} and orientations {G.shape} of "
+                               f"{len(parents)} joints, finite, needed")
+        R = Rotation.from_quat(G).as_matrix()
+        rest = np.zeros_like(P)
+        for j, p in enumerate(parents):
+            if p >= 0:
+                rest[j] = rest[p] + R[p].T @ (P[j] - P[p])
+        return cls(rest)
+
+    @classmethod
     def find(cls, take: Any) -> "RestPose | None":
         """``of_take``, or None when the take has no rest geometry."""
         try:
