@@ -8,30 +8,18 @@ from __future__ import annotations
 import numpy as np
 
 import rtseg.drivers.axis.codec as A
-from rtseg.core.posture import Posture, take_posture
 from rtseg.drivers.axis.pose import rest_positions
 from rtseg.drivers.axis.source import AxisBinarySource
 from rtseg.simulators.axis_sender import AxisSender
 
-from test_library_posture import swing
-from test_vmc_live import read_all
+from posture_round_trip import posture_back
 
 
 def test_the_posture_of_the_take_sent_comes_back_over_udp():
-    take = swing(80.0, 3, seconds=3.0)
-    src = AxisBinarySource("127.0.0.1", 0, queue_size=4096)
-    try:
-        with AxisSender(take, "binary", "127.0.0.1", src.port, speed=4.0) as snd:
-            snd.wait(10.0)
-        frames = read_all(src)
-        rest = src.rest_pose
-    finally:
-        src.close()
-    assert len(frames) == take.n_frames and rest is not None
-    rows = Posture(src.joint_names, src.parents, rest, src.space).transform(
-        np.stack([f.quats for f in frames]))
-    ref = take_posture(take)[[f.seq for f in frames]]
-    assert np.abs(rows - ref).max() < 0.05
+    read, sent, rest, diff = posture_back(
+        AxisBinarySource("127.0.0.1", 0, queue_size=4096),
+        lambda take, port: AxisSender(take, "binary", "127.0.0.1", port, speed=4.0))
+    assert read == sent and rest is not None and diff < 0.05
 
 
 def test_no_geometry_without_offsets():

@@ -7,33 +7,21 @@ from __future__ import annotations
 
 import numpy as np
 
-from rtseg.core.posture import Posture, take_posture
 from rtseg.drivers.mocopi.codec import BONE_NAMES, BONE_PARENTS, MocopiFrame, MocopiSkeleton
 from rtseg.drivers.mocopi.rest import rest_pose
 from rtseg.drivers.mocopi.source import MocopiSource
 from rtseg.simulators.mocopi_sender import MocopiSender
 
-from test_library_posture import swing
-from test_vmc_live import read_all
+from posture_round_trip import posture_back
 
 IDS = list(range(len(BONE_NAMES)))
 
 
 def test_the_posture_of_the_take_sent_comes_back_over_udp():
-    take = swing(80.0, 3, seconds=3.0)
-    src = MocopiSource("127.0.0.1", 0, queue_size=4096)
-    try:
-        with MocopiSender(take, "127.0.0.1", src.port, speed=4.0) as snd:
-            snd.wait(10.0)
-        frames = read_all(src)
-        rest = src.rest_pose
-    finally:
-        src.close()
-    assert len(frames) == take.n_frames and rest is not None
-    rows = Posture(src.joint_names, src.parents, rest, src.space).transform(
-        np.stack([f.quats for f in frames]))
-    ref = take_posture(take)[[f.seq for f in frames]]
-    assert np.abs(rows - ref).max() < 0.05
+    read, sent, rest, diff = posture_back(
+        MocopiSource("127.0.0.1", 0, queue_size=4096),
+        lambda take, port: MocopiSender(take, "127.0.0.1", port, speed=4.0))
+    assert read == sent and rest is not None and diff < 0.05
 
 
 def _tran(offsets: np.ndarray, w: float = 1.0) -> np.ndarray:

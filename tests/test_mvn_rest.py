@@ -7,10 +7,11 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rtseg.core.posture import Posture, RestPose, take_posture
+from rtseg.core.posture import RestPose
 from rtseg.drivers.mvn.source import MvnSource
 from rtseg.simulators.mvn_sender import MvnSender
 
+from posture_round_trip import posture_back
 from test_library_posture import swing
 from test_vmc_live import read_all
 
@@ -31,20 +32,10 @@ def test_a_rigid_chain_gives_back_its_offsets_in_any_pose():
 
 
 def test_the_posture_of_the_take_sent_comes_back_over_udp():
-    take = swing(80.0, 3, seconds=3.0)
-    src = MvnSource("127.0.0.1", 0, queue_size=4096)
-    try:
-        with MvnSender(take, "127.0.0.1", src.port, speed=4.0) as snd:
-            snd.wait(10.0)
-        frames = read_all(src)
-        rest = src.rest_pose
-    finally:
-        src.close()
-    assert len(frames) == take.n_frames and rest is not None
-    rows = Posture(src.joint_names, src.parents, rest, src.space).transform(
-        np.stack([f.quats for f in frames]))
-    ref = take_posture(take)[[f.seq for f in frames]]
-    assert np.abs(rows - ref).max() < 0.05
+    read, sent, rest, diff = posture_back(
+        MvnSource("127.0.0.1", 0, queue_size=4096),
+        lambda take, port: MvnSender(take, "127.0.0.1", port, speed=4.0))
+    assert read == sent and rest is not None and diff < 0.05
 
 
 def test_a_stream_that_places_only_the_pelvis_has_no_geometry():
