@@ -271,3 +271,32 @@ def test_identity_speed_times_naming_with_posture(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "with posture (17 joints): the window's posture rows median" in r.stdout
     assert "names sent:" in r.stdout
+
+
+def test_names_over_vmc_compares_a_live_vmc_session_with_the_file_replay(tmp_path):
+    """benchmarks/names_over_vmc.py on one synthetic performance (real UDP): the VMC
+    session receives every frame and names by posture, as the file replay does, unless the
+    sender sends no positions."""
+    from rtseg.drivers.readers import write_take
+    from rtseg.evaluation.online import live_config
+    from rtseg.library.examples import learn, synthetic_examples
+    from rtseg.library.file import save
+    from rtseg.simulators.synth.motion import synthesize
+    cfg, _ = live_config()
+    lib, _ = learn(synthetic_examples(["walk", "squat", "wave"], [11, 12], cfg, seconds=6.0))
+    save(lib, tmp_path / "lib.json")
+    perf = tmp_path / "perf"
+    perf.mkdir()
+    write_take(perf / "synth_3.npz", synthesize("walk:6,squat:6,wave:6", seed=3).take)
+    for extra, by_posture in (((), True), (("--no-positions",), False)):
+        r = _run("names_over_vmc.py", str(perf), str(tmp_path / "lib.json"), "--speed", "4",
+                 "--json", *extra)
+        assert r.returncode == 0, r.stderr[-2000:]
+        doc = json.loads(r.stdout)
+        (s,) = doc["sessions"]
+        assert s["frames_received"] == s["frames_sent"] and s["decisions"] >= 1
+        assert (s["posture_namings"] == s["decisions"]) is by_posture
+        assert (s["posture_namings"] == 0) is not by_posture
+        assert doc["file_replay"]["segments"] >= 1
+    r = _run("names_over_vmc.py", str(tmp_path / "nowhere"), str(tmp_path / "lib.json"))
+    assert r.returncode == 2 and "names_over_vmc:" in r.stderr
