@@ -1,5 +1,5 @@
 """Axis (Perception Neuron) rest geometry from a stream with displacement
-(rtseg.drivers.axis.pose.rest_positions): each joint's position channels are its offset from
+(rtseg.drivers.axis.pose.rest_pose): each joint's position channels are its offset from
 its parent, so over a real UDP socket the simulator's frames give the posture of the take
 sent; without displacement, or with zero offsets, there is none."""
 
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 import rtseg.drivers.axis.codec as A
-from rtseg.drivers.axis.pose import rest_positions
+from rtseg.drivers.axis.pose import rest_pose
 from rtseg.drivers.axis.source import AxisBinarySource
 from rtseg.simulators.axis_sender import AxisSender
 
@@ -25,11 +25,11 @@ def test_the_posture_of_the_take_sent_comes_back_over_udp():
 def test_no_geometry_without_offsets():
     v = np.zeros((len(A.JOINTS), 6))
     v[0, :3] = (10.0, 95.0, -30.0)                      # the Hips' travel only
-    assert rest_positions(v.ravel(), with_ref=False) is None
+    assert rest_pose(v.ravel(), with_ref=False) is None
     v[1, :3] = (-9.0, 0.0, 0.0)                          # RightUpLeg from the Hips, cm
     v[2, :3] = (0.0, -42.0, 0.0)
-    pos = rest_positions(np.concatenate([np.zeros(6), v.ravel()]), with_ref=True)
+    pos = rest_pose(np.concatenate([np.zeros(6), v.ravel()]), with_ref=True).positions
     np.testing.assert_allclose(pos[0], 0.0)
     np.testing.assert_allclose(pos[2], [-0.09, -0.42, 0.0])
     v[3, 4] = np.nan
-    assert rest_positions(v.ravel(), with_ref=False) is None
+    assert rest_pose(v.ravel(), with_ref=False) is None

@@ -22,7 +22,7 @@ import numpy as np
 
 from rtseg.drivers.axis.codec import (JOINTS, PARENTS, AxisError, AxisFrame, BinaryAssembler,
                                       decode_binary, global_pose, poses, to_pose)
-from rtseg.drivers.axis.pose import rest_positions
+from rtseg.drivers.axis.pose import rest_pose
 from rtseg.drivers.axis.text import TextSplitter, decode_texts
 from rtseg.drivers.vendor_seq import SeqGaps
 from rtseg.core.frame import Frame
@@ -56,7 +56,7 @@ class AxisFrames:
         self._log_at: dict[str, float] = {}
         self._gaps = SeqGaps(32)
         #: the avatar's rest geometry (``rtseg.core.posture.RestPose``) from the first
-        #: frame with displacement that gives one (``pose.rest_positions``), else None
+        #: frame with displacement that gives one (``pose.rest_pose``), else None
         self.rest: RestPose | None = None
         self._rest_tries = 0
 
@@ -103,9 +103,7 @@ class AxisFrames:
         """Take the rest geometry from ``f`` (the first few frames with displacement)."""
         if self.rest is None and f.with_disp and self._rest_tries < REST_TRIES:
             self._rest_tries += 1
-            pos = rest_positions(f.values, f.with_ref, self.unit_scale)
-            if pos is not None:
-                self.rest = RestPose(pos)
+            self.rest = rest_pose(f.values, f.with_ref, self.unit_scale)
 
     def _convert(self, f: AxisFrame, now: float) -> Frame:
         self._note_rest(f)

@@ -20,10 +20,11 @@ from typing import Any
 
 import numpy as np
 
+from rtseg.core.posture import RestPose
 from rtseg.drivers.axis import kernel as axis_kernel
 
 __all__ = ["JOINTS", "PARENTS", "euler_to_quat", "quat_to_euler", "global_pose", "poses",
-           "to_poses", "to_pose", "rest_positions"]
+           "to_poses", "to_pose", "rest_pose"]
 
 #: Axis Neuron's 59 BVH joints, in stream order (parents before children).
 JOINTS: tuple[str, ...] = (
@@ -383,10 +384,10 @@ def to_pose(frame: Any, order: str = "YXZ", unit_scale: float = 0.01,
     return q, valid, pos
 
 
-def rest_positions(values: np.ndarray, with_ref: bool, unit_scale: float = 0.01
-                   ) -> np.ndarray | None:
-    """Each joint's rest location (59, 3), metres, the Hips at the origin, from one frame's
-    values **with displacement**: a joint's position channels are its offset from its
+def rest_pose(values: np.ndarray, with_ref: bool, unit_scale: float = 0.01
+              ) -> RestPose | None:
+    """The rig's rest geometry (``RestPose``: each joint's rest location, metres, the Hips
+    at the origin) from one frame's values **with displacement**: a joint's position channels are its offset from its
     parent (BVH), the avatar's bone, constant but for the Hips' (the body's travel, left
     out).  None when the values are not finite or every offset is zero (a sender that
     streams displacement without offsets: no rig geometry)."""
@@ -397,8 +398,4 @@ def rest_positions(values: np.ndarray, with_ref: bool, unit_scale: float = 0.01
     off[0] = 0.0
     if not np.abs(off).max() > 1e-9:
         return None
-    pos = np.zeros((len(JOINTS), 3))
-    for j, p in enumerate(PARENTS):
-        if p >= 0:
-            pos[j] = pos[p] + off[j]
-    return pos
+    return RestPose.from_offsets(off, PARENTS)

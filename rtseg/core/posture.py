@@ -87,15 +87,22 @@ class RestPose:
             bone = np.asarray(meta["bone_offsets"], dtype=np.float64)
             step = [np.zeros(3) if p < 0 or parents[p] < 0 else bone[p] for p in parents]
         elif fmt == "bvh" and np.shape(meta.get("offsets")) == (J, 3):
-            off = np.asarray(meta["offsets"], dtype=np.float64)
-            step = [np.zeros(3) if p < 0 else off[j] for j, p in enumerate(parents)]
+            step = meta["offsets"]
         else:
             raise PostureError(f"{take.source or 'take'}: no rest geometry (bone offsets) "
                                f"to compute a posture from")
-        pos = np.zeros((J, 3))
+        return cls.from_offsets(step, parents)
+
+    @classmethod
+    def from_offsets(cls, offsets: Any, parents: Sequence[int]) -> "RestPose":
+        """The rest geometry of a rig whose joint j lies ``offsets[j]`` (J, 3) from its
+        parent at rest (BVH ``OFFSET``s, a stream's bone translations; the roots' own
+        offsets are left out: roots at the origin).  ``parents`` before children."""
+        off = np.asarray(offsets, dtype=np.float64)
+        pos = np.zeros((len(parents), 3))
         for j, p in enumerate(parents):
             if p >= 0:
-                pos[j] = pos[p] + step[j]
+                pos[j] = pos[p] + off[j]
         return cls(pos)
 
     @classmethod
@@ -115,11 +122,9 @@ class RestPose:
             raise PostureError(f"world positions {P.shape} and orientations {G.shape} of "
                                f"{len(parents)} joints, finite, needed")
         R = Rotation.from_quat(G).as_matrix()
-        rest = np.zeros_like(P)
-        for j, p in enumerate(parents):
-            if p >= 0:
-                rest[j] = rest[p] + R[p].T @ (P[j] - P[p])
-        return cls(rest)
+        steps = [np.zeros(3) if p < 0 else R[p].T @ (P[j] - P[p])
+                 for j, p in enumerate(parents)]
+        return cls.from_offsets(steps, parents)
 
     @classmethod
     def find(cls, take: Any) -> "RestPose | None":
