@@ -31,11 +31,10 @@ import socket
 import time
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from rtseg.drivers.mvn.codec import DEFAULT_MAX_DATAGRAM, DEFAULT_PORT, encode_datagrams, \
     encode_message
-from rtseg.core.posture import RestPose
+from rtseg.core.posture import RestPose, world_positions
 from rtseg.core.profiles import SuitProfile
 from rtseg.simulators.retarget import ImuModel
 from rtseg.simulators.udp_take_sender import (UdpTakeSender, cli_arguments, cli_take,
@@ -89,19 +88,12 @@ class MvnSender(UdpTakeSender):
         its parent (the take's rest geometry) puts it under the parent's orientation; every
         segment at the root when the take has no rest geometry."""
         n, s = self._quats.shape[:2]
-        pos = np.zeros((n, s, 3))
-        if self.root is not None:
-            pos[:, 0] = self.root
+        root = np.zeros((n, 3)) if self.root is None else np.asarray(self.root, dtype=float)
         rest = RestPose.find(self.take)
         if rest is None:
-            pos[:, 1:] = pos[:, :1]
-            return pos
+            return np.repeat(root[:, None], s, axis=1)
         off = self.retargeted.bone_offsets(rest.positions) * metres_per_unit(self.take)
-        R = Rotation.from_quat(self._quats.reshape(-1, 4)).as_matrix().reshape(n, s, 3, 3)
-        for j, p in enumerate(self.suit.parents):
-            if p >= 0:
-                pos[:, j] = pos[:, p] + R[:, p] @ off[j]
-        return pos
+        return world_positions(self._quats, self.suit.parents, off, root)
 
     def preamble(self) -> list[bytes]:
         return [encode_message("12", f"name:{self.character_name}\n".encode(),

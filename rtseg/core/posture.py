@@ -245,6 +245,25 @@ class Posture:
         return {"points": dict(self.points), "leg_length": round(self.leg_length, 6)}
 
 
+def world_positions(orientations: np.ndarray, parents: Sequence[int], offsets: Any,
+                    root: np.ndarray | None = None) -> np.ndarray:
+    """Joint positions (frames, J, 3) by forward kinematics: joint j at its parent's
+    position plus the parent's global orientation (``orientations`` (frames, J, 4),
+    scalar-last) applied to ``offsets[j]`` (J, 3), its step from the parent at rest; the
+    roots at ``root`` (frames, 3) or the origin.  ``parents`` before children."""
+    G = np.asarray(orientations, dtype=np.float64)
+    F, J = G.shape[:2]
+    off = np.asarray(offsets, dtype=np.float64)
+    R = Rotation.from_quat(G.reshape(-1, 4)).as_matrix().reshape(F, J, 3, 3)
+    pos = np.zeros((F, J, 3))
+    for j, p in enumerate(parents):
+        if p >= 0:
+            pos[:, j] = pos[:, p] + R[:, p] @ off[j]
+        elif root is not None:
+            pos[:, j] = root
+    return pos
+
+
 def _any_normal(up: np.ndarray) -> np.ndarray:
     """A unit vector at right angles to ``up`` (the heading when the hips are vertical)."""
     a = np.array([1.0, 0.0, 0.0]) if abs(up[0]) < 0.9 else np.array([0.0, 0.0, 1.0])

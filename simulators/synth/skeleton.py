@@ -9,9 +9,10 @@ are scalar-last (x, y, z, w); angles are degrees.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from rtseg.core import quat
+from rtseg.core.posture import world_positions
+
 #: The default17 suit's bones, in sensor-id order (config/suits.toml).
 JOINT_NAMES: list[str] = [
     "Hips", "Spine", "Chest", "Neck", "Head",
@@ -113,14 +114,7 @@ def rest_positions() -> np.ndarray:
 def joint_positions(global_q: np.ndarray, root: np.ndarray | None = None) -> np.ndarray:
     """World joint positions (frames, 17, 3) in metres by forward kinematics of the global
     rotations (frames, 17, 4) and the rest offsets; root at ``root`` (frames, 3) or origin."""
-    n = global_q.shape[0]
-    pos = np.zeros((n, N_JOINTS, 3))
-    if root is not None:
-        pos[:, 0] = root
-    for j in range(1, N_JOINTS):
-        p = PARENTS[j]
-        pos[:, j] = pos[:, p] + Rotation.from_quat(global_q[:, p]).apply(OFFSETS[j])
-    return pos
+    return world_positions(global_q, PARENTS, OFFSETS, root)
 
 
 
