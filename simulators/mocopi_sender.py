@@ -27,8 +27,7 @@ from rtseg.core.profiles import SuitProfile
 from rtseg.simulators.retarget import ImuModel
 from rtseg.simulators.udp_take_sender import (UdpTakeSender, cli_arguments, cli_take,
                                                cli_timing, serve_options, serve_sender)
-from rtseg.core.posture import RestPose
-from rtseg.simulators.vmc_sender import metres_per_unit, send_until_done, take_parser
+from rtseg.simulators.vmc_sender import rest_offsets, send_until_done, take_parser
 from rtseg.core.take import Take
 
 
@@ -55,9 +54,9 @@ class MocopiSender(UdpTakeSender):
         self._local = np.ascontiguousarray(Q.make_continuous(
             Q.local_from_global(self.retargeted.quats, list(self.suit.parents)), 0))
         n, s = self._local.shape[:2]
-        geometry = RestPose.find(take)
-        offsets = np.zeros((s, 3)) if geometry is None else (
-            self.retargeted.bone_offsets(geometry.positions) * metres_per_unit(take))
+        offsets = rest_offsets(take, self.retargeted)
+        if offsets is None:
+            offsets = np.zeros((s, 3))
         self._pos = np.tile(offsets, (n, 1, 1))
         if self.root is not None:
             root = self.suit.parents.index(-1)

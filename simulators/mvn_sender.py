@@ -34,12 +34,12 @@ import numpy as np
 
 from rtseg.drivers.mvn.codec import DEFAULT_MAX_DATAGRAM, DEFAULT_PORT, encode_datagrams, \
     encode_message
-from rtseg.core.posture import RestPose, world_positions
+from rtseg.core.posture import world_positions
 from rtseg.core.profiles import SuitProfile
 from rtseg.simulators.retarget import ImuModel
 from rtseg.simulators.udp_take_sender import (UdpTakeSender, cli_arguments, cli_take,
                                                cli_timing, serve_options, serve_sender)
-from rtseg.simulators.vmc_sender import metres_per_unit, send_until_done, take_parser
+from rtseg.simulators.vmc_sender import rest_offsets, send_until_done, take_parser
 from rtseg.core.take import Take
 
 
@@ -89,10 +89,9 @@ class MvnSender(UdpTakeSender):
         segment at the root when the take has no rest geometry."""
         n, s = self._quats.shape[:2]
         root = np.zeros((n, 3)) if self.root is None else np.asarray(self.root, dtype=float)
-        rest = RestPose.find(self.take)
-        if rest is None:
+        off = rest_offsets(self.take, self.retargeted)
+        if off is None:
             return np.repeat(root[:, None], s, axis=1)
-        off = self.retargeted.bone_offsets(rest.positions) * metres_per_unit(self.take)
         return world_positions(self._quats, self.suit.parents, off, root)
 
     def preamble(self) -> list[bytes]:

@@ -71,6 +71,16 @@ def metres_per_unit(take: Take, default: float = 1.0) -> float:
     return float(scale)
 
 
+def rest_offsets(take: Take, retargeted: Any) -> np.ndarray | None:
+    """Each suit bone's rest offset from its parent bone in metres, (bones, 3)
+    (``Retargeted.bone_offsets`` of the take's rest geometry, ``RestPose``), or None when
+    the take has none: the local positions an avatar's bones have."""
+    rest = RestPose.find(take)
+    if rest is None:
+        return None
+    return retargeted.bone_offsets(rest.positions) * metres_per_unit(take)
+
+
 def root_metres(take: Take, default: float = 1.0) -> np.ndarray | None:
     """``take.root_position`` in metres (``metres_per_unit``)."""
     if take.root_position is None:
@@ -219,10 +229,9 @@ class VmcSender(SenderThread):
         self._quats = np.ascontiguousarray(rt.local()[:, sent, :])
         self._valid = None if rt.valid[:, sent].all() else rt.valid[:, sent]
         self._root = root_metres(take) if send_root else None
-        rest = RestPose.find(take)
+        offsets = rest_offsets(take, rt)
         #: Bone local positions sent (metres; the take's rest geometry), or None: zeros.
-        self.bone_positions = None if rest is None else np.ascontiguousarray(
-            rt.bone_offsets(rest.positions)[sent] * metres_per_unit(take))
+        self.bone_positions = None if offsets is None else np.ascontiguousarray(offsets[sent])
         #: The FaultInjector in use (its ``record`` says what was damaged), or None.
         self.injector = _make_injector(faults)
         self._init_thread()
