@@ -53,6 +53,8 @@ from rtseg.drivers.osc.url import (DEFAULT_HOST, Network, allow_option, check_op
 OPTIONS = ("suit", "queue", "rate", "rcvbuf", "tolerance", "allow", "space")
 #: socket poll interval, s (also how soon ``close`` is noticed); no frame waits on it
 POLL = 0.05
+#: skeletons and frames looked at for the rest geometry before giving up
+REST_TRIES = 8
 
 
 class ForwardKinematics:
@@ -137,15 +139,23 @@ class MocopiSource(VendorUdpSource):
         asm = MocopiAssembler(ids, unit_tolerance=tolerance, root_id=root, stats=self.stats)
         self._asm = asm if space == "local" else _GlobalAssembler(asm, parents)
         self._rest: Any = None
+        self._rest_seen: list[Any] = []       # skeletons and frames already looked at
         self._start(host, port, POLL * 2, queue_size, rcvbuf, allow)
 
     @property
     def rest_pose(self) -> Any:
         """The sender's rest geometry from the bone translations it sends
         (``rtseg.drivers.mocopi.rest``: a ``RestPose`` in profile order), or None before
-        the first skeleton or frame and when they carry no offsets."""
+        the first skeleton or frame and when they carry no offsets.  At most
+        ``REST_TRIES`` skeletons or frames are looked at, each once (the live loop asks on
+        every frame until it has one)."""
         if self._rest is None:
-            self._rest = rest_pose(self.bone_ids, self._asm.skeleton, self._asm.last_frame)
+            sk, fr = self._asm.skeleton, self._asm.last_frame
+            new = sk if sk is not None else fr
+            if new is not None and len(self._rest_seen) < REST_TRIES and not any(
+                    new is seen for seen in self._rest_seen):
+                self._rest_seen.append(new)
+                self._rest = rest_pose(self.bone_ids, sk, fr)
         return self._rest
 
 

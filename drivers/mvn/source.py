@@ -92,18 +92,19 @@ class _RigGeometry:
     ``RestPose.from_world``), None before and when the stream sends no positions."""
 
     _rest: Any = None
+    _rest_done = False                       # the first full frame has been looked at
 
     @property
     def rest_pose(self) -> Any:
         first = self._asm.first_pose
-        if self._rest is None and first is not None:
+        if not self._rest_done and first is not None:
+            self._rest_done = True
             others = [j for j, p in enumerate(self.parents) if p >= 0]
-            if not np.abs(first[0][others]).max() > 1e-6:
-                return None                  # only the pelvis placed: no positions sent
-            try:
-                self._rest = RestPose.from_world(first[0], first[1], self.parents)
-            except PostureError:
-                return None
+            if np.abs(first[0][others]).max() > 1e-6:    # else only the pelvis placed
+                try:
+                    self._rest = RestPose.from_world(first[0], first[1], self.parents)
+                except PostureError:
+                    pass                     # non-finite values: no geometry
         return self._rest
 
 
