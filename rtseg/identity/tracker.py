@@ -378,9 +378,8 @@ class IdentityTracker:
     def _held_name(self, seg: _Segment, name: str, count: bool = True) -> str:
         """``name`` for ``seg``, or ``unknown`` when other ids hold it (``NameHolders``;
         counted in ``names_contested`` when ``count``)."""
-        claimed = self._holders.claimed
         if name in ("", UNKNOWN) or self._holders.grant(seg, name):
-            self.stats.names_claimed += self._holders.claimed - claimed
+            self.stats.names_claimed = self._holders.claimed
             return name
         self.stats.names_contested += int(count)
         return UNKNOWN
