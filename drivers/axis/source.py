@@ -89,7 +89,24 @@ _RANGES = {"rate": (1e-3, 1e5), "queue": (1, 1_000_000), "rcvbuf": (1, 1 << 30),
            "backoff": (1e-3, 60.0), "max_backoff": (1e-3, 600.0)}
 
 
-class AxisBinarySource(OscUdpSource):
+class _AvatarFrames:
+    """What both Axis sources read off their ``AxisFrames`` (``self._frames``)."""
+
+    _frames: AxisFrames
+
+    @property
+    def other_avatars(self) -> int:
+        """Frames of avatars other than the one followed (counted, not delivered)."""
+        return self._frames.other_avatars
+
+    @property
+    def rest_pose(self) -> Any:
+        """The avatar's rest geometry from a stream with displacement
+        (``AxisFrames.rest``), or None."""
+        return self._frames.rest
+
+
+class AxisBinarySource(_AvatarFrames, OscUdpSource):
     """Axis binary BVH frames on a UDP socket (see module docstring).  ``.port``: bound
     port."""
 
@@ -107,16 +124,6 @@ class AxisBinarySource(OscUdpSource):
         self._frames = AxisFrames(self.count, avatar, order, unit_scale, rate, space)
         self._asm = _BinaryAdapter(self._frames)
         self._start(host, port, 0.1, queue_size, rcvbuf, allow)
-
-    @property
-    def other_avatars(self) -> int:
-        return self._frames.other_avatars
-
-    @property
-    def rest_pose(self) -> Any:
-        """The avatar's rest geometry from a stream with displacement
-        (``AxisFrames.rest``), or None."""
-        return self._frames.rest
 
     def _run(self) -> None:
         """:class:`OscUdpSource`'s reader loop, except that the datagrams already waiting
@@ -176,7 +183,7 @@ class AxisBinarySource(OscUdpSource):
                               "oldest queued frame (%d so far)", self.stats.dropped)
 
 
-class AxisTextSource(QueuedSource):
+class AxisTextSource(_AvatarFrames, QueuedSource):
     """TCP client of Axis's text BVH server (see module docstring)."""
 
     space = "global"
@@ -206,16 +213,6 @@ class AxisTextSource(QueuedSource):
         self._thread = threading.Thread(target=self._run, daemon=True,
                                         name=f"rtseg-axis-{host}:{port}")
         self._thread.start()
-
-    @property
-    def other_avatars(self) -> int:
-        return self._frames.other_avatars
-
-    @property
-    def rest_pose(self) -> Any:
-        """The avatar's rest geometry from a stream with displacement
-        (``AxisFrames.rest``), or None."""
-        return self._frames.rest
 
     def _connect(self) -> socket.socket | None:
         try:
