@@ -17,6 +17,7 @@ from rtseg.simulators.vmc_sender import VmcSender
 
 from test_library_posture import FR, swing, library
 from test_vmc_live import PARENTS, SUIT, read_all
+from vendor_helpers import free_port
 
 #: local positions (rtseg frame, metres) of a small avatar with shoulders and an upper chest
 AVATAR = {
@@ -143,17 +144,13 @@ def test_a_recorded_vmc_session_keeps_the_sender_geometry_for_its_replays(tmp_pa
     """A live session over UDP records the sender's rest geometry (session.json meta); the
     recording read back as a take has it, so a replay names by posture as the live session
     did."""
-    import socket
     import threading
     from rtseg.core.posture import RestPose
     from rtseg.drivers.readers import read_take
     from rtseg.live.config import from_dict
     from rtseg.live.session import LiveSession
     take = swing(80.0, 3, seconds=3.0)
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
+    port = free_port()
     rec = tmp_path / "rec"
     cfg = from_dict({"output": {"osc": []}, "recording": {"dir": str(rec)}}, origin="test")
     session = LiveSession(f"osc://127.0.0.1:{port}?format=vmc&rate=120", cfg,
