@@ -5,9 +5,10 @@ the take sent; a stream that places only the pelvis has none."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
-from rtseg.core.posture import RestPose
+from rtseg.core.posture import PostureError, RestPose
 from rtseg.drivers.mvn.source import MvnSource
 from rtseg.simulators.mvn_sender import MvnSender
 
@@ -49,3 +50,10 @@ def test_a_stream_that_places_only_the_pelvis_has_no_geometry():
         assert read_all(src) and src.rest_pose is None
     finally:
         src.close()
+
+
+def test_non_finite_world_values_are_one_posture_error():
+    P = np.zeros((3, 3))
+    P[2, 1] = np.nan
+    with pytest.raises(PostureError, match="finite"):
+        RestPose.from_world(P, np.tile([0.0, 0.0, 0.0, 1.0], (3, 1)), [-1, 0, 1])

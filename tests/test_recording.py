@@ -303,3 +303,16 @@ def test_sigkill_mid_session_loses_at_most_the_flush_interval(tmp_path):
         valid[i % 17] = (i % 3) != 0
         expect.append(valid.copy())
     assert np.array_equal(tk.valid, np.array(expect))
+
+
+def test_rest_geometry_of_another_shape_is_refused_in_one_line(tmp_path):
+    """``note_rest`` takes (joints, 3) finite rest locations; anything else is one
+    ValueError naming the shape, and the header keeps no geometry."""
+    rec = SessionRecorder(tmp_path / "s", NAMES, PARENTS, space="global", frame_rate=100.0)
+    try:
+        for bad in (np.zeros((len(NAMES) + 1, 3)), np.full((len(NAMES), 3), np.nan)):
+            with pytest.raises(ValueError, match="rest geometry of shape"):
+                rec.note_rest(bad)
+        assert "rest_positions" not in rec.header["meta"]
+    finally:
+        rec.close()
