@@ -398,6 +398,14 @@ class OscVmcSource(OscUdpSource):
         the first frames have arrived and when it sends no positions."""
         return self._asm.offsets.rest_pose()
 
+    @property
+    def t_pose_without_geometry(self) -> bool:
+        """True once the first frames are in without bone positions: VRM avatars' rotations
+        are from a T-pose, so names may use the standard T-pose's geometry
+        (``rtseg.core.standard_rig``, the live session's facing probe)."""
+        offsets = self._asm.offsets
+        return not offsets.capturing and offsets.rest_pose() is None
+
 
 class OscVrchatSource(OscUdpSource):
     """VRChat OSC trackers receiver (``format=vrchat``, default port 9000): joints Head,

@@ -126,13 +126,15 @@ class Pipeline:
     replays know it, IMU suits do not), or a callable returning it once known and None
     before (a VMC sender's, from the bone positions of its first frames) - with it, and a
     behaviour library that names by posture, the identity tracker gets each frame's
-    rotations too and names by posture.
+    rotations too and names by posture.  ``standard``: a callable true once the source is
+    known to give no geometry while its rotations are from a T-pose (the standard T-pose's
+    is used then, ``rtseg.live.posture_switch``).
     """
 
     def __init__(self, joint_names: list[str], parents: list[int], space: str,
                  frame_rate: float | None, config: SessionConfig,
                  features: Any = None, detectors: dict[str, OnlineDetector] | None = None,
-                 rest: Any = None) -> None:
+                 rest: Any = None, standard: Any = False) -> None:
         self.joint_names = list(joint_names)
         self.parents = list(parents)
         self.space = space
@@ -200,7 +202,8 @@ class Pipeline:
         #: (``process(identify=False)``)
         self._identity_due: tuple[int, np.ndarray, list[PipelineCut], np.ndarray] | None = None
         #: whether behaviour names use posture (made when the library and rest say so)
-        self.posture = SessionPosture(self.joint_names, self.parents, space, rest)
+        self.posture = SessionPosture(self.joint_names, self.parents, space, rest, standard,
+                                      self.frame_rate)
 
     def _feature_joints(self) -> np.ndarray:
         """Input joints the pose features depend on: the profile's joints and, for global
@@ -369,6 +372,8 @@ class Pipeline:
         else:
             np.copyto(self._prev_fed, q)
         if self.identity is not None:
+            if self.posture.probe is not None:
+                self.posture.observe(q, self.identity)
             if identify:
                 self._identify(index, x, out, q)
             else:

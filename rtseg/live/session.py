@@ -274,7 +274,8 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
         self.frame_rate = float(rate or DEFAULT_FRAME_RATE)
         self._rate_check = DeclaredRateCheck(float(rate)) if rate else None
         self.pipeline = Pipeline(names, parents, space, self.frame_rate, self.config,
-                                 rest=lambda: getattr(src, "rest_pose", None))
+                                 rest=lambda: getattr(src, "rest_pose", None),
+                                 standard=lambda: getattr(src, "t_pose_without_geometry", False))
         if hasattr(self.pipeline.features, "summary"):
             line = self.pipeline.features.summary()
             log.info("%s", line)
@@ -440,6 +441,8 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
             try:
                 self.recorder.note_session(self.loss_counts())
                 rest = getattr(self.source, "rest_pose", None)
+                if rest is None and self.pipeline is not None:
+                    rest = self.pipeline.posture.geometry     # the standard T-pose's
                 if rest is not None:
                     self.recorder.note_rest(rest.positions)
             except Exception as exc:  # pragma: no cover - defensive
