@@ -132,3 +132,34 @@ def test_a_live_vmc_sender_without_positions_names_by_the_standard_pose(tmp_path
     rest = RestPose.find(read_take(rec))
     assert rest is not None
     np.testing.assert_allclose(rest.positions, sp.geometry.positions)
+
+
+def test_an_axis_stream_without_displacement_gets_the_standard_pose_by_its_knees(take):
+    """Over real UDP: Axis binary frames without displacement carry no geometry; the
+    source says so, and its (global) rotations are from a T-pose: the probe decides on
+    them and the posture is the performer's by the standard pose."""
+    from rtseg.drivers.axis.source import AxisBinarySource
+    from rtseg.simulators.axis_sender import AxisSender
+    from test_vmc_live import read_all
+    src = AxisBinarySource("127.0.0.1", 0, queue_size=8192)
+    try:
+        assert not src.t_pose_without_geometry
+        with AxisSender(take, "binary", "127.0.0.1", src.port, speed=8.0,
+                        displacement=False) as snd:
+            snd.wait(10.0)
+        frames = read_all(src)
+        assert src.rest_pose is None and src.t_pose_without_geometry
+    finally:
+        src.close()
+    assert len(frames) == take.n_frames
+    quats = np.stack([f.quats for f in frames])
+    p = FacingProbe(src.joint_names, src.parents, src.space)
+    for q in quats[::4]:
+        p.observe(q)
+    assert p.result is not None and p.turned is False
+    rows = Posture(src.joint_names, src.parents, p.result, src.space).transform(quats)
+    ref = Posture(take.joint_names, take.parents, standard_rest(take.joint_names, take.parents),
+                  take.space).transform(take.quats)
+    # Axis's rig has more spine and neck joints than the take and Euler angles on the
+    # wire: within 0.03 leg lengths
+    assert np.abs(rows - ref).max() < 0.03

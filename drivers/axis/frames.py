@@ -59,6 +59,9 @@ class AxisFrames:
         #: frame with displacement that gives one (``pose.rest_pose``), else None
         self.rest: RestPose | None = None
         self._rest_tries = 0
+        #: True once the stream is known to give no rest geometry (a frame without
+        #: displacement, or ``REST_TRIES`` with it that gave none)
+        self.no_geometry = False
 
     def warn(self, key: str, now: float, msg: str, *args) -> None:
         if now - self._log_at.get(key, -math.inf) >= 5.0:
@@ -101,9 +104,14 @@ class AxisFrames:
 
     def _note_rest(self, f: AxisFrame) -> None:
         """Take the rest geometry from ``f`` (the first few frames with displacement)."""
-        if self.rest is None and f.with_disp and self._rest_tries < REST_TRIES:
-            self._rest_tries += 1
-            self.rest = rest_pose(f.values, f.with_ref, self.unit_scale)
+        if self.rest is not None or self.no_geometry:
+            return
+        if not f.with_disp:
+            self.no_geometry = True
+            return
+        self._rest_tries += 1
+        self.rest = rest_pose(f.values, f.with_ref, self.unit_scale)
+        self.no_geometry = self.rest is None and self._rest_tries >= REST_TRIES
 
     def _convert(self, f: AxisFrame, now: float) -> Frame:
         self._note_rest(f)

@@ -105,6 +105,13 @@ class _AvatarFrames:
         (``AxisFrames.rest``), or None."""
         return self._frames.rest
 
+    @property
+    def t_pose_without_geometry(self) -> bool:
+        """True once the stream is known to give no rest geometry (no displacement):
+        Axis Neuron's skeleton rests in a T-pose, so names may use the standard T-pose's
+        geometry (``rtseg.core.standard_rig``, the live session's facing probe)."""
+        return self._frames.no_geometry
+
 
 class AxisBinarySource(_AvatarFrames, OscUdpSource):
     """Axis binary BVH frames on a UDP socket (see module docstring).  ``.port``: bound
