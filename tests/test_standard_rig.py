@@ -163,3 +163,44 @@ def test_an_axis_stream_without_displacement_gets_the_standard_pose_by_its_knees
     # Axis's rig has more spine and neck joints than the take and Euler angles on the
     # wire: within 0.03 leg lengths
     assert np.abs(rows - ref).max() < 0.03
+
+
+#: the ASF people the standard pose's proportions are the mean of (module doc)
+PEOPLE = {"hdm05/amc": ("bd_001", "bk_001", "dg_001"),
+          "cmu_single/amc": ("10_01", "16_01", "64_01")}
+
+
+def test_the_standard_proportions_are_the_mean_of_six_people(data_dir):
+    """Heights and arm spans of T_POSE against the mean of the six ASF people's rest
+    geometry (leg lengths about the hips' midpoint). The table is symmetric with straight
+    legs, where the ASF rest pose spreads them, and its pelvis and spine are a humanoid
+    avatar's, not the ASF root's."""
+    from rtseg.core.rig import map_rig
+    from rtseg.core.standard_rig import T_POSE
+    from rtseg.drivers.readers import read_take
+    found = {}
+    for folder, takes in PEOPLE.items():
+        for name in takes:
+            path = data_dir / folder / f"{name}.amc"
+            if not path.is_file():
+                pytest.skip(f"{path} not found")
+            t = read_take(path)
+            R = RestPose.of_take(t).positions
+            idx = map_rig(t.joint_names, t.parents).index
+            loc = {c: R[idx[c]] for c in T_POSE if c in idx}
+            for side in ("left", "right"):
+                for limb, end in (("lower_arm", "hand"), ("lower_leg", "foot")):
+                    loc[f"{side}_{end}"] = R[t.parents.index(idx[f"{side}_{limb}"])]
+            mid = 0.5 * (loc["left_upper_leg"] + loc["right_upper_leg"])
+            leg = (np.linalg.norm(loc["left_lower_leg"] - loc["left_upper_leg"])
+                   + np.linalg.norm(loc["left_foot"] - loc["left_lower_leg"]))
+            for c, v in loc.items():
+                found.setdefault(c, []).append((v - mid) / leg)
+    mean = {c: np.mean(v, axis=0) for c, v in found.items()}
+    for c in T_POSE:
+        if c in ("pelvis", "spine"):
+            continue
+        assert abs(T_POSE[c][1] - mean[c][1]) < 0.03, c                  # heights
+    for side in ("left", "right"):
+        for c in (f"{side}_upper_arm", f"{side}_lower_arm", f"{side}_hand", f"{side}_upper_leg"):
+            assert abs(T_POSE[c][0] - mean[c][0]) < 0.02, c              # spans

@@ -5,8 +5,9 @@ Posture (``rtseg.core.posture``) needs the rig's rest geometry. Where the source
 but its rotations are known to be from a T-pose (every local rotation the identity in a
 T-pose, rtseg's frame: right-handed, Y up, as VRM avatars' normalised bones are), the
 joints' rest locations are taken from :data:`T_POSE`: a symmetric T-pose with straight
-legs, the proportions of the mean of six ASF people of ``../shared/data`` (hdm05 bd, bk,
-dg; cmu_single 10, 16, 64) in leg lengths. Another person's proportions name as well as
+legs, its heights and arm spans the mean of six ASF people of ``../shared/data`` (hdm05 bd,
+bk, dg; cmu_single 10, 16, 64) in leg lengths, rounded (checked by
+``tests/test_standard_rig.py``). Another person's proportions name as well as
 the performer's own (``docs/identity.md``, "Posture without the sender's geometry"); the
 facing does not: a T-pose facing +Z with the left arm along +X and the same pose turned
 half a turn about Y (VRM 0.x and 1.0 avatars face opposite ways) give the same rotations
