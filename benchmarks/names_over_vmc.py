@@ -8,7 +8,8 @@ PERF_DIR: labelled performances (``benchmarks/splice.py`` output, or any folder
 ``rtseg evaluate --group spliced`` reads); LIB: a behaviour library (``rtseg learn``).
 Each performance is sent by the VMC simulator (``rtseg.simulators.vmc_sender.VmcSender``,
 ``--speed`` times its rate; bone positions = the take's rest offsets, as an avatar's, or
-zeros with ``--no-positions``, as a sender without them) to a ``LiveSession`` on
+zeros with ``--no-positions``, as a sender without them: the session then takes the
+standard T-pose once its facing probe has decided) to a ``LiveSession`` on
 ``osc://127.0.0.1:PORT?format=vmc`` naming with LIB; and replayed from the file through the
 same pipeline (``rtseg.evaluation.identity.run_identity``).  Printed for both: the named
 segments' summary (``rtseg.evaluation.library.named_summary``: named right, ``unknown``,

@@ -275,8 +275,9 @@ def test_identity_speed_times_naming_with_posture(tmp_path):
 
 def test_names_over_vmc_compares_a_live_vmc_session_with_the_file_replay(tmp_path):
     """benchmarks/names_over_vmc.py on one synthetic performance (real UDP): the VMC
-    session receives every frame and names by posture, as the file replay does, unless the
-    sender sends no positions."""
+    session receives every frame and names by posture, as the file replay does; a sender
+    without positions names by posture only once the facing probe has decided (the walk's
+    decision comes before it: the standard T-pose, rtseg.core.standard_rig)."""
     from rtseg.drivers.readers import write_take
     from rtseg.evaluation.online import live_config
     from rtseg.library.examples import learn, synthetic_examples
@@ -295,8 +296,10 @@ def test_names_over_vmc_compares_a_live_vmc_session_with_the_file_replay(tmp_pat
         doc = json.loads(r.stdout)
         (s,) = doc["sessions"]
         assert s["frames_received"] == s["frames_sent"] and s["decisions"] >= 1
-        assert (s["posture_namings"] == s["decisions"]) is by_posture
-        assert (s["posture_namings"] == 0) is not by_posture
+        if by_posture:
+            assert s["posture_namings"] == s["decisions"]
+        else:
+            assert 1 <= s["posture_namings"] < s["decisions"]
         assert doc["file_replay"]["segments"] >= 1
     r = _run("names_over_vmc.py", str(tmp_path / "nowhere"), str(tmp_path / "lib.json"))
     assert r.returncode == 2 and "names_over_vmc:" in r.stderr
