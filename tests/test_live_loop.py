@@ -679,3 +679,17 @@ def test_work_ahead_that_fails_is_counted_and_the_session_goes_on(caplog):
     assert summary.frames_processed == 600
     assert s.pipeline.stats.ahead_errors > 10
     assert "work ahead failed (RuntimeError: ahead broke" in caplog.text
+
+
+def test_the_last_status_states_the_input_rate_of_a_whole_span():
+    """The status sent as the session ends comes moments after the one before it: too short
+    a span to count frames over. It repeats the last rate instead of dividing a frame or two
+    by a few milliseconds (which said 2 648 Hz for a 120 Hz suit)."""
+    src = FakeSource(frames(100_000, 10**9), pace=1.0 / 200.0)       # about 200 Hz
+    s, summary = session(src, {"calibration": {"mode": "none"}, "status": {"interval": 0.25}},
+                         duration=1.6)
+    status = [e for e in s.publishers.events if isinstance(e, StatusEvent)]
+    assert len(status) >= 4 and status[-1].alive == 0
+    whole = [e.frame_rate for e in status[1:-1]]
+    assert status[-1].frame_rate == pytest.approx(whole[-1])
+    assert all(50.0 < r < 400.0 for r in whole + [status[-1].frame_rate])

@@ -48,9 +48,10 @@ def test_vmc_at_120_hz_into_rate_60_warns_over_udp(caplog):
     assert len(warned) == 1 and summary.frames_received > 240
 
 
-def _vmc_session_cuts(take, declared: float, caplog) -> tuple[list, object, list[str]]:
+def _vmc_session_cuts(take, declared: float | None, caplog) -> tuple[list, object, list[str]]:
     """The primary detector's cuts of a live session on a VMC sender playing ``take`` at 4x
-    (its /VMC/Ext/T keeps the take's 120 Hz) over real UDP, read with ``rate=declared``."""
+    (its /VMC/Ext/T keeps the take's rate) over real UDP, read with ``rate=declared`` (no
+    rate= when None); the rate warnings."""
     import time as _time
 
     from rtseg.drivers import open_source
@@ -58,7 +59,8 @@ def _vmc_session_cuts(take, declared: float, caplog) -> tuple[list, object, list
     from rtseg.live.session import LiveSession
     from rtseg.publishers import PublisherSet
     from rtseg.simulators.vmc_sender import VmcSender
-    src = open_source(f"osc://127.0.0.1:0?format=vmc&rate={declared:g}&queue=4096")
+    rate = "" if declared is None else f"&rate={declared:g}"
+    src = open_source(f"osc://127.0.0.1:0?format=vmc{rate}&queue=4096")
     cuts: list = []
     sess = LiveSession(src, from_dict({"buffer": {"max_lag_seconds": 0.0}}),
                        publishers=PublisherSet(), handle_signals=False,
@@ -66,7 +68,7 @@ def _vmc_session_cuts(take, declared: float, caplog) -> tuple[list, object, list
                                   else None])
     caplog.clear()
     with caplog.at_level(logging.WARNING, logger="rtseg"):
-        sender = VmcSender(take, port=src.port, rate=120.0, speed=4.0)
+        sender = VmcSender(take, port=src.port, rate=take.frame_rate, speed=4.0)
         box: dict = {}
         t = threading.Thread(target=lambda: box.setdefault("s", sess.run()), daemon=True)
         t.start()
@@ -76,7 +78,8 @@ def _vmc_session_cuts(take, declared: float, caplog) -> tuple[list, object, list
             _time.sleep(1.0)
         sess.stop()
         t.join(20)
-    said = [r.getMessage() for r in caplog.records if "declared rate=" in r.getMessage()]
+    said = [r.getMessage() for r in caplog.records
+            if "declared rate=" in r.getMessage() or "declares no frame rate" in r.getMessage()]
     return cuts, sess, said
 
 
@@ -99,3 +102,19 @@ def test_a_sender_faster_than_declared_is_segmented_at_its_own_rate(caplog):
                                                          abs=0.03)
     assert all(c.detector_delay_ms == pytest.approx(d.detector_delay_ms, abs=30)
                for c, d in zip(wrong, right))
+
+
+def test_a_sender_without_a_declared_rate_is_segmented_at_its_clock_rate(caplog):
+    """A VMC sender at 60 Hz read without rate= (the session assumes 120 Hz): one warning
+    saying no rate was declared, and the session runs at the 60 Hz the sender's clock shows
+    - the same cuts as a session told rate=60."""
+    from rtseg.simulators.synth.motion import synthesize
+    take = synthesize("idle:4,walk:5,punch:5,squat:5", frame_rate=60.0, seed=0).take
+    none, sess, said = _vmc_session_cuts(take, None, caplog)
+    assert len(said) == 1 and "declares no frame rate" in said[0], said
+    assert "uses 60 Hz from now on" in said[0] and "add rate=60" in said[0]
+    assert sess.frame_rate == 60.0 and sess.pipeline.frame_rate == 60.0
+    right, sess2, said2 = _vmc_session_cuts(take, 60.0, caplog)
+    assert not said2 and sess2.frame_rate == 60.0
+    assert len(right) >= 2
+    assert [c.frame for c in none] == pytest.approx([c.frame for c in right], abs=2)

@@ -17,6 +17,10 @@ import numpy as np
 
 from rtseg.core.events import INPUT_COUNTERS, SENDER_COUNTERS, DropoutEvent, StatusEvent
 
+#: Shortest span (s) the status's input frame rate is counted over; a shorter one (the last
+#: status, sent when the session ends) repeats the last rate, or the whole session's.
+RATE_SPAN_S = 0.5
+
 log = logging.getLogger("rtseg.live.session")
 
 
@@ -98,8 +102,11 @@ class SessionHealth:
         return out
 
     def _status(self, now: float, alive: int = 1) -> StatusEvent:
-        dt = max(1e-9, now - self._status_t)
-        rate = (self.stats.frames_received - self._status_frames) / dt
+        dt = now - self._status_t
+        if dt >= RATE_SPAN_S:
+            rate = (self.stats.frames_received - self._status_frames) / dt
+        else:   # too short a span to count frames over (the last status, at the session's end)
+            rate = self._last_rate or self._input_rate()
         self._status_t, self._status_frames = now, self.stats.frames_received
         stale = int(self._joint_lost.sum()) if not self._source_lost else len(self._joint_lost)
         names = tuple(n for n, l in zip(self.pipeline.joint_names, self._joint_lost) if l)

@@ -2,7 +2,8 @@
 
 :class:`DeclaredRateCheck` watches the first ``window_s`` seconds (source clock when frames
 carry ``source_time``, else the receive clock) of a session whose source declared a nominal
-rate (``rate=`` in the URL).  The measured rate is frames elapsed per second, frames elapsed
+rate (``rate=`` in the URL), or of one whose source declared none (``assumed``: the
+session's default rate is checked the same way, and the warning says no rate was declared).  The measured rate is frames elapsed per second, frames elapsed
 taken from ``seq`` when frames carry it (so frames lost on the way do not lower it), else
 from the count of frames received.  A measured rate off the declared one by more than
 ``tolerance`` (a fraction, default 0.10) is a mismatch, warned once:
@@ -32,8 +33,10 @@ class DeclaredRateCheck:
     """Feed every frame (``feed``); returns a message once, when the declared rate is off."""
 
     def __init__(self, declared_hz: float, window_s: float = 2.0,
-                 tolerance: float = 0.10) -> None:
+                 tolerance: float = 0.10, assumed: bool = False) -> None:
         self.declared_hz = float(declared_hz)
+        #: the source declared no rate: ``declared_hz`` is the session's assumption
+        self.assumed = bool(assumed)
         self.window_s = float(window_s)
         self.tolerance = float(tolerance)
         self.done = False
@@ -80,6 +83,18 @@ class DeclaredRateCheck:
         self.measured_hz = frames / span
         if abs(self.measured_hz - self.declared_hz) <= self.tolerance * self.declared_hz:
             return None
+        if self.assumed:
+            what = (f"the source declares no frame rate (rtseg assumed "
+                    f"{self.declared_hz:g} Hz)")
+            if self._use_source:
+                return (f"{what}; its clock says {self.measured_hz:.1f} Hz (measured over "
+                        f"{span:.1f} s of its time): the session uses "
+                        f"{round(self.measured_hz, 1):g} Hz from now on (detectors started "
+                        f"again); add rate={round(self.measured_hz):g} to the source URL to "
+                        f"start at it")
+            return (f"{what}; frames arrive at {self.measured_hz:.1f} Hz (measured over "
+                    f"{span:.1f} s of receive time; the frames carry no time): the assumed "
+                    f"rate is kept; add rate= to the source URL")
         if self._use_source:
             return (f"declared rate={self.declared_hz:g} Hz but the source's clock says "
                     f"{self.measured_hz:.1f} Hz (measured over {span:.1f} s of its time); "
@@ -100,7 +115,10 @@ def switch_rate(session: Any, rate: float, upto: int) -> None:
     from rtseg.live.outputs import wire_methods
     from rtseg.live.pipeline import Pipeline
     old = session.pipeline
-    pipe = Pipeline(old.joint_names, old.parents, old.space, rate, session.config)
+    posture = old.posture          # the rig's geometry, or how to find it, carries over
+    pipe = Pipeline(old.joint_names, old.parents, old.space, rate, session.config,
+                    rest=posture.geometry if posture.geometry is not None else posture.rest,
+                    standard=posture.standard)
     ring = session.ring
     J = len(old.joint_names)
     start = max(0, ring.oldest)

@@ -270,9 +270,10 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
         space = getattr(src, "space", "global")
         rate = getattr(src, "frame_rate", None)
         if not rate:
-            log.warning("source has no nominal frame rate; assuming %.0f Hz", DEFAULT_FRAME_RATE)
+            log.warning("source has no nominal frame rate; assuming %.0f Hz until its clock "
+                        "says otherwise (add rate= to the URL)", DEFAULT_FRAME_RATE)
         self.frame_rate = float(rate or DEFAULT_FRAME_RATE)
-        self._rate_check = DeclaredRateCheck(float(rate)) if rate else None
+        self._rate_check = DeclaredRateCheck(self.frame_rate, assumed=not rate)
         self.pipeline = Pipeline(names, parents, space, self.frame_rate, self.config,
                                  rest=lambda: getattr(src, "rest_pose", None),
                                  standard=lambda: getattr(src, "t_pose_without_geometry", False))
