@@ -77,6 +77,10 @@ def test_learn_from_a_parent_of_sources_of_two_rigs_and_frame_rates(parent, tmp_
     assert p.returncode == 0, p.stderr
     assert "s1_001" in p.stderr and "shorter than 2 s" in p.stderr
     assert "12 already in the library" in p.stderr and lib.read_bytes() == before
+    # the short take alone: nothing could be learned, as for a new library: an error
+    p = _learn(str(lib), "--take", str(short / "bvh" / "s1_001.bvh"), "--label", "walk")
+    assert p.returncode == 2 and "no example long enough to learn from" in p.stderr
+    assert lib.read_bytes() == before
     # one take of it given by hand (the same frames: rest at the ends dropped as --from
     # does) and a copy of the source folder under another name: the same motion
     copy = tmp_path / "copy"
@@ -169,3 +173,24 @@ def test_a_lone_short_take_is_kept_when_one_window_fits(tmp_path):
     assert sorted(e["source"] for e in lib.examples) == ["bn2_001", "bn2_044"]
     assert sum(n == "raise_up_right_hand" for n in lib.names) == 1      # one window
     assert any(n.startswith("bn2_032 ") and "shorter than" in n for n in notes), notes
+
+
+def test_learn_with_a_profile_leaves_out_the_rigs_that_cannot_give_it(tmp_path):
+    """--profile cmu14 computes the examples' features with it: the takes of a rig with the
+    CMU ASF joint names are learned, those of another rig are left out in one note line
+    naming the joint they lack (not one error for the whole run)."""
+    root = tmp_path / "data"
+    make_source(root / "asf", ["c1", "c2"], ["walk", "squat"], rig="cmu-asf")
+    make_source(root / "bvh", ["d1", "d2"], ["walk", "squat"], rig="cmu-bvh", seed0=5)
+    lib = tmp_path / "lib.json"
+    p = _learn(str(lib), "--from", str(root), "--profile", "cmu14")
+    assert p.returncode == 0, p.stderr
+    got = load(lib)
+    assert got.profile == "cmu14" and got.dims == 56
+    assert {e["person"] for e in got.examples} == {"c1", "c2"}
+    left = [ln for ln in p.stderr.splitlines() if "left out" in ln]
+    assert len(left) == 1 and left[0].startswith("rtseg learn: note: 4 takes left out (")
+    assert "of skeleton profile 'cmu14' is missing" in left[0]
+    # a profile no rig of the folder can give: nothing to learn, one line, exit 2
+    p = _learn(str(tmp_path / "none.json"), "--from", str(root / "bvh"), "--profile", "cmu14")
+    assert p.returncode == 2 and "no labelled examples" in p.stderr

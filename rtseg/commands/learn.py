@@ -136,6 +136,33 @@ def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
     return out
 
 
+def grouped_notes(notes: list[str], show: int = 4) -> list[str]:
+    """``notes`` with the takes left out for one reason ("TAKE: left out: WHY") in one line
+    each ("N takes left out (A, B, ... and M more): WHY"), in the order first met."""
+    out: list[str] = []
+    by_why: dict[str, list[str]] = {}
+    for n in notes:
+        take, sep, why = n.partition(": left out: ")
+        if not sep:
+            out.append(n)
+            continue
+        if why not in by_why:
+            by_why[why] = []
+            out.append(why)
+        by_why[why].append(take)
+    lines = []
+    for n in out:
+        takes = by_why.get(n)
+        if takes is None:
+            lines.append(n)
+        elif len(takes) == 1:
+            lines.append(f"{takes[0]}: left out: {n}")
+        else:
+            more = f" and {len(takes) - show} more" if len(takes) > show else ""
+            lines.append(f"{len(takes)} takes left out ({', '.join(takes[:show])}{more}): {n}")
+    return lines
+
+
 def run(args: argparse.Namespace) -> int:
     from rtseg.library.behaviours import DEFAULT_STEP_S
     from rtseg.library.file import load
@@ -151,6 +178,12 @@ def run(args: argparse.Namespace) -> int:
     if not takes and not args.from_dir:
         raise ValueError("nothing to learn from: give --take FILE --label NAME or --from DATA_DIR")
     cfg, _ = live_config(args.config)
+    if args.profile:             # the examples' features are computed with that profile
+        have = cfg["features.profile"]
+        if have and have != args.profile:
+            raise ValueError(f"--profile {args.profile}: the configuration's [features] "
+                             f"profile is {have!r}")
+        cfg["features.profile"] = args.profile
     examples = []
     for t in takes:
         if not t.get("label"):
@@ -185,14 +218,18 @@ def run(args: argparse.Namespace) -> int:
             src_notes.append(f"{e.take} [{e.frames[0]}:{e.frames[1]}) {e.name}: already in "
                              f"the library as {was!r}; not added again")
     held = sum(e.key in known for e in repeated)
+    short: list[str] = []
     if old is not None:          # too short to learn: noted here, so they are not "new"
         examples, short = learnable(examples, step_s=step)
         src_notes += short
-    for n in src_notes:
+    for n in grouped_notes(src_notes):
         print(f"rtseg learn: note: {n}", file=sys.stderr)
     if held:
         print(f"rtseg learn: {held} already in the library", file=sys.stderr)
     if old is not None and not examples:
+        if short and not held:      # as for a new library: nothing given could be learned
+            raise ValueError(f"no example long enough to learn from (notes above); {path} "
+                             f"is unchanged")
         if args.threshold is not None:
             raise ValueError(f"nothing new to learn: {held} already in the library "
                              f"(--threshold applies to a library being learned)")
@@ -260,9 +297,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--exclude-person", action="append", metavar="S",
                    help="with --from: leave out subject S (repeatable)")
     p.add_argument("--profile", metavar="NAME",
-                   help="keep the examples of this feature profile (the features are the "
-                        "configuration's; default: the most common profile among the "
-                        "examples; the others are left out with a note)")
+                   help="learn with this feature profile (rtseg.core.profiles: canonical, "
+                        "cmu14, ...): takes whose rig cannot give it are left out with a note; "
+                        "default: the configuration's ([features] profile), else each rig's "
+                        "own, and the most common among the examples is kept")
     p.add_argument("--threshold", type=float, metavar="D",
                    help="unknown beyond this distance (default: calibrated on the library)")
     p.add_argument("--step", type=float, metavar="S",

@@ -71,7 +71,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "example")
     p.add_argument("--identity-threshold", type=float, metavar="D", default=None,
                    help="tracker distance at or below which a segment is an earlier "
-                        "behaviour (default 4.5, chosen leave-one-take-out; see docs/identity.md)")
+                        "behaviour (default 4.0, as rtseg live's; see docs/identity.md)")
     a = p.add_argument_group("archives (many takes)")
     a.add_argument("--out", metavar="FILE",
                    help="write records to FILE (.jsonl, or .parquet with pyarrow); takes "

@@ -77,7 +77,10 @@ def examples_from_source(src: str | Path, config: Any, people: Iterable[str] | N
             pending: list[tuple[Any, Example]] = []      # (take, example) too short alone
             need = min_example_s * g.frame_rate          # fed rows (one per frame)
             for r in sorted(pool.takes, key=lambda r: r.name):
-                X, index, profile = take_rows(r.take, config)
+                rows_of = _rows_or_note(r.take, r.name, config, notes)
+                if rows_of is None:
+                    continue
+                X, index, profile = rows_of
                 e = Example(behaviour, r.name, subject, X, index, r.trim, profile,
                             float(g.frame_rate), motion_key(r.take, *r.trim))
                 i, j = e.rows()
@@ -119,6 +122,20 @@ def examples_from_source(src: str | Path, config: Any, people: Iterable[str] | N
     return out
 
 
+def _rows_or_note(take: Any, name: str, config: Any, notes: list[str] | None
+                  ) -> tuple[Any, Any, str] | None:
+    """``take_rows`` of ``take``, or None with a line in ``notes`` when the configuration's
+    feature profile cannot be computed on its rig (a joint it needs is missing)."""
+    from rtseg.core.rig import RigError
+    try:
+        return take_rows(take, config)
+    except (KeyError, RigError) as exc:
+        if notes is not None:
+            why = str(exc.args[0] if isinstance(exc, KeyError) and exc.args else exc)
+            notes.append(f"{name}: left out: {why.split('; available')[0]}")
+        return None
+
+
 def examples_from_dir(data_dir: str | Path, config: Any,
                       people: Iterable[str] | None = None,
                       takes: Iterable[str] | None = None,
@@ -146,7 +163,10 @@ def examples_from_dir(data_dir: str | Path, config: Any,
                 (keep_p is not None and lt.name.split("_")[0] not in keep_p):
             continue
         take = lt.load()
-        X, index, profile = take_rows(take, config)
+        rows_of = _rows_or_note(take, lt.name, config, notes)
+        if rows_of is None:
+            continue
+        X, index, profile = rows_of
         P = posture_rows(take, index)
         truth = truth_labels(lt, take.n_frames)
         mocap6 = "mocap6" in lt.labels.source
