@@ -127,16 +127,26 @@ def resolve(take: Take, suit: SuitProfile, family: str | None = None,
         try:
             smap = detect_family(names, rest)
         except RetargetError:
-            if not allow_missing:
-                raise RetargetError(
-                    f"take {where}: no known skeleton family ({', '.join(MAPS)}) names any "
-                    f"of suit {suit.name!r}'s bones {', '.join(rest)}; joints in the take: "
-                    f"{', '.join(names)}; pass a joint map (suit bone -> take joint)") from None
-            smap = MAPS["unity"]
-    cols = resolve_names(names, bones, smap)
+            smap = None
+    cols = resolve_names(names, bones, smap) if smap is not None else [-1] * len(bones)
+    fam = smap.name if smap is not None else "topology"
+    if family is None and min(cols, default=0) < 0:
+        # names alone left bones out: the rig's canonical joints by names and topology
+        # (rtseg.core.rig, as the readers map any humanoid rig), when they place more
+        topo = topology_columns(take, suit)
+        if topo is not None and sum(c >= 0 for c in topo) > sum(c >= 0 for c in cols):
+            cols, fam = topo, "topology"
     for k, j in overrides.items():
         cols[k] = j
+    if not any(c >= 0 for c in cols):
+        raise RetargetError(
+            f"take {where}: no joint for any of suit {suit.name!r}'s bones: no known skeleton "
+            f"family ({', '.join(MAPS)}) names them and the rig's canonical joints cannot be "
+            f"found by names and topology; joints in the take: {', '.join(names)}; pass a "
+            f"joint map (suit bone -> take joint)")
     missing = tuple(b for b, c in zip(bones, cols) if c < 0)
+    if smap is None:
+        smap = MAPS["unity"]
     if missing and not allow_missing:
         wanted = "; ".join(f"{b} (looked for {' or '.join(candidates(b, smap)) or 'nothing: not in the map'})"
                            for b in missing)
@@ -144,7 +154,31 @@ def resolve(take: Take, suit: SuitProfile, family: str | None = None,
             f"take {where} (skeleton map {smap.name!r}) has no joint for {len(missing)} of "
             f"suit {suit.name!r}'s bones: {wanted}; joints in the take: {', '.join(names)}. "
             f"Map them (suit bone -> take joint) or allow missing sensors")
-    return Resolution(smap.name, tuple(cols), missing)
+    return Resolution(fam, tuple(cols), missing)
+
+
+def topology_columns(take: Take, suit: SuitProfile) -> list[int] | None:
+    """``Resolution.columns`` by canonical joints (``rtseg.core.rig.map_rig`` of the suit's
+    bones and of the take's joints, by names and topology): each canonical joint's suit bone
+    gets the take's, and the first bone below each lower arm and leg (hand, foot) the take's
+    first joint below it; other bones -1.  None when either rig cannot be mapped."""
+    from rtseg.core.rig import CANONICAL, RigError, map_rig
+    sp, tp = [int(p) for p in suit.parents], [int(p) for p in take.parents]
+    try:
+        rs = map_rig(list(suit.bones), sp)
+        rt = map_rig(list(take.joint_names), tp)
+    except RigError:
+        return None
+    cols = [-1] * len(suit.bones)
+    for c in CANONICAL:
+        cols[rs.index[c]] = rt.index[c]
+    for side in ("left", "right"):
+        for limb in ("lower_arm", "lower_leg"):
+            below_s = [k for k, p in enumerate(sp) if p == rs.index[f"{side}_{limb}"]]
+            below_t = [k for k, p in enumerate(tp) if p == rt.index[f"{side}_{limb}"]]
+            if below_s and below_t:
+                cols[below_s[0]] = below_t[0]
+    return cols
 
 
 # --------------------------------------------------------------------------- kinematics

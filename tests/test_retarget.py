@@ -277,3 +277,27 @@ def test_every_map_covers_every_default17_bone():
     low = {b.lower() for b in SUIT.bones}
     for m in MAPS.values():
         assert low <= {k.lower() for k in m.bones}, m.name
+
+
+def test_a_rig_no_family_names_is_placed_by_its_canonical_joints():
+    """Joint names no skeleton map knows (a prefix on every joint, as exporters write) are
+    placed as the readers map any rig (rtseg.core.rig: names and topology): every default17
+    bone gets the joint it has in the plain rig, and the suit's orientations are the same."""
+    import sys
+    sys.path.insert(0, str(Path(__file__).parent))
+    from rig_variants import in_rig
+    take = in_rig(synthesize("walk:2,squat:2", seed=2).take, "bandai")
+    renamed = Take([f"Character1_{n}" for n in take.joint_names], take.parents,
+                   take.frame_rate, take.quats, take.root_position, take.space, None,
+                   take.length_unit, "prefixed")
+    plain, pref = resolve(take, SUIT), resolve(renamed, SUIT)
+    assert plain.family == "bandai" and pref.family == "topology" and not pref.missing
+    assert pref.columns == plain.columns
+    a, b = retarget(take, SUIT), retarget(renamed, SUIT)
+    np.testing.assert_allclose(a.local(), b.local())
+    # names that say nothing and a flat hierarchy: one error, nothing placed
+    flat = Take([f"j{k:02d}" for k in range(len(take.joint_names))],
+                [-1] + [0] * (len(take.joint_names) - 1), take.frame_rate, take.quats,
+                None, "local", None, take.length_unit, "generic")
+    with pytest.raises(RetargetError, match="no joint for any of suit 'default17''s bones"):
+        resolve(flat, SUIT, allow_missing=True)
