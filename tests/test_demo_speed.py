@@ -107,3 +107,26 @@ def test_demo_refuses_a_file_that_is_not_a_library(tmp_path):
         capture_output=True, text=True, timeout=60, cwd=REPO)
     assert proc.returncode == 2
     assert len(proc.stderr.strip().splitlines()) == 1 and "not a behaviour library" in proc.stderr
+
+
+def _summary(**kw):
+    from types import SimpleNamespace
+    base = dict(frames_received=172, frames_processed=172, duration_s=10.0, dropped=0,
+                overload_drops=0, overruns=0, stop_reason="duration reached")
+    base.update(kw)
+    return SimpleNamespace(**base)
+
+
+@pytest.mark.parametrize("kw, warned", [
+    ({}, True),                                                   # the loop fell behind
+    ({"dropped": 1009}, False),                                   # lost on the link (--faults)
+    ({"dropped": 1009, "overload_drops": 1009}, True),            # dropped by the loop itself
+    ({"stop_reason": "SIGTERM"}, False),                          # the user stopped it
+    ({"stop_reason": "SIGINT"}, False),
+])
+def test_the_speed_warning_blames_the_loop_only_for_frames_it_missed(kw, warned, capsys):
+    from types import SimpleNamespace
+    from rtseg.commands.demo import speed_check
+    args = SimpleNamespace(duration=10.0, rate=120.0, speed=1.0)
+    assert speed_check(_summary(**kw), args) == 0
+    assert ("not the --speed 1 asked for" in capsys.readouterr().err) is warned

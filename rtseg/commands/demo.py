@@ -23,6 +23,7 @@ ends by itself after ``--duration`` seconds (default 60).  Ctrl-C stops it clean
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 from rtseg.library.file import save as save_library
@@ -88,11 +89,16 @@ def _run(args: argparse.Namespace, cfg, script: str, library: str = "") -> int:
     """The demo proper: synthesise, play on a pty, run the live session on it
     (``library``: what the demo's own library holds, for the console; "" without it)."""
     from rtseg.simulators.faults import FaultConfig
-    from rtseg.simulators.serial_device import SerialSuit
-    from rtseg.simulators.synth.motion import ScriptError, synthesize
+    from rtseg.simulators.serial_device import READER_SETTLE_S, SerialSuit
+    from rtseg.simulators.synth.motion import ScriptError, parse_script, synthesize
     try:
         faults = FaultConfig.parse(args.faults)
-        synth = synthesize(script, frame_rate=args.rate, seed=args.seed)
+        items = parse_script(script)
+        # a script shorter than --duration is performed again (blended into its own start,
+        # its transitions in --truth) rather than the suit jumping back to the first frame
+        total = sum(secs for _, secs in items)
+        times = max(1, math.ceil(args.duration / total)) if total > 0 else 1
+        synth = synthesize(items * times, frame_rate=args.rate, seed=args.seed)
     except (ScriptError, ValueError) as exc:
         print(f"rtseg demo: {exc}", file=sys.stderr)
         return 2
@@ -125,10 +131,15 @@ def _run(args: argparse.Namespace, cfg, script: str, library: str = "") -> int:
               f"performance{wall}, Ctrl-C to stop", file=sys.stderr)
         if args.truth:
             for tr in synth.transitions:
+                if tr.mid / args.rate > args.duration:
+                    break
                 print(f"truth: {tr.before} -> {tr.after} at frame {tr.mid} "
                       f"(t={tr.mid / args.rate:.2f} s, blend {tr.lo}..{tr.hi})", file=sys.stderr)
         monitor = demo_monitor(args)
-        return run_session(url, cfg, args.duration / args.speed, args.quiet, monitor=monitor,
+        # the session's clock starts when it opens the port, the suit's performance
+        # READER_SETTLE_S later (a board booting on the port's DTR): that much more wall time
+        return run_session(url, cfg, args.duration / args.speed + READER_SETTLE_S, args.quiet,
+                           monitor=monitor,
                            check=lambda summary: speed_check(summary, args))
     finally:
         suit.stop()
@@ -149,13 +160,20 @@ def speed_check(summary, args: argparse.Namespace) -> int:
     wall = max(summary.duration_s, 1e-9)
     reached = done / args.rate / wall               # performance seconds per wall second
     if done == 0:
+        if getattr(args, "faults", None) and not summary.frames_received:
+            why = f"--faults {args.faults} let none through"
+        else:
+            why = (f"--speed {args.speed:g} leaves the session {args.duration / args.speed:.2f} s, "
+                   f"too short to start and process any (lower --speed, or raise --duration)")
         print(f"rtseg demo: error: no frame processed ({summary.frames_received} received) "
-              f"in {summary.duration_s:.1f} s of wall-clock time: --speed {args.speed:g} "
-              f"leaves the session {args.duration / args.speed:.2f} s, too short to start "
-              f"and process any (lower --speed, or raise --duration)",
-              file=sys.stderr)
+              f"in {summary.duration_s:.1f} s of wall-clock time: {why}", file=sys.stderr)
         return 1
-    if done < KEPT_UP * due:
+    if summary.stop_reason != "duration reached":
+        return 0                    # stopped by the user or the source: not a speed matter
+    # frames lost on the way (--faults, a corrupt link: gaps in the sequence numbers) were
+    # never the loop's to keep up with
+    lost = max(0, summary.dropped - summary.overload_drops - summary.overruns)
+    if done + lost < KEPT_UP * due:
         print(f"rtseg demo: warning: processed {done} of the {due} frames of "
               f"{args.duration:g} s of performance ({100 * done / due:.0f} %) in "
               f"{summary.duration_s:.1f} s: the loop reached x{reached:.1f} of real time "
