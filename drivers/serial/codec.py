@@ -75,7 +75,8 @@ What the receiver does with each message (counters in :class:`DecoderStats`):
   decoded frame for the caller to ignore.
 - bytes before the first delimiter after start/reset are skipped (``skipped_bytes``):
   the receiver cannot know where that message began.  A run of more than
-  :data:`MAX_WIRE_BYTES` without a delimiter is discarded as ``corrupt``.
+  :data:`MAX_WIRE_BYTES` without a delimiter, before the first delimiter or after one, is
+  discarded: 1 in ``corrupt`` per run, its bytes in ``skipped_bytes``.
 
 Text format
 ===========
@@ -185,6 +186,12 @@ class SerialFrameDecoder:
         """Bytes held waiting for a delimiter."""
         return len(self._buf)
 
+    def take_pending(self) -> bytes:
+        """The bytes held waiting for a delimiter, forgotten here (for a caller that hands
+        the stream to another decoder)."""
+        buf, self._buf = self._buf, b""
+        return buf
+
     def feed(self, data: bytes | bytearray | memoryview) -> list[DecodedFrame]:
         """Decode everything completed by ``data``; keep the unfinished tail."""
         if not data:
@@ -195,7 +202,8 @@ class SerialFrameDecoder:
         stats = self.stats
         if not self._synced:
             if not parts:  # still no delimiter seen
-                if len(tail) > MAX_WIRE_BYTES:
+                if len(tail) > MAX_WIRE_BYTES:  # too long for a message: noise, discarded
+                    stats.corrupt += 1
                     stats.skipped_bytes += len(tail)
                     tail = b""
                 self._buf = tail

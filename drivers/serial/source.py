@@ -8,7 +8,8 @@ Options (all optional):
 
 =============  ==============================================================================
 ``baud``       line speed, default 921600 (use 115200 for typical text sketches)
-``format``     ``rtseg`` (binary, :mod:`rtseg.drivers.serial.codec`) or ``text``
+``format``     ``rtseg`` (binary, :mod:`rtseg.drivers.serial.codec`), ``text``, or ``auto``
+               (the default: binary, switching to text if text lines arrive first; below)
 ``suit``       suit profile name in ``config/suits.toml`` (default ``default17``)
 ``suits``      another suits TOML file to read the profile from
 ``stale``      seconds without a valid value before a sensor is reported lost (0.25)
@@ -45,6 +46,13 @@ Behaviour
 - Text format: no sequence numbers or device clock (``seq``/``source_time`` None); a
   partial frame is closed after a quiet gap of a third of a frame period (see
   ``rtseg.drivers.serial.codec`` for the other closing rules).
+- No ``format`` in the URL (or ``format=auto``): binary, but while no intact binary message
+  has arrived, 1 KB of text lines without a zero byte switch the source to the text
+  format for good (logged once; ``fmt`` then says ``text``).  ``format=rtseg`` never
+  switches.  Binary input that never forms a message is counted (``stats.corrupt``: one
+  per run too long for a message; ``skipped_bytes``: every byte outside messages) and a
+  warning every 4 KB of it (at most one per 5 s) names the likely cause - text lines: add
+  ``format=text`` (``rtseg.drivers.serial.stream``).
 """
 
 from __future__ import annotations
@@ -91,15 +99,15 @@ class SerialSource(QueuedSource):
 
     space = "global"
 
-    def __init__(self, path: str, baud: int = DEFAULT_BAUD, fmt: str = "rtseg",
+    def __init__(self, path: str, baud: int = DEFAULT_BAUD, fmt: str = "auto",
                  suit: str | SuitProfile = "default17", suits_path: str | None = None,
                  stale: float = 0.25, rate: float | None = None, queue_size: int = 256,
                  backoff_start: float = 0.05, backoff_max: float = 0.5, wait: bool = False,
                  exclusive: bool = True, read_timeout: float = 0.02,
                  on_dropout: Callable[[SensorEvent], None] | None = None) -> None:
         super().__init__()
-        if fmt not in ("rtseg", "text"):
-            raise SourceError(f"serial format must be 'rtseg' or 'text', not {fmt!r}")
+        if fmt not in ("rtseg", "text", "auto"):
+            raise SourceError(f"serial format must be 'rtseg', 'text' or 'auto', not {fmt!r}")
         if stale <= 0 or queue_size < 1 or backoff_start <= 0 or backoff_max < backoff_start:
             raise SourceError("serial source needs stale > 0, queue >= 1, 0 < backoff start <= max")
         try:
@@ -108,7 +116,6 @@ class SerialSource(QueuedSource):
             raise SourceError(f"serial source: {exc}") from None
         self.path = path
         self.baud = int(baud)
-        self.fmt = fmt
         self.stale = float(stale)
         self.joint_names = list(self.suit.bones)
         self.parents = list(self.suit.parents)
@@ -185,6 +192,17 @@ class SerialSource(QueuedSource):
         return self._stream.sensor_status
 
     @property
+    def fmt(self) -> str:
+        """The format read: ``rtseg`` or ``text`` (``text`` once format ``auto`` has seen
+        text lines)."""
+        return self._stream.fmt
+
+    @property
+    def skipped_bytes(self) -> int:
+        """Bytes received that were no part of any message (``SuitStream.skipped_bytes``)."""
+        return self._stream.skipped_bytes
+
+    @property
     def restarts(self) -> int:
         """Times the device's clock went back (the device restarted)."""
         return self._stream.restarts
@@ -228,7 +246,9 @@ class SerialSource(QueuedSource):
             log.warning("serial %s: reconnected", self.path)
         else:
             log.info("serial %s: open at %d baud, format %s, suit %s",
-                     self.path, self.baud, self.fmt, self.suit.name)
+                     self.path, self.baud,
+                     "rtseg (text if text lines arrive)" if self._stream.auto else self.fmt,
+                     self.suit.name)
         self._ever_connected = True
         self._connected.set()
         return True
@@ -480,7 +500,7 @@ def open_url(location: str, options: dict[str, str]) -> SerialSource:
 
     return SerialSource(
         location, baud=num("baud", int, DEFAULT_BAUD, 50, MAX_BAUD),
-        fmt=options.get("format", "rtseg"),
+        fmt=options.get("format", "auto"),
         suit=options.get("suit", "default17"), suits_path=options.get("suits"),
         stale=num("stale", float, 0.25, 1e-3, 3600.0), rate=num("rate", float, None, 1e-3, 1e5),
         queue_size=num("queue", int, 256, 1, 1_000_000),

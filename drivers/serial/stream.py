@@ -29,6 +29,18 @@ first value).
   ``bad_values``, ids not in the suit -> ``unknown_names``, malformed text lines and
   unknown message types -> ``bad_messages``.  Warnings go through a
   :class:`rtseg.core.ratelog.RateLimitedLog` (once per kind per 5 s).
+- Bytes that never form a message (binary format): each run of more than
+  ``codec.MAX_WIRE_BYTES`` without a delimiter counts 1 in ``corrupt``; all bytes skipped
+  outside messages are in :attr:`SuitStream.skipped_bytes`.  Every
+  :data:`NO_FRAME_WARN_BYTES` bytes without an intact message a warning names the likely
+  cause: text lines (``format=text``), no delimiter at all, or only damaged messages
+  (the baud rate).
+- Format ``auto`` (a URL without ``format=``): binary, until text lines arrive first.
+  While no intact binary message has arrived, once :data:`SNIFF_BYTES` bytes since the
+  last zero byte read as text lines (``text.looks_like_text``), the stream switches to the
+  text decoder for good (logged once) and decodes those bytes as text (all the port gave
+  since it opened, or, when bytes were dropped before, from their first complete line).
+  An intact binary message first settles it as binary.
 """
 
 from __future__ import annotations
@@ -45,8 +57,17 @@ from rtseg.core.frame import Frame
 from rtseg.core.profiles import SuitProfile
 from rtseg.core.ratelog import RateLimitedLog
 from rtseg.drivers.serial import codec
+from rtseg.drivers.serial.text import looks_like_text
 
 log = logging.getLogger("rtseg.drivers.serial")
+
+#: format ``auto``: bytes since the last zero byte (and no intact binary message) that must
+#: read as text lines before the stream switches to the text decoder
+SNIFF_BYTES = 1024
+#: bytes without an intact binary message between two warnings that say why
+NO_FRAME_WARN_BYTES = 4096
+#: the most recent bytes without an intact binary message kept to look at
+RECENT_BYTES = 2048
 
 #: decoder counter -> SourceStats field
 STAT_MAP = {
@@ -67,18 +88,24 @@ class SensorEvent:
 class SuitStream:
     """Bytes of one suit in, frames and counts out (module docstring).
 
-    ``fmt``: ``rtseg`` or ``text`` (the decoder); ``frame_rate``: nominal Hz (a restarted
-    device's clock step, the text format's quiet gap); ``stale``: seconds; ``count(field,
-    n)``: adds to the owner's ``SourceStats``; ``put(frame)``: hands a frame on; ``name``:
-    the device, for log lines; ``on_dropout``: called with every :class:`SensorEvent` (on
-    the caller's thread; keep it short)."""
+    ``fmt``: ``rtseg`` or ``text`` (the decoder), or ``auto`` (``rtseg`` until text lines
+    arrive first: module docstring; :attr:`fmt` then says which); ``frame_rate``: nominal
+    Hz (a restarted device's clock step, the text format's quiet gap); ``stale``: seconds;
+    ``count(field, n)``: adds to the owner's ``SourceStats``; ``put(frame)``: hands a
+    frame on; ``name``: the device, for log lines; ``on_dropout``: called with every
+    :class:`SensorEvent` (on the caller's thread; keep it short)."""
 
     def __init__(self, suit: SuitProfile, fmt: str, frame_rate: float, stale: float,
                  count: Callable[[str, int], None], put: Callable[[Frame], None],
                  name: str, on_dropout: Callable[[SensorEvent], None] | None = None,
                  now: float = 0.0) -> None:
+        if fmt not in ("rtseg", "text", "auto"):
+            raise ValueError(f"unknown serial format {fmt!r}; known: rtseg, text, auto")
         self.suit = suit
-        self.fmt = fmt
+        #: ``auto`` and undecided: still looking for text lines
+        self.auto = fmt == "auto"
+        #: the decoder's format, ``rtseg`` or ``text``
+        self.fmt = "rtseg" if self.auto else fmt
         self.frame_rate = float(frame_rate)
         self.stale = float(stale)
         self.name = name
@@ -89,8 +116,17 @@ class SuitStream:
         self.restarts = 0
         self._count, self._put = count, put
         self._log = RateLimitedLog(log)
-        self.decoder = codec.decoder_for(fmt, suit.sensor_ids)
+        self.decoder = codec.decoder_for(self.fmt, suit.sensor_ids)
         self._dec_seen = {k: 0 for k in STAT_MAP}
+        self._skipped_before = 0  # bytes skipped by a decoder replaced (format auto)
+        # binary input since the last intact message: bytes, the last of them, whether a
+        # zero byte was among them, when to warn next, when auto-detection last looked
+        self._unframed = 0
+        self._recent = bytearray()
+        self._zero_seen = False
+        self._warn_at = NO_FRAME_WARN_BYTES
+        self._sniffed_at = 0
+        self._skipped_at_open = 0  # the binary decoder's skipped_bytes at the last (re)open
         n = len(self.joint_names)
         self._lut = np.full(256, -1, dtype=np.int64)
         for k, sid in enumerate(suit.sensor_ids):
@@ -137,9 +173,17 @@ class SuitStream:
         first): what a frame costs the port's buffer."""
         return max(self._read_sizes, default=0.0)
 
+    @property
+    def skipped_bytes(self) -> int:
+        """Bytes dropped outside messages: before the first delimiter, runs too long for a
+        message, a text line cut short at a switch to text, text lines too long."""
+        return self._skipped_before + self.decoder.stats.skipped_bytes
+
     def restart(self, now: float) -> None:
         """The port was (re)opened: a half-received message is dropped."""
         self.decoder.reset()
+        self._recent.clear()
+        self._skipped_at_open = self.decoder.stats.skipped_bytes
         self._last_data = now
 
     def consume(self, data: bytes, now: float) -> None:
@@ -148,7 +192,10 @@ class SuitStream:
         if data:
             self._last_data = now
             before = self._frames_put
-            self._handle(self.decoder.feed(data), now)
+            if self.fmt == "rtseg":
+                self._binary(data, now)
+            else:
+                self._handle(self.decoder.feed(data), now)
             if self._frames_put > before:
                 self._read_sizes.append(len(data) / (self._frames_put - before))
         elif (self.fmt == "text" and self.decoder.has_partial
@@ -179,6 +226,81 @@ class SuitStream:
                       self.name, self.stale, ", ".join(self.joint_names[k] for k in ks))
 
     # ------------------------------------------------------------------ decoding
+
+    def _binary(self, data: bytes, now: float) -> None:
+        """Binary decoding, watching for input that never forms a message and, with format
+        ``auto``, for text lines (module docstring)."""
+        if self.auto and self._unframed + len(data) - self._sniffed_at >= SNIFF_BYTES // 4:
+            self._sniffed_at = self._unframed + len(data)
+            window = self._recent + data
+            window = window[window.rfind(b"\x00") + 1:]
+            if len(window) >= SNIFF_BYTES and looks_like_text(window):
+                self._to_text(data, now)
+                return
+        dec = self.decoder
+        messages = dec.stats.messages
+        self._handle(dec.feed(data), now)
+        if dec.stats.messages != messages:   # an intact message: the link carries binary
+            self.auto = False
+            if self._unframed:
+                self._unframed = self._sniffed_at = 0
+                self._recent.clear()
+                self._zero_seen = False
+                self._warn_at = NO_FRAME_WARN_BYTES
+            return
+        self._unframed += len(data)
+        self._zero_seen = self._zero_seen or b"\x00" in data
+        recent = self._recent
+        recent += data
+        if len(recent) > RECENT_BYTES:
+            del recent[:len(recent) - RECENT_BYTES]
+        if self._unframed >= self._warn_at:
+            self._warn_at = self._unframed + NO_FRAME_WARN_BYTES
+            self._warn_no_frame()
+
+    def _warn_no_frame(self) -> None:
+        """Many bytes and no intact binary message: say what they look like."""
+        n = self._unframed
+        if looks_like_text(self._recent[self._recent.rfind(b"\x00") + 1:]):
+            self._log("noframe", "serial %s: %d bytes of text lines (id,w,x,y,z) and no rtseg "
+                      "binary frame: the suit sends text; add format=text to the URL",
+                      self.name, n)
+        elif not self._zero_seen:
+            self._log("noframe", "serial %s: %d bytes without a frame delimiter (0x00) and no "
+                      "rtseg binary frame: a text suit? add format=text to the URL (or check "
+                      "the baud rate)", self.name, n)
+        else:
+            self._log("noframe", "serial %s: %d bytes and no intact rtseg binary frame (%d "
+                      "corrupt so far): check the baud rate and the suit's format",
+                      self.name, n, self.decoder.stats.corrupt)
+
+    def _to_text(self, data: bytes, now: float) -> None:
+        """Format ``auto``: text lines arrived; decode them, and all that follows, as text.
+        The bytes after the last zero byte (the binary decoder's pending ones and
+        ``data``) are decoded again as text: all of them when they are all the port gave
+        since it was opened (as ``format=text`` would have), else from their first
+        complete line (the one before may be the end of a line cut short)."""
+        old = self.decoder
+        pending = old.take_pending()
+        cut = data.rfind(b"\x00")
+        if cut >= 0:              # what came before the last zero byte: skipped
+            head = len(pending) + cut + 1
+            buf = data[cut + 1:]
+        else:
+            head = 0
+            buf = pending + data
+        from_open = cut < 0 and old.stats.skipped_bytes == self._skipped_at_open
+        nl = 0 if from_open else buf.find(b"\n") + 1
+        self._skipped_before += old.stats.skipped_bytes + head + nl
+        self.auto = False
+        self.fmt = "text"
+        self.decoder = codec.decoder_for("text", self.suit.sensor_ids)
+        self._dec_seen = {k: 0 for k in STAT_MAP}
+        self._recent.clear()
+        self._unframed = self._sniffed_at = 0
+        log.warning("serial %s: text lines detected; reading format=text (write format=text "
+                    "in the URL to skip the detection)", self.name)
+        self._handle(self.decoder.feed(buf[nl:]), now)
 
     def _sync_stats(self) -> None:
         # damaged messages since the last intact one: frames destroyed that no sequence

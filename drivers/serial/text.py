@@ -6,6 +6,7 @@ The wire carries w first; frames come out **scalar-last (x, y, z, w)** float64.
 
 from __future__ import annotations
 
+import re
 from typing import Iterable
 
 import numpy as np
@@ -124,4 +125,38 @@ class TextLineDecoder:
                 out.extend(self.flush())
 
 
-__all__ = ["TextLineDecoder"]
+#: one record line ``id,w,x,y,z[,status]`` (stripped): an integer id, 4 or 5 numbers
+_RECORD = re.compile(rb"\d{1,3}(?:[ \t]*,[ \t]*[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?){4,5}")
+
+#: fewest record lines that make bytes look like the text format
+MIN_TEXT_RECORDS = 8
+
+
+def count_records(data: bytes | bytearray) -> tuple[int, int]:
+    """(record lines ``id,w,x,y,z[,status]``, other lines) among the complete lines of
+    ``data``: the first line (it may be the end of one cut short) and the unterminated
+    tail are left out, so are blank lines and ``#`` comments."""
+    lines = bytes(data).split(b"\n")[1:-1]
+    records = other = 0
+    for raw in lines:
+        line = raw.strip()
+        if not line or line.startswith(b"#"):
+            continue
+        if _RECORD.fullmatch(line):
+            records += 1
+        else:
+            other += 1
+    return records, other
+
+
+def looks_like_text(data: bytes | bytearray) -> bool:
+    """Whether ``data`` reads as the text format: no zero byte (the binary format's
+    delimiter; text never has one), at least :data:`MIN_TEXT_RECORDS` record lines and at
+    least three record lines for every other line (a boot log or a banner before them)."""
+    if b"\x00" in data:
+        return False
+    records, other = count_records(data)
+    return records >= MIN_TEXT_RECORDS and records >= 3 * other
+
+
+__all__ = ["MIN_TEXT_RECORDS", "TextLineDecoder", "count_records", "looks_like_text"]
