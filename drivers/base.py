@@ -121,7 +121,8 @@ class Source:
 
     ``as_fast_as_read``: True for a source that hands over frames as fast as they are read
     (a replay at ``speed=0``): its frames are never late, so the live loop processes every
-    one instead of dropping the oldest under overload.
+    one instead of dropping the oldest under overload, and reads it only as fast as it
+    processes (backpressure, ``rtseg.live.intake``): no frame is lost to the ring.
 
     Polled reading (optional)
     -------------------------

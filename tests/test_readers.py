@@ -449,7 +449,7 @@ BVH_ERRORS = [
     ("0 4 5 6 0 0    0 0 0     0 0 0   0\n", "0 4 5 6 0 0    0 0 0     0 0 0\n",
      "frame 2 has 12 values, expected 13", 30),
     ("90 1 2 3", "90 1 two 3", "value 'two' is not a number", 29),
-    ("Frames: 2", "Frames: 3", "'Frames: 3' but 2 frame lines follow", 27),
+    ("Frames: 2", "Frames: 1", "'Frames: 1' but 2 frame lines follow", 27),
     ("Frames: 2", "Frames: many", "Frames: 'many' is not an integer", 27),
     ("Frame Time: 0.0333333", "Frame Time: 0", "Frame Time 0.0 must be positive", 28),
     ("CHANNELS 1 Xrotation", "CHANNELS 1 Wrotation", "unknown channel 'Wrotation'", 22),

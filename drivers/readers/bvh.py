@@ -13,19 +13,29 @@ Conventions
   ``meta["joint_positions"][name]`` as (frames, 3) arrays.
 - ``Frame Time`` (seconds) gives the frame rate; ``frame_rate`` overrides it.
 
-Malformed input raises ``ReaderError`` naming the file, the line and the problem.
+Malformed input raises ``ReaderError`` naming the file, the line and the problem, except a
+file cut short (as the AMC reader, ``rtseg.drivers.readers.amc``): fewer frame lines than
+``Frames:`` declares, the file ending after a whole line, or its last line - with no line
+break after it, cut in the middle - short, not a number, or not the last frame declared.
+The whole frames before the cut are read and one warning says how many of how many
+declared (``meta["truncated"]``: the cut line or None, the frame number dropped or None,
+the problem, ``read`` and ``declared``).  A file with no whole frame, more frame lines than
+declared, or a bad line before the last stays an error.
 """
 
 from __future__ import annotations
 
+import logging
 import re
 from pathlib import Path
 
 import numpy as np
 
 from rtseg.core import quat as Q
-from rtseg.drivers.readers.errors import ReaderError, read_text_lines
+from rtseg.drivers.readers.errors import ReaderError, ends_mid_line, is_number, read_text_lines
 from rtseg.core.take import Take
+
+log = logging.getLogger("rtseg.readers")
 
 _TOKEN_RE = re.compile(r"[{}]|[^\s{}]+")
 _CHANNELS = {"xposition": "px", "yposition": "py", "zposition": "pz",
@@ -200,17 +210,48 @@ def read_bvh(path: str | Path, frame_rate: float | None = None) -> Take:
     n_ch = sum(len(j.channels) for j in joints)
     data_rows: list[list[str]] = []
     data_lines: list[int] = []
-    for lineno in range(idx + 1, len(lines) + 1):
+    last_line = len(lines)                   # the last line holding text
+    while last_line > idx and not lines[last_line - 1].strip():
+        last_line -= 1
+    truncated: dict | None = None
+    for lineno in range(idx + 1, last_line + 1):
         toks = lines[lineno - 1].split()
         if not toks:
             continue
-        if len(toks) != n_ch:
-            raise ReaderError(path, f"frame {len(data_rows) + 1} has {len(toks)} values, expected {n_ch}", lineno)
+        frame = len(data_rows) + 1
+        problem = (f"frame {frame} has {len(toks)} values, expected {n_ch}"
+                   if len(toks) != n_ch else None)
+        if lineno == last_line and frame <= n_frames and ends_mid_line(path):
+            # the last line, no line break after it: the file was cut inside it.  Dropped
+            # when it is wrong, or when frames are still missing (whole-looking, its last
+            # number may be cut short); the last frame declared, whole, is kept (a file
+            # without a final line break)
+            if problem is None:
+                bad = next((t for t in toks if not is_number(t)), None)
+                if bad is not None:
+                    problem = f"value {bad!r} is not a number"
+                elif frame < n_frames:
+                    problem = (f"its last value may be cut short, {n_frames - frame} "
+                               f"more frames declared")
+            if problem is not None:
+                truncated = {"line": lineno, "frame": frame, "problem": problem}
+                break
+        if problem is not None:
+            raise ReaderError(path, problem, lineno)
         data_rows.append(toks)
         data_lines.append(lineno)
-    if len(data_rows) != n_frames:
-        raise ReaderError(path, f"'Frames: {n_frames}' but {len(data_rows)} frame lines follow",
-                          int(header["frames_line"]))
+    n_read = len(data_rows)
+    if n_read > n_frames or (n_read < n_frames and not n_read):
+        what = f"{n_read} frame lines follow" if n_read else "no whole frame line follows"
+        if truncated is not None:
+            what += f" (line {truncated['line']}, cut: {truncated['problem']})"
+        raise ReaderError(path, f"'Frames: {n_frames}' but {what}", int(header["frames_line"]))
+    if n_read < n_frames:                   # a file cut short: its whole frames
+        if truncated is None:
+            truncated = {"line": None, "frame": None,
+                         "problem": f"the file ends after line {data_lines[-1]}"}
+        truncated.update(read=n_read, declared=n_frames)
+        n_frames = n_read
     try:
         data = np.array(data_rows, dtype=np.float64).reshape(n_frames, n_ch)
     except ValueError:
@@ -224,6 +265,16 @@ def read_bvh(path: str | Path, frame_rate: float | None = None) -> Take:
     if not np.all(np.isfinite(data)):
         r = int(np.argwhere(~np.isfinite(data))[0][0])
         raise ReaderError(path, "non-finite value", data_lines[r])
+    if truncated is not None:               # one warning, once the frames read are good
+        if truncated["line"] is None:
+            log.warning("%s: cut short: the file ends after frame %d (line %d): read %d of "
+                        "the %d frames 'Frames:' declares", path, n_frames, data_lines[-1],
+                        n_frames, truncated["declared"])
+        else:
+            log.warning("%s:%d: cut short: the last line (frame %d) was cut (%s), dropped: "
+                        "read %d of the %d frames 'Frames:' declares", path,
+                        truncated["line"], truncated["frame"], truncated["problem"], n_frames,
+                        truncated["declared"])
 
     # Rotations and positions.
     quats = np.empty((n_frames, len(joints), 4))
@@ -255,6 +306,8 @@ def read_bvh(path: str | Path, frame_rate: float | None = None) -> Take:
         "end_sites": end_sites,
         "joint_positions": joint_positions,
     }
+    if truncated is not None:
+        meta["truncated"] = truncated
     return Take(joint_names=[jt.name for jt in joints], parents=[jt.parent for jt in joints],
                 frame_rate=rate, quats=quats, root_position=root_position, space="local",
                 length_unit="bvh units (unspecified by the format; often cm)",

@@ -52,3 +52,13 @@ def read_text_lines(path: Path) -> list[str]:
     except UnicodeDecodeError:
         text = data.decode("latin-1")
     return text.splitlines()
+
+
+def ends_mid_line(path: Path) -> bool:
+    """Whether the file's last byte is not a line break (it was cut inside a line)."""
+    try:
+        with open(path, "rb") as fh:
+            fh.seek(-1, 2)
+            return fh.read(1) not in (b"\n", b"\r")
+    except OSError:
+        return False

@@ -13,6 +13,7 @@ Any format ``rtseg.drivers.readers.read_take`` knows: ``.amc`` (+ ASF), ``.bvh``
 ``skeleton``   ASF of an AMC take (relative to the working folder, else to the take's
                folder); default ``SS.asf`` beside ``SS_TT.amc``
 ``speed``      1 = real time (default), N = N times faster, 0 = as fast as read
+               (a live session processes every frame: it reads no faster)
 ``loop``       1: start again after the last frame (``seq`` keeps increasing)
 ``start``      seconds into the take to begin at (default 0)
 ``stop``       seconds into the take to end at (default: the end)

@@ -10,7 +10,9 @@ time of the frame relative to the first (recorded timing, session folders).  Eve
 is computed from ``t0``, never from the previous frame, so the schedule does not drift
 however late individual reads are; a consumer that falls behind gets the overdue frames at
 once (nothing is dropped, as a real driver's buffer would hold them).  ``speed=0`` delivers
-frames as fast as they are read.
+frames as fast as they are read (``as_fast_as_read``): a live session then reads them only
+as fast as it processes them (backpressure, ``rtseg.live.intake``), so none is lost or
+dropped as late and the cuts are those of the take offline.
 
 Frames
 ------

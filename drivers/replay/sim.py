@@ -13,6 +13,7 @@ Options:
 ``rate``       frame rate in Hz (default 120)
 ``noise``      sensor noise, degrees (default 0.3)
 ``speed``      1 = real time (default), N = N times faster, 0 = as fast as read
+               (a live session processes every frame: it reads no faster)
 ``loop``       1: play the take again after its end
 ``start``      / ``stop``: seconds of the take to play
 ``space``      ``local`` (default, parent-relative like VMC) or ``global`` (world

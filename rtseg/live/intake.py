@@ -7,6 +7,13 @@ source whose own thread wakes the loop (``Source.wake_with``), or read by a read
 :class:`SessionInput` is a part of :class:`rtseg.live.session.LiveSession` (a base class; it
 uses the session's ``source``, ``ring``, ``recorder``, ``stats``, ``monitor``, ``_warn``,
 ``_stop``/``_eof`` flags and the state ``_begin`` sets up).  Times are monotonic seconds.
+
+Backpressure: a source that hands over frames as fast as they are read
+(``Source.as_fast_as_read``: a file or ``sim://`` replay at ``speed=0``) is read only while
+fewer than ``BACKPRESSURE_FRAMES`` frames wait to be processed; its reader thread then
+waits for the processing (``SessionProcessing`` wakes it once half of them are done), so
+the ring is never lapped and no frame is lost: the session processes every frame of the
+take, in order, as offline.
 """
 
 from __future__ import annotations
@@ -24,9 +31,25 @@ log = logging.getLogger("rtseg.live.session")
 #: (``LiveSession._hand_back``): a sustained overload, not a stall of a few frames
 HAND_BACK_DROPS = 64
 
+#: most frames a source as fast as read (a replay at ``speed=0``) gets ahead of the
+#: processing: its reader waits beyond that (at most half the ring), and is woken once
+#: half of them are processed.  A few milliseconds of processing: the frames are stamped
+#: (``recv_time``) shortly before they are processed
+BACKPRESSURE_FRAMES = 64
+
 
 class SessionInput:
     """Frame intake of a :class:`~rtseg.live.session.LiveSession`."""
+
+    #: the reader waits for the processing (a source as fast as read; module docstring)
+    _backpressure = False
+    #: absolute index of the next frame the processing takes (kept with backpressure)
+    _room_from = 0
+    #: frames waiting at which the reader waits, and at which it is woken again
+    _room_high = BACKPRESSURE_FRAMES
+    _room_low = BACKPRESSURE_FRAMES // 2
+    #: set by the processing when the waiting frames are down to ``_room_low``
+    _room: threading.Event | None = None
 
     def _receive(self, frame: Any) -> None:
         """One frame from the source: checked, recorded (every frame received is), appended
@@ -97,6 +120,8 @@ class SessionInput:
         assert ring is not None
         try:
             while not self._stop.is_set():
+                if self._backpressure and not self._wait_for_room():
+                    return
                 try:
                     frame = src.read(timeout=0.1)
                 except EOFError:
@@ -115,6 +140,19 @@ class SessionInput:
             self._reader_error = exc
             log.exception("reader thread failed")
             wake()
+
+    def _wait_for_room(self) -> bool:
+        """Backpressure (module docstring): wait until fewer than ``_room_high`` frames
+        wait to be processed; False if the session stops meanwhile."""
+        ring, room = self.ring, self._room
+        while ring.head - self._room_from >= self._room_high:
+            room.clear()
+            if ring.head - self._room_from < self._room_high:   # processed meanwhile
+                break
+            if self._stop.is_set():
+                return False
+            room.wait(0.05)
+        return not self._stop.is_set()
 
     def _start_input(self, loop: Any) -> None:
         """Let the loop read the source (``Source.take_over``), or start a reader thread
@@ -146,6 +184,13 @@ class SessionInput:
             self._take_frames()
             loop.add_woken(self)
         else:
+            if getattr(self.source, "as_fast_as_read", False) is True:
+                # a replay at speed 0: read as fast as processed, never ahead of it
+                self._backpressure = True
+                self._room = threading.Event()
+                self._room_from = self._cursor.position
+                self._room_high = max(1, min(BACKPRESSURE_FRAMES, self.ring.capacity // 2))
+                self._room_low = self._room_high // 2
             self._reader_thread = threading.Thread(target=self._reader, name="rtseg-reader",
                                                    daemon=True)
             self._reader_thread.start()
@@ -178,4 +223,4 @@ class SessionInput:
 
 
 
-__all__ = ["HAND_BACK_DROPS", "SessionInput"]
+__all__ = ["BACKPRESSURE_FRAMES", "HAND_BACK_DROPS", "SessionInput"]

@@ -5,7 +5,9 @@ the ``Pipeline``, the oldest dropped under overload (see "Keeping up" in ``rtseg
 uses the session's ``pipeline``, ``ring``, ``stats``, ``_emit``, ``_warn``, the event
 builders of ``rtseg.live.emitter`` and the dropout tracking of ``rtseg.live.health``, and
 the state ``run`` sets up: ``_max_lag`` (s), ``_thin`` (frames), ``_pending_lost``,
-``_frame_cost`` (s)).
+``_frame_cost`` (s); and from ``rtseg.live.intake`` the backpressure of a source as fast as
+read, ``_backpressure``, ``_room_from``, ``_room_low``, ``_room``: each frame taken
+moves ``_room_from`` on and wakes the waiting reader once few frames are left).
 Times are monotonic seconds; latencies milliseconds.
 """
 
@@ -86,6 +88,10 @@ class SessionProcessing:
             valid = w.valid[i]
             lost, pending = pending, 0
             i += 1
+            if self._backpressure:        # a replay at speed 0: its reader may go on
+                self._room_from = index + 1
+                if not self._room.is_set() and self.ring.head - index <= self._room_low + 1:
+                    self._room.set()
             src = stime if stime == stime else None
             # could this frame send?  Asked again once the last promise is used up, so a
             # frame counts as one that could send only when the pipeline, just before it,
@@ -99,8 +105,12 @@ class SessionProcessing:
             quiet_left -= 1
             t_frame = self._clock_frame(index, recv, src)      # session seconds
             try:
+                # with backpressure the receive clock measures the processing, not the
+                # source: its steps are no silence (a restart on them would cut elsewhere
+                # than offline, by the machine's load)
                 cuts = pipe.process(index, w.data[index - w.start].reshape(J, 4), valid,
-                                    None if seq < 0 else seq, recv, lost, src,
+                                    None if seq < 0 else seq,
+                                    None if self._backpressure else recv, lost, src,
                                     identify=False)
             except Exception as exc:  # never let one frame end the session
                 st.bad_frames += 1

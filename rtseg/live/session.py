@@ -49,10 +49,12 @@ replay of it (``replay_session``) shows what an unloaded machine would have foun
 Measured with ``python3 benchmarks/live.py --overload 30`` (the suit at 30 x 120 Hz over a
 pty): cue latency p99 60 ms, ~23 % of the frames dropped, no detector restart; with
 ``--max-lag 0`` (never drop) p99 1.28 s.
-With L = 0, or a source that hands over frames as fast as they are read
-(``Source.as_fast_as_read``: a replay at ``speed=0``), nothing is dropped: the loop falls behind until the ring overwrites its oldest
-frames (see ``rtseg.core.ringbuffer``); it notices by absolute index, counts the lost frames as
-dropped (``LiveStats.overruns``) and treats them as a gap (detectors restart).
+A source that hands over frames as fast as they are read (``Source.as_fast_as_read``: a
+replay at ``speed=0``) is read only as fast as it is processed (``rtseg.live.intake``,
+backpressure): every frame is processed, in order, as offline.  With L = 0 nothing is
+dropped: the loop falls behind until the ring overwrites its oldest frames (see
+``rtseg.core.ringbuffer``); it notices by absolute index, counts the lost frames as dropped
+(``LiveStats.overruns``) and treats them as a gap (detectors restart).
 ``LiveStats.lag_s`` (age of the frame being processed) and ``backlog`` (frames waiting)
 measure how far behind the loop is; a lag above ``buffer.lag_warn_seconds`` is logged
 (rate-limited) and reported in the summary.  Cut times stay on the source clock under
