@@ -187,3 +187,13 @@ def test_segment_reads_a_truncated_bvh(tmp_path, caplog, capsys, synth_bvh):
     assert doc["methods"]["pca"]["segments"][-1]["end"] == 800
     [msg] = _warnings(caplog)
     assert f"read 800 of the {whole.n_frames} frames" in msg
+
+
+@pytest.mark.parametrize("frame_time, rate", [("0.0083333", 120.0), ("0.0333333", 30.0),
+                                              ("0.0333667", 1.0 / 0.0333667)])
+def test_a_frame_time_written_to_a_few_decimals_is_its_whole_rate(tmp_path, frame_time, rate):
+    """0.0333333 s is 30 Hz (not 30.00003, which reports and JSON carried); 29.97 Hz
+    (NTSC) stays what it is."""
+    p = tmp_path / "t.bvh"
+    p.write_text(SMALL.replace("Frame Time: 0.0083333", f"Frame Time: {frame_time}"))
+    assert read_bvh(p).frame_rate == rate

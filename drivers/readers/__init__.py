@@ -51,7 +51,7 @@ def read_take(path: str | Path, skeleton: str | Path | None = None,
         return read_asf_amc(path, skeleton=skeleton, frame_rate=frame_rate)
     if ext == ".asf":
         raise ReaderError(path, "an ASF file is a skeleton without motion; read the .amc take "
-                          "(its skeleton is found beside it, or pass skeleton=)")
+                          "(its skeleton is found beside it, or give it: --skeleton FILE, skeleton=)")
     if ext == ".bvh":
         from rtseg.drivers.readers.bvh import read_bvh
         return read_bvh(path, frame_rate=frame_rate)

@@ -316,7 +316,7 @@ def skeleton_for(amc_path: str | Path) -> Path:
         return asfs[0]
     tried = ", ".join(dict.fromkeys(c.name for c in candidates))   # each name once
     raise ReaderError(amc_path, f"no skeleton given and none found beside it (looked for {tried}"
-                      + (f"; {len(asfs)} .asf files there, pass skeleton=" if asfs else "") + ")")
+                      + (f"; {len(asfs)} .asf files there, give one: --skeleton FILE, skeleton=" if asfs else "") + ")")
 
 
 def read_asf_amc(amc_path: str | Path, skeleton: str | Path | AsfSkeleton | None = None,

@@ -11,7 +11,8 @@ Conventions
 - Position channels may be on any joint and in any order.  The first root's go to
   ``root_position`` (x, y, z, file units, ``None`` if it has none); those of other joints to
   ``meta["joint_positions"][name]`` as (frames, 3) arrays.
-- ``Frame Time`` (seconds) gives the frame rate; ``frame_rate`` overrides it.
+- ``Frame Time`` (seconds) gives the frame rate (within ``RATE_SNAP_HZ`` of a whole number:
+  that number); ``frame_rate`` overrides it.
 
 Malformed input raises ``ReaderError`` naming the file, the line and the problem, except a
 file cut short (as the AMC reader, ``rtseg.drivers.readers.amc``): fewer frame lines than
@@ -51,6 +52,11 @@ class _Joint:
         self.offset = np.zeros(3)
         self.channels: list[str] = []
         self.line = line
+
+
+#: a rate from ``Frame Time`` within this (Hz) of a whole number is that number (the
+#: header's few decimals: 0.0333333 s; 29.97 Hz stays 29.97)
+RATE_SNAP_HZ = 1e-3
 
 
 def read_bvh(path: str | Path, frame_rate: float | None = None) -> Take:
@@ -206,6 +212,8 @@ def read_bvh(path: str | Path, frame_rate: float | None = None) -> Take:
         if not frame_time > 0:
             raise ReaderError(path, f"Frame Time {frame_time} must be positive", int(header["time_line"]))
         rate = 1.0 / frame_time
+        if abs(rate - round(rate)) < RATE_SNAP_HZ:   # 0.0333333 s is 30 Hz, not 30.00003
+            rate = float(round(rate))
 
     n_ch = sum(len(j.channels) for j in joints)
     data_rows: list[list[str]] = []

@@ -255,8 +255,8 @@ def evaluate_dir(data_dir: str | Path, methods: Sequence[str], group: str | None
     else:
         takes = find_labelled_takes(data_dir, select_groups(group))
     if not takes:
-        raise ValueError(f"no labelled takes of group {group!r} found in {data_dir}"
-                         + no_takes_hint(data_dir))
+        which = "no labelled takes" if group == "any" else f"no labelled takes of group {group!r}"
+        raise ValueError(f"{which} found in {data_dir}" + no_takes_hint(data_dir))
     bar = Progress(len(takes), enabled=progress)
     return evaluate_takes(takes, methods, params, bar, profile, tolerance_s, online,
                           workers, scheduler)

@@ -355,6 +355,9 @@ def source_list(given: list[str], cfg: SessionConfig) -> list[tuple[str, str]]:
     if given:
         for item in given:
             m = _NAMED.fullmatch(item)
+            if m is None and "=" in item.split("://", 1)[0]:
+                raise ConfigError(f"source {item!r}: a source name (NAME=URL) is letters, "
+                                  f"digits, _ and - (at most 64)")
             out.append((m.group(1), m.group(2)) if m and "://" not in m.group(1)
                        else ("", item))
     elif cfg.sources:

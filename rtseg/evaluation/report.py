@@ -136,10 +136,12 @@ def format_identity_table(doc: dict[str, Any]) -> str:
     if nm:
         nl = nm["not_in_library"]
         dd = nm["decision_delay_s"]["after_transition_median"]
+        def share(v: Any) -> str:
+            return "-" if v is None else str(round(float(v), 3))
         lines.append(f"named by the library: {nm['segments']} segments of its behaviours: "
-                     f"right {nm['accuracy']}, unknown {nm['unknown_rate']}, wrong "
-                     f"{nm['wrong_rate']}; {nl['segments']} of other behaviours: unknown "
-                     f"{nl['unknown_rate']}; name decided a median "
+                     f"right {share(nm['accuracy'])}, unknown {share(nm['unknown_rate'])}, wrong "
+                     f"{share(nm['wrong_rate'])}; {nl['segments']} of other behaviours: unknown "
+                     f"{share(nl['unknown_rate'])}; name decided a median "
                      f"{'-' if dd is None else f'{dd:.2f}'} s after the change")
     lib = doc.get("library")
     if lib:

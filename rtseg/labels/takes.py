@@ -104,7 +104,8 @@ def no_takes_hint(data_dir: str | Path) -> str:
     """What to say after "no labelled takes in ``data_dir``": when the folder holds
     single-behaviour takes (``cmu_single/``, or an ``index.tsv`` beside ``bvh/`` or
     ``amc/``), that they have no transitions to score and how to splice them into
-    performances that do; else "" ."""
+    performances that do; when it is a ``cmu/`` or ``tsseg4d/`` folder whose labels lie in
+    its parent's ``labels/``, to give the parent; else "" ."""
     root = Path(data_dir)
     for src in (root / "cmu_single", root):
         if (src / "index.tsv").is_file() and ((src / "bvh").is_dir() or (src / "amc").is_dir()):
@@ -112,6 +113,10 @@ def no_takes_hint(data_dir: str | Path) -> str:
                     f"splice them into labelled performances with `python3 "
                     f"benchmarks/splice.py {src} OUT` (rtseg.evaluation.splice.generate) and "
                     f"evaluate OUT")
+    if root.name in ("cmu", "tsseg4d") and (root.parent / "labels").is_dir() \
+            and not (root / "labels").is_dir():
+        return (f"; the labels of {root.name}/ are in {root.parent / 'labels'}: give the "
+                f"folder that holds both, {root.parent}")
     return ""
 
 

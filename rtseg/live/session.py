@@ -297,12 +297,16 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
             from rtseg.recording import SessionRecorder
             url = (self._source_arg if isinstance(self._source_arg, str)
                    else getattr(src, "url", type(src).__name__))
-            self.recorder = SessionRecorder(
-                self.config["recording.dir"], names, parents, space=space,
-                frame_rate=self.frame_rate, start_monotonic=self.session_start,
-                meta={"source": url, "config": self.config.origin,
-                      "methods": list(self.pipeline.detectors), "primary": self.primary,
-                      "wire_methods": sorted(self.wire)})
+            try:
+                self.recorder = SessionRecorder(
+                    self.config["recording.dir"], names, parents, space=space,
+                    frame_rate=self.frame_rate, start_monotonic=self.session_start,
+                    meta={"source": url, "config": self.config.origin,
+                          "methods": list(self.pipeline.detectors), "primary": self.primary,
+                          "wire_methods": sorted(self.wire)})
+            except OSError as exc:
+                raise OSError(exc.errno, f"cannot record the session in "
+                              f"{self.config['recording.dir']} ({exc.strerror or exc})") from None
 
     # ---------------------------------------------------------------- run
     def run(self) -> SessionSummary:
