@@ -49,6 +49,12 @@ def write_config(tmp_path: Path, text: str) -> Path:
 
 # ------------------------------------------------------------------------ sources
 
+@pytest.mark.parametrize("bad", ["a b=sim://synth", "x.y=sim://synth"])
+def test_a_source_name_that_is_not_one_is_named_as_such(capsys, bad):
+    rc, _, err = live(capsys, bad, "--duration", "1")
+    assert_one_line_error(rc, err, f"source {bad!r}: a source name (NAME=URL) is letters")
+
+
 def test_serial_baud_too_large(capsys):
     rc, _, err = live(capsys, "serial:///dev/ptmx?baud=12345678901234567890", "--duration", "1")
     assert_one_line_error(rc, err, "baud=12345678901234567890", "out of range")
@@ -119,7 +125,7 @@ def test_duration_must_be_positive_and_finite(capsys, value):
 
 def test_record_folder_that_cannot_be_created(capsys):
     rc, _, err = live(capsys, "sim://synth", "--record", "/proc/nope", "--duration", "1")
-    assert_one_line_error(rc, err, "/proc/nope")
+    assert_one_line_error(rc, err, "cannot record the session in /proc/nope")
     assert "_status_t" not in err
 
 
@@ -373,3 +379,13 @@ def test_random_segment_options_give_a_clean_run_or_one_line(capsys, tmp_path, s
         assert "Traceback" not in err, err
         return
     assert_one_line_error(rc, err)
+
+
+def test_evaluate_on_a_cmu_folder_points_at_its_parent(capsys, tmp_path):
+    """The cmu takes' labels live beside the folder (../labels): evaluating cmu/ alone finds
+    none, and the one line says which folder to give."""
+    (tmp_path / "cmu").mkdir()
+    (tmp_path / "labels").mkdir()
+    rc, _, err = run(capsys, "evaluate", tmp_path / "cmu")
+    line = assert_one_line_error(rc, err, "no labelled takes found in")
+    assert f"give the folder that holds both, {tmp_path}" in line and "'any'" not in line
