@@ -17,7 +17,6 @@ import os
 import select
 import subprocess
 import sys
-import threading
 import time
 import tty
 from pathlib import Path
@@ -34,6 +33,8 @@ from rtseg.drivers.serial.source import SerialSource
 from rtseg.drivers.serial.text import looks_like_text
 from rtseg.simulators.serial_device import SerialSuit
 from rtseg.simulators.synth.motion import synthesize
+
+from test_serial_live import rig  # noqa: F401  (the suit-and-source fixture)
 
 REPO = Path(__file__).resolve().parents[1]
 SUIT = suit_profile("default17")
@@ -82,26 +83,6 @@ def wait_for(cond, timeout: float = 5.0) -> bool:
 def messages(caplog, text: str) -> list[str]:
     return [r.getMessage() for r in caplog.records
             if r.name == LOGGER and text in r.getMessage()]
-
-
-@pytest.fixture
-def rig():
-    """Open a simulated suit and a source on its pty; everything is closed at the end."""
-    opened: list = []
-
-    def open_pair(take, url_opts: str = "", **suit_kw):
-        suit = SerialSuit(take, **suit_kw)
-        opened.append(suit)
-        suit.start(send=False)
-        src = open_source(f"serial://{suit.path}?{url_opts}")
-        opened.append(src)
-        assert src.wait_connected(2.0)
-        return suit, src
-
-    yield open_pair
-    for obj in reversed(opened):
-        obj.close() if isinstance(obj, SerialSource) else obj.stop()
-    assert not [t for t in threading.enumerate() if t.name.startswith("rtseg-serial")]
 
 
 @pytest.fixture

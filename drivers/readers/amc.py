@@ -36,7 +36,7 @@ import numpy as np
 from rtseg.core import quat as Q
 from rtseg.drivers.readers.asf import (CMU_METRES_PER_UNIT, ROT_DOFS, AsfBone, AsfSkeleton,
                                        angle_to_deg, read_asf)
-from rtseg.drivers.readers.errors import ReaderError, is_number, read_text_lines
+from rtseg.drivers.readers.errors import ReaderError, ends_mid_line, is_number, read_text_lines
 from rtseg.core.take import Take
 
 __all__ = ["AsfBone", "AsfSkeleton", "read_asf", "read_amc", "read_asf_amc", "skeleton_for",
@@ -205,7 +205,7 @@ def read_amc(path: str | Path, skeleton: AsfSkeleton | str | Path,
         # line), or its last line - with no line break after it - is the one that is wrong
         # (cut in the middle of that line)
         cut = at_end or (not at_number and exc.line is not None and exc.line >= last_line
-                         and _ends_mid_line(path))
+                         and ends_mid_line(path))
         if not (cut and row is not None and len(rows) > 1):
             raise
         rows.pop()
@@ -227,16 +227,6 @@ def read_amc(path: str | Path, skeleton: AsfSkeleton | str | Path,
     if truncated is not None:
         take.meta["truncated"] = truncated
     return take
-
-
-def _ends_mid_line(path: Path) -> bool:
-    """Whether the file's last byte is not a line break (it was cut inside a line)."""
-    try:
-        with open(path, "rb") as fh:
-            fh.seek(-1, 2)
-            return fh.read(1) not in (b"\n", b"\r")
-    except OSError:
-        return False
 
 
 def _build_take(path: Path, sk: AsfSkeleton, data: np.ndarray, layout: dict[str, tuple[int, int]],
