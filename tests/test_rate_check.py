@@ -114,6 +114,10 @@ def test_a_sender_without_a_declared_rate_is_segmented_at_its_clock_rate(caplog)
     assert len(said) == 1 and "declares no frame rate" in said[0], said
     assert "uses 60 Hz from now on" in said[0] and "add rate=60" in said[0]
     assert sess.frame_rate == 60.0 and sess.pipeline.frame_rate == 60.0
+    # the pipeline built at the new rate still knows where the rig's geometry comes from
+    # (the sender's bone positions), so names by posture go on
+    rest = sess.pipeline.posture.rest
+    assert callable(rest) and rest() is not None
     right, sess2, said2 = _vmc_session_cuts(take, 60.0, caplog)
     assert not said2 and sess2.frame_rate == 60.0
     assert len(right) >= 2
