@@ -57,7 +57,11 @@ class SessionHealth:
         if not self._source_lost and now - last >= lim:
             self._source_lost = True
             self.stats.dropouts += 1
-            log.warning("dropout: no frames from the source for %.2f s", now - last)
+            if self._last_recv is None:
+                log.warning("dropout: no frame from the source yet, %.2f s after the start "
+                            "(is the sender running?)", now - last)
+            else:
+                log.warning("dropout: no frames from the source for %.2f s", now - last)
             self._emit(DropoutEvent("source", True, self.clock.now(now, report=True)))
 
     def dropped(self) -> int:
