@@ -16,6 +16,8 @@ with posture when the library names by it and the take's rig geometry is known: 
 tracker is then given every frame's rotations, as the pipeline gives them);
 the per-decision naming time is printed too (median of 50 namings of one 2.5 s window;
 with posture, the posture rows of that window worked out as the namer does, and apart).
+Always: the facing probe's cost per frame it looks at (a source without rig geometry,
+``rtseg.core.standard_rig``).
 ``--compare LIB2``: the same window named by LIB and LIB2 alternately, 300 times each (one
 BLAS thread): medians, p90s and their ratio, side by side in one run.
 
@@ -81,6 +83,30 @@ def compare_naming(a, b, W: np.ndarray, fr: float, name_a: str, name_b: str,
         print(f"naming with {n}: {len(lib.names)} windows, median {np.median(t):.0f} us, "
               f"p90 {np.percentile(t, 90):.0f} us")
     print(f"ratio {name_b} / {name_a}: median x{np.median(tb) / np.median(ta):.2f}")
+
+
+def probe_cost(take) -> None:
+    """The facing probe's cost per frame it looks at (``rtseg.core.standard_rig``: a
+    source without rig geometry; the session gives it 30 frames a second until it decides,
+    60 s at most): each call timed while the probe is undecided, over the take's frames."""
+    from rtseg.core.posture import PostureError
+    from rtseg.core.rig import RigError
+    from rtseg.core.standard_rig import FacingProbe
+    try:
+        probe = FacingProbe(take.joint_names, take.parents, take.space)
+    except (PostureError, RigError) as exc:
+        print(f"facing probe: none for this rig ({exc})")
+        return
+    t = []
+    for q in take.quats[::4]:
+        if probe.result is not None or probe.failed is not None:
+            break
+        t0 = time.perf_counter()
+        probe.observe(q)
+        t.append((time.perf_counter() - t0) * 1e6)
+    said = ("decided" if probe.result is not None else probe.failed or "undecided")
+    print(f"facing probe ({take.n_joints} joints): one frame looked at median "
+          f"{np.median(t):.0f} us, p99 {np.percentile(t, 99):.0f} us over {len(t)} ({said})")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -161,6 +187,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{np.median(rows):.0f} us, naming with them median {np.median(both):.0f} us")
         if other is not None:
             compare_naming(library, other, W, fr, args.library, args.compare)
+    probe_cost(take)
     off, on = [], []
     for _ in range(3):                  # interleaved: the machine's load drifts
         cfg["identity.enabled"] = False

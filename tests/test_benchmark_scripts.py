@@ -2,6 +2,7 @@
 (the full 10^6-input fuzz is `python3 benchmarks/fuzz_decoders.py`; figures in README)."""
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -271,6 +272,9 @@ def test_identity_speed_times_naming_with_posture(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "with posture (17 joints): the window's posture rows median" in r.stdout
     assert "names sent:" in r.stdout
+    # the synthetic performer squats: the facing probe decides within the take
+    assert re.search(r"facing probe \(17 joints\): one frame looked at median \d+ us, "
+                     r"p99 \d+ us over \d+ \(decided\)", r.stdout), r.stdout
 
 
 def test_names_over_vmc_compares_a_live_vmc_session_with_the_file_replay(tmp_path):
