@@ -122,3 +122,38 @@ def test_a_sender_without_a_declared_rate_is_segmented_at_its_clock_rate(caplog)
     assert not said2 and sess2.frame_rate == 60.0
     assert len(right) >= 2
     assert [c.frame for c in none] == pytest.approx([c.frame for c in right], abs=2)
+
+
+def test_damaged_timestamps_do_not_move_the_measured_rate():
+    """A clock with a few wild values (a corrupting link): the median period still says
+    120 Hz; a clock that says an implausible rate is not believed (no switch)."""
+    chk = DeclaredRateCheck(120.0, assumed=True)
+    times = [i / 120.0 for i in range(600)]
+    for k in (30, 31, 200, 333):
+        times[k] += 57.0 if k % 2 else -3.0               # jumps either way
+    said = [m for m in (chk.feed(i / 120.0, t, i) for i, t in enumerate(times)) if m]
+    assert not said and chk.measured_hz == pytest.approx(120.0)
+    slow = DeclaredRateCheck(120.0, assumed=True)
+    said = [m for m in (slow.feed(i / 120.0, i * 1.25, i) for i in range(600)) if m]
+    assert len(said) == 1 and "not believed" in said[0] and not slow.mismatch
+
+
+def test_a_switch_the_detectors_refuse_is_logged_and_the_session_goes_on(caplog, monkeypatch):
+    """Whatever the clock says, the live loop is never ended by the rate switch: a rate
+    the detectors cannot run at is an error line and the session keeps its rate."""
+    import rtseg.live.session as session_mod
+    from rtseg.live.config import from_dict
+    from rtseg.live.session import LiveSession
+    from rtseg.publishers import PublisherSet
+
+    def refuse(session, rate, upto):
+        raise ValueError("min_before must be at least two steps")
+    monkeypatch.setattr(session_mod, "switch_rate", refuse)
+    sess = LiveSession("sim://synth", from_dict({}), publishers=PublisherSet(),
+                       handle_signals=False, duration=1.0)
+    sess._measured_rate = 0.8
+    with caplog.at_level(logging.ERROR, logger="rtseg"):
+        summary = sess.run()
+    assert summary.stop_reason == "duration reached" and summary.frames_processed > 0
+    assert any("could not switch to 0.8 Hz" in r.getMessage() for r in caplog.records)
+    assert sess.frame_rate == 120.0

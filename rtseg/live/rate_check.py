@@ -28,6 +28,10 @@ import numpy as np
 
 log = logging.getLogger("rtseg.live.session")
 
+#: measured rates outside this range (Hz) are not believed (a damaged clock): the session
+#: keeps its rate
+MIN_HZ, MAX_HZ = 5.0, 5000.0
+
 
 class DeclaredRateCheck:
     """Feed every frame (``feed``); returns a message once, when the declared rate is off."""
@@ -42,9 +46,12 @@ class DeclaredRateCheck:
         self.done = False
         #: the measured rate (Hz) once the window is full, else None
         self.measured_hz: float | None = None
-        self._t0: float | None = None
+        self._t: float | None = None                # the last frame's time (measured clock)
+        self._seq: int | None = None
+        self._periods: list[float] = []             # seconds per frame, frame to frame
+        self._t0: float | None = None               # the first frame's time and seq
         self._seq0: int | None = None
-        self._n = 0
+        self._n = 0                                 # frames since the first
         self._use_source: bool | None = None
 
     @property
@@ -54,12 +61,18 @@ class DeclaredRateCheck:
 
     @property
     def mismatch(self) -> bool:
-        """Whether the measured rate (once known) is off the declared one."""
-        return (self.measured_hz is not None and abs(self.measured_hz - self.declared_hz)
-                > self.tolerance * self.declared_hz)
+        """Whether the measured rate (once known, and believable) is off the declared one."""
+        return (self.measured_hz is not None and MIN_HZ <= self.measured_hz <= MAX_HZ
+                and abs(self.measured_hz - self.declared_hz) > self.tolerance * self.declared_hz)
 
     def feed(self, recv: float, source_time: float | None, seq: int | None) -> str | None:
-        """One frame (receive time s, source time s or None, sequence number or None)."""
+        """One frame (receive time s, source time s or None, sequence number or None).
+
+        On the source clock the rate is 1 / the median of the frame-to-frame periods (time
+        step over sequence step), so a few damaged timestamps or a clock that restarts do
+        not move it; the window is full once the periods span ``window_s`` at the median
+        period.  On the receive clock (frames come in bursts) it is the frames elapsed over
+        the time elapsed since the first frame."""
         if self.done:
             return None
         if self._use_source is None:
@@ -67,20 +80,35 @@ class DeclaredRateCheck:
         t = source_time if self._use_source else recv
         if t is None or not math.isfinite(t):
             return None
-        if self._t0 is None:
-            self._t0, self._seq0, self._n = t, seq, 0
+        prev_t, prev_seq = self._t, self._seq
+        self._t, self._seq = t, seq
+        if prev_t is None:
+            self._t0, self._seq0 = t, seq
             return None
         self._n += 1
-        span = t - self._t0
-        if span < 0:                       # the clock restarted: measure afresh
-            self._t0, self._seq0, self._n = t, seq, 0
-            return None
-        if span < self.window_s:
+        if self._use_source:
+            steps = (seq - prev_seq) if (seq is not None and prev_seq is not None
+                                         and seq > prev_seq) else 1
+            if t > prev_t:
+                self._periods.append((t - prev_t) / steps)
+            n = len(self._periods)
+            if n < 8 or n % 8:
+                return None
+            period = float(np.median(self._periods))
+            span = n * period
+        else:
+            span = t - self._t0
+            frames = (seq - self._seq0) if (seq is not None and self._seq0 is not None
+                                            and seq > self._seq0) else self._n
+            period = span / frames if span > 0 else 0.0
+        if span < self.window_s or not period > 0:
             return None
         self.done = True
-        frames = (seq - self._seq0) if (seq is not None and self._seq0 is not None
-                                        and seq > self._seq0) else self._n
-        self.measured_hz = frames / span
+        self.measured_hz = 1.0 / period
+        if not MIN_HZ <= self.measured_hz <= MAX_HZ:
+            return (f"the source's {'clock' if self._use_source else 'frames'} say "
+                    f"{self.measured_hz:.3g} Hz, outside {MIN_HZ:g}-{MAX_HZ:g} Hz: not "
+                    f"believed; the session keeps {self.declared_hz:g} Hz")
         if abs(self.measured_hz - self.declared_hz) <= self.tolerance * self.declared_hz:
             return None
         if self.assumed:

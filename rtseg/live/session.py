@@ -388,8 +388,12 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
                 self.stats.overload_drops += skipped
                 self._pending_lost += skipped
         if self._measured_rate is not None:    # the source's clock disagreed
-            switch_rate(self, self._measured_rate, cursor.position)
-            self._measured_rate = None
+            rate, self._measured_rate = self._measured_rate, None
+            try:
+                switch_rate(self, rate, cursor.position)
+            except Exception as exc:  # a rate the detectors refuse must not end the session
+                log.error("could not switch to %g Hz (%s); the session keeps %g Hz",
+                          rate, exc, self.frame_rate)
         w = cursor.read(self._max_batch)
         if len(w) or w.lost:
             self._process_window(w, now, self._loop.turn_s if self._loop is not None else None)
