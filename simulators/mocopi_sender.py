@@ -90,7 +90,8 @@ def serve(args, take: Take, host) -> tuple[str, list[str]]:
     :class:`rtseg.commands.simulate.Host`); returns (stop reason, summary lines)."""
     port = host.port(DEFAULT_PORT, faults=True)
     sender = MocopiSender(take, args.host, port, **serve_options(args, host))
-    return serve_sender(args, host, sender, port, f"mocopi://{args.host}:{port}")
+    return serve_sender(args, host, sender, port,
+                        f"mocopi://{args.host}:{port}?rate={sender.rate:g}")
 
 
 def main(argv: list[str] | None = None) -> int:

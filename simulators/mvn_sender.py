@@ -177,7 +177,8 @@ def serve(args, take: Take, host) -> tuple[str, list[str]]:
                        transport=args.transport,
                        wait_server=host.wait_for_peer() if tcp else None,
                        **serve_options(args, host))
-    query = [f"character={args.character}"] if args.character else []
+    query = [f"rate={sender.rate:g}"]
+    query += [f"character={args.character}"] if args.character else []
     query += ["transport=tcp"] if tcp else []
     url = f"mvn://{args.host}:{port}" + ("?" + "&".join(query) if query else "")
     return serve_sender(args, host, sender, port, url)

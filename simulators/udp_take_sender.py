@@ -139,7 +139,7 @@ def serve_sender(args, host, sender: UdpTakeSender, port: int, url: str) -> tupl
     out(f"{sender.name} sender: {len(sender.suit.bones)}-segment suit {sender.suit.name} to "
         f"{how} {args.host}:{port} at {sender.rate:g} Hz (stream clock in take time), sent at "
         f"x{sender.speed:g}" + (f"; faults {args.faults}" if args.faults else ""))
-    out(f"  receive it with: rtseg live {url}")
+    out(f"  receive it with: rtseg live \"{url}\"")
     if how == "tcp":
         out(f"  {'not waiting' if args.no_wait else 'waiting'} for the receiver to listen "
             f"on tcp {args.host}:{port}" + (" (--no-wait)" if args.no_wait else ""))

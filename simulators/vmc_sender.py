@@ -369,7 +369,7 @@ def serve(args, take: Take, host) -> tuple[str, list[str]]:
     out(f"VMC sender: {len(sender.bone_names)} bones to udp {args.host}:{args.port} "
         f"at {sender.rate:g} Hz (T in take seconds), sent at x{sender.speed:g}")
     out(f"  receive it with: rtseg live \"osc://{args.host}:{args.port}?format=vmc"
-        f"&suit={sender.suit.name}\"")
+        f"&suit={sender.suit.name}&rate={sender.rate:g}\"")
     reason, elapsed = host.drive(sender)
     log = list(sender.sent_log)
     sent = [f for f in log if not f.dropped]

@@ -281,7 +281,7 @@ def test_simulator_through_live_session_gives_valid_joints_and_cuts():
 
 def test_rtseg_simulate_mocopi_command_reaches_the_source():
     out, port, frames = simulate_into("mocopi://127.0.0.1:0?queue=10000", "mocopi", "50")
-    assert f"rtseg live mocopi://127.0.0.1:{port}" in out
+    assert f'rtseg live "mocopi://127.0.0.1:{port}?rate=50"' in out
     assert "filled from their parents: torso_1, torso_3" in out
     assert len(frames) == 200 and all(f.valid.all() for f in frames)
 

@@ -328,7 +328,7 @@ def test_simulator_through_live_session_gives_valid_joints_and_cuts(tmp_path):
 def test_rtseg_simulate_mvn_command_reaches_the_source():
     out, port, frames = simulate_into("mvn://127.0.0.1:0?queue=10000&character=1", "mvn", "60",
                                       "--character", "1")
-    assert f"rtseg live mvn://127.0.0.1:{port}?character=1" in out
+    assert f'rtseg live "mvn://127.0.0.1:{port}?rate=60&character=1"' in out
     assert "filled from their parents: L3, T12, RightShoulder" in out
     assert len(frames) == 240 and all(f.valid.all() for f in frames)
 
@@ -483,7 +483,7 @@ def test_corrupting_faults_are_counted_as_refused_input_and_never_stop_the_loop(
 def test_rtseg_simulate_mvn_over_tcp_with_faults():
     out, port, frames = simulate_into("mvn://127.0.0.1:0?transport=tcp&queue=10000", "mvn",
                                       "60", "--transport", "tcp", "--faults", "drop=0.1,seed=2")
-    assert f"rtseg live mvn://127.0.0.1:{port}?transport=tcp" in out
+    assert f'rtseg live "mvn://127.0.0.1:{port}?rate=60&transport=tcp"' in out
     dropped = int(out.split(" dropped by faults")[0].rsplit("; ", 1)[1])
     assert dropped > 5 and len(frames) == 240 - dropped
     assert_refused([("mvn://127.0.0.1:0?transport=quic", "udp or tcp"),
