@@ -389,3 +389,25 @@ def test_evaluate_on_a_cmu_folder_points_at_its_parent(capsys, tmp_path):
     rc, _, err = run(capsys, "evaluate", tmp_path / "cmu")
     line = assert_one_line_error(rc, err, "no labelled takes found in")
     assert f"give the folder that holds both, {tmp_path}" in line and "'any'" not in line
+
+
+def test_files_named_in_a_config_file_are_found_beside_it(capsys, tmp_path, monkeypatch):
+    """[detectors] params and [identity] behaviours given as relative paths in a
+    configuration file are read beside it, whatever the current folder (else from the
+    current folder, as before)."""
+    from rtseg.live.config import load_session_config
+    conf = tmp_path / "conf"
+    conf.mkdir()
+    (conf / "det.toml").write_text("[contrast]\nthreshold = 1.75\n")
+    (conf / "live.toml").write_text('[detectors]\nparams = "det.toml"\n')
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    cfg = load_session_config(conf / "live.toml")
+    assert cfg["detectors.params"] == str(conf / "det.toml")
+    rc, _, err = live(capsys, "sim://synth", "--config", conf / "live.toml", "--duration", "0.3")
+    assert rc == 0, err
+    # a file that is not beside it is looked for from the current folder, and named
+    (conf / "live.toml").write_text('[detectors]\nparams = "nope.toml"\n')
+    rc, _, err = live(capsys, "sim://synth", "--config", conf / "live.toml", "--duration", "0.3")
+    assert_one_line_error(rc, err, "detectors.params", "nope.toml")

@@ -367,6 +367,20 @@ def _split_sources(raw: Any, origin: str) -> tuple[Any, list[dict[str, str]]]:
     return raw, []
 
 
+#: keys naming files to read: a relative path given in a configuration file is found
+#: beside that file when it is there, else from the current folder
+FILE_KEYS = (("detectors", "params"), ("identity", "behaviours"))
+
+
+def beside(value: str, folder: Path) -> str:
+    """``value`` (a path from a configuration file in ``folder``) as ``folder / value`` when
+    it is relative and that file exists, else unchanged (from the current folder)."""
+    if not value or Path(value).is_absolute():
+        return value
+    there = folder / value
+    return str(there) if there.exists() else value
+
+
 def load_session_config(path: str | Path | None = None,
                         overrides: dict[str, Any] | None = None) -> SessionConfig:
     """Read and validate the live configuration, then apply ``overrides``.
@@ -378,6 +392,8 @@ def load_session_config(path: str | Path | None = None,
     p = Path(path) if path is not None else config_dir() / "live.toml"
     raw, sources = _split_sources(load_toml(p), p.name)
     values = validate(raw, origin=p.name)
+    for section, key in FILE_KEYS:
+        values[section][key] = beside(values[section][key], p.parent)
     cfg = SessionConfig(values, origin=str(p), sources=sources)
     if overrides:
         apply_overrides(cfg, overrides)
