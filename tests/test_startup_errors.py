@@ -411,3 +411,12 @@ def test_files_named_in_a_config_file_are_found_beside_it(capsys, tmp_path, monk
     (conf / "live.toml").write_text('[detectors]\nparams = "nope.toml"\n')
     rc, _, err = live(capsys, "sim://synth", "--config", conf / "live.toml", "--duration", "0.3")
     assert_one_line_error(rc, err, "detectors.params", "nope.toml")
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (("--no-osc", "--osc", "127.0.0.1:19998"), "--no-osc and --osc"),
+    (("--no-osc", "--template", "/cue/{label}"), "--template: no OSC target"),
+])
+def test_output_flags_that_contradict_each_other(capsys, argv, fragment):
+    rc, _, err = run(capsys, "live", "sim://synth", "--duration", "0.3", "--quiet", *argv)
+    assert_one_line_error(rc, err, fragment)

@@ -65,6 +65,8 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
     if args.osc:
         over["output.osc"] = list(args.osc)
     if getattr(args, "no_osc", False):
+        if args.osc:
+            raise ConfigError("--no-osc and --osc: give one of them")
         over["output.osc"] = []
     if args.osc_tcp:
         over["output.osc_tcp"] = list(args.osc_tcp)
@@ -90,6 +92,10 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
             except ConfigError as exc:
                 flag = FLAGS.get(key, key)
                 raise ConfigError(str(exc).replace(f"command line: {key}", flag, 1)) from None
+    if args.template and not (cfg["output.osc"] or cfg["output.osc_tcp"] or any(
+            not str(t).startswith(("-", "jsonl:")) for t in cfg["output.targets"])):
+        raise ConfigError("--template: no OSC target to send it to (--no-osc, and no --osc-tcp "
+                          "or --target)")
     return cfg
 
 
