@@ -611,3 +611,43 @@ def test_slip_decoder_and_message_decoder_on_chunked_stream():
     assert decode_message(got[1]) == ("/rtseg/dropout", "si", ["Head", 1])
     with pytest.raises(ValueError):
         decode_message(got[0][:-6])
+
+
+def test_a_target_with_its_own_templates_does_not_also_fire_the_session_ones():
+    """--template goes to the OSC targets without a template= of their own: a QLab target
+    given its own cue address fires each cue once, not once per template list."""
+    from rtseg.publishers import parse_target
+    own = parse_target("udp:127.0.0.1:53000,standard=off,template=/cue/{label}/start segment",
+                       ["/cue/{label}/start"])
+    plain = parse_target("udp:127.0.0.1:53001", ["/cue/{label}/start"])
+    try:
+        assert [t.spec for t in own.templates] == ["/cue/{label}/start segment"]
+        assert [t.spec for t in plain.templates] == ["/cue/{label}/start"]
+    finally:
+        own.close()
+        plain.close()
+
+
+@pytest.mark.parametrize("source, address", [("", "/cue/walk/start"),
+                                             ("alice", "/cue/alice/walk/start")])
+def test_an_empty_source_field_drops_out_of_the_address(source, address):
+    """{source} of a session on its own is "": the address must not get '//' (an OSC 1.1
+    path wildcard), so the empty part and its slash drop out."""
+    ev = make_cut(label="walk", source=source)
+    assert AddressTemplate("/cue/{source}/{label}/start").render(ev)[0] == address
+
+
+def test_one_jsonl_destination_given_twice_is_written_once(tmp_path, caplog):
+    import logging
+    from rtseg.live.config import from_dict
+    from rtseg.live.outputs import build_publishers
+    path = tmp_path / "events.jsonl"
+    cfg = from_dict({"output": {"osc": [], "jsonl": str(path),
+                                "targets": [f"jsonl:{path}", "-", "jsonl:-"]}})
+    with caplog.at_level(logging.WARNING, logger="rtseg"):
+        pubs = build_publishers(cfg)
+    try:
+        assert len(pubs) == 2                     # the file once, standard output once
+        assert sum("written once" in r.getMessage() for r in caplog.records) == 2
+    finally:
+        pubs.close()

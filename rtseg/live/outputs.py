@@ -10,11 +10,15 @@ cuts kept off the wire (the JSON-lines targets), so that no cut is ever dropped 
 
 from __future__ import annotations
 
+import logging
+from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from rtseg.config import ConfigError
 from rtseg.core.events import CutEvent
 from rtseg.live.config import SessionConfig
+
+log = logging.getLogger("rtseg.live.session")
 
 __all__ = ["build_publishers", "log_publishers", "wire_methods"]
 
@@ -60,8 +64,18 @@ def build_publishers(config: SessionConfig) -> Any:
         specs.append(("output.jsonl", "-" if config["output.jsonl"] == "-"
                       else f"jsonl:{config['output.jsonl']}", False))
     pubs = PublisherSet()
+    seen_jsonl: dict[str, str] = {}
     try:
         for key, spec, is_osc in specs:
+            if not is_osc:          # one JSON-lines destination given twice: written once
+                dest = spec.strip()
+                dest = "-" if dest in ("-", "jsonl:-") else str(
+                    Path(dest[len("jsonl:"):]).expanduser().resolve())
+                if dest in seen_jsonl:
+                    log.warning("%s: the same JSON-lines destination as %s; written once",
+                                key, seen_jsonl[dest])
+                    continue
+                seen_jsonl[dest] = key
             try:
                 pubs.add(parse_target(spec, templates if is_osc else None))
             except (ValueError, OSError) as exc:

@@ -31,7 +31,8 @@ Target specs (``parse_target``)
 =====================================  ======================================================
 
 OSC targets take options after commas: ``template=ADDRESS [ARG ...]`` (repeatable; see
-``rtseg.publishers.templates``), ``standard=on|off`` (send the ``/rtseg/*`` messages,
+``rtseg.publishers.templates``; a target's own templates replace the session's
+``--template`` ones for it), ``standard=on|off`` (send the ``/rtseg/*`` messages,
 default on), and for TCP ``queue=N`` (outgoing queue length, default 1000) and
 ``max_age=SECONDS`` (drop messages that could not be sent in time, default 2).
 IPv6 hosts go in brackets: ``udp:[::1]:9123``.  A bad spec raises ValueError naming it.
@@ -89,8 +90,10 @@ def _split_hostport(spec: str, rest: str) -> tuple[str, int]:
 def parse_target(spec: str, templates: Sequence[str] | None = None) -> Publisher:
     """Make one publisher from a target spec (see the module docstring).
 
-    ``templates`` are added to the target's own ``template=`` options (OSC targets only;
-    given for a JSON-lines target they raise ValueError).
+    ``templates`` (the session's ``--template`` ones) are the target's when it has no
+    ``template=`` option of its own; a target's own templates replace them, so a cue is
+    not fired twice (OSC targets only; given for a JSON-lines target they raise
+    ValueError).
     """
     if not isinstance(spec, str) or not spec.strip():
         raise ValueError(f"bad output target {spec!r}: empty")
@@ -147,7 +150,8 @@ def parse_target(spec: str, templates: Sequence[str] | None = None) -> Publisher
         else:
             raise ValueError(f"bad output target {spec!r}: unknown option {key!r} "
                              f"(template, standard{', queue, max_age' if proto == 'tcp' else ''})")
-    tmpl.extend(templates or ())
+    if not tmpl:
+        tmpl.extend(templates or ())
     try:
         parsed = [AddressTemplate(t) for t in tmpl]
     except ValueError as exc:

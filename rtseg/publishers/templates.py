@@ -10,7 +10,8 @@ A template is ``ADDRESS [ARG ...]`` separated by spaces, e.g.
 Fields usable in ADDRESS (Python ``str.format`` syntax, format specs allowed, e.g.
 ``{segment:03d}``, widths and precisions at most 64): ``label`` and ``method`` (both sanitised to ``[A-Za-z0-9_-]``),
 ``segment`` (index of the new segment), ``event`` (cut event number), ``source`` (the
-source's name when one process runs several sessions, sanitised; "" otherwise).
+source's name when one process runs several sessions, sanitised; "" otherwise: the
+empty part and its slash drop out, ``/cue/{source}/go`` is ``/cue/go``).
 
 ARGs (default: none - the message carries no arguments, which is what QLab's
 ``/cue/{number}/start`` expects) are field names sent with a fixed type:
@@ -54,6 +55,9 @@ MAX_FORMAT_WIDTH = 64
 
 _BAD_LABEL_CHARS = re.compile(r"[^A-Za-z0-9_-]+")
 _OSC_FORBIDDEN = set(" #*,?[]{}")
+
+
+_SLASHES = re.compile(r"/{2,}")
 
 
 def sanitize_label(label: Any) -> str:
@@ -129,6 +133,8 @@ class AddressTemplate:
             label=sanitize_label(ev.label), method=sanitize_label(ev.method),
             segment=int(ev.segment), event=int(ev.event),
             source=sanitize_label(ev.source) if getattr(ev, "source", "") else "")
+        if "//" in address:        # an empty field ({source} of a session on its own): OSC
+            address = _SLASHES.sub("/", address)   # 1.1 reads // as a path wildcard
         if any(c in _OSC_FORBIDDEN for c in address):
             shown = address if len(address) <= 80 else address[:77] + "..."
             raise ValueError(f"template {self.spec!r} produced an invalid OSC address {shown!r}")
