@@ -693,3 +693,18 @@ def test_the_last_status_states_the_input_rate_of_a_whole_span():
     whole = [e.frame_rate for e in status[1:-1]]
     assert status[-1].frame_rate == pytest.approx(whole[-1])
     assert all(50.0 < r < 400.0 for r in whole + [status[-1].frame_rate])
+
+
+def test_every_frame_received_is_accounted_for_in_the_summary():
+    """Received = processed + dropped by the session + arrived as it stopped (after its last
+    processing: recorded, not processed), and the summary says so when some did."""
+    from rtseg.live.stats import SessionSummary
+    src = FakeSource(frames(100_000, 10**9), pace=1.0 / 500.0)
+    s, summary = session(src, duration=0.5)
+    assert summary.frames_received == (summary.frames_processed + summary.overruns
+                                       + summary.overload_drops + summary.unprocessed)
+    assert len(s.recorder.frames) == summary.frames_received
+    fields = {f: getattr(summary, f) for f in SessionSummary.__dataclass_fields__}
+    text = SessionSummary(**{**fields, "unprocessed": 2}).text()
+    assert "2 arrived as it stopped (recorded, not processed)" in text
+    assert "arrived as it stopped" not in SessionSummary(**{**fields, "unprocessed": 0}).text()

@@ -503,6 +503,8 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
             cut_latency_ms_p99=percentile(st.cut_latency_ms, 99),
             recording=str(rec) if rec else None,
             stop_reason=self.stop_reason, wire_cuts=st.wire_cuts,
+            unprocessed=max(0, st.frames_received - st.frames_processed - st.overruns
+                            - st.overload_drops),
             input=self.input_counts() if self.pipeline is not None else {},
             gated={m: d.gate.dropped for m, d in self.pipeline.detectors.items()
                    if getattr(d, "gate", None) is not None} if self.pipeline else {},

@@ -131,6 +131,9 @@ class SessionSummary:
     #: ``max_lag_ms`` (``buffer.max_lag_seconds``; 0 = never dropped)
     overload_drops: int = 0
     max_lag_setting_ms: float = 0.0
+    #: frames received as the session stopped, after its last processing (recorded, not
+    #: processed: no cut can come from them)
+    unprocessed: int = 0
     #: processing latency (arrival -> processed, and sent for a cut), ms, over every frame
     #: processed (the last 200 000); ``cut_latency_ms_*`` are over the frames that
     #: revealed a cut only (the cues' latency)
@@ -165,6 +168,8 @@ class SessionSummary:
                 f"{self.frames_processed} processed, {self.dropped} dropped"
                 + (f" ({self.overload_drops} under overload, so none waited over "
                    f"{self.max_lag_setting_ms:.0f} ms)" if self.overload_drops else "")
+                + (f", {self.unprocessed} arrived as it stopped (recorded, not processed)"
+                   if self.unprocessed else "")
                 + ", "
                 f"{input_text(self.input)}, "
                 f"{self.cuts} cuts ({methods}; {targets_text(self.targets)}"
