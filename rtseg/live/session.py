@@ -108,7 +108,6 @@ import re
 import signal
 import threading
 import time
-from dataclasses import asdict
 from typing import Any, Callable, Iterable
 
 import numpy as np
@@ -127,7 +126,8 @@ from rtseg.live.replay import replay_frames, replay_session
 from rtseg.live.rate_check import DeclaredRateCheck, switch_rate
 from rtseg.core.ringbuffer import RingBuffer
 from rtseg.live.config import SessionConfig, load_session_config
-from rtseg.live.stats import FloatRing, LiveStats, SessionSummary, percentile
+from rtseg.live.stats import FloatRing, LiveStats, SessionSummary
+from rtseg.live.summary import session_summary
 
 log = logging.getLogger("rtseg.live.session")
 
@@ -466,52 +466,6 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
                 obj.close()
             except Exception as exc:
                 log.warning("closing %s failed: %s", name, exc)
-        st = self.stats
-        dur = now - self.session_start if self.session_start else 0.0
-        src_stats = self.source.stats.as_dict() if getattr(self.source, "stats", None) else {}
-        rec = getattr(self.recorder, "dir", None) or (self.config["recording.dir"] or None)
-        targets = {}
-        if self.publishers is not None and hasattr(self.publishers, "stats"):
-            try:
-                targets = self.publishers.stats()
-            except Exception as exc:  # pragma: no cover - defensive
-                log.warning("publisher counters unavailable: %s", exc)
-        rec_stats = getattr(self.recorder, "stats", None)
-        summary = SessionSummary(
-            targets=targets, recording_failure=getattr(self.recorder, "failure", None),
-            recording_frames=getattr(self.recorder, "frames_written", None),
-            recording_cuts=getattr(rec_stats, "cuts", None),
-            duration_s=dur, frames_received=st.frames_received,
-            frames_processed=st.frames_processed,
-            frame_rate=self._input_rate(),
-            cuts=st.cuts, cuts_by_method=dict(st.cuts_by_method),
-            dropped=self.dropped() if self.pipeline is not None else 0,
-            source_stats=src_stats,
-            pipeline=asdict(self.pipeline.stats) if self.pipeline else {},
-            overruns=st.overruns, bad_frames=st.bad_frames, max_lag_ms=st.max_lag_s * 1000.0,
-            overload_drops=st.overload_drops,
-            max_lag_setting_ms=getattr(self, "_max_lag", 0.0) * 1000.0,
-            latency_ms_p50=percentile(st.frame_latency_ms, 50),
-            latency_ms_p99=percentile(st.frame_latency_ms, 99),
-            latency_frames=len(st.frame_latency_ms),
-            open_latency_ms_p50=percentile(st.open_latency_ms, 50),
-            open_latency_ms_p99=percentile(st.open_latency_ms, 99),
-            open_latency_frames=len(st.open_latency_ms),
-            quiet={"batches": st.quiet_batches, "frames": st.quiet_frames,
-                   "late_open": st.late_open},
-            cut_latency_ms_p50=percentile(st.cut_latency_ms, 50),
-            cut_latency_ms_p99=percentile(st.cut_latency_ms, 99),
-            recording=str(rec) if rec else None,
-            stop_reason=self.stop_reason, wire_cuts=st.wire_cuts,
-            unprocessed=max(0, st.frames_received - st.frames_processed - st.overruns
-                            - st.overload_drops),
-            input=self.input_counts() if self.pipeline is not None else {},
-            gated={m: d.gate.dropped for m, d in self.pipeline.detectors.items()
-                   if getattr(d, "gate", None) is not None} if self.pipeline else {},
-            floored={m: d.relative.refused for m, d in self.pipeline.detectors.items()
-                     if getattr(d, "relative", None) is not None} if self.pipeline else {},
-            identity=(asdict(self.pipeline.identity.stats)
-                      if self.pipeline is not None and self.pipeline.identity is not None
-                      else {}))
+        summary = session_summary(self, now)
         log.info("%s", summary.text())
         return summary
