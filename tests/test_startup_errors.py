@@ -420,3 +420,14 @@ def test_files_named_in_a_config_file_are_found_beside_it(capsys, tmp_path, monk
 def test_output_flags_that_contradict_each_other(capsys, argv, fragment):
     rc, _, err = run(capsys, "live", "sim://synth", "--duration", "0.3", "--quiet", *argv)
     assert_one_line_error(rc, err, fragment)
+
+
+def test_a_folder_of_recorded_sessions_points_at_them(capsys, tmp_path):
+    """A session of two named sources records each in DIR/<name>: reading DIR says so."""
+    rec = tmp_path / "rec"
+    rc, _, err = live(capsys, "a=sim://synth", "b=sim://synth", "--record", rec,
+                      "--duration", "0.3")
+    assert rc == 0, err
+    rc, _, err = run(capsys, "live", f"file://{rec}", "--no-osc", "--quiet")
+    line = assert_one_line_error(rc, err, "not a recorded session")
+    assert f"it holds the sessions {rec / 'a'}, {rec / 'b'}: give one" in line

@@ -59,14 +59,14 @@ def parse_frames(text: str) -> tuple[int, int]:
 def recorded_segment(t: dict[str, Any]) -> int | None:
     """K of ``--segment K`` of a ``--take`` (None without it); the take must be a session
     recording."""
-    from rtseg.recording.reader import is_session_dir
+    from rtseg.recording.reader import is_session_dir, sessions_inside
     if t.get("segment") is None:
         return None
     if t.get("frames"):
         raise ValueError(f"--take {t['take']}: give --frames or --segment, not both")
     if not is_session_dir(t["take"]):
         raise ValueError(f"--take {t['take']}: --segment needs a session recording "
-                         f"(rtseg live --record DIR)")
+                         f"(rtseg live --record DIR)" + sessions_inside(t["take"]))
     try:
         return int(t["segment"])
     except ValueError:

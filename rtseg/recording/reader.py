@@ -28,13 +28,25 @@ def is_session_dir(path: str | Path) -> bool:
     return p.is_dir() and (p / HEADER_FILE).is_file()
 
 
+def sessions_inside(path: str | Path) -> str:
+    """What to say when ``path`` is not a recorded session but a folder of them (a session
+    of several named sources records each in ``DIR/<name>``): "; it holds the sessions
+    DIR/a, DIR/b: give one", else ""."""
+    p = Path(path)
+    if not p.is_dir():
+        return ""
+    inner = sorted(str(d) for d in p.iterdir() if is_session_dir(d))
+    return f"; it holds the sessions {', '.join(inner)}: give one" if inner else ""
+
+
 def read_session_header(directory: str | Path) -> dict[str, Any]:
     """The parsed ``session.json``; ValueError naming the file if missing or invalid."""
     path = Path(directory) / HEADER_FILE
     try:
         header = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
-        raise ValueError(f"{path}: not a recorded session (no {HEADER_FILE})") from None
+        raise ValueError(f"{path}: not a recorded session (no {HEADER_FILE})"
+                         + sessions_inside(directory)) from None
     except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ValueError(f"{path}: cannot read session header: {exc}") from None
     if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
