@@ -273,7 +273,8 @@ class VmcAssembler(VmcFrameRules):
                             self._maybe_complete()
                             n_got = self._n_got
                     else:
-                        self._bad_value(f"bone {padded!r}: quaternion norm² {n2}")
+                        name = padded.rstrip(b"\x00").decode("utf-8", "replace")
+                        self._bad_value(f"bone {name!r}: quaternion norm² {n2}")
                     pos = stop
                     continue
                 if idx == -3:
