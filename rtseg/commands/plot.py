@@ -151,7 +151,10 @@ def pca_with_band(X: np.ndarray, frame_rate: float, params: Mapping[str, Any] | 
 # --------------------------------------------------------------------------- drawing
 
 def _legend(ax) -> None:
-    """The panel's legend outside it, right of the axes, so it hides no curve."""
+    """The panel's legend outside it, right of the axes, so it hides no curve (none when
+    the panel has nothing labelled: a take too short for the method)."""
+    if not ax.get_legend_handles_labels()[1]:
+        return
     ax.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), borderaxespad=0.0, fontsize=7,
               ncol=1)
 
