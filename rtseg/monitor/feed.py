@@ -13,6 +13,11 @@ through three calls, and never blocks it:
   last batch, the events since then, and every ``health_interval`` (0.25 s) an input-health
   snapshot.
 
+The session's final status (``alive=0``, emitted as it shuts down, after its last ``tick``)
+becomes an ``{"kind": "end"}`` event and is queued at once in a last batch, with every event
+and statistic point not yet queued and a last health snapshot: a batch the server sends every
+page before it closes them (:meth:`rtseg.monitor.server.MonitorServer.stop`).
+
 Batches go into a bounded queue (``capacity`` batches) that the server thread empties
 (:meth:`drain`); when nobody drains it the oldest batch is dropped and counted
 (``dropped_batches``), so a stalled server never grows memory nor slows the loop.
@@ -58,6 +63,7 @@ class MonitorFeed:
         self._events: list[dict] = []
         self._segment_time: dict[int, float] = {0: 0.0}   # primary segment -> its cut's time
         self._det: Any = None
+        self._session: Any = None
         self._gate_seen = 0
         self._next = 0.0
         self._next_health = 0.0
@@ -88,6 +94,7 @@ class MonitorFeed:
             if getattr(det, "we", 0) and early is not None:
                 info["early_threshold"] = float(early.threshold)
         self.info = info
+        self._session = session
         self._health_t = time.monotonic()
 
     def __call__(self, ev: Any) -> None:
@@ -112,11 +119,25 @@ class MonitorFeed:
                                  "time": ev.time})
         elif isinstance(ev, StatusEvent) and not ev.alive:
             self._events.append({"kind": "end", "time": ev.time})
+            self._end()
 
-    def tick(self, session: Any, now: float | None = None) -> None:
-        """Queue one batch when ``interval`` has passed since the last (processing thread)."""
+    def _end(self) -> None:
+        """Queue the last batch now: no ``tick`` follows the session's final status."""
+        if self._session is not None:
+            try:
+                self.tick(self._session, force=True)
+                return
+            except Exception:    # a session half shut down: the events still go out
+                pass
+        if self._events:
+            self._put({"now": self._events[-1]["time"], "events": self._events})
+            self._events = []
+
+    def tick(self, session: Any, now: float | None = None, force: bool = False) -> None:
+        """Queue one batch when ``interval`` has passed since the last (processing thread);
+        ``force``: now, with a health snapshot (the session's end)."""
         now = time.monotonic() if now is None else now
-        if now < self._next:
+        if now < self._next and not force:
             return
         self._next = now + self.interval
         latest = session.clock.latest       # the clock of every event time (source's own)
@@ -142,11 +163,11 @@ class MonitorFeed:
                 dropped = [(at(b), round(float(d), 3)) for b, d, sent in new if not sent]
                 if dropped:
                     batch["gated"] = dropped
-        if self._events:
-            batch["events"], self._events = self._events, []
-        if now >= self._next_health:
+        if now >= self._next_health or force:
             self._next_health = now + self.health_interval
             batch["health"] = self._health(session, now)
+        if self._events:        # last: a failure above leaves them for the next batch
+            batch["events"], self._events = self._events, []
         self._put(batch)
 
     def _health(self, session: Any, now: float) -> dict[str, Any]:

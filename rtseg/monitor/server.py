@@ -2,6 +2,10 @@
 
 ``MonitorServer(feed, host="127.0.0.1", port=8765)`` runs an aiohttp application on its own
 thread and event loop (``start()`` returns once the socket is bound, ``stop()`` ends it).
+``stop()`` (called once the session has ended) sends every page what the feed still holds,
+the session's end event among it, waits (at most ``close_timeout`` seconds) until each page's
+queue is written, and only then closes the sockets (code 1000): a page always learns that the
+session ended rather than seeing a dropped connection.
 
 - ``GET /``: the page (``static/index.html``); ``GET /static/<name>``: the files shipped
   beside it (uPlot, the page's script and style); anything else is a 404, any other method
@@ -88,8 +92,10 @@ def _load_static() -> dict[str, bytes]:
 class _Client:
     def __init__(self, ws: web.WebSocketResponse, size: int) -> None:
         self.ws = ws
-        self.queue: asyncio.Queue[bytes] = asyncio.Queue(maxsize=size)
+        # messages to send; None (put once, at stop): the last, the writer ends after it
+        self.queue: asyncio.Queue[bytes | None] = asyncio.Queue(maxsize=size)
         self.resync = False
+        self.writer: asyncio.Future | None = None
 
 
 class MonitorServer:
@@ -98,7 +104,7 @@ class MonitorServer:
     def __init__(self, feed: MonitorFeed, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT,
                  *, interval: float = 0.04, max_clients: int = 8, client_queue: int = 64,
                  send_timeout: float = 5.0, history_s: float = 30.0,
-                 send_buffer: int = 16384) -> None:
+                 send_buffer: int = 16384, close_timeout: float = 2.0) -> None:
         self.feed = feed
         self.host, self.port = host, int(port)
         self.interval = float(interval)
@@ -107,6 +113,7 @@ class MonitorServer:
         self.send_timeout = float(send_timeout)
         self.history_s = float(history_s)
         self.send_buffer = int(send_buffer)
+        self.close_timeout = float(close_timeout)
         self.stats = {"clients": 0, "connections": 0, "refused": 0, "dropped": 0,
                       "messages": 0, "bad_frames": 0, "slow_closed": 0}
         self._static = _load_static()
@@ -148,7 +155,8 @@ class MonitorServer:
         return self.url
 
     def stop(self, timeout: float = 5.0) -> None:
-        """Send what is queued, close every page, end the thread."""
+        """Send every page what the feed holds (the session's end), then close them; end
+        the thread."""
         loop, ev = self._loop, self._stopping
         if loop is not None and ev is not None and loop.is_running():
             loop.call_soon_threadsafe(ev.set)
@@ -186,11 +194,27 @@ class MonitorServer:
         self._ready.set()
         pump = asyncio.ensure_future(self._pump())
         await self._stopping.wait()
-        await asyncio.sleep(self.interval * 1.5)     # the last batch (end of session)
         pump.cancel()
+        try:
+            await pump
+        except asyncio.CancelledError:
+            pass
+        await self._flush()
         for c in list(self._clients):
             await c.ws.close()
         await runner.cleanup()
+
+    async def _flush(self) -> None:
+        """The feed's last batches (the end of the session) to every page, then each page's
+        queue written out (at most ``close_timeout`` seconds) before any socket closes."""
+        self._publish()
+        writers = []
+        for c in list(self._clients):
+            self._enqueue(c, None)
+            if c.writer is not None and not c.writer.done():
+                writers.append(c.writer)
+        if writers:
+            await asyncio.wait(writers, timeout=self.close_timeout)
 
     # ------------------------------------------------------------ HTTP
     async def _index(self, request: web.Request) -> web.Response:
@@ -230,7 +254,7 @@ class MonitorServer:
         client.queue.put_nowait(self._hello())
         if self.feed.info:
             self._announced = self.feed.info
-        writer = asyncio.ensure_future(self._writer(client))
+        writer = client.writer = asyncio.ensure_future(self._writer(client))
         try:
             async for msg in ws:
                 if msg.type == WSMsgType.ERROR:
@@ -250,11 +274,14 @@ class MonitorServer:
         try:
             while True:
                 msg = await client.queue.get()
-                if client.resync:
+                if client.resync:       # what it missed: the history (``ended`` with it)
                     client.resync = False
-                    msg = self._hello()
-                await asyncio.wait_for(client.ws.send_str(msg.decode()), self.send_timeout)
-                self.stats["messages"] += 1
+                    await self._send(client, self._hello())
+                    if msg is not None:
+                        continue
+                if msg is None:         # the server stops: all is sent, the socket closes
+                    return
+                await self._send(client, msg)
         except asyncio.TimeoutError:
             self.stats["slow_closed"] += 1
             log.info("monitor page too slow (a send blocked %.0f s): closed", self.send_timeout)
@@ -262,30 +289,43 @@ class MonitorServer:
         except (ConnectionError, RuntimeError):
             pass
 
+    async def _send(self, client: _Client, msg: bytes) -> None:
+        await asyncio.wait_for(client.ws.send_str(msg.decode()), self.send_timeout)
+        self.stats["messages"] += 1
+
     # ------------------------------------------------------------ batches
     async def _pump(self) -> None:
         while True:
             await asyncio.sleep(self.interval)
-            batches = self.feed.drain()
-            if not batches:
-                continue
-            merged = self._merge(batches)
-            if not self._clients:
-                continue
-            if self.feed.info is not self._announced:     # pages that came before attach
-                self._announced = self.feed.info
-                hello = self._hello()
-                for c in list(self._clients):
-                    if not c.queue.full():
-                        c.queue.put_nowait(hello)
-            data = orjson.dumps(merged)
+            self._publish()
+
+    def _publish(self) -> None:
+        """What the feed queued, merged into one message for every page."""
+        batches = self.feed.drain()
+        if not batches:
+            return
+        merged = self._merge(batches)
+        if not self._clients:
+            return
+        if self.feed.info is not self._announced:     # pages that came before attach
+            self._announced = self.feed.info
+            hello = self._hello()
             for c in list(self._clients):
-                if c.queue.full():
-                    self.stats["dropped"] += c.queue.qsize() + 1
-                    while not c.queue.empty():
-                        c.queue.get_nowait()
-                    c.resync = True
-                c.queue.put_nowait(data)
+                if not c.queue.full():
+                    c.queue.put_nowait(hello)
+        data = orjson.dumps(merged)
+        for c in list(self._clients):
+            self._enqueue(c, data)
+
+    def _enqueue(self, c: _Client, data: bytes | None) -> None:
+        """``data`` onto a page's queue; a full queue is emptied first and the page gets a
+        fresh hello in place of what it missed (``stats["dropped"]``)."""
+        if c.queue.full():
+            self.stats["dropped"] += c.queue.qsize() + (data is not None)
+            while not c.queue.empty():
+                c.queue.get_nowait()
+            c.resync = True
+        c.queue.put_nowait(data)
 
     def _merge(self, batches: list[dict]) -> dict[str, Any]:
         """One message from the feed's batches; the history is updated with it."""
