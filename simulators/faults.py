@@ -11,7 +11,9 @@ receiver recovered exactly what it should have:
 - ``dropout=SENSOR:START:DURATION[:PERIOD]``
                      sensor SENSOR (an integer id, or a name such as ``LeftHand`` for
                      name-keyed protocols) stops reporting from START s for DURATION s,
-                     again every PERIOD s when given.  Repeat the key for several sensors;
+                     again every PERIOD s when given.  Repeat the key for several sensors.
+                     A device refuses a SENSOR it does not have when it is built
+                     (:func:`check_dropout_targets`: ValueError naming the valid ones);
 - ``unplug=EVERY:FOR`` the link disappears every EVERY s (first at EVERY) for FOR s;
 - ``seed=N``         random seed (default 0).
 
@@ -26,6 +28,7 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass, field
+from typing import Sequence
 
 import numpy as np
 
@@ -46,6 +49,50 @@ class Dropout:
         if self.period_s:
             dt %= self.period_s
         return dt < self.duration_s
+
+    @property
+    def spec(self) -> str:
+        """The CLI item, ``dropout=SENSOR:START:DURATION[:PERIOD]``."""
+        tail = f":{self.period_s:g}" if self.period_s else ""
+        return f"dropout={self.sensor}:{self.start_s:g}:{self.duration_s:g}{tail}"
+
+
+def _id_list(ids: Sequence[int]) -> str:
+    """``0..16`` for a run of consecutive ids, else ``1, 4, 9``."""
+    ids = sorted(int(i) for i in ids)
+    if len(ids) > 2 and ids == list(range(ids[0], ids[-1] + 1)):
+        return f"{ids[0]}..{ids[-1]}"
+    return ", ".join(str(i) for i in ids)
+
+
+def check_dropout_targets(config: "FaultConfig | None", ids: Sequence[int], names: Sequence[str],
+                          *, what: str = "sensor", where: str = "the suit",
+                          id_kind: str = "ids") -> None:
+    """Refuse a dropout whose target is not there: ValueError (one line) naming the
+    dropout item and the valid targets.  A target is an integer in ``ids`` or a name
+    in ``names`` (case-insensitive) - ``what`` (sensor, bone) of ``where`` (the suit
+    default17, ...).  Devices call it when they are built (they know their sensors then):
+    without it an unknown target silences nothing and the run looks fault-free."""
+    if config is None or not config.dropouts:
+        return
+    id_set = {int(i) for i in ids}
+    name_set = {str(n).lower() for n in names}
+    for d in config.dropouts:
+        if isinstance(d.sensor, int):
+            if d.sensor in id_set:
+                continue
+            label = str(d.sensor)
+        else:
+            if str(d.sensor).lower() in name_set:
+                continue
+            label = repr(str(d.sensor))
+        valid = []
+        if id_set:
+            valid.append(f"{id_kind} {_id_list(id_set)}")
+        if names:
+            valid.append(f"names {', '.join(names)}")
+        raise ValueError(f"fault {d.spec}: no {what} {label} in {where}; "
+                         f"valid: {' or '.join(valid) or 'none'}")
 
 
 @dataclass
@@ -134,8 +181,7 @@ class FaultConfig:
         if self.jitter_s:
             items.append(f"jitter={self.jitter_s:g}")
         for d in self.dropouts:
-            tail = f":{d.period_s:g}" if d.period_s else ""
-            items.append(f"dropout={d.sensor}:{d.start_s:g}:{d.duration_s:g}{tail}")
+            items.append(d.spec)
         if self.unplug_every_s:
             items.append(f"unplug={self.unplug_every_s:g}:{self.unplug_for_s:g}")
         items.append(f"seed={self.seed}")
@@ -248,4 +294,4 @@ class FaultInjector:
                                list(r.dropped), dict(r.lost), list(r.unplugs))
 
 
-__all__ = ["Dropout", "FaultConfig", "FaultRecord", "FaultInjector"]
+__all__ = ["Dropout", "FaultConfig", "FaultRecord", "FaultInjector", "check_dropout_targets"]

@@ -27,7 +27,9 @@ number like every message.  Fault schedules (unplug, dropout windows) are in tak
 (``k / rate``).  Sensors are the suit's (``config/suits.toml``); each carries the global
 orientation of the take joint that the skeleton map gives it, by forward kinematics, with
 optional IMU noise and heading drift (:mod:`rtseg.simulators.retarget`).  Sensors in a
-fault dropout, or whose take joint is not valid, are left out of that frame.
+fault dropout, or whose take joint is not valid, are left out of that frame; a dropout
+naming a sensor (id or bone name) the suit does not have is a ValueError listing the
+suit's.
 
 ``sent_log`` lists one :class:`SentMessage` per message attempted, with its fate.
 """
@@ -51,7 +53,7 @@ import numpy as np
 
 from rtseg.drivers.serial import codec
 from rtseg.core.profiles import SuitProfile, suit_profile
-from rtseg.simulators.faults import FaultConfig, FaultInjector
+from rtseg.simulators.faults import FaultConfig, FaultInjector, check_dropout_targets
 from rtseg.simulators.retarget import ImuModel, retarget
 from rtseg.core.take import Take
 
@@ -97,7 +99,8 @@ class SentMessage:
     ``seq``: u16 sequence number on the wire; ``time_us``: u32 device time; ``send_time``:
     ``time.monotonic()`` when written (or due, if not written); ``sensor_ids``: ids
     included; ``fate``: "intact", "corrupted", "dropped" (fault), "unplugged", "overflow"
-    (nobody reading and the pty buffer full)."""
+    (nobody reading and the pty buffer full); ``silenced``: ids a fault dropout left out
+    (sensors that would have been sent otherwise)."""
     index: int
     frame: int
     seq: int
@@ -105,6 +108,7 @@ class SentMessage:
     send_time: float
     sensor_ids: tuple[int, ...]
     fate: str
+    silenced: tuple[int, ...] = ()
 
 
 class SerialSuit:
@@ -168,6 +172,9 @@ class SerialSuit:
             self.injector = faults
         else:
             self.injector = FaultInjector(faults)
+        # a dropout of a sensor the suit does not have would silence nothing
+        check_dropout_targets(self.injector.config, self.suit.sensor_ids, self.suit.bones,
+                              what="sensor", where=f"suit {self.suit.name}")
         self.fmt = fmt
         self.loop = loop
         self.start_seq = int(start_seq)
@@ -346,21 +353,29 @@ class SerialSuit:
 
     # ------------------------------------------------------------------ sending
 
-    def _encode(self, seq: int, time_us: int, frame: int) -> tuple[bytes, tuple[int, ...]]:
+    def _encode(self, seq: int, time_us: int,
+                frame: int) -> tuple[bytes, tuple[int, ...], tuple[int, ...]]:
+        """(message, ids sent, ids a fault dropout left out) of take frame ``frame``."""
         t_rel = (frame if frame >= 0 else 0) / self.rate
         f = frame % self.quats.shape[0]
         silent = self.injector.silent_sensors(t_rel)
         keep = self.valid[f].copy()
+        silenced: list[int] = []
         if silent:
             names = [b.lower() for b in self.suit.bones]
+            silent_names = {str(s).lower() for s in silent if not isinstance(s, int)}
             for k, sid in enumerate(self.sensor_ids):
-                if int(sid) in silent or names[k] in {str(s).lower() for s in silent}:
+                if int(sid) in silent or names[k] in silent_names:
+                    if keep[k]:
+                        silenced.append(int(sid))
                     keep[k] = False
         ids = self.sensor_ids[keep]
         q = self.quats[f][keep]
         if self.fmt == "text":
-            return codec.encode_text_frame(ids, q, self.status, self.text_blank_line), tuple(ids.tolist())
-        return codec.encode_frame(seq, time_us, ids, q, self.status), tuple(ids.tolist())
+            data = codec.encode_text_frame(ids, q, self.status, self.text_blank_line)
+        else:
+            data = codec.encode_frame(seq, time_us, ids, q, self.status)
+        return data, tuple(ids.tolist()), tuple(silenced)
 
     def _info(self, seq: int, time_us: int) -> bytes:
         return codec.encode_info(seq, time_us, {
@@ -432,10 +447,11 @@ class SerialSuit:
                 send_info = False
                 index += 1
                 continue
-            data, ids = self._encode(seq, time_us, frame)
+            data, ids, silenced = self._encode(seq, time_us, frame)
             if not self.plugged:
                 inj.mark_lost(index, "unplugged")
-                self.sent_log.append(SentMessage(index, frame, seq, time_us, due, ids, "unplugged"))
+                self.sent_log.append(SentMessage(index, frame, seq, time_us, due, ids, "unplugged",
+                                                 silenced))
             else:
                 out = inj.process(index, data)
                 fate = "dropped" if out is None else ("intact" if out is data else "corrupted")
@@ -446,7 +462,8 @@ class SerialSuit:
                     if not self._write(out):
                         inj.mark_lost(index, "overflow")
                         fate = "overflow"
-                self.sent_log.append(SentMessage(index, frame, seq, time_us, time.monotonic(), ids, fate))
+                self.sent_log.append(SentMessage(index, frame, seq, time_us, time.monotonic(), ids,
+                                                 fate, silenced))
             index += 1
             frame += 1
 

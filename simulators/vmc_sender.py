@@ -31,7 +31,7 @@ or a CLI spec (``"drop=0.05,jitter=0.002,dropout=LeftHand:1:0.5,corrupt=0.001"``
 injector *message* is one frame slot (index = slot, time = slot / rate): ``drop`` drops
 all datagrams of the frame, ``corrupt`` flips bytes anywhere in them, ``jitter`` delays
 the frame, ``dropout`` omits the bone (sensor = HumanBodyBones name, or index into
-``bone_names``), ``unplug`` stops sending during its windows (recorded as lost).  Every frame slot is recorded in
+``bone_names``; a bone not sent is a ValueError listing those sent), ``unplug`` stops sending during its windows (recorded as lost).  Every frame slot is recorded in
 ``.sent_log`` (:class:`SentFrame`), including dropped ones, so tests can compare what
 was sent with what arrived.
 """
@@ -234,6 +234,12 @@ class VmcSender(SenderThread):
         self.bone_positions = None if offsets is None else np.ascontiguousarray(offsets[sent])
         #: The FaultInjector in use (its ``record`` says what was damaged), or None.
         self.injector = _make_injector(faults)
+        if self.injector is not None:
+            from rtseg.simulators.faults import check_dropout_targets
+            check_dropout_targets(self.injector.config, range(len(self.bone_names)),
+                                  self.bone_names, what="bone",
+                                  where=f"the bones sent for suit {self.suit.name}",
+                                  id_kind="indices")
         self._init_thread()
 
     def _send_failed(self, exc: OSError) -> None:

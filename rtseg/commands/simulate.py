@@ -39,6 +39,9 @@ place is an error naming it; ``--joint-map Head=upperneck,...`` places it by han
 ``--faults SPEC`` (serial, vmc and the vendor simulators): ``drop``, ``corrupt``,
 ``jitter`` and ``unplug`` per frame for mvn/mocopi/rokoko/axis (``dropout`` is serial/VMC
 only: the vendor formats send whole skeletons); see ``rtseg.simulators.faults``.
+``dropout=SENSOR:...`` must name one of the simulator's sensors - serial: a suit sensor id
+or bone name, vmc: a bone name or its index among the bones sent - else the run is refused
+with an error listing them; the serial summary counts the frames with a sensor dropout.
 
 ``--speed X`` sends X times faster while the stream keeps the take's own clock (serial
 device time and sequence numbers, VMC ``/VMC/Ext/T``); ``--start``/``--end`` (take
@@ -406,8 +409,12 @@ def _serve_serial(args, take: Take) -> tuple[str, list[str]]:
         lines.append(f"waited {started - t0:.2f} s for a reader to open the device "
                      f"(sending starts {READER_SETTLE_S:g} s after it does)")
     sending = (log[-1].send_time - started) if log and started is not None else 0.0
+    # frames a fault dropout left a sensor out of (said whenever dropouts are configured)
+    dropouts = (f"; {sum(1 for m in frames if m.silenced)} with a sensor dropout"
+                if suit.injector.config.dropouts else "")
     lines += [f"sent {len(frames)} frame messages in {sending:.2f} s "
-             f"({', '.join(f'{v} {k}' for k, v in sorted(fates.items())) or 'none'}); "
+             f"({', '.join(f'{v} {k}' for k, v in sorted(fates.items())) or 'none'})"
+             f"{dropouts}; "
              f"{len(log) - len(frames)} device-info messages; {len(suit.unplug_log)} unplug(s)"]
     if frames:
         lines.append(f"take frames {frames[0].frame}..{frames[-1].frame} "
