@@ -30,7 +30,10 @@ class SourceStats:
     datagrams from senders outside a network source's ``allow=`` list (dropped unread);
     other_senders: datagrams from a second sender while a network source follows one
     (dropped unread); clock_restarts: times the source's clock went back or jumped ahead
-    by more than a few seconds, each starting a new segment of the reported clock.
+    by more than a few seconds, each starting a new segment of the reported clock;
+    counter_jumps: frame counter values taken as a damaged or restarted counter (a jump
+    the receive clock cannot explain, or backwards), not as lost frames
+    (``rtseg.drivers.vendor_seq``: MVN, mocopi, Axis).
     """
     frames_ok: int = 0
     dropped: int = 0
@@ -44,6 +47,7 @@ class SourceStats:
     refused_senders: int = 0
     other_senders: int = 0
     clock_restarts: int = 0
+    counter_jumps: int = 0
 
     def as_dict(self) -> dict[str, int]:
         return asdict(self)

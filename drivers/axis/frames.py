@@ -54,7 +54,7 @@ class AxisFrames:
         self.received = 0
         self._last = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (len(JOINTS), 1))
         self._log_at: dict[str, float] = {}
-        self._gaps = SeqGaps(32)
+        self._gaps = SeqGaps(32, name="Axis", counter="frame index", logger=log)
         #: the avatar's rest geometry (``rtseg.core.posture.RestPose``) from the first
         #: frame with displacement that gives one (``pose.rest_pose``), else None
         self.rest: RestPose | None = None
@@ -74,17 +74,22 @@ class AxisFrames:
 
     def _seq(self, f: AxisFrame, now: float) -> int:
         """The frame's ``seq``: the binary frame index (a forward jump adds 1 to ``gaps``
-        and the frames skipped to ``dropped``), or for text the count of frames so far."""
+        and the frames skipped to ``dropped``; an index the receive clock cannot explain,
+        or backwards, is a damaged or restarted counter: 1 in ``counter_jumps``, the last
+        trusted index + 1 returned; :class:`rtseg.drivers.vendor_seq.SeqGaps`), or for text
+        the count of frames so far."""
         self.received += 1
         if f.frame_index is None:
             return self.received - 1
-        missing = self._gaps.step(f.frame_index)
-        if missing:
+        step = self._gaps.step(f.frame_index, now)
+        if step.jumps:                             # damaged or restarted (SeqGaps logs)
+            self._count("counter_jumps", step.jumps)
+        if step.missing:
             self._count("gaps")
-            self._count("dropped", missing)
+            self._count("dropped", step.missing)
             self.warn("gap", now, "Axis: %d frame(s) missing before frame index %d",
-                      missing, f.frame_index)
-        return f.frame_index
+                      step.missing, f.frame_index)
+        return step.seq
 
     def _selected(self, f: AxisFrame) -> bool:
         if self.avatar is None:
@@ -119,9 +124,10 @@ class AxisFrames:
             return self._convert_bad(f, now)
         q, self._last, pos = poses(f.values, f.with_disp, f.with_ref, self.order,
                                    self.unit_scale, self.space)
+        seq = self._seq(f, now)
         return Frame(recv_time=now, quats=q, valid=_ALL_VALID.copy(),
-                     source_time=None if f.frame_index is None else f.frame_index / self.rate,
-                     seq=self._seq(f, now), root_position=pos)
+                     source_time=None if f.frame_index is None else seq / self.rate,
+                     seq=seq, root_position=pos)
 
     def _convert_bad(self, f: AxisFrame, now: float) -> Frame:
         """A frame with non-finite values: those joints invalid (their last good local
@@ -141,7 +147,7 @@ class AxisFrames:
                         valid[j] = False
         seq = self._seq(f, now)
         return Frame(recv_time=now, quats=q, valid=valid,
-                     source_time=None if f.frame_index is None else f.frame_index / self.rate,
+                     source_time=None if f.frame_index is None else seq / self.rate,
                      seq=seq, root_position=pos)
 
     def many(self, items: list[AxisFrame | AxisError], now: float) -> list[Frame]:
@@ -184,7 +190,7 @@ class AxisFrames:
             seq = self._seq(f, now)
             out.append(Frame(recv_time=now, quats=q[k], valid=_ALL_VALID.copy(),
                              source_time=None if f.frame_index is None
-                             else f.frame_index / self.rate, seq=seq,
+                             else seq / self.rate, seq=seq,
                              root_position=root[k]))
 
 

@@ -38,7 +38,10 @@ class MocopiAssembler:
     ``UNIT_EXACT`` off unit are renormalised); ``continuous`` flips signs
     for a non-negative dot with the previous value (so a sign-flipped identity is
     harmless).  A forward jump of ``fnum`` adds 1 to ``stats.gaps`` and the frames skipped
-    to ``stats.dropped`` (:class:`rtseg.drivers.vendor_seq.SeqGaps`).  ``skdf`` packets set ``skeleton``; a ``head.ftyp`` other than
+    to ``stats.dropped`` (:class:`rtseg.drivers.vendor_seq.SeqGaps`); a jump the receive
+    clock cannot explain, or backwards, is a damaged or restarted ``fnum``: 1 in
+    ``stats.counter_jumps``, nothing in ``dropped``, the frame delivered with ``seq`` = the
+    last trusted ``fnum`` + 1.  ``skdf`` packets set ``skeleton``; a ``head.ftyp`` other than
     ``"sony motion format"`` is counted in ``bad_messages``.  :meth:`feed` never raises.
     """
 
@@ -68,7 +71,7 @@ class MocopiAssembler:
         self._all_valid = np.ones(self.n, dtype=bool)
         #: frames decoded through a learned layout (diagnostics)
         self.fast_frames = 0
-        self._gaps = SeqGaps(32)
+        self._gaps = SeqGaps(32, name="mocopi", counter="fnum", logger=log)
 
     def _count(self, what: str, n: int, message: str) -> None:
         setattr(self.stats, what, getattr(self.stats, what) + n)
@@ -109,12 +112,16 @@ class MocopiAssembler:
 
     def _frame(self, fr: MocopiFrame, now: float) -> Frame:
         self.last_frame = fr
-        missing = self._gaps.step(fr.fnum)
+        step = self._gaps.step(fr.fnum, now)
+        if step.jumps:                                # damaged or restarted (SeqGaps logs)
+            self.stats.counter_jumps += step.jumps
+        missing = step.missing
         if missing:                                   # frames the sender numbered, lost
             self.stats.gaps += 1
             self._count("dropped", missing, f"{missing} frame(s) missing before fnum "
                         f"{fr.fnum} (gaps also counted in gaps)")
-        fast = self._frame_fast(fr, now)
+        seq = step.seq
+        fast = self._frame_fast(fr, now, seq)
         if fast is not None:
             return fast
         ids = fr.bone_ids
@@ -152,10 +159,10 @@ class MocopiAssembler:
             if np.isfinite(pos).all():
                 root = pos.copy()
         st = fr.uttm if fr.uttm is not None and math.isfinite(fr.uttm) else None
-        return Frame(recv_time=now, quats=q, valid=valid, source_time=st, seq=fr.fnum,
+        return Frame(recv_time=now, quats=q, valid=valid, source_time=st, seq=seq,
                      root_position=root)
 
-    def _frame_fast(self, fr: MocopiFrame, now: float) -> Frame | None:
+    def _frame_fast(self, fr: MocopiFrame, now: float, seq: int) -> Frame | None:
         """Exactly the suit's bones in suit order, all finite and unit: few numpy
         operations.  None: the general path (same result)."""
         if len(fr.bone_ids) != self.n or not np.array_equal(fr.bone_ids, self._ids_arr):
@@ -177,4 +184,4 @@ class MocopiAssembler:
             root = pos.copy() if np.isfinite(pos).all() else None
         st = fr.uttm if fr.uttm is not None and math.isfinite(fr.uttm) else None
         return Frame(recv_time=now, quats=q, valid=self._all_valid.copy(), source_time=st,
-                     seq=fr.fnum, root_position=root)
+                     seq=seq, root_position=root)

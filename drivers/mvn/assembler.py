@@ -57,12 +57,15 @@ class MvnAssembler:
 
     Per frame: ``quats`` (J, 4) rtseg frame, global; segments not received hold their last
     value with ``valid`` False (a sample counter that jumps forward adds 1 to
-    ``stats.gaps`` and the samples skipped to ``stats.dropped``); ``seq`` = sample counter; ``source_time`` = time code / 1000
-    (s); ``root_position`` = position of the first joint (the pelvis), metres, rtseg frame.
-    Quaternions with | |q|^2 - 1 | > ``unit_tolerance`` or non-finite values are counted
-    in ``bad_values`` and marked invalid; accepted ones more than ``UNIT_EXACT`` off unit
-    are renormalised.  ``continuous``: flip signs so each joint's dot with its previous
-    value is >= 0.  :meth:`feed` never raises on any input.
+    ``stats.gaps`` and the samples skipped to ``stats.dropped``; a jump the receive clock
+    cannot explain, or backwards, is a damaged or restarted counter: 1 in
+    ``stats.counter_jumps``, nothing in ``dropped``, ``seq`` = the last trusted counter + 1,
+    :class:`rtseg.drivers.vendor_seq.SeqGaps`); ``seq`` = sample counter; ``source_time`` =
+    time code / 1000 (s); ``root_position`` = position of the first joint (the pelvis),
+    metres, rtseg frame.  Quaternions with | |q|^2 - 1 | > ``unit_tolerance`` or
+    non-finite values are counted in ``bad_values`` and marked invalid; accepted ones more
+    than ``UNIT_EXACT`` off unit are renormalised.  ``continuous``: flip signs so each
+    joint's dot with its previous value is >= 0.  :meth:`feed` never raises on any input.
     """
 
     def __init__(self, segment_ids: Sequence[int], *, character: int = 0,
@@ -109,7 +112,7 @@ class MvnAssembler:
         self.incomplete_frames = 0
         #: characters seen (any type), to list in error messages
         self.characters_seen: set[int] = set()
-        self._gaps = SeqGaps(32)
+        self._gaps = SeqGaps(32, name="MVN", counter="sample counter", logger=log)
 
     # -- public
 
@@ -190,7 +193,10 @@ class MvnAssembler:
                             "its missing segments are marked invalid (further ones counted in "
                             ".incomplete_frames)", p.sample, sorted(p.parts))
         self._last_sample = p.sample
-        missing = self._gaps.step(p.sample)
+        step = self._gaps.step(p.sample, now)
+        if step.jumps:                         # damaged or restarted (SeqGaps logs)
+            self.stats.counter_jumps += step.jumps
+        missing, seq = step.missing, step.seq
         if missing:                            # whole frames the sender numbered, lost
             self.stats.gaps += 1
             self.stats.dropped += missing
@@ -203,7 +209,7 @@ class MvnAssembler:
         # (np.concatenate would convert to native byte order; joining bytes keeps it)
         items = parts[0] if len(parts) == 1 else \
             np.frombuffer(b"".join(x.tobytes() for x in parts), dtype=ITEM_02)
-        fast = self._emit_fast(items, p, now)
+        fast = self._emit_fast(items, p, now, seq)
         if fast is not None:
             return fast
         ids = items["id"].astype(np.int64)
@@ -251,9 +257,9 @@ class MvnAssembler:
                 self.first_pose = (full, q.copy())
         self._q = q
         return Frame(recv_time=now, quats=q, valid=valid, source_time=p.time_ms / 1000.0,
-                     seq=p.sample, root_position=root)
+                     seq=seq, root_position=root)
 
-    def _emit_fast(self, items: np.ndarray, p: _Partial, now: float) -> Frame | None:
+    def _emit_fast(self, items: np.ndarray, p: _Partial, now: float, seq: int) -> Frame | None:
         """The common case in few numpy operations: exactly the suit's segments, in suit
         order, all finite and unit.  None: use the general path (same result)."""
         if len(items) != self.n or items["id"].tobytes() != self._ids_bytes:
@@ -272,7 +278,7 @@ class MvnAssembler:
             self.first_pose = (raw[:, _PCOLS].copy(), q.copy())
         pos = raw[self._root_row, _PCOLS]
         return Frame(recv_time=now, quats=q, valid=self._all_valid.copy(),
-                     source_time=p.time_ms / 1000.0, seq=p.sample,
+                     source_time=p.time_ms / 1000.0, seq=seq,
                      root_position=pos if np.isfinite(pos).all() else None)
 
     def _other(self, t: str, payload: memoryview) -> None:
