@@ -708,3 +708,6 @@ def test_every_frame_received_is_accounted_for_in_the_summary():
     text = SessionSummary(**{**fields, "unprocessed": 2}).text()
     assert "2 arrived as it stopped (recorded, not processed)" in text
     assert "arrived as it stopped" not in SessionSummary(**{**fields, "unprocessed": 0}).text()
+    # a source's damaged frame counters (rtseg.drivers.vendor_seq) are said beside bad input
+    damaged = SessionSummary(**{**fields, "source_stats": {"counter_jumps": 3}}).text()
+    assert "unknown names (3 damaged frame counters), " in damaged

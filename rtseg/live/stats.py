@@ -171,7 +171,10 @@ class SessionSummary:
                 + (f", {self.unprocessed} arrived as it stopped (recorded, not processed)"
                    if self.unprocessed else "")
                 + ", "
-                f"{input_text(self.input)}, "
+                f"{input_text(self.input)}"
+                + (f" ({self.source_stats['counter_jumps']} damaged frame counters)"
+                   if (self.source_stats or {}).get("counter_jumps") else "")
+                + ", "
                 f"{self.cuts} cuts ({methods}; {targets_text(self.targets)}"
                 + "".join(f"; {k} gate held back {v}" for k, v in sorted(self.gated.items()))
                 + "".join(f"; {k} relative floor held back {v}"
