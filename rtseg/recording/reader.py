@@ -31,12 +31,13 @@ def is_session_dir(path: str | Path) -> bool:
 def sessions_inside(path: str | Path) -> str:
     """What to say when ``path`` is not a recorded session but a folder of them (a session
     of several named sources records each in ``DIR/<name>``): "; it holds the sessions
-    DIR/a, DIR/b: give one", else ""."""
+    of a, b (in DIR/<name>): give one", else ""."""
     p = Path(path)
     if not p.is_dir():
         return ""
-    inner = sorted(str(d) for d in p.iterdir() if is_session_dir(d))
-    return f"; it holds the sessions {', '.join(inner)}: give one" if inner else ""
+    inner = sorted(d.name for d in p.iterdir() if is_session_dir(d))
+    return (f"; it holds the sessions of {', '.join(inner)} (in {p.name}/<name>): give one"
+            if inner else "")
 
 
 def read_session_header(directory: str | Path) -> dict[str, Any]:
