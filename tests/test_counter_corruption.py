@@ -155,6 +155,19 @@ def _check(src, frames, n: int) -> None:
     assert [f.seq for f in frames] == [k for k in range(n) if k not in LEFT_OUT]
 
 
+def _sent_and_checked(url: str, grams: list[bytes], n: int) -> tuple:
+    """Send ``grams`` (``n`` frames, ``LEFT_OUT`` left out, ``DAMAGED`` damaged) to a source
+    on ``url`` over UDP, read what arrived, check its counts (``_check``): (source, frames)."""
+    src = open_source(url)
+    try:
+        _send_paced(src.port, grams)
+        frames = read_all(src)
+    finally:
+        src.close()
+    _check(src, frames, n)
+    return src, frames
+
+
 def test_mocopi_over_udp_counts_the_real_gap_not_the_damaged_fnum():
     n = 120
     q = Rotation.random(n * len(BONE_NAMES), random_state=3).as_quat().reshape(
@@ -168,13 +181,7 @@ def test_mocopi_over_udp_counts_the_real_gap_not_the_damaged_fnum():
             byte, x = DAMAGED[k]
             d = _xor_at(d, d.index(b"fnum") + 4 + byte, x)   # u32 little-endian value
         grams.append(d)
-    src = open_source("mocopi://127.0.0.1:0?queue=1000")
-    try:
-        _send_paced(src.port, grams)
-        frames = read_all(src)
-    finally:
-        src.close()
-    _check(src, frames, n)
+    src, frames = _sent_and_checked("mocopi://127.0.0.1:0?queue=1000", grams, n)
     assert all(f.valid.all() for f in frames)
 
 
@@ -194,13 +201,7 @@ def test_mvn_over_udp_counts_the_real_gap_not_the_damaged_sample_counter():
             d = _xor_at(d, 6 + 3 - byte, x)                  # u32 big-endian after "MXTP02"
             assert struct.unpack(">I", d[6:10])[0] != k
         grams.append(d)
-    src = open_source("mvn://127.0.0.1:0?queue=1000")
-    try:
-        _send_paced(src.port, grams)
-        frames = read_all(src)
-    finally:
-        src.close()
-    _check(src, frames, n)
+    src, frames = _sent_and_checked("mvn://127.0.0.1:0?queue=1000", grams, n)
     assert all(f.valid.all() for f in frames)
 
 
@@ -219,13 +220,7 @@ def test_axis_over_udp_counts_the_real_gap_not_the_damaged_frame_index():
             byte, x = DAMAGED[k]
             fi = k ^ (x << (8 * byte))
         grams.append(A.encode_binary(v[k], frame_index=fi))
-    src = open_source("axis://127.0.0.1:0?rate=120&queue=1000")
-    try:
-        _send_paced(src.port, grams)
-        frames = read_all(src)
-    finally:
-        src.close()
-    _check(src, frames, n)
+    src, frames = _sent_and_checked("axis://127.0.0.1:0?rate=120&queue=1000", grams, n)
     st = np.array([f.source_time for f in frames])          # index / rate, damaged ones too
     assert np.allclose(st, np.array([f.seq for f in frames]) / 120.0)
 

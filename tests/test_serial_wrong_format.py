@@ -26,15 +26,13 @@ import pytest
 
 from rtseg.core.profiles import suit_profile
 from rtseg.core.quat import global_from_local
-from rtseg.core.take import Take
 from rtseg.drivers import open_source
 from rtseg.drivers.serial import codec, stream
-from rtseg.drivers.serial.source import SerialSource
 from rtseg.drivers.serial.text import looks_like_text
 from rtseg.simulators.serial_device import SerialSuit
 from rtseg.simulators.synth.motion import synthesize
 
-from test_serial_live import rig  # noqa: F401  (the suit-and-source fixture)
+from test_serial_live import collect, make_take, rig  # noqa: F401  (rig: a fixture)
 
 REPO = Path(__file__).resolve().parents[1]
 SUIT = suit_profile("default17")
@@ -42,33 +40,6 @@ J = len(SUIT.bones)
 LOGGER = "rtseg.drivers.serial"
 DETECTED = "text lines detected; reading format=text"
 TEXT_HINT = "bytes of text lines (id,w,x,y,z) and no rtseg binary frame"
-
-
-def make_take(n: int, rate: float = 120.0, seed: int = 0) -> Take:
-    """A smooth random local take on the default17 hierarchy."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(n)[:, None] / rate
-    freq = rng.uniform(0.2, 1.5, (1, J))
-    phase = rng.uniform(0, 2 * np.pi, (1, J))
-    axis = rng.normal(size=(J, 3))
-    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
-    angle = 0.8 * np.sin(2 * np.pi * freq * t + phase)
-    q = np.concatenate([axis[None] * np.sin(angle / 2)[..., None],
-                        np.cos(angle / 2)[..., None]], -1)
-    return Take(list(SUIT.bones), list(SUIT.parents), rate, q, space="local", source="test")
-
-
-def collect(src: SerialSource, until, timeout: float = 10.0) -> list:
-    """Read frames until ``until(frames, idle)`` (idle: the last read timed out)."""
-    frames = []
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        f = src.read(0.05)
-        if f is not None:
-            frames.append(f)
-        if until(frames, f is None):
-            break
-    return frames
 
 
 def wait_for(cond, timeout: float = 5.0) -> bool:
