@@ -112,9 +112,10 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     for key in ("vmc", "file_replay"):
         s = out[key]
+        left = s['not_in_library']
         print(f"{key:12s} named right {s['accuracy']}, unknown {s['unknown_rate']}, wrong "
               f"{s['wrong_rate']} of {s['segments']} known segments; missing behaviours "
-              f"unknown {s['not_in_library']['unknown_rate']}")
+              + (f"unknown {left['unknown_rate']}" if left['segments'] else "none"))
     for c in counts:
         print(f"  {c['take']}: {c['frames_received']} of {c['frames_sent']} frames, "
               f"{c['posture_namings']} of {c['decisions']} decisions by posture")
