@@ -204,3 +204,38 @@ def test_the_standard_proportions_are_the_mean_of_six_people(data_dir):
     for side in ("left", "right"):
         for c in (f"{side}_upper_arm", f"{side}_lower_arm", f"{side}_hand", f"{side}_upper_leg"):
             assert abs(T_POSE[c][0] - mean[c][0]) < 0.02, c              # spans
+
+
+def test_a_serial_suit_declared_tpose_names_by_the_standard_pose(tmp_path):
+    """``serial://...?tpose=1`` (a suit whose firmware sends each segment's rotation from a
+    T-pose, as the simulated suit does): over a real pseudo-terminal the session's facing
+    probe decides and names use posture; without the option they never do."""
+    from rtseg.drivers import open_source
+    from rtseg.drivers.base import SourceError
+    from rtseg.evaluation.online import live_config
+    from rtseg.library.examples import learn, synthetic_examples
+    from rtseg.library.file import save
+    from rtseg.live.config import from_dict
+    from rtseg.live.session import LiveSession
+    from rtseg.simulators.serial_device import SerialSuit
+    cfg0, _ = live_config()
+    lib, _ = learn(synthetic_examples(["walk", "squat", "punch"], [3, 4], cfg0, seconds=6.0))
+    path = save(lib, tmp_path / "lib.json")
+    perf = synthesize("walk:5,squat:5,punch:5", frame_rate=120.0, seed=1).take
+    origins = {}
+    for opt in ("&tpose=1", ""):
+        suit = SerialSuit(perf, rate=120.0, speed=4.0)
+        link = suit.start()
+        try:
+            cfg = from_dict({"output": {"osc": []},
+                             "identity": {"enabled": True, "behaviours": str(path)}})
+            session = LiveSession(f"serial://{link}?rate=120{opt}", cfg, handle_signals=False,
+                                  duration=perf.n_frames / 120.0 / 4.0 + 0.6)
+            session.run()
+        finally:
+            suit.stop()
+        st = session.pipeline.identity.stats
+        origins[opt] = (session.pipeline.posture.origin, st.posture_namings >= 1)
+    assert origins == {"&tpose=1": ("standard", True), "": (None, False)}
+    with pytest.raises(SourceError, match="tpose"):
+        open_source("serial:///dev/null?tpose=maybe")

@@ -18,6 +18,9 @@ Options (all optional):
 ``backoff``    longest wait between reconnect attempts to a device that stays, s (0.5)
 ``wait``       1: start even if the device is absent and keep trying (default 0: error)
 ``exclusive``  1 (default): lock the port (flock) so two readers cannot share it
+``tpose``      1: each orientation is its segment's rotation from a T-pose in a Y-up world
+               facing +Z or -Z (the suit's firmware calibrates so; the simulated suit does):
+               behaviour names use a standard T-pose's posture (``rtseg.core.standard_rig``)
 =============  ==============================================================================
 
 Behaviour
@@ -98,6 +101,8 @@ class SerialSource(QueuedSource):
     """See the module docstring.  ``path``: device path or any pyserial URL."""
 
     space = "global"
+    #: URL option ``tpose=1``: the orientations are from a T-pose (see the options above)
+    t_pose_without_geometry = False
 
     def __init__(self, path: str, baud: int = DEFAULT_BAUD, fmt: str = "auto",
                  suit: str | SuitProfile = "default17", suits_path: str | None = None,
@@ -463,7 +468,7 @@ class SerialSource(QueuedSource):
 
 
 _OPTIONS = {"baud", "format", "suit", "suits", "stale", "rate", "queue", "backoff", "wait",
-            "exclusive"}
+            "exclusive", "tpose"}
 
 
 def _flag(value: str, key: str) -> bool:
@@ -498,7 +503,8 @@ def open_url(location: str, options: dict[str, str]) -> SerialSource:
             raise SourceError(f"serial option {key}={text}: out of range {lo}..{hi}")
         return value
 
-    return SerialSource(
+    tpose = _flag(options["tpose"], "tpose") if "tpose" in options else False
+    src = SerialSource(
         location, baud=num("baud", int, DEFAULT_BAUD, 50, MAX_BAUD),
         fmt=options.get("format", "auto"),
         suit=options.get("suit", "default17"), suits_path=options.get("suits"),
@@ -507,6 +513,8 @@ def open_url(location: str, options: dict[str, str]) -> SerialSource:
         backoff_max=num("backoff", float, 0.5, 0.05, 3600.0),
         wait=_flag(options["wait"], "wait") if "wait" in options else False,
         exclusive=_flag(options["exclusive"], "exclusive") if "exclusive" in options else True)
+    src.t_pose_without_geometry = tpose
+    return src
 
 
 __all__ = ["SerialSource", "SensorEvent", "open_url"]

@@ -109,7 +109,7 @@ def _run(args: argparse.Namespace, cfg, script: str, library: str = "") -> int:
     suit = SerialSuit(take, rate=args.rate, speed=args.speed, faults=faults, loop=True)
     path = suit.start()
     try:
-        url = f"serial://{path}?rate={args.rate:g}"
+        url = f"serial://{path}?rate={args.rate:g}&tpose=1"
         targets = ", ".join(cfg["output.osc"])
         where = (f"cuts go to OSC {targets} (try `oscdump {cfg['output.osc'][0].rsplit(':', 1)[1]}`)"
                  if targets else "no OSC/UDP target")
