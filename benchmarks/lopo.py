@@ -12,7 +12,8 @@ per subject number) and any number of single-behaviour source folders laid out l
 ``cmu_single/`` (``index.tsv`` with take, subject, format, behaviour; ``bvh/``, ``amc/``),
 e.g. ``cmu_single``, ``hdm05``, ``bandai``.  A folder laid out like one source alone works
 too.  From each source ``rtseg.evaluation.splice`` builds same-person and mixed performances
-(``--per-person`` x people of each kind per seed, cached under ``--cache``; a source of one
+(``--per-person`` x people of each kind per seed, cached under ``--cache`` by the source's
+path and contents, so another folder of the same name is spliced afresh; a source of one
 person gives same-person ones only).  Held-out units: each person with same-person
 performances (the cmu takes of one subject are one person), and each mixed performance
 holding someone who has none (a person with one behaviour per format); a unit's training
@@ -33,6 +34,7 @@ the strict tolerance (cut inside the labelled range) and delay median / p90 are 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import itertools
 import json
 import sys
@@ -47,7 +49,7 @@ from rtseg.detectors.contrast import ContrastDetector
 from rtseg.evaluation.scoring import pooled_tally, tally
 from rtseg.labels.takes import find_labelled_takes
 from rtseg.evaluation.online import fed_features, live_config, to_take_frames
-from rtseg.evaluation.splice import SpliceConfig, generate
+from rtseg.evaluation.splice import SpliceConfig, generate, read_source_index
 
 TOL_S = 0.5
 #: the candidates (every combination); the shipped defaults fill the other keys
@@ -94,10 +96,22 @@ def _sources(data: Path) -> list[Path]:
 
 
 def _subjects(src: Path) -> list[str]:
-    rows = (src / "index.tsv").read_text(encoding="utf-8").splitlines()
-    head = rows[0].split("\t")
-    col = head.index("subject")
-    return sorted({r.split("\t")[col] for r in rows[1:] if r.strip()})
+    """The people of a source (``index.tsv`` read as ``splice.py`` reads it: rows whose
+    motion file exists)."""
+    return sorted({r.subject for r in read_source_index(src)})
+
+
+def _cache_key(src: Path) -> str:
+    """Ten hex digits naming ``src``'s performances in the cache: its resolved path, its
+    ``index.tsv`` and the name, size and time of each motion file, so another folder of
+    the same name, or this one changed, never reuses what was spliced before."""
+    h = hashlib.sha1(str(src.resolve()).encode())
+    h.update((src / "index.tsv").read_bytes())
+    for p in sorted(src.rglob("*")):
+        if p.is_file() and p.suffix.lower() in (".amc", ".asf", ".bvh"):
+            st = p.stat()
+            h.update(f"{p.relative_to(src)}\t{st.st_size}\t{st.st_mtime_ns}\n".encode())
+    return h.hexdigest()[:10]
 
 
 def load_cases(data: Path, cache: Path, per_person: int, seeds: list[int]) -> list[Case]:
@@ -115,21 +129,21 @@ def load_cases(data: Path, cache: Path, per_person: int, seeds: list[int]) -> li
             add(t.load(), f"cmu/{t.name}", who, [who], "cmu", t.transitions)
     for src in _sources(data):
         n = per_person * max(1, len(_subjects(src)))
+        key = _cache_key(src)
         for seed in seeds:
-            out = cache / f"{src.name}-seed{seed}-n{n}"
+            out = cache / f"{src.name}-{key}-seed{seed}-n{n}"
             if not (out / "index.tsv").is_file():
-                made = False
+                made, why = False, ""
                 for kinds in (("same", "mixed"), ("same",)):
                     try:   # a source with one person makes same-person performances only
                         generate(src, out, seed=seed, n=n, kinds=kinds, cfg=SpliceConfig(),
                                  force=True)
                         made = True
                         break
-                    except ValueError:
-                        continue
+                    except ValueError as exc:
+                        why = str(exc)      # the same-person attempt's, when both fail
                 if not made:
-                    print(f"lopo: {src}: no performance can be spliced (each person needs two "
-                          f"behaviours in one format)", file=sys.stderr)
+                    print(f"lopo: {src}: no performance can be spliced: {why}", file=sys.stderr)
                     continue
             same = {p for t in find_labelled_takes(out, ("spliced",)) if t.name.startswith("same")
                     for p in t.load().meta.get("splice", {}).get("subjects", [])}

@@ -391,3 +391,56 @@ def test_real_cmu_single(tmp_path):
     assert {p.take.meta["splice"]["format"] for p in perfs if p.kind == "mixed"} == {"bvh", "amc"}
     found = find_labelled_takes(tmp_path, ["spliced"])
     assert len(found) == 4 and all(t.labels.kind == "ranges" for t in found)
+
+
+def test_index_rows_of_blanks_are_skipped_and_errors_name_their_line(tmp_path):
+    """A spreadsheet export's rows of spaces or tabs are no takes; a row that lacks a field
+    is named by its own line of index.tsv."""
+    from source_folders import make_source
+    src = make_source(tmp_path / "src", ["p1"], ["walk", "squat"], seconds=3.0)
+    index = src / "index.tsv"
+    lines = index.read_text().splitlines()
+    index.write_text("\n".join(lines[:2] + ["   ", "\t\t\t", ""] + lines[2:]) + "\n")
+    assert [r.name for r in S.read_source_index(src)] == ["p1_001", "p1_002"]
+    index.write_text("\n".join(lines[:2] + ["\t\t\t", "p1_009\tp1\tbvh"] + lines[2:]) + "\n")
+    with pytest.raises(ValueError, match=r"index.tsv:4: empty"):
+        S.read_source_index(src)
+
+
+def test_an_amc_take_is_read_with_its_subject_skeleton(tmp_path, data_dir):
+    """amc/<take>.amc goes with amc/<subject>.asf (docs/splice.md), whatever the take is
+    called: two people's skeletons beside takes named otherwise."""
+    import shutil
+    src = tmp_path / "src"
+    (src / "amc").mkdir(parents=True)
+    hdm = data_dir / "hdm05"
+    if not (hdm / "amc").is_dir():
+        pytest.skip(f"{hdm} not found")
+    rows = ["take\tsubject\tformat\tbehaviour"]
+    for person in ("bd", "bk"):
+        shutil.copy(hdm / "amc" / f"{person}.asf", src / "amc" / f"{person}.asf")
+        amc = sorted((hdm / "amc").glob(f"{person}_00*.amc"))[0]
+        name = f"HDM_{person}_squat_007"
+        shutil.copy(amc, src / "amc" / f"{name}.amc")
+        rows.append(f"{name}\t{person}\tamc\tsquat")
+    (src / "index.tsv").write_text("\n".join(rows) + "\n")
+    got = S.load_sources(S.read_source_index(src))
+    assert [r.take.n_frames > 0 for r in got] == [True, True]
+
+
+def test_lopo_caches_performances_by_the_source_path_and_contents(tmp_path):
+    """benchmarks/lopo.py keys its cache of spliced performances on the source: two folders
+    of one name, or one folder changed, never share what was spliced."""
+    import importlib.util
+    from source_folders import make_source
+    spec = importlib.util.spec_from_file_location(
+        "lopo_bench", Path(__file__).resolve().parents[1] / "benchmarks" / "lopo.py")
+    lopo = importlib.util.module_from_spec(spec)
+    sys.modules["lopo_bench"] = lopo              # its dataclasses look their module up
+    spec.loader.exec_module(lopo)
+    a = make_source(tmp_path / "a" / "hdm05", ["p1"], ["walk", "squat"], seconds=3.0)
+    b = make_source(tmp_path / "b" / "hdm05", ["p1"], ["walk", "squat"], seconds=3.0)
+    key_a = lopo._cache_key(a)
+    assert key_a == lopo._cache_key(a) and key_a != lopo._cache_key(b)
+    (a / "index.tsv").write_text((a / "index.tsv").read_text() + "\n")
+    assert lopo._cache_key(a) != key_a

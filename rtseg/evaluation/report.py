@@ -158,7 +158,7 @@ def format_identity_table(doc: dict[str, Any]) -> str:
 def run_evaluate_identity(args: Any) -> int:
     """``rtseg evaluate DATA --online --identity [--json]``: JSON ``{"live_default",
     "identity": {"pooled", "groups", "takes"}}`` or a table.  Takes: ``--group`` (default
-    cmu and tsseg4d)."""
+    cmu and tsseg4d, else every group found, e.g. a folder of spliced performances)."""
     import json
     import sys
     from rtseg.progress import Progress
@@ -172,6 +172,9 @@ def run_evaluate_identity(args: Any) -> int:
     groups = (("cmu", "tsseg4d") if args.group is None
               else GROUPS if args.group == "all" else (args.group,))
     takes = find_labelled_takes(args.data_dir, groups)
+    if not takes and args.group is None:       # as without --identity: whatever is there
+        groups = GROUPS                        # (a folder of spliced performances)
+        takes = find_labelled_takes(args.data_dir, groups)
     if not takes:
         raise ValueError(f"no labelled takes of {', '.join(groups)} found in {args.data_dir}"
                          + no_takes_hint(args.data_dir))

@@ -92,7 +92,7 @@ def read_source_index(src: str | Path) -> list[SourceTake]:
     """Rows of ``SRC/index.tsv`` whose motion file exists (missing ones: logged, skipped).
 
     Raises ValueError naming the line for a row without take/subject/format/behaviour or
-    with a format other than bvh/amc.
+    with a format other than bvh/amc; rows of blanks only are skipped.
     """
     src = Path(src)
     index = src / "index.tsv"
@@ -105,8 +105,12 @@ def read_source_index(src: str | Path) -> list[SourceTake]:
         missing = [c for c in need if c not in (rows.fieldnames or [])]
         if missing:
             raise ValueError(f"{index}: missing column(s) {', '.join(missing)}")
-        for lineno, row in enumerate(rows, start=2):
+        for row in rows:
+            lineno = rows.line_num
             vals = {c: (row.get(c) or "").strip() for c in need}
+            cells = [x for v in row.values() for x in (v if isinstance(v, list) else [v])]
+            if not any(str(x or "").strip() for x in cells):
+                continue                  # a blank row (spaces or tabs only)
             if not all(vals.values()):
                 raise ValueError(f"{index}:{lineno}: empty {[c for c in need if not vals[c]][0]}")
             fmt = vals["format"].lower()
@@ -124,7 +128,9 @@ def load_sources(rows: Sequence[SourceTake]) -> list[SourceTake]:
     """Read every take and set its trim bounds (in place; returns the rows)."""
     from rtseg.drivers.readers import read_take
     for r in rows:
-        r.take = read_take(r.path)
+        # an AMC take's skeleton: the subject's (amc/<subject>.asf), else found beside it
+        asf = r.path.with_name(f"{r.subject}.asf") if r.fmt == "amc" else None
+        r.take = read_take(r.path, skeleton=asf if asf is not None and asf.is_file() else None)
         if r.take.root_position is None:
             r.take.root_position = np.zeros((r.take.n_frames, 3))
         r.trim = trim_bounds(r.take.quats, r.take.frame_rate)
