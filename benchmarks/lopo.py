@@ -237,9 +237,15 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr)
         held: dict[str, tuple] = {}
         choices = {}
+        alone = []
         for person in units:
             who = set().union(*(c.persons for c in cases if c.person == person))
             train = [c for c in cases if not (c.persons & who)]
+            if not train:          # nobody else to choose on: the shipped defaults
+                alone.append(person)
+                choices[person] = "shipped (no other person to choose on)"
+                held.update({c.name: shipped[c.name] for c in cases if c.person == person})
+                continue
             best, best_key = 0, None
             for k, res in enumerate(results):
                 tr = [res[c.name] for c in train]
@@ -256,6 +262,10 @@ def main(argv: list[str] | None = None) -> int:
         everyone = max(range(len(sets)), key=lambda k: mean_f1(list(results[k].values())))
         out["held_out"] = report(cases, held)
         out["choices"] = choices
+        if alone:
+            out["held_out_without_training"] = alone
+            print(f"lopo: {', '.join(alone)}: no other person to choose a set on; held out "
+                  f"with the shipped defaults", file=sys.stderr)
         out["chosen_on_everyone"] = {key: sets[everyone][key] for key in GRIDS[args.grid]}
         out["chosen_on_everyone_fit"] = report(cases, results[everyone])
     out["seconds"] = round(time.perf_counter() - t0, 1)
