@@ -444,3 +444,16 @@ def test_lopo_caches_performances_by_the_source_path_and_contents(tmp_path):
     assert key_a == lopo._cache_key(a) and key_a != lopo._cache_key(b)
     (a / "index.tsv").write_text((a / "index.tsv").read_text() + "\n")
     assert lopo._cache_key(a) != key_a
+
+
+def test_a_take_that_cannot_be_read_is_skipped_not_the_source(tmp_path, caplog):
+    """An empty BVH file or one of no frames is logged and left out, as a missing file is;
+    the rest of the source is read."""
+    import logging
+    from source_folders import make_source
+    src = make_source(tmp_path / "src", ["p1"], ["walk", "squat", "wave"], seconds=3.0)
+    (src / "bvh" / "p1_002.bvh").write_text("")
+    with caplog.at_level(logging.WARNING):
+        rows = S.load_sources(S.read_source_index(src))
+    assert [r.name for r in rows] == ["p1_001", "p1_003"]
+    assert any("p1_002.bvh: cannot be read" in r.getMessage() for r in caplog.records)

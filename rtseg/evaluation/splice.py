@@ -124,19 +124,32 @@ def read_source_index(src: str | Path) -> list[SourceTake]:
     return out
 
 
-def load_sources(rows: Sequence[SourceTake]) -> list[SourceTake]:
-    """Read every take and set its trim bounds (in place; returns the rows)."""
-    from rtseg.drivers.readers import read_take
+def load_sources(rows: list[SourceTake]) -> list[SourceTake]:
+    """Read every take and set its trim bounds (in place; returns the rows).  A take that
+    cannot be read, or holds fewer than two frames, is logged and left out (of ``rows``
+    too), as a missing file is: one bad file does not stop a whole source."""
+    from rtseg.drivers.readers import ReaderError, read_take
+    kept = []
     for r in rows:
         # an AMC take's skeleton: the subject's (amc/<subject>.asf), else found beside it
         asf = r.path.with_name(f"{r.subject}.asf") if r.fmt == "amc" else None
-        r.take = read_take(r.path, skeleton=asf if asf is not None and asf.is_file() else None)
+        try:
+            r.take = read_take(r.path, skeleton=asf if asf is not None and asf.is_file()
+                               else None)
+        except (ReaderError, OSError, ValueError) as exc:
+            log.warning("%s: cannot be read (%s); take skipped", r.path, exc)
+            continue
+        if r.take.n_frames < 2:
+            log.warning("%s: %d frame(s); take skipped", r.path, r.take.n_frames)
+            continue
         if r.take.root_position is None:
             r.take.root_position = np.zeros((r.take.n_frames, 3))
         r.trim = trim_bounds(r.take.quats, r.take.frame_rate)
         if r.trim != (0, r.take.n_frames):
             log.info("%s: rest frames dropped, kept [%d, %d) of %d", r.name, *r.trim,
                      r.take.n_frames)
+        kept.append(r)
+    rows[:] = kept
     return rows
 
 
