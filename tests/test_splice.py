@@ -457,3 +457,20 @@ def test_a_take_that_cannot_be_read_is_skipped_not_the_source(tmp_path, caplog):
         rows = S.load_sources(S.read_source_index(src))
     assert [r.name for r in rows] == ["p1_001", "p1_003"]
     assert any("p1_002.bvh: cannot be read" in r.getMessage() for r in caplog.records)
+
+
+def test_a_person_without_material_is_named_when_left_out(tmp_path, caplog):
+    """Someone whose takes are all too short for a segment is not silently dropped."""
+    import logging
+    from source_folders import make_source
+    src = make_source(tmp_path / "src", ["p1", "p2"], ["walk", "squat"], seconds=4.0)
+    make_source(tmp_path / "short", ["p3"], ["walk", "squat"], seconds=1.6, seed0=7)
+    lines = (tmp_path / "short" / "index.tsv").read_text().splitlines()[1:]
+    for f in (tmp_path / "short" / "bvh").iterdir():
+        f.rename(src / "bvh" / f.name)
+    with open(src / "index.tsv", "a") as fh:
+        fh.write("\n".join(lines) + "\n")
+    with caplog.at_level(logging.WARNING):
+        S.generate(src, tmp_path / "out", n=1, kinds=("same",))
+    assert any("p3 left out: no behaviour with material" in r.getMessage()
+               for r in caplog.records)

@@ -423,7 +423,12 @@ def generate(src: str | Path, out: str | Path, *, seed: int = 0, n: int = 20,
                          "use another folder or --force to remove them")
     for p in stale:
         p.unlink()
-    groups = build_groups(load_sources(read_source_index(src)), cfg)
+    rows = load_sources(read_source_index(src))
+    groups = build_groups(rows, cfg)
+    gone = sorted({r.subject for r in rows} - {k[0] for g in groups for k in g.pools})
+    if gone:
+        log.warning("%s: %s left out: no behaviour with material for a segment (%.1f s with "
+                    "its fades)", src, ", ".join(gone), cfg.min_segment_s + 2 * cfg.min_fade_s)
     names = sorted({b for g in groups for b in g.behaviours()})
     perfs = []
     for kind in kinds:
