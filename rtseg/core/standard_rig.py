@@ -74,7 +74,7 @@ MIN_BENT = 30
 #: Share of those that must agree on the knee lying in front.
 AGREE = 0.8
 #: A knee is bent when hip to ankle is shorter than this x thigh plus shin.
-BENT = 0.9
+BENT = 0.95
 #: In at least a tenth of the frames looked at, the ankles must lie more than this (leg
 #: lengths) below the hips' midpoint: legs that never hang down are no T-pose's.
 LEGS_DOWN = 0.5
