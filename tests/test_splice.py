@@ -474,3 +474,16 @@ def test_a_person_without_material_is_named_when_left_out(tmp_path, caplog):
         S.generate(src, tmp_path / "out", n=1, kinds=("same",))
     assert any("p3 left out: no behaviour with material" in r.getMessage()
                for r in caplog.records)
+
+
+def test_a_missing_take_is_warned_about_once(tmp_path, caplog):
+    """Commands read a source's index several times (learn, library_loto): its missing file
+    is said once."""
+    import logging
+    from source_folders import make_source
+    src = make_source(tmp_path / "src", ["p1"], ["walk", "squat"], seconds=3.0)
+    (src / "bvh" / "p1_002.bvh").unlink()
+    with caplog.at_level(logging.WARNING):
+        for _ in range(3):
+            assert [r.name for r in S.read_source_index(src)] == ["p1_001"]
+    assert sum("p1_002.bvh not found" in r.getMessage() for r in caplog.records) == 1

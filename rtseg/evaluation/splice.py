@@ -88,6 +88,10 @@ class SourceTake:
         return self.trim[1] - self.trim[0]
 
 
+#: (missing file, index line) already warned about in this process
+_MISSING_SAID: set[tuple[str, int]] = set()
+
+
 def read_source_index(src: str | Path) -> list[SourceTake]:
     """Rows of ``SRC/index.tsv`` whose motion file exists (missing ones: logged, skipped).
 
@@ -118,7 +122,9 @@ def read_source_index(src: str | Path) -> list[SourceTake]:
                 raise ValueError(f"{index}:{lineno}: format {fmt!r} is not bvh or amc")
             path = src / fmt / f"{vals['take']}{FORMAT_SUFFIX[fmt]}"
             if not path.is_file():
-                log.warning("%s:%d: %s not found; take skipped", index, lineno, path)
+                if (str(path), lineno) not in _MISSING_SAID:   # once, however often read
+                    _MISSING_SAID.add((str(path), lineno))
+                    log.warning("%s:%d: %s not found; take skipped", index, lineno, path)
                 continue
             out.append(SourceTake(vals["take"], vals["subject"], fmt, vals["behaviour"], path))
     return out
