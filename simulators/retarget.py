@@ -172,12 +172,10 @@ def topology_columns(take: Take, suit: SuitProfile) -> list[int] | None:
     cols = [-1] * len(suit.bones)
     for c in CANONICAL:
         cols[rs.index[c]] = rt.index[c]
-    for side in ("left", "right"):
-        for limb in ("lower_arm", "lower_leg"):
-            below_s = [k for k, p in enumerate(sp) if p == rs.index[f"{side}_{limb}"]]
-            below_t = [k for k, p in enumerate(tp) if p == rt.index[f"{side}_{limb}"]]
-            if below_s and below_t:
-                cols[below_s[0]] = below_t[0]
+    ends_t = rt.ends(tp)
+    for end, k in rs.ends(sp).items():
+        if end in ends_t:
+            cols[k] = ends_t[end]
     return cols
 
 

@@ -37,7 +37,7 @@ from typing import Any, Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rtseg.core.rig import RigError, map_rig
+from rtseg.core.rig import END_OF, RigError, map_rig
 
 #: The points of a posture row, in order; each is a rig joint's location (module doc).
 POINTS: tuple[str, ...] = (
@@ -54,8 +54,9 @@ _AT = {"head": "head", "chest": "chest",
        **{f"{s}_{p}": f"{s}_{c}" for s in ("left", "right")
           for p, c in (("shoulder", "upper_arm"), ("elbow", "lower_arm"),
                        ("hip", "upper_leg"), ("knee", "lower_leg"))}}
-_BELOW = {f"{s}_{p}": f"{s}_{c}" for s in ("left", "right")
-          for p, c in (("wrist", "lower_arm"), ("ankle", "lower_leg"))}
+#: wrist and ankle -> the limb end (``rtseg.core.rig.END_OF``) at them
+_END = {f"{s}_{p}": f"{s}_{e}" for s in ("left", "right")
+        for p, e in (("wrist", "hand"), ("ankle", "foot"))}
 
 
 class PostureError(ValueError):
@@ -166,12 +167,13 @@ class Posture:
         _check_order(parents)
         rig = map_rig(names, parents)
         at = {p: rig.index[c] for p, c in _AT.items()}
-        for p, c in _BELOW.items():
-            below = [k for k, par in enumerate(parents) if par == rig.index[c]]
-            if not below:
+        ends = rig.ends(parents)
+        for p, e in _END.items():
+            if e not in ends:
+                c = END_OF[e]
                 raise PostureError(f"{c} ({rig.joints[c]}) has no joint below it: no "
                                    f"{p.replace('_', ' ')}")
-            at[p] = below[0]
+            at[p] = ends[e]
         self.space = space
         self.parents = parents
         self.points = {p: names[at[p]] for p in POINTS}

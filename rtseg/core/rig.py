@@ -48,9 +48,13 @@ from typing import Sequence
 
 from rtseg.core.skeletons import rank_families, resolve_names
 
-__all__ = ["CANONICAL", "CANONICAL_PARENT", "FEATURE_JOINTS", "Rig", "RigError", "map_rig"]
+__all__ = ["CANONICAL", "CANONICAL_PARENT", "END_OF", "FEATURE_JOINTS", "Rig", "RigError",
+           "map_rig"]
 
 SIDES = ("left", "right")
+#: each limb's end (the first joint below its lower part: wrist, ankle) -> that lower part
+END_OF: dict[str, str] = {f"{s}_{end}": f"{s}_{low}" for s in SIDES
+                          for end, low in (("hand", "lower_arm"), ("foot", "lower_leg"))}
 LIMBS = tuple(f"{s}_{p}" for p in ("upper_arm", "lower_arm", "upper_leg", "lower_leg")
               for s in SIDES)
 #: Every canonical joint (pelvis first).
@@ -94,6 +98,17 @@ class Rig:
     @property
     def feature_indices(self) -> list[int]:
         return [self.index[j] for j in FEATURE_JOINTS]
+
+    def ends(self, parents: Sequence[int]) -> dict[str, int]:
+        """The limbs' ends: ``END_OF``'s hand or foot -> the rig joint just below its lower
+        arm or leg (the first one, in joint order, whose parent it is; ``parents`` of the rig
+        this was mapped from); an end the rig has no joint for is left out."""
+        out = {}
+        for end, low in END_OF.items():
+            below = [k for k, p in enumerate(parents) if p == self.index[low]]
+            if below:
+                out[end] = below[0]
+        return out
 
     def report(self) -> dict:
         """JSON-ready description: family, canonical -> rig joint, composed joints."""

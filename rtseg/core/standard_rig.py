@@ -22,7 +22,7 @@ from typing import Sequence
 import numpy as np
 
 from rtseg.core.posture import POINTS, Posture, PostureError, RestPose
-from rtseg.core.rig import CANONICAL, map_rig
+from rtseg.core.rig import CANONICAL, END_OF, map_rig
 
 #: Joint locations of the standard T-pose, in leg lengths (hip to knee plus knee to ankle),
 #: relative to the midpoint of the hip joints; Y up, the body facing +Z, its left at +X.
@@ -52,13 +52,11 @@ def standard_rest(joint_names: Sequence[str], parents: Sequence[int],
     names, par = list(joint_names), [int(p) for p in parents]
     rig = map_rig(names, par)
     at: dict[int, str] = {rig.index[c]: c for c in CANONICAL}
-    for side in ("left", "right"):
-        for limb, end in (("lower_arm", "hand"), ("lower_leg", "foot")):
-            below = [k for k, p in enumerate(par) if p == rig.index[f"{side}_{limb}"]]
-            if not below:
-                raise PostureError(f"{side}_{limb} ({rig.joints[f'{side}_{limb}']}) has no "
-                                   f"joint below it")
-            at.setdefault(below[0], f"{side}_{end}")
+    ends = rig.ends(par)
+    for end, low in END_OF.items():
+        if end not in ends:
+            raise PostureError(f"{low} ({rig.joints[low]}) has no joint below it")
+        at.setdefault(ends[end], end)
     sign = _HALF_TURN if turned else np.ones(3)
     out = np.zeros((len(names), 3))
     for j, p in enumerate(par):
