@@ -3,14 +3,13 @@ UDP (VMC sender): the short gaps are bridged and the detectors never restart."""
 
 from __future__ import annotations
 
-import socket
-import threading
-
 from rtseg.live.session import LiveSession
 from rtseg.live.config import from_dict
 from rtseg.simulators.serial_device import SerialSuit
 from rtseg.simulators.synth.motion import synthesize
 from rtseg.simulators.vmc_sender import VmcSender
+
+from vendor_helpers import free_port, run_while_sending
 
 SPEED = 4.0
 
@@ -49,21 +48,11 @@ def test_serial_5_percent_loss_does_not_restart_the_detectors():
 
 def test_vmc_5_percent_loss_does_not_restart_the_detectors():
     take = _take()
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
+    port = free_port()
     session = LiveSession(f"osc://127.0.0.1:{port}?format=vmc&rate=120", _config(),
                           handle_signals=False, duration=take.n_frames / 120.0 / SPEED + 2.0)
     sender = VmcSender(take, "127.0.0.1", port, rate=120.0, speed=SPEED,
                        faults="drop=0.05,seed=4")
-    # start sending once the session's socket is bound
-    t = threading.Timer(0.5, sender.start)
-    t.start()
-    try:
-        session.run()
-    finally:
-        t.cancel()
-        sender.stop()
+    run_while_sending(session, sender)
     assert sum(1 for f in sender.sent_log if f.dropped) > 0.03 * take.n_frames
     _check(session, take.n_frames)

@@ -6,7 +6,6 @@ real UDP, and records the geometry it used."""
 
 from __future__ import annotations
 
-import threading
 
 import numpy as np
 import pytest
@@ -16,7 +15,7 @@ from rtseg.core.posture import Posture, RestPose, take_posture
 from rtseg.core.standard_rig import MIN_BENT, FacingProbe, standard_rest
 from rtseg.simulators.synth.motion import synthesize
 
-from vendor_helpers import free_port
+from vendor_helpers import free_port, run_while_sending
 
 HALF_TURN = Rotation.from_euler("y", 180, degrees=True)
 
@@ -115,14 +114,8 @@ def test_a_live_vmc_sender_without_positions_names_by_the_standard_pose(tmp_path
                           handle_signals=False, duration=perf.n_frames / 120.0 / speed + 1.5)
     sender = VmcSender(perf, "127.0.0.1", port, speed=speed)
     sender.bone_positions = None                     # a sender without positions
-    timer = threading.Timer(0.5, sender.start)
-    timer.start()
-    try:
-        with caplog.at_level(logging.INFO, logger="rtseg.live.posture_switch"):
-            session.run()
-    finally:
-        timer.cancel()
-        sender.stop()
+    with caplog.at_level(logging.INFO, logger="rtseg.live.posture_switch"):
+        run_while_sending(session, sender)
     assert session.source.rest_pose is None and session.source.t_pose_without_geometry
     sp = session.pipeline.posture
     assert sp.origin == "standard" and sp.posture is not None

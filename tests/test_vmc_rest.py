@@ -17,7 +17,7 @@ from rtseg.simulators.vmc_sender import VmcSender
 
 from test_library_posture import FR, swing, library
 from test_vmc_live import PARENTS, SUIT, read_all
-from vendor_helpers import free_port
+from vendor_helpers import free_port, run_while_sending
 
 #: local positions (rtseg frame, metres) of a small avatar with shoulders and an upper chest
 AVATAR = {
@@ -144,7 +144,6 @@ def test_a_recorded_vmc_session_keeps_the_sender_geometry_for_its_replays(tmp_pa
     """A live session over UDP records the sender's rest geometry (session.json meta); the
     recording read back as a take has it, so a replay names by posture as the live session
     did."""
-    import threading
     from rtseg.core.posture import RestPose
     from rtseg.drivers.readers import read_take
     from rtseg.live.config import from_dict
@@ -156,13 +155,7 @@ def test_a_recorded_vmc_session_keeps_the_sender_geometry_for_its_replays(tmp_pa
     session = LiveSession(f"osc://127.0.0.1:{port}?format=vmc&rate=120", cfg,
                           handle_signals=False, duration=take.n_frames / 120.0 / 4.0 + 1.5)
     sender = VmcSender(take, "127.0.0.1", port, speed=4.0)
-    t = threading.Timer(0.5, sender.start)
-    t.start()
-    try:
-        session.run()
-    finally:
-        t.cancel()
-        sender.stop()
+    run_while_sending(session, sender)
     live_rest = session.source.rest_pose
     assert live_rest is not None
     replay = read_take(rec)

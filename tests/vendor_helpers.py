@@ -56,6 +56,19 @@ def free_port(kind: int = socket.SOCK_DGRAM) -> int:
     return port
 
 
+def run_while_sending(session, sender, delay: float = 0.5):
+    """Run ``session`` (a ``LiveSession`` on a network URL) with ``sender`` started
+    ``delay`` seconds in, once the session's socket is bound; the sender is stopped however
+    the run ends.  Returns the session's summary."""
+    timer = threading.Timer(delay, sender.start)
+    timer.start()
+    try:
+        return session.run()
+    finally:
+        timer.cancel()
+        sender.stop()
+
+
 def read_all(src, idle: float = 0.3) -> list:
     """Frames read from ``src`` until none arrives for ``idle`` seconds."""
     frames = []
