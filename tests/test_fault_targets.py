@@ -129,18 +129,23 @@ def _read_port(link, stop: threading.Event) -> None:
         port.close()
 
 
-@pytest.mark.parametrize("target", ["LeftHand", "7"])
-def test_serial_summary_counts_the_frames_with_a_dropout(target, tmp_path, capsys):
-    link = tmp_path / "tty_d"
+def _simulate_serial_read(link, faults: str) -> int:
+    """``rtseg simulate serial`` of 2 s of idle with ``faults``, its pty read meanwhile by
+    ``_read_port``; the exit status."""
     stop = threading.Event()
     reader = threading.Thread(target=_read_port, args=(link, stop), daemon=True)
     reader.start()
     try:
-        rc = main(["simulate", "serial", "--synth", "idle:2", "--link", str(link),
-                   "--speed", "4", "--linger", "0", "--faults", f"dropout={target}:0.2:0.5"])
+        return main(["simulate", "serial", "--synth", "idle:2", "--link", str(link),
+                     "--speed", "4", "--linger", "0", "--faults", faults])
     finally:
         stop.set()
         reader.join(5.0)
+
+
+@pytest.mark.parametrize("target", ["LeftHand", "7"])
+def test_serial_summary_counts_the_frames_with_a_dropout(target, tmp_path, capsys):
+    rc = _simulate_serial_read(tmp_path / "tty_d", f"dropout={target}:0.2:0.5")
     out, err = capsys.readouterr()
     assert rc == 0, err
     d = Dropout(target, 0.2, 0.5)
@@ -153,16 +158,7 @@ def test_serial_summary_counts_the_frames_with_a_dropout(target, tmp_path, capsy
 
 
 def test_serial_summary_without_dropouts_says_nothing_of_them(tmp_path, capsys):
-    link = tmp_path / "tty_d"
-    stop = threading.Event()
-    reader = threading.Thread(target=_read_port, args=(link, stop), daemon=True)
-    reader.start()
-    try:
-        rc = main(["simulate", "serial", "--synth", "idle:2", "--link", str(link),
-                   "--speed", "4", "--linger", "0", "--faults", "seed=1"])
-    finally:
-        stop.set()
-        reader.join(5.0)
+    rc = _simulate_serial_read(tmp_path / "tty_d", "seed=1")
     out = capsys.readouterr().out
     assert rc == 0
     assert re.search(r"^sent 240 frame messages in [\d.]+ s \(240 intact\); \d+ device-info",
