@@ -18,7 +18,6 @@ import select
 import subprocess
 import sys
 import time
-import tty
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +31,7 @@ from rtseg.drivers.serial.text import looks_like_text
 from rtseg.simulators.serial_device import SerialSuit
 from rtseg.simulators.synth.motion import synthesize
 
-from test_serial_live import collect, make_take, rig  # noqa: F401  (rig: a fixture)
+from test_serial_live import collect, make_take, raw_pty, rig  # noqa: F401  (fixtures)
 
 REPO = Path(__file__).resolve().parents[1]
 SUIT = suit_profile("default17")
@@ -54,16 +53,6 @@ def wait_for(cond, timeout: float = 5.0) -> bool:
 def messages(caplog, text: str) -> list[str]:
     return [r.getMessage() for r in caplog.records
             if r.name == LOGGER and text in r.getMessage()]
-
-
-@pytest.fixture
-def raw_pty():
-    """A bare pty pair: tests write raw bytes to the master."""
-    master, slave = os.openpty()
-    tty.setraw(slave)
-    yield master, os.ttyname(slave)
-    for fd in (master, slave):
-        os.close(fd)
 
 
 # --------------------------------------------------------------------------- the detector
