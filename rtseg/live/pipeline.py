@@ -372,7 +372,7 @@ class Pipeline:
         else:
             np.copyto(self._prev_fed, q)
         if self.identity is not None:
-            if self.posture.probe is not None:
+            if self.posture.probing:
                 self.posture.observe(q, self.identity)
             if identify:
                 self._identify(index, x, out, q)
