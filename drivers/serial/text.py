@@ -6,7 +6,6 @@ The wire carries w first; frames come out **scalar-last (x, y, z, w)** float64.
 
 from __future__ import annotations
 
-import re
 from typing import Iterable
 
 import numpy as np
@@ -16,6 +15,36 @@ from rtseg.drivers.serial.decoded import (DecodedFrame, DecoderStats, _check_qua
 from rtseg.drivers.serial.wire import (_WXYZ_TO_XYZW, MSG_FRAME, NORM_TOLERANCE,
                                              STATUS_ERROR, STATUS_VALID)
 
+
+
+#: what :func:`parse_record` says of a line that is no record: not one at all (no id) ...
+GARBAGE = "garbage"
+#: ... or one whose fields are wrong (id out of range, field count, values, status)
+BAD = "bad"
+
+
+def parse_record(line: bytes, max_line: int = 256) -> tuple | str:
+    """One stripped, non-blank line ``id,w,x,y,z[,status]``: ``(id, w, x, y, z, status)``
+    (status :data:`STATUS_VALID` when absent), else :data:`GARBAGE` (too long, or no integer
+    id) or :data:`BAD` (the id out of 0..255, another field count, a value or status that is
+    no number, a status out of 0..255)."""
+    if len(line) > max_line:
+        return GARBAGE
+    fields = line.split(b",")
+    try:
+        sid = int(fields[0])
+    except ValueError:
+        return GARBAGE
+    if not 0 <= sid <= 255 or len(fields) not in (5, 6):
+        return BAD
+    try:
+        w, x, y, z = (float(f) for f in fields[1:5])
+        st = int(fields[5]) if len(fields) == 6 else STATUS_VALID
+    except ValueError:
+        return BAD
+    if not 0 <= st <= 255:
+        return BAD
+    return sid, w, x, y, z, st
 
 
 class TextLineDecoder:
@@ -92,27 +121,14 @@ class TextLineDecoder:
         if not line or line.startswith(b"#"):
             out.extend(self.flush())
             return
-        if len(line) > self.MAX_LINE:
+        rec = parse_record(line, self.MAX_LINE)
+        if rec is GARBAGE:
             self.stats.garbage_lines += 1
             return
-        fields = line.split(b",")
-        try:
-            sid = int(fields[0])
-        except ValueError:
-            self.stats.garbage_lines += 1
-            return
-        if not 0 <= sid <= 255 or len(fields) not in (5, 6):
+        if rec is BAD:
             self.stats.bad_messages += 1
             return
-        try:
-            w, x, y, z = (float(f) for f in fields[1:5])
-            st = int(fields[5]) if len(fields) == 6 else STATUS_VALID
-        except ValueError:
-            self.stats.bad_messages += 1
-            return
-        if not 0 <= st <= 255:
-            self.stats.bad_messages += 1
-            return
+        sid, w, x, y, z, st = rec
         if sid in self._seen:
             out.extend(self.flush())
         self._ids.append(sid)
@@ -124,9 +140,6 @@ class TextLineDecoder:
             if self._known_seen == self._n_known:
                 out.extend(self.flush())
 
-
-#: one record line ``id,w,x,y,z[,status]`` (stripped): an integer id, 4 or 5 numbers
-_RECORD = re.compile(rb"\d{1,3}(?:[ \t]*,[ \t]*[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?){4,5}")
 
 #: fewest record lines that make bytes look like the text format
 MIN_TEXT_RECORDS = 8
@@ -142,7 +155,7 @@ def count_records(data: bytes | bytearray) -> tuple[int, int]:
         line = raw.strip()
         if not line or line.startswith(b"#"):
             continue
-        if _RECORD.fullmatch(line):
+        if isinstance(parse_record(line), tuple):     # what the decoder reads as a record
             records += 1
         else:
             other += 1
@@ -159,4 +172,5 @@ def looks_like_text(data: bytes | bytearray) -> bool:
     return records >= MIN_TEXT_RECORDS and records >= 3 * other
 
 
-__all__ = ["MIN_TEXT_RECORDS", "TextLineDecoder", "count_records", "looks_like_text"]
+__all__ = ["BAD", "GARBAGE", "MIN_TEXT_RECORDS", "TextLineDecoder", "count_records",
+           "looks_like_text", "parse_record"]
