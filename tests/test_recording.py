@@ -170,6 +170,32 @@ def test_torn_last_jsonl_line(tmp_path):
     assert read_session(d).meta["torn_lines"] == 1
 
 
+def test_unclosed_session_is_read_with_one_warning_saying_what_was_lost(tmp_path, caplog):
+    """A recording whose process was killed (``closed: false``, a record cut short at the
+    end) reads, and says so once: frames read, the session time they reach, what is lost;
+    a cleanly closed one reads without it (``rtseg segment`` printed nothing before)."""
+    d = tmp_path / "killed"
+    rec = record(d, random_frames(40))
+    rec.flush()                                  # what a kill leaves: flushed, never closed
+    size = record_dtype(len(NAMES)).itemsize
+    with open(d / FRAMES_FILE, "ab") as fh:
+        fh.write(b"RTSF" + b"\1" * (size // 3))  # a record cut short by the kill
+    with caplog.at_level(logging.WARNING, logger="rtseg.recording"):
+        tk = read_session(d)
+    assert tk.n_frames == 40 and not tk.meta["closed_cleanly"]
+    notes = [r.getMessage() for r in caplog.records if "not closed cleanly" in r.getMessage()]
+    assert len(notes) == 1, caplog.text
+    t_end = tk.meta["session_time"][-1]
+    assert (f"{d} was not closed cleanly" in notes[0] and "40 frames read" in notes[0]
+            and f"t={t_end:.2f} s" in notes[0] and "up to 0.5 s of frames" in notes[0]
+            and "1 record(s) cut short" in notes[0]), notes[0]
+    rec.close()
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="rtseg.recording"):
+        assert read_session(d).meta["closed_cleanly"]
+    assert "not closed" not in caplog.text
+
+
 def test_bad_frames_are_counted_not_raised(tmp_path):
     rec = SessionRecorder(tmp_path / "s", NAMES, PARENTS)
     good = random_frames(1)[0]

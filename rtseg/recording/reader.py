@@ -194,6 +194,22 @@ def _estimate_rate(recv_time: np.ndarray) -> float | None:
     return float(1.0 / np.median(d))
 
 
+def unclosed_note(directory: Path, header: dict[str, Any], n_frames: int,
+                  session_time: np.ndarray, torn: int) -> str:
+    """What a reader of a session that was never closed (``closed: false``: the process
+    was killed or crashed, or it is still recording) has and has not: the frames read and
+    the session time they reach; lost, the frames received after the last flush (at most
+    ``flush_interval_s``), a record cut short, and the closing counters."""
+    flush = header.get("flush_interval_s")
+    last = (f"up to {flush:g} s of frames received before the end"
+            if isinstance(flush, (int, float)) else "the frames received after the last flush")
+    upto = (f", up to t={float(session_time[-1]):.2f} s" if n_frames else "")
+    cut = (f", {torn} record(s) cut short at the end of {FRAMES_FILE}" if torn else "")
+    return (f"session {directory} was not closed cleanly (killed, crashed, or still "
+            f"recording): {n_frames} frames read{upto}; lost: {last}{cut}, and the session's "
+            "closing summary (its frame and drop counters)")
+
+
 def read_session(directory: str | Path) -> Take:
     """Read a recorded session folder as a ``Take``.
 
@@ -263,6 +279,8 @@ def read_session(directory: str | Path) -> Take:
         except (ValueError, TypeError):
             bad_c += 1
     start = float(header.get("start_monotonic", recv_time[0] if F else 0.0))
+    if not header.get("closed", False):
+        log.warning("%s", unclosed_note(d, header, F, recv_time - start, torn))
     meta: dict[str, Any] = {
         "recv_time": recv_time, "session_time": recv_time - start,
         "source_time": source_time, "seq": seq,
