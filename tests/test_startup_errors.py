@@ -96,6 +96,22 @@ def test_bad_configuration_values(capsys, tmp_path, text, fragments):
     assert '"unknown' not in line        # not a KeyError repr
 
 
+def test_library_in_config_without_enabled_turns_identity_on(capsys, tmp_path):
+    """``[identity] behaviours = "LIB"`` is ``--behaviours LIB`` (docs/identity.md): it
+    turned nothing on without ``enabled = true``, so a library that was not there was
+    ignored and the session ran without names (exit 0).  Now it is read, and a missing one
+    is one line, exit 2; ``enabled = false`` written beside it still keeps identity off."""
+    from rtseg.live.config import load_session_config
+    cfg = write_config(tmp_path, '[identity]\nbehaviours = "nope.json"\n')
+    assert load_session_config(cfg)["identity.enabled"]
+    rc, _, err = live(capsys, "sim://synth", "--config", cfg, "--duration", "0.3")
+    assert_one_line_error(rc, err, "nope.json", "cannot read")
+    cfg.write_text('[identity]\nenabled = false\nbehaviours = "nope.json"\n')
+    assert not load_session_config(cfg)["identity.enabled"]
+    cfg.write_text('[identity]\nthreshold = 4.5\n')
+    assert not load_session_config(cfg)["identity.enabled"]
+
+
 def test_config_that_is_a_folder(capsys, tmp_path):
     rc, _, err = live(capsys, "sim://synth", "--config", tmp_path, "--duration", "1")
     assert_one_line_error(rc, err, f"{tmp_path} is a folder")

@@ -215,7 +215,8 @@ SCHEMA: dict[str, dict[str, Key]] = {
                             doc="with a behaviour library: a segment the library cannot "
                                 "name after decide_after_s waits this many seconds of it"),
         "behaviours": Key("str", "", doc="behaviour library file naming segments "
-                                         "(rtseg learn; '' = ids only)"),
+                                         "(rtseg learn; '' = ids only); set in a file "
+                                         "without enabled, it turns identity on"),
         "exclusive_names": Key("bool", True,
                                doc="with a library: a name held only by segments of other "
                                    "behaviour ids is sent as 'unknown'"),
@@ -324,6 +325,9 @@ def validate(raw: dict[str, Any], origin: str = "live.toml") -> dict[str, dict[s
                 if problem:
                     raise ConfigError(f"{origin}: {name}: {problem}")
             out[section][key] = value
+    ident = raw.get("identity") or {}
+    if ident.get("behaviours") and "enabled" not in ident:
+        out["identity"]["enabled"] = True     # a library names segments: as --behaviours LIB
     return out
 
 
