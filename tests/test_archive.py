@@ -84,6 +84,26 @@ def test_discovery_files_folders_globs(archive, tmp_path):
     assert discover_takes([root, root]) == every             # a folder twice is fine
 
 
+
+def test_symlinked_takes_keep_their_own_names(archive, tmp_path):
+    """A layout made of links (docs: make folders laid out differently with symlinks):
+    each link is a take named as the link, two links to one file are two takes.  Before,
+    discovery followed the links: the records named the targets and the second link was
+    silently dropped."""
+    lay = tmp_path / "lay"
+    lay.mkdir()
+    target = Path(archive["takes"][0])
+    (lay / "alice walk.npz").symlink_to(target)
+    (lay / "bob_walk.npz").symlink_to(target)
+    found = discover_takes([lay])
+    assert found == [str(lay / "alice walk.npz"), str(lay / "bob_walk.npz")]
+    stats = run_archive([lay], ["contrast"], tmp_path / "r.jsonl", progress=False)
+    assert (stats.found, stats.run, stats.failed) == (2, 2, 0)
+    recs = load_records(tmp_path / "r.jsonl")
+    assert sorted((r["take"], r["path"]) for r in recs) == [
+        ("alice walk", str(lay / "alice walk.npz")), ("bob_walk", str(lay / "bob_walk.npz"))]
+    assert recs[0]["cuts"] == recs[1]["cuts"] and recs[0]["n_frames"] > 0
+
 def test_segment_of_an_empty_folder_fails(tmp_path):
     """``rtseg segment EMPTYDIR`` is an error naming the folder, exit 2, no "0/0 takes"."""
     import subprocess

@@ -138,6 +138,26 @@ def test_radians_root_order_and_frame_rate_override(tmp_path):
     assert take.meta["first_frame_number"] == 7
 
 
+def test_symlinked_amc_finds_its_skeleton_beside_the_link_else_beside_the_target(tmp_path):
+    """A folder of links to AMC takes (an archive laid out with symlinks) without their
+    ASF: the skeleton beside the file linked to is used; one beside the link wins."""
+    data = tmp_path / "data"
+    data.mkdir()
+    _write(data, "T.asf", ASF)
+    _write(data, "T_01.amc", AMC)
+    lay = tmp_path / "lay"
+    lay.mkdir()
+    (lay / "my take.amc").symlink_to(data / "T_01.amc")
+    assert read_take(lay / "my take.amc").n_frames == 2
+    from rtseg.drivers.readers.amc import skeleton_for
+    assert skeleton_for(lay / "my take.amc") == data / "T.asf"
+    _write(lay, "my take.asf", ASF)
+    assert skeleton_for(lay / "my take.amc") == lay / "my take.asf"
+    (tmp_path / "plain").mkdir()
+    with pytest.raises(ReaderError, match="no skeleton given"):
+        skeleton_for(_write(tmp_path / "plain", "T_01.amc", AMC))
+
+
 def test_amc_degrees_header_overrides_asf_radians(tmp_path):
     asf = ASF.replace("angle deg", "angle rad").replace("axis 0 0 90 XYZ", f"axis 0 0 {math.pi / 2} XYZ")
     take = read_amc(_write(tmp_path, "T_01.amc", AMC), _write(tmp_path, "T.asf", asf))

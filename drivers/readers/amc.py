@@ -287,8 +287,23 @@ def _build_take(path: Path, sk: AsfSkeleton, data: np.ndarray, layout: dict[str,
 
 
 def skeleton_for(amc_path: str | Path) -> Path:
-    """The ASF that goes with ``SS_TT.amc``: ``SS.asf`` in the same folder, else the only ASF there."""
+    """The ASF that goes with ``SS_TT.amc``: ``SS.asf`` in the same folder, else the only ASF
+    there; for a symbolic link to an AMC with neither beside the link, the same beside the
+    file it points to."""
     amc_path = Path(amc_path)
+    if amc_path.is_symlink():
+        try:
+            return _skeleton_beside(amc_path)
+        except ReaderError:
+            target = amc_path.resolve()
+            try:
+                return _skeleton_beside(target)
+            except ReaderError:
+                pass
+    return _skeleton_beside(amc_path)
+
+
+def _skeleton_beside(amc_path: Path) -> Path:
     stem = amc_path.stem
     candidates = []
     if "_" in stem:

@@ -70,7 +70,7 @@ def _walk(root: Path) -> Iterable[Path]:
 
 def discover_takes(paths: Sequence[str | os.PathLike]) -> list[str]:
     """Absolute take paths from files, folders and globs (``**`` recurses), sorted and
-    without repeats.  A path that does not exist and matches nothing, or a folder given
+    without repeats; symbolic links are kept as they are named, not followed.  A path that does not exist and matches nothing, or a folder given
     by name that holds no take, is a ValueError."""
     found: dict[str, None] = {}
     for raw in paths:
@@ -93,7 +93,9 @@ def discover_takes(paths: Sequence[str | os.PathLike]) -> list[str]:
                 takes = []
             n = 0
             for n, t in enumerate(takes, 1):
-                found[str(t.resolve())] = None
+                # absolute but not resolved: a symlinked take keeps its own name, and two
+                # links to one file are two takes (a layout made of links, docs/offline.md)
+                found[os.path.abspath(t)] = None
             if m is p and n == 0 and m.is_dir():
                 raise ValueError(f"{text}: no take in this folder (files "
                                  f"{', '.join(TAKE_EXTENSIONS)} or recorded sessions, "
