@@ -72,6 +72,7 @@ from rtseg.drivers.osc.source import OscUdpSource
 from rtseg.drivers.osc.url import (DEFAULT_HOST, Network, allow_option, check_options,
                                    number_option, parse_location, sender_allowed)
 from rtseg.core.frame import Frame
+from rtseg.core.session_log import start_thread
 
 log = logging.getLogger("rtseg.drivers.axis")
 
@@ -217,9 +218,7 @@ class AxisTextSource(_AvatarFrames, QueuedSource):
         #: True while a connection is up
         self.connected = threading.Event()
         self.connections = 0
-        self._thread = threading.Thread(target=self._run, daemon=True,
-                                        name=f"rtseg-axis-{host}:{port}")
-        self._thread.start()
+        self._thread = start_thread(self._run, name=f"rtseg-axis-{host}:{port}")
 
     def _connect(self) -> socket.socket | None:
         try:

@@ -58,6 +58,7 @@ from rtseg.drivers.base import FrameQueue, QueuedSource, SourceError
 from rtseg.drivers.mvn.codec import DEFAULT_PORT, MxtpStream
 from rtseg.drivers.mvn.assembler import MvnAssembler
 from rtseg.core.frame import Frame
+from rtseg.core.session_log import start_thread
 from rtseg.drivers.osc.source import OscUdpSource
 from rtseg.drivers.osc.url import (DEFAULT_HOST, Network, allow_option, check_options, is_wide,
                                    load_suit, parse_location, sender_allowed)
@@ -190,9 +191,7 @@ class MvnTcpSource(_RigGeometry, QueuedSource):
                         ",".join(map(str, allow)) if allow else "restrict senders with allow=")
         self._tick = max(0.001, min(quiet / 2.0, 0.05))
         self._srv.settimeout(self._tick)
-        self._thread = threading.Thread(target=self._run, name=f"rtseg-mvn-tcp-{self.port}",
-                                        daemon=True)
-        self._thread.start()
+        self._thread = start_thread(self._run, name=f"rtseg-mvn-tcp-{self.port}")
 
     @property
     def assembler(self) -> MvnAssembler:

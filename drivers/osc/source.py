@@ -70,6 +70,7 @@ from collections import deque
 from typing import Any, Sequence
 
 from rtseg.core.frame import Frame
+from rtseg.core.session_log import start_thread
 from rtseg.drivers.base import FrameQueue, QueuedSource, SourceError
 from rtseg.drivers.osc.url import (DEFAULT_HOST, Network, allow_option, check_options, is_wide,
                                    load_suit, number_option, parse_location, sender_allowed)
@@ -163,9 +164,7 @@ class OscUdpSource(QueuedSource):
         self._sock.settimeout(self._quiet_wait)
         self._polled = False
         self._poll_at: float | None = None
-        self._thread = threading.Thread(target=self._run, name=f"rtseg-osc-{self.port}",
-                                        daemon=True)
-        self._thread.start()
+        self._thread = start_thread(self._run, name=f"rtseg-osc-{self.port}")
 
     @property
     def assembler(self) -> Any:
@@ -248,9 +247,7 @@ class OscUdpSource(QueuedSource):
             return False
         self._sock.settimeout(self._quiet_wait)
         self._polled = False
-        self._thread = threading.Thread(target=self._run, name=f"rtseg-osc-{self.port}",
-                                        daemon=True)
-        self._thread.start()
+        self._thread = start_thread(self._run, name=f"rtseg-osc-{self.port}")
         return True
 
     def poll_fds(self) -> tuple[int, ...]:

@@ -73,6 +73,7 @@ import serial
 from rtseg.core.frame import Frame
 from rtseg.core.profiles import SuitProfile, suit_profile
 from rtseg.core.ratelog import RateLimitedLog
+from rtseg.core.session_log import start_thread
 from rtseg.drivers.base import FrameQueue, QueuedSource, SourceError
 from rtseg.drivers.serial.stream import SensorEvent, SuitStream
 
@@ -155,8 +156,7 @@ class SerialSource(QueuedSource):
         if not opened and not wait:
             raise SourceError(f"cannot open serial device {path!r}: {self._open_error}"
                               " (add wait=1 to keep trying)")
-        self._thread = threading.Thread(target=self._run, name=f"rtseg-serial {path}", daemon=True)
-        self._thread.start()
+        self._thread = start_thread(self._run, name=f"rtseg-serial {path}")
 
     # ------------------------------------------------------------------ public API
 
@@ -371,9 +371,7 @@ class SerialSource(QueuedSource):
         if not self._polled:
             return True
         self._polled = False
-        self._thread = threading.Thread(target=self._run, name=f"rtseg-serial {self.path}",
-                                        daemon=True)
-        self._thread.start()
+        self._thread = start_thread(self._run, name=f"rtseg-serial {self.path}")
         return True
 
     def poll_fds(self) -> tuple[int, ...]:

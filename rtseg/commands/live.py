@@ -320,9 +320,11 @@ def run_many(sources: list[tuple[str, str]], cfg: SessionConfig, duration: float
     """Several sources, one session each, on one thread (``rtseg.live.loop.run_sessions``):
     each with its own detectors and counters; its events carry its name (OSC addresses
     ``/rtseg/<name>/...``), its recording goes to ``recording.dir/<name>``.  Each
-    summary is printed after its name; the exit status is 0."""
+    summary is printed after its name, and so is every line it logs (its driver's
+    warnings, its session's: ``rtseg.core.session_log``); the exit status is 0."""
     import copy
     from pathlib import Path
+    from rtseg.core.session_log import session_names_shown
     from rtseg.live.loop import run_sessions
     from rtseg.live.session import LiveSession
     sessions, consoles = [], []
@@ -339,7 +341,8 @@ def run_many(sources: list[tuple[str, str]], cfg: SessionConfig, duration: float
             console.session_stats = lambda s=session: s.stats
             sessions.append(session)
             consoles.append(console)
-        summaries = run_sessions(sessions)
+        with session_names_shown():
+            summaries = run_sessions(sessions)
     finally:
         for console in consoles:
             console.finish()

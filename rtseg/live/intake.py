@@ -25,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from rtseg.core.session_log import start_thread
+
 log = logging.getLogger("rtseg.live.session")
 
 #: frames dropped for overload after which a polled source is read in threads again
@@ -191,9 +193,7 @@ class SessionInput:
                 self._room_from = self._cursor.position
                 self._room_high = max(1, min(BACKPRESSURE_FRAMES, self.ring.capacity // 2))
                 self._room_low = self._room_high // 2
-            self._reader_thread = threading.Thread(target=self._reader, name="rtseg-reader",
-                                                   daemon=True)
-            self._reader_thread.start()
+            self._reader_thread = start_thread(self._reader, name="rtseg-reader")
 
     def _hand_back(self) -> None:
         """Overloaded with a polled source (``HAND_BACK_DROPS`` frames dropped to keep
@@ -217,9 +217,7 @@ class SessionInput:
             return
         log.info("overloaded: the source is read in threads from now on (%d frames "
                  "dropped to keep up)", self.stats.overload_drops)
-        self._reader_thread = threading.Thread(target=self._reader, name="rtseg-reader",
-                                               daemon=True)
-        self._reader_thread.start()
+        self._reader_thread = start_thread(self._reader, name="rtseg-reader")
 
 
 

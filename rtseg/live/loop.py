@@ -70,7 +70,9 @@ same cut (``LiveStats.ahead_pieces`` counts the pieces).
 Several sessions in one loop each keep their own source, pipeline (features, detectors,
 identity), ring buffer, publishers, recording and counters; they share the thread, the
 process's signal handling (SIGINT/SIGTERM stop every session), the BLAS thread limit and
-the frozen heap (``_freeze_heap``).
+the frozen heap (``_freeze_heap``).  What is logged while the loop works for one session,
+and in the threads that session starts (its reader thread, its driver's and publishers'),
+carries that session's name (``rtseg.core.session_log``).
 """
 
 from __future__ import annotations
@@ -84,6 +86,7 @@ import threading
 import time
 from typing import Any, Sequence
 
+from rtseg.core.session_log import in_session
 from rtseg.live.detector_setup import _blas_limit
 
 log = logging.getLogger("rtseg.live.session")
@@ -106,6 +109,12 @@ AHEAD_S = 0.001
 MAX_DEFER_S = 0.1
 
 _READ = select.POLLIN | select.POLLPRI | select.POLLERR | select.POLLHUP
+
+
+def _as(session: Any) -> in_session:
+    """``with _as(session):`` - what is logged inside is ``session``'s
+    (``rtseg.core.session_log``: its name, "" for an unnamed one)."""
+    return in_session(getattr(session, "name", ""))
 
 
 class Waker:
@@ -289,25 +298,27 @@ class SessionLoop:
         """Take the frames the woken sources' threads queued; poll the sources of
         ``ready`` and those whose ``poll_due`` has come."""
         for s in self._woken:
-            s._take_frames()
+            with _as(s):
+                s._take_frames()
         for s in self._polled:
-            if s in ready:
-                s._poll_source(now)
-                self.sync(s)
-                continue
-            if self._quiet and id(s) in self._quiet:
-                if self._quiet_now(s, now):
+            with _as(s):
+                if s in ready:
+                    s._poll_source(now)
+                    self.sync(s)
                     continue
-                s._read_quiet(now)             # the quiet frames, in one batch
-                self.sync(s)
-                continue
-            try:
-                due = s.source.poll_due()
-            except Exception:                  # pragma: no cover - a driver bug
-                due = None
-            if due is not None and due <= now:
-                s._poll_source(now)
-                self.sync(s)
+                if self._quiet and id(s) in self._quiet:
+                    if self._quiet_now(s, now):
+                        continue
+                    s._read_quiet(now)             # the quiet frames, in one batch
+                    self.sync(s)
+                    continue
+                try:
+                    due = s.source.poll_due()
+                except Exception:                  # pragma: no cover - a driver bug
+                    due = None
+                if due is not None and due <= now:
+                    s._poll_source(now)
+                    self.sync(s)
         self._last_pump = now
 
     def pump(self, now: float) -> None:
@@ -319,7 +330,8 @@ class SessionLoop:
             self.read_sources(self._ready(self._poller.poll(0)), now)
         else:
             for s in self._woken:
-                s._take_frames()
+                with _as(s):
+                    s._take_frames()
             self._last_pump = now
 
     def next_due(self, now: float) -> float:
@@ -391,10 +403,12 @@ def run_sessions(sessions: Sequence[Any], handle_signals: bool = True) -> list[A
         _freeze_heap(collect=True)
         for s in sessions:
             started.append(s)
-            s._begin(loop)
+            with _as(s):
+                s._begin(loop)
         _freeze_heap(collect=False)
         for s in sessions:
-            s._start_input(loop)
+            with _as(s):
+                s._start_input(loop)
         running = list(sessions)
         while running:
             now = time.monotonic()
@@ -408,31 +422,34 @@ def run_sessions(sessions: Sequence[Any], handle_signals: bool = True) -> list[A
                 now = time.monotonic()
                 if not s._due(now):
                     continue                   # another session's wake-up
-                s._step(now)
-                if s._stop.is_set():
-                    if loop.is_quiet(s):       # what arrived while it was left unread
-                        loop.resume(s)
-                        s._read_quiet(time.monotonic())
-                        s._step(time.monotonic())
-                    running.remove(s)
-                    loop.drop(s)
-                    summaries[id(s)] = s._finish()
-                elif s._polled and not loop.is_quiet(s):
-                    until = s._quiet_until(time.monotonic())
-                    if until is not None:
-                        loop.quiet(s, until)
+                with _as(s):
+                    s._step(now)
+                    if s._stop.is_set():
+                        if loop.is_quiet(s):   # what arrived while it was left unread
+                            loop.resume(s)
+                            s._read_quiet(time.monotonic())
+                            s._step(time.monotonic())
+                        running.remove(s)
+                        loop.drop(s)
+                        summaries[id(s)] = s._finish()
+                    elif s._polled and not loop.is_quiet(s):
+                        until = s._quiet_until(time.monotonic())
+                        if until is not None:
+                            loop.quiet(s, until)
             now = time.monotonic()
             if running and all(s._may_work_ahead(now) for s in running):
                 end = now + AHEAD_S            # work ahead: no frame that may send is due
                 for s in running:
-                    s._work_ahead(end)
+                    with _as(s):
+                        s._work_ahead(end)
                     if time.monotonic() >= end:
                         break
     finally:
         for s in started:
             if id(s) not in summaries:
                 s._stop.set()
-                summaries[id(s)] = s._finish()
+                with _as(s):
+                    summaries[id(s)] = s._finish()
         loop.close()
         for sig, h in old_handlers.items():
             signal.signal(sig, h)

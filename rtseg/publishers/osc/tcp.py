@@ -30,6 +30,7 @@ import socket
 import threading
 import time
 
+from rtseg.core.session_log import start_thread
 from rtseg.publishers.base import OscPublisher, log
 from rtseg.publishers.osc.message import slip_encode
 from rtseg.publishers.templates import AddressTemplate
@@ -59,8 +60,7 @@ class OscTcpPublisher(OscPublisher):
         self._cond = threading.Condition()
         self._stop = False
         self._stop_deadline = float("inf")
-        self._thread = threading.Thread(target=self._run, name="rtseg-osc-tcp", daemon=True)
-        self._thread.start()
+        self._thread = start_thread(self._run, name="rtseg-osc-tcp")
 
     # -- caller side -------------------------------------------------------------------
     def _send(self, packet: bytes) -> None:
