@@ -448,6 +448,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def folder_problem(path: Path) -> str | None:
+    """Why the folder ``path`` cannot be plotted, in one line: a folder of recorded
+    sessions (``rtseg live --record DIR`` with several sources writes ``DIR/<name>``) or
+    a folder that is no recorded session; None for a file, a missing path or one
+    recorded session's folder."""
+    from rtseg.drivers.readers import READERS
+    from rtseg.recording.reader import is_session_dir
+    if not path.is_dir() or is_session_dir(path):
+        return None
+    inner = sorted(d.name for d in path.iterdir() if is_session_dir(d))
+    if inner:
+        return (f"{path} is a folder of recorded sessions ({', '.join(inner)}: rtseg live "
+                f"--record with several sources), not one take: give one of them, e.g. "
+                f"rtseg plot {path / inner[0]}")
+    return (f"{path} is a folder but not a recorded session (no session.json in it): give "
+            f"a take file ({', '.join(READERS)}) or the folder of one recorded session")
+
+
 def run(args: argparse.Namespace) -> int:
     try:
         _pyplot()
@@ -461,7 +479,12 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     take_path = Path(args.take)
+    problem = folder_problem(take_path)
+    if problem is not None:
+        print(f"rtseg plot: error: {problem}", file=sys.stderr)
+        return 2
     name = take_path.stem if take_path.suffix else take_path.name
+    take = read_take(take_path, skeleton=args.skeleton)     # before the labels: it may fail
     if args.labels == "none":
         labels = None
     elif args.labels == "auto":
@@ -470,7 +493,6 @@ def run(args: argparse.Namespace) -> int:
             log.warning("%s: no labels found by the data layout; plotting cuts only", take_path)
     else:
         labels = read_labels_file(args.labels, name)
-    take = read_take(take_path, skeleton=args.skeleton)
     methods = list(METHODS) if args.method == "all" else [args.method]
     params = params_by_method(args.params, methods)
     X = compute_features(take, args.profile)
