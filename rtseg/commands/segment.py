@@ -124,6 +124,9 @@ def run(args: argparse.Namespace) -> int:
         from rtseg.drivers.readers import read_take
         path = args.paths[0]
         take = read_take(path, skeleton=args.skeleton)
+        note = missing_frames_note(path, take)
+        if note:
+            print(f"rtseg segment: warning: {note}", file=sys.stderr)
         if getattr(args, "identify", False):
             results = identify_take(take, methods, params, profile=args.profile,
                                     threshold=args.identity_threshold)
@@ -145,6 +148,19 @@ def run(args: argparse.Namespace) -> int:
         sys.stdout.write(out(path, results, names))
         return 0
     return run_many(args, methods, params)
+
+
+def missing_frames_note(path: str, take: Any) -> str:
+    """What to say when ``take`` is a recorded session that misses frames its source sent
+    (``missing_frames`` of ``rtseg.recording.read_session``): its frames and times count
+    the recorded frames only, so they run early after each gap; "" otherwise."""
+    lost = take.meta.get("missing_frames") if isinstance(take.meta, dict) else None
+    if not lost:
+        return ""
+    return (f"{path}: the source sent {lost} frames that are not in this recording "
+            f"({take.meta.get('gaps', '?')} gaps); frames and times below count the "
+            f"{take.n_frames} recorded frames, so after a gap they are early by the frames "
+            "lost before it (the session's own cut times are in its cuts.jsonl)")
 
 
 def run_many(args: argparse.Namespace, methods: list[str],

@@ -194,6 +194,23 @@ def _estimate_rate(recv_time: np.ndarray) -> float | None:
     return float(1.0 / np.median(d))
 
 
+def missing_frames(seq: np.ndarray, source_time: np.ndarray, rate: float | None
+                   ) -> tuple[int, int] | None:
+    """(frames missing, gaps) between the recorded frames, by the source's sequence numbers
+    (-1 where none) where consecutive frames carry them, else by its clock at the nominal
+    ``rate``; a step back (a wrap, a restart) is not counted.  None when neither tells."""
+    ok = (seq[:-1] >= 0) & (seq[1:] >= 0)
+    if ok.any():
+        step = np.diff(seq)[ok]
+    elif rate and np.isfinite(source_time).sum() > 1:
+        t = source_time[np.isfinite(source_time)]
+        step = np.rint(np.diff(t) * float(rate)).astype(np.int64)
+    else:
+        return None
+    lost = step[step > 1] - 1
+    return int(lost.sum()), int(lost.size)
+
+
 def unclosed_note(directory: Path, header: dict[str, Any], n_frames: int,
                   session_time: np.ndarray, torn: int) -> str:
     """What a reader of a session that was never closed (``closed: false``: the process
@@ -220,7 +237,9 @@ def read_session(directory: str | Path) -> Take:
     start; ``source_time`` (F,) (NaN where none); ``seq`` (F,) int64 (-1 where none);
     ``cuts`` (list of CutEvent); ``events`` (list of dicts); ``header``; ``closed_cleanly``;
     ``torn_records``, ``corrupt_bytes``, ``torn_lines``; ``frame_rate_source``
-    ("nominal" | "estimated" | "default"); ``estimated_frame_rate``.
+    ("nominal" | "estimated" | "default"); ``estimated_frame_rate``; ``missing_frames`` and
+    ``gaps``: frames the source sent that are not in the recording (lost on the way), by its
+    sequence numbers or clock, when it has either (``missing_frames``).
     """
     d = Path(directory)
     header = read_session_header(d)
@@ -291,6 +310,9 @@ def read_session(directory: str | Path) -> Take:
         "frame_rate_source": rate_src, "estimated_frame_rate": est,
         "session_meta": header.get("meta", {}),
     }
+    gaps = missing_frames(seq, source_time, nominal if rate_src == "nominal" else None)
+    if gaps is not None:
+        meta["missing_frames"], meta["gaps"] = gaps
     rest = (header.get("meta") or {}).get("rest_positions")
     if rest is not None and np.shape(rest) == (len(names), 3):
         meta["rest_positions"] = np.asarray(rest, dtype=np.float64)   # RestPose.of_take
