@@ -207,6 +207,13 @@ def test_cli_out_resume_progress_and_errors(archive, tmp_path, capsys):
     assert "1 of 3 takes failed" in err
     recs = load_records(out)
     assert len(recs) == 6 and sum(r["error"] is not None for r in recs) == 1
+    assert "skipped (done before) failed" not in err
+    # a rerun with nothing left to do says the archive still holds that error (it said
+    # "0 failed, 6 skipped" and nothing else)
+    rc = main(["segment", str(root), "--method", "pca", "--out", str(out), "--no-progress"])
+    _, err = capsys.readouterr()
+    assert "1 of the 6 takes skipped (done before) failed then" in err
+    assert f"errors in {out}; --retry-errors redoes them" in err
     # several takes without --out: JSON lines on stdout
     rc = main(["segment", str(root / "s1"), "--method", "contrast", "--no-progress"])
     lines = capsys.readouterr().out.splitlines()

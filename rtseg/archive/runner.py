@@ -105,9 +105,11 @@ def discover_takes(paths: Sequence[str | os.PathLike]) -> list[str]:
 
 @dataclass
 class ArchiveRun:
-    """What ``run_archive`` did: takes found, skipped (already done), run, failed."""
+    """What ``run_archive`` did: takes found, skipped (already done; ``skipped_failed`` of
+    them hold an error from an earlier run), run, failed."""
     found: int = 0
     skipped: int = 0
+    skipped_failed: int = 0
     run: int = 0
     failed: int = 0
     wall_s: float = 0.0
@@ -155,6 +157,8 @@ def run_archive(paths: Sequence[str], methods: Sequence[str], out: str | os.Path
         missing = [m for m in methods if force or not store.done(t, m, retry_errors)]
         if missing:
             todo.append((t, missing))
+        elif any((store.records.get((t, m)) or {}).get("error") for m in methods):
+            stats.skipped_failed += 1
     stats.skipped = len(takes) - len(todo)
     if limit is not None:
         todo = todo[:max(0, int(limit))]

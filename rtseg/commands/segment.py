@@ -193,6 +193,10 @@ def run_many(args: argparse.Namespace, methods: list[str],
         where = f" (errors in {args.out})" if args.out else ""
         print(f"rtseg segment: {stats.failed} of {stats.run} takes failed{where}",
               file=sys.stderr)
+    if stats.skipped_failed:
+        print(f"rtseg segment: {stats.skipped_failed} of the {stats.skipped} takes skipped "
+              f"(done before) failed then (errors in {args.out}; --retry-errors redoes them)",
+              file=sys.stderr)
     return 1 if stats.failed else 0
 
 
