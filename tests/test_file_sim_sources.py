@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
+from urllib.parse import quote
 
 import numpy as np
 import pytest
@@ -206,6 +207,23 @@ def test_file_source_relative_path_and_pacing(npz_path, monkeypatch):
         t0 = src.pacer.t0
     assert len(frames) == 60
     assert all(f.recv_time >= t0 + f.seq / 2400.0 - 1e-6 for f in frames)
+
+
+def test_file_source_reads_a_percent_encoded_path(tmp_path, synth):
+    """A folder whose name has a '#' (``rtseg live --record "run #1"`` makes one) or a
+    file URL copied from a file manager (``My%20Takes``): the path as written, else
+    percent-decoded.  Before, no URL could name such a folder: '#' starts the URL's
+    fragment and %23 was taken literally ("no such file or folder")."""
+    d = tmp_path / "my takes #1 ü"
+    d.mkdir()
+    p = write_take(d / "take.npz", synth.take)
+    src = open_source("file://" + quote(str(p)) + "?speed=0")
+    assert src.path == p and len(_drain(src)) == synth.take.n_frames
+    literal = tmp_path / "a%20b.npz"             # a name that holds a '%' is read as written
+    write_take(literal, synth.take)
+    assert open_source(f"file://{literal}?speed=0").path == literal
+    with pytest.raises(SourceError, match="no such file"):
+        open_source("file://" + quote(str(tmp_path / "none #2.npz")))
 
 
 @pytest.mark.parametrize("url, fragment", [

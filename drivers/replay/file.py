@@ -5,6 +5,7 @@ URL::
     file://take.amc?skeleton=86.asf&speed=1.0&loop=0      (relative to the working folder)
     file:///abs/path/take.bvh?speed=4
     file://sessions/2026-11-22T03-00-00?timing=recorded     (a folder recorded by rtseg live)
+    file:///home/me/My%20Takes/run%231.bvh                   (percent-encoded: '#' is %23)
 
 Any format ``rtseg.drivers.readers.read_take`` knows: ``.amc`` (+ ASF), ``.bvh``, ``.npz``,
 ``.csv`` (tsseg4d), or a recorded session folder.  Options:
@@ -32,6 +33,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 from typing import Mapping
+from urllib.parse import unquote
 
 from rtseg.drivers.base import SourceError
 from rtseg.drivers.replay.pacing import (REPLAY_OPTIONS, ReplaySource, check_options, number,
@@ -51,10 +53,15 @@ class FileSource(ReplaySource):
 
 def resolve_path(location: str) -> Path:
     """The take path of a ``file://`` location: ``~`` expanded, relative to the working
-    folder; SourceError when missing."""
+    folder; percent-encoded (``My%20Takes``, ``%23`` for ``#``) when not found as written;
+    SourceError when missing."""
     if not location:
         raise SourceError("file:// needs a path, e.g. file://take.amc or file:///abs/take.bvh")
     path = Path(os.path.expanduser(location))
+    if not path.exists() and "%" in location:
+        decoded = Path(os.path.expanduser(unquote(location)))
+        if decoded.exists():            # a percent-encoded file URL: %20, %23 (#), %3F (?)
+            return decoded
     if not path.exists():
         raise SourceError(f"file://{location}: no such file or folder ({path.resolve()})")
     return path
