@@ -13,8 +13,8 @@
 listen on loopback (127.0.0.1) unless the URL writes another address (``osc://0.0.0.0:...``);
 ``allow=`` restricts who may send (see ``rtseg.drivers.osc.source``).
 
-May import ``rtseg.core``; its modules ``base`` and ``vendor_seq`` serve every source
-package."""
+May import ``rtseg.core``; its modules ``base``, ``options`` (URL options) and
+``vendor_seq`` serve every source package."""
 
 from __future__ import annotations
 

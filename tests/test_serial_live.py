@@ -325,7 +325,7 @@ def test_boot_text_bad_values_unknown_ids(raw_pty):
 
 
 def test_open_errors_are_clear(tmp_path):
-    with pytest.raises(SourceError, match="unknown serial option"):
+    with pytest.raises(SourceError, match="serial:// unknown option"):
         open_source(f"serial://{tmp_path}/x?bogus=1")
     with pytest.raises(SourceError, match="cannot open serial device"):
         open_source(f"serial://{tmp_path}/absent")

@@ -2,5 +2,5 @@
 (``vmc``: Virtual Motion Capture bones, frames, encoder), VRChat-style trackers
 (``vrchat``) and the live source ``osc://`` (``source``).
 
-May import ``rtseg.core``, ``rtseg.config`` (the shipped suits) and
-``rtseg.drivers.base``."""
+May import ``rtseg.core``, ``rtseg.config`` (the shipped suits), ``rtseg.drivers.base``
+and ``rtseg.drivers.options``."""

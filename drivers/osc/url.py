@@ -8,9 +8,10 @@ decoding are :mod:`rtseg.drivers.osc.source`'s and the vendor drivers'.
 from __future__ import annotations
 
 import ipaddress
-from typing import Sequence
 
 from rtseg.drivers.base import SourceError
+from rtseg.drivers.options import check_options
+from rtseg.drivers.options import number_option as _number_option
 
 #: address listened on when the URL names none: loopback only
 DEFAULT_HOST = "127.0.0.1"
@@ -123,34 +124,15 @@ def parse_location(location: str, default_port: int,
 
 #: accepted range of each numeric option
 NUMBER_RANGES = {"quiet": (1e-4, 60.0), "queue": (1, 1_000_000), "rate": (1e-3, 1e5),
-           "rcvbuf": (1, 1 << 30), "tolerance": (0.0, 1.0), "burst": (0.0, 60.0)}
+                 "rcvbuf": (1, 1 << 30), "tolerance": (0.0, 1.0), "burst": (0.0, 60.0)}
 
 
 def number_option(scheme: str, options: dict[str, str], key: str, default, kind=float,
                   ranges: dict[str, tuple[float, float]] = NUMBER_RANGES):
-    """Option ``key`` as ``kind`` within ``ranges[key]``, or ``default`` when absent or
-    empty; errors name ``scheme``."""
-    if key not in options or options[key] == "":
-        return default
-    try:
-        value = kind(options[key])
-    except ValueError:
-        raise SourceError(f"{scheme}:// option {key}={options[key]!r} is not a valid "
-                          f"{'integer' if kind is int else 'number'}") from None
-    lo, hi = ranges[key]
-    if not lo <= value <= hi:                 # also refuses nan and inf
-        raise SourceError(f"{scheme}:// option {key}={options[key]}: out of range {lo}..{hi}")
-    return value
-
-
-def check_options(scheme: str, options: dict[str, str], known: Sequence[str],
-                  fmt: str | None = None) -> None:
-    """Refuse options not in ``known`` (naming ``scheme`` and, when given, the format)."""
-    unknown = sorted(set(options) - set(known))
-    if unknown:
-        raise SourceError(f"{scheme}:// unknown option(s) {', '.join(unknown)}"
-                          f"{'' if fmt is None else f' for format={fmt}'}; known: "
-                          f"{', '.join(known)}")
+    """Option ``key`` as ``kind`` within ``ranges[key]`` (default: this module's
+    :data:`NUMBER_RANGES`), or ``default`` when absent or empty
+    (``rtseg.drivers.options.number_option``); errors name ``scheme``."""
+    return _number_option(scheme, options, key, default, kind, ranges)
 
 
 __all__ = ["DEFAULT_HOST", "NUMBER_RANGES", "Network", "allow_option", "check_options",

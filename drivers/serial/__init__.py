@@ -2,4 +2,4 @@
 framing, encoder), its streaming decoders (``codec`` binary, ``text`` lines, ``decoded``
 the checks both share) and the live source ``serial://`` (``source``).
 
-May import ``rtseg.core`` and ``rtseg.drivers.base``."""
+May import ``rtseg.core``, ``rtseg.drivers.base`` and ``rtseg.drivers.options``."""

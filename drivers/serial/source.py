@@ -75,6 +75,7 @@ from rtseg.core.profiles import SuitProfile, suit_profile
 from rtseg.core.ratelog import RateLimitedLog
 from rtseg.core.session_log import start_thread
 from rtseg.drivers.base import FrameQueue, QueuedSource, SourceError
+from rtseg.drivers.options import check_options, flag_option, number_option
 from rtseg.drivers.serial.stream import SensorEvent, SuitStream
 
 log = logging.getLogger("rtseg.drivers.serial")
@@ -465,52 +466,30 @@ class SerialSource(QueuedSource):
                       "serial %s: consumer too slow, oldest frame dropped", self.path)
 
 
-_OPTIONS = {"baud", "format", "suit", "suits", "stale", "rate", "queue", "backoff", "wait",
-            "exclusive", "tpose"}
-
-
-def _flag(value: str, key: str) -> bool:
-    v = value.strip().lower()
-    if v in ("1", "true", "yes", "on", ""):
-        return True
-    if v in ("0", "false", "no", "off"):
-        return False
-    raise SourceError(f"serial option {key}={value!r}: expected 0 or 1")
+_OPTIONS = ("backoff", "baud", "exclusive", "format", "queue", "rate", "stale", "suit", "suits",
+            "tpose", "wait")
+#: accepted range of each numeric option
+_RANGES = {"baud": (50, MAX_BAUD), "stale": (1e-3, 3600.0), "rate": (1e-3, 1e5),
+           "queue": (1, 1_000_000), "backoff": (0.05, 3600.0)}
 
 
 def open_url(location: str, options: dict[str, str]) -> SerialSource:
     """``serial://`` handler for :func:`rtseg.drivers.open_source`; see the module docstring."""
-    unknown = set(options) - _OPTIONS
-    if unknown:
-        raise SourceError(f"unknown serial option(s) {', '.join(sorted(unknown))}; "
-                          f"known: {', '.join(sorted(_OPTIONS))}")
+    check_options("serial", options, _OPTIONS)
     if not location:
         raise SourceError("serial URL needs a device path, e.g. serial:///dev/ttyUSB0")
 
-    def num(key: str, kind: type, default, lo: float, hi: float):
-        """Option ``key`` as ``kind`` within [lo, hi] (finite), or ``default``."""
-        if key not in options:
-            return default
-        text = options[key]
-        try:
-            value = kind(text)
-        except ValueError:
-            raise SourceError(f"serial option {key}={text!r}: expected "
-                              f"{'an integer' if kind is int else 'a number'}") from None
-        if not (lo <= value <= hi):          # also refuses nan and inf
-            raise SourceError(f"serial option {key}={text}: out of range {lo}..{hi}")
-        return value
+    def num(key: str, kind: type, default):
+        return number_option("serial", options, key, default, kind, _RANGES)
 
-    tpose = _flag(options["tpose"], "tpose") if "tpose" in options else False
+    tpose = flag_option("serial", options, "tpose")
     src = SerialSource(
-        location, baud=num("baud", int, DEFAULT_BAUD, 50, MAX_BAUD),
-        fmt=options.get("format", "auto"),
+        location, baud=num("baud", int, DEFAULT_BAUD), fmt=options.get("format", "auto"),
         suit=options.get("suit", "default17"), suits_path=options.get("suits"),
-        stale=num("stale", float, 0.25, 1e-3, 3600.0), rate=num("rate", float, None, 1e-3, 1e5),
-        queue_size=num("queue", int, 256, 1, 1_000_000),
-        backoff_max=num("backoff", float, 0.5, 0.05, 3600.0),
-        wait=_flag(options["wait"], "wait") if "wait" in options else False,
-        exclusive=_flag(options["exclusive"], "exclusive") if "exclusive" in options else True)
+        stale=num("stale", float, 0.25), rate=num("rate", float, None),
+        queue_size=num("queue", int, 256), backoff_max=num("backoff", float, 0.5),
+        wait=flag_option("serial", options, "wait"),
+        exclusive=flag_option("serial", options, "exclusive", True))
     src.t_pose_without_geometry = tpose
     return src
 
