@@ -45,7 +45,8 @@ def config_dir() -> Path:
 
 def load_toml(name_or_path: str | Path) -> dict[str, Any]:
     """Parsed TOML of ``name_or_path``: a bare name (no suffix) is a shipped default
-    (``"suits"`` -> ``<config_dir>/suits.toml``), anything else a path.  Errors are
+    (``"suits"`` -> ``<config_dir>/suits.toml``), anything else a path (a UTF-8
+    byte-order mark is skipped).  Errors are
     ``ConfigError`` naming the file."""
     p = Path(name_or_path)
     if isinstance(name_or_path, str) and not p.suffix and len(p.parts) == 1 and not p.exists():
@@ -54,7 +55,9 @@ def load_toml(name_or_path: str | Path) -> dict[str, Any]:
         raise ConfigError(f"{p} is a folder, not a configuration file")
     try:
         with open(p, "rb") as fh:
-            return tomllib.load(fh)
+            data = fh.read()
+        # a byte-order mark (Windows Notepad's UTF-8) is not TOML: "invalid statement" at 1:1
+        return tomllib.loads(data.removeprefix(b"\xef\xbb\xbf").decode("utf-8"))
     except FileNotFoundError:
         raise ConfigError(f"configuration file not found: {p}") from None
     except PermissionError:

@@ -112,6 +112,24 @@ def test_library_in_config_without_enabled_turns_identity_on(capsys, tmp_path):
     assert not load_session_config(cfg)["identity.enabled"]
 
 
+def test_files_saved_with_a_byte_order_mark_are_read(capsys, tmp_path):
+    """A configuration or parameter file saved as "UTF-8 with BOM" (Windows Notepad) was
+    "invalid TOML: Invalid statement (at line 1, column 1)"; the mark is now skipped, and
+    a real error in such a file still names its key."""
+    from rtseg.live.config import load_session_config
+    from rtseg.detectors.segmentation import load_params
+    bom = b"\xef\xbb\xbf"
+    cfg = tmp_path / "live.toml"
+    cfg.write_bytes(bom + b"[status]\ninterval = 2.5\n")
+    assert load_session_config(cfg)["status.interval"] == 2.5
+    par = tmp_path / "det.toml"
+    par.write_bytes(bom + b"[contrast]\nthreshold = 3.0\n")
+    assert load_params(par, "contrast") == {"threshold": 3.0}
+    cfg.write_bytes(bom + b"[status]\ninterval = \"x\"\n")
+    rc, _, err = live(capsys, "sim://synth", "--config", cfg, "--duration", "0.3")
+    assert_one_line_error(rc, err, "status.interval", "expected float")
+
+
 def test_config_that_is_a_folder(capsys, tmp_path):
     rc, _, err = live(capsys, "sim://synth", "--config", tmp_path, "--duration", "1")
     assert_one_line_error(rc, err, f"{tmp_path} is a folder")

@@ -152,7 +152,7 @@ def load_params(path: str | Path | None, method: str | None = None) -> dict[str,
         if p.suffix.lower() == ".json":
             data = json.loads(raw)
         else:
-            data = tomllib.loads(raw.decode("utf-8"))
+            data = tomllib.loads(raw.decode("utf-8-sig"))     # a byte-order mark is skipped
     except (json.JSONDecodeError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ValueError(f"{p}: cannot parse parameters: {exc}") from None
     if not isinstance(data, dict):
