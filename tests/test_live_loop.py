@@ -539,6 +539,23 @@ def test_bad_detector_settings_refused_before_the_source_opens(tmp_path):
         LiveSession(Unopenable(), from_dict({"detectors": {"ppca": {"window_s": -1.0}}}))
 
 
+def test_json_parameter_file_in_the_live_configuration(tmp_path):
+    """``[detectors] params`` given the JSON file ``rtseg segment --params`` reads: it was
+    parsed as TOML ("invalid TOML: Invalid statement"); now JSON is read as JSON, and its
+    values are checked as a TOML file's are."""
+    from rtseg.live.detector_setup import detector_params
+    p = tmp_path / "det.json"
+    p.write_text('{"contrast": {"threshold": 3.5}}')
+    got = detector_params(from_dict({"detectors": {"params": str(p)}}))
+    assert got["contrast"]["threshold"] == 3.5
+    p.write_text('{"contrast": {"threshold": "high"}}')
+    with pytest.raises(ConfigError, match=r"detectors\.params: .*det\.json.*threshold"):
+        detector_params(from_dict({"detectors": {"params": str(p)}}))
+    p.write_text('{"contrast": ')
+    with pytest.raises(ConfigError, match=r"det\.json: invalid JSON"):
+        detector_params(from_dict({"detectors": {"params": str(p)}}))
+
+
 def test_joint_the_features_do_not_use_may_be_missing_for_ever():
     """A VMC rig without hands: LeftHand never valid.  The features (unity profile) do not
     use it, so calibration completes and the detectors are fed without restarts."""

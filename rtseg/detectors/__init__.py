@@ -138,10 +138,28 @@ def validate(method: str, params: Mapping[str, Any], where: str = "") -> dict[st
     return out
 
 
+def _load_user_params(path: str | Path) -> dict[str, Any]:
+    """A parameter file: TOML, or JSON for a ``.json`` file (as ``rtseg segment --params``
+    reads it); ConfigError naming the file."""
+    if Path(path).suffix.lower() != ".json":
+        return load_toml(path)
+    import json
+    try:
+        data = json.loads(Path(path).read_bytes())
+    except FileNotFoundError:
+        raise ConfigError(f"parameter file not found: {path}") from None
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"{path}: invalid JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected an object of {{method: {{name: value}}}}")
+    return data
+
+
 def load_params(path: str | Path | None = None) -> dict[str, dict[str, Any]]:
     """Parameters of every method: ``config/detectors.toml`` (or ``path``), validated.
 
-    Returns ``{"pca": {...}, "ppca": {...}, "gmm": {...}}``.  A file may give only some
+    Returns ``{"pca": {...}, "ppca": {...}, "gmm": {...}}``.  ``path`` is TOML, or JSON when
+    it ends in ``.json``.  A file may give only some
     sections or keys; the rest come from the shipped defaults.  Unknown sections or keys and
     bad values raise ``rtseg.config.ConfigError`` naming the file and key.
     """
@@ -153,7 +171,7 @@ def load_params(path: str | Path | None = None) -> dict[str, dict[str, Any]]:
         if missing:
             raise ConfigError(f"{default_path}: [{m}] misses {', '.join(sorted(missing))}")
     if path is not None:
-        user = load_toml(path)
+        user = _load_user_params(path)
         for section, table in user.items():
             if section not in SCHEMA:
                 raise ConfigError(f"{path}: unknown section [{section}] "
