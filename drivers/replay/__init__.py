@@ -2,5 +2,5 @@
 procedural synthesiser (``sim``, ``sim://``) and the absolute-schedule pacing both share
 (``pacing``).
 
-May import ``rtseg.core``, ``rtseg.drivers.base``, ``rtseg.drivers.readers`` and
-``rtseg.simulators.synth``."""
+May import ``rtseg.core``, ``rtseg.drivers.base``, ``rtseg.drivers.options``,
+``rtseg.drivers.readers`` and ``rtseg.simulators.synth``."""

@@ -36,8 +36,8 @@ from typing import Mapping
 from urllib.parse import unquote
 
 from rtseg.drivers.base import SourceError
-from rtseg.drivers.replay.pacing import (REPLAY_OPTIONS, ReplaySource, check_options, number,
-                                  replay_kwargs)
+from rtseg.drivers.options import check_options, number_option
+from rtseg.drivers.replay.pacing import RANGES, REPLAY_OPTIONS, ReplaySource, replay_kwargs
 from rtseg.core.take import Take
 
 OPTIONS = REPLAY_OPTIONS | {"skeleton", "rate", "timing"}
@@ -84,9 +84,7 @@ def open_take(location: str, options: Mapping[str, str]) -> tuple[Path, Take]:
 
     path = resolve_path(location)
     skeleton = resolve_skeleton(options["skeleton"], path) if options.get("skeleton") else None
-    rate = number(options, "rate", None, float, 0.0)
-    if rate is not None and rate <= 0:
-        raise SourceError(f"option rate={options['rate']!r}: must be > 0")
+    rate = number_option("file", options, "rate", None, float, RANGES)
     try:
         take = read_take(path, skeleton=skeleton, frame_rate=rate)
     except (ValueError, OSError) as exc:   # ReaderError is a ValueError naming file and line
@@ -96,8 +94,8 @@ def open_take(location: str, options: Mapping[str, str]) -> tuple[Path, Take]:
 
 def open_url(location: str, options: Mapping[str, str]) -> FileSource:
     """``file://`` URL handler (see module docstring)."""
-    check_options(options, OPTIONS, "file")
-    kwargs = replay_kwargs(options)
+    check_options("file", options, sorted(OPTIONS))
+    kwargs = replay_kwargs("file", options)
     path, take = open_take(location, options)
     timing = options.get("timing")
     if timing is None:

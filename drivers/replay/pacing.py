@@ -29,6 +29,7 @@ and ``source_time`` are the recorded ones where the session had them.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from typing import Mapping
@@ -38,6 +39,7 @@ import numpy as np
 from rtseg.core import quat
 from rtseg.core.posture import RestPose
 from rtseg.drivers.base import Source, SourceError
+from rtseg.drivers.options import flag_option, number_option
 from rtseg.core.frame import Frame
 from rtseg.core.take import Take
 
@@ -250,55 +252,25 @@ class ReplaySource(Source):
 
 # ---------------------------------------------------------------------- URL options
 
-def flag(options: Mapping[str, str], key: str, default: bool = False) -> bool:
-    """A boolean URL option: 1/0, true/false, yes/no, on/off (empty = true)."""
-    if key not in options:
-        return default
-    v = options[key].strip().lower()
-    if v in ("1", "true", "yes", "on", ""):
-        return True
-    if v in ("0", "false", "no", "off"):
-        return False
-    raise SourceError(f"option {key}={options[key]!r}: expected 1/0, true/false, yes/no")
-
-
-def number(options: Mapping[str, str], key: str, default, kind=float, minimum=None):
-    """A numeric URL option converted with ``kind``; SourceError naming the key if bad."""
-    if key not in options:
-        return default
-    try:
-        v = kind(options[key])
-    except ValueError:
-        raise SourceError(f"option {key}={options[key]!r}: expected a{'n integer' if kind is int else ' number'}") from None
-    if kind is float and not np.isfinite(v):
-        raise SourceError(f"option {key}={options[key]!r}: must be finite")
-    if minimum is not None and v < minimum:
-        raise SourceError(f"option {key}={options[key]!r}: must be >= {minimum}")
-    return v
-
-
-def check_options(options: Mapping[str, str], known: set[str], scheme: str) -> None:
-    unknown = sorted(set(options) - known)
-    if unknown:
-        raise SourceError(f"{scheme}:// unknown option(s) {', '.join(unknown)}; "
-                          f"known: {', '.join(sorted(known))}")
-
-
 #: Options every replay source understands.
 REPLAY_OPTIONS = {"speed", "loop", "start", "stop", "space"}
 
 
-def replay_kwargs(options: Mapping[str, str]) -> dict:
-    """speed / loop / start / stop / space from URL options, validated."""
+#: accepted range of each numeric option of the replay sources (``rate``: above zero)
+RANGES = {"speed": (0.0, math.inf), "start": (0.0, math.inf), "stop": (0.0, math.inf),
+          "seed": (0, 2**32 - 1), "rate": (1e-3, 1e5), "noise": (0.0, math.inf)}
+
+
+def replay_kwargs(scheme: str, options: Mapping[str, str]) -> dict:
+    """speed / loop / start / stop / space from URL options, validated (errors name
+    ``scheme``)."""
     space = options.get("space")
     if space is not None and space not in ("local", "global"):
-        raise SourceError(f"option space={space!r}: expected local or global")
-    stop = number(options, "stop", None, float, 0.0)
-    return {"speed": number(options, "speed", 1.0, float, 0.0),
-            "loop": flag(options, "loop"),
-            "start": number(options, "start", 0.0, float, 0.0),
-            "stop": stop, "space": space}
+        raise SourceError(f"{scheme}:// option space={space!r}: expected local or global")
+    return {"speed": number_option(scheme, options, "speed", 1.0, float, RANGES),
+            "loop": flag_option(scheme, options, "loop"),
+            "start": number_option(scheme, options, "start", 0.0, float, RANGES),
+            "stop": number_option(scheme, options, "stop", None, float, RANGES), "space": space}
 
 
-__all__ = ["Pacer", "ReplaySource", "REPLAY_OPTIONS", "replay_kwargs", "flag", "number",
-           "check_options"]
+__all__ = ["Pacer", "RANGES", "ReplaySource", "REPLAY_OPTIONS", "replay_kwargs"]

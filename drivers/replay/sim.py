@@ -30,7 +30,8 @@ from __future__ import annotations
 from typing import Mapping
 
 from rtseg.drivers.base import SourceError
-from rtseg.drivers.replay.pacing import REPLAY_OPTIONS, ReplaySource, check_options, number, replay_kwargs
+from rtseg.drivers.options import check_options, number_option
+from rtseg.drivers.replay.pacing import RANGES, REPLAY_OPTIONS, ReplaySource, replay_kwargs
 
 GENERATORS = ("synth",)
 OPTIONS = REPLAY_OPTIONS | {"script", "seed", "rate", "noise"}
@@ -60,13 +61,11 @@ def open_url(location: str, options: Mapping[str, str]) -> SimSource:
     if generator not in GENERATORS:
         raise SourceError(f"sim://{location}: unknown generator {generator!r}; "
                           f"known: {', '.join(GENERATORS)}")
-    check_options(options, OPTIONS, "sim")
-    kwargs = replay_kwargs(options)
-    seed = number(options, "seed", 0, int, 0)
-    rate = number(options, "rate", 120.0, float, 0.0)
-    if rate <= 0:
-        raise SourceError(f"option rate={options['rate']!r}: must be > 0")
-    noise = number(options, "noise", 0.3, float, 0.0)
+    check_options("sim", options, sorted(OPTIONS))
+    kwargs = replay_kwargs("sim", options)
+    seed = number_option("sim", options, "seed", 0, int, RANGES)
+    rate = number_option("sim", options, "rate", 120.0, float, RANGES)
+    noise = number_option("sim", options, "noise", 0.3, float, RANGES)
     try:
         result = synthesize(options.get("script") or DEFAULT_SCRIPT, frame_rate=rate,
                             seed=seed, noise_deg=noise)
