@@ -343,6 +343,16 @@ def _jumping_jacks(phi, t, rng):
     return post, d
 
 
+def _tpose(phi, t, rng):
+    """Standing still in a T-pose (arms out level, legs straight), breathing: what an IMU
+    suit is calibrated on (``rtseg.core.suit_calibration``)."""
+    n = len(phi)
+    post, d = np.zeros((N_JOINTS, CHANNELS)), np.zeros((n, N_JOINTS, CHANNELS))
+    post[J["LeftUpperArm"], SIDE] = post[J["RightUpperArm"], SIDE] = 90.0
+    d[:, J["Chest"], FLEX] = 0.8 * np.sin(2 * np.pi * 0.27 * t)  # breathing
+    return post, d
+
+
 def _jacks_lift(phi):
     return 0.06 * np.sin(phi) ** 2
 
@@ -363,6 +373,8 @@ BEHAVIOURS: dict[str, Behaviour] = {b.name: b for b in [
     Behaviour("side_bend", 3.0, _side_bend, "lateral trunk bends, opposite arm overhead",
               amp_jitter=0.05),
     Behaviour("jumping_jacks", 1.0, _jumping_jacks, "jumping jacks", lift=_jacks_lift),
+    Behaviour("tpose", 4.0, _tpose, "standing still in a T-pose (an IMU suit's calibration pose)",
+              tempo_jitter=0.0, amp_jitter=0.0),
 ]}
 
 
