@@ -1,6 +1,6 @@
 """Live sources chosen by URL, one module each (in the spirit of pyserial's URL handlers).
 
-    serial:///dev/ttyUSB0?baud=921600&format=rtseg   -> rtseg.drivers.serial.source
+    serial:///dev/ttyUSB0?baud=921600&format=rtseg   -> rtseg.drivers.serial.url
     osc://127.0.0.1:39539?format=vmc&allow=...       -> rtseg.drivers.osc.source
     file://take.amc?skeleton=86.asf&speed=1.0        -> rtseg.drivers.replay.file
     sim://synth?seed=1&script=...                    -> rtseg.drivers.replay.sim
@@ -24,7 +24,7 @@ from urllib.parse import parse_qs, urlsplit
 from rtseg.drivers.base import Source, SourceError, SourceStats
 
 SCHEMES: dict[str, str] = {
-    "serial": "rtseg.drivers.serial.source",
+    "serial": "rtseg.drivers.serial.url",
     "osc": "rtseg.drivers.osc.source",
     "file": "rtseg.drivers.replay.file",
     "sim": "rtseg.drivers.replay.sim",

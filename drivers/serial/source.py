@@ -1,27 +1,6 @@
 """Live IMU suit over a serial port (USB CDC / UART), rtseg binary frames or text lines.
 
-URL::
-
-    serial:///dev/ttyUSB0?baud=921600&format=rtseg&suit=default17&stale=0.25
-
-Options (all optional):
-
-=============  ==============================================================================
-``baud``       line speed, default 921600 (use 115200 for typical text sketches)
-``format``     ``rtseg`` (binary, :mod:`rtseg.drivers.serial.codec`), ``text``, or ``auto``
-               (the default: binary, switching to text if text lines arrive first; below)
-``suit``       suit profile name in ``config/suits.toml`` (default ``default17``)
-``suits``      another suits TOML file to read the profile from
-``stale``      seconds without a valid value before a sensor is reported lost (0.25)
-``rate``       nominal frame rate in Hz (default: the suit's ``frame_rate``)
-``queue``      frames buffered for a slow consumer (default 256, ~2 s at 120 Hz)
-``backoff``    longest wait between reconnect attempts to a device that stays, s (0.5)
-``wait``       1: start even if the device is absent and keep trying (default 0: error)
-``exclusive``  1 (default): lock the port (flock) so two readers cannot share it
-``tpose``      1: each orientation is its segment's rotation from a T-pose in a Y-up world
-               facing +Z or -Z (the suit's firmware calibrates so; the simulated suit does):
-               behaviour names use a standard T-pose's posture (``rtseg.core.standard_rig``)
-=============  ==============================================================================
+URL and options: :mod:`rtseg.drivers.serial.url` (``serial:///dev/ttyUSB0?baud=921600``).
 
 Behaviour
 ---------
@@ -73,9 +52,9 @@ import serial
 from rtseg.core.frame import Frame
 from rtseg.core.profiles import SuitProfile, suit_profile
 from rtseg.core.ratelog import RateLimitedLog
+from rtseg.core.suit_calibration import SuitCalibration
 from rtseg.core.session_log import start_thread
 from rtseg.drivers.base import FrameQueue, QueuedSource, SourceError
-from rtseg.drivers.options import check_options, flag_option, number_option
 from rtseg.drivers.serial.stream import SensorEvent, SuitStream
 
 log = logging.getLogger("rtseg.drivers.serial")
@@ -105,6 +84,8 @@ class SerialSource(QueuedSource):
     space = "global"
     #: URL option ``tpose=1``: the orientations are from a T-pose (see the options above)
     t_pose_without_geometry = False
+    #: URL option ``calibration=FILE``: the suit calibration applied to every frame, or None
+    calibration: SuitCalibration | None = None
 
     def __init__(self, path: str, baud: int = DEFAULT_BAUD, fmt: str = "auto",
                  suit: str | SuitProfile = "default17", suits_path: str | None = None,
@@ -459,6 +440,8 @@ class SerialSource(QueuedSource):
     # ------------------------------------------------------------------ frames
 
     def _put(self, frame: Frame) -> None:
+        if self.calibration is not None:
+            frame.quats = self.calibration.apply(frame.quats)
         if self._queue.put(frame):
             self.overflow_drops += 1
             self.count("dropped")
@@ -466,32 +449,4 @@ class SerialSource(QueuedSource):
                       "serial %s: consumer too slow, oldest frame dropped", self.path)
 
 
-_OPTIONS = ("backoff", "baud", "exclusive", "format", "queue", "rate", "stale", "suit", "suits",
-            "tpose", "wait")
-#: accepted range of each numeric option
-_RANGES = {"baud": (50, MAX_BAUD), "stale": (1e-3, 3600.0), "rate": (1e-3, 1e5),
-           "queue": (1, 1_000_000), "backoff": (0.05, 3600.0)}
-
-
-def open_url(location: str, options: dict[str, str]) -> SerialSource:
-    """``serial://`` handler for :func:`rtseg.drivers.open_source`; see the module docstring."""
-    check_options("serial", options, _OPTIONS)
-    if not location:
-        raise SourceError("serial URL needs a device path, e.g. serial:///dev/ttyUSB0")
-
-    def num(key: str, kind: type, default):
-        return number_option("serial", options, key, default, kind, _RANGES)
-
-    tpose = flag_option("serial", options, "tpose")
-    src = SerialSource(
-        location, baud=num("baud", int, DEFAULT_BAUD), fmt=options.get("format", "auto"),
-        suit=options.get("suit", "default17"), suits_path=options.get("suits"),
-        stale=num("stale", float, 0.25), rate=num("rate", float, None),
-        queue_size=num("queue", int, 256), backoff_max=num("backoff", float, 0.5),
-        wait=flag_option("serial", options, "wait"),
-        exclusive=flag_option("serial", options, "exclusive", True))
-    src.t_pose_without_geometry = tpose
-    return src
-
-
-__all__ = ["SerialSource", "SensorEvent", "open_url"]
+__all__ = ["SerialSource", "SensorEvent"]
