@@ -16,7 +16,7 @@ import math
 import sys
 from typing import NoReturn
 
-COMMANDS = ["segment", "evaluate", "plot", "simulate", "live", "demo", "learn"]
+COMMANDS = ["segment", "evaluate", "plot", "simulate", "live", "demo", "learn", "calibrate"]
 
 
 #: exit status of a usage, configuration or input error

@@ -198,40 +198,76 @@ def forward_kinematics(take: Take) -> np.ndarray:
 class ImuModel:
     """IMU imperfections: ``noise_deg`` (std of a white per-axis orientation error, degrees,
     sensor frame), ``drift_deg_per_min`` (heading drift rates drawn from ±this, degrees per
-    minute of take time, about world +Y), ``seed`` (NumPy generator seed)."""
+    minute of take time, about world +Y), ``seed`` (NumPy generator seed); and what a raw
+    sensor reports instead of its segment's rotation from the T-pose
+    (``rtseg.core.suit_calibration`` undoes it): ``mount_deg`` (each sensor sits on its
+    segment turned by a random rotation of up to this many degrees), ``up`` (the sensors'
+    world up axis: "y", or "z" as a BNO055's) and ``heading_deg`` (the performer's heading
+    in that world)."""
     noise_deg: float = 0.0
     drift_deg_per_min: float = 0.0
     seed: int = 0
+    mount_deg: float = 0.0
+    up: str = "y"
+    heading_deg: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("noise_deg", "drift_deg_per_min"):
+        for name in ("noise_deg", "drift_deg_per_min", "mount_deg"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise ValueError(f"IMU {name} must be a finite number >= 0, got {v}")
+        if self.mount_deg > 180:
+            raise ValueError(f"IMU mount_deg is at most 180, got {self.mount_deg}")
+        if self.up not in ("y", "z"):
+            raise ValueError(f"IMU up must be y or z, got {self.up!r}")
+        if not np.isfinite(self.heading_deg):
+            raise ValueError(f"IMU heading_deg must be finite, got {self.heading_deg}")
 
     @property
     def enabled(self) -> bool:
-        return self.noise_deg > 0 or self.drift_deg_per_min > 0
+        return self.noise_deg > 0 or self.drift_deg_per_min > 0 or self.raw
+
+    @property
+    def raw(self) -> bool:
+        """Whether the sensors report raw orientations (mounting, up axis or heading)."""
+        return self.mount_deg > 0 or self.up != "y" or self.heading_deg != 0
 
     @classmethod
     def parse(cls, spec: str | None) -> "ImuModel":
-        """``"noise=0.5,drift=3,seed=1"`` (degrees, degrees per minute); empty: no errors."""
-        kw: dict[str, float | int] = {}
-        keys = {"noise": "noise_deg", "drift": "drift_deg_per_min", "seed": "seed"}
+        """``"noise=0.5,drift=3,seed=1,mount=180,up=z,heading=40"`` (degrees, degrees per
+        minute); empty: no errors."""
+        kw: dict[str, float | int | str] = {}
+        keys = {"noise": "noise_deg", "drift": "drift_deg_per_min", "seed": "seed",
+                "mount": "mount_deg", "up": "up", "heading": "heading_deg"}
         for part in filter(None, (p.strip() for p in (spec or "").split(","))):
             key, eq, val = part.partition("=")
-            if not eq or key.strip() not in keys:
+            key = key.strip()
+            if not eq or key not in keys:
                 raise ValueError(f"IMU spec {spec!r}: expected noise=DEG, drift=DEG_PER_MIN, "
-                                 f"seed=N, got {part!r}")
+                                 f"seed=N, mount=DEG, up=y|z, heading=DEG, got {part!r}")
+            if key == "up":
+                kw["up"] = val.strip().lower()
+                continue
             try:
-                kw[keys[key.strip()]] = int(val) if key.strip() == "seed" else float(val)
+                kw[keys[key]] = int(val) if key == "seed" else float(val)
             except ValueError:
                 raise ValueError(f"IMU spec {spec!r}: {key} needs a number, got {val!r}") from None
         return cls(**kw)
 
+    def mounts(self, sensors: int) -> np.ndarray:
+        """(sensors, 4) each sensor's mounting rotation (uniform axis, angle up to
+        ``mount_deg``), deterministic for the seed."""
+        rng = np.random.default_rng([self.seed, 1])
+        axis = rng.standard_normal((sensors, 3))
+        axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+        angle = rng.uniform(0.0, np.deg2rad(self.mount_deg), sensors)
+        return Rotation.from_rotvec(axis * angle[:, None]).as_quat()
+
     def apply(self, q: np.ndarray, frame_rate: float) -> np.ndarray:
         """``q`` (frames, sensors, 4) global orientations -> the same with this model's
-        errors: drift_y(t) ⊗ q ⊗ noise.  Deterministic for a given seed and shape."""
+        errors: drift_y(t) ⊗ q ⊗ noise, then as a raw sensor reports it:
+        B^-1 ⊗ that ⊗ mount^-1 (B: ``rtseg.core.suit_calibration``'s, from ``up`` and
+        ``heading_deg``).  Deterministic for a given seed and shape."""
         if not self.enabled:
             return q
         F, S = q.shape[:2]
@@ -248,6 +284,10 @@ class ImuModel:
         if self.noise_deg > 0:
             n = Rotation.from_rotvec(noise.reshape(-1, 3)).as_quat().reshape(F, S, 4)
             out = Q.multiply(out, n)
+        if self.raw:
+            from rtseg.core.suit_calibration import world_rotation
+            b = world_rotation(self.up, self.heading_deg)
+            out = Q.multiply(Q.multiply(Q.conjugate(b), out), Q.conjugate(self.mounts(S)))
         return Q.make_continuous(Q.normalize(out), axis=0)
 
 

@@ -32,7 +32,9 @@ A recorded take is retargeted to the suit (``rtseg.simulators.retarget``): the s
 family (CMU ASF/AMC, CMU BVH, Mixamo, Daz/Poser, Unity humanoid, the vendor rigs) is
 detected from the joint names (or named with ``--map``), each suit sensor gets the global orientation of its body
 segment by forward kinematics, optionally with IMU noise and heading drift (``--imu
-noise=0.5,drift=3,seed=1``: degrees, degrees per minute).  A suit bone the map cannot
+noise=0.5,drift=3,seed=1``: degrees, degrees per minute) and as raw sensors report it
+(``--imu mount=180,up=z,heading=40``: each sensor turned on its segment by up to 180
+degrees, a Z-up sensor world, the performer at heading 40; ``rtseg calibrate`` undoes it).  A suit bone the map cannot
 place is an error naming it; ``--joint-map Head=upperneck,...`` places it by hand and
 ``--allow-missing`` sends the suit without it.
 
@@ -111,7 +113,7 @@ def register(subparsers: Any) -> None:
                    help="send the suit without the bones the take has no joint for")
     p.add_argument("--imu", metavar="SPEC", default="",
                    help="IMU errors: noise=DEG (white, per axis), drift=DEG_PER_MIN (heading), "
-                   "seed=N")
+                   "seed=N; raw sensors: mount=DEG (random mounting), up=y|z, heading=DEG")
     p.add_argument("--loop", action="store_true", help="repeat the take until stopped")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     p.add_argument("--save", metavar="NPZ", help="also write the take (with the synthesiser's "
@@ -383,8 +385,16 @@ def _serve_serial(args, take: Take) -> tuple[str, list[str]]:
     path = suit.start()
     _out(f"serial device: {path} ({len(suit.suit.bones)}-sensor suit {suit.suit.name}, "
          f"{suit.rate:g} Hz device clock, sent at x{suit.speed:g})")
-    _out(f"  read it with: rtseg live serial://{path}"
-         + ("?format=text&baud=115200" if args.format == "text" else ""))
+    url = f"serial://{path}" + ("?format=text&baud=115200" if args.format == "text" else "")
+    from rtseg.simulators.retarget import ImuModel
+    raw = ImuModel.parse(args.imu)
+    if raw.raw:
+        sep = "&" if "?" in url else "?"
+        _out(f"  raw sensors: calibrate with rtseg calibrate {url} --up {raw.up} --out suit.json "
+             f"(a T-pose held first: --synth tpose:3,squat:5,...), then read it with: "
+             f"rtseg live \"{url}{sep}calibration=suit.json\"")
+    else:
+        _out(f"  read it with: rtseg live {url}")
     t0 = time.monotonic()
     reason = "interrupted"
     try:

@@ -74,6 +74,14 @@ def _yaw(psi: float) -> np.ndarray:
     return np.array([0.0, math.sin(psi / 2), 0.0, math.cos(psi / 2)])
 
 
+def world_rotation(up: str, heading_deg: float) -> np.ndarray:
+    """B = R_y(-psi) A of the module doc (scalar-last): the sensors' world (up axis
+    ``up``) to rtseg's, the performer (heading ``heading_deg``) facing +Z."""
+    if up not in UP_AXES:
+        raise CalibrationError(f"up={up!r}: one of {', '.join(UP_AXES)}")
+    return quat.multiply(_yaw(-math.radians(heading_deg)), np.array(UP_AXES[up]))
+
+
 @dataclass(frozen=True)
 class SuitCalibration:
     """A suit's calibration (module doc): ``joint_names`` in the source's order,
@@ -92,7 +100,7 @@ class SuitCalibration:
         if self.up not in UP_AXES:
             raise CalibrationError(f"calibration up={self.up!r}: one of {', '.join(UP_AXES)}")
         object.__setattr__(self, "reference", quat.normalize(ref))
-        b = quat.multiply(_yaw(-math.radians(self.heading_deg)), np.array(UP_AXES[self.up]))
+        b = world_rotation(self.up, self.heading_deg)
         # G = B q (q_c^-1 B^-1): a left factor for all, a right factor per sensor
         object.__setattr__(self, "_left", b)
         object.__setattr__(self, "_right", quat.multiply(quat.conjugate(self.reference),
@@ -217,5 +225,5 @@ def calibrate(quats: np.ndarray, joint_names: Sequence[str], parents: Sequence[i
                  "knee_axis_tilt_deg": round(tilt, 2), "heading_deg": round(psi, 2)}
 
 
-__all__ = ["CalibrationError", "SuitCalibration", "calibrate", "knee_heading",
+__all__ = ["CalibrationError", "SuitCalibration", "calibrate", "knee_heading", "world_rotation",
            "still_stretch", "UP_AXES", "HOLD_S", "STILL_DEG", "MIN_BENT"]

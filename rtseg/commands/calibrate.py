@@ -1,0 +1,70 @@
+"""``rtseg calibrate``: record an IMU suit's calibration (``rtseg.core.suit_calibration``).
+
+    rtseg calibrate "serial:///dev/ttyUSB0" --up z --out suit.json [--seconds 60] [--hold 1]
+
+The performer holds a T-pose for ``--hold`` seconds, then bends the knees (a squat, walking
+on the spot); the command writes the calibration and prints the ``rtseg live`` URL that
+applies it (``calibration=FILE``).  ``--up``: the sensors' world up axis (z for a BNO055 in
+its fusion mode, y for sensors that report Y up).  Exit 0 with a calibration, 2 without
+(one line saying why), as for a bad URL or option.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from rtseg.cli import EXIT_USAGE, positive_float
+from rtseg.core.suit_calibration import HOLD_S, UP_AXES, CalibrationError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "calibrate", help="record an IMU suit's calibration from a T-pose and knee bends",
+        description="Record an IMU suit's sensor-to-segment calibration: hold a T-pose, then "
+                    "bend the knees.  The file makes raw sensor orientations (any mounting, "
+                    "a Z-up or Y-up sensor world, any heading) segment rotations from the "
+                    "T-pose: rtseg live 'serial://...?calibration=FILE'.")
+    p.add_argument("source", metavar="SOURCE_URL", help="the suit, e.g. serial:///dev/ttyUSB0")
+    p.add_argument("--out", required=True, metavar="FILE", help="calibration file to write (JSON)")
+    p.add_argument("--up", choices=sorted(UP_AXES), default="y",
+                   help="the sensors' world up axis (default y; z for a BNO055)")
+    p.add_argument("--seconds", type=positive_float, default=60.0,
+                   help="longest time to wait for the T-pose and the knee bends (default 60)")
+    p.add_argument("--hold", type=positive_float, default=HOLD_S,
+                   help=f"seconds the T-pose must be held still (default {HOLD_S:g})")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from rtseg.drivers import open_source
+    from rtseg.drivers.base import SourceError
+    from rtseg.live.calibrate import capture
+    try:
+        source = open_source(args.source)
+    except SourceError as exc:
+        print(f"rtseg calibrate: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    print(f"rtseg calibrate: hold a T-pose (arms out level, legs straight) for {args.hold:g} s, "
+          f"then bend the knees a few times", file=sys.stderr)
+    try:
+        got = capture(source, args.up, args.seconds, args.hold,
+                      progress=lambda m: print(f"rtseg calibrate: {m}", file=sys.stderr))
+    except CalibrationError as exc:
+        print(f"rtseg calibrate: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    finally:
+        source.close()
+    if got.calibration is None:
+        print(f"rtseg calibrate: error: no calibration from {got.frames} frames: {got.reason}",
+              file=sys.stderr)
+        return EXIT_USAGE
+    got.calibration.save(args.out)
+    r = got.report
+    sep = "&" if "?" in args.source else "?"
+    print(f"{args.out}: {len(got.calibration.joint_names)} sensors, up {args.up}, heading "
+          f"{r['heading_deg']:.1f} degrees from {r['knee_bends']} knee bends (axis "
+          f"{r['knee_axis_tilt_deg']:.1f} degrees from level), T-pose at frames "
+          f"{r['t_pose_frames'][0]}-{r['t_pose_frames'][1]} of {got.used}")
+    print(f"  use it with: rtseg live \"{args.source}{sep}calibration={args.out}\"")
+    return 0
