@@ -118,7 +118,7 @@ def test_rtseg_calibrate_over_a_pty_and_a_session_that_names_by_posture(tmp_path
         session.run()
     finally:
         suit.stop()
-    assert session.pipeline.posture.origin == "standard"
+    assert session.pipeline.posture.origin == "source"      # the standard T-pose, facing +Z
     assert session.pipeline.identity.stats.posture_namings >= 1
     from rtseg.recording.reader import read_session
     rec = read_session(tmp_path / "rec")

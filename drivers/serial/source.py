@@ -50,6 +50,7 @@ from typing import Callable
 import serial
 
 from rtseg.core.frame import Frame
+from rtseg.core.posture import RestPose
 from rtseg.core.profiles import SuitProfile, suit_profile
 from rtseg.core.ratelog import RateLimitedLog
 from rtseg.core.suit_calibration import SuitCalibration
@@ -86,6 +87,19 @@ class SerialSource(QueuedSource):
     t_pose_without_geometry = False
     #: URL option ``calibration=FILE``: the suit calibration applied to every frame, or None
     calibration: SuitCalibration | None = None
+    _rest = None
+
+    @property
+    def rest_pose(self) -> RestPose | None:
+        """The rig's rest geometry for posture (``rtseg.core.posture.RestPose``): with a
+        calibration, the standard T-pose facing +Z (``rtseg.core.standard_rig``: what the
+        calibrated rotations are from); None without."""
+        if self.calibration is None:
+            return None
+        if self._rest is None:
+            from rtseg.core.standard_rig import standard_rest
+            self._rest = standard_rest(self.joint_names, self.parents)
+        return self._rest
 
     def __init__(self, path: str, baud: int = DEFAULT_BAUD, fmt: str = "auto",
                  suit: str | SuitProfile = "default17", suits_path: str | None = None,

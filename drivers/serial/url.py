@@ -25,9 +25,10 @@ Options (all optional):
                    behaviour names use a standard T-pose's posture (``rtseg.core.standard_rig``)
 ``calibration``    a suit calibration file (``rtseg calibrate``,
                    ``rtseg.core.suit_calibration``): every frame's sensor orientations become
-                   their segments' rotations from the T-pose it was made on, facing +Z (so
-                   ``tpose=1`` is implied); for raw sensor orientations (any mounting, a Z-up
-                   or Y-up sensor world, any heading)
+                   their segments' rotations from the T-pose it was made on, facing +Z, and
+                   the rig's rest geometry is the standard T-pose's (``rest_pose``; no facing
+                   probe); for raw sensor orientations (any mounting, a Z-up or Y-up sensor
+                   world, any heading)
 =================  ==========================================================================
 
 Every bad value is refused with one :class:`rtseg.drivers.base.SourceError` line before the
@@ -78,7 +79,7 @@ def open_url(location: str, options: dict[str, str]) -> SerialSource:
         wait=flag_option("serial", options, "wait"),
         exclusive=flag_option("serial", options, "exclusive", True))
     src.calibration = calibration
-    src.t_pose_without_geometry = tpose or calibration is not None
+    src.t_pose_without_geometry = tpose and calibration is None     # calibrated: rest_pose
     return src
 
 
