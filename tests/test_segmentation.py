@@ -41,3 +41,30 @@ def test_load_params_flat_per_method_and_errors(tmp_path):
     j = tmp_path / "p.json"
     j.write_text('{"gmm": {"n_components": 5}}')
     assert load_params(j, "gmm") == {"n_components": 5}
+
+
+@pytest.mark.parametrize("script, seed, rate", [
+    ("idle:5,walk:8,punch:7", 0, 120.0),
+    ("walk:5,jump:5,kick:6,arm_circles:5", 2, 60.0),
+])
+def test_offline_contrast_gives_the_live_cuts(script, seed, rate):
+    """rtseg segment's contrast cuts are the live pipeline's (the same rows: a local-space
+    take's first 0.25 s make the calibration pose, not fed), frames and detection frames;
+    fed every frame uncalibrated the detector cuts elsewhere on these takes."""
+    from rtseg.core.features import live_rows
+    from rtseg.detectors.segmentation import (compute_features, segment_features_result,
+                                              segment_take)
+    from rtseg.evaluation.online import live_config, live_cuts
+    from rtseg.simulators.synth.motion import synthesize
+    take = synthesize(script, frame_rate=rate, seed=seed).take
+    cfg, _ = live_config()
+    live = live_cuts(take, cfg)["contrast"]
+    off = segment_take(take, "contrast", keep_trace=True)
+    assert len(live) >= 2
+    assert off.cut_frames == [c.boundary for c in live]
+    every_frame = segment_features_result(compute_features(take), "contrast", rate)
+    assert every_frame.cut_frames != off.cut_frames
+    assert [c.detected_at for c in off.cuts] == [c.cut.detected_at + live_rows(take)[1]
+                                                for c in live]
+    assert off.segments[0].start == 0 and off.segments[-1].end == take.n_frames
+    assert min(r[0] for r in off.trace) >= live_rows(take)[1]

@@ -365,6 +365,37 @@ class PoseFeatures:
                 f"space={self.space!r}, calibrated={self.calibrated})")
 
 
+#: seconds of a rig-relative (local-space) stream averaged as its calibration pose before
+#: the detectors are fed: ``[calibration] seconds`` of the shipped config/live.toml (mode
+#: "auto"), which ``live_rows`` reproduces offline
+CALIBRATION_S = 0.25
+
+
+def average_quats(q: np.ndarray) -> np.ndarray:
+    """Mean rotation of (n, J, 4) quaternions close to each other: sign-align to the first
+    frame, average, normalise (the first-order approximation of the quaternion mean)."""
+    ref = q[0]
+    signs = np.where(np.sum(q * ref, axis=-1, keepdims=True) < 0, -1.0, 1.0)
+    m = np.mean(q * signs, axis=0)
+    n = np.linalg.norm(m, axis=-1, keepdims=True)
+    return np.where(n > 1e-9, m / np.where(n > 1e-9, n, 1.0), ref)
+
+
+def live_rows(take: Take, profile: str | None = None,
+              seconds: float = CALIBRATION_S) -> tuple[np.ndarray, int]:
+    """(rows, first): the features the live session (shipped configuration) feeds its
+    detectors on ``take`` and the take frame of the first row.  Rig-relative rotations
+    (``space`` "local") are measured from a calibration pose, the mean of the first
+    ``seconds`` of frames (at least one), which are not fed (``rtseg.live.pipeline``);
+    global orientations are fed from frame 0 as they are."""
+    pf = PoseFeatures.for_take(take, profile)
+    first = 0
+    if take.space == "local" and take.n_frames > 1:
+        first = min(take.n_frames - 1, max(1, int(round(seconds * take.frame_rate))))
+        pf.calibrate(average_quats(np.asarray(take.quats[:first], dtype=np.float64)))
+    return pf.transform(take.quats[first:]), first
+
+
 def take_features(take: Take, profile: str | None = None) -> np.ndarray:
     """(frames, 4·J) float64 features of a whole take (``profile`` None: canonical when the rig maps, else a named profile).
 

@@ -11,7 +11,7 @@ import json
 import logging
 import time
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
@@ -183,14 +183,21 @@ def compute_features(take: "Take", profile: Any = None) -> np.ndarray:
 
 def segment_features_result(X: np.ndarray, method: str, frame_rate: float,
                             params: Mapping[str, Any] | None = None, keep_trace: bool = False,
-                            source: str = "") -> SegmentationResult:
-    """Run one detector (``rtseg.detectors.segment_features``) on a feature matrix."""
+                            source: str = "", first: int = 0) -> SegmentationResult:
+    """Run one detector (``rtseg.detectors.segment_features``) on a feature matrix whose
+    rows are the take's frames from ``first`` on (cuts, trace and segments in take frames;
+    the frames before ``first`` belong to the first segment)."""
     from rtseg.detectors import segment_features
     t0 = time.perf_counter()
     out = segment_features(X, method, frame_rate, dict(params or {}), keep_trace)
     elapsed = time.perf_counter() - t0
     raw, trace = out, getattr(out, "trace", None)   # a list of Cut carrying ``trace``
-    n = int(np.asarray(X).shape[0])
+    n = first + int(np.asarray(X).shape[0])
+    if first:
+        raw = [replace(c, frame=c.frame + first, detected_at=c.detected_at + first)
+               if isinstance(c, Cut) else int(c) + first for c in raw]
+        if trace is not None and len(trace):
+            trace = [(r[0] + first, *r[1:]) for r in trace]
     cuts = _clean_cuts(list(raw), method, n)
     return SegmentationResult(method=method, cuts=cuts,
                               segments=segments_between([c.frame for c in cuts], n, frame_rate),
@@ -199,19 +206,33 @@ def segment_features_result(X: np.ndarray, method: str, frame_rate: float,
                               elapsed_s=elapsed)
 
 
+#: methods fed offline exactly what the live session feeds them (``rtseg.core.features
+#: .live_rows``), so that ``rtseg segment`` gives the live cuts
+LIVE_FED: tuple[str, ...] = ("contrast",)
+
+
 def segment_take(take: "Take", method: str, params: Mapping[str, Any] | None = None,
                  profile: Any = None, keep_trace: bool = False,
                  features: np.ndarray | None = None) -> SegmentationResult:
     """Segment a whole take with one method ("contrast", "pca", "ppca", "gmm").
 
     params: detector parameters overriding the defaults; profile: passed to
-    ``take_features`` (joint selection); features: a precomputed feature matrix of this take
-    (to run several methods on one feature pass).
+    ``take_features`` (joint selection); features: a precomputed feature matrix of this
+    take's frames for the paper's batch methods (to run several on one feature pass).
+    The methods of :data:`LIVE_FED` (rtseg's live detector) always get the rows the live
+    session feeds them (a local-space take's first 0.25 s make its calibration pose), so
+    their cuts are the live session's.
     """
     t0 = time.perf_counter()
-    X = compute_features(take, profile) if features is None else np.asarray(features, float)
+    first = 0
+    if method in LIVE_FED:
+        from rtseg.core.features import live_rows
+        X, first = live_rows(take, profile)
+    else:
+        X = compute_features(take, profile) if features is None else np.asarray(features, float)
     t_feat = time.perf_counter() - t0
-    res = segment_features_result(X, method, take.frame_rate, params, keep_trace, take.source)
+    res = segment_features_result(X, method, take.frame_rate, params, keep_trace, take.source,
+                                  first)
     res.elapsed_s += t_feat
     return res
 
@@ -222,9 +243,9 @@ def segment_take_methods(take: "Take", methods: Sequence[str],
                          ) -> dict[str, SegmentationResult]:
     """Several methods on one take, computing its features once.  ``params`` maps method
     name to that method's parameters."""
-    X = compute_features(take, profile)
+    X = compute_features(take, profile) if set(methods) - set(LIVE_FED) else None
     params = params or {}
-    return {m: segment_take(take, m, params.get(m), keep_trace=keep_trace, features=X)
+    return {m: segment_take(take, m, params.get(m), profile, keep_trace=keep_trace, features=X)
             for m in methods}
 
 

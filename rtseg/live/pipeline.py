@@ -47,6 +47,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from rtseg.config import ConfigError
+from rtseg.core.features import average_quats
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.live.config import SessionConfig
 from rtseg.live.detector_setup import detector_params, make_detectors
@@ -89,16 +90,6 @@ class PipelineStats:
     identity_errors: int = 0   # frames on which rtseg.identity.tracker failed (cuts still sent)
     ahead_errors: int = 0      # pieces of the detectors' work ahead that failed (logged; the
                                # frame that sends the cut then does that work itself)
-
-
-def _average_quats(q: np.ndarray) -> np.ndarray:
-    """Mean rotation of (n, J, 4) quaternions close to each other: sign-align to the first
-    frame, average, normalise (the first-order approximation of the quaternion mean)."""
-    ref = q[0]
-    signs = np.where(np.sum(q * ref, axis=-1, keepdims=True) < 0, -1.0, 1.0)
-    m = np.mean(q * signs, axis=0)
-    n = np.linalg.norm(m, axis=-1, keepdims=True)
-    return np.where(n > 1e-9, m / np.where(n > 1e-9, n, 1.0), ref)
 
 
 def _resolve_joints(names: Iterable[str], joint_names: list[str], key: str) -> np.ndarray:
@@ -341,7 +332,7 @@ class Pipeline:
                 self._calib.append(q.copy())
                 st.calibration_frames += 1
                 if len(self._calib) >= self.calibration_needed:
-                    pose = _average_quats(np.stack(self._calib))
+                    pose = average_quats(np.stack(self._calib))
                     self.features.calibrate(pose)
                     self.calibrated = True
                     self._calib = []
