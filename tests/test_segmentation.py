@@ -68,3 +68,11 @@ def test_offline_contrast_gives_the_live_cuts(script, seed, rate):
                                                 for c in live]
     assert off.segments[0].start == 0 and off.segments[-1].end == take.n_frames
     assert min(r[0] for r in off.trace) >= live_rows(take)[1]
+
+
+def test_offline_calibration_is_the_shipped_live_configuration():
+    """live_rows reproduces the shipped [calibration] (mode auto, seconds)."""
+    from rtseg.core.features import CALIBRATION_S
+    from rtseg.live.config import load_session_config
+    cfg = load_session_config()
+    assert cfg["calibration.mode"] == "auto" and cfg["calibration.seconds"] == CALIBRATION_S
