@@ -63,6 +63,32 @@ def test_a_calibration_is_saved_and_read_back(performer, tmp_path):
         cal.check_joints(["Hips", "Spine"], "suit x")
 
 
+def test_a_damaged_calibration_file_is_refused_not_applied(performer, tmp_path):
+    """A heading of NaN made every frame NaN (a session of nothing but bad values); a zero
+    reference quaternion was silently taken for the identity; an empty calibration= read
+    the suit raw.  Each is now one line."""
+    from rtseg.drivers import open_source
+    from rtseg.drivers.base import SourceError
+    take, g = performer
+    raw = ImuModel(mount_deg=90, up="z", heading_deg=25.0, seed=4).apply(g, RATE)
+    cal, _ = calibrate(raw, take.joint_names, take.parents, RATE, "z")
+    doc = cal.as_dict()
+    for key, value, says in (("heading_deg", "NaN", "heading_deg must be a finite"),
+                             ("heading_deg", float("inf"), "heading_deg must be a finite"),
+                             ("reference", [[0.0, 0.0, 0.0, 0.0]] + doc["reference"][1:],
+                              "Hips is not a unit quaternion"),
+                             ("reference", [[0.0, 0.0, 0.0, 2.0]] + doc["reference"][1:],
+                              "Hips is not a unit quaternion")):
+        path = tmp_path / "damaged.json"
+        path.write_text(json.dumps(dict(doc, **{key: value})))
+        with pytest.raises(CalibrationError, match=says):
+            SuitCalibration.load(path)
+        with pytest.raises(SourceError, match=says):
+            open_source(f"serial:///dev/null?calibration={path}")
+    with pytest.raises(SourceError, match="calibration= needs a file"):
+        open_source("serial:///dev/null?calibration=")
+
+
 def test_what_cannot_be_calibrated_says_why(performer):
     take, g = performer
     raw = ImuModel(mount_deg=180, up="z", heading_deg=-100.0, seed=3).apply(g, RATE)

@@ -65,7 +65,10 @@ def open_url(location: str, options: dict[str, str]) -> SerialSource:
     except (KeyError, ValueError) as exc:
         raise SourceError(f"serial source: {exc}") from None
     calibration = None
-    if options.get("calibration"):
+    if "calibration" in options:
+        if not options["calibration"].strip():
+            raise SourceError("serial:// calibration= needs a file (rtseg calibrate writes "
+                              "one); leave the option out to read the sensors raw")
         try:
             calibration = SuitCalibration.load(options["calibration"])
             calibration.check_joints(suit.bones, f"suit {suit.name}")

@@ -63,6 +63,9 @@ AGREE = 0.8
 #: the mean knee axis may rise at most this far from horizontal (degrees) before ``up`` is
 #: judged wrong
 MAX_TILT_DEG = 30.0
+#: a calibration's reference quaternions must have length 1 within this (a file's are
+#: rounded to 8 decimals; a zero or hand-edited row is refused, not silently renormalised)
+UNIT_TOL = 1e-3
 
 
 class CalibrationError(ValueError):
@@ -97,8 +100,16 @@ class SuitCalibration:
         if ref.shape != (len(self.joint_names), 4) or not np.isfinite(ref).all():
             raise CalibrationError(f"calibration reference must be ({len(self.joint_names)}, 4) "
                                    f"finite quaternions, got shape {ref.shape}")
+        off = np.flatnonzero(np.abs(np.linalg.norm(ref, axis=1) - 1.0) > UNIT_TOL)
+        if len(off):
+            raise CalibrationError(f"calibration reference of {self.joint_names[off[0]]} is not "
+                                   f"a unit quaternion (length "
+                                   f"{np.linalg.norm(ref[off[0]]):.3g})")
         if self.up not in UP_AXES:
             raise CalibrationError(f"calibration up={self.up!r}: one of {', '.join(UP_AXES)}")
+        if not math.isfinite(self.heading_deg):
+            raise CalibrationError(f"calibration heading_deg must be a finite number of degrees, "
+                                   f"got {self.heading_deg!r}")
         object.__setattr__(self, "reference", quat.normalize(ref))
         b = world_rotation(self.up, self.heading_deg)
         # G = B q (q_c^-1 B^-1): a left factor for all, a right factor per sensor
