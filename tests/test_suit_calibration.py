@@ -148,6 +148,8 @@ def test_rtseg_calibrate_over_a_pty_and_a_session_that_names_by_posture(tmp_path
     assert session.pipeline.identity.stats.posture_namings >= 1
     from rtseg.recording.reader import read_session
     rec = read_session(tmp_path / "rec")
+    # the recording says its frames are calibrated, and with what
+    assert rec.meta["session_meta"]["calibration"] == SuitCalibration.load(cal_path).as_dict()
     seq = np.asarray(rec.meta["seq"]) % len(truth)
     local = quat.local_from_global(rec.quats, list(perf.parents))
     err = degrees_apart(local[:, 1:], truth[seq][:, 1:])        # the root's heading aside

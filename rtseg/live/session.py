@@ -297,13 +297,16 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
             from rtseg.recording import SessionRecorder
             url = (self._source_arg if isinstance(self._source_arg, str)
                    else getattr(src, "url", type(src).__name__))
+            meta = {"source": url, "config": self.config.origin,
+                    "methods": list(self.pipeline.detectors), "primary": self.primary,
+                    "wire_methods": sorted(self.wire)}
+            calibration = getattr(src, "calibration", None)     # serial:// calibration=FILE
+            if hasattr(calibration, "as_dict"):
+                meta["calibration"] = calibration.as_dict()     # the frames are calibrated
             try:
                 self.recorder = SessionRecorder(
                     self.config["recording.dir"], names, parents, space=space,
-                    frame_rate=self.frame_rate, start_monotonic=self.session_start,
-                    meta={"source": url, "config": self.config.origin,
-                          "methods": list(self.pipeline.detectors), "primary": self.primary,
-                          "wire_methods": sorted(self.wire)})
+                    frame_rate=self.frame_rate, start_monotonic=self.session_start, meta=meta)
             except OSError as exc:
                 raise OSError(exc.errno, f"cannot record the session in "
                               f"{self.config['recording.dir']} ({exc.strerror or exc})") from None
