@@ -12,7 +12,10 @@ its fusion mode, y for sensors that report Y up).  Exit 0 with a calibration, 2 
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
+from pathlib import Path
+from urllib.parse import quote
 
 from rtseg.cli import EXIT_USAGE, positive_float
 from rtseg.core.suit_calibration import HOLD_S, UP_AXES, CalibrationError
@@ -36,23 +39,78 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def check_out(out: str) -> str | None:
+    """Why the calibration cannot be written to ``out`` (one line), or None: checked
+    before the performer calibrates, not after.  Tries to open it for appending (an
+    existing file is left as it is, a new one removed again)."""
+    path = Path(out)
+    if path.is_dir():
+        return f"--out {out}: is a folder, give a file name (e.g. {path / 'suit.json'})"
+    folder = path.parent
+    if not folder.is_dir():
+        return (f"--out {out}: {folder} is not a folder" if folder.exists() else
+                f"--out {out}: folder {folder} does not exist")
+    existed = path.exists()
+    try:
+        with open(path, "a", encoding="utf-8"):
+            pass
+    except OSError as exc:
+        return f"--out {out}: cannot write ({exc.strerror or exc})"
+    if not existed:
+        try:
+            path.unlink()
+        except OSError:
+            pass
+    return None
+
+
+def live_command(source_url: str, out: str) -> str:
+    """The ``rtseg live`` command line that reads ``source_url`` with the calibration
+    ``out``: the file percent-encoded in the URL (a ``&``, ``#``, ``+`` or space would cut
+    or change it) and the URL quoted for a POSIX shell."""
+    url = f"{source_url}{'&' if '?' in source_url else '?'}calibration={quote(out, safe='/')}"
+    return f"rtseg live {shlex.quote(url)}"
+
+
 def run(args: argparse.Namespace) -> int:
-    from rtseg.drivers import open_source
+    from rtseg.drivers import open_source, parse_url
     from rtseg.drivers.base import SourceError
-    from rtseg.live.calibrate import capture
+    from rtseg.live.calibrate import capture, check_source
+
+    def error(message: str) -> int:
+        print(f"rtseg calibrate: error: {message}", file=sys.stderr)
+        return EXIT_USAGE
+
+    try:
+        scheme = parse_url(args.source)[0]
+    except SourceError as exc:
+        return error(str(exc))
+    if scheme != "serial":
+        return error(f"{scheme}:// is not an IMU suit: rtseg calibrate calibrates a suit read "
+                     f"over serial:// (e.g. serial:///dev/ttyUSB0), whose URL takes "
+                     f"calibration=FILE")
+    if args.hold >= args.seconds:
+        return error(f"--hold {args.hold:g} s leaves no time in --seconds {args.seconds:g} for "
+                     f"the knee bends: give --seconds more than --hold")
+    problem = check_out(args.out)
+    if problem:
+        return error(problem)
     try:
         source = open_source(args.source)
     except SourceError as exc:
-        print(f"rtseg calibrate: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    print(f"rtseg calibrate: hold a T-pose (arms out level, legs straight) for {args.hold:g} s, "
-          f"then bend the knees a few times", file=sys.stderr)
+        return error(str(exc))
     try:
-        got = capture(source, args.up, args.seconds, args.hold,
-                      progress=lambda m: print(f"rtseg calibrate: {m}", file=sys.stderr))
-    except CalibrationError as exc:
-        print(f"rtseg calibrate: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        try:
+            check_source(source)
+        except CalibrationError as exc:
+            return error(str(exc))
+        print(f"rtseg calibrate: hold a T-pose (arms out level, legs straight) for "
+              f"{args.hold:g} s, then bend the knees a few times", file=sys.stderr)
+        try:
+            got = capture(source, args.up, args.seconds, args.hold,
+                          progress=lambda m: print(f"rtseg calibrate: {m}", file=sys.stderr))
+        except CalibrationError as exc:
+            return error(str(exc))
     finally:
         source.close()
     if got.calibration is None:
@@ -61,10 +119,9 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     got.calibration.save(args.out)
     r = got.report
-    sep = "&" if "?" in args.source else "?"
     print(f"{args.out}: {len(got.calibration.joint_names)} sensors, up {args.up}, heading "
           f"{r['heading_deg']:.1f} degrees from {r['knee_bends']} knee bends (axis "
           f"{r['knee_axis_tilt_deg']:.1f} degrees from level), T-pose at frames "
           f"{r['t_pose_frames'][0]}-{r['t_pose_frames'][1]} of {got.used}")
-    print(f"  use it with: rtseg live \"{args.source}{sep}calibration={args.out}\"")
+    print(f"  use it with: {live_command(args.source, args.out)}")
     return 0

@@ -5,7 +5,7 @@ spot); :func:`capture` reads the source's frames meanwhile and tries
 ``rtseg.core.suit_calibration.calibrate`` on what has arrived every half second, until it
 succeeds or ``seconds`` have passed.  Frames with any sensor invalid are left out (a
 calibration needs every sensor).  The source must give sensor orientations (``space``
-"global") and must not be calibrated already.
+"global") and must not be calibrated already (:func:`check_source`).
 """
 
 from __future__ import annotations
@@ -42,12 +42,7 @@ def capture(source: Any, up: str, seconds: float, hold_s: float = HOLD_S,
     """Read ``source`` (a started ``rtseg.drivers.base.Source``) for at most ``seconds``
     and calibrate on its frames (module doc).  ``progress`` gets a line when the T-pose is
     found.  The frame rate is the source's, else measured from the frames' receive times."""
-    if getattr(source, "space", "global") != "global":
-        raise CalibrationError("the source gives joint rotations, not sensor orientations: "
-                               "a suit calibration is for IMU suits (serial://)")
-    if getattr(source, "calibration", None) is not None:
-        raise CalibrationError("the source is calibrated already: leave calibration= out of "
-                               "the URL to record a new one")
+    check_source(source)
     names, parents = list(source.joint_names), list(source.parents)
     quats: list[np.ndarray] = []
     times: list[float] = []
@@ -89,6 +84,17 @@ def capture(source: Any, up: str, seconds: float, hold_s: float = HOLD_S,
     return out
 
 
+def check_source(source: Any) -> None:
+    """CalibrationError (one line) unless ``source`` gives raw sensor orientations that a
+    suit calibration is for: global orientations, not calibrated already."""
+    if getattr(source, "space", "global") != "global":
+        raise CalibrationError("the source gives joint rotations, not sensor orientations: "
+                               "a suit calibration is for IMU suits (serial://)")
+    if getattr(source, "calibration", None) is not None:
+        raise CalibrationError("the source is calibrated already: leave calibration= out of "
+                               "the URL to record a new one")
+
+
 def _rate(source: Any, times: list[float]) -> float:
     """The source's declared frame rate, else 1 / the median receive period."""
     rate = getattr(source, "frame_rate", None)
@@ -99,4 +105,4 @@ def _rate(source: Any, times: list[float]) -> float:
     return 1.0 / float(np.median(d)) if len(d) else 120.0
 
 
-__all__ = ["Capture", "capture", "TRY_EVERY_S"]
+__all__ = ["Capture", "capture", "check_source", "TRY_EVERY_S"]
