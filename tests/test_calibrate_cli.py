@@ -1,7 +1,8 @@
 """``rtseg calibrate`` as a technician runs it: what it refuses (one line on stderr, exit
 status 2, before the performer has calibrated for nothing), Ctrl-C (130, no traceback),
 the ``rtseg live`` command it prints (pasted into a shell it reads the calibration, whatever
-the file's name)."""
+the file's name), and a suit whose clock runs at another rate than the one declared (over a
+real pseudo-terminal)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,8 @@ import shlex
 import pytest
 
 from rtseg.cli import main
+
+RAW = "mount=180,up=z,heading=40,seed=5"
 
 
 def run_cli(argv: list[str], capsys) -> tuple[int, str, str]:
@@ -75,3 +78,36 @@ def test_the_printed_live_command_reads_the_file_it_names(out):
         assert argv[:2] == ["rtseg", "live"] and len(argv) == 3
         scheme, location, options = parse_url(argv[2])
         assert (scheme, location, options["calibration"]) == ("serial", "/dev/ttyUSB0", out)
+    argv = shlex.split(live_command("serial:///dev/ttyUSB0", out, rate=59.9))
+    assert parse_url(argv[2])[2]["rate"] == "60"
+    argv = shlex.split(live_command("serial:///dev/ttyUSB0?rate=60", out, rate=59.9))
+    assert argv[2].count("rate=") == 1
+
+
+def test_a_60_hz_suit_read_without_rate_is_calibrated_and_the_command_works(tmp_path, capsys):
+    """A 60 Hz suit read as the profile's 120 Hz: the 1 s hold was 120 frames, 2 s of a
+    T-pose that drifts, and nothing was found.  The device's clock now times it; the
+    printed command (a folder with a space, a '&' in the name) opens with the
+    calibration and rate=60."""
+    from rtseg.drivers import open_source
+    from rtseg.simulators.serial_device import SerialSuit
+    from rtseg.simulators.synth.motion import synthesize
+    perf = synthesize("tpose:3,squat:4", frame_rate=60.0, seed=0).take
+    (tmp_path / "my cal").mkdir()
+    out = tmp_path / "my cal" / "suit&1.json"
+    suit = SerialSuit(perf, rate=60.0, speed=4.0, imu=RAW)
+    link = suit.start()
+    try:
+        rc, printed, err = run_cli(["calibrate", f"serial://{link}", "--up", "z", "--out",
+                                    str(out), "--seconds", "6"], capsys)
+    finally:
+        suit.stop()
+    assert rc == 0, err
+    assert "60.0 Hz" in err and "T-pose held at 0.0-1.0 s" in err
+    line = next(ln for ln in printed.splitlines() if "use it with:" in ln)
+    argv = shlex.split(line.split("use it with:", 1)[1])
+    src = open_source(argv[2] + "&wait=1")
+    try:
+        assert src.calibration is not None and src.frame_rate == 60.0
+    finally:
+        src.close()

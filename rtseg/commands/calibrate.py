@@ -64,11 +64,16 @@ def check_out(out: str) -> str | None:
     return None
 
 
-def live_command(source_url: str, out: str) -> str:
+def live_command(source_url: str, out: str, rate: float | None = None) -> str:
     """The ``rtseg live`` command line that reads ``source_url`` with the calibration
     ``out``: the file percent-encoded in the URL (a ``&``, ``#``, ``+`` or space would cut
-    or change it) and the URL quoted for a POSIX shell."""
-    url = f"{source_url}{'&' if '?' in source_url else '?'}calibration={quote(out, safe='/')}"
+    or change it) and the URL quoted for a POSIX shell; ``rate``: the rate the suit's
+    clock said, added as ``rate=`` when the URL has none."""
+    from rtseg.drivers import parse_url
+    url = source_url
+    if rate is not None and "rate" not in parse_url(source_url)[2]:
+        url += f"{'&' if '?' in url else '?'}rate={round(rate):g}"
+    url += f"{'&' if '?' in url else '?'}calibration={quote(out, safe='/')}"
     return f"rtseg live {shlex.quote(url)}"
 
 
@@ -123,5 +128,5 @@ def run(args: argparse.Namespace) -> int:
           f"{r['heading_deg']:.1f} degrees from {r['knee_bends']} knee bends (axis "
           f"{r['knee_axis_tilt_deg']:.1f} degrees from level), T-pose at frames "
           f"{r['t_pose_frames'][0]}-{r['t_pose_frames'][1]} of {got.used}")
-    print(f"  use it with: {live_command(args.source, args.out)}")
+    print(f"  use it with: {live_command(args.source, args.out, got.measured_rate)}")
     return 0

@@ -6,6 +6,11 @@ spot); :func:`capture` reads the source's frames meanwhile and tries
 succeeds or ``seconds`` have passed.  Frames with any sensor invalid are left out (a
 calibration needs every sensor).  The source must give sensor orientations (``space``
 "global") and must not be calibrated already (:func:`check_source`).
+
+The hold is timed at the source's declared frame rate, unless the frames carry the
+device's clock (``source_time``) and it says otherwise by more than 10 % (a 60 Hz suit
+read without ``rate=60``): then at the measured rate (``Capture.measured_rate``), as the
+live session switches to it (``rtseg.live.rate_check``).
 """
 
 from __future__ import annotations
@@ -18,9 +23,15 @@ import numpy as np
 
 from rtseg.core.suit_calibration import (HOLD_S, CalibrationError, SuitCalibration, calibrate,
                                          still_stretch)
+from rtseg.live.rate_check import MAX_HZ, MIN_HZ
 
 #: seconds of new frames between two attempts
 TRY_EVERY_S = 0.5
+#: the device's clock overrides the declared frame rate when they differ by more than this
+#: fraction (as ``rtseg.live.rate_check.DeclaredRateCheck``'s tolerance)
+RATE_TOLERANCE = 0.10
+#: frame-to-frame periods of the device's clock needed to measure its rate
+MIN_PERIODS = 16
 
 
 @dataclass
@@ -34,6 +45,8 @@ class Capture:
     calibration: SuitCalibration | None = None
     report: dict[str, Any] = field(default_factory=dict)
     reason: str = ""
+    #: the rate the device's clock says (Hz) when it is off the declared one, else None
+    measured_rate: float | None = None
 
 
 def capture(source: Any, up: str, seconds: float, hold_s: float = HOLD_S,
@@ -46,6 +59,8 @@ def capture(source: Any, up: str, seconds: float, hold_s: float = HOLD_S,
     names, parents = list(source.joint_names), list(source.parents)
     quats: list[np.ndarray] = []
     times: list[float] = []
+    clock_times: list[float] = []          # the device's clock (nan without one) and seq
+    seqs: list[int | None] = []
     out = Capture()
     end = clock() + float(seconds)
     next_try = TRY_EVERY_S
@@ -58,11 +73,21 @@ def capture(source: Any, up: str, seconds: float, hold_s: float = HOLD_S,
             continue
         quats.append(np.array(frame.quats, dtype=np.float64))
         times.append(float(frame.recv_time))
+        clock_times.append(float("nan") if frame.source_time is None
+                           else float(frame.source_time))
+        seqs.append(frame.seq)
         out.used = len(quats)
         if times[-1] - times[0] < next_try:
             continue
         next_try = times[-1] - times[0] + TRY_EVERY_S
         rate = _rate(source, times)
+        measured = _clock_rate(clock_times, seqs)
+        if measured is not None and abs(measured - rate) > RATE_TOLERANCE * rate:
+            if out.measured_rate is None and progress is not None:
+                progress(f"the suit's clock says {measured:.1f} Hz, not the {rate:g} Hz "
+                         f"declared: timing the T-pose at {measured:.1f} Hz (add "
+                         f"rate={round(measured):g} to the URL)")
+            out.measured_rate = rate = measured
         q = np.stack(quats)
         if out.t_pose_at is None:
             still = still_stretch(q, rate, hold_s)
@@ -93,6 +118,22 @@ def check_source(source: Any) -> None:
     if getattr(source, "calibration", None) is not None:
         raise CalibrationError("the source is calibrated already: leave calibration= out of "
                                "the URL to record a new one")
+
+
+def _clock_rate(clock_times: list[float], seqs: list[int | None]) -> float | None:
+    """The frame rate the device's clock says: 1 / the median of the frame-to-frame
+    periods (time step over sequence step; frames left out or lost do not lower it), from
+    at least :data:`MIN_PERIODS` periods and within the believable range of
+    ``rtseg.live.rate_check``; None without a clock."""
+    t = np.asarray(clock_times, dtype=np.float64)
+    s = np.array([np.nan if q is None else q for q in seqs], dtype=np.float64)
+    dt, ds = np.diff(t), np.diff(s)
+    ds = np.where(np.isfinite(ds) & (ds > 0), ds, 1.0)
+    ok = np.isfinite(dt) & (dt > 0)
+    if ok.sum() < MIN_PERIODS:
+        return None
+    rate = 1.0 / float(np.median(dt[ok] / ds[ok]))
+    return rate if MIN_HZ <= rate <= MAX_HZ else None
 
 
 def _rate(source: Any, times: list[float]) -> float:
