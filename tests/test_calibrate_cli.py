@@ -111,3 +111,32 @@ def test_a_60_hz_suit_read_without_rate_is_calibrated_and_the_command_works(tmp_
         assert src.calibration is not None and src.frame_rate == 60.0
     finally:
         src.close()
+
+
+def test_a_failed_capture_says_what_the_input_lost():
+    """A capture that found no T-pose on a damaged link says so beside the advice: the
+    frames left out for an invalid sensor and the link's losses, from the source's counts."""
+    import numpy as np
+    from types import SimpleNamespace
+    from rtseg.core.frame import Frame
+    from rtseg.drivers.base import SourceStats
+    from rtseg.live.calibrate import capture
+    from rtseg.simulators.synth.skeleton import JOINT_NAMES, PARENTS
+    rng = np.random.default_rng(0)
+    frames = []
+    for i in range(240):                      # 2 s at 120 Hz: never still, every 3rd invalid
+        q = rng.normal(size=(len(JOINT_NAMES), 4))
+        valid = np.ones(len(JOINT_NAMES), bool)
+        valid[0] = i % 3 != 0
+        frames.append(Frame(i / 120.0, q / np.linalg.norm(q, axis=1, keepdims=True), valid,
+                            i / 120.0, i))
+    stats = SourceStats(dropped=17, corrupt=5)
+    t = iter(np.arange(0.0, 10.0, 0.004))
+    source = SimpleNamespace(joint_names=JOINT_NAMES, parents=PARENTS, space="global",
+                             frame_rate=120.0, stats=stats,
+                             read=lambda timeout=None: frames.pop(0) if frames else None)
+    got = capture(source, "y", seconds=1.5, clock=lambda: next(t))
+    assert got.calibration is None
+    assert "hold the T-pose still" in got.reason
+    assert "80 of 240 frames had a sensor invalid" in got.reason
+    assert "17 frames lost, 5 damaged messages" in got.reason

@@ -106,7 +106,24 @@ def capture(source: Any, up: str, seconds: float, hold_s: float = HOLD_S,
         out.reason = (f"no frame arrived in {seconds:g} s" if not out.frames else
                       f"no frame with every sensor valid in {seconds:g} s" if not out.used else
                       f"no {hold_s:g} s T-pose in {seconds:g} s: hold the T-pose still")
+    out.reason += input_losses(source, out)
     return out
+
+
+def input_losses(source: Any, out: Capture) -> str:
+    """What the input lost while the capture read it, as a clause for a failure reason
+    ("" when nothing): frames with a sensor invalid (left out, so a T-pose held through
+    them is cut short), frames lost and bytes damaged on the link."""
+    st = getattr(source, "stats", None)
+    parts = []
+    if out.frames > out.used:
+        parts.append(f"{out.frames - out.used} of {out.frames} frames had a sensor invalid "
+                     f"(left out)")
+    for key, what in (("dropped", "frames lost"), ("corrupt", "damaged messages")):
+        n = int(getattr(st, key, 0) or 0)
+        if n:
+            parts.append(f"{n} {what}")
+    return f" (the input: {', '.join(parts)})" if parts else ""
 
 
 def check_source(source: Any) -> None:
@@ -146,4 +163,4 @@ def _rate(source: Any, times: list[float]) -> float:
     return 1.0 / float(np.median(d)) if len(d) else 120.0
 
 
-__all__ = ["Capture", "capture", "check_source", "TRY_EVERY_S"]
+__all__ = ["Capture", "capture", "input_losses", "check_source", "TRY_EVERY_S"]
