@@ -49,11 +49,9 @@ def test_speed0_replay_processes_every_frame_and_cuts_as_offline(take_file, busy
     expected = offline_cuts(capsys, path)
     assert len(expected) >= 3
     # a small ring and a slow pipeline (busy_core: 0.5 ms more a frame): without
-    # backpressure the reader laps these 64 frames at once.  No calibration pose: the
-    # live features are then the offline ones (a local-space take is otherwise measured
-    # from its first 0.25 s live, which moves this take's first cut by a step: 358 for 344)
+    # backpressure the reader laps these 64 frames at once.  The shipped calibration pose
+    # (a local-space take measured from its first 0.25 s), as rtseg segment uses it too
     cfg = from_dict({"output": {"osc": []}, "detectors": {"methods": ["contrast"]},
-                     "calibration": {"mode": "none"},
                      "buffer": {"capacity": 64, "max_lag_seconds": max_lag}}, origin="test")
     cuts = []
     session = LiveSession(f"file://{path}?speed=0", cfg, handle_signals=False,
