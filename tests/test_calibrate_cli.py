@@ -124,10 +124,10 @@ def test_a_failed_capture_says_what_the_input_lost():
     from rtseg.simulators.synth.skeleton import JOINT_NAMES, PARENTS
     rng = np.random.default_rng(0)
     frames = []
-    for i in range(240):                      # 2 s at 120 Hz: never still, every 3rd invalid
-        q = rng.normal(size=(len(JOINT_NAMES), 4))
+    for i in range(240):                      # 2 s at 120 Hz: never still, the first second
+        q = rng.normal(size=(len(JOINT_NAMES), 4))    # without a valid Hips
         valid = np.ones(len(JOINT_NAMES), bool)
-        valid[0] = i % 3 != 0
+        valid[0] = i >= 120
         frames.append(Frame(i / 120.0, q / np.linalg.norm(q, axis=1, keepdims=True), valid,
                             i / 120.0, i))
     stats = SourceStats(dropped=17, corrupt=5)
@@ -138,5 +138,41 @@ def test_a_failed_capture_says_what_the_input_lost():
     got = capture(source, "y", seconds=1.5, clock=lambda: next(t))
     assert got.calibration is None
     assert "hold the T-pose still" in got.reason
-    assert "80 of 240 frames had a sensor invalid" in got.reason
+    assert "120 of 240 frames had a sensor invalid for more than 0.25 s" in got.reason
     assert "17 frames lost, 5 damaged messages" in got.reason
+
+
+def test_a_sensor_that_drops_out_briefly_does_not_spoil_the_t_pose():
+    """A sensor invalid in every third frame (the source keeps its last good value) is taken
+    at that value: the 1 s T-pose and the squat still calibrate; gone for good, it cannot."""
+    import numpy as np
+    from types import SimpleNamespace
+    from rtseg.core import quat
+    from rtseg.core.frame import Frame
+    from rtseg.live.calibrate import capture
+    from rtseg.simulators.retarget import ImuModel
+    from rtseg.simulators.synth.motion import synthesize
+    take = synthesize("squat:6", frame_rate=120.0, seed=1).take
+    g = quat.global_from_local(take.quats, list(take.parents))
+    g = np.concatenate([np.tile([0.0, 0.0, 0.0, 1.0], (144, g.shape[1], 1)), g])   # 1.2 s
+    raw = ImuModel(mount_deg=180, up="z", heading_deg=30.0, seed=2).apply(g, 120.0)
+
+    def source(gone_after):
+        frames, last = [], raw[0].copy()
+        for i, q in enumerate(raw):
+            valid = np.ones(len(q), bool)
+            valid[3] = i % 3 != 0 and i < gone_after
+            last[valid] = q[valid]
+            frames.append(Frame(i / 120.0, last.copy(), valid, i / 120.0, i))
+        return SimpleNamespace(joint_names=take.joint_names, parents=take.parents,
+                               space="global", frame_rate=120.0, stats=None,
+                               read=lambda timeout=None: frames.pop(0) if frames else None)
+
+    def clock():
+        t = iter(np.arange(0.0, 100.0, 0.001))
+        return lambda: next(t)
+    got = capture(source(len(raw)), "z", seconds=20.0, clock=clock())
+    assert got.calibration is not None, got.reason
+    assert got.report["t_pose_frames"][1] - got.report["t_pose_frames"][0] == 120
+    lost = capture(source(60), "z", seconds=20.0, clock=clock())
+    assert lost.calibration is None and "had a sensor invalid" in lost.reason

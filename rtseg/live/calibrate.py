@@ -3,8 +3,10 @@
 The performer holds a T-pose for a second, then bends the knees (a squat, walking on the
 spot); :func:`capture` reads the source's frames meanwhile and tries
 ``rtseg.core.suit_calibration.calibrate`` on what has arrived every half second, until it
-succeeds or ``seconds`` have passed.  Frames with any sensor invalid are left out (a
-calibration needs every sensor).  The source must give sensor orientations (``space``
+succeeds or ``seconds`` have passed.  A calibration needs every sensor: a sensor invalid
+in a frame is taken at its last good value (which the source keeps in the frame) when it
+was valid within :data:`STALE_S`, else the frame is left out.  The source must give
+sensor orientations (``space``
 "global") and must not be calibrated already (:func:`check_source`).
 
 The hold is timed at the source's declared frame rate, unless the frames carry the
@@ -27,6 +29,8 @@ from rtseg.live.rate_check import MAX_HZ, MIN_HZ
 
 #: seconds of new frames between two attempts
 TRY_EVERY_S = 0.5
+#: seconds a sensor's last good value stands in for it (the serial source's ``stale``)
+STALE_S = 0.25
 #: the device's clock overrides the declared frame rate when they differ by more than this
 #: fraction (as ``rtseg.live.rate_check.DeclaredRateCheck``'s tolerance)
 RATE_TOLERANCE = 0.10
@@ -62,6 +66,7 @@ def capture(source: Any, up: str, seconds: float, hold_s: float = HOLD_S,
     clock_times: list[float] = []          # the device's clock (nan without one) and seq
     seqs: list[int | None] = []
     out = Capture()
+    last_good = np.full(len(names), -np.inf)       # receive time of each sensor's last valid value
     end = clock() + float(seconds)
     next_try = TRY_EVERY_S
     while clock() < end:
@@ -69,8 +74,11 @@ def capture(source: Any, up: str, seconds: float, hold_s: float = HOLD_S,
         if frame is None:
             continue
         out.frames += 1
-        if not np.all(frame.valid):
-            continue
+        now = float(frame.recv_time)
+        valid = np.asarray(frame.valid, dtype=bool)
+        last_good[valid] = now
+        if not np.all(valid | (now - last_good <= STALE_S)):
+            continue                       # a sensor gone longer than STALE_S: left out
         quats.append(np.array(frame.quats, dtype=np.float64))
         times.append(float(frame.recv_time))
         clock_times.append(float("nan") if frame.source_time is None
@@ -118,7 +126,7 @@ def input_losses(source: Any, out: Capture) -> str:
     parts = []
     if out.frames > out.used:
         parts.append(f"{out.frames - out.used} of {out.frames} frames had a sensor invalid "
-                     f"(left out)")
+                     f"for more than {STALE_S:g} s (left out)")
     for key, what in (("dropped", "frames lost"), ("corrupt", "damaged messages")):
         n = int(getattr(st, key, 0) or 0)
         if n:
@@ -163,4 +171,4 @@ def _rate(source: Any, times: list[float]) -> float:
     return 1.0 / float(np.median(d)) if len(d) else 120.0
 
 
-__all__ = ["Capture", "capture", "input_losses", "check_source", "TRY_EVERY_S"]
+__all__ = ["Capture", "capture", "input_losses", "check_source", "STALE_S", "TRY_EVERY_S"]
