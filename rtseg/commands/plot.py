@@ -448,24 +448,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def folder_problem(path: Path) -> str | None:
-    """Why the folder ``path`` cannot be plotted, in one line: a folder of recorded
-    sessions (``rtseg live --record DIR`` with several sources writes ``DIR/<name>``) or
-    a folder that is no recorded session; None for a file, a missing path or one
-    recorded session's folder."""
-    from rtseg.drivers.readers import READERS
-    from rtseg.recording.reader import is_session_dir
-    if not path.is_dir() or is_session_dir(path):
-        return None
-    inner = sorted(d.name for d in path.iterdir() if is_session_dir(d))
-    if inner:
-        return (f"{path} is a folder of recorded sessions ({', '.join(inner)}: rtseg live "
-                f"--record with several sources), not one take: give one of them, e.g. "
-                f"rtseg plot {path / inner[0]}")
-    return (f"{path} is a folder but not a recorded session (no session.json in it): give "
-            f"a take file ({', '.join(READERS)}) or the folder of one recorded session")
-
-
 def run(args: argparse.Namespace) -> int:
     try:
         _pyplot()
@@ -479,7 +461,9 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     take_path = Path(args.take)
-    problem = folder_problem(take_path)
+    from rtseg.drivers.readers import READERS
+    from rtseg.recording.reader import folder_problem
+    problem = folder_problem(take_path, "rtseg plot", ", ".join(READERS))
     if problem is not None:
         print(f"rtseg plot: error: {problem}", file=sys.stderr)
         return 2

@@ -40,6 +40,24 @@ def sessions_inside(path: str | Path) -> str:
             if inner else "")
 
 
+def folder_problem(path: str | Path, command: str, takes: str) -> str | None:
+    """Why the folder ``path`` is no take for ``command`` (e.g. "rtseg plot"), in one line:
+    a folder of recorded sessions (``rtseg live --record DIR`` with several sources writes
+    ``DIR/<name>``: one of them is suggested) or a folder that is no recorded session
+    (``takes``: the take formats to name); None for a file, a missing path or one recorded
+    session's folder."""
+    p = Path(path)
+    if not p.is_dir() or is_session_dir(p):
+        return None
+    inner = sorted(d.name for d in p.iterdir() if is_session_dir(d))
+    if inner:
+        return (f"{p} is a folder of recorded sessions ({', '.join(inner)}: rtseg live "
+                f"--record with several sources), not one take: give one of them, e.g. "
+                f"{command} {p / inner[0]}")
+    return (f"{p} is a folder but not a recorded session (no session.json in it): give "
+            f"a take file ({takes}) or the folder of one recorded session")
+
+
 def read_session_header(directory: str | Path) -> dict[str, Any]:
     """The parsed ``session.json``; ValueError naming the file if missing or invalid."""
     path = Path(directory) / HEADER_FILE
