@@ -317,8 +317,22 @@ def test_sim_source_paces(synth):
     ("sim://synth?script=idle:2,fly:3", "unknown behaviour 'fly'"),
     ("sim://synth?seed=-1", "seed"),
     ("sim://synth?rate=0", "rate"),
+    ("sim://synth?rate=100000", r"rate=100000: out of range 1.0..1000.0"),  # was an OOM kill
+    ("sim://synth?rate=0.5", "rate"),
     ("sim://synth?colour=red", "unknown option"),
 ])
 def test_sim_source_errors(url, fragment):
     with pytest.raises(SourceError, match=fragment):
         open_source(url)
+
+
+@pytest.mark.parametrize("query", ["start=1e308", "start=1e308&stop=1e308"])
+def test_start_far_past_the_end_is_refused_in_one_line(query):
+    # start * rate overflowed to infinity: OverflowError, an 'internal error' of rtseg live
+    with pytest.raises(SourceError, match="outside the take"):
+        open_source(f"sim://synth?script=walk:2&{query}")
+
+
+def test_stop_far_past_the_end_is_the_end():
+    src = open_source("sim://synth?script=walk:2&rate=30&speed=0&stop=1e308")
+    assert src.n_frames == 60

@@ -115,8 +115,10 @@ class ReplaySource(Source):
         self.name = name or take.source or "<take>"
         if take.n_frames == 0:
             raise SourceError(f"{self.name}: the take has no frames")
-        a = int(round(start * take.frame_rate)) if start else 0
-        b = take.n_frames if stop is None else int(round(stop * take.frame_rate))
+        # min(): a start or stop far past the end (1e308 s) is the end, not an overflow
+        a = int(round(min(start * take.frame_rate, take.n_frames))) if start else 0
+        b = (take.n_frames if stop is None
+             else int(round(min(stop * take.frame_rate, take.n_frames))))
         if not 0 <= a < take.n_frames:
             raise SourceError(f"{self.name}: start={start} s is outside the take "
                               f"(0 to {take.duration:.3f} s)")
@@ -259,6 +261,9 @@ REPLAY_OPTIONS = {"speed", "loop", "start", "stop", "space"}
 #: accepted range of each numeric option of the replay sources (``rate``: above zero)
 RANGES = {"speed": (0.0, math.inf), "start": (0.0, math.inf), "stop": (0.0, math.inf),
           "seed": (0, 2**32 - 1), "rate": (1e-3, 1e5), "noise": (0.0, math.inf)}
+#: ``sim://`` synthesises every frame of its script up front: its ``rate`` is a suit's
+#: (100 kHz over the default script's 62 s is 6 million frames, more memory than a machine has)
+SIM_RANGES = {**RANGES, "rate": (1.0, 1000.0)}
 
 
 def replay_kwargs(scheme: str, options: Mapping[str, str]) -> dict:
@@ -273,4 +278,4 @@ def replay_kwargs(scheme: str, options: Mapping[str, str]) -> dict:
             "stop": number_option(scheme, options, "stop", None, float, RANGES), "space": space}
 
 
-__all__ = ["Pacer", "RANGES", "ReplaySource", "REPLAY_OPTIONS", "replay_kwargs"]
+__all__ = ["Pacer", "RANGES", "SIM_RANGES", "ReplaySource", "REPLAY_OPTIONS", "replay_kwargs"]

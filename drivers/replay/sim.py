@@ -10,7 +10,7 @@ Options:
 ``script``     behaviour:seconds list (``rtseg.simulators.synth.motion.parse_script``); default
                the synthesiser's default script
 ``seed``       random seed (default 0): the same seed gives the same take
-``rate``       frame rate in Hz (default 120)
+``rate``       frame rate in Hz, 1 to 1000 (default 120)
 ``noise``      sensor noise, degrees (default 0.3)
 ``speed``      1 = real time (default), N = N times faster, 0 = as fast as read
                (a live session processes every frame: it reads no faster)
@@ -31,7 +31,7 @@ from typing import Mapping
 
 from rtseg.drivers.base import SourceError
 from rtseg.drivers.options import check_options, number_option
-from rtseg.drivers.replay.pacing import RANGES, REPLAY_OPTIONS, ReplaySource, replay_kwargs
+from rtseg.drivers.replay.pacing import REPLAY_OPTIONS, SIM_RANGES, ReplaySource, replay_kwargs
 
 GENERATORS = ("synth",)
 OPTIONS = REPLAY_OPTIONS | {"script", "seed", "rate", "noise"}
@@ -63,9 +63,9 @@ def open_url(location: str, options: Mapping[str, str]) -> SimSource:
                           f"known: {', '.join(GENERATORS)}")
     check_options("sim", options, sorted(OPTIONS))
     kwargs = replay_kwargs("sim", options)
-    seed = number_option("sim", options, "seed", 0, int, RANGES)
-    rate = number_option("sim", options, "rate", 120.0, float, RANGES)
-    noise = number_option("sim", options, "noise", 0.3, float, RANGES)
+    seed = number_option("sim", options, "seed", 0, int, SIM_RANGES)
+    rate = number_option("sim", options, "rate", 120.0, float, SIM_RANGES)
+    noise = number_option("sim", options, "noise", 0.3, float, SIM_RANGES)
     try:
         result = synthesize(options.get("script") or DEFAULT_SCRIPT, frame_rate=rate,
                             seed=seed, noise_deg=noise)
