@@ -96,8 +96,10 @@ def open_url(location: str, options: Mapping[str, str]) -> FileSource:
     """``file://`` URL handler (see module docstring)."""
     check_options("file", options, sorted(OPTIONS))
     kwargs = replay_kwargs("file", options)
+    timing = options.get("timing") or None     # empty: the default, as for numbers
+    if timing not in (None, "nominal", "recorded"):    # refused before the take is read
+        raise SourceError(f"file:// option timing={timing!r}: expected nominal or recorded")
     path, take = open_take(location, options)
-    timing = options.get("timing")
     if timing is None:
         timing = "recorded" if path.is_dir() and take.meta.get("recv_time") is not None else "nominal"
     return FileSource(take, path, timing=timing, **kwargs)

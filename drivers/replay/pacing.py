@@ -269,7 +269,7 @@ SIM_RANGES = {**RANGES, "rate": (1.0, 1000.0)}
 def replay_kwargs(scheme: str, options: Mapping[str, str]) -> dict:
     """speed / loop / start / stop / space from URL options, validated (errors name
     ``scheme``)."""
-    space = options.get("space")
+    space = options.get("space") or None       # empty: the default, as for numbers
     if space is not None and space not in ("local", "global"):
         raise SourceError(f"{scheme}:// option space={space!r}: expected local or global")
     return {"speed": number_option(scheme, options, "speed", 1.0, float, RANGES),

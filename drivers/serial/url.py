@@ -60,10 +60,14 @@ def open_url(location: str, options: dict[str, str]) -> SerialSource:
         return number_option("serial", options, key, default, kind, _RANGES)
 
     tpose = flag_option("serial", options, "tpose")
+    fmt = options.get("format") or "auto"      # empty: the default, as for numbers
+    if fmt not in ("rtseg", "text", "auto"):
+        raise SourceError(f"serial:// option format={fmt!r}: expected rtseg, text or auto")
     try:
-        suit = suit_profile(options.get("suit", "default17"), options.get("suits"))
+        suit = suit_profile(options.get("suit") or "default17", options.get("suits") or None)
     except (KeyError, ValueError) as exc:
-        raise SourceError(f"serial source: {exc}") from None
+        # str(KeyError) is the repr of its message (quoted); say the message itself
+        raise SourceError(f"serial source: {exc.args[0] if exc.args else exc}") from None
     calibration = None
     if "calibration" in options:
         if not options["calibration"].strip():
@@ -75,7 +79,7 @@ def open_url(location: str, options: dict[str, str]) -> SerialSource:
         except CalibrationError as exc:
             raise SourceError(f"serial:// {exc}") from None
     src = SerialSource(
-        location, baud=num("baud", int, DEFAULT_BAUD), fmt=options.get("format", "auto"),
+        location, baud=num("baud", int, DEFAULT_BAUD), fmt=fmt,
         suit=suit,
         stale=num("stale", float, 0.25), rate=num("rate", float, None),
         queue_size=num("queue", int, 256), backoff_max=num("backoff", float, 0.5),
