@@ -170,6 +170,33 @@ def test_segment_of_a_recording_with_lost_frames_says_so(synth_dir, capsys, tmp_
     assert "not in this recording" not in err
 
 
+def test_segment_archive_of_recordings_with_lost_frames_says_so(synth_dir, capsys, tmp_path):
+    """The archive path (``rtseg segment DIR --out F``) segmented a recording that misses
+    frames its source sent without a word (only the one-take path warned); its records now
+    hold missing_frames and gaps and one warning names the recordings."""
+    import json
+    from rtseg.core.frame import Frame
+    from rtseg.recording import SessionRecorder
+    take = synth_dir["a"].take
+    fr = take.frame_rate
+    keep = [i for i in range(400) if not 100 <= i < 110]
+    for name, rows in (("gappy", keep), ("whole", range(400))):
+        rec = SessionRecorder(tmp_path / "recs" / name, take.joint_names, take.parents,
+                              space=take.space, frame_rate=fr, start_monotonic=0.0)
+        for i in rows:
+            rec.record_frame(Frame(recv_time=i / fr, quats=take.quats[i],
+                                   valid=np.ones(take.n_joints, bool), source_time=i / fr,
+                                   seq=i))
+        rec.close()
+    out_file = tmp_path / "r.jsonl"
+    rc, out, err = run_cli(capsys, "segment", tmp_path / "recs", "--method", "contrast",
+                           "--out", out_file, "--no-progress")
+    recs = {r["take"]: r for r in map(json.loads, out_file.read_text().splitlines())}
+    assert rc == 0 and (recs["gappy"]["missing_frames"], recs["gappy"]["gaps"]) == (10, 1)
+    assert "missing_frames" not in recs["whole"]
+    assert "1 recorded session(s) miss frames" in err and "gappy (10)" in err
+
+
 def test_segment_with_a_bvh_as_skeleton_says_what_a_skeleton_is(tmp_path, capsys):
     """``--skeleton`` given a BVH: one line saying the skeleton must be an ASF and that a
     BVH take carries its own (not "line outside any section: 'HIERARCHY'")."""

@@ -48,13 +48,17 @@ def take_records(path: str, methods: Sequence[str],
             f"{type(exc).__name__}: {exc}"
         return [error_record(path, m, msg, time.perf_counter() - t0) for m in methods]
     total = round(time.perf_counter() - t0, 4)
+    # a recorded session missing frames its source sent: frames and times count the
+    # recorded frames (early after each gap), so its records say how many are missing
+    lost = take.meta.get("missing_frames") if isinstance(take.meta, dict) else None
+    extra = {"missing_frames": int(lost), "gaps": int(take.meta.get("gaps") or 0)} if lost else {}
     out = []
     for m, r in results.items():
         d = r.as_dict()
         out.append({**base, "method": m, "frame_rate": r.frame_rate, "n_frames": r.n_frames,
                     "cuts": d["cuts"], "segments": d["segments"],
                     "elapsed_s": round(r.elapsed_s, 4), "take_elapsed_s": total,
-                    "error": None})
+                    **extra, "error": None})
     return out
 
 

@@ -22,6 +22,7 @@ segment, segment ``[start, end)``, times in s from the take start)::
      "segments": [{"index", "start", "end", "start_time", "end_time", "duration"
                    [, "behaviour" with --identify]}, ...],
      "elapsed_s": detector s, "take_elapsed_s": read + features + all methods s,
+     ["missing_frames": N, "gaps": G, a recorded session whose source lost frames,]
      "error": null | "message"}
 """
 

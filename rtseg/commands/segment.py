@@ -178,9 +178,17 @@ def run_many(args: argparse.Namespace, methods: list[str],
     if args.workers and args.scheduler:
         raise ValueError("give --workers (a local cluster) or --scheduler (a running one), "
                          "not both")
+    lossy: dict[str, int] = {}          # recordings missing frames: take -> frames
+
+    def note_lost(path: str, records: list[dict[str, Any]]) -> None:
+        lost = next((r.get("missing_frames") for r in records if r.get("missing_frames")), 0)
+        if lost:
+            lossy[records[0].get("take") or path] = lost
+
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
         stats = run_archive(args.paths, methods, args.out, params, profile=args.profile,
+                            on_take=note_lost,
                             skeleton=args.skeleton, workers=args.workers,
                             scheduler=args.scheduler, force=args.force,
                             retry_errors=args.retry_errors, limit=args.limit,
@@ -189,6 +197,11 @@ def run_many(args: argparse.Namespace, methods: list[str],
                             identity_threshold=getattr(args, "identity_threshold", None))
     for w in caught:
         print(f"rtseg segment: warning: {w.message}", file=sys.stderr)
+    if lossy:
+        named = ", ".join(f"{t} ({n})" for t, n in sorted(lossy.items()))
+        print(f"rtseg segment: warning: {len(lossy)} recorded session(s) miss frames their "
+              f"source sent: {named}; their frames and times count the recorded frames, so "
+              "after a gap they are early (records: missing_frames, gaps)", file=sys.stderr)
     if stats.failed:
         where = f" (errors in {args.out})" if args.out else ""
         print(f"rtseg segment: {stats.failed} of {stats.run} takes failed{where}",
