@@ -55,6 +55,13 @@ def test_a_source_name_that_is_not_one_is_named_as_such(capsys, bad):
     assert_one_line_error(rc, err, f"source {bad!r}: a source name (NAME=URL) is letters")
 
 
+def test_a_bad_url_of_one_of_several_sources_names_that_source(capsys):
+    # two sim:// sources, one bad: the line said only "sim:// option rate='abc'"
+    rc, _, err = live(capsys, "a=sim://synth?stop=0.2&speed=0", "b=sim://synth?rate=abc",
+                      "--duration", "1")
+    assert_one_line_error(rc, err, "rtseg live: b: sim:// option rate='abc'")
+
+
 def test_serial_baud_too_large(capsys):
     rc, _, err = live(capsys, "serial:///dev/ptmx?baud=12345678901234567890", "--duration", "1")
     assert_one_line_error(rc, err, "baud=12345678901234567890", "out of range")

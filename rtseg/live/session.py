@@ -261,9 +261,14 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
     # ---------------------------------------------------------------- setup
     def _open(self) -> None:
         if isinstance(self._source_arg, str):
-            from rtseg.drivers import open_source
+            from rtseg.drivers import SourceError, open_source
             self._source_arg = with_suit(self._source_arg, self.config["source.suit"])
-            self.source = open_source(self._source_arg)
+            try:
+                self.source = open_source(self._source_arg)
+            except SourceError as exc:      # several sources: say whose URL it is
+                if self.name and not str(exc).startswith(f"{self.name}: "):
+                    raise SourceError(f"{self.name}: {exc}") from exc
+                raise
         else:
             self.source = self._source_arg
         src = self.source
