@@ -329,3 +329,15 @@ def test_find_labels_for_motion_in_layout(tmp_path):
     assert find_labels_for(tmp_path / "cmu" / "86_01.amc").kind == "ranges"
     assert find_labels_for(tmp_path / "cmu" / "13_29.amc").transitions[0].mid == 12
     assert find_labels_for(tmp_path / "cmu" / "55_01.bvh") is None
+
+
+def test_find_labels_for_reads_the_ranges_an_npz_take_carries(tmp_path):
+    """``rtseg plot take.npz`` (labels auto) said 'no labels found' for a synthetic take
+    saved with its ground truth, which rtseg evaluate scores: the ranges are read too."""
+    from rtseg.drivers.readers import write_take
+    from rtseg.labels.takes import find_labels_for
+    from rtseg.simulators.synth.motion import synthesize
+    path = write_take(tmp_path / "s.npz", synthesize("idle:2,walk:2", frame_rate=30).take)
+    labels = find_labels_for(path)
+    assert labels is not None and len(labels.transitions) == 1
+    assert "meta transitions" in labels.source

@@ -224,7 +224,8 @@ def find_labels_for(motion: str | Path, *, tolerance: int = DEFAULT_TOLERANCE
 
     Looks (in this order) for the take's block in ``<root>/labels/*transitions*.txt``, for
     ``<root>/labels/mocap6/<take>.txt`` (root = the folder above the motion's folder, or the
-    motion's own folder), and for per-frame labels in a tsseg4d ``.csv`` motion itself.
+    motion's own folder), for per-frame labels in a tsseg4d ``.csv`` motion itself, and for
+    the transition ranges an rtseg ``.npz`` take carries in its meta (synthetic, spliced).
     """
     motion = Path(motion)
     name = motion.stem
@@ -239,6 +240,8 @@ def find_labels_for(motion: str | Path, *, tolerance: int = DEFAULT_TOLERANCE
             return read_block_labels(m6, tolerance=tolerance)
     if motion.suffix.lower() == ".csv":
         return read_frame_labels(motion, tolerance=tolerance)
+    if motion.suffix.lower() == ".npz":     # ranges the take carries (as rtseg evaluate reads)
+        return read_take_transitions(motion)
     return None
 
 
