@@ -141,25 +141,31 @@ def test_segment_bad_input_is_a_clear_error(tmp_path, capsys):
     assert rc == 2 and "junk.bvh" in err
 
 
+def record_frames(folder, take, rows) -> None:
+    """A session recording in ``folder`` of ``take``'s frames ``rows`` (sequence number and
+    source clock = the take frame, so left-out rows are frames the source lost)."""
+    from rtseg.core.frame import Frame
+    from rtseg.recording import SessionRecorder
+    fr = take.frame_rate
+    rec = SessionRecorder(folder, take.joint_names, take.parents, space=take.space,
+                          frame_rate=fr, start_monotonic=0.0)
+    for i in rows:
+        rec.record_frame(Frame(recv_time=i / fr, quats=take.quats[i],
+                               valid=np.ones(take.n_joints, bool), source_time=i / fr, seq=i))
+    rec.close()
+
+
 def test_segment_of_a_recording_with_lost_frames_says_so(synth_dir, capsys, tmp_path):
     """A session recording misses the frames its source lost (sequence gaps): ``rtseg
     segment`` numbers and times the recorded frames, so after a gap its times ran early
     by the frames lost, without a word (a real serial session, 9 % lost: 1.7 s early at
     15 s).  It now warns with the frames lost and the gaps; a recording without gaps (or a
     file take) gives no warning."""
-    from rtseg.core.frame import Frame
-    from rtseg.recording import SessionRecorder, read_session
+    from rtseg.recording import read_session
     take = synth_dir["a"].take
-    fr = take.frame_rate
     keep = [i for i in range(1200) if not (300 <= i < 330 or 600 <= i < 610)]
     for name, rows in (("gappy", keep), ("whole", range(1200))):
-        rec = SessionRecorder(tmp_path / name, take.joint_names, take.parents,
-                              space=take.space, frame_rate=fr, start_monotonic=0.0)
-        for i in rows:
-            rec.record_frame(Frame(recv_time=i / fr, quats=take.quats[i],
-                                   valid=np.ones(take.n_joints, bool), source_time=i / fr,
-                                   seq=i))
-        rec.close()
+        record_frames(tmp_path / name, take, rows)
     tk = read_session(tmp_path / "gappy")
     assert (tk.n_frames, tk.meta["missing_frames"], tk.meta["gaps"]) == (1160, 40, 2)
     rc, out, err = run_cli(capsys, "segment", tmp_path / "gappy", "--method", "pca")
@@ -175,19 +181,10 @@ def test_segment_archive_of_recordings_with_lost_frames_says_so(synth_dir, capsy
     frames its source sent without a word (only the one-take path warned); its records now
     hold missing_frames and gaps and one warning names the recordings."""
     import json
-    from rtseg.core.frame import Frame
-    from rtseg.recording import SessionRecorder
     take = synth_dir["a"].take
-    fr = take.frame_rate
     keep = [i for i in range(400) if not 100 <= i < 110]
     for name, rows in (("gappy", keep), ("whole", range(400))):
-        rec = SessionRecorder(tmp_path / "recs" / name, take.joint_names, take.parents,
-                              space=take.space, frame_rate=fr, start_monotonic=0.0)
-        for i in rows:
-            rec.record_frame(Frame(recv_time=i / fr, quats=take.quats[i],
-                                   valid=np.ones(take.n_joints, bool), source_time=i / fr,
-                                   seq=i))
-        rec.close()
+        record_frames(tmp_path / "recs" / name, take, rows)
     out_file = tmp_path / "r.jsonl"
     rc, out, err = run_cli(capsys, "segment", tmp_path / "recs", "--method", "contrast",
                            "--out", out_file, "--no-progress")
