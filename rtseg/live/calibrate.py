@@ -25,17 +25,15 @@ import numpy as np
 
 from rtseg.core.suit_calibration import (HOLD_S, CalibrationError, SuitCalibration, calibrate,
                                          still_stretch)
-from rtseg.live.rate_check import MAX_HZ, MIN_HZ
+from rtseg.live.rate_check import DeclaredRateCheck
 
 #: seconds of new frames between two attempts
 TRY_EVERY_S = 0.5
 #: seconds a sensor's last good value stands in for it (the serial source's ``stale``)
 STALE_S = 0.25
-#: the device's clock overrides the declared frame rate when they differ by more than this
-#: fraction (as ``rtseg.live.rate_check.DeclaredRateCheck``'s tolerance)
-RATE_TOLERANCE = 0.10
-#: frame-to-frame periods of the device's clock needed to measure its rate
-MIN_PERIODS = 16
+#: seconds of the device's clock its rate is measured over (``DeclaredRateCheck``'s
+#: window; the session's is 2 s, but the T-pose must be timed from its first second)
+RATE_WINDOW_S = 0.25
 
 
 @dataclass
@@ -63,8 +61,7 @@ def capture(source: Any, up: str, seconds: float, hold_s: float = HOLD_S,
     names, parents = list(source.joint_names), list(source.parents)
     quats: list[np.ndarray] = []
     times: list[float] = []
-    clock_times: list[float] = []          # the device's clock (nan without one) and seq
-    seqs: list[int | None] = []
+    rate_check: DeclaredRateCheck | None = None      # made with the first frame's rate
     out = Capture()
     last_good = np.full(len(names), -np.inf)       # receive time of each sensor's last valid value
     end = clock() + float(seconds)
@@ -75,22 +72,22 @@ def capture(source: Any, up: str, seconds: float, hold_s: float = HOLD_S,
             continue
         out.frames += 1
         now = float(frame.recv_time)
+        if rate_check is None:
+            rate_check = DeclaredRateCheck(_rate(source, [now]), window_s=RATE_WINDOW_S)
+        rate_check.feed(now, frame.source_time, frame.seq)
         valid = np.asarray(frame.valid, dtype=bool)
         last_good[valid] = now
         if not np.all(valid | (now - last_good <= STALE_S)):
             continue                       # a sensor gone longer than STALE_S: left out
         quats.append(np.array(frame.quats, dtype=np.float64))
-        times.append(float(frame.recv_time))
-        clock_times.append(float("nan") if frame.source_time is None
-                           else float(frame.source_time))
-        seqs.append(frame.seq)
+        times.append(now)
         out.used = len(quats)
         if times[-1] - times[0] < next_try:
             continue
         next_try = times[-1] - times[0] + TRY_EVERY_S
         rate = _rate(source, times)
-        measured = _clock_rate(clock_times, seqs)
-        if measured is not None and abs(measured - rate) > RATE_TOLERANCE * rate:
+        if rate_check.on_source_clock and rate_check.mismatch:
+            measured = float(rate_check.measured_hz)
             if out.measured_rate is None and progress is not None:
                 progress(f"the suit's clock says {measured:.1f} Hz, not the {rate:g} Hz "
                          f"declared: timing the T-pose at {measured:.1f} Hz (add "
@@ -143,22 +140,6 @@ def check_source(source: Any) -> None:
     if getattr(source, "calibration", None) is not None:
         raise CalibrationError("the source is calibrated already: leave calibration= out of "
                                "the URL to record a new one")
-
-
-def _clock_rate(clock_times: list[float], seqs: list[int | None]) -> float | None:
-    """The frame rate the device's clock says: 1 / the median of the frame-to-frame
-    periods (time step over sequence step; frames left out or lost do not lower it), from
-    at least :data:`MIN_PERIODS` periods and within the believable range of
-    ``rtseg.live.rate_check``; None without a clock."""
-    t = np.asarray(clock_times, dtype=np.float64)
-    s = np.array([np.nan if q is None else q for q in seqs], dtype=np.float64)
-    dt, ds = np.diff(t), np.diff(s)
-    ds = np.where(np.isfinite(ds) & (ds > 0), ds, 1.0)
-    ok = np.isfinite(dt) & (dt > 0)
-    if ok.sum() < MIN_PERIODS:
-        return None
-    rate = 1.0 / float(np.median(dt[ok] / ds[ok]))
-    return rate if MIN_HZ <= rate <= MAX_HZ else None
 
 
 def _rate(source: Any, times: list[float]) -> float:
