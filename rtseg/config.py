@@ -43,14 +43,25 @@ def config_dir() -> Path:
     return Path(str(root.joinpath("live.toml"))).parent
 
 
+def find_config(name_or_path: str | Path, what: str = "configuration file") -> Path:
+    """The file ``name_or_path`` names: a path, or for a bare name (a string without suffix
+    or folder that is no file here) the shipped ``<config_dir>/<name>.toml`` (``"fast"``).
+    ConfigError when a bare name is neither."""
+    p = Path(name_or_path)
+    if isinstance(name_or_path, str) and not p.suffix and len(p.parts) == 1 and not p.exists():
+        p = config_dir() / f"{name_or_path}.toml"
+        if not p.exists():
+            raise ConfigError(f"{what} not found: {name_or_path} (no such file here, and no "
+                              f"shipped {name_or_path}.toml in {config_dir()})")
+    return p
+
+
 def load_toml(name_or_path: str | Path) -> dict[str, Any]:
     """Parsed TOML of ``name_or_path``: a bare name (no suffix) is a shipped default
     (``"suits"`` -> ``<config_dir>/suits.toml``), anything else a path (a UTF-8
     byte-order mark is skipped).  Errors are
     ``ConfigError`` naming the file."""
-    p = Path(name_or_path)
-    if isinstance(name_or_path, str) and not p.suffix and len(p.parts) == 1 and not p.exists():
-        p = config_dir() / f"{name_or_path}.toml"
+    p = find_config(name_or_path)
     if p.is_dir():
         raise ConfigError(f"{p} is a folder, not a configuration file")
     try:

@@ -282,6 +282,49 @@ def test_early_maximum_without_the_full_look_is_dropped_and_the_full_one_sent():
     assert not sent[2].early and sent[2].peak.position == 205
 
 
+@pytest.mark.parametrize("backing, back, sent", [
+    (1.0, None, True),     # any full-look value >= threshold from 30 frames before
+    (1.25, None, False),   # 2.2 < 1.25 x 2: not backed strongly enough
+    (1.0, 10, False),      # the backing value (at 180) lies 20 frames before: older than back
+    (1.0, 25, True)])
+def test_early_maximum_needs_its_backing_within_back_frames(backing, back, sent):
+    from rtseg.detectors.early import EarlyCuts
+    ec = EarlyCuts(2.0, hold=20, min_gap=50, drop=0.5, early_threshold=1.5, early_hold=10,
+                   early_after=30, back=back, backing=backing)
+    # the full look reaches 2.2 at 180 only; its maximum waits for its hold (1.5 after it
+    # is above half of it)
+    for pos in range(100, 200, 5):
+        assert ec.update_full(pos, 2.2 if pos == 180 else 1.5 if pos > 180 else 1.0,
+                              pos + 70) is None
+    out = [ec.update_early(p, v, p + 40) for p, v in ((200, 3.0), (205, 1.0))]
+    assert (out[1] is not None) == sent and out[0] is None
+
+
+def test_early_backing_must_be_positive():
+    from rtseg.detectors.early import EarlyCuts
+    with pytest.raises(ValueError, match="backing"):
+        EarlyCuts(2.0, hold=20, min_gap=50, drop=0.5, early_threshold=1.5, early_hold=10,
+                  early_after=30, backing=0.0)
+
+
+def test_shipped_fast_parameters_cut_sooner(perf):
+    """``--params fast`` (config/fast.toml): the same synthetic changes, each within 0.5 s
+    of the labelled middle, sent sooner than with the defaults."""
+    from rtseg.detectors import load_params
+    res, X = perf
+    fast = load_params("fast")["contrast"]
+    assert fast["early_after_s"] > 0 and fast != load_params()["contrast"]
+    quick = ContrastDetector.from_params(fast, FR).run(X)
+    default = ContrastDetector.from_params(load_params()["contrast"], FR).run(X)
+    mids = [t.mid for t in res.transitions]
+    assert len(quick) == len(default) == len(mids)
+    for c, m in zip(quick, mids):
+        assert abs(c.frame - m) <= 0.5 * FR
+    d_quick = np.median([c.detected_at - c.frame for c in quick])
+    d_default = np.median([c.detected_at - c.frame for c in default])
+    assert d_quick < d_default - 0.25 * FR, (d_quick, d_default)
+
+
 def test_early_look_off_is_the_full_look_alone():
     from rtseg.detectors.early import EarlyCuts
     ec = EarlyCuts(2.0, hold=20, min_gap=50, drop=0.5, early_threshold=None, early_hold=10,

@@ -81,6 +81,20 @@ def test_evaluate_online_json(synth_dir, capsys):
     assert 0.5 < p["delay_s"]["median"] < 3.5
 
 
+def test_evaluate_online_with_the_shipped_fast_parameters(synth_dir, capsys):
+    """``--online --params fast`` runs the live loop with config/fast.toml: the same
+    changes found, each sent sooner than with the defaults."""
+    root, _ = synth_dir
+    doc = {}
+    for name, extra in (("default", []), ("fast", ["--params", "fast"])):
+        assert main(["evaluate", str(root), "--online", "--json", "--no-progress",
+                     "--method", "contrast", *extra]) == 0
+        doc[name] = json.loads(capsys.readouterr().out)["contrast"]["takes"]["92_01"]
+    assert doc["fast"]["f1"] == doc["default"]["f1"] == 1.0
+    d = {k: sorted(m["delay_s"] for m in v["matched"]) for k, v in doc.items()}
+    assert all(f < g for f, g in zip(d["fast"], d["default"])), d
+
+
 def test_evaluate_tolerance_zero_equals_strict(synth_dir, capsys):
     root, _ = synth_dir
     assert main(["evaluate", str(root), "--tolerance", "0", "--json", "--no-progress",

@@ -312,7 +312,9 @@ def add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
                         "(pooled per group and overall)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--params", metavar="FILE",
-                   help="detector parameters, TOML or JSON: flat, or one table per method")
+                   help="detector parameters, TOML or JSON: flat, or one table per method "
+                        "(with --online: the live configuration's detectors.params); "
+                        "'fast' is the shipped config/fast.toml")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.add_argument("--tolerance", type=tolerance_seconds, default=0.5, metavar="S",
                    help="a cut counts for a transition within S seconds outside its labelled "
@@ -379,9 +381,9 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("--behaviours names the identity's segments: add --online --identity")
     if getattr(args, "identity", False) and (args.workers or args.scheduler):
         raise ValueError("--identity runs in this process: drop --workers/--scheduler")
-    if args.online and (args.params or args.profile):
-        raise ValueError("--online takes the detectors and features of the live "
-                         "configuration: give --config FILE instead of --params/--profile")
+    if args.online and args.profile:
+        raise ValueError("--online takes the features of the live configuration: give "
+                         "--config FILE instead of --profile")
     if getattr(args, "identity", False):          # separate path: rtseg.evaluation.identity
         from rtseg.evaluation.report import run_evaluate_identity
         return run_evaluate_identity(args)
@@ -391,7 +393,7 @@ def run(args: argparse.Namespace) -> int:
         if any(m not in ONLINE_METHODS for m in methods):
             raise ValueError(f"--online: {args.method} has no live detector "
                              f"(live: {', '.join(ONLINE_METHODS)})")
-        online, live_default = live_config(args.config, methods)
+        online, live_default = live_config(args.config, methods, args.params)
     else:
         if args.config:
             raise ValueError("--config goes with --online (offline methods take --params)")

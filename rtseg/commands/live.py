@@ -44,6 +44,9 @@ def add_session_arguments(p: argparse.ArgumentParser, osc_default_note: str = ""
     p.add_argument("--config", metavar="FILE", help="session configuration (default config/live.toml)")
     p.add_argument("--methods", metavar="LIST",
                    help="online detectors, comma separated: contrast (the default), pca, ppca")
+    p.add_argument("--params", metavar="FILE",
+                   help="detector parameters, TOML or JSON (detectors.params): a file, or "
+                        "'fast' for the shipped sooner cuts (config/fast.toml)")
     p.add_argument("--duration", type=positive_float, metavar="S",
                    help="stop after S seconds (a number > 0)")
     p.add_argument("--max-lag", type=float, metavar="S",
@@ -81,6 +84,8 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
         over["recording.dir"] = args.record
     if getattr(args, "max_lag", None) is not None:
         over["buffer.max_lag_seconds"] = args.max_lag
+    if getattr(args, "params", None):
+        over["detectors.params"] = args.params
     if args.methods:
         over["detectors.methods"] = [m.strip() for m in args.methods.split(",") if m.strip()]
     cfg = load_session_config(args.config)
@@ -125,7 +130,8 @@ def check_record_dir(path: str) -> None:
 #: configuration key -> the command-line flag that sets it (for error messages)
 FLAGS = {"output.osc": "--osc", "output.osc_tcp": "--osc-tcp", "output.templates": "--template",
          "output.targets": "--target", "output.jsonl": "--jsonl", "recording.dir": "--record",
-         "detectors.methods": "--methods", "buffer.max_lag_seconds": "--max-lag"}
+         "detectors.methods": "--methods", "detectors.params": "--params",
+         "buffer.max_lag_seconds": "--max-lag"}
 
 
 def format_cut(ev: CutEvent) -> str:

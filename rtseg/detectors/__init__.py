@@ -32,7 +32,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from rtseg.config import ConfigError, config_dir, load_toml
+from rtseg.config import ConfigError, config_dir, find_config, load_toml
 from rtseg.detectors.base import BatchDetector, Cut, OnlineDetector, frames
 
 METHODS: tuple[str, ...] = ("contrast", "pca", "ppca", "gmm")
@@ -62,6 +62,8 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "early_after_s": ((int, float), _nonneg),
         "early_threshold": ((int, float), _pos),
         "early_hold_s": ((int, float), _nonneg),
+        "early_back_s": ((int, float), _nonneg),
+        "early_backing": ((int, float), _pos),
         "gate_threshold": ((int, float), _nonneg),
         "relative_floor": ((int, float), (lambda v: 0 <= v < 1, "in [0, 1)")),
         "residual_floor": ((int, float), (lambda v: 0 <= v < 1, "in [0, 1)")),
@@ -142,7 +144,7 @@ def _load_user_params(path: str | Path) -> dict[str, Any]:
     """A parameter file: TOML, or JSON for a ``.json`` file (as ``rtseg segment --params``
     reads it); ConfigError naming the file."""
     if Path(path).suffix.lower() != ".json":
-        return load_toml(path)
+        return load_toml(find_config(path, "parameter file"))
     import json
     try:
         data = json.loads(Path(path).read_bytes())

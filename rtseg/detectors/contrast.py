@@ -26,7 +26,8 @@ the bounded before windows (``bound_before``) keep A0 and A inside the behaviour
 last cut sent, and the early look (``early_after`` > 0, ``rtseg.detectors.early``; off by
 default) also scores each position one-sided once ``early_after`` frames have arrived,
 ``early(c) = Epca(B'|A) / Epca(A|A0)``, and sends its maxima when the full contrast backs
-them.  A cut the gate or the floor drops is forgotten (it keeps no later maximum away).
+them (a full-look value at least ``early_backing`` x ``threshold`` at most ``early_back``
+before the maximum; ``config/fast.toml`` turns it on for cuts sooner).  A cut the gate or the floor drops is forgotten (it keeps no later maximum away).
 
 Work per frame: each ``step``-frame block's statistics are summed once (one BLAS call),
 windows are differences of prefix sums, each window's PCA model is fitted once
@@ -88,6 +89,7 @@ class ContrastDetector(OnlineDetector):
                  ppca_energy: float = 0.95, noise_floor: float = 1e-6,
                  reference_dims: int = 48, early_after: int = 0,
                  early_threshold: float = 1.5, early_hold: int = 60,
+                 early_back: int | None = None, early_backing: float = 1.0,
                  gate_threshold: float = 0.0, gate_decide: int = 180, gate_skip: int = 60,
                  gate_window: int = 360, gate_min_after: int = 120,
                  relative_floor: float = 0.0, residual_floor: float = 0.0,
@@ -120,7 +122,8 @@ class ContrastDetector(OnlineDetector):
         self.we = int(round(early_after / step)) if early_after else 0   # early window, blocks
         self.peaks = EarlyCuts(threshold, hold=int(hold), min_gap=int(min_gap), drop=drop,
                                early_threshold=float(early_threshold) if self.we else None,
-                               early_hold=int(early_hold), early_after=self.we * self.step)
+                               early_hold=int(early_hold), early_after=self.we * self.step,
+                               back=early_back, backing=float(early_backing))
         #: before windows never reach back past the last cut sent (module doc)
         self.bound_before = bool(bound_before)
         #: cut placement (``rtseg.detectors.placement``): radius 0 = off
@@ -174,6 +177,9 @@ class ContrastDetector(OnlineDetector):
                    early_after=frames(p["early_after_s"], frame_rate) if p["early_after_s"] else 0,
                    early_threshold=p["early_threshold"],
                    early_hold=frames(p["early_hold_s"], frame_rate),
+                   early_back=(frames(p["early_back_s"], frame_rate)
+                               if p.get("early_back_s") else None),
+                   early_backing=p.get("early_backing", 1.0),
                    gate_threshold=p["gate_threshold"],
                    gate_decide=frames(GATE_DECIDE_S, frame_rate),
                    gate_skip=frames(GATE_SKIP_S, frame_rate),

@@ -13,10 +13,13 @@ them into one stream of cuts:
 
 - a full-look maximum is a cut, as it always was;
 - an early-look maximum (at least ``early_threshold``) is a cut only when the full look
-  *corroborates* it: some full-look value at or after ``early_after`` frames before its
-  position, known by the time the early maximum is confirmed, has reached the full
-  ``threshold``.  One that is not corroborated then is dropped (the full look may still
-  find the change later);
+  *corroborates* it: some full-look value at most ``back`` frames before its position (at
+  or after it too), known by the time the early maximum is confirmed, has reached
+  ``backing`` x the full ``threshold``.  One that is not corroborated then is dropped (the
+  full look may still find the change later).  The full look at a position up to
+  ``after`` frames before a change already sees part of it, and one more than ``back``
+  before it sees the change before; a backing above 1 asks the full look for more than a
+  cut of its own would;
 - every cut lies at least ``min_gap`` frames from every cut already sent, whichever look
   sent it, so one change is sent once.
 
@@ -45,16 +48,23 @@ class EarlyCuts:
     """Merge the full and early contrast profiles into cuts (module docstring).
 
     ``threshold``, ``hold``, ``drop``: the full look's peak picker; ``early_threshold``,
-    ``early_hold``: the early look's (same ``drop``); ``early_after``: how far before an
-    early maximum the corroborating full-look values may lie (frames); ``min_gap``: frames
-    between any two cuts.  ``early_threshold`` None turns the early look off.
+    ``early_hold``: the early look's (same ``drop``); ``early_after``: the early look's after
+    window (frames); ``back``: how far before an early maximum the corroborating full-look
+    values may lie (frames; None: ``early_after``); ``backing``: the factor of ``threshold``
+    they must reach; ``min_gap``: frames between any two cuts.  ``early_threshold`` None
+    turns the early look off.
     """
 
     def __init__(self, threshold: float, hold: int, min_gap: int, drop: float,
-                 early_threshold: float | None, early_hold: int, early_after: int) -> None:
+                 early_threshold: float | None, early_hold: int, early_after: int,
+                 back: int | None = None, backing: float = 1.0) -> None:
         self.threshold = float(threshold)
         self.min_gap = int(min_gap)
         self.early_after = int(early_after)
+        self.back = int(early_after) if back is None else min(int(back), int(early_after))
+        if not backing > 0:
+            raise ValueError(f"backing must be positive, got {backing}")
+        self.backing = float(backing)
         # full-look values kept: those an early maximum (at most early_hold behind the
         # early look, which runs ahead of the full one) may still need
         self._keep = int(early_after) + int(early_hold) + int(min_gap)
@@ -97,8 +107,8 @@ class EarlyCuts:
         peak = self.early.update(position, value, now)
         if peak is None:
             return None
-        since = peak.position - self.early_after
-        if not any(v >= self.threshold for p, v in self._full_recent if p >= since):
+        since, level = peak.position - self.back, self.backing * self.threshold
+        if not any(v >= level for p, v in self._full_recent if p >= since):
             return None
         return self._send(peak, early=True)
 

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
+from rtseg.config import find_config
 from rtseg.detectors.base import Cut
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -135,7 +136,8 @@ def _clean_cuts(raw: Sequence[Any], method: str, n_frames: int) -> list[Cut]:
 
 
 def load_params(path: str | Path | None, method: str | None = None) -> dict[str, Any]:
-    """Detector parameters from a TOML or JSON file.
+    """Detector parameters from a TOML or JSON file, or a shipped one by its bare name
+    (``"fast"``: ``config/fast.toml``, as ``rtseg.config.load_toml`` finds it).
 
     The file is either flat (``{name: value}``, applied to whichever method runs) or has one
     table per method (``[pca] ...``, ``[ppca] ...``): with ``method`` given, that method's
@@ -143,7 +145,7 @@ def load_params(path: str | Path | None, method: str | None = None) -> dict[str,
     """
     if path is None:
         return {}
-    p = Path(path)
+    p = find_config(path, "parameter file")     # or a shipped one by name: "fast"
     try:
         raw = p.read_bytes()
     except FileNotFoundError:

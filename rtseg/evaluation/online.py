@@ -18,12 +18,17 @@ from rtseg.live.replay import replay_frames
 from rtseg.live.config import SessionConfig, load_session_config
 
 
-def live_config(path: str | None = None, methods: Sequence[str] | None = None
-                ) -> tuple[SessionConfig, str]:
+def live_config(path: str | None = None, methods: Sequence[str] | None = None,
+                params: str | None = None) -> tuple[SessionConfig, str]:
     """The live configuration (``config/live.toml`` or ``path``) with ``detectors.methods``
-    replaced by ``methods`` when given, and the name of its default live detector (the
-    configured ``detectors.primary``, else the first configured method)."""
+    replaced by ``methods`` and ``detectors.params`` by ``params`` (a parameter file or a
+    shipped one's name, checked here: ConfigError) when given, and the name of its default
+    live detector (the configured ``detectors.primary``, else the first configured method)."""
     cfg = load_session_config(path)
+    if params:
+        from rtseg.detectors import load_params
+        load_params(params)
+        cfg["detectors.params"] = params
     default = cfg["detectors.primary"] or cfg["detectors.methods"][0]
     if methods is not None:
         cfg["detectors.methods"] = list(methods)

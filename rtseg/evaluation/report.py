@@ -167,7 +167,7 @@ def run_evaluate_identity(args: Any) -> int:
     if not args.online:
         raise ValueError("--identity scores what the live loop sends: add --online")
     methods = None if args.method == "all" else [args.method]
-    cfg, default = live_config(args.config, methods)
+    cfg, default = live_config(args.config, methods, getattr(args, "params", None))
     cfg["identity.enabled"] = True
     groups = (("cmu", "tsseg4d") if args.group is None
               else GROUPS if args.group == "all" else (args.group,))
