@@ -7,7 +7,8 @@
     python3 benchmarks/library_loto.py spliced SPLICED_DIR [DATA_DIR/cmu_single]
     python3 benchmarks/library_loto.py fewshot [DATA_DIR] [--seconds S]  # short examples
     python3 benchmarks/library_loto.py --by-person DIR [--n N] [--seed K] [--no-hide] [--truth-cuts]
-    (options: --no-reject, --metric model|descriptor, --step S, --name-after S, --claim-margin M)
+    (options: --no-reject, --metric model|descriptor, --step S, --name-after S, --claim-margin M,
+    --params FILE: the live detectors' parameters, e.g. fast)
 
 --by-person DIR: DIR a source folder laid out like ../shared/data/cmu_single, hdm05 or
 bandai, or their parent (../shared/data): per source, leave-one-person-out - the library
@@ -99,7 +100,12 @@ def _pop_number(argv: list[str], flag: str, kind: type, what: str,
 
 
 def _identity_options(cfg, opts: dict) -> None:
-    """``--name-after`` and ``--claim-margin`` into the session configuration ``cfg``."""
+    """``--name-after``, ``--claim-margin`` and ``--params`` (the live detectors' parameter
+    file: ``fast`` is config/fast.toml) into the session configuration ``cfg``."""
+    if "--params" in opts:
+        from rtseg.detectors import load_params
+        load_params(opts["--params"])          # a bad file: ConfigError naming it
+        cfg["detectors.params"] = opts["--params"]
     if "--name-after" in opts:
         cfg["identity.name_after_s"] = opts["--name-after"]
     if "--claim-margin" in opts:
@@ -273,6 +279,13 @@ def main(argv: list[str] | None = None) -> int:
         le.METRIC = argv[k + 1]
         del argv[k:k + 2]
     opts = {}
+    if "--params" in argv:
+        k = argv.index("--params")
+        if k + 1 >= len(argv):
+            print("--params: a detector parameter file (or 'fast')", file=sys.stderr)
+            return 2
+        opts["--params"] = argv[k + 1]
+        del argv[k:k + 2]
     try:
         for flag in ("--step", "--name-after", "--seconds"):
             value = _pop_number(argv, flag, float, "seconds, a number", "seconds, > 0")
