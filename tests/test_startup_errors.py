@@ -47,25 +47,6 @@ def write_config(tmp_path: Path, text: str) -> Path:
     return p
 
 
-# ------------------------------------------------------------------------ detectors
-
-def test_params_names_a_missing_file_or_shipped_name(capsys):
-    rc, _, err = live(capsys, "sim://synth", "--params", "nosuch", "--duration", "1")
-    assert_one_line_error(rc, err, "parameter file not found: nosuch", "no shipped nosuch.toml")
-
-
-def test_params_fast_runs_the_session_with_config_fast(capsys, caplog):
-    caplog.set_level(logging.INFO)
-    rc, out, err = live(capsys, "sim://synth?stop=0.5", "--params", "fast")
-    assert rc == 0, err
-    from rtseg.cli import build_parser     # the parsed option reaches the configuration
-    from rtseg.commands.live import config_from_args
-    args = build_parser().parse_args(["live", "sim://synth", "--params", "fast"])
-    from rtseg.live.detector_setup import detector_params
-    p = detector_params(config_from_args(args))["contrast"]
-    assert p["early_after_s"] == 1.5 and p["early_backing"] == 1.25
-
-
 # ------------------------------------------------------------------------ sources
 
 @pytest.mark.parametrize("bad", ["a b=sim://synth", "x.y=sim://synth"])

@@ -124,9 +124,9 @@ def run(args: argparse.Namespace) -> int:
         from rtseg.drivers.readers import read_take
         path = args.paths[0]
         take = read_take(path, skeleton=args.skeleton)
-        note = missing_frames_note(path, take)
-        if note:
-            print(f"rtseg segment: warning: {note}", file=sys.stderr)
+        for note in (missing_frames_note(path, take), recorded_params_note(path, take, params)):
+            if note:
+                print(f"rtseg segment: warning: {note}", file=sys.stderr)
         if getattr(args, "identify", False):
             results = identify_take(take, methods, params, profile=args.profile,
                                     threshold=args.identity_threshold)
@@ -161,6 +161,31 @@ def missing_frames_note(path: str, take: Any) -> str:
             f"({take.meta.get('gaps', '?')} gaps); frames and times below count the "
             f"{take.n_frames} recorded frames, so after a gap they are early by the frames "
             "lost before it (the session's own cut times are in its cuts.jsonl)")
+
+
+def recorded_params_note(path: str, take: Any, params: dict[str, dict[str, Any]]) -> str:
+    """What to say when ``take`` is a recorded session whose detectors ran with other
+    parameters (``meta["session_meta"]["detector_params"]``) than ``params`` give: the differing keys
+    of each method both have; "" otherwise."""
+    from rtseg.detectors import method_params
+    meta = take.meta.get("session_meta") if isinstance(take.meta, dict) else None
+    recorded = meta.get("detector_params") if isinstance(meta, dict) else None
+    if not isinstance(recorded, dict):
+        return ""
+    diffs = []
+    for m, used in params.items():
+        live = recorded.get(m)
+        if not isinstance(live, dict):
+            continue
+        now = method_params(m, used)
+        keys = [k for k in sorted(live) if k in now and live[k] != now[k]]
+        diffs += [f"{m} {k} = {live[k]!r} (now {now[k]!r})" for k in keys]
+    if not diffs:
+        return ""
+    more = f" and {len(diffs) - 4} more" if len(diffs) > 4 else ""
+    return (f"{path}: the live session ran its detectors with other parameters: "
+            f"{'; '.join(diffs[:4])}{more}; give --params with the session's to cut as it "
+            "did (its session.json meta.detector_params)")
 
 
 def run_many(args: argparse.Namespace, methods: list[str],

@@ -124,6 +124,7 @@ from rtseg.live.pipeline import (DEFAULT_FRAME_RATE, Pipeline, PipelineCut, Pipe
                                  detector_params, make_detectors)
 from rtseg.live.replay import replay_frames, replay_session
 from rtseg.live.rate_check import DeclaredRateCheck, switch_rate
+from rtseg.live.detector_setup import detector_params
 from rtseg.core.ringbuffer import RingBuffer
 from rtseg.live.config import SessionConfig, load_session_config
 from rtseg.live.stats import FloatRing, LiveStats, SessionSummary
@@ -284,8 +285,13 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
         self.pipeline = Pipeline(names, parents, space, self.frame_rate, self.config,
                                  rest=lambda: getattr(src, "rest_pose", None),
                                  standard=lambda: getattr(src, "t_pose_without_geometry", False))
+        lines = []
         if hasattr(self.pipeline.features, "summary"):
-            line = self.pipeline.features.summary()
+            lines.append(self.pipeline.features.summary())
+        if self.config["detectors.params"]:       # not the shipped defaults: say which
+            from rtseg.config import find_config
+            lines.append(f"detector parameters: {find_config(self.config['detectors.params'])}")
+        for line in lines:
             log.info("%s", line)
             if self.on_start is not None:
                 self.on_start(line)
@@ -304,7 +310,8 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
                    else getattr(src, "url", type(src).__name__))
             meta = {"source": url, "config": self.config.origin,
                     "methods": list(self.pipeline.detectors), "primary": self.primary,
-                    "wire_methods": sorted(self.wire)}
+                    "wire_methods": sorted(self.wire),
+                    "detector_params": detector_params(self.config)}
             calibration = getattr(src, "calibration", None)     # serial:// calibration=FILE
             if hasattr(calibration, "as_dict"):
                 meta["calibration"] = calibration.as_dict()     # the frames are calibrated

@@ -1,0 +1,56 @@
+"""Detector parameter files chosen on the command line: ``--params FILE`` or a shipped one
+by name (``fast``: config/fast.toml) for ``rtseg live``, the parameters a recording keeps,
+and the warning when a recording is segmented with others.  The real CLI in-process on
+``sim://synth``."""
+
+from __future__ import annotations
+
+import json
+import logging
+
+from rtseg.cli import build_parser, main
+from rtseg.commands.live import config_from_args
+from rtseg.detectors import load_params
+from rtseg.live.detector_setup import detector_params
+
+
+def run(capsys, *argv) -> tuple[int, str, str]:
+    rc = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_params_names_a_missing_file_or_shipped_name(capsys):
+    rc, _, err = run(capsys, "live", "sim://synth", "--params", "nosuch", "--duration", "1",
+                     "--no-osc", "--quiet")
+    lines = err.strip().splitlines()
+    assert rc == 2 and len(lines) == 1 and "Traceback" not in err
+    assert "parameter file not found: nosuch" in lines[0]
+    assert "no shipped nosuch.toml" in lines[0]
+
+
+def test_params_fast_reaches_the_session_configuration():
+    args = build_parser().parse_args(["live", "sim://synth", "--params", "fast"])
+    p = detector_params(config_from_args(args))["contrast"]
+    assert p == load_params("fast")["contrast"]
+    assert p["early_after_s"] == 1.5 and p != load_params()["contrast"]
+
+
+def test_recording_keeps_its_parameters_and_segment_says_when_they_differ(capsys, tmp_path,
+                                                                          caplog):
+    rec = tmp_path / "rec"
+    caplog.set_level(logging.INFO, logger="rtseg")
+    rc, _, err = run(capsys, "live", "sim://synth?stop=1.5&speed=0", "--params", "fast",
+                     "--no-osc", "--quiet", "--record", rec)
+    assert rc == 0, err
+    assert any("detector parameters:" in r.getMessage() and "fast.toml" in r.getMessage()
+               for r in caplog.records)
+    meta = json.loads((rec / "session.json").read_text())["meta"]
+    assert meta["detector_params"]["contrast"] == load_params("fast")["contrast"]
+    # segmented with the defaults: one warning naming what differs
+    rc, out, err = run(capsys, "segment", rec, "--method", "contrast")
+    assert rc == 0 and "contrast early_after_s = 1.5 (now 0.0)" in err
+    assert "ran its detectors with other parameters" in err
+    # with the session's own: no warning
+    rc, out, err = run(capsys, "segment", rec, "--method", "contrast", "--params", "fast")
+    assert rc == 0 and "other parameters" not in err
