@@ -300,6 +300,18 @@ def test_early_maximum_needs_its_backing_within_back_frames(backing, back, sent)
     assert (out[1] is not None) == sent and out[0] is None
 
 
+def assert_same_changes_sooner(res, sooner, later) -> None:
+    """Both cut lists find every labelled change of ``res``, ``sooner``'s within 0.5 s of
+    the labelled middles, and ``sooner``'s are sent at least 0.25 s sooner (median)."""
+    mids = [t.mid for t in res.transitions]
+    assert len(sooner) == len(later) == len(mids)
+    for c, m in zip(sooner, mids):
+        assert abs(c.frame - m) <= 0.5 * FR
+    d_sooner = np.median([c.detected_at - c.frame for c in sooner])
+    d_later = np.median([c.detected_at - c.frame for c in later])
+    assert d_sooner < d_later - 0.25 * FR, (d_sooner, d_later)
+
+
 def test_early_backing_must_be_positive():
     from rtseg.detectors.early import EarlyCuts
     with pytest.raises(ValueError, match="backing"):
@@ -314,15 +326,8 @@ def test_shipped_fast_parameters_cut_sooner(perf):
     res, X = perf
     fast = load_params("fast")["contrast"]
     assert fast["early_after_s"] > 0 and fast != load_params()["contrast"]
-    quick = ContrastDetector.from_params(fast, FR).run(X)
-    default = ContrastDetector.from_params(load_params()["contrast"], FR).run(X)
-    mids = [t.mid for t in res.transitions]
-    assert len(quick) == len(default) == len(mids)
-    for c, m in zip(quick, mids):
-        assert abs(c.frame - m) <= 0.5 * FR
-    d_quick = np.median([c.detected_at - c.frame for c in quick])
-    d_default = np.median([c.detected_at - c.frame for c in default])
-    assert d_quick < d_default - 0.25 * FR, (d_quick, d_default)
+    assert_same_changes_sooner(res, ContrastDetector.from_params(fast, FR).run(X),
+                               ContrastDetector.from_params(load_params()["contrast"], FR).run(X))
 
 
 def test_early_look_off_is_the_full_look_alone():
@@ -347,13 +352,7 @@ def test_early_look_sends_the_same_changes_sooner(perf):
                              min_before=det.wmin * det.step, threshold=det.threshold,
                              hold=det.peaks.full.hold, min_gap=det.peaks.min_gap,
                              drop=det.peaks.full.drop, early_after=0).run(X)
-    mids = [t.mid for t in res.transitions]
-    assert len(with_early) == len(alone) == len(mids)
-    for c, m in zip(with_early, mids):
-        assert abs(c.frame - m) <= 0.5 * FR
-    d_early = np.median([c.detected_at - c.frame for c in with_early])
-    d_alone = np.median([c.detected_at - c.frame for c in alone])
-    assert d_early < d_alone - 0.25 * FR, (d_early, d_alone)
+    assert_same_changes_sooner(res, with_early, alone)
 
 
 @pytest.mark.parametrize("kw", [dict(early_after=15), dict(early_after=210),
