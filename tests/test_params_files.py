@@ -54,3 +54,25 @@ def test_recording_keeps_its_parameters_and_segment_says_when_they_differ(capsys
     # with the session's own: no warning
     rc, out, err = run(capsys, "segment", rec, "--method", "contrast", "--params", "fast")
     assert rc == 0 and "other parameters" not in err
+
+
+def test_a_folder_named_fast_does_not_hide_the_shipped_file(capsys, tmp_path, monkeypatch):
+    """A recording made with ``--record fast`` leaves a folder ``fast`` here (or beside a
+    configuration file): ``--params fast`` / ``params = "fast"`` still name
+    config/fast.toml (a folder is no parameter file); a file named ``fast`` still wins."""
+    from rtseg.config import config_dir, find_config
+    from rtseg.live.config import load_session_config
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "fast").mkdir()
+    assert find_config("fast") == config_dir() / "fast.toml"
+    assert load_params("fast")["contrast"]["early_after_s"] == 1.5
+    cfg_file = tmp_path / "show.toml"
+    cfg_file.write_text('[detectors]\nparams = "fast"\n')
+    cfg = load_session_config(cfg_file)
+    assert detector_params(cfg)["contrast"]["early_after_s"] == 1.5
+    rc, _, err = run(capsys, "live", "sim://synth?stop=0.5&speed=0", "--params", "fast",
+                     "--no-osc", "--quiet")
+    assert rc == 0, err
+    (tmp_path / "fast").rmdir()
+    (tmp_path / "fast").write_text("[contrast]\nthreshold = 9.0\n")
+    assert load_params("fast")["contrast"]["threshold"] == 9.0

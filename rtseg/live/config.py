@@ -378,11 +378,12 @@ FILE_KEYS = (("detectors", "params"), ("identity", "behaviours"))
 
 def beside(value: str, folder: Path) -> str:
     """``value`` (a path from a configuration file in ``folder``) as ``folder / value`` when
-    it is relative and that file exists, else unchanged (from the current folder)."""
+    it is relative and that file exists, else unchanged (from the current folder; a bare
+    name such as "fast" is then a shipped file: ``rtseg.config.find_config``)."""
     if not value or Path(value).is_absolute():
         return value
     there = folder / value
-    return str(there) if there.exists() else value
+    return str(there) if there.is_file() else value
 
 
 def load_session_config(path: str | Path | None = None,
