@@ -76,3 +76,12 @@ def test_a_folder_named_fast_does_not_hide_the_shipped_file(capsys, tmp_path, mo
     (tmp_path / "fast").rmdir()
     (tmp_path / "fast").write_text("[contrast]\nthreshold = 9.0\n")
     assert load_params("fast")["contrast"]["threshold"] == 9.0
+
+
+def test_live_console_shows_the_features_and_the_parameter_file(capsys):
+    """Both start lines reach the console before the first status line: the parameter file
+    used to replace the features line (one banner kept, the last)."""
+    rc, _, err = run(capsys, "live", "sim://synth?stop=1.5", "--params", "fast", "--no-osc")
+    assert rc == 0, err
+    assert "rtseg live: features: " in err
+    assert "rtseg live: detector parameters: " in err and "fast.toml" in err

@@ -188,8 +188,9 @@ class Console:
         self._corrupt_at: tuple[float, int] | None = None   # (Unix s, corrupt count)
         self.first_segment: dict[str, int] = {}    # behaviour id -> earliest segment
         self.last_behaviour: BehaviourEvent | None = None
-        #: a line printed before the first status line (the features the session uses)
-        self.banner: str | None = None
+        #: lines printed before the first status line (the features the session uses, the
+        #: detector parameter file)
+        self.banners: list[str] = []
 
     @property
     def _tag(self) -> str:
@@ -219,10 +220,11 @@ class Console:
             print(f"rtseg: {self._tag}dropout: {ev.name} {'lost' if ev.lost else 'restored'} "
                   f"at t={ev.time:.2f} s", file=self.err, flush=True)
         elif isinstance(ev, StatusEvent) and self.status and ev.alive:
-            if self.banner:           # the joints the features use, once the session runs
+            if self.banners:          # the joints the features use, once the session runs
                 self._clear()
-                print(f"rtseg live: {self._tag}{self.banner}", file=self.err, flush=True)
-                self.banner = None
+                for line in self.banners:
+                    print(f"rtseg live: {self._tag}{line}", file=self.err, flush=True)
+                self.banners = []
             self.show_status(ev)
 
     def show_status(self, ev: StatusEvent) -> None:
@@ -308,7 +310,7 @@ def run_session(source: Any, cfg: SessionConfig, duration: float | None, quiet: 
     try:
         session = LiveSession(source, cfg, listeners=[console], duration=duration,
                               monitor=monitor[0] if monitor else None, name=name,
-                              on_start=lambda line: setattr(console, "banner", line))
+                              on_start=console.banners.append)
         console.session_stats = lambda: session.stats
         if before_run is not None:
             before_run()
@@ -342,8 +344,7 @@ def run_many(sources: list[tuple[str, str]], cfg: SessionConfig, duration: float
             console = Console(print_cuts=cfg["output.jsonl"] != "-", status=not quiet,
                               name=name)
             session = LiveSession(url, c, listeners=[console], duration=duration, name=name,
-                                  on_start=lambda line, con=console: setattr(con, "banner",
-                                                                             line))
+                                  on_start=console.banners.append)
             console.session_stats = lambda s=session: s.stats
             sessions.append(session)
             consoles.append(console)
