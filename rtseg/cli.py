@@ -42,6 +42,15 @@ def positive_float(text: str) -> float:
     return v
 
 
+def params_file(text: str) -> str:
+    """argparse type of ``--params``: a parameter file or a shipped one's name, not empty
+    (an empty name would read the current folder, or be taken for no file at all)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a parameter file (TOML or JSON) or a "
+                                         "shipped one's name such as 'fast', got ''")
+    return text
+
+
 def error_text(exc: BaseException) -> str:
     """One line describing ``exc`` (a KeyError's message without its quotes): runs of
     white space become one space and other unprintable characters (a path may hold any)

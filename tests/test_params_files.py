@@ -85,3 +85,16 @@ def test_live_console_shows_the_features_and_the_parameter_file(capsys):
     assert rc == 0, err
     assert "rtseg live: features: " in err
     assert "rtseg live: detector parameters: " in err and "fast.toml" in err
+
+
+def test_empty_params_is_one_usage_error_everywhere(capsys, tmp_path):
+    """``--params ""`` (an unset shell variable): segment used to fail with '[Errno 21] Is
+    a directory', live and evaluate --online ran the defaults silently.  Now each refuses
+    it in one line, exit 2."""
+    take = tmp_path / "t.npz"
+    for argv in (["segment", take], ["live", "sim://synth?stop=0.5&speed=0", "--no-osc"],
+                 ["evaluate", tmp_path, "--online"]):
+        rc, out, err = run(capsys, *argv, "--params", "")
+        lines = err.strip().splitlines()
+        assert rc == 2 and len(lines) == 1 and "Traceback" not in err, (argv, err)
+        assert "argument --params" in lines[0] and "'fast'" in lines[0]

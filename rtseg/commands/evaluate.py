@@ -28,6 +28,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from rtseg.cli import params_file
 from rtseg.commands.segment import (
     add_method_argument, add_profile_argument, methods_of, params_by_method,
 )
@@ -311,7 +312,7 @@ def add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
                         "spliced (performances written by benchmarks/splice.py) or all "
                         "(pooled per group and overall)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    p.add_argument("--params", metavar="FILE",
+    p.add_argument("--params", type=params_file, metavar="FILE",
                    help="detector parameters, TOML or JSON: flat, or one table per method "
                         "(with --online: the live configuration's detectors.params); "
                         "'fast' is the shipped config/fast.toml")

@@ -14,7 +14,7 @@ import sys
 import time
 from typing import Any, Callable, TextIO
 
-from rtseg.cli import error_text, positive_float
+from rtseg.cli import error_text, params_file, positive_float
 from rtseg.config import ConfigError
 from rtseg.core.events import SENDER_COUNTERS, BehaviourEvent, CutEvent, DropoutEvent, StatusEvent
 from rtseg.live.stats import source_losses_text
@@ -44,7 +44,7 @@ def add_session_arguments(p: argparse.ArgumentParser, osc_default_note: str = ""
     p.add_argument("--config", metavar="FILE", help="session configuration (default config/live.toml)")
     p.add_argument("--methods", metavar="LIST",
                    help="online detectors, comma separated: contrast (the default), pca, ppca")
-    p.add_argument("--params", metavar="FILE",
+    p.add_argument("--params", type=params_file, metavar="FILE",
                    help="detector parameters, TOML or JSON (detectors.params): a file, or "
                         "'fast' for the shipped sooner cuts (config/fast.toml)")
     p.add_argument("--duration", type=positive_float, metavar="S",

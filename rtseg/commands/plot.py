@@ -33,6 +33,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from rtseg.cli import params_file
 from rtseg.commands.evaluate import tolerance_seconds
 from rtseg.commands.segment import add_profile_argument, params_by_method
 from rtseg.evaluation.scoring import score, widen
@@ -437,7 +438,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--method", default="all", choices=[*METHODS, "all"],
                    help="methods in the cut strip (default all; PCA and PPCA panels are "
                         "drawn when those methods run)")
-    p.add_argument("--params", metavar="FILE", help="detector parameters, TOML or JSON")
+    p.add_argument("--params", type=params_file, metavar="FILE", help="detector parameters, TOML or JSON")
     add_profile_argument(p)
     p.add_argument("--tolerance", type=tolerance_seconds, default=DEFAULT_TOLERANCE_S,
                    metavar="S", help="score cuts within S seconds outside a labelled range, "

@@ -18,6 +18,7 @@ import warnings
 from pathlib import Path
 from typing import Any
 
+from rtseg.cli import params_file
 from rtseg.archive.runner import SESSION_HEADER
 from rtseg.identity.segments import identify_take
 from rtseg.detectors.segmentation import METHODS, SegmentationResult, load_params, segment_take_methods
@@ -54,7 +55,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_method_argument(p, "all")
     p.add_argument("--format", choices=["table", "json", "csv"], default=None,
                    help="output format of a single take without --out (default table)")
-    p.add_argument("--params", metavar="FILE",
+    p.add_argument("--params", type=params_file, metavar="FILE",
                    help="detector parameters, TOML or JSON: flat, or one table per method")
     add_profile_argument(p)
     p.add_argument("--identify", action="store_true",
