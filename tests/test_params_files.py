@@ -98,3 +98,26 @@ def test_empty_params_is_one_usage_error_everywhere(capsys, tmp_path):
         lines = err.strip().splitlines()
         assert rc == 2 and len(lines) == 1 and "Traceback" not in err, (argv, err)
         assert "argument --params" in lines[0] and "'fast'" in lines[0]
+
+
+def test_a_flat_file_in_live_says_to_use_a_method_table(capsys, tmp_path):
+    """rtseg segment reads a flat parameter file; live and evaluate --online read one table
+    per method and said 'unknown section [early_after_s]' of a flat one.  Now one line
+    naming the key and the table to put it in, exit 2, for TOML and JSON."""
+    (tmp_path / "flat.toml").write_text("early_after_s = 1.5\n")
+    (tmp_path / "flat.json").write_text('{"early_after_s": 1.5}')
+    for name in ("flat.toml", "flat.json"):
+        for argv in (["live", "sim://synth?stop=0.5&speed=0", "--no-osc", "--quiet"],
+                     ["evaluate", tmp_path, "--online"]):
+            rc, _, err = run(capsys, *argv, "--params", tmp_path / name)
+            lines = err.strip().splitlines()
+            assert rc == 2 and len(lines) == 1 and "Traceback" not in err, (argv, err)
+            assert "early_after_s = 1.5 is not in a method table" in lines[0]
+            assert "[contrast]" in lines[0] and "unknown section" not in lines[0]
+    take = tmp_path / "t.npz"
+    from rtseg.drivers.readers import write_take
+    from rtseg.simulators.synth.motion import synthesize
+    write_take(take, synthesize("idle:4,walk:4", seed=1).take)
+    rc, out, err = run(capsys, "segment", take, "--method", "contrast",
+                       "--params", tmp_path / "flat.toml")
+    assert rc == 0, err

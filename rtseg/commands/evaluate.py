@@ -314,7 +314,8 @@ def add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--params", type=params_file, metavar="FILE",
                    help="detector parameters, TOML or JSON: flat, or one table per method "
-                        "(with --online: the live configuration's detectors.params); "
+                        "(with --online: one table per method, the live configuration's "
+                        "detectors.params); "
                         "'fast' is the shipped config/fast.toml")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.add_argument("--tolerance", type=tolerance_seconds, default=0.5, metavar="S",

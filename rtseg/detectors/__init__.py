@@ -175,6 +175,10 @@ def load_params(path: str | Path | None = None) -> dict[str, dict[str, Any]]:
     if path is not None:
         user = _load_user_params(path)
         for section, table in user.items():
+            if not isinstance(table, Mapping) and section not in SCHEMA:
+                raise ConfigError(f"{path}: {section} = {table!r} is not in a method table: "
+                                  "put it under [contrast] (or [pca], [ppca], [gmm]); only "
+                                  "rtseg segment and offline rtseg evaluate read flat files")
             if section not in SCHEMA:
                 raise ConfigError(f"{path}: unknown section [{section}] "
                                   f"(known: {', '.join(METHODS)})")
