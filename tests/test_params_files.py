@@ -121,3 +121,26 @@ def test_a_flat_file_in_live_says_to_use_a_method_table(capsys, tmp_path):
     rc, out, err = run(capsys, "segment", take, "--method", "contrast",
                        "--params", tmp_path / "flat.toml")
     assert rc == 0, err
+
+
+def test_segment_of_several_recordings_says_which_ran_other_parameters(capsys, tmp_path):
+    """The archive path (several takes, or --out) used to drop the warning one recording
+    gets: its records now carry params_differ and one warning names the sessions."""
+    for name, extra in (("fastrec", ["--params", "fast"]), ("plain", [])):
+        rc, _, err = run(capsys, "live", "sim://synth?stop=1.5&speed=0", *extra,
+                         "--no-osc", "--quiet", "--record", tmp_path / name)
+        assert rc == 0, err
+    out = tmp_path / "x.jsonl"
+    rc, _, err = run(capsys, "segment", tmp_path / "fastrec", tmp_path / "plain",
+                     "--method", "contrast", "--out", out, "--no-progress")
+    assert rc == 0, err
+    recs = {r["take"]: r for r in map(json.loads, out.read_text().splitlines())}
+    assert "early_after_s = 1.5 (now 0.0)" in recs["fastrec"]["params_differ"]
+    assert "params_differ" not in recs["plain"]
+    assert "1 recorded session(s) ran their detectors with other parameters: fastrec" in err
+    # with fast: the session recorded with the defaults is the one named
+    rc, stdout, err = run(capsys, "segment", tmp_path / "fastrec", tmp_path / "plain",
+                          "--method", "contrast", "--params", "fast", "--no-progress")
+    recs = {r["take"]: r for r in map(json.loads, stdout.splitlines())}
+    assert rc == 0 and "1 recorded session(s)" in err and "parameters: plain;" in err
+    assert "params_differ" not in recs["fastrec"] and "params_differ" in recs["plain"]

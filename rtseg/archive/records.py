@@ -16,6 +16,30 @@ def take_name(path: str) -> str:
     return p.name if p.is_dir() else p.stem
 
 
+def param_differences(take: Any, params: Mapping[str, Mapping[str, Any]]
+                      ) -> dict[str, list[str]]:
+    """For a recorded session whose detectors ran with other parameters
+    (``meta["session_meta"]["detector_params"]``) than ``params`` give: method ->
+    ``"key = live (now value)"`` for each differing key of each method both have; {} for
+    other takes (and recordings made before sessions kept their parameters)."""
+    from rtseg.detectors import method_params
+    meta = take.meta.get("session_meta") if isinstance(take.meta, dict) else None
+    recorded = meta.get("detector_params") if isinstance(meta, dict) else None
+    if not isinstance(recorded, dict):
+        return {}
+    out = {}
+    for m, used in params.items():
+        live = recorded.get(m)
+        if not isinstance(live, dict):
+            continue
+        now = method_params(m, used)
+        diffs = [f"{k} = {live[k]!r} (now {now[k]!r})" for k in sorted(live)
+                 if k in now and live[k] != now[k]]
+        if diffs:
+            out[m] = diffs
+    return out
+
+
 def take_records(path: str, methods: Sequence[str],
                  params: Mapping[str, Mapping[str, Any]] | None = None,
                  profile: str | None = None, skeleton: str | None = None,
@@ -52,13 +76,16 @@ def take_records(path: str, methods: Sequence[str],
     # recorded frames (early after each gap), so its records say how many are missing
     lost = take.meta.get("missing_frames") if isinstance(take.meta, dict) else None
     extra = {"missing_frames": int(lost), "gaps": int(take.meta.get("gaps") or 0)} if lost else {}
+    # a recorded session whose detectors ran with other parameters than these
+    differ = param_differences(take, {m: dict((params or {}).get(m, {})) for m in results})
     out = []
     for m, r in results.items():
         d = r.as_dict()
         out.append({**base, "method": m, "frame_rate": r.frame_rate, "n_frames": r.n_frames,
                     "cuts": d["cuts"], "segments": d["segments"],
                     "elapsed_s": round(r.elapsed_s, 4), "take_elapsed_s": total,
-                    **extra, "error": None})
+                    **extra, **({"params_differ": differ[m]} if m in differ else {}),
+                    "error": None})
     return out
 
 

@@ -23,6 +23,8 @@ segment, segment ``[start, end)``, times in s from the take start)::
                    [, "behaviour" with --identify]}, ...],
      "elapsed_s": detector s, "take_elapsed_s": read + features + all methods s,
      ["missing_frames": N, "gaps": G, a recorded session whose source lost frames,]
+     ["params_differ": ["key = live (now value)", ...], a recorded session whose
+      detector of this method ran with other parameters,]
      "error": null | "message"}
 """
 

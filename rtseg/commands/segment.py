@@ -166,21 +166,11 @@ def missing_frames_note(path: str, take: Any) -> str:
 
 def recorded_params_note(path: str, take: Any, params: dict[str, dict[str, Any]]) -> str:
     """What to say when ``take`` is a recorded session whose detectors ran with other
-    parameters (``meta["session_meta"]["detector_params"]``) than ``params`` give: the differing keys
-    of each method both have; "" otherwise."""
-    from rtseg.detectors import method_params
-    meta = take.meta.get("session_meta") if isinstance(take.meta, dict) else None
-    recorded = meta.get("detector_params") if isinstance(meta, dict) else None
-    if not isinstance(recorded, dict):
-        return ""
-    diffs = []
-    for m, used in params.items():
-        live = recorded.get(m)
-        if not isinstance(live, dict):
-            continue
-        now = method_params(m, used)
-        keys = [k for k in sorted(live) if k in now and live[k] != now[k]]
-        diffs += [f"{m} {k} = {live[k]!r} (now {now[k]!r})" for k in keys]
+    parameters (``meta["session_meta"]["detector_params"]``) than ``params`` give: the
+    differing keys of each method both have (``rtseg.archive.records.param_differences``);
+    "" otherwise."""
+    from rtseg.archive.records import param_differences
+    diffs = [f"{m} {d}" for m, ds in param_differences(take, params).items() for d in ds]
     if not diffs:
         return ""
     more = f" and {len(diffs) - 4} more" if len(diffs) > 4 else ""
@@ -205,11 +195,14 @@ def run_many(args: argparse.Namespace, methods: list[str],
         raise ValueError("give --workers (a local cluster) or --scheduler (a running one), "
                          "not both")
     lossy: dict[str, int] = {}          # recordings missing frames: take -> frames
+    differ: list[str] = []              # recordings whose session ran other parameters
 
     def note_lost(path: str, records: list[dict[str, Any]]) -> None:
         lost = next((r.get("missing_frames") for r in records if r.get("missing_frames")), 0)
         if lost:
             lossy[records[0].get("take") or path] = lost
+        if any(r.get("params_differ") for r in records):
+            differ.append(records[0].get("take") or path)
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
@@ -228,6 +221,11 @@ def run_many(args: argparse.Namespace, methods: list[str],
         print(f"rtseg segment: warning: {len(lossy)} recorded session(s) miss frames their "
               f"source sent: {named}; their frames and times count the recorded frames, so "
               "after a gap they are early (records: missing_frames, gaps)", file=sys.stderr)
+    if differ:
+        print(f"rtseg segment: warning: {len(differ)} recorded session(s) ran their detectors "
+              f"with other parameters: {', '.join(sorted(differ))}; give --params with a "
+              "session's (its session.json meta.detector_params) to cut as it did "
+              "(records: params_differ)", file=sys.stderr)
     if stats.failed:
         where = f" (errors in {args.out})" if args.out else ""
         print(f"rtseg segment: {stats.failed} of {stats.run} takes failed{where}",
