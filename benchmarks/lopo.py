@@ -238,6 +238,11 @@ def main(argv: list[str] | None = None) -> int:
     if not args.data.is_dir():
         print(f"lopo: {args.data} is not a folder", file=sys.stderr)
         return 2
+    try:
+        base = load_params(args.params)["contrast"]     # a bad file: before minutes of reading
+    except ValueError as exc:
+        print(f"lopo: {exc}", file=sys.stderr)
+        return 2
     t0 = time.perf_counter()
     try:
         cases = load_cases(args.data, args.cache, args.per_person, args.seeds)
@@ -251,7 +256,6 @@ def main(argv: list[str] | None = None) -> int:
     units = sorted({c.person for c in cases})
     print(f"lopo: {len(cases)} performances of {len(people)} people in {len(units)} held-out units "
           f"({time.perf_counter() - t0:.0f} s to read)", file=sys.stderr)
-    base = load_params(args.params)["contrast"]
     shipped = {c.name: run(c, base) for c in cases}
     out: dict = {"people": people, "performances": len(cases), "shipped": report(cases, shipped)}
     sets = candidate_sets(args.grid, base)

@@ -10,6 +10,7 @@ import logging
 
 from rtseg.cli import build_parser, main
 from rtseg.commands.live import config_from_args
+from rtseg.config import config_dir
 from rtseg.detectors import load_params
 from rtseg.live.detector_setup import detector_params
 
@@ -144,3 +145,17 @@ def test_segment_of_several_recordings_says_which_ran_other_parameters(capsys, t
     recs = {r["take"]: r for r in map(json.loads, stdout.splitlines())}
     assert rc == 0 and "1 recorded session(s)" in err and "parameters: plain;" in err
     assert "params_differ" not in recs["fastrec"] and "params_differ" in recs["plain"]
+
+
+def test_lopo_checks_its_params_before_reading_the_data(tmp_path):
+    """benchmarks/lopo.py --params read the file only after the data (minutes of splicing)
+    and ended in a traceback; now a bad name is one line, exit 2, first."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "lopo.py"
+    r = subprocess.run([sys.executable, str(script), str(tmp_path), "--params", "nosuch"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert r.stderr.strip() == ("lopo: parameter file not found: nosuch (no such file "
+                                f"here, and no shipped nosuch.toml in {config_dir()})")
