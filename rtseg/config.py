@@ -57,6 +57,29 @@ def find_config(name_or_path: str | Path, what: str = "configuration file") -> P
     return p
 
 
+def params_path(name_or_path: str | Path) -> Path:
+    """A detector parameter file's path: a recording's folder gives its ``session.json``
+    (whose ``meta.detector_params`` ``params_of`` reads), anything else ``find_config``'s."""
+    p = Path(name_or_path)
+    if p.is_dir() and (p / "session.json").is_file():
+        return p / "session.json"
+    return find_config(name_or_path, "parameter file")
+
+
+def params_of(data: Any, where: str | Path) -> Any:
+    """``data`` read from a parameter file, or for a recording's ``session.json`` the
+    parameters its live detectors ran with (``meta.detector_params``; ConfigError when the
+    recording does not keep them)."""
+    if not (isinstance(data, dict) and data.get("format") == "rtseg-session"):
+        return data
+    meta = data.get("meta")
+    params = meta.get("detector_params") if isinstance(meta, dict) else None
+    if not isinstance(params, dict):
+        raise ConfigError(f"{where}: this recording does not keep the parameters its "
+                          "detectors ran with (recorded by an older rtseg)")
+    return params
+
+
 def load_toml(name_or_path: str | Path) -> dict[str, Any]:
     """Parsed TOML of ``name_or_path``: a bare name (no suffix) is a shipped default
     (``"suits"`` -> ``<config_dir>/suits.toml``), anything else a path (a UTF-8

@@ -41,7 +41,7 @@ def test_recording_keeps_its_parameters_and_segment_says_when_they_differ(capsys
                                                                           caplog):
     rec = tmp_path / "rec"
     caplog.set_level(logging.INFO, logger="rtseg")
-    rc, _, err = run(capsys, "live", "sim://synth?stop=1.5&speed=0", "--params", "fast",
+    rc, _, err = run(capsys, "live", "sim://synth?stop=10&speed=0", "--params", "fast",
                      "--no-osc", "--quiet", "--record", rec)
     assert rc == 0, err
     assert any("detector parameters:" in r.getMessage() and "fast.toml" in r.getMessage()
@@ -52,9 +52,33 @@ def test_recording_keeps_its_parameters_and_segment_says_when_they_differ(capsys
     rc, out, err = run(capsys, "segment", rec, "--method", "contrast")
     assert rc == 0 and "contrast early_after_s = 1.5 (now 0.0)" in err
     assert "ran its detectors with other parameters" in err
-    # with the session's own: no warning
-    rc, out, err = run(capsys, "segment", rec, "--method", "contrast", "--params", "fast")
-    assert rc == 0 and "other parameters" not in err
+    assert f"give --params {rec} to cut as it did" in err
+    # with the session's own, named or read from the recording itself: no warning, one result
+    outs = []
+    for given in ("fast", rec, rec / "session.json"):
+        rc, out, err = run(capsys, "segment", rec, "--method", "contrast", "--params", given,
+                           "--format", "json")
+        assert rc == 0 and "other parameters" not in err, err
+        outs.append(json.loads(out)["methods"]["contrast"]["cuts"])
+    assert outs[0] and outs[0] == outs[1] == outs[2]
+    assert load_params(rec)["contrast"] == load_params("fast")["contrast"]
+    # a recording that does not keep them (an older rtseg's): one line saying so
+    doc = json.loads((rec / "session.json").read_text())
+    del doc["meta"]["detector_params"]
+    old = tmp_path / "old"
+    old.mkdir()
+    (old / "session.json").write_text(json.dumps(doc))
+    rc, _, err = run(capsys, "segment", rec, "--params", old)
+    assert rc == 2 and len(err.strip().splitlines()) == 1
+    assert "does not keep the parameters its detectors ran with" in err
+
+
+def test_early_back_beyond_the_early_window_is_refused(capsys, tmp_path):
+    p = tmp_path / "p.toml"
+    p.write_text("[contrast]\nearly_after_s = 1.0\nearly_back_s = 1.5\n")
+    rc, _, err = run(capsys, "live", "sim://synth?stop=1", "--params", p, "--no-osc", "--quiet")
+    assert rc == 2 and len(err.strip().splitlines()) == 1
+    assert "early_back_s (1.5) must not exceed early_after_s (1.0)" in err
 
 
 def test_a_folder_named_fast_does_not_hide_the_shipped_file(capsys, tmp_path, monkeypatch):

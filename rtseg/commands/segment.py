@@ -13,6 +13,7 @@ import csv
 import glob
 import io
 import json
+import shlex
 import sys
 import warnings
 from pathlib import Path
@@ -175,8 +176,7 @@ def recorded_params_note(path: str, take: Any, params: dict[str, dict[str, Any]]
         return ""
     more = f" and {len(diffs) - 4} more" if len(diffs) > 4 else ""
     return (f"{path}: the live session ran its detectors with other parameters: "
-            f"{'; '.join(diffs[:4])}{more}; give --params with the session's to cut as it "
-            "did (its session.json meta.detector_params)")
+            f"{'; '.join(diffs[:4])}{more}; give --params {shlex.quote(str(path))} to cut as it did")
 
 
 def run_many(args: argparse.Namespace, methods: list[str],
@@ -223,8 +223,8 @@ def run_many(args: argparse.Namespace, methods: list[str],
               "after a gap they are early (records: missing_frames, gaps)", file=sys.stderr)
     if differ:
         print(f"rtseg segment: warning: {len(differ)} recorded session(s) ran their detectors "
-              f"with other parameters: {', '.join(sorted(differ))}; give --params with a "
-              "session's (its session.json meta.detector_params) to cut as it did "
+              f"with other parameters: {', '.join(sorted(differ))}; give --params SESSION "
+              "(the recording's folder: the parameters it ran with) to cut as it did "
               "(records: params_differ)", file=sys.stderr)
     if stats.failed:
         where = f" (errors in {args.out})" if args.out else ""

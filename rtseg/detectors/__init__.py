@@ -32,7 +32,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from rtseg.config import ConfigError, config_dir, find_config, load_toml
+from rtseg.config import ConfigError, config_dir, load_toml, params_of, params_path
 from rtseg.detectors.base import BatchDetector, Cut, OnlineDetector, frames
 
 METHODS: tuple[str, ...] = ("contrast", "pca", "ppca", "gmm")
@@ -142,12 +142,13 @@ def validate(method: str, params: Mapping[str, Any], where: str = "") -> dict[st
 
 def _load_user_params(path: str | Path) -> dict[str, Any]:
     """A parameter file: TOML, or JSON for a ``.json`` file (as ``rtseg segment --params``
-    reads it); ConfigError naming the file."""
-    if Path(path).suffix.lower() != ".json":
-        return load_toml(find_config(path, "parameter file"))
+    reads it), or a recording (``rtseg.config.params_of``); ConfigError naming the file."""
+    path = params_path(path)
+    if path.suffix.lower() != ".json":
+        return load_toml(path)
     import json
     try:
-        data = json.loads(Path(path).read_bytes())
+        data = params_of(json.loads(path.read_bytes()), path)
     except FileNotFoundError:
         raise ConfigError(f"parameter file not found: {path}") from None
     except (OSError, ValueError) as exc:

@@ -166,6 +166,10 @@ class ContrastDetector(OnlineDetector):
                     keep_trace: bool = False) -> "ContrastDetector":
         """From ``[contrast]`` parameters in seconds (``config/detectors.toml``)."""
         from rtseg.detectors.base import frames
+        if p["early_after_s"] and p.get("early_back_s", 0.0) > p["early_after_s"]:
+            raise ValueError(f"early_back_s ({p['early_back_s']}) must not exceed "
+                             f"early_after_s ({p['early_after_s']}): the backing full-look "
+                             f"values lie within the early window")
         step = frames(p["step_s"], frame_rate)
         return cls(step=step, before=frames(p["before_s"], frame_rate),
                    after=frames(p["after_s"], frame_rate),

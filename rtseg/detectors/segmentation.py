@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
-from rtseg.config import find_config
+from rtseg.config import params_of, params_path
 from rtseg.detectors.base import Cut
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -136,8 +136,9 @@ def _clean_cuts(raw: Sequence[Any], method: str, n_frames: int) -> list[Cut]:
 
 
 def load_params(path: str | Path | None, method: str | None = None) -> dict[str, Any]:
-    """Detector parameters from a TOML or JSON file, or a shipped one by its bare name
-    (``"fast"``: ``config/fast.toml``, as ``rtseg.config.load_toml`` finds it).
+    """Detector parameters from a TOML or JSON file, a shipped one by its bare name
+    (``"fast"``: ``config/fast.toml``, as ``rtseg.config.load_toml`` finds it), or a
+    recording (its folder or ``session.json``: the parameters its live detectors ran with).
 
     The file is either flat (``{name: value}``, applied to whichever method runs) or has one
     table per method (``[pca] ...``, ``[ppca] ...``): with ``method`` given, that method's
@@ -145,7 +146,7 @@ def load_params(path: str | Path | None, method: str | None = None) -> dict[str,
     """
     if path is None:
         return {}
-    p = find_config(path, "parameter file")     # or a shipped one by name: "fast"
+    p = params_path(path)     # or a shipped one by name ("fast"), or a recording's
     try:
         raw = p.read_bytes()
     except FileNotFoundError:
@@ -157,6 +158,7 @@ def load_params(path: str | Path | None, method: str | None = None) -> dict[str,
             data = tomllib.loads(raw.decode("utf-8-sig"))     # a byte-order mark is skipped
     except (json.JSONDecodeError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ValueError(f"{p}: cannot parse parameters: {exc}") from None
+    data = params_of(data, p)
     if not isinstance(data, dict):
         raise ValueError(f"{p}: parameters must be a table / object")
     if method is None:

@@ -124,7 +124,6 @@ from rtseg.live.pipeline import (DEFAULT_FRAME_RATE, Pipeline, PipelineCut, Pipe
                                  detector_params, make_detectors)
 from rtseg.live.replay import replay_frames, replay_session
 from rtseg.live.rate_check import DeclaredRateCheck, switch_rate
-from rtseg.live.detector_setup import detector_params
 from rtseg.core.ringbuffer import RingBuffer
 from rtseg.live.config import SessionConfig, load_session_config
 from rtseg.live.stats import FloatRing, LiveStats, SessionSummary
@@ -289,8 +288,8 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
         if hasattr(self.pipeline.features, "summary"):
             lines.append(self.pipeline.features.summary())
         if self.config["detectors.params"]:       # not the shipped defaults: say which
-            from rtseg.config import find_config
-            lines.append(f"detector parameters: {find_config(self.config['detectors.params'])}")
+            from rtseg.config import params_path
+            lines.append(f"detector parameters: {params_path(self.config['detectors.params'])}")
         for line in lines:
             log.info("%s", line)
             if self.on_start is not None:
