@@ -332,6 +332,9 @@ def test_load_params_user_file_overrides(tmp_path):
     ("[contrast]\nearly_threshold = 0\n", "early_threshold"),
     ("[contrast]\ngate_threshold = -1.0\n", "gate_threshold"),
     ("[contrast]\ngate_threshold = \"on\"\n", "gate_threshold"),
+    ("[contrast]\nearly_backing = inf\n", "early_backing"),      # never sends: refused
+    ("[contrast]\nthreshold = inf\n", "threshold"),
+    ("[contrast]\nearly_back_s = -0.5\n", "early_back_s"),
 ])
 def test_load_params_rejects_bad_keys_naming_them(tmp_path, text, word):
     f = tmp_path / "bad.toml"

@@ -27,6 +27,7 @@ May import ``rtseg.core`` and ``rtseg.config``; ``rtseg.detectors.pca`` and
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -40,9 +41,9 @@ METHODS: tuple[str, ...] = ("contrast", "pca", "ppca", "gmm")
 ONLINE_METHODS: tuple[str, ...] = ("contrast", "pca", "ppca")
 
 # key -> (type(s), check, description); checks return True when the value is acceptable.
-_pos = (lambda v: v > 0, "> 0")
+_pos = (lambda v: 0 < v < math.inf, "finite and > 0")
 _unit = (lambda v: 0 < v < 1, "in (0, 1)")
-_nonneg = (lambda v: v >= 0, ">= 0")
+_nonneg = (lambda v: 0 <= v < math.inf, "finite and >= 0")
 _posint = (lambda v: v >= 1, ">= 1")
 
 SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
