@@ -8,6 +8,8 @@ from __future__ import annotations
 import json
 import logging
 
+import pytest
+
 from rtseg.cli import build_parser, main
 from rtseg.commands.live import config_from_args
 from rtseg.config import config_dir
@@ -103,13 +105,16 @@ def test_a_folder_named_fast_does_not_hide_the_shipped_file(capsys, tmp_path, mo
     assert load_params("fast")["contrast"]["threshold"] == 9.0
 
 
-def test_live_console_shows_the_features_and_the_parameter_file(capsys):
+@pytest.mark.parametrize("stop", [1.5, 0.3])
+def test_live_console_shows_the_features_and_the_parameter_file(capsys, stop):
     """Both start lines reach the console before the first status line: the parameter file
-    used to replace the features line (one banner kept, the last)."""
-    rc, _, err = run(capsys, "live", "sim://synth?stop=1.5", "--params", "fast", "--no-osc")
+    used to replace the features line (one banner kept, the last); a session that ends
+    before its first status line (0.3 s) shows them at its end, before its summary."""
+    rc, _, err = run(capsys, "live", f"sim://synth?stop={stop}", "--params", "fast", "--no-osc")
     assert rc == 0, err
     assert "rtseg live: features: " in err
     assert "rtseg live: detector parameters: " in err and "fast.toml" in err
+    assert err.index("detector parameters") < err.index("session ended")
 
 
 def test_empty_params_is_one_usage_error_everywhere(capsys, tmp_path):

@@ -221,11 +221,7 @@ class Console:
             print(f"rtseg: {self._tag}dropout: {ev.name} {'lost' if ev.lost else 'restored'} "
                   f"at t={ev.time:.2f} s", file=self.err, flush=True)
         elif isinstance(ev, StatusEvent) and self.status and ev.alive:
-            if self.banners:          # the joints the features use, once the session runs
-                self._clear()
-                for line in self.banners:
-                    print(f"rtseg live: {self._tag}{line}", file=self.err, flush=True)
-                self.banners = []
+            self._show_banners()      # the joints the features use, once the session runs
             self.show_status(ev)
 
     def show_status(self, ev: StatusEvent) -> None:
@@ -270,8 +266,17 @@ class Console:
                 self._last_plain = now
                 print(line, file=self.err, flush=True)
 
+    def _show_banners(self) -> None:
+        """The start lines not shown yet (with the status line: not under --quiet)."""
+        if self.banners and self.status:
+            self._clear()
+            for line in self.banners:
+                print(f"rtseg live: {self._tag}{line}", file=self.err, flush=True)
+        self.banners = []
+
     def finish(self) -> None:
         self._clear()
+        self._show_banners()      # a session that ended before its first status line
 
 
 def start_monitor(address: str | None, prog: str) -> tuple[Any, Any] | None:
