@@ -41,6 +41,11 @@ def test_load_params_flat_per_method_and_errors(tmp_path):
     j = tmp_path / "p.json"
     j.write_text('{"gmm": {"n_components": 5}}')
     assert load_params(j, "gmm") == {"n_components": 5}
+    # a misspelt method's table (or a live configuration) is refused, not ignored
+    typo = tmp_path / "typo.toml"
+    typo.write_text("[contrsat]\nthreshold = 2.0\n")
+    with pytest.raises(ValueError, match=r"unknown section \[contrsat\]"):
+        load_params(typo, "contrast")
 
 
 @pytest.mark.parametrize("script, seed, rate", [

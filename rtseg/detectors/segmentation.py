@@ -163,6 +163,10 @@ def load_params(path: str | Path | None, method: str | None = None) -> dict[str,
         raise ValueError(f"{p}: parameters must be a table / object")
     if method is None:
         return data
+    from rtseg.detectors import METHODS
+    other = [k for k, v in data.items() if isinstance(v, dict) and k not in METHODS]
+    if other:      # a misspelt method, or a live configuration given as parameters
+        raise ValueError(f"{p}: unknown section [{other[0]}] (known: {', '.join(METHODS)})")
     flat = {k: v for k, v in data.items() if not isinstance(v, dict)}
     per = data.get(method, {})
     if not isinstance(per, dict):
