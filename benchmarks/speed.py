@@ -111,6 +111,12 @@ def main(argv: list[str] | None = None) -> int:
     if a.cpu_time:
         CLOCK = time.process_time
     from rtseg.detectors import make_online, segment_features
+    if a.versus:             # a bad file: at once, not after the timing runs
+        from rtseg.detectors.segmentation import load_params
+        try:
+            load_params(a.versus, "contrast")
+        except (OSError, ValueError) as exc:
+            ap.error(f"--versus: {exc}")
 
     X, fps, what = _features(a.data)
     n = len(X)

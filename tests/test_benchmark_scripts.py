@@ -307,3 +307,11 @@ def test_names_over_vmc_compares_a_live_vmc_session_with_the_file_replay(tmp_pat
         assert doc["file_replay"]["segments"] >= 1
     r = _run("names_over_vmc.py", str(tmp_path / "nowhere"), str(tmp_path / "lib.json"))
     assert r.returncode == 2 and "names_over_vmc:" in r.stderr
+
+
+def test_speed_versus_a_missing_parameter_file_fails_at_once(tmp_path):
+    """``speed.py --versus`` reads its file before the data and the timing runs: a bad
+    name is one usage line (exit 2), even with a data folder that holds nothing."""
+    r = _run("speed.py", "--versus", "nosuch", "--data", str(tmp_path))
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "--versus: parameter file not found: nosuch" in r.stderr

@@ -23,6 +23,13 @@ def run(capsys, *argv) -> tuple[int, str, str]:
     return rc, out, err
 
 
+def test_a_missing_parameter_path_is_a_parameter_file_everywhere(capsys, tmp_path):
+    missing = tmp_path / "nope.toml"
+    for argv in (["live", "sim://synth?stop=1", "--no-osc", "--quiet"], ["segment", missing]):
+        rc, _, err = run(capsys, *argv, "--params", missing)
+        assert rc == 2 and f"parameter file not found: {missing}" in err, err
+
+
 def test_params_names_a_missing_file_or_shipped_name(capsys):
     rc, _, err = run(capsys, "live", "sim://synth", "--params", "nosuch", "--duration", "1",
                      "--no-osc", "--quiet")

@@ -145,6 +145,8 @@ def _load_user_params(path: str | Path) -> dict[str, Any]:
     """A parameter file: TOML, or JSON for a ``.json`` file (as ``rtseg segment --params``
     reads it), or a recording (``rtseg.config.params_of``); ConfigError naming the file."""
     path = params_path(path)
+    if not path.exists():
+        raise ConfigError(f"parameter file not found: {path}")
     if path.suffix.lower() != ".json":
         return load_toml(path)
     import json
