@@ -89,7 +89,9 @@ def test_evaluate_online_with_the_shipped_fast_parameters(synth_dir, capsys):
     for name, extra in (("default", []), ("fast", ["--params", "fast"])):
         assert main(["evaluate", str(root), "--online", "--json", "--no-progress",
                      "--method", "contrast", *extra]) == 0
-        doc[name] = json.loads(capsys.readouterr().out)["contrast"]["takes"]["92_01"]
+        r = json.loads(capsys.readouterr().out)["contrast"]
+        assert r.get("params_file") == (extra[1] if extra else None)   # which file, if any
+        doc[name] = r["takes"]["92_01"]
     assert doc["fast"]["f1"] == doc["default"]["f1"] == 1.0
     d = {k: sorted(m["delay_s"] for m in v["matched"]) for k, v in doc.items()}
     assert all(f < g for f, g in zip(d["fast"], d["default"])), d

@@ -133,18 +133,23 @@ class EvaluationReport:
     methods: dict[str, MethodReport]
     errors: dict[str, str] = field(default_factory=dict)
     live_default: str | None = None
+    #: the ``--params`` file the detectors ran with (as given), None for the shipped ones
+    params_file: str | None = None
 
     def as_dict(self) -> dict[str, Any]:
-        """``{method: {"tolerance_s", "online", "pooled", "groups", "takes"[, "errors"]}}``;
-        takes that failed are listed under every method; online runs add a top-level
-        ``"live_default"``: the name of the default live detector."""
+        """``{method: {"tolerance_s", "online", "pooled", "groups", "takes"[, "errors",
+        "params_file"]}}``; takes that failed are listed under every method; ``params_file``
+        the ``--params`` given; online runs add a top-level ``"live_default"``: the name
+        of the default live detector."""
         doc: dict[str, Any] = {}
         if self.live_default is not None:
             doc["live_default"] = self.live_default
         doc.update({m: r.as_dict() for m, r in self.methods.items()})
-        if self.errors:
-            for m in self.methods:
+        for m in self.methods:
+            if self.errors:
                 doc[m]["errors"] = dict(self.errors)
+            if self.params_file is not None:
+                doc[m]["params_file"] = self.params_file
         return doc
 
 
@@ -281,7 +286,8 @@ def format_table(report: EvaluationReport) -> str:
         lines.append(f"{m}{' (live)' if r.online else ''}{' [default live detector]' if m == report.live_default else ''}: "
                      f"F1 with cuts within {tol} of the labelled ranges; strict = inside them"
                      + ("; delay = median/p90 s from the labelled transition to the frame "
-                        "that produced the cut" if r.online else ""))
+                        "that produced the cut" if r.online else "")
+                     + (f"; parameters {report.params_file}" if report.params_file else ""))
         lines.append(hdr)
         for key, t in r.takes.items():
             s, st = t.score, t.strict
@@ -406,6 +412,7 @@ def run(args: argparse.Namespace) -> int:
                           tolerance_s=args.tolerance, online=online,
                           workers=args.workers, scheduler=args.scheduler)
     report.live_default = live_default
+    report.params_file = args.params
     if args.json:
         sys.stdout.write(json.dumps(report.as_dict(), indent=2, allow_nan=False) + "\n")
     else:
