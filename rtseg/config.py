@@ -9,7 +9,8 @@ there and point ``--config`` (or ``--params``) at the copy.
 
 ``config_dir()`` is the folder of the shipped defaults; ``load_toml(name_or_path)`` reads
 ``<config_dir>/<name>.toml`` or any path.  Validation of live-session configuration lives
-in ``rtseg.live.config``; detector parameters are read by ``rtseg.detectors``.
+in ``rtseg.live.config``; detector parameter files are read by ``read_params_file`` and
+validated by ``rtseg.detectors``.
 """
 
 from __future__ import annotations
@@ -28,6 +29,11 @@ REPO_CONFIG = Path(__file__).resolve().parent.parent / "config"
 
 class ConfigError(ValueError):
     """Invalid configuration; the message names the file and key."""
+
+
+class ParamsFileNotFound(ConfigError, FileNotFoundError):
+    """A detector parameter file that does not exist (``read_params_file``): a ConfigError
+    and a FileNotFoundError, as either kind of caller expects."""
 
 
 @lru_cache(maxsize=1)
@@ -78,6 +84,30 @@ def params_of(data: Any, where: str | Path) -> Any:
         raise ConfigError(f"{where}: this recording does not keep the parameters its "
                           "detectors ran with (recorded by an older rtseg)")
     return params
+
+
+def read_params_file(name_or_path: str | Path) -> dict[str, Any]:
+    """The table a detector parameter file holds (both readers of ``--params``,
+    ``rtseg.detectors.load_params`` and ``rtseg.detectors.segmentation.load_params``, take
+    it from here): TOML, or JSON for a ``.json`` file; a recording's folder or
+    ``session.json`` gives the parameters its session ran with (``params_of``); a bare
+    name a shipped file (``params_path``).  ConfigError naming the file
+    (``ParamsFileNotFound`` when there is none)."""
+    p = params_path(name_or_path)
+    if not p.exists():
+        raise ParamsFileNotFound(f"parameter file not found: {p}")
+    if p.suffix.lower() != ".json":
+        data = load_toml(p)
+    else:
+        import json
+        try:
+            data = json.loads(p.read_bytes())
+        except (OSError, ValueError) as exc:
+            raise ConfigError(f"{p}: invalid JSON: {exc}") from None
+    data = params_of(data, p)
+    if not isinstance(data, dict):
+        raise ConfigError(f"{p}: expected an object of {{method: {{name: value}}}}")
+    return data
 
 
 def load_toml(name_or_path: str | Path) -> dict[str, Any]:

@@ -33,7 +33,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from rtseg.config import ConfigError, config_dir, load_toml, params_of, params_path
+from rtseg.config import ConfigError, config_dir, load_toml, read_params_file
 from rtseg.detectors.base import BatchDetector, Cut, OnlineDetector, frames
 
 METHODS: tuple[str, ...] = ("contrast", "pca", "ppca", "gmm")
@@ -141,26 +141,6 @@ def validate(method: str, params: Mapping[str, Any], where: str = "") -> dict[st
     return out
 
 
-def _load_user_params(path: str | Path) -> dict[str, Any]:
-    """A parameter file: TOML, or JSON for a ``.json`` file (as ``rtseg segment --params``
-    reads it), or a recording (``rtseg.config.params_of``); ConfigError naming the file."""
-    path = params_path(path)
-    if not path.exists():
-        raise ConfigError(f"parameter file not found: {path}")
-    if path.suffix.lower() != ".json":
-        return load_toml(path)
-    import json
-    try:
-        data = params_of(json.loads(path.read_bytes()), path)
-    except FileNotFoundError:
-        raise ConfigError(f"parameter file not found: {path}") from None
-    except (OSError, ValueError) as exc:
-        raise ConfigError(f"{path}: invalid JSON: {exc}") from None
-    if not isinstance(data, dict):
-        raise ConfigError(f"{path}: expected an object of {{method: {{name: value}}}}")
-    return data
-
-
 def load_params(path: str | Path | None = None) -> dict[str, dict[str, Any]]:
     """Parameters of every method: ``config/detectors.toml`` (or ``path``), validated.
 
@@ -177,7 +157,7 @@ def load_params(path: str | Path | None = None) -> dict[str, dict[str, Any]]:
         if missing:
             raise ConfigError(f"{default_path}: [{m}] misses {', '.join(sorted(missing))}")
     if path is not None:
-        user = _load_user_params(path)
+        user = read_params_file(path)
         for section, table in user.items():
             if not isinstance(table, Mapping) and section not in SCHEMA:
                 raise ConfigError(f"{path}: {section} = {table!r} is not in a method table: "

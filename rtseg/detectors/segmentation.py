@@ -7,17 +7,15 @@ segment.  Segment ``k`` covers frames ``[start, end)`` (end exclusive); times ar
 
 from __future__ import annotations
 
-import json
 import logging
 import time
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
-from rtseg.config import params_of, params_path
+from rtseg.config import read_params_file
 from rtseg.detectors.base import Cut
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -146,31 +144,17 @@ def load_params(path: str | Path | None, method: str | None = None) -> dict[str,
     """
     if path is None:
         return {}
-    p = params_path(path)     # or a shipped one by name ("fast"), or a recording's
-    try:
-        raw = p.read_bytes()
-    except FileNotFoundError:
-        raise FileNotFoundError(f"parameter file not found: {p}") from None
-    try:
-        if p.suffix.lower() == ".json":
-            data = json.loads(raw)
-        else:
-            data = tomllib.loads(raw.decode("utf-8-sig"))     # a byte-order mark is skipped
-    except (json.JSONDecodeError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{p}: cannot parse parameters: {exc}") from None
-    data = params_of(data, p)
-    if not isinstance(data, dict):
-        raise ValueError(f"{p}: parameters must be a table / object")
+    data = read_params_file(path)
     if method is None:
         return data
     from rtseg.detectors import METHODS
     other = [k for k, v in data.items() if isinstance(v, dict) and k not in METHODS]
     if other:      # a misspelt method, or a live configuration given as parameters
-        raise ValueError(f"{p}: unknown section [{other[0]}] (known: {', '.join(METHODS)})")
+        raise ValueError(f"{path}: unknown section [{other[0]}] (known: {', '.join(METHODS)})")
     flat = {k: v for k, v in data.items() if not isinstance(v, dict)}
     per = data.get(method, {})
     if not isinstance(per, dict):
-        raise ValueError(f"{p}: key {method!r} must be a table of parameters")
+        raise ValueError(f"{path}: key {method!r} must be a table of parameters")
     return {**flat, **per}
 
 
