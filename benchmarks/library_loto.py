@@ -100,12 +100,7 @@ def _pop_number(argv: list[str], flag: str, kind: type, what: str,
 
 
 def _identity_options(cfg, opts: dict) -> None:
-    """``--name-after``, ``--claim-margin`` and ``--params`` (the live detectors' parameter
-    file: ``fast`` is config/fast.toml) into the session configuration ``cfg``."""
-    if "--params" in opts:
-        from rtseg.detectors import load_params
-        load_params(opts["--params"])          # a bad file: ConfigError naming it
-        cfg["detectors.params"] = opts["--params"]
+    """``--name-after`` and ``--claim-margin`` into the session configuration ``cfg``."""
     if "--name-after" in opts:
         cfg["identity.name_after_s"] = opts["--name-after"]
     if "--claim-margin" in opts:
@@ -236,7 +231,7 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
     if len(argv) != 1:
         print(__doc__, file=sys.stderr)
         return 2
-    cfg, _ = live_config()
+    cfg, _ = live_config(params=opts.get("--params"))   # fast: config/fast.toml
     cfg["identity.enabled"] = True
     _identity_options(cfg, opts)
     t0 = time.perf_counter()
@@ -310,7 +305,7 @@ def main(argv: list[str] | None = None) -> int:
     if not argv or argv[0] not in ("mocap6", "single", "spliced", "fewshot"):
         print(__doc__, file=sys.stderr)
         return 2
-    cfg, _ = live_config()
+    cfg, _ = live_config(params=opts.get("--params"))   # fast: config/fast.toml
     cfg["identity.enabled"] = True
     _identity_options(cfg, opts)
     t0 = time.perf_counter()

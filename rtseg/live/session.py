@@ -198,7 +198,9 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
         self.name = check_name(name) if name else ""
         #: called once the source is open, with the line naming the joints the features use
         self.on_start = on_start
-        detector_params(self.config)          # refuse bad detector settings before opening
+        #: every parameter of each configured detector (refused here, before the source
+        #: opens, when bad); the recording keeps them
+        self.detector_params = detector_params(self.config)
         wire_methods(self.config)
         self._source_arg = source
         self.source: Any = None
@@ -310,7 +312,7 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
             meta = {"source": url, "config": self.config.origin,
                     "methods": list(self.pipeline.detectors), "primary": self.primary,
                     "wire_methods": sorted(self.wire),
-                    "detector_params": detector_params(self.config)}
+                    "detector_params": self.detector_params}
             calibration = getattr(src, "calibration", None)     # serial:// calibration=FILE
             if hasattr(calibration, "as_dict"):
                 meta["calibration"] = calibration.as_dict()     # the frames are calibrated
