@@ -231,8 +231,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cache", type=Path, default=Path("/tmp/rtseg-lopo"),
                    help="where spliced performances are kept")
     p.add_argument("--params", metavar="FILE",
-                   help="detector parameters scored as 'shipped' and filling the grid's other keys (default config/detectors.toml; "
-                        "'fast': config/fast.toml)")
+                   help="detector parameters scored as 'shipped' and filling the grid's "
+                        "other keys (default config/detectors.toml; 'fast': config/fast.toml)")
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
     if not args.data.is_dir():

@@ -105,7 +105,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cpu-time", action="store_true",
                     help="time the runs in process CPU time instead of wall time")
     ap.add_argument("--versus", metavar="FILE",
-                    help="contrast parameter overrides timed alternately with the shipped set ('fast': config/fast.toml)")
+                    help="contrast parameter overrides timed alternately with the shipped "
+                         "set ('fast': config/fast.toml)")
     a = ap.parse_args(argv)
     global CLOCK
     if a.cpu_time:
