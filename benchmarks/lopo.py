@@ -51,6 +51,7 @@ from rtseg.detectors import load_params
 from rtseg.detectors.contrast import ContrastDetector
 from rtseg.evaluation.scoring import pooled_tally, tally
 from rtseg.labels.takes import find_labelled_takes
+from rtseg.library.sources import source_folders
 from rtseg.evaluation.online import fed_features, live_config, to_take_frames
 from rtseg.evaluation.splice import SpliceConfig, generate, read_source_index
 
@@ -98,13 +99,6 @@ class Case:
     transitions: list
 
 
-def _sources(data: Path) -> list[Path]:
-    """Single-behaviour source folders of ``data`` (or ``data`` itself when it is one)."""
-    if (data / "index.tsv").is_file():
-        return [data]
-    return sorted(p for p in data.iterdir() if p.is_dir() and (p / "index.tsv").is_file())
-
-
 def _subjects(src: Path) -> list[str]:
     """The people of a source (``index.tsv`` read as ``splice.py`` reads it: rows whose
     motion file exists)."""
@@ -137,7 +131,7 @@ def load_cases(data: Path, cache: Path, per_person: int, seeds: list[int]) -> li
         for t in find_labelled_takes(data, ("cmu",)):
             who = f"cmu:{t.name.split('_')[0]}"
             add(t.load(), f"cmu/{t.name}", who, [who], "cmu", t.transitions)
-    for src in _sources(data):
+    for src in source_folders(data):
         n = per_person * max(1, len(_subjects(src)))
         key = _cache_key(src)
         for seed in seeds:

@@ -97,6 +97,26 @@ def test_lopo_on_a_folder_of_two_people(tmp_path):
     assert _run("lopo.py", str(tmp_path / "nowhere")).returncode == 2
 
 
+def test_lopo_leaves_a_spliced_folder_of_the_data_folder_alone(tmp_path):
+    """A data folder holding ``spliced/`` (performances written by benchmarks/splice.py,
+    read by ``rtseg evaluate``) beside a source folder: lopo splices and scores the source
+    and takes ``spliced/index.tsv`` for no source (it stopped on "missing column(s) take")."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from source_folders import make_source
+    data = tmp_path / "data"
+    make_source(data / "synth", ["p1", "p2"], ["walk", "squat", "wave"], rate=30.0,
+                seconds=8.0)
+    (data / "spliced").mkdir()
+    (data / "spliced" / "index.tsv").write_text(
+        "performance\tkind\tformat\tframes\tsegment\tbehaviour\tsubject\tstart\n")
+    r = _run("lopo.py", str(data), "--per-person", "1", "--grid", "none",
+             "--cache", str(tmp_path / "cache"), "--json")
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    assert doc["people"] == ["synth:p1", "synth:p2"]
+    assert set(doc["shipped"]["sources"]) == {"synth"}
+
+
 def test_library_loto_by_person_over_a_source_folder(tmp_path):
     """benchmarks/library_loto.py --by-person DIR on a parent of one source folder laid
     out like cmu_single (three synthetic performers, tests/source_folders.py): each person

@@ -319,6 +319,18 @@ def test_evaluate_says_how_to_score_single_behaviour_takes(tmp_path, capsys):
     rc, _, err = run_cli(capsys, "evaluate", tmp_path)        # nothing of the kind
     assert rc == 2 and "no labelled takes" in err and "splice" not in err
 
+
+def test_evaluate_names_the_splicer_for_a_parent_of_any_source_folder(tmp_path, capsys):
+    """A folder laid out like ../shared/data holding hdm05/ (or bandai/) alone, no
+    cmu_single/: the error names that source folder and the splicer, as for cmu_single."""
+    src = tmp_path / "d" / "hdm05"
+    (src / "amc").mkdir(parents=True)
+    (src / "index.tsv").write_text("take\tsubject\tformat\tbehaviour\n")
+    for extra in ([], ["--online", "--identity"]):
+        rc, _, err = run_cli(capsys, "evaluate", tmp_path / "d", *extra)
+        assert rc == 2 and "no labelled takes" in err
+        assert f"{src} holds single-behaviour takes" in err and f"splice.py {src} OUT" in err
+
 # ------------------------------------------------------------------------ plot
 
 def test_plot_writes_png(synth_dir, capsys, tmp_path):

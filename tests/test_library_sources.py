@@ -115,6 +115,23 @@ def test_example_keys_and_unique_examples():
     assert [e.key for e in new] == ["k1", "", ""] and [e.key for e in rep] == ["k1", "k2"]
 
 
+def test_a_spliced_folder_beside_the_sources_is_not_a_source(tmp_path):
+    """A data folder may hold ``spliced/`` (benchmarks/splice.py's output, which
+    ``rtseg evaluate`` reads): its ``index.tsv`` lists performances, not takes, and has no
+    ``bvh/`` or ``amc/`` beside it, so it is no source folder; ``rtseg learn --from`` the
+    parent learns the source (it said "spliced/index.tsv: missing column(s) take")."""
+    from rtseg.library.sources import source_folders
+    root = tmp_path / "data"
+    make_source(root / "single", ["a1", "a2"], ["walk", "squat"], rate=30.0, seconds=4.0)
+    (root / "spliced").mkdir()
+    (root / "spliced" / "index.tsv").write_text(
+        "performance\tkind\tformat\tframes\tsegment\tbehaviour\tsubject\tstart\n")
+    assert source_folders(root) == [root / "single"]
+    p = _learn(str(tmp_path / "lib.json"), "--from", str(root))
+    assert p.returncode == 0, p.stderr
+    assert {e["person"] for e in load(tmp_path / "lib.json").examples} == {"a1", "a2"}
+
+
 def test_learn_from_a_folder_that_does_not_exist(tmp_path):
     p = _learn(str(tmp_path / "lib.json"), "--from", str(tmp_path / "nowhere"))
     assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1

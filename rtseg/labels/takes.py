@@ -100,15 +100,24 @@ def _subject(name: str) -> str:
     return name.split("_", 1)[0]
 
 
+def is_source_folder(path: str | Path) -> bool:
+    """Whether ``path`` is a folder of single-behaviour takes laid out like
+    ``../shared/data/cmu_single``, ``hdm05`` or ``bandai``: an ``index.tsv`` beside ``bvh/``
+    or ``amc/`` (the ``index.tsv`` of spliced performances has neither beside it)."""
+    p = Path(path)
+    return (p / "index.tsv").is_file() and ((p / "bvh").is_dir() or (p / "amc").is_dir())
+
+
 def no_takes_hint(data_dir: str | Path) -> str:
-    """What to say after "no labelled takes in ``data_dir``": when the folder holds
-    single-behaviour takes (``cmu_single/``, or an ``index.tsv`` beside ``bvh/`` or
-    ``amc/``), that they have no transitions to score and how to splice them into
-    performances that do; when it is a ``cmu/`` or ``tsseg4d/`` folder whose labels lie in
-    its parent's ``labels/``, to give the parent; else "" ."""
+    """What to say after "no labelled takes in ``data_dir``": when the folder, or a folder
+    in it, holds single-behaviour takes (:func:`is_source_folder`), that they have no
+    transitions to score and how to splice them into performances that do; when it is a
+    ``cmu/`` or ``tsseg4d/`` folder whose labels lie in its parent's ``labels/``, to give
+    the parent; else "" ."""
     root = Path(data_dir)
-    for src in (root / "cmu_single", root):
-        if (src / "index.tsv").is_file() and ((src / "bvh").is_dir() or (src / "amc").is_dir()):
+    subs = sorted(p for p in root.iterdir() if p.is_dir()) if root.is_dir() else []
+    for src in (root, *subs):
+        if is_source_folder(src):
             return (f"; {src} holds single-behaviour takes (no transitions to score): "
                     f"splice them into labelled performances with `python3 "
                     f"benchmarks/splice.py {src} OUT` (rtseg.evaluation.splice.generate) and "

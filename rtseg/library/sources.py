@@ -42,13 +42,16 @@ MIN_EXAMPLE_S = 2.0
 
 
 def source_folders(root: str | Path) -> list[Path]:
-    """``root`` itself when it holds ``index.tsv``, else its subfolders that do (sorted)."""
+    """``root`` itself when it holds ``index.tsv``, else its subfolders that are source
+    folders (``rtseg.labels.takes.is_source_folder``: ``index.tsv`` beside ``bvh/`` or
+    ``amc/``; not a ``spliced/`` folder of performances), sorted."""
+    from rtseg.labels.takes import is_source_folder
     root = Path(root)
     if (root / "index.tsv").is_file():
         return [root]
     if not root.is_dir():
         return []
-    return sorted(p for p in root.iterdir() if p.is_dir() and (p / "index.tsv").is_file())
+    return sorted(p for p in root.iterdir() if p.is_dir() and is_source_folder(p))
 
 
 def examples_from_source(src: str | Path, config: Any, people: Iterable[str] | None = None,
