@@ -50,13 +50,14 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.kind == "both" and not mixed_possible(args.src):
             kinds = ("same",)
-            print(f"splice: {args.src} holds one person per format: same-person "
-                  f"performances only", file=sys.stderr)
         perfs = generate(args.src, args.out, seed=args.seed, n=args.n, kinds=kinds,
                          cfg=SpliceConfig(), force=args.force)
     except (OSError, ValueError) as exc:
         print(f"splice: error: {exc}", file=sys.stderr)
         return 2
+    if args.kind == "both" and kinds == ("same",):   # said once there is something to splice
+        print(f"splice: {args.src} holds one person per format: same-person "
+              f"performances only", file=sys.stderr)
     for perf in perfs:
         sp = perf.take.meta["splice"]
         print(f"{perf.name}\t{sp['format']}\t{','.join(sp['subjects'])}\t"

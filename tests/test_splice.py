@@ -487,3 +487,22 @@ def test_a_missing_take_is_warned_about_once(tmp_path, caplog):
         for _ in range(3):
             assert [r.name for r in S.read_source_index(src)] == ["p1_001"]
     assert sum("p1_002.bvh not found" in r.getMessage() for r in caplog.records) == 1
+
+
+def test_a_source_without_a_readable_take_says_so(tmp_path):
+    """A source whose index lists only missing or unreadable files: "no take to splice",
+    nothing written, and splice.py does not call it a folder of one person (it said "holds
+    one person per format", then "no person has two behaviours")."""
+    from source_folders import make_source
+    src = make_source(tmp_path / "src", ["p1", "p2"], ["walk", "squat"], seconds=3.0)
+    files = sorted((src / "bvh").iterdir())
+    files[0].write_text("")
+    for f in files[1:]:
+        f.unlink()
+    with pytest.raises(ValueError, match="no take to splice"):
+        S.generate(src, tmp_path / "out", n=1)
+    assert not (tmp_path / "out").exists()
+    r = subprocess.run([sys.executable, str(REPO / "benchmarks" / "splice.py"), str(src),
+                        str(tmp_path / "out"), "--n", "1"], capture_output=True, text=True)
+    assert r.returncode == 2 and "no take to splice" in r.stderr
+    assert "one person" not in r.stderr and not (tmp_path / "out").exists()

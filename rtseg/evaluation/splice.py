@@ -419,17 +419,21 @@ def generate(src: str | Path, out: str | Path, *, seed: int = 0, n: int = 20,
              force: bool = False) -> list[Performance]:
     """Build ``n`` performances of each kind from ``src`` into ``out`` (``<kind>_NNN.npz``
     and ``index.tsv``).  Refuses a folder holding other ``.npz`` files unless ``force``
-    (then they are removed)."""
+    (then they are removed).  ValueError, ``out`` left alone, when no take of ``src`` can
+    be read (every listed file missing or unreadable, or no rows)."""
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     wanted = {f"{k}_{i:03d}.npz" for k in kinds for i in range(n)}
     stale = sorted(p for p in out.glob("*.npz") if p.name not in wanted)
     if stale and not force:
         raise ValueError(f"{out} holds other .npz files ({stale[0].name}, ...); "
                          "use another folder or --force to remove them")
+    rows = load_sources(read_source_index(src))
+    if not rows:
+        raise ValueError(f"{src}: no take to splice (index.tsv lists none whose file exists "
+                         "and can be read)")
+    out.mkdir(parents=True, exist_ok=True)
     for p in stale:
         p.unlink()
-    rows = load_sources(read_source_index(src))
     groups = build_groups(rows, cfg)
     gone = sorted({r.subject for r in rows} - {k[0] for g in groups for k in g.pools})
     if gone:
