@@ -132,6 +132,28 @@ def test_a_spliced_folder_beside_the_sources_is_not_a_source(tmp_path):
     assert {e["person"] for e in load(tmp_path / "lib.json").examples} == {"a1", "a2"}
 
 
+def test_examples_of_spliced_performances_are_their_segments_people(tmp_path):
+    """``rtseg learn --from DATA`` also learns the spliced performances in ``DATA/spliced/``:
+    each example's person is the subject of its segment (it was the file name's prefix,
+    "mixed" or "same"), so --person / --exclude-person keep a person's material out of the
+    library there too."""
+    from rtseg.evaluation.splice import generate
+    root = tmp_path / "data"
+    src = make_source(root / "single", ["p1", "p2"], BEHAVIOURS, rate=30.0, seconds=8.0)
+    generate(src, root / "spliced", seed=0, n=1, kinds=("mixed",))
+    lib = tmp_path / "lib.json"
+    p = _learn(str(lib), "--from", str(root))
+    assert p.returncode == 0, p.stderr
+    spliced = [e for e in load(lib).examples if e["source"].startswith("mixed_000")]
+    assert spliced and {e["person"] for e in spliced} == {"p1", "p2"}
+    p = _learn(str(lib), "--new", "--from", str(root), "--exclude-person", "p2")
+    assert p.returncode == 0, p.stderr
+    assert {e["person"] for e in load(lib).examples} == {"p1"}
+    p = _learn(str(lib), "--new", "--from", str(root), "--person", "p2")
+    assert p.returncode == 0, p.stderr
+    assert {e["person"] for e in load(lib).examples} == {"p2"}
+
+
 def test_learn_from_a_folder_that_does_not_exist(tmp_path):
     p = _learn(str(tmp_path / "lib.json"), "--from", str(tmp_path / "nowhere"))
     assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1

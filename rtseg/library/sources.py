@@ -162,8 +162,9 @@ def examples_from_dir(data_dir: str | Path, config: Any,
             return out
         raise
     for lt in labelled:
+        who = lt.name.split("_")[0]           # SS of SS_TT; a spliced segment: its subject
         if (keep_t is not None and lt.name not in keep_t) or \
-                (keep_p is not None and lt.name.split("_")[0] not in keep_p):
+                (keep_p is not None and lt.group != "spliced" and who not in keep_p):
             continue
         take = lt.load()
         rows_of = _rows_or_note(take, lt.name, config, notes)
@@ -177,6 +178,21 @@ def examples_from_dir(data_dir: str | Path, config: Any,
             if lab in ("?", "") or lab.startswith("s") and lab[1:].isdigit():
                 continue
             name = MOCAP6_NAMES.get(lab, lab) if mocap6 else lab
-            out.append(Example(name, lt.name, lt.name.split("_")[0], X, index, (a, b),
+            person = _segment_subject(take, a, b) or who
+            if keep_p is not None and person not in keep_p:
+                continue
+            out.append(Example(name, lt.name, person, X, index, (a, b),
                                profile, float(take.frame_rate), motion_key(take, a, b), P))
     return out
+
+
+def _segment_subject(take: Any, a: int, b: int) -> str | None:
+    """Who performs frames ``[a, b)`` of a spliced performance (``benchmarks/splice.py``):
+    the ``subject`` of its ``segment_sources`` entry holding the run's middle frame (a
+    performance's name, ``same_000``, names no one); None for any other take."""
+    mid = (a + b) // 2
+    for seg in take.meta.get("segment_sources") or []:
+        if isinstance(seg, dict) and seg.get("subject") and \
+                int(seg.get("start", 0)) <= mid < int(seg.get("stop", -1)):
+            return str(seg["subject"])
+    return None
