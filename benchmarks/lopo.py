@@ -19,7 +19,10 @@ path and contents, so another folder of the same name is spliced afresh; a sourc
 person gives same-person ones only).  Held-out units: each person with same-person
 performances (the cmu takes of one subject are one person), and each mixed performance
 holding someone who has none (a person with one behaviour per format); a unit's training
-set shares nobody with it.  Mixed performances of people who have their own are left out.
+set shares nobody with it, by subject name in any source (``cmu/`` and ``cmu_single/``
+both number CMU's subjects, so ``86`` in one is ``86`` in the other; two sources' people
+of one name are kept apart from each other's training, never let into it).  Mixed
+performances of people who have their own are left out.
 
 Every performance goes once through the live pipeline (``rtseg.evaluation.online.fed_features``:
 the features ``rtseg live`` feeds its detectors); every parameter set of the grid then runs
@@ -174,6 +177,18 @@ def run(case: Case, params: dict) -> tuple:
     return tally(to_take_frames(cuts, case.index), case.transitions, case.frame_rate, TOL_S)
 
 
+def subject(person: str) -> str:
+    """A person's subject name without its source (``cmu_single:86`` -> ``86``)."""
+    return person.split(":", 1)[-1]
+
+
+def training_cases(cases: list[Case], unit: str) -> list[Case]:
+    """The performances a set is chosen on for the held-out ``unit``: those sharing no
+    subject name, in any source, with anyone in the unit's performances."""
+    who = {subject(p) for c in cases if c.person == unit for p in c.persons}
+    return [c for c in cases if not any(subject(p) in who for p in c.persons)]
+
+
 def _best_set(results: list[dict[str, tuple]], names: list[str], max_median: float) -> int:
     """Index of the set with the best mean F1 over the performances ``names`` among those
     whose median delay there is within ``max_median`` seconds (any set when none is)."""
@@ -263,8 +278,7 @@ def main(argv: list[str] | None = None) -> int:
         choices = {}
         alone = []
         for person in units:
-            who = set().union(*(c.persons for c in cases if c.person == person))
-            train = [c for c in cases if not (c.persons & who)]
+            train = training_cases(cases, person)
             if not train:          # nobody else to choose on: the shipped defaults
                 alone.append(person)
                 choices[person] = "shipped (no other person to choose on)"

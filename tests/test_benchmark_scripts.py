@@ -335,3 +335,32 @@ def test_speed_versus_a_missing_parameter_file_fails_at_once(tmp_path):
     r = _run("speed.py", "--versus", "nosuch", "--data", str(tmp_path))
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "--versus: parameter file not found: nosuch" in r.stderr
+
+
+def test_lopo_training_shares_no_subject_with_the_held_out_unit_in_any_source():
+    """benchmarks/lopo.py: the sets for a held-out unit are chosen on performances that share
+    no subject name with it in any source - CMU subject 86 in ``cmu/`` and in ``cmu_single/``
+    is one person - so nobody is scored on material the set was chosen on."""
+    import numpy as np
+    sys.path.insert(0, str(BENCH))
+    try:
+        import lopo
+    finally:
+        sys.path.remove(str(BENCH))
+
+    def case(name, unit, persons, source):
+        return lopo.Case(name, unit, frozenset(persons), source, 120.0, np.zeros((1, 1)),
+                         np.zeros(1, int), [])
+
+    cases = [case("cmu/86_01", "cmu:86", ["cmu:86"], "cmu"),
+             case("cmu/13_29", "cmu:13", ["cmu:13"], "cmu"),
+             case("cmu_single/s0/same_000", "cmu_single:86", ["cmu_single:86"], "cmu_single"),
+             case("cmu_single/s0/mixed_000", "cmu_single/s0/mixed_000",
+                  ["cmu_single:02", "cmu_single:86"], "cmu_single"),
+             case("hdm05/s0/same_000", "hdm05:bd", ["hdm05:bd"], "hdm05")]
+    names = lambda unit: sorted(c.name for c in lopo.training_cases(cases, unit))   # noqa: E731
+    assert names("cmu:86") == ["cmu/13_29", "hdm05/s0/same_000"]
+    assert names("cmu_single:86") == ["cmu/13_29", "hdm05/s0/same_000"]
+    assert names("cmu_single/s0/mixed_000") == ["cmu/13_29", "hdm05/s0/same_000"]
+    assert names("hdm05:bd") == ["cmu/13_29", "cmu/86_01", "cmu_single/s0/mixed_000",
+                                 "cmu_single/s0/same_000"]
