@@ -23,7 +23,9 @@ library's calibrated threshold times F (rejection rules to compare).  ``--truth-
 the segments are the labelled ones - a cut at every labelled change, delivered at that
 frame, instead of the live detector's cuts - so the naming is measured apart from where
 the detector cuts (names decided ``decide_after_s``, or ``name_after_s``, after the
-change).
+change).  A source in which nobody can be scored (one person, or nobody with two
+behaviours) is one line on stderr naming each person's reason; exit 1 when no source
+scored anyone (the JSON is still printed).
 
 mocap6: the three mocap6 takes (13_29, 13_31, 14_14; exercise names); for each take a
 library learned from the other two names its live segments (``contrast`` cuts, decided
@@ -244,6 +246,10 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
     if not segments:
         for d in doc["sources"].values():
             d.pop("segments", None)
+    for name, d in doc["sources"].items():     # a source nobody in is scored: say why
+        if not d["people"]:
+            why = "; ".join(f"{p}: {r}" for p, r in sorted(d["skipped"].items())) or "nobody in it"
+            print(f"library_loto.py --by-person: {name}: nobody scored ({why})", file=sys.stderr)
     from rtseg.library.behaviours import DEFAULT_STEP_S
     print(json.dumps({"protocol": "leave-one-person-out over source folders",
                       "seconds": round(time.perf_counter() - t0, 1),
@@ -252,7 +258,7 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
                       "claim_margin": cfg["identity.claim_margin"], "performances": kw["n"],
                       "seed": kw["seed"], "hidden_names": hide, "cuts": kw["cuts"],
                       "threshold_scale": kw.get("threshold_scale", 1.0), **doc}, indent=1, default=str))
-    return 0
+    return 0 if any(d["people"] for d in doc["sources"].values()) else 1
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -364,3 +364,19 @@ def test_lopo_training_shares_no_subject_with_the_held_out_unit_in_any_source():
     assert names("cmu_single/s0/mixed_000") == ["cmu/13_29", "hdm05/s0/same_000"]
     assert names("hdm05:bd") == ["cmu/13_29", "cmu/86_01", "cmu_single/s0/mixed_000",
                                  "cmu_single/s0/same_000"]
+
+
+def test_library_loto_by_person_says_when_nobody_can_be_scored(tmp_path):
+    """library_loto.py --by-person on a source of one person (a one-actor folder laid out
+    like bandai): nobody has a library of others, so one stderr line names the source and
+    the reason, and the exit is 1 (the JSON, all figures null, still printed)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from source_folders import make_source
+    make_source(tmp_path / "data" / "solo", ["p1"], ["walk", "squat"], rate=30.0, seconds=6.0)
+    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1", "--no-hide")
+    assert r.returncode == 1, r.stderr[-2000:]
+    line = [x for x in r.stderr.splitlines() if "nobody scored" in x]
+    assert line == ["library_loto.py --by-person: solo: nobody scored "
+                    "(p1: no other person in this source)"]
+    doc = json.loads(r.stdout)
+    assert doc["sources"]["solo"]["people"] == [] and doc["pooled"]["known"]["segments"] == 0
