@@ -407,6 +407,24 @@ def test_index_rows_of_blanks_are_skipped_and_errors_name_their_line(tmp_path):
         S.read_source_index(src)
 
 
+def test_an_index_row_repeating_a_take_is_logged_and_skipped(tmp_path, caplog):
+    """A take listed twice in index.tsv (a copy-paste, or the same file under two
+    behaviours) is read once: the later row is skipped with a warning naming both lines,
+    so the splicer never uses one take's motion twice."""
+    import logging
+    from source_folders import make_source
+    src = make_source(tmp_path / "src", ["p1"], ["walk", "squat"], seconds=3.0)
+    index = src / "index.tsv"
+    lines = index.read_text().splitlines()
+    twice = lines[1].replace("walk", "run")
+    index.write_text("\n".join(lines + [twice]) + "\n")
+    with caplog.at_level(logging.WARNING):
+        rows = S.read_source_index(src)
+    assert [(r.name, r.behaviour) for r in rows] == [("p1_001", "walk"), ("p1_002", "squat")]
+    said = [r.getMessage() for r in caplog.records if "already line" in r.getMessage()]
+    assert len(said) == 1 and "index.tsv:4: p1_001.bvh is already line 2's take" in said[0]
+
+
 def test_an_amc_take_is_read_with_its_subject_skeleton(tmp_path, data_dir):
     """amc/<take>.amc goes with amc/<subject>.asf (docs/splice.md), whatever the take is
     called: two people's skeletons beside takes named otherwise."""

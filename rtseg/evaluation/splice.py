@@ -88,12 +88,14 @@ class SourceTake:
         return self.trim[1] - self.trim[0]
 
 
-#: (missing file, index line) already warned about in this process
+#: (file, index line) already warned about (missing, or named twice) in this process
 _MISSING_SAID: set[tuple[str, int]] = set()
 
 
 def read_source_index(src: str | Path) -> list[SourceTake]:
     """Rows of ``SRC/index.tsv`` whose motion file exists (missing ones: logged, skipped).
+    A row naming a take and format an earlier row named is logged and skipped, so no
+    take's motion is used twice.
 
     Raises ValueError naming the line for a row without take/subject/format/behaviour or
     with a format other than bvh/amc; rows of blanks only are skipped.
@@ -103,6 +105,7 @@ def read_source_index(src: str | Path) -> list[SourceTake]:
     if not index.is_file():
         raise FileNotFoundError(f"{index} not found (a source folder needs index.tsv, bvh/, amc/)")
     out: list[SourceTake] = []
+    first: dict[tuple[str, str], int] = {}     # (format, take) -> the line that named it
     with open(index, encoding="utf-8-sig", newline="") as fh:
         rows = csv.DictReader(fh, delimiter="\t")
         need = ("take", "subject", "format", "behaviour")
@@ -121,6 +124,13 @@ def read_source_index(src: str | Path) -> list[SourceTake]:
             if fmt not in FORMAT_SUFFIX:
                 raise ValueError(f"{index}:{lineno}: format {fmt!r} is not bvh or amc")
             path = src / fmt / f"{vals['take']}{FORMAT_SUFFIX[fmt]}"
+            seen = first.setdefault((fmt, vals["take"]), lineno)
+            if seen != lineno:
+                if (str(path), lineno) not in _MISSING_SAID:
+                    _MISSING_SAID.add((str(path), lineno))
+                    log.warning("%s:%d: %s is already line %d's take; row skipped", index,
+                                lineno, path.name, seen)
+                continue
             if not path.is_file():
                 if (str(path), lineno) not in _MISSING_SAID:   # once, however often read
                     _MISSING_SAID.add((str(path), lineno))
