@@ -75,11 +75,12 @@ GRIDS = {
         "early_after_s": [0.0, 1.0, 1.25],
     },
     "fast": {                       # the early look at a delay budget (--max-median 2.0)
-        "early_after_s": [1.5, 1.75],
-        "early_threshold": [2.0, 4.0],
+        "early_after_s": [1.5],
+        "early_threshold": [4.0, 5.0, 6.0],
         "early_hold_s": [0.25],
-        "early_back_s": [0.25, 0.5],
-        "early_backing": [1.25, 2.0, 3.0],
+        "early_back_s": [0.5, 0.75, 1.0],
+        "early_backing": [1.25, 1.5, 2.0],
+        "early_parts": [1, 2],
     },
     "short": {                      # shorter windows and gaps for 2-5 s behaviours
         "threshold": [1.75, 2.0],

@@ -330,6 +330,60 @@ def test_shipped_fast_parameters_cut_sooner(perf):
                                ContrastDetector.from_params(load_params()["contrast"], FR).run(X))
 
 
+def test_early_parts_score_only_a_window_new_throughout(perf):
+    """``early_parts = 2``: the early look is the smaller error of its window's two halves.
+    While both detectors are in one state (before the first cut is sent) it is never above
+    the whole window's, and 1 s before the first change - the change in the window's
+    second half - it stays near the no-change level where the whole window scores far
+    above the early threshold."""
+    from rtseg.detectors import load_params
+    res, X = perf
+    p = {**load_params()["contrast"], "early_after_s": 1.5, "early_threshold": 5.0}
+    looks = {}
+    for parts in (1, 2):
+        det = ContrastDetector.from_params({**p, "early_parts": parts}, FR, keep_trace=True)
+        first_sent = det.run(X)[0].detected_at
+        looks[parts] = {pos: v for pos, v, now in det.trace_early if now < first_sent}
+    assert looks[1].keys() == looks[2].keys() and len(looks[1]) > 10
+    assert all(looks[2][q] <= looks[1][q] * (1 + 1e-9) for q in looks[1])
+    m = res.transitions[0].mid
+    before = min(looks[1], key=lambda q: abs(q - (m - FR)))
+    assert looks[1][before] > p["early_threshold"] and looks[2][before] < 1.5, \
+        (looks[1][before], looks[2][before])
+
+
+def test_early_cuts_are_scored_on_the_full_looks_scale(perf):
+    """A cut the early look sends carries the full-look value that backed it as its score
+    (a value of the full look's profile within ``early_back_s`` before it), not the early
+    look's one-sided ratio, which runs to hundreds: the relative floor, which keeps the
+    scores of the cuts sent, would otherwise lie above every later full-look maximum and
+    refuse the changes after an early cut."""
+    from rtseg.detectors import load_params
+    res, X = perf
+    p = {**load_params()["contrast"], "early_after_s": 1.5, "early_threshold": 5.0,
+         "early_back_s": 1.0, "early_backing": 1.5, "early_parts": 2, "gate_threshold": 0}
+    det = ContrastDetector.from_params(p, FR, keep_trace=True)
+    looks, cut = [], det._cut
+    det._cut = lambda sent, at: (looks.append(sent.early), cut(sent, at))[1]
+    cuts = det.run(X)
+    full = {pos: v for pos, v, _ in det.trace}
+    early = {pos: v for pos, v, _ in det.trace_early}
+    assert any(looks), "the early look sent no cut on the synthetic changes"
+    assert len(cuts) == len(res.transitions)
+    for c in cuts:
+        assert c.score in full.values() and c.score < max(early.values()) / 5
+        assert c.confidence == pytest.approx(1 - det.threshold / c.score)
+    assert list(det.relative._scores) == [c.score for c in cuts]
+
+
+@pytest.mark.parametrize("parts", [0, 13])
+def test_early_parts_must_fit_the_early_window(parts):
+    """At least one part, and no more parts than the early window has steps (12 at 1.5 s
+    in steps of 0.125 s)."""
+    with pytest.raises(ValueError, match="early_parts"):
+        ContrastDetector(step=15, early_after=180, early_parts=parts)
+
+
 def test_early_look_off_is_the_full_look_alone():
     from rtseg.detectors.early import EarlyCuts
     ec = EarlyCuts(2.0, hold=20, min_gap=50, drop=0.5, early_threshold=None, early_hold=10,
@@ -387,13 +441,13 @@ def test_two_cuts_confirmed_on_one_frame_go_out_one_frame_apart(perf):
         def update_full(self, position, value, now):
             if self.full_at is None:
                 self.full_at = now
-                return EarlyCut(Peak(position, 9.0, now), False)
+                return EarlyCut(Peak(position, 9.0, now), False, 9.0)
             return None
 
         def update_early(self, position, value, now):
             if self.full_at is not None and now >= self.full_at and not self.early_sent:
                 self.early_sent = True
-                return EarlyCut(Peak(position, 9.0, now), True)
+                return EarlyCut(Peak(position, 50.0, now), True, 3.0)   # backed by 3.0
             return None
 
     det.peaks = BothAtOnce()
@@ -405,7 +459,8 @@ def test_two_cuts_confirmed_on_one_frame_go_out_one_frame_apart(perf):
     # the full look's cut first (an earlier position), then the early look's
     assert c1.frame < c2.frame
     assert c1.confidence == pytest.approx(1 - det.threshold / 9.0)
-    assert c2.confidence == pytest.approx(1 - det.peaks.early.threshold / 9.0)
+    # the early look's cut on the full look's scale: the full-look value that backed it
+    assert c2.score == 3.0 and c2.confidence == pytest.approx(1 - det.threshold / 3.0)
 
 
 # ---------------------------------------------------------------- gate drops

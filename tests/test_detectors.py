@@ -333,6 +333,8 @@ def test_load_params_user_file_overrides(tmp_path):
     ("[contrast]\ngate_threshold = -1.0\n", "gate_threshold"),
     ("[contrast]\ngate_threshold = \"on\"\n", "gate_threshold"),
     ("[contrast]\nearly_backing = inf\n", "early_backing"),      # never sends: refused
+    ("[contrast]\nearly_parts = 0\n", "early_parts"),
+    ("[contrast]\nearly_parts = 1.5\n", "early_parts"),
     ("[contrast]\nthreshold = inf\n", "threshold"),
     ("[contrast]\nearly_back_s = -0.5\n", "early_back_s"),
 ])

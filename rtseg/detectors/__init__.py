@@ -65,6 +65,7 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "early_hold_s": ((int, float), _nonneg),
         "early_back_s": ((int, float), _nonneg),
         "early_backing": ((int, float), _pos),
+        "early_parts": ((int,), _posint),
         "gate_threshold": ((int, float), _nonneg),
         "relative_floor": ((int, float), (lambda v: 0 <= v < 1, "in [0, 1)")),
         "residual_floor": ((int, float), (lambda v: 0 <= v < 1, "in [0, 1)")),

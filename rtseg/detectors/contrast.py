@@ -26,7 +26,9 @@ the bounded before windows (``bound_before``) keep A0 and A inside the behaviour
 last cut sent, and the early look (``early_after`` > 0, ``rtseg.detectors.early``; off by
 default) also scores each position one-sided once ``early_after`` frames have arrived,
 ``early(c) = Epca(B'|A) / Epca(A|A0)``, and sends its maxima when the full contrast backs
-them (a full-look value at least ``early_backing`` x ``threshold`` at most ``early_back``
+them.  With ``early_parts`` > 1, B' is cut into that many equal parts and the smallest
+part's error counts: the whole of B' must be new, so a change late in B' does not score
+the position before it (a maximum there would cut up to ``early_after`` too soon) (a full-look value at least ``early_backing`` x ``threshold`` at most ``early_back``
 before the maximum; ``config/fast.toml`` turns it on for cuts sooner).  A cut the gate or the floor drops is forgotten (it keeps no later maximum away).
 
 Work per frame: each ``step``-frame block's statistics are summed once (one BLAS call),
@@ -39,9 +41,10 @@ prepares the gate's decision, so the frame that sends the cut finds that work do
 never changes a cut, and offline nothing calls it.  Cost: ``benchmarks/speed.py``.
 
 Frames are numbered from the detector's creation.  ``Cut.frame`` = c (placed),
-``detected_at`` = the frame whose arrival confirmed it, ``score`` = the contrast at c,
-``confidence`` = 1 - threshold / contrast (0 at the threshold, -> 1 far above it; the
-early look's own when it sent the cut).  When both looks send a cut on the same frame (two
+``detected_at`` = the frame whose arrival confirmed it, ``score`` = the contrast at c (for
+a cut the early look sent, the highest full-look value that backed it: one scale for
+every cut, which the relative floor compares), ``confidence`` = 1 - threshold / score (0
+at the threshold, -> 1 far above it).  When both looks send a cut on the same frame (two
 changes at least ``min_gap`` apart), the second goes out with the next frame; a restart
 drops it.
 """
@@ -90,7 +93,7 @@ class ContrastDetector(OnlineDetector):
                  reference_dims: int = 48, early_after: int = 0,
                  early_threshold: float = 1.5, early_hold: int = 60,
                  early_back: int | None = None, early_backing: float = 1.0,
-                 gate_threshold: float = 0.0, gate_decide: int = 180, gate_skip: int = 60,
+                 early_parts: int = 1, gate_threshold: float = 0.0, gate_decide: int = 180, gate_skip: int = 60,
                  gate_window: int = 360, gate_min_after: int = 120,
                  relative_floor: float = 0.0, residual_floor: float = 0.0,
                  bound_before: bool = False,
@@ -120,6 +123,11 @@ class ContrastDetector(OnlineDetector):
             raise ValueError(f"early_after must be 0 (off) or at least two steps and shorter "
                              f"than after ({after} frames), got {early_after}")
         self.we = int(round(early_after / step)) if early_after else 0   # early window, blocks
+        if not 1 <= early_parts <= max(self.we, 1):
+            raise ValueError(f"early_parts must be >= 1 and at most the early window's steps "
+                             f"({max(self.we, 1)}), got {early_parts}")
+        #: the parts of B' the early look scores, as block offsets from its position
+        self._parts = [(self.we * k) // int(early_parts) for k in range(int(early_parts) + 1)]
         self.peaks = EarlyCuts(threshold, hold=int(hold), min_gap=int(min_gap), drop=drop,
                                early_threshold=float(early_threshold) if self.we else None,
                                early_hold=int(early_hold), early_after=self.we * self.step,
@@ -184,6 +192,7 @@ class ContrastDetector(OnlineDetector):
                    early_back=(frames(p["early_back_s"], frame_rate)
                                if p.get("early_back_s") else None),
                    early_backing=p.get("early_backing", 1.0),
+                   early_parts=p.get("early_parts", 1),
                    gate_threshold=p["gate_threshold"],
                    gate_decide=frames(GATE_DECIDE_S, frame_rate),
                    gate_skip=frames(GATE_SKIP_S, frame_rate),
@@ -395,13 +404,13 @@ class ContrastDetector(OnlineDetector):
             self._out.append(sent)
 
     def _cut(self, sent: EarlyCut, at: int) -> Cut:
-        """The Cut for a peak sent on frame ``at`` (confidence: see the module docstring)."""
-        peak = sent.peak
-        thr = self.peaks.early.threshold if sent.early else self.threshold
-        conf = 1.0 - thr / peak.value if peak.value > 0 else 0.0
-        return Cut(frame=peak.position, method=self.name,
+        """The Cut for a peak sent on frame ``at`` (score and confidence: see the module
+        docstring)."""
+        v = sent.strength
+        conf = 1.0 - self.threshold / v if v > 0 else 0.0
+        return Cut(frame=sent.peak.position, method=self.name,
                    confidence=float(min(max(conf, 0.0), 1.0)),
-                   detected_at=at, score=float(peak.value))
+                   detected_at=at, score=float(v))
 
     def _placed(self, cut: Cut) -> Cut:
         """``cut`` moved to the best two-Gaussian split of the frames within
@@ -486,10 +495,13 @@ class ContrastDetector(OnlineDetector):
 
     def _early(self, c: int) -> float:
         """The early look at block position c (module docstring): B' = [c, c + we) under
-        A's PCA model, over A under A0's (both already fitted)."""
+        A's PCA model - the smallest error of its ``early_parts`` parts - over A under
+        A0's (both already fitted)."""
         a0, a = self._before(c)
         f = self.residual.value
-        e_b = pca_error(self._stats(c, c + self.we), a, f)
+        o = self._parts
+        e_b = min(pca_error(self._stats(c + o[k], c + o[k + 1]), a, f)
+                  for k in range(len(o) - 1))
         return self._stated(e_b / max(pca_error(a.stats, a0, f), 1e-300), a)
 
 

@@ -31,6 +31,7 @@ known); nothing here depends on the frame rate.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 
@@ -39,9 +40,14 @@ from rtseg.detectors.peaks import CausalPeaks, Peak
 
 @dataclass(frozen=True)
 class EarlyCut:
-    """A cut to send: the peak (position, value, confirming frame) and which look found it."""
+    """A cut to send: the peak (position, value, confirming frame), which look found it,
+    and its strength on the full look's scale: the full look's own maximum, or for an
+    early maximum the highest full-look value that backed it (the early look's one-sided
+    ratio runs to hundreds where the full look's reaches tens, so only this value compares
+    across cuts)."""
     peak: Peak
     early: bool
+    strength: float
 
 
 class EarlyCuts:
@@ -98,7 +104,7 @@ class EarlyCuts:
             while recent and recent[0][0] < position - self._keep:
                 recent.popleft()
         peak = self.full.update(position, value, now)
-        return self._send(peak, early=False) if peak is not None else None
+        return self._send(peak, False, peak.value) if peak is not None else None
 
     def update_early(self, position: int, value: float, now: int) -> EarlyCut | None:
         """The early look's value at ``position``, known since frame ``now``."""
@@ -107,10 +113,11 @@ class EarlyCuts:
         peak = self.early.update(position, value, now)
         if peak is None:
             return None
-        since, level = peak.position - self.back, self.backing * self.threshold
-        if not any(v >= level for p, v in self._full_recent if p >= since):
+        since = peak.position - self.back
+        backing = max((v for p, v in self._full_recent if p >= since), default=-math.inf)
+        if not backing >= self.backing * self.threshold:
             return None
-        return self._send(peak, early=True)
+        return self._send(peak, True, backing)
 
     def forget(self, position: int) -> None:
         """A cut sent at ``position`` was withdrawn before it went out (the same-behaviour
@@ -122,7 +129,7 @@ class EarlyCuts:
             if look is not None:
                 look.forget(position)
 
-    def _send(self, peak: Peak, early: bool) -> EarlyCut | None:
+    def _send(self, peak: Peak, early: bool, strength: float) -> EarlyCut | None:
         sent = self._sent
         if any(abs(peak.position - p) < self.min_gap for p in sent):
             return None
@@ -131,4 +138,4 @@ class EarlyCuts:
         # new peak lies near the newest ones (within the longest delay): 4 are enough
         while len(sent) > 4:
             sent.popleft()
-        return EarlyCut(peak, early)
+        return EarlyCut(peak, early, float(strength))
