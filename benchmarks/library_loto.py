@@ -8,7 +8,7 @@
     python3 benchmarks/library_loto.py fewshot [DATA_DIR] [--seconds S]  # short examples
     python3 benchmarks/library_loto.py --by-person DIR [--n N] [--seed K] [--no-hide] [--truth-cuts]
     (options: --no-reject, --metric model|descriptor, --step S, --name-after S, --claim-margin M,
-    --params FILE: the live detectors' parameters, e.g. full_look)
+    --params FILE: the live detectors' parameters, e.g. fast)
 
 --by-person DIR: DIR a source folder laid out like ../shared/data/cmu_single, hdm05 or
 bandai, or their parent (../shared/data): per source, leave-one-person-out - the library
@@ -233,7 +233,7 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
     if len(argv) != 1:
         print(__doc__, file=sys.stderr)
         return 2
-    cfg, _ = live_config(params=opts.get("--params"))   # full_look: config/full_look.toml
+    cfg, _ = live_config(params=opts.get("--params"))   # fast: config/fast.toml
     cfg["identity.enabled"] = True
     _identity_options(cfg, opts)
     t0 = time.perf_counter()
@@ -283,7 +283,7 @@ def main(argv: list[str] | None = None) -> int:
     if "--params" in argv:
         k = argv.index("--params")
         if k + 1 >= len(argv):
-            print("--params: a detector parameter file (or a shipped name such as 'full_look')", file=sys.stderr)
+            print("--params: a detector parameter file (or 'fast')", file=sys.stderr)
             return 2
         opts["--params"] = argv[k + 1]
         del argv[k:k + 2]
@@ -311,7 +311,7 @@ def main(argv: list[str] | None = None) -> int:
     if not argv or argv[0] not in ("mocap6", "single", "spliced", "fewshot"):
         print(__doc__, file=sys.stderr)
         return 2
-    cfg, _ = live_config(params=opts.get("--params"))   # full_look: config/full_look.toml
+    cfg, _ = live_config(params=opts.get("--params"))   # fast: config/fast.toml
     cfg["identity.enabled"] = True
     _identity_options(cfg, opts)
     t0 = time.perf_counter()

@@ -5,8 +5,8 @@ data folder, and the parameter choice made that way.
     python3 benchmarks/lopo.py ../shared/data                 # shipped defaults + LOPO grid
     python3 benchmarks/lopo.py ../shared/data --grid delay    # accuracy against delay
     python3 benchmarks/lopo.py ../shared/data --grid none     # shipped defaults only
-    python3 benchmarks/lopo.py ../shared/data --grid early --max-median 2.0  # the early look
-    python3 benchmarks/lopo.py ../shared/data --grid none --params full_look # config/full_look.toml
+    python3 benchmarks/lopo.py ../shared/data --grid fast --max-median 2.0   # sooner cuts
+    python3 benchmarks/lopo.py ../shared/data --grid none --params fast      # config/fast.toml
     python3 benchmarks/lopo.py DIR --per-person 3 --seeds 0 1 --json
 
 DIR is laid out like ``../shared/data``: ``cmu/`` (full labelled performances, one person
@@ -72,9 +72,9 @@ GRIDS = {
         "place_radius_s": [0.0, 1.0],
     },
     "delay": {                      # the early look's after window (0 = full look only)
-        "early_after_s": [0.0, 1.25, 1.5, 1.75],
+        "early_after_s": [0.0, 1.0, 1.25],
     },
-    "early": {                      # the early look at a delay budget (--max-median 2.0)
+    "fast": {                       # the early look at a delay budget (--max-median 2.0)
         "early_after_s": [1.5],
         "early_threshold": [4.0, 5.0, 6.0],
         "early_hold_s": [0.25],
@@ -242,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="where spliced performances are kept")
     p.add_argument("--params", metavar="FILE",
                    help="detector parameters scored as 'shipped' and filling the grid's "
-                        "other keys (default config/detectors.toml; 'full_look': config/full_look.toml)")
+                        "other keys (default config/detectors.toml; 'fast': config/fast.toml)")
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
     if not args.data.is_dir():

@@ -106,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="time the runs in process CPU time instead of wall time")
     ap.add_argument("--versus", metavar="FILE",
                     help="contrast parameter overrides timed alternately with the shipped "
-                         "set ('full_look': config/full_look.toml)")
+                         "set ('fast': config/fast.toml)")
     a = ap.parse_args(argv)
     global CLOCK
     if a.cpu_time:

@@ -47,7 +47,7 @@ def params_file(text: str) -> str:
     (an empty name would read the current folder, or be taken for no file at all)."""
     if not text.strip():
         raise argparse.ArgumentTypeError("expected a parameter file (TOML or JSON) or a "
-                                         "shipped one's name such as 'full_look', got ''")
+                                         "shipped one's name such as 'fast', got ''")
     return text
 
 

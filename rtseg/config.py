@@ -52,7 +52,7 @@ def config_dir() -> Path:
 def find_config(name_or_path: str | Path, what: str = "configuration file") -> Path:
     """The file ``name_or_path`` names: a path, or for a bare name (a string without suffix
     or folder that is no file here: a folder of that name, e.g. a recording, does not
-    count) the shipped ``<config_dir>/<name>.toml`` (``"full_look"``).  ConfigError when a
+    count) the shipped ``<config_dir>/<name>.toml`` (``"fast"``).  ConfigError when a
     bare name is neither."""
     p = Path(name_or_path)
     if isinstance(name_or_path, str) and not p.suffix and len(p.parts) == 1 and not p.is_file():

@@ -25,7 +25,7 @@ from rtseg.core.profiles import resolve_joints, suit_profile
 from rtseg.live.config import from_dict
 from rtseg.simulators.axis_sender import AxisSender
 from rtseg.simulators.synth.motion import synthesize
-from vendor_helpers import (FULL_LOOK, Counter, assert_refused, assert_same_cuts, free_port,
+from vendor_helpers import (Counter, assert_refused, assert_same_cuts, free_port,
                             overwrite_bytes, random_bytes, read_all, run_live, send_and_read,
                             serial_reference, simulate_into)
 
@@ -819,9 +819,7 @@ def test_real_take_cuts_match_the_serial_suit(data_dir):
     # space=global (world orientations, no calibration under calibration.mode = auto), and
     # the default local space with calibration.mode = "none" (Axis's rotations are already
     # relative to its T-pose)
-    # (both with the full look, as the reference: vendor_helpers.FULL_LOOK)
-    for space, cfg in (("global", from_dict(FULL_LOOK)),
-                       ("local", from_dict({"calibration": {"mode": "none"}, **FULL_LOOK}))):
+    for space, cfg in (("global", None), ("local", from_dict({"calibration": {"mode": "none"}}))):
         got = replay_frames(runs[space], list(A.JOINTS), list(A.PARENTS), space, rate, cfg)
         assert_same_cuts(got, ref, rate, space)
 

@@ -35,7 +35,7 @@ def test_demo_names_recurring_behaviours():
     """The demo turns identity on: each cut line is followed by its segment's behaviour id,
     and a behaviour that recurs (walk, punch, walk, punch) gets its earlier id back.
 
-    Unloaded the cuts are at frames 709, 1380, 2141, 2790 run after run.  A machine too busy
+    Unloaded the cuts are at frames 713, 1380, 2176, 2889 run after run.  A machine too busy
     to read the suit in time loses frames at the pty (the simulated suit, like a real one,
     does not wait): the session reports them ("messages missing", dropped frames, a
     detector restart at the gap) and a cut can go with them.  Then the exact cuts cannot be
@@ -61,12 +61,9 @@ def test_demo_names_recurring_behaviours():
                     f"{summary[:300]}); the exact cuts need a stream without losses")
     # every segment (the first one and one per cut) gets exactly one behaviour line
     assert sorted(ids) == [0] + cut_segments, proc.stdout
-    # walk = segments 0 and 2, punch = 1 and 3, squat = 4.  The squat's cut comes 0.75 s
-    # before its labelled middle, where the synthesiser's blend out of punch starts (the
-    # early look, docs/live_detector.md "Limits"): its id lies near walk's and near a new
-    # one by a hair (confidence under 0.5 either way), so it is not asserted.
-    assert ids[0] == ids[2] and ids[1] == ids[3] and ids[0] != ids[1], proc.stdout
-    assert ids[4] != ids[1], proc.stdout
+    # walk = segments 0 and 2, punch = 1 and 3, squat = 4
+    assert ids[0] == ids[2] and ids[1] == ids[3], proc.stdout
+    assert len({ids[0], ids[1], ids[4]}) == 3, proc.stdout
     assert re.search(r"^behaviour .* segment 2 .*\(same as segment 0\)", proc.stdout, re.M)
 
     off = subprocess.run(

@@ -81,20 +81,20 @@ def test_evaluate_online_json(synth_dir, capsys):
     assert 0.5 < p["delay_s"]["median"] < 3.5
 
 
-def test_evaluate_online_with_the_shipped_full_look_parameters(synth_dir, capsys):
-    """``--online --params full_look`` runs the live loop with config/full_look.toml (the
-    early look off): the same changes found, each sent later than with the defaults."""
+def test_evaluate_online_with_the_shipped_fast_parameters(synth_dir, capsys):
+    """``--online --params fast`` runs the live loop with config/fast.toml: the same
+    changes found, each sent sooner than with the defaults."""
     root, _ = synth_dir
     doc = {}
-    for name, extra in (("default", []), ("full_look", ["--params", "full_look"])):
+    for name, extra in (("default", []), ("fast", ["--params", "fast"])):
         assert main(["evaluate", str(root), "--online", "--json", "--no-progress",
                      "--method", "contrast", *extra]) == 0
         r = json.loads(capsys.readouterr().out)["contrast"]
         assert r.get("params_file") == (extra[1] if extra else None)   # which file, if any
         doc[name] = r["takes"]["92_01"]
-    assert doc["full_look"]["f1"] == doc["default"]["f1"] == 1.0
+    assert doc["fast"]["f1"] == doc["default"]["f1"] == 1.0
     d = {k: sorted(m["delay_s"] for m in v["matched"]) for k, v in doc.items()}
-    assert all(f < g for f, g in zip(d["default"], d["full_look"])), d
+    assert all(f < g for f, g in zip(d["fast"], d["default"])), d
 
 
 def test_evaluate_tolerance_zero_equals_strict(synth_dir, capsys):

@@ -24,7 +24,7 @@ from rtseg.drivers.mocopi.source import ForwardKinematics, MocopiSource
 from rtseg.core.profiles import suit_profile
 from rtseg.simulators.mocopi_sender import MocopiSender
 from rtseg.simulators.synth.motion import synthesize
-from vendor_helpers import (FULL_LOOK, append_junk, assert_same_cuts, assert_sane_frame, flip_bits,
+from vendor_helpers import (append_junk, assert_same_cuts, assert_sane_frame, flip_bits,
                             assert_refused, run_live, serial_reference, simulate_into,
                             truncate)
 
@@ -288,9 +288,7 @@ def test_rtseg_simulate_mocopi_command_reaches_the_source():
 
 def test_real_take_cuts_match_the_serial_suit(data_dir):
     """86_01 (CMU, 38 s) through the mocopi codec and the source's default global
-    conversion gives the cuts the 17-sensor serial suit gives, within 0.25 s (both with
-    the full look: ``vendor_helpers.FULL_LOOK``)."""
-    from rtseg.live.config import from_dict
+    conversion gives the cuts the 17-sensor serial suit gives, within 0.25 s."""
     from rtseg.live.replay import replay_frames
 
     take, serial, ref = serial_reference(data_dir)
@@ -301,8 +299,7 @@ def test_real_take_cuts_match_the_serial_suit(data_dir):
     moc = [(fk(f.quats), f.valid, f.seq, i / rate, f.source_time) for i in range(take.n_frames)
            for d in sender.encode(i, i, i / rate) for f in asm.feed(d, i / rate)]
     assert len(serial) == len(moc) == take.n_frames
-    got = replay_frames(moc, list(sender.suit.bones), list(sender.suit.parents), "global", rate,
-                        from_dict(FULL_LOOK))
+    got = replay_frames(moc, list(sender.suit.bones), list(sender.suit.parents), "global", rate)
     assert_same_cuts(got, ref, rate)
 
 

@@ -22,7 +22,7 @@ from rtseg.drivers.mvn.source import MvnSource
 from rtseg.core.profiles import resolve_joints, suit_profile
 from rtseg.simulators.mvn_sender import MvnSender
 from rtseg.simulators.synth.motion import synthesize
-from vendor_helpers import (FULL_LOOK, append_junk, assert_same_cuts, assert_sane_frame, flip_bits,
+from vendor_helpers import (append_junk, assert_same_cuts, assert_sane_frame, flip_bits,
                             assert_refused, read_all, run_live, serial_reference,
                             simulate_into, truncate)
 
@@ -337,7 +337,6 @@ def test_real_take_cuts_match_the_serial_suit(data_dir):
     """86_01 (CMU, 38 s) through the MVN codec gives the cuts the 17-sensor serial suit
     gives through its codec, within 0.25 s: the suit changes the features only where the
     joints differ (offline pipeline, the live loop's own, no sockets)."""
-    from rtseg.live.config import from_dict
     from rtseg.live.replay import replay_frames
 
     take, serial, ref = serial_reference(data_dir)
@@ -348,8 +347,7 @@ def test_real_take_cuts_match_the_serial_suit(data_dir):
            for d in sender.encode(i, i, i / rate) for f in asm.feed(d, i / rate)]
     assert len(serial) == len(mvn) == take.n_frames
     assert all(v.all() for _, v, *_ in mvn)
-    got = replay_frames(mvn, list(sender.suit.bones), list(sender.suit.parents), "global", rate,
-                        from_dict(FULL_LOOK))             # as the reference
+    got = replay_frames(mvn, list(sender.suit.bones), list(sender.suit.parents), "global", rate)
     assert_same_cuts(got, ref, rate)
 
 

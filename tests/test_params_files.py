@@ -1,5 +1,5 @@
 """Detector parameter files chosen on the command line: ``--params FILE`` or a shipped one
-by name (``full_look``: config/full_look.toml) for ``rtseg live``, the parameters a recording keeps,
+by name (``fast``: config/fast.toml) for ``rtseg live``, the parameters a recording keeps,
 and the warning when a recording is segmented with others.  The real CLI in-process on
 ``sim://synth``."""
 
@@ -39,38 +39,38 @@ def test_params_names_a_missing_file_or_shipped_name(capsys):
     assert "no shipped nosuch.toml" in lines[0]
 
 
-def test_params_full_look_reaches_the_session_configuration():
-    args = build_parser().parse_args(["live", "sim://synth", "--params", "full_look"])
+def test_params_fast_reaches_the_session_configuration():
+    args = build_parser().parse_args(["live", "sim://synth", "--params", "fast"])
     p = detector_params(config_from_args(args))["contrast"]
-    assert p == load_params("full_look")["contrast"]
-    assert p["early_after_s"] == 0.0 and p != load_params()["contrast"]
+    assert p == load_params("fast")["contrast"]
+    assert p["early_after_s"] == 1.5 and p != load_params()["contrast"]
 
 
 def test_recording_keeps_its_parameters_and_segment_says_when_they_differ(capsys, tmp_path,
                                                                           caplog):
     rec = tmp_path / "rec"
     caplog.set_level(logging.INFO, logger="rtseg")
-    rc, _, err = run(capsys, "live", "sim://synth?stop=10&speed=0", "--params", "full_look",
+    rc, _, err = run(capsys, "live", "sim://synth?stop=10&speed=0", "--params", "fast",
                      "--no-osc", "--quiet", "--record", rec)
     assert rc == 0, err
-    assert any("detector parameters:" in r.getMessage() and "full_look.toml" in r.getMessage()
+    assert any("detector parameters:" in r.getMessage() and "fast.toml" in r.getMessage()
                for r in caplog.records)
     meta = json.loads((rec / "session.json").read_text())["meta"]
-    assert meta["detector_params"]["contrast"] == load_params("full_look")["contrast"]
+    assert meta["detector_params"]["contrast"] == load_params("fast")["contrast"]
     # segmented with the defaults: one warning naming what differs
     rc, out, err = run(capsys, "segment", rec, "--method", "contrast")
-    assert rc == 0 and "contrast early_after_s = 0.0 (now 1.5)" in err
+    assert rc == 0 and "contrast early_after_s = 1.5 (now 0.0)" in err
     assert "ran its detectors with other parameters" in err
     assert f"give --params {rec} to cut as it did" in err
     # with the session's own, named or read from the recording itself: no warning, one result
     outs = []
-    for given in ("full_look", rec, rec / "session.json"):
+    for given in ("fast", rec, rec / "session.json"):
         rc, out, err = run(capsys, "segment", rec, "--method", "contrast", "--params", given,
                            "--format", "json")
         assert rc == 0 and "other parameters" not in err, err
         outs.append(json.loads(out)["methods"]["contrast"]["cuts"])
     assert outs[0] and outs[0] == outs[1] == outs[2]
-    assert load_params(rec)["contrast"] == load_params("full_look")["contrast"]
+    assert load_params(rec)["contrast"] == load_params("fast")["contrast"]
     # a recording that does not keep them (an older rtseg's): one line saying so
     doc = json.loads((rec / "session.json").read_text())
     del doc["meta"]["detector_params"]
@@ -90,26 +90,26 @@ def test_early_back_beyond_the_early_window_is_refused(capsys, tmp_path):
     assert "early_back_s (1.5) must not exceed early_after_s (1.0)" in err
 
 
-def test_a_folder_named_full_look_does_not_hide_the_shipped_file(capsys, tmp_path, monkeypatch):
-    """A recording made with ``--record full_look`` leaves a folder ``full_look`` here (or beside a
-    configuration file): ``--params full_look`` / ``params = "full_look"`` still name
-    config/full_look.toml (a folder is no parameter file); a file named ``full_look`` still wins."""
+def test_a_folder_named_fast_does_not_hide_the_shipped_file(capsys, tmp_path, monkeypatch):
+    """A recording made with ``--record fast`` leaves a folder ``fast`` here (or beside a
+    configuration file): ``--params fast`` / ``params = "fast"`` still name
+    config/fast.toml (a folder is no parameter file); a file named ``fast`` still wins."""
     from rtseg.config import config_dir, find_config
     from rtseg.live.config import load_session_config
     monkeypatch.chdir(tmp_path)
-    (tmp_path / "full_look").mkdir()
-    assert find_config("full_look") == config_dir() / "full_look.toml"
-    assert load_params("full_look")["contrast"]["early_after_s"] == 0.0
+    (tmp_path / "fast").mkdir()
+    assert find_config("fast") == config_dir() / "fast.toml"
+    assert load_params("fast")["contrast"]["early_after_s"] == 1.5
     cfg_file = tmp_path / "show.toml"
-    cfg_file.write_text('[detectors]\nparams = "full_look"\n')
+    cfg_file.write_text('[detectors]\nparams = "fast"\n')
     cfg = load_session_config(cfg_file)
-    assert detector_params(cfg)["contrast"]["early_after_s"] == 0.0
-    rc, _, err = run(capsys, "live", "sim://synth?stop=0.5&speed=0", "--params", "full_look",
+    assert detector_params(cfg)["contrast"]["early_after_s"] == 1.5
+    rc, _, err = run(capsys, "live", "sim://synth?stop=0.5&speed=0", "--params", "fast",
                      "--no-osc", "--quiet")
     assert rc == 0, err
-    (tmp_path / "full_look").rmdir()
-    (tmp_path / "full_look").write_text("[contrast]\nthreshold = 9.0\n")
-    assert load_params("full_look")["contrast"]["threshold"] == 9.0
+    (tmp_path / "fast").rmdir()
+    (tmp_path / "fast").write_text("[contrast]\nthreshold = 9.0\n")
+    assert load_params("fast")["contrast"]["threshold"] == 9.0
 
 
 @pytest.mark.parametrize("stop", [1.5, 0.3])
@@ -117,10 +117,10 @@ def test_live_console_shows_the_features_and_the_parameter_file(capsys, stop):
     """Both start lines reach the console before the first status line: the parameter file
     used to replace the features line (one banner kept, the last); a session that ends
     before its first status line (0.3 s) shows them at its end, before its summary."""
-    rc, _, err = run(capsys, "live", f"sim://synth?stop={stop}", "--params", "full_look", "--no-osc")
+    rc, _, err = run(capsys, "live", f"sim://synth?stop={stop}", "--params", "fast", "--no-osc")
     assert rc == 0, err
     assert "rtseg live: features: " in err
-    assert "rtseg live: detector parameters: " in err and "full_look.toml" in err
+    assert "rtseg live: detector parameters: " in err and "fast.toml" in err
     assert err.index("detector parameters") < err.index("session ended")
 
 
@@ -134,7 +134,7 @@ def test_empty_params_is_one_usage_error_everywhere(capsys, tmp_path):
         rc, out, err = run(capsys, *argv, "--params", "")
         lines = err.strip().splitlines()
         assert rc == 2 and len(lines) == 1 and "Traceback" not in err, (argv, err)
-        assert "argument --params" in lines[0] and "'full_look'" in lines[0]
+        assert "argument --params" in lines[0] and "'fast'" in lines[0]
 
 
 def test_a_flat_file_in_live_says_to_use_a_method_table(capsys, tmp_path):
@@ -163,24 +163,24 @@ def test_a_flat_file_in_live_says_to_use_a_method_table(capsys, tmp_path):
 def test_segment_of_several_recordings_says_which_ran_other_parameters(capsys, tmp_path):
     """The archive path (several takes, or --out) used to drop the warning one recording
     gets: its records now carry params_differ and one warning names the sessions."""
-    for name, extra in (("fullrec", ["--params", "full_look"]), ("plain", [])):
+    for name, extra in (("fastrec", ["--params", "fast"]), ("plain", [])):
         rc, _, err = run(capsys, "live", "sim://synth?stop=1.5&speed=0", *extra,
                          "--no-osc", "--quiet", "--record", tmp_path / name)
         assert rc == 0, err
     out = tmp_path / "x.jsonl"
-    rc, _, err = run(capsys, "segment", tmp_path / "fullrec", tmp_path / "plain",
+    rc, _, err = run(capsys, "segment", tmp_path / "fastrec", tmp_path / "plain",
                      "--method", "contrast", "--out", out, "--no-progress")
     assert rc == 0, err
     recs = {r["take"]: r for r in map(json.loads, out.read_text().splitlines())}
-    assert "early_after_s = 0.0 (now 1.5)" in recs["fullrec"]["params_differ"]
+    assert "early_after_s = 1.5 (now 0.0)" in recs["fastrec"]["params_differ"]
     assert "params_differ" not in recs["plain"]
-    assert "1 recorded session(s) ran their detectors with other parameters: fullrec" in err
-    # with full_look: the session recorded with the defaults is the one named
-    rc, stdout, err = run(capsys, "segment", tmp_path / "fullrec", tmp_path / "plain",
-                          "--method", "contrast", "--params", "full_look", "--no-progress")
+    assert "1 recorded session(s) ran their detectors with other parameters: fastrec" in err
+    # with fast: the session recorded with the defaults is the one named
+    rc, stdout, err = run(capsys, "segment", tmp_path / "fastrec", tmp_path / "plain",
+                          "--method", "contrast", "--params", "fast", "--no-progress")
     recs = {r["take"]: r for r in map(json.loads, stdout.splitlines())}
     assert rc == 0 and "1 recorded session(s)" in err and "parameters: plain;" in err
-    assert "params_differ" not in recs["fullrec"] and "params_differ" in recs["plain"]
+    assert "params_differ" not in recs["fastrec"] and "params_differ" in recs["plain"]
 
 
 def test_lopo_checks_its_params_before_reading_the_data(tmp_path):
@@ -195,22 +195,3 @@ def test_lopo_checks_its_params_before_reading_the_data(tmp_path):
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert r.stderr.strip() == ("lopo: parameter file not found: nosuch (no such file "
                                 f"here, and no shipped nosuch.toml in {config_dir()})")
-
-
-def test_replay_session_cuts_with_the_parameters_the_session_ran_with(capsys, tmp_path):
-    """``rtseg.live.replay.replay_session`` of a recording made with ``--params full_look``
-    gives the cuts the session sent (boundary and detecting frame), not the defaults'
-    (whose early look detects sooner); a configuration given still wins."""
-    from rtseg.evaluation.online import live_config
-    from rtseg.live.replay import replay_session
-    from rtseg.recording import read_session
-    rec = tmp_path / "rec"
-    rc, _, err = run(capsys, "live", "sim://synth?stop=30&speed=0", "--params", "full_look",
-                     "--no-osc", "--quiet", "--record", rec)
-    assert rc == 0, err
-    sent = [(c.frame, c.detected_frame) for c in read_session(rec).meta["cuts"]
-            if c.wire and c.method == "contrast"]
-    assert len(sent) >= 3
-    assert [(c.boundary, c.detected) for c in replay_session(str(rec))] == sent
-    defaults = [(c.boundary, c.detected) for c in replay_session(str(rec), live_config()[0])]
-    assert defaults != sent

@@ -1,9 +1,6 @@
 """A real take through the simulated serial suit on a real pty into the live loop: the cuts
 it sends are the ones the same detector gives offline on the recorded frames, and they
-score on 86_01 like ``rtseg evaluate --online`` does on the take's own rig.  Both with the
-full look (``--params full_look``): with the early look the suit's 17-sensor retargeted rig
-sends one of 86_01's cuts 1.4 s before the jump -> walk change (docs/live_detector.md,
-"Limits"), a difference of rigs this test does not measure."""
+score on 86_01 like ``rtseg evaluate --online`` does."""
 
 from __future__ import annotations
 
@@ -35,8 +32,7 @@ def test_86_01_through_the_serial_suit_scores_like_evaluate_online(data_dir, tmp
     box: dict = {}
     try:
         path = suit.start()
-        cfg = from_dict({"output": {"osc": []}, "recording": {"dir": str(rec)},
-                         "detectors": {"params": "full_look"}}, origin="test")
+        cfg = from_dict({"output": {"osc": []}, "recording": {"dir": str(rec)}}, origin="test")
         session = LiveSession(f"serial://{path}?rate={take.frame_rate:g}", cfg,
                               handle_signals=False)
         th = threading.Thread(target=lambda: box.setdefault("s", session.run()), daemon=True)
@@ -66,7 +62,7 @@ def test_86_01_through_the_serial_suit_scores_like_evaluate_online(data_dir, tmp
         assert c.time == pytest.approx(src[c.frame] + t0, abs=0.02), (c.time, src[c.frame])
     wide = widen(lt.transitions, int(round(0.5 * take.frame_rate)))
     f1_suit = score(to_take, wide).f1
-    cfg_online, _ = live_config(methods=["contrast"], params="full_look")
+    cfg_online, _ = live_config(methods=["contrast"])
     f1_online = score([c.boundary for c in live_cuts(take, cfg_online)["contrast"]], wide).f1
     assert abs(f1_suit - f1_online) <= 0.1, (f1_suit, f1_online, to_take)
     assert f1_suit >= 0.8

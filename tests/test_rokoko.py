@@ -25,7 +25,7 @@ from rtseg.drivers.rokoko.source import RokokoAssembler
 from rtseg.core.profiles import resolve_joints, suit_profile
 from rtseg.simulators.rokoko_sender import RokokoSender
 from rtseg.simulators.synth.motion import synthesize
-from vendor_helpers import (FULL_LOOK, Counter, assert_refused, assert_same_cuts, free_port,
+from vendor_helpers import (Counter, assert_refused, assert_same_cuts, free_port,
                             overwrite_bytes, random_bytes, read_all, run_live, send_and_read,
                             serial_reference, simulate_into)
 
@@ -402,7 +402,6 @@ def test_a_take_with_rokoko_names_replays_unchanged():
 def test_real_take_cuts_match_the_serial_suit(data_dir):
     """86_01 (CMU, 38 s) through the Rokoko codec gives the cuts the 17-sensor serial suit
     gives through its codec, within 0.25 s (offline pipeline, the live loop's own)."""
-    from rtseg.live.config import from_dict
     from rtseg.live.replay import replay_frames
 
     take, serial, ref = serial_reference(data_dir)
@@ -413,8 +412,7 @@ def test_real_take_cuts_match_the_serial_suit(data_dir):
            for f in asm.feed(sender.payload(i, i / rate), i / rate)]
     assert len(serial) == len(rok) == take.n_frames
     assert all(v.all() for _, v, *_ in rok)
-    got = replay_frames(rok, list(BODY_BONES), list(BODY_PARENTS), "global", rate,
-                        from_dict(FULL_LOOK))             # as the reference
+    got = replay_frames(rok, list(BODY_BONES), list(BODY_PARENTS), "global", rate)
     assert_same_cuts(got, ref, rate)
 
 

@@ -166,19 +166,10 @@ def assert_refused(cases) -> None:
             open_source(url).close()
 
 
-#: the configuration the codec comparisons on 86_01 cut with: the full look alone
-#: (config/full_look.toml).  With the early look (the default) the 17-sensor suit's
-#: retargeted rig sends one cut of 86_01 1.4 s before the jump -> walk change that every
-#: 59-joint rig sends on it (docs/live_detector.md, "Limits"): a difference of rigs, not
-#: of codecs, which these tests compare.
-FULL_LOOK = {"detectors": {"params": "full_look"}}
-
-
-def serial_reference(data_dir, cfg=None):
+def serial_reference(data_dir):
     """86_01 (CMU, 38 s) through the 17-sensor serial suit's codec and the offline
-    pipeline: (take, serial frames as replay_frames tuples, reference cuts, made with
-    ``cfg``: a live configuration, the full look's by default).  Asserts the reference
-    cuts the take at least 3 times."""
+    pipeline: (take, serial frames as replay_frames tuples, reference cuts).  Asserts the
+    reference cuts the take at least 3 times."""
     from rtseg.drivers.serial.codec import SerialFrameDecoder, encode_frame as ser_encode
     from rtseg.drivers.readers import read_take
     from rtseg.live.replay import replay_frames
@@ -194,9 +185,7 @@ def serial_reference(data_dir, cfg=None):
     serial = [(f.quats.copy(), f.valid.copy(), i, i / rate, i / rate)
               for i in range(take.n_frames)
               for f in dec.feed(ser_encode(i & 0xFFFF, int(i / rate * 1e6), ids, rt.quats[i]))]
-    from rtseg.live.config import from_dict
-    cfg = from_dict(FULL_LOOK) if cfg is None else cfg
-    ref = replay_frames(serial, list(suit.bones), list(suit.parents), "global", rate, cfg)
+    ref = replay_frames(serial, list(suit.bones), list(suit.parents), "global", rate)
     assert len(ref) >= 3, "the reference suit should cut 86_01"
     return take, serial, ref
 

@@ -23,15 +23,13 @@ chose them, in docs/live_detector.md): the relative floor (``relative_floor``,
 cut placement (``place_radius``, ``rtseg.detectors.placement``); the residual floor
 (``residual_floor``, ``rtseg.detectors.residual``) bounds every window model's own error,
 the bounded before windows (``bound_before``) keep A0 and A inside the behaviour since the
-last cut sent, and the early look (``early_after`` > 0, ``rtseg.detectors.early``; on by
-default, ``config/full_look.toml`` turns it off) also scores each position one-sided once
-``early_after`` frames have arrived, ``early(c) = Epca(B'|A) / Epca(A|A0)``, and sends its
-maxima when the full contrast backs them (a full-look value at least ``early_backing`` x
-``threshold`` at most ``early_back`` before the maximum).  With ``early_parts`` > 1, B' is
-cut into that many equal parts and the smallest part's error counts: the whole of B' must
-be new, so a change late in B' does not score the position before it (a maximum there
-would cut up to ``early_after`` too soon).  A cut the gate or the floor drops is
-forgotten (it keeps no later maximum away).
+last cut sent, and the early look (``early_after`` > 0, ``rtseg.detectors.early``; off by
+default) also scores each position one-sided once ``early_after`` frames have arrived,
+``early(c) = Epca(B'|A) / Epca(A|A0)``, and sends its maxima when the full contrast backs
+them.  With ``early_parts`` > 1, B' is cut into that many equal parts and the smallest
+part's error counts: the whole of B' must be new, so a change late in B' does not score
+the position before it (a maximum there would cut up to ``early_after`` too soon) (a full-look value at least ``early_backing`` x ``threshold`` at most ``early_back``
+before the maximum; ``config/fast.toml`` turns it on for cuts sooner).  A cut the gate or the floor drops is forgotten (it keeps no later maximum away).
 
 Work per frame: each ``step``-frame block's statistics are summed once (one BLAS call),
 windows are differences of prefix sums, each window's PCA model is fitted once
@@ -125,12 +123,11 @@ class ContrastDetector(OnlineDetector):
             raise ValueError(f"early_after must be 0 (off) or at least two steps and shorter "
                              f"than after ({after} frames), got {early_after}")
         self.we = int(round(early_after / step)) if early_after else 0   # early window, blocks
-        if early_parts < 1 or (self.we and early_parts > self.we):
+        if not 1 <= early_parts <= max(self.we, 1):
             raise ValueError(f"early_parts must be >= 1 and at most the early window's steps "
-                             f"({self.we}), got {early_parts}")
+                             f"({max(self.we, 1)}), got {early_parts}")
         #: the parts of B' the early look scores, as block offsets from its position
-        parts = min(int(early_parts), max(self.we, 1))
-        self._parts = [(self.we * k) // parts for k in range(parts + 1)]
+        self._parts = [(self.we * k) // int(early_parts) for k in range(int(early_parts) + 1)]
         self.peaks = EarlyCuts(threshold, hold=int(hold), min_gap=int(min_gap), drop=drop,
                                early_threshold=float(early_threshold) if self.we else None,
                                early_hold=int(early_hold), early_after=self.we * self.step,

@@ -5,8 +5,8 @@ The contrast detector (``rtseg.detectors.contrast``) scores every grid position 
 - the **full look**, the two-window contrast with the whole after window (2 s at the
   defaults), known ``after`` frames after c;
 - the **early look**, a one-sided contrast with a shorter after window (``early_after``,
-  1.5 s at the defaults), known sooner.  Alone it is noisy: a short window over a slow
-  cycle differs from the 3 s before it without any change of behaviour.
+  1 s), known sooner.  Alone it is noisy: a short window over a slow cycle differs from the
+  3 s before it without any change of behaviour.
 
 ``EarlyCuts`` picks causal maxima (``CausalPeaks``) on each profile separately and merges
 them into one stream of cuts:

@@ -135,7 +135,7 @@ def _clean_cuts(raw: Sequence[Any], method: str, n_frames: int) -> list[Cut]:
 
 def load_params(path: str | Path | None, method: str | None = None) -> dict[str, Any]:
     """Detector parameters from a TOML or JSON file, a shipped one by its bare name
-    (``"full_look"``: ``config/full_look.toml``, as ``rtseg.config.load_toml`` finds it), or a
+    (``"fast"``: ``config/fast.toml``, as ``rtseg.config.load_toml`` finds it), or a
     recording (its folder or ``session.json``: the parameters its live detectors ran with).
 
     The file is either flat (``{name: value}``, applied to whichever method runs) or has one

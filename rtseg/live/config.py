@@ -379,7 +379,7 @@ FILE_KEYS = (("detectors", "params"), ("identity", "behaviours"))
 def beside(value: str, folder: Path) -> str:
     """``value`` (a path from a configuration file in ``folder``) as ``folder / value`` when
     it is relative and that file exists, else unchanged (from the current folder; a bare
-    name such as "full_look" is then a shipped file: ``rtseg.config.find_config``)."""
+    name such as "fast" is then a shipped file: ``rtseg.config.find_config``)."""
     if not value or Path(value).is_absolute():
         return value
     there = folder / value
