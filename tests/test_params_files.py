@@ -195,3 +195,22 @@ def test_lopo_checks_its_params_before_reading_the_data(tmp_path):
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert r.stderr.strip() == ("lopo: parameter file not found: nosuch (no such file "
                                 f"here, and no shipped nosuch.toml in {config_dir()})")
+
+
+def test_replay_session_cuts_with_the_parameters_the_session_ran_with(capsys, tmp_path):
+    """``rtseg.live.replay.replay_session`` of a recording made with ``--params fast``
+    gives the cuts the session sent (boundary and detecting frame), not the defaults'
+    (whose full look detects later); a configuration given still wins."""
+    from rtseg.evaluation.online import live_config
+    from rtseg.live.replay import replay_session
+    from rtseg.recording import read_session
+    rec = tmp_path / "rec"
+    rc, _, err = run(capsys, "live", "sim://synth?stop=30&speed=0", "--params", "fast",
+                     "--no-osc", "--quiet", "--record", rec)
+    assert rc == 0, err
+    sent = [(c.frame, c.detected_frame) for c in read_session(rec).meta["cuts"]
+            if c.wire and c.method == "contrast"]
+    assert len(sent) >= 3
+    assert [(c.boundary, c.detected) for c in replay_session(str(rec))] == sent
+    defaults = [(c.boundary, c.detected) for c in replay_session(str(rec), live_config()[0])]
+    assert defaults != sent

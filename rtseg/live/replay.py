@@ -40,10 +40,15 @@ def replay_frames(frames: Iterable[tuple], joint_names: list[str], parents: list
 def replay_session(directory: str, config: SessionConfig | None = None) -> list[PipelineCut]:
     """The cuts the live loop's detectors give on a recorded session folder
     (``rtseg.recording``), offline: every recorded frame with its sequence number, receive
-    time and source time, through ``replay_frames``."""
+    time and source time, through ``replay_frames``.  Without ``config``, with the
+    detector parameters the session ran with when the recording keeps them (its
+    ``session.json`` ``meta.detector_params``), else the defaults."""
     from rtseg.recording import read_session
     tk = read_session(directory)
     m = tk.meta
+    if config is None and (m.get("session_meta") or {}).get("detector_params"):
+        from rtseg.live.config import from_dict
+        config = from_dict({"detectors": {"params": str(directory)}}, origin=str(directory))
     seq, recv, src = m["seq"], m["recv_time"], m["source_time"]
     frames = ((tk.quats[i], tk.valid[i], None if seq[i] < 0 else int(seq[i]), float(recv[i]),
                None if not np.isfinite(src[i]) else float(src[i])) for i in range(tk.n_frames))
