@@ -24,12 +24,14 @@ cut placement (``place_radius``, ``rtseg.detectors.placement``); the residual fl
 (``residual_floor``, ``rtseg.detectors.residual``) bounds every window model's own error,
 the bounded before windows (``bound_before``) keep A0 and A inside the behaviour since the
 last cut sent, and the early look (``early_after`` > 0, ``rtseg.detectors.early``; off by
-default) also scores each position one-sided once ``early_after`` frames have arrived,
-``early(c) = Epca(B'|A) / Epca(A|A0)``, and sends its maxima when the full contrast backs
-them.  With ``early_parts`` > 1, B' is cut into that many equal parts and the smallest
-part's error counts: the whole of B' must be new, so a change late in B' does not score
-the position before it (a maximum there would cut up to ``early_after`` too soon) (a full-look value at least ``early_backing`` x ``threshold`` at most ``early_back``
-before the maximum; ``config/fast.toml`` turns it on for cuts sooner).  A cut the gate or the floor drops is forgotten (it keeps no later maximum away).
+default, ``config/fast.toml`` turns it on for cuts sooner) also scores each position
+one-sided once ``early_after`` frames have arrived, ``early(c) = Epca(B'|A) /
+Epca(A|A0)``, and sends its maxima when the full contrast backs them (a full-look value at
+least ``early_backing`` x ``threshold`` at most ``early_back`` before the maximum).  With
+``early_parts`` > 1, B' is cut into that many equal parts and the smallest part's error
+counts: the whole of B' must be new, so a change late in B' does not score the position
+before it (a maximum there would cut up to ``early_after`` too soon).  A cut the gate or
+the floor drops is forgotten (it keeps no later maximum away).
 
 Work per frame: each ``step``-frame block's statistics are summed once (one BLAS call),
 windows are differences of prefix sums, each window's PCA model is fitted once
