@@ -191,12 +191,17 @@ def test_offline_segment_runs_the_same_core(perf):
 
 
 def test_restart_forgets_the_segment_and_keeps_the_frame_count(perf):
+    """After a restart the cuts are a fresh detector's, counted on.  The residual and
+    relative floors outlive restarts by design (a gap is not a new performer), so they are
+    off here: with them the cuts may differ by what they learnt before the gap."""
     _, X = perf
-    det = make_online("contrast", FR)
+    no_floors = {"residual_floor": 0.0, "relative_floor": 0.0}
+    det = make_online("contrast", FR, no_floors)
     det.run(X[:1000])
     det.restart()
     cuts = det.run(X[1000:])
-    fresh = make_online("contrast", FR).run(X[1000:])
+    fresh = make_online("contrast", FR, no_floors).run(X[1000:])
+    assert len(fresh) >= 3
     assert [c.frame for c in cuts] == [c.frame + 1000 for c in fresh]
 
 

@@ -92,8 +92,11 @@ def test_page_shows_the_cut_and_behaviour_the_session_printed(library, tmp_path)
             assert joints == 17
             assert "17 of 17 online" in page.evaluate("document.getElementById('online')"
                                                       ".textContent")
-            points = page.evaluate("window.rtsegMonitor.stat.length")
-            assert points >= 5     # one point per detector block (0.5 s at the defaults)
+            # one point per detector block (0.5 s at the defaults): the statistic keeps
+            # coming after the first cut, however soon that came
+            points = page.wait_for("window.rtsegMonitor.stat.length >= 5 && "
+                                   "window.rtsegMonitor.stat.length", timeout=15)
+            assert points >= 5
             shot = tmp_path / "monitor.png"
             size = page.screenshot(shot)
             data = shot.read_bytes()
