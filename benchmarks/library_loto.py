@@ -85,9 +85,9 @@ class _Usage(ValueError):
 
 def _pop_number(argv: list[str], flag: str, kind: type, what: str,
                 not_positive: str | None = None):
-    """The value after ``flag`` in ``argv`` as ``kind`` (both removed), None when absent;
-    ``_Usage`` "FLAG: WHAT" when it is not one, "FLAG: NOT_POSITIVE" when it is <= 0 and
-    ``not_positive`` is given."""
+    """The value after ``flag`` in ``argv`` as ``kind`` (a number type, or ``str``; both
+    removed), None when absent; ``_Usage`` "FLAG: WHAT" when it is not one (or missing),
+    "FLAG: NOT_POSITIVE" when it is <= 0 and ``not_positive`` is given."""
     if flag not in argv:
         return None
     k = argv.index(flag)
@@ -280,14 +280,10 @@ def main(argv: list[str] | None = None) -> int:
         le.METRIC = argv[k + 1]
         del argv[k:k + 2]
     opts = {}
-    if "--params" in argv:
-        k = argv.index("--params")
-        if k + 1 >= len(argv):
-            print("--params: a detector parameter file (or 'fast')", file=sys.stderr)
-            return 2
-        opts["--params"] = argv[k + 1]
-        del argv[k:k + 2]
     try:
+        params = _pop_number(argv, "--params", str, "a detector parameter file (or 'fast')")
+        if params is not None:
+            opts["--params"] = params
         for flag in ("--step", "--name-after", "--seconds"):
             value = _pop_number(argv, flag, float, "seconds, a number", "seconds, > 0")
             if value is not None:

@@ -66,7 +66,6 @@ class EarlyCuts:
                  back: int | None = None, backing: float = 1.0) -> None:
         self.threshold = float(threshold)
         self.min_gap = int(min_gap)
-        self.early_after = int(early_after)
         self.back = int(early_after) if back is None else min(int(back), int(early_after))
         if not backing > 0:
             raise ValueError(f"backing must be positive, got {backing}")

@@ -92,6 +92,13 @@ class SourceTake:
 _MISSING_SAID: set[tuple[str, int]] = set()
 
 
+def _skip_once(path: Path, lineno: int, msg: str, *args: Any) -> None:
+    """Log the warning for a skipped index row once per process, however often read."""
+    if (str(path), lineno) not in _MISSING_SAID:
+        _MISSING_SAID.add((str(path), lineno))
+        log.warning(msg, *args)
+
+
 def read_source_index(src: str | Path) -> list[SourceTake]:
     """Rows of ``SRC/index.tsv`` whose motion file exists (missing ones: logged, skipped).
     A row naming a take and format an earlier row named is logged and skipped, so no
@@ -126,15 +133,12 @@ def read_source_index(src: str | Path) -> list[SourceTake]:
             path = src / fmt / f"{vals['take']}{FORMAT_SUFFIX[fmt]}"
             seen = first.setdefault((fmt, vals["take"]), lineno)
             if seen != lineno:
-                if (str(path), lineno) not in _MISSING_SAID:
-                    _MISSING_SAID.add((str(path), lineno))
-                    log.warning("%s:%d: %s is already line %d's take; row skipped", index,
-                                lineno, path.name, seen)
+                _skip_once(path, lineno, "%s:%d: %s is already line %d's take; row skipped",
+                           index, lineno, path.name, seen)
                 continue
             if not path.is_file():
-                if (str(path), lineno) not in _MISSING_SAID:   # once, however often read
-                    _MISSING_SAID.add((str(path), lineno))
-                    log.warning("%s:%d: %s not found; take skipped", index, lineno, path)
+                _skip_once(path, lineno, "%s:%d: %s not found; take skipped", index, lineno,
+                           path)
                 continue
             out.append(SourceTake(vals["take"], vals["subject"], fmt, vals["behaviour"], path))
     return out
