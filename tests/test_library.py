@@ -753,13 +753,15 @@ def test_learn_says_which_behaviours_the_library_may_confuse(tmp_path):
 
 def test_library_benchmark_refuses_bad_folders_in_one_line(tmp_path):
     """benchmarks/library_loto.py: a folder that is not there, or one without two mocap6
-    takes (and --by-person without two people), is one line on stderr and exit 2."""
+    takes (and --by-person without two people), or --params without its file, is one line
+    on stderr and exit 2."""
     bench = str(Path(__file__).resolve().parents[1] / "benchmarks" / "library_loto.py")
     run = lambda *a: subprocess.run([sys.executable, bench, *a], capture_output=True,
                                     text=True, timeout=120)
     for args, says in ((["mocap6", str(tmp_path / "missing")], "does not exist"),
                        (["fewshot", str(tmp_path / "missing")], "does not exist"),
-                       (["mocap6", "--by-person", str(tmp_path)], "needs two")):
+                       (["mocap6", "--by-person", str(tmp_path)], "needs two"),
+                       (["mocap6", "--params"], "--params: a detector parameter file")):
         p = run(*args)
         assert p.returncode == 2, p.stderr
         assert len(p.stderr.strip().splitlines()) == 1 and says in p.stderr, p.stderr
