@@ -795,3 +795,45 @@ def test_learn_prefers_named_examples_and_refuses_numbered_names():
     assert sum("left out" in n for n in notes) == 4
     with pytest.raises(ValueError, match="named by a number"):
         learn(ids)
+
+
+def _people_library(takes):
+    """A library from (person, seed, script) takes of the synthesiser, each take one example
+    per behaviour of that person; the script's two behaviours are named walk and punch (a
+    person whose script is "run:8,wave:8" walks and punches in a style of their own)."""
+    b = None
+    for k, (person, seed, script) in enumerate(takes):
+        res = synthesize(script, seed=seed)
+        X, idx, profile = take_rows(res.take, _config())
+        b = b or LibraryBuilder(profile, X.shape[1], res.take.frame_rate)
+        for (a, e, _), name in zip(label_runs(res.frame_names()), ("walk", "punch")):
+            i, j = np.searchsorted(idx, a), np.searchsorted(idx, e)
+            assert b.add(X[i:j], name, f"{person}{k}", info={"person": person}) > 0
+    return b.build()
+
+
+def test_the_library_says_how_much_farther_another_person_lies(tmp_path):
+    """``calibration.people``: the median nearest same-name window of another example of
+    the same person against another person's.  A person whose walk and punch look unlike
+    the other's (run and wave) lies much farther from them than from their own other takes;
+    two people of one style do not; one person: no figure.  ``rtseg learn --show`` prints
+    it."""
+    from rtseg.commands.learn import describe
+    ann = [("ann", 0, "walk:8,punch:8"), ("ann", 4, "walk:8,punch:8")]
+    styled = _people_library(ann + [("bob", 1, "run:8,wave:8"), ("bob", 5, "run:8,wave:8")])
+    mixed = _people_library(ann + [("bob", 1, "walk:8,punch:8"), ("bob", 5, "walk:8,punch:8")])
+    one = _people_library(ann)
+    a, m = styled.calibration["people"], mixed.calibration["people"]
+    assert a["windows"] > 0 and m["windows"] > 0
+    assert a["ratio"] == pytest.approx(a["other_person"] / a["same_person"], rel=1e-2)
+    assert a["ratio"] > 2.0 * m["ratio"]
+    assert 0.5 < m["ratio"] < 2.0
+    assert one.calibration["people"] is None
+    save_library(styled, tmp_path / "styled.json")
+    back = load(tmp_path / "styled.json")
+    assert back.calibration["people"] == a
+    lines = describe(back, tmp_path / "styled.json")
+    line = next(x for x in lines if "another person's examples lie" in x)
+    assert f"{a['ratio']:.2f} x" in line and "styles differ" in line
+    assert not any("another person's examples" in x for x in describe(one, tmp_path / "o.json"))
+    assert not any("styles differ" in x for x in describe(mixed, tmp_path / "m.json"))

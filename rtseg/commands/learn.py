@@ -78,6 +78,11 @@ def recorded_segment(t: dict[str, Any]) -> int | None:
 #: examples (a display choice; naming does not use it), or - no second example - when that
 #: name lies within the threshold
 CONFUSED_SHARE = 0.25
+#: ``describe`` adds a note to the people line when another person's examples lie at least
+#: this many times as far as the same person's (a display choice; naming does not use it):
+#: bandai's two actors, two styles, 2.6; hdm05's three people 1.25, cmu_single's 1.2
+#: (model distance; docs/identity.md, Limits)
+SPREAD_NOTE = 2.0
 
 
 def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
@@ -100,6 +105,16 @@ def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
                    f"{lib.posture_rule['ratio']:.2f}")
     elif getattr(lib, "has_posture", False):
         out.append("  posture kept, not used until a behaviour has a second example")
+    spread = lib.calibration.get("people")
+    if spread and spread.get("ratio"):
+        post = (lib.calibration.get("posture") or {}).get("people") or {}
+        out.append(f"  another person's examples lie {spread['ratio']:.2f} x as far as the "
+                   f"same person's other examples (nearest same-name window, median "
+                   f"{spread['other_person']:.2f} against {spread['same_person']:.2f}"
+                   + (f"; with posture {post['ratio']:.2f} x" if post.get("ratio") else "")
+                   + ")" + (": the people or styles differ more than one person's takes; "
+                            "a new performer is named best from examples near their own style"
+                            if spread["ratio"] >= SPREAD_NOTE else ""))
     if sources:
         out.append(f"  {lib.metric} distance, windows of {lib.window_s:g} s every "
                    f"{lib.step_s:g} s, {lib.frame_rate:g} Hz")

@@ -57,7 +57,7 @@ import numpy as np
 from rtseg.config import ConfigError
 from rtseg.library.calibration import (DEFAULT_THRESHOLD, MODEL_ONE_NAME_FACTOR,
                                        ONE_NAME_FACTOR, k_mean, median_or_none,
-                                       nearest_others, separating_rule)
+                                       nearest_others, person_spread, separating_rule)
 from rtseg.core.posture import window_descriptor
 from rtseg.library.descriptor import (GROUPS, K_NEAREST, SCALE_FLOOR,  # noqa: F401 (re-exported)
                                      descriptor, group_slices)
@@ -289,7 +289,8 @@ class Library:
             t, r, cal = self._calibrated_rule(True)
             self.posture_rule.update(threshold=t, ratio=r)
             self.calibration["posture"] = {k: cal[k] for k in
-                                           ("same_median", "other_median", "threshold")}
+                                           ("same_median", "other_median", "threshold",
+                                            "people")}
             self.calibration["posture"]["ratio"] = r
         return self.threshold
 
@@ -305,10 +306,17 @@ class Library:
         o1, o2 = [], []                  # the window's name left out: nearest two other names
         # name -> per window: its nearest other name, that distance, its known case's
         near: dict[str, list[tuple[str, float, float | None]]] = {}
-        for i in range(len(names)):
+        own, across = [], []             # nearest same-name window of another example:
+        for i in range(len(names)):      # the same person's, another person's
             d = self.window_distances(i, posture)
-            if by_person:                # as a new person would be met: others' windows only
-                d = np.where(person != person[i], d, np.inf)
+            if by_person:
+                same_name = (names == names[i]) & (src != src[i])
+                a = d[same_name & (person == person[i])]
+                b = d[same_name & (person != person[i])]
+                if len(a) and len(b) and np.isfinite(a.min()) and np.isfinite(b.min()):
+                    own.append(float(a.min()))
+                    across.append(float(b.min()))
+                d = np.where(person != person[i], d, np.inf)   # as a new person is met
             s = d[(names == names[i]) & (src != src[i])]
             s = s[np.isfinite(s)]
             others = {n: v for n, v in self.name_distances(d).items()
@@ -329,7 +337,8 @@ class Library:
         return t, r, {"same_median": median_or_none(same), "other_median": median_or_none(o1),
                       "threshold": round(t, 4) if math.isfinite(t) else None,
                       "same": len(same), "other": len(o1), "calibrated": bool(same),
-                      "nearest_other": nearest_others(near)}
+                      "nearest_other": nearest_others(near),
+                      "people": person_spread(own, across)}
 
     def merged(self, other: "Library") -> "Library":
         """This library with ``other``'s examples added (same profile, dims and windows;

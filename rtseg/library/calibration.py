@@ -92,6 +92,22 @@ def median_or_none(v: Sequence[float]) -> float | None:
     return round(float(np.median(v)), 4) if len(v) else None
 
 
+def person_spread(own: Sequence[float], across: Sequence[float]) -> dict[str, Any] | None:
+    """How much farther another person's examples lie than the same person's: from the
+    windows that have both, the nearest same-name window of another example of the same
+    person (``own``) and of another person (``across``).  ``{"same_person", "other_person":
+    medians, "ratio": other / same, "windows": n}``; None without such windows (a library of
+    one person, or no behaviour performed twice by one person and once by another).
+    ``rtseg learn --show`` prints it: a ratio well above 1 says the people (or styles) of the
+    library differ more than one person's takes do, so a new performer needs examples near
+    their own style."""
+    if not len(own):
+        return None
+    a, b = float(np.median(own)), float(np.median(across))
+    return {"same_person": round(a, 4), "other_person": round(b, 4),
+            "ratio": round(b / a, 3) if a > 0 else None, "windows": len(own)}
+
+
 def nearest_others(near: dict[str, list[tuple[str, float, float | None]]]
                    ) -> dict[str, dict[str, Any]]:
     """Per name, from its windows' (nearest other name, distance to it, distance of the
