@@ -4,6 +4,7 @@ refusal of a library of other feature dims."""
 from __future__ import annotations
 
 import logging
+import math
 
 import numpy as np
 import pytest
@@ -19,7 +20,7 @@ class _Recording:
         self.dims = dims
         self.windows: list[np.ndarray] = []
 
-    def name(self, W: np.ndarray, frame_rate: float):
+    def name(self, W: np.ndarray, frame_rate: float, scale: float = 1.0):
         self.windows.append(W.copy())
 
         class _N:
@@ -88,3 +89,58 @@ def test_tracker_library_is_fixed_once_rows_flow():
     tr.update(0, np.zeros(2))
     with pytest.raises(RuntimeError):
         tr.library = None
+
+
+class _OnePerson:
+    """A stand-in library calibrated on one person (threshold 2.0) that records the
+    threshold factor each naming is given and answers with the next distance."""
+
+    metric = "model"
+
+    def __init__(self, one_person: bool, distances: list[float]) -> None:
+        self.dims = 2
+        self.one_person_calibration = one_person
+        self.scales: list[float] = []
+        self._d = list(distances)
+
+    def rule_threshold(self, posture: bool) -> float:
+        return 2.0
+
+    def name(self, W, frame_rate, P=None, scale=1.0):
+        self.scales.append(scale)
+        d = self._d.pop(0)
+
+        class _N:
+            name, distance = ("walk" if d <= 2.0 * scale else UNKNOWN), d
+        return _N()
+
+
+@pytest.mark.parametrize("one_person", [True, False])
+def test_the_performers_scale_is_the_median_distance_over_the_threshold(one_person):
+    """A library calibrated on one person: each naming's threshold is multiplied by the
+    median, over the segments decided so far, of their distance over the threshold, when
+    above 1; a segment without a name (inf) does not count.  Any other library: 1."""
+    lib = _OnePerson(one_person, [4.0, 6.0, math.inf, 5.0, 1.0])   # ratios 2, 3, -, 2.5, 0.5
+    nm = SegmentNamer(lib, FR)
+    assert nm.start(2)
+    _fed(nm, 1000)
+    for _ in range(5):
+        nm.decided(nm.name(600, 799)[1])
+    if one_person:
+        # before any decision 1; then median(2) = 2, median(2, 3) = 2.5, still 2.5 (inf
+        # left out), median(2, 3, 2.5) = 2.5
+        assert lib.scales == [1.0, 2.0, 2.5, 2.5, 2.5]
+        assert nm.scale == 2.25                       # median(2, 3, 2.5, 0.5)
+    else:
+        assert lib.scales == [1.0] * 5 and nm.scale == 1.0
+
+
+def test_a_performer_nearer_than_the_threshold_keeps_it():
+    """Ratios below 1 never lower the threshold (the scale is at least 1)."""
+    lib = _OnePerson(True, [0.5, 0.5, 0.5])
+    nm = SegmentNamer(lib, FR)
+    assert nm.start(2)
+    _fed(nm, 1000)
+    for _ in range(3):
+        nm.decided(nm.name(600, 799)[1])
+    assert lib.scales == [1.0, 1.0, 1.0] and nm.scale == 1.0

@@ -837,3 +837,21 @@ def test_the_library_says_how_much_farther_another_person_lies(tmp_path):
     assert f"{a['ratio']:.2f} x" in line and "styles differ" in line
     assert not any("another person's examples" in x for x in describe(one, tmp_path / "o.json"))
     assert not any("styles differ" in x for x in describe(mixed, tmp_path / "m.json"))
+
+
+def test_one_person_calibration_and_the_thresholds_scale():
+    """``one_person_calibration``: calibrated on one person's examples only (not several
+    people, not a given threshold).  ``decide(d, scale=s)`` judges by s x threshold."""
+    ann = [("ann", 0, "walk:8,punch:8"), ("ann", 4, "walk:8,punch:8")]
+    one = _people_library(ann)
+    two = _people_library(ann + [("bob", 1, "walk:8,punch:8")])
+    assert one.calibration["calibrated"] and one.one_person_calibration
+    assert not two.one_person_calibration
+    one.calibration["threshold_given"] = True
+    assert not one.one_person_calibration
+    names = np.asarray(one.names)
+    t = one.threshold
+    d = np.where(names == "walk", 1.5 * t, 10.0 * t)
+    assert one.decide(d).name == UNKNOWN and one.decide(d).nearest == "walk"
+    assert one.decide(d, scale=2.0).name == "walk"
+    assert one.decide(d, scale=1.4).name == UNKNOWN

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import socket
+from dataclasses import asdict
 
 from rtseg.live.stats import SessionSummary, source_losses_text, targets_text
 
@@ -57,3 +58,16 @@ def test_the_cuts_the_relative_floor_held_back_are_counted():
     assert "contrast relative floor held back 4" in s.text()
     assert s.as_dict()["floored"] == {"contrast": 4}
     assert "relative floor" not in _summary(floored={"contrast": 0}).text()
+
+
+def test_the_identity_summary_says_how_many_names_the_performers_scale_judged():
+    """The session summary's identity part names the decisions whose threshold the
+    performer's scale raised, and the largest factor; nothing when none was."""
+    from rtseg.identity.messages import IdentityStats
+    from rtseg.live.stats import identity_text
+    counts = asdict(IdentityStats(decisions=6, new_behaviours=4, named=3, names_unknown=3))
+    assert "performer's scale" not in identity_text(counts)
+    counts.update(names_scaled=4, largest_scale=2.4)
+    text = identity_text(counts)
+    assert "3 named, 3 unknown" in text
+    assert "4 with the performer's scale (the threshold up to x 2.40)" in text

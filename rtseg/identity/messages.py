@@ -51,3 +51,5 @@ class IdentityStats:
     names_restored: int = 0           # contested names a correction to a holder's id gave back
     names_claimed: int = 0            # names other ids held, granted as clearly nearer (CLAIM_MARGIN)
     posture_namings: int = 0          # decisions whose naming compared posture too
+    names_scaled: int = 0             # namings whose threshold the performer's scale raised
+    largest_scale: float = 1.0        # ... the largest such factor

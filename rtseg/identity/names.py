@@ -31,6 +31,16 @@ library names by it too, a second ring keeps each frame's rotations (joints x 4,
 per frame) and the named window's posture rows are worked out from them in one batch when
 the segment is named (``rtseg.library.posture_distance``); a frame fed without its
 rotations leaves the segment to the pose features alone.
+
+The performer's scale: a library calibrated on one person's examples
+(``Library.one_person_calibration``) has only that person's own other takes as known
+cases, and another performer - another body, another style - lies farther from all of them
+(bandai's two actors: 2.6 times by the model distance).  ``SegmentNamer`` keeps, for every
+segment the tracker decides (``decided``), its nearest name's distance over the threshold
+it was judged by, and names each later segment with the threshold times the median of
+those ratios when it is above 1 (``scale``): statistics of this session's own segments, no
+parameter.  Libraries of several people (calibrated across people), given thresholds and
+uncalibrated libraries are named as they are.
 """
 
 from __future__ import annotations
@@ -77,6 +87,9 @@ class SegmentNamer:
         self._has_pose = np.zeros(self._R, dtype=bool)
         #: whether the last ``name`` call compared posture too
         self.last_by_posture = False
+        #: the threshold factor the last ``name`` call used (``scale``)
+        self.last_scale = 1.0
+        self._ratios: list[float] = []     # per decided segment: its distance / threshold
 
     @property
     def wants_poses(self) -> bool:
@@ -126,6 +139,15 @@ class SegmentNamer:
         (module doc), oldest first, (frames, d)."""
         return self._rows[self._positions(boundary, frame)]
 
+    @property
+    def scale(self) -> float:
+        """The threshold factor of the next naming (module doc, the performer's scale): 1
+        unless the library was calibrated on one person and the segments decided so far
+        lie, by their median, beyond its threshold."""
+        if not self._ratios or not getattr(self.library, "one_person_calibration", False):
+            return 1.0
+        return max(1.0, float(np.median(self._ratios)))
+
     def name(self, boundary: int, frame: int) -> tuple[str, float]:
         """(name, library distance) of the segment starting at ``boundary`` when decided
         at ``frame``; (``unknown``, inf) with fewer than 2 rows."""
@@ -137,10 +159,22 @@ class SegmentNamer:
         if self.posture is not None and self._poses is not None and self._has_pose[pos].all():
             P = self.posture.transform(self._poses[pos])
         self.last_by_posture = P is not None
+        self.last_scale = s = self.scale
         W = self._rows[pos]
-        nm = (self.library.name(W, self.frame_rate) if P is None
-              else self.library.name(W, self.frame_rate, P))
+        args = (W, self.frame_rate) if P is None else (W, self.frame_rate, P)
+        nm = self.library.name(*args) if s == 1.0 else self.library.name(*args, scale=s)
         return nm.name, nm.distance
+
+    def decided(self, distance: float) -> None:
+        """The tracker decided a segment whose nearest name lay at ``distance`` (the last
+        ``name`` call's): its ratio to the threshold it was judged by joins the
+        performer's scale (inf, no name: left out)."""
+        lib = self.library
+        if not math.isfinite(distance) or not getattr(lib, "one_person_calibration", False):
+            return
+        t = lib.rule_threshold(self.last_by_posture)
+        if t > 0 and math.isfinite(t):
+            self._ratios.append(distance / t)
 
 
 class NameHolders:

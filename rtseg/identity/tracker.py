@@ -366,6 +366,10 @@ class IdentityTracker:
             seg.library_name, seg.name_distance = naming or self.namer.name(seg.boundary,
                                                                              int(frame))
             self.stats.posture_namings += int(self.namer.last_by_posture)
+            if self.namer.last_scale > 1.0:
+                self.stats.names_scaled += 1
+                self.stats.largest_scale = max(self.stats.largest_scale, self.namer.last_scale)
+            self.namer.decided(seg.name_distance)
             seg.name = self._held_name(seg, seg.library_name)
             if seg.name == UNKNOWN:
                 self.stats.names_unknown += 1

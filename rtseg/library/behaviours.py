@@ -35,6 +35,12 @@ windows of one example lie nearer each other than a new performance does.  A lib
 no behaviour has a second example cannot be calibrated: its threshold is
 ``DEFAULT_THRESHOLD`` of its metric and its ratio 1 (``calibration["calibrated"]`` False).
 
+A library calibrated on ONE person's examples (``one_person_calibration``) knows only how
+near that person's own takes lie, which is nearer than another performer's: a session
+names with its threshold times the performer's scale (``rtseg.identity.names.SegmentNamer``:
+the median, over the segments named so far, of d1 over the threshold, when above 1), passed
+to ``name`` / ``decide`` as ``scale``.
+
 Windows: ``window_s`` (2 s) long every ``step_s`` (0.5 s) inside each labelled range after
 ``edge_s`` (0.5 s) is cut off each end (transitions); a range shorter than that gives one
 window of what is left if it is at least ``min_s`` (1 s).
@@ -154,6 +160,24 @@ class Library:
         return self.has_posture and "threshold" in self.posture_rule
 
     @property
+    def one_person_calibration(self) -> bool:
+        """Whether the rejection rule was calibrated on the examples of one person only
+        (every example names the same ``person``; not a given threshold, not the default):
+        its known cases are that person's own other takes (module doc).  Model metric
+        only (version-1 descriptor libraries name as they did)."""
+        cal = self.calibration or {}
+        if (self.metric != "model" or not cal.get("calibrated", False)
+                or cal.get("threshold_given")):
+            return False
+        people = {str(e.get("person") or "") for e in self.examples}
+        return len(people) == 1 and "" not in people
+
+    def rule_threshold(self, posture: bool) -> float:
+        """The threshold of the rule a naming by posture (or not) is judged by."""
+        return float(self.posture_rule["threshold"] if posture and self.names_by_posture
+                     else self.threshold)
+
+    @property
     def posture_bank(self) -> Any:
         """The windows' posture descriptors (``rtseg.library.posture_distance.PostureBank``)."""
         b = getattr(self, "_posture_bank", None)
@@ -211,9 +235,10 @@ class Library:
             return self.bank.pairwise()[i].copy()
         return self.distances(self.descriptors[i])
 
-    def decide(self, d: np.ndarray, posture: bool = False) -> Naming:
+    def decide(self, d: np.ndarray, posture: bool = False, scale: float = 1.0) -> Naming:
         """Name from the distances ``d`` to every window (module doc, Decision); with
-        ``posture`` the distances are model x posture ones, judged by ``posture_rule``."""
+        ``posture`` the distances are model x posture ones, judged by ``posture_rule``;
+        the threshold times ``scale`` (a performer's, module doc)."""
         per = self.name_distances(d)
         if not per:
             return Naming(UNKNOWN, "", math.inf, 0.0)
@@ -222,6 +247,7 @@ class Library:
         second = per[order[1]] if len(order) > 1 else math.inf
         t, r = ((self.posture_rule["threshold"], self.posture_rule["ratio"]) if posture
                 else (self.threshold, self.ratio))
+        t *= scale
         ratio = dist / second if second > 0 else 1.0
         if dist <= t and ratio <= r:
             conf = min(1.0 - dist / t, 1.0 - ratio / r if r > 0 else 0.0)
@@ -257,10 +283,11 @@ class Library:
         return cache[1]
 
     def name(self, W: np.ndarray, frame_rate: float | None = None,
-             P: np.ndarray | None = None) -> Naming:
+             P: np.ndarray | None = None, scale: float = 1.0) -> Naming:
         """Name a window of feature rows (frames, dims) of this library's profile; ``P``:
         the same frames' posture rows (``rtseg.core.posture``), used when the library has
-        posture too (module doc)."""
+        posture too (module doc); ``scale``: the threshold's factor (``decide``; model
+        metric only)."""
         W = np.asarray(W, dtype=np.float64)
         if W.ndim != 2 or W.shape[1] != self.dims:
             raise ValueError(f"library wants {self.dims} feature dims, got {W.shape}")
@@ -270,9 +297,10 @@ class Library:
                 return Naming(UNKNOWN, "", math.inf, 0.0)
             d = self.bank.distances(self.bank.query(W, fr, self.lag_s))
             if P is None or not self.names_by_posture or not len(P):
-                return self.decide(d)
+                return self.decide(d, scale=scale)
             dp = self.posture_bank.distances(window_descriptor(P))
-            return self.decide(combined(d, dp, self._posture_scale()), posture=True)
+            return self.decide(combined(d, dp, self._posture_scale()), posture=True,
+                               scale=scale)
         return self.name_descriptor(descriptor(W, fr))
 
     # ------------------------------------------------------------------ calibration

@@ -247,7 +247,7 @@ def recording_text(summary: "SessionSummary") -> str:
             f"frames and {summary.recording_cuts} cuts")
 
 
-def identity_text(counts: dict[str, int]) -> str:
+def identity_text(counts: dict[str, float]) -> str:
     """The identity part of the session summary ("" when identity was off)."""
     if not counts:
         return ""
@@ -262,6 +262,9 @@ def identity_text(counts: dict[str, int]) -> str:
             out += f"; {counts['names_claimed']} names other ids held given as clearly nearer"
         if counts.get("posture_namings", 0):
             out += f"; {counts['posture_namings']} decided by posture too"
+        if counts.get("names_scaled", 0):
+            out += (f"; {counts['names_scaled']} with the performer's scale (the threshold "
+                    f"up to x {counts.get('largest_scale', 1.0):.2f})")
     return out + "), "
 
 
