@@ -116,7 +116,7 @@ class _OnePerson:
 
 
 @pytest.mark.parametrize("one_person", [True, False])
-def test_the_performers_scale_is_the_median_distance_over_the_threshold(one_person):
+def test_the_performers_scale_is_the_median_distance_over_the_threshold(one_person, caplog):
     """A library calibrated on one person: each naming's threshold is multiplied by the
     median, over the segments decided so far, of their distance over the threshold, when
     above 1; a segment without a name (inf) does not count.  Any other library: 1."""
@@ -124,8 +124,11 @@ def test_the_performers_scale_is_the_median_distance_over_the_threshold(one_pers
     nm = SegmentNamer(lib, FR)
     assert nm.start(2)
     _fed(nm, 1000)
-    for _ in range(5):
-        nm.decided(nm.name(600, 799)[1])
+    with caplog.at_level(logging.INFO, logger="rtseg.identity.names"):
+        for _ in range(5):
+            nm.decided(nm.name(600, 799)[1])
+    told = [r for r in caplog.records if "performer's segments lie" in r.getMessage()]
+    assert len(told) == (1 if one_person else 0)      # once, when the scale first applies
     if one_person:
         # before any decision 1; then median(2) = 2, median(2, 3) = 2.5, still 2.5 (inf
         # left out), median(2, 3, 2.5) = 2.5

@@ -90,6 +90,7 @@ class SegmentNamer:
         #: the threshold factor the last ``name`` call used (``scale``)
         self.last_scale = 1.0
         self._ratios: list[float] = []     # per decided segment: its distance / threshold
+        self._scaled_told = False           # the log said the scale is in use
 
     @property
     def wants_poses(self) -> bool:
@@ -160,6 +161,11 @@ class SegmentNamer:
             P = self.posture.transform(self._poses[pos])
         self.last_by_posture = P is not None
         self.last_scale = s = self.scale
+        if s > 1.0 and not self._scaled_told:
+            self._scaled_told = True
+            log.info("this performer's segments lie %.2f x the library's threshold from it "
+                     "(median so far): names are judged by that from now on (the library's "
+                     "examples are of one person)", s)
         W = self._rows[pos]
         args = (W, self.frame_rate) if P is None else (W, self.frame_rate, P)
         nm = self.library.name(*args) if s == 1.0 else self.library.name(*args, scale=s)
