@@ -276,9 +276,10 @@ def run(args: argparse.Namespace) -> int:
         if len(people) == 1 and "" not in people:
             print(f"rtseg learn: note: every example is of one person ({people.pop()}): "
                   "the threshold is calibrated on that person's other takes, which lie "
-                  "nearer each other than another performer's do, so a new performer's "
-                  "segments may come out unknown more often; add examples from a second "
-                  "person", file=sys.stderr)
+                  "nearer each other than another performer's do; a session judges a "
+                  "performer whose segments lie farther by their own median distance (the "
+                  "performer's scale), which names more of them but also more behaviours "
+                  "the library lacks; add examples from a second person", file=sys.stderr)
     return 0
 
 
