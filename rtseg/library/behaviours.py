@@ -337,15 +337,15 @@ class Library:
         own, across = [], []             # nearest same-name window of another example:
         for i in range(len(names)):      # the same person's, another person's
             d = self.window_distances(i, posture)
+            same_name = (names == names[i]) & (src != src[i])   # of another example
             if by_person:
-                same_name = (names == names[i]) & (src != src[i])
-                a = d[same_name & (person == person[i])]
-                b = d[same_name & (person != person[i])]
+                elsewhere = person != person[i]
+                a, b = d[same_name & ~elsewhere], d[same_name & elsewhere]
                 if len(a) and len(b) and np.isfinite(a.min()) and np.isfinite(b.min()):
                     own.append(float(a.min()))
                     across.append(float(b.min()))
-                d = np.where(person != person[i], d, np.inf)   # as a new person is met
-            s = d[(names == names[i]) & (src != src[i])]
+                d = np.where(elsewhere, d, np.inf)   # as a new person is met
+            s = d[same_name]
             s = s[np.isfinite(s)]
             others = {n: v for n, v in self.name_distances(d).items()
                       if n != names[i] and math.isfinite(v)}
