@@ -524,3 +524,43 @@ def test_a_source_without_a_readable_take_says_so(tmp_path):
                         str(tmp_path / "out"), "--n", "1"], capture_output=True, text=True)
     assert r.returncode == 2 and "no take to splice" in r.stderr
     assert "one person" not in r.stderr and not (tmp_path / "out").exists()
+
+
+def test_two_processes_splicing_into_one_folder_leave_whole_files(source, tmp_path):
+    """Two benchmarks that share a cache may splice the same performances into one folder
+    at once (``benchmarks/lopo.py`` twice): each file appears whole, by an atomic rename,
+    so both finish, every file is the bytes one process alone writes, and no temporary
+    file is left."""
+    def start(out: Path) -> subprocess.Popen:
+        return subprocess.Popen([sys.executable, str(REPO / "benchmarks" / "splice.py"),
+                                 str(source), str(out), "--seed", "4", "--n", "6"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    shared = tmp_path / "shared"
+    procs = [start(shared), start(shared)]
+    for p in procs:
+        _, err = p.communicate(timeout=300)
+        assert p.returncode == 0, err.decode()
+    alone = tmp_path / "alone"
+    assert start(alone).wait(timeout=300) == 0
+    names = sorted(p.name for p in alone.iterdir())
+    assert sorted(p.name for p in shared.iterdir()) == names      # nothing else left
+    for name in names:
+        assert (shared / name).read_bytes() == (alone / name).read_bytes(), name
+    assert oct((shared / names[0]).stat().st_mode & 0o777) == oct(0o644)
+
+
+def test_a_write_that_fails_leaves_no_file(tmp_path, monkeypatch):
+    """``replace_bytes``: a write that fails before its rename (here the rename itself)
+    leaves neither the target nor its temporary file; one that succeeds leaves the file."""
+    target = tmp_path / "x.npz"
+
+    def no_rename(src, dst):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(S.os, "replace", no_rename)
+    with pytest.raises(OSError, match="disk full"):
+        S.replace_bytes(target, b"whole")
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.undo()
+    S.replace_bytes(target, b"whole")
+    assert target.read_bytes() == b"whole" and [p.name for p in tmp_path.iterdir()] == ["x.npz"]

@@ -37,6 +37,8 @@ from __future__ import annotations
 import csv
 import io
 import logging
+import os
+import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -398,12 +400,14 @@ _FIXED_TIME = (1980, 1, 1, 0, 0, 0)
 
 
 def write_performance(path: str | Path, perf: Performance) -> Path:
-    """Write the take (rtseg ``.npz``) with fixed zip timestamps: same input, same bytes."""
+    """Write the take (rtseg ``.npz``) with fixed zip timestamps: same input, same bytes.
+    The file appears whole or not at all (``replace_bytes``)."""
     from rtseg.drivers.readers import write_take
     path = Path(path)
-    write_take(path, perf.take)
-    with zipfile.ZipFile(path) as z:
-        members = [(i.filename, z.read(i.filename)) for i in z.infolist()]
+    with tempfile.TemporaryDirectory(dir=path.parent, prefix=".splice-") as tmp:
+        first = write_take(Path(tmp) / path.name, perf.take)
+        with zipfile.ZipFile(first) as z:
+            members = [(i.filename, z.read(i.filename)) for i in z.infolist()]
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as z:
         for fname, data in members:
@@ -411,7 +415,23 @@ def write_performance(path: str | Path, perf: Performance) -> Path:
             info.compress_type = zipfile.ZIP_DEFLATED
             info.external_attr = 0o644 << 16
             z.writestr(info, data)
-    path.write_bytes(buf.getvalue())
+    return replace_bytes(path, buf.getvalue())
+
+
+def replace_bytes(path: Path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` through a temporary file beside it and an atomic rename,
+    so a reader, or another process writing the same performances into the same folder
+    (two benchmarks sharing a cache), never sees a part-written file, and a process
+    stopped midway leaves the old file or none."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.chmod(tmp, 0o644)                 # as a plain write would leave it (mkstemp: 0600)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
     return path
 
 
@@ -462,10 +482,11 @@ def generate(src: str | Path, out: str | Path, *, seed: int = 0, n: int = 20,
             write_performance(out / f"{name}.npz", perf)
             perfs.append(perf)
     lines = ["\t".join(INDEX_COLUMNS)] + ["\t".join(r) for p in perfs for r in index_rows(p)]
-    (out / "index.tsv").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    replace_bytes(out / "index.tsv", ("\n".join(lines) + "\n").encode("utf-8"))
     return perfs
 
 
 __all__ = ["SpliceConfig", "SourceTake", "read_source_index", "trim_bounds", "load_sources",
            "build_groups", "Clip", "slerp", "crossfade", "fade_weights", "plan_performance",
-           "make_performance", "write_performance", "generate", "Performance", "KINDS"]
+           "make_performance", "write_performance", "replace_bytes", "generate", "Performance",
+           "KINDS"]
