@@ -380,3 +380,23 @@ def test_library_loto_by_person_says_when_nobody_can_be_scored(tmp_path):
                     "(p1: no other person in this source)"]
     doc = json.loads(r.stdout)
     assert doc["sources"]["solo"]["people"] == [] and doc["pooled"]["known"]["segments"] == 0
+
+
+def test_lopo_scores_its_sets_alike_in_one_process_or_several(tmp_path):
+    """benchmarks/lopo.py --jobs 2 (the sets scored in two forked processes) gives the same
+    document as --jobs 1, set by set, and the same held-out choice."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from source_folders import make_source
+    data = tmp_path / "data"
+    make_source(data / "synth", ["p1", "p2"], ["walk", "squat", "wave"], rate=30.0,
+                seconds=8.0)
+    docs = []
+    for jobs in ("1", "2"):
+        r = _run("lopo.py", str(data), "--per-person", "1", "--grid", "looks", "--jobs", jobs,
+                 "--cache", str(tmp_path / "cache"), "--json")
+        assert r.returncode == 0, r.stderr[-2000:]
+        docs.append(json.loads(r.stdout))
+    one, two = docs
+    assert len(one["sets"]) == 4 and one["sets"] == two["sets"]
+    assert one["held_out"] == two["held_out"] and one["choices"] == two["choices"]
+    assert one["held_out"]["pooled"]["transitions"] > 0
