@@ -207,23 +207,22 @@ def score_sets(cases: list[Case], sets: list[dict], jobs: int = 1,
     same as one process gives, since a run depends only on its set and performance.
     ``progress(k)`` after each set."""
     global _CASES
-    if jobs <= 1 or len(sets) < 2 or "fork" not in multiprocessing.get_all_start_methods():
+
+    def collect(rows_per_set) -> list[dict[str, tuple]]:
         out = []
-        for k, s in enumerate(sets):
-            out.append({c.name: run(c, s) for c in cases})
+        for k, rows in enumerate(rows_per_set):
+            out.append(rows)
             if progress is not None:
                 progress(k)
         return out
+
     _CASES = cases
     try:
+        if jobs <= 1 or len(sets) < 2 or "fork" not in multiprocessing.get_all_start_methods():
+            return collect(map(_score_set, sets))
         with ProcessPoolExecutor(min(jobs, len(sets)),
                                  mp_context=multiprocessing.get_context("fork")) as ex:
-            out = []
-            for k, rows in enumerate(ex.map(_score_set, sets)):
-                out.append(rows)
-                if progress is not None:
-                    progress(k)
-            return out
+            return collect(ex.map(_score_set, sets))
     finally:
         _CASES = []
 
