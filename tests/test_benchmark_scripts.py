@@ -117,6 +117,53 @@ def test_lopo_leaves_a_spliced_folder_of_the_data_folder_alone(tmp_path):
     assert set(doc["shipped"]["sources"]) == {"synth"}
 
 
+def test_errors_accounts_for_every_miss_and_false_cut(tmp_path):
+    """benchmarks/errors.py on a folder of two synthetic performers, with parameters that make
+    it err three ways (a gate that drops most cuts, a threshold nothing reaches, a low
+    threshold without the gate or floor): the causes and places follow, and the counts agree
+    with the F1 scoring (misses = transitions - right cuts, false cuts = cuts - right cuts),
+    listed per performance and pooled; a missing folder or a bad parameter file is exit 2."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from source_folders import make_source
+    from rtseg.evaluation.errors import FALSE_KINDS, MISS_CAUSES
+    data = tmp_path / "data"
+    make_source(data / "synth", ["p1", "p2"], ["walk", "squat", "wave"], rate=30.0,
+                seconds=8.0)
+    sets = {"gate": "gate_threshold = 50.0", "high": "threshold = 1000.0",
+            "low": "threshold = 1.02\ngate_threshold = 0.0\nrelative_floor = 0.0\nmin_gap_s = 1.0"}
+    docs = {}
+    for name, body in sets.items():
+        (tmp_path / f"{name}.toml").write_text(f"[contrast]\n{body}\n")
+        r = _run("errors.py", str(data), "--params", str(tmp_path / f"{name}.toml"),
+                 "--cache", str(tmp_path / "cache"), "--json")
+        assert r.returncode == 0, r.stderr[-2000:]
+        doc = docs[name] = json.loads(r.stdout)
+        g = doc["pooled"]
+        assert set(doc["sources"]) == {"synth"} and g["performances"] == len(doc["performances"])
+        assert set(g["miss_causes"]) == set(MISS_CAUSES)
+        assert set(g["false_kinds"]) == set(FALSE_KINDS)
+        assert g["misses"] == sum(g["miss_causes"].values()) == sum(g["missed_pairs"].values())
+        assert g["false_cuts"] == sum(g["false_kinds"].values())
+        listed_m = sum(len(p["misses"]) for p in doc["performances"].values())
+        listed_f = sum(len(p["false_cuts"]) for p in doc["performances"].values())
+        assert (listed_m, listed_f) == (g["misses"], g["false_cuts"])
+        right = g["transitions"] - g["misses"]
+        assert g["false_cuts"] == g["cuts"] - right
+        f1 = 2 * right / (g["cuts"] + g["transitions"])
+        assert g["f1"] == pytest.approx(f1, abs=1e-4)
+    gate, high, low = (docs[k]["pooled"] for k in ("gate", "high", "low"))
+    assert gate["miss_causes"]["gate dropped"] >= gate["misses"] / 2 > 0
+    assert high["cuts"] == 0 and high["miss_causes"]["below threshold"] == high["transitions"]
+    assert low["false_cuts"] > 0 and sum(low["false_inside"].values()) == low["false_kinds"]["inside"]
+    text = _run("errors.py", str(data), "--cache", str(tmp_path / "cache"))
+    assert text.returncode == 0 and text.stdout.startswith("pooled: ")
+    assert _run("errors.py", str(tmp_path / "nowhere")).returncode == 2
+    (tmp_path / "bad.toml").write_text("[contrast]\nthreshold = -1\n")
+    r = _run("errors.py", str(data), "--params", str(tmp_path / "bad.toml"),
+             "--cache", str(tmp_path / "cache"))
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
 def test_library_loto_by_person_over_a_source_folder(tmp_path):
     """benchmarks/library_loto.py --by-person DIR on a parent of one source folder laid
     out like cmu_single (three synthetic performers, tests/source_folders.py): each person

@@ -45,7 +45,8 @@ def test_no_floor_until_warm_then_a_fraction_of_the_median():
     assert f.floor == 0.0                       # two cuts sent: not warm yet
     f.sent(90.0)
     assert f.floor == pytest.approx(7.0)        # 0.1 x median(50, 70, 90)
-    assert not f.admits(6.9) and f.refused == 1
+    assert not f.admits(6.9, frame=1234) and f.refused == 1
+    assert f.refusals == [(1234, 6.9, pytest.approx(7.0))]   # what benchmarks/errors.py reads
     assert f.admits(7.0)
     for s in (2.0, 2.0, 2.0):                   # the oldest scores leave the median
         f.sent(s)
