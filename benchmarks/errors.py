@@ -24,7 +24,6 @@ import argparse
 import json
 import os
 import sys
-from pathlib import Path
 
 if __name__ == "__main__":
     for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -32,7 +31,6 @@ if __name__ == "__main__":
 
 
 import lopo
-from rtseg.detectors import load_params
 from rtseg.detectors.contrast import ContrastDetector
 from rtseg.evaluation.errors import Errors, attribute, tally_errors
 from rtseg.evaluation.online import to_take_frames
@@ -93,22 +91,13 @@ def _text(doc: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("data", type=Path, help="folder laid out like ../shared/data (or one source)")
-    p.add_argument("--per-person", type=int, default=2, help="performances per person and seed")
-    p.add_argument("--seeds", type=int, nargs="+", default=[0], help="splice seeds")
-    p.add_argument("--cache", type=Path, default=Path("/tmp/rtseg-lopo"),
-                   help="where spliced performances are kept (shared with lopo.py)")
+    lopo.add_performance_arguments(p)
     p.add_argument("--params", metavar="FILE",
                    help="detector parameters (a file, or a shipped name such as fast)")
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
-    if not args.data.is_dir():
-        print(f"errors: {args.data}: no such folder", file=sys.stderr)
-        return 2
-    try:
-        params = load_params(args.params)["contrast"]
-    except (OSError, ValueError) as exc:
-        print(f"errors: {exc}", file=sys.stderr)
+    params = lopo.checked_params(args, "errors")
+    if params is None:
         return 2
     cases = lopo.load_cases(args.data, args.cache, args.per_person, args.seeds)
     if not cases:

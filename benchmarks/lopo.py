@@ -280,15 +280,34 @@ def report(cases: list[Case], rows: dict[str, tuple]) -> dict:
             "sources": {s: summary(r) for s, r in sorted(by_source.items())}}
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def add_performance_arguments(p: argparse.ArgumentParser) -> None:
+    """The arguments that say which performances ``load_cases`` reads: DATA, --per-person,
+    --seeds, --cache (shared by the scripts that score them)."""
     p.add_argument("data", type=Path, help="folder laid out like ../shared/data (or one source)")
     p.add_argument("--per-person", type=int, default=2, help="performances per person and seed")
     p.add_argument("--seeds", type=int, nargs="+", default=[0], help="splice seeds")
-    p.add_argument("--grid", choices=list(GRIDS), default="default")
-    p.add_argument("--max-median", type=float, default=2.5, help="delay budget (s) of a set")
     p.add_argument("--cache", type=Path, default=Path("/tmp/rtseg-lopo"),
                    help="where spliced performances are kept")
+
+
+def checked_params(args: argparse.Namespace, prog: str) -> dict | None:
+    """The ``[contrast]`` parameters of ``args.params`` (None: the shipped ones), or None
+    after one line on stderr when ``args.data`` is no folder or the file is bad."""
+    if not args.data.is_dir():
+        print(f"{prog}: {args.data} is not a folder", file=sys.stderr)
+        return None
+    try:
+        return load_params(args.params)["contrast"]
+    except (OSError, ValueError) as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return None
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    add_performance_arguments(p)
+    p.add_argument("--grid", choices=list(GRIDS), default="default")
+    p.add_argument("--max-median", type=float, default=2.5, help="delay budget (s) of a set")
     p.add_argument("--params", metavar="FILE",
                    help="detector parameters scored as 'shipped' and filling the grid's "
                         "other keys (default config/detectors.toml; 'fast': config/fast.toml)")
@@ -297,13 +316,8 @@ def main(argv: list[str] | None = None) -> int:
                         "the machine's cores; 1: in this process)")
     p.add_argument("--json", action="store_true")
     args = p.parse_args(argv)
-    if not args.data.is_dir():
-        print(f"lopo: {args.data} is not a folder", file=sys.stderr)
-        return 2
-    try:
-        base = load_params(args.params)["contrast"]     # a bad file: before minutes of reading
-    except ValueError as exc:
-        print(f"lopo: {exc}", file=sys.stderr)
+    base = checked_params(args, "lopo")     # a bad file: before minutes of reading
+    if base is None:
         return 2
     t0 = time.perf_counter()
     try:
