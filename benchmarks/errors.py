@@ -77,7 +77,7 @@ def _text(doc: dict) -> str:
     for name, g in [("pooled", doc["pooled"]), *doc["sources"].items()]:
         causes = ", ".join(f"{k} {v}" for k, v in g["miss_causes"].items())
         kinds = ", ".join(f"{k} {v}" for k, v in g["false_kinds"].items())
-        lines.append(f"{name}: {g['transitions']} transitions, {g['cuts']} cuts, F1 {g['f1']:.3f}")
+        lines.append(f"{name}: {g['transitions']} transitions, {g['cuts']} cuts, F1 {g['f1']:.4f}")
         lines.append(f"  missed {g['misses']}: {causes}")
         lines.append(f"  false cuts {g['false_cuts']}: {kinds}")
         pairs = list(g["missed_pairs"].items())[:6]
