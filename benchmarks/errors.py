@@ -31,7 +31,6 @@ if __name__ == "__main__":
 
 
 import lopo
-from rtseg.detectors.contrast import ContrastDetector
 from rtseg.evaluation.errors import Errors, attribute, tally_errors
 from rtseg.evaluation.online import to_take_frames
 from rtseg.evaluation.scoring import pooled_tally, tally
@@ -40,22 +39,16 @@ from rtseg.evaluation.scoring import pooled_tally, tally
 def performance_errors(case: lopo.Case, params: dict) -> tuple[Errors, tuple]:
     """The errors of the contrast detector with ``params`` on one performance's fed rows,
     and its tally row (``rtseg.evaluation.scoring.tally``)."""
-    det = ContrastDetector.from_params(params, case.frame_rate, keep_trace=True)
-    cuts = []
-    for i, x in enumerate(case.X):
-        c = det.update(x)
-        if c is not None:
-            cuts.append((c.frame, i))
+    det, cuts = lopo.detect(case, params, keep_trace=True)
     last = len(case.index) - 1
     take = lambda f: int(case.index[min(max(int(f), 0), last)])   # noqa: E731
-    frames = [c for c, _ in to_take_frames(cuts, case.index)]
+    pairs = to_take_frames(cuts, case.index)
     errs = attribute(
-        frames, case.transitions, case.frame_rate, lopo.TOL_S, threshold=det.threshold,
-        contrast=[(take(p), v) for p, v, _ in det.trace],
+        [c for c, _ in pairs], case.transitions, case.frame_rate, lopo.TOL_S,
+        threshold=det.threshold, contrast=[(take(p), v) for p, v, _ in det.trace],
         gate_drops=[take(b) for b, _, sent in (det.gate.decisions if det.gate else ()) if not sent],
         refusals=[take(f) for f, _, _ in det.relative.refusals])
-    row = tally(to_take_frames(cuts, case.index), case.transitions, case.frame_rate, lopo.TOL_S)
-    return errs, row
+    return errs, tally(pairs, case.transitions, case.frame_rate, lopo.TOL_S)
 
 
 def summarise(cases: list[lopo.Case], found: dict[str, tuple[Errors, tuple]]) -> dict:

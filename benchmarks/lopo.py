@@ -181,13 +181,21 @@ def load_cases(data: Path, cache: Path, per_person: int, seeds: list[int]) -> li
     return cases
 
 
-def run(case: Case, params: dict) -> tuple:
-    det = ContrastDetector.from_params(params, case.frame_rate)
+def detect(case: Case, params: dict, keep_trace: bool = False
+           ) -> tuple[ContrastDetector, list[tuple[int, int]]]:
+    """The contrast detector with ``params`` run over a performance's fed rows, and its
+    (cut frame, detected frame) pairs in rows (``to_take_frames`` makes them take frames)."""
+    det = ContrastDetector.from_params(params, case.frame_rate, keep_trace=keep_trace)
     cuts = []
     for i, x in enumerate(case.X):
         c = det.update(x)
         if c is not None:
             cuts.append((c.frame, i))
+    return det, cuts
+
+
+def run(case: Case, params: dict) -> tuple:
+    _, cuts = detect(case, params)
     return tally(to_take_frames(cuts, case.index), case.transitions, case.frame_rate, TOL_S)
 
 

@@ -103,13 +103,9 @@ def attribute(cuts: Sequence[int], transitions: Sequence[Transition], frame_rate
     wide = widen(transitions, int(round(tolerance_s * fr)))
     s = score(frames, wide)
     hit_t = {j for _, j in s.matches}
-    hit_c = Counter(c for c, _ in s.matches)
-    free: list[int] = []                  # cuts that matched nothing (a frame may repeat)
-    left = Counter(frames)
-    left.subtract(hit_c)
-    for c in sorted(left):
-        free.extend([c] * max(left[c], 0))
-    profile = sorted((int(p), float(v)) for p, v in contrast)
+    # the cuts that matched nothing, in order (a frame may repeat)
+    free = sorted((Counter(frames) - Counter(c for c, _ in s.matches)).elements())
+    profile = [(int(p), float(v)) for p, v in contrast]
     drops, refused = [int(b) for b in gate_drops], [int(b) for b in refusals]
     out_f = int(round(outside_s * fr))
     misses = []
