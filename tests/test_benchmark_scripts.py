@@ -122,7 +122,8 @@ def test_errors_accounts_for_every_miss_and_false_cut(tmp_path):
     it err three ways (a gate that drops most cuts, a threshold nothing reaches, a low
     threshold without the gate or floor): the causes and places follow, and the counts agree
     with the F1 scoring (misses = transitions - right cuts, false cuts = cuts - right cuts),
-    listed per performance and pooled; a missing folder or a bad parameter file is exit 2."""
+    listed per performance and pooled; a missing folder, a folder of no performance or a
+    bad parameter file is exit 2 with one line."""
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from source_folders import make_source
     from rtseg.evaluation.errors import FALSE_KINDS, MISS_CAUSES
@@ -158,6 +159,9 @@ def test_errors_accounts_for_every_miss_and_false_cut(tmp_path):
     text = _run("errors.py", str(data), "--cache", str(tmp_path / "cache"))
     assert text.returncode == 0 and text.stdout.startswith("pooled: ")
     assert _run("errors.py", str(tmp_path / "nowhere")).returncode == 2
+    (tmp_path / "empty").mkdir()
+    r = _run("errors.py", str(tmp_path / "empty"), "--cache", str(tmp_path / "cache"))
+    assert r.returncode == 2 and r.stderr.strip().endswith("no labelled performance"), r.stderr
     (tmp_path / "bad.toml").write_text("[contrast]\nthreshold = -1\n")
     r = _run("errors.py", str(data), "--params", str(tmp_path / "bad.toml"),
              "--cache", str(tmp_path / "cache"))
