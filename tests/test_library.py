@@ -71,7 +71,7 @@ def test_saved_into_a_missing_folder(tmp_path, library):
 def test_round_trip_through_the_file(tmp_path, library):
     path = save_library(library, tmp_path / "lib.json")
     doc = json.loads(path.read_text())
-    assert doc["format"] == "rtseg-behaviour-library" and doc["version"] == 3
+    assert doc["format"] == "rtseg-behaviour-library" and doc["version"] == 4
     assert doc["metric"] == "model" and len(doc["window_stats"]["n"]) == len(library.names)
     assert doc["profile"] == library.profile and doc["dims"] == library.dims
     back = load(path, library.profile, library.dims)

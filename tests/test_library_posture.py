@@ -86,7 +86,7 @@ def test_posture_tells_apart_what_the_rotations_cannot(lib):
 def test_the_file_keeps_the_posture_and_its_rule(tmp_path, lib):
     path = save(lib, tmp_path / "lib.json")
     doc = json.loads(path.read_text())
-    assert doc["version"] == 3 and len(doc["posture"]) == len(doc["names"])
+    assert doc["version"] == 4 and len(doc["posture"]) == len(doc["names"])
     back = load(path)
     assert back.names_by_posture
     np.testing.assert_allclose(back.posture, lib.posture, atol=1e-5)

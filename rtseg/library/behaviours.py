@@ -13,7 +13,9 @@ dims), short windows cut from labelled examples, each with its name and the exam
   a name's distance is the mean of its 3 nearest windows' (``k_nearest`` 3).
 
 A model library learned from takes whose rest geometry is known (``rtseg.core.posture``:
-ASF/AMC, BVH) also keeps each window's posture descriptor; a session that has posture too
+ASF/AMC, BVH) also keeps each window's body descriptor (its posture and, from file version
+4, how fast each joint turns: ``rtseg.library.posture_distance.body_descriptor``); a
+session that has posture too
 is named by a weighted geometric mean of the model and posture distances
 (``rtseg.library.posture_distance``), with a rejection rule calibrated for it
 (``posture_rule``); a session without posture (an IMU suit) by the model distance alone.
@@ -45,11 +47,12 @@ Windows: ``window_s`` (2 s) long every ``step_s`` (0.5 s) inside each labelled r
 ``edge_s`` (0.5 s) is cut off each end (transitions); a range shorter than that gives one
 window of what is left if it is at least ``min_s`` (1 s).
 
-File: JSON (data only), ``{"format": "rtseg-behaviour-library", "version": 3, "profile",
+File: JSON (data only), ``{"format": "rtseg-behaviour-library", "version": 4, "profile",
 "dims", "frame_rate", "window_s", ..., "threshold", "ratio", "k_nearest", "metric",
 "lag_s", "scale", "names", "sources", "starts", "descriptors", "window_stats",
-"posture", "posture_rule", "examples"}`` (``rtseg.library.file``).  ``load`` refuses
-another format, version (1 to 3 are read), profile or dims with one ``LibraryError`` line.
+"posture", "posture_rule", "posture_speed_weight", "examples"}`` (``rtseg.library.file``).
+``load`` refuses another format, version (1 to 4 are read), profile or dims with one
+``LibraryError`` line.
 """
 
 from __future__ import annotations
@@ -64,17 +67,19 @@ from rtseg.config import ConfigError
 from rtseg.library.calibration import (DEFAULT_THRESHOLD, MODEL_ONE_NAME_FACTOR,
                                        ONE_NAME_FACTOR, k_mean, median_or_none,
                                        nearest_others, person_spread, separating_rule)
-from rtseg.core.posture import window_descriptor
 from rtseg.library.descriptor import (GROUPS, K_NEAREST, SCALE_FLOOR,  # noqa: F401 (re-exported)
                                      descriptor, group_slices)
 from rtseg.library.distance import LAG_S, window_stats
-from rtseg.library.posture_distance import PostureBank, combined, posture_scale
+from rtseg.library.joint_speed import SPEED_WEIGHT
+from rtseg.library.posture_distance import (PostureBank, body_descriptor, combined,
+                                            posture_scale, reweighted)
 
 FORMAT = "rtseg-behaviour-library"
-VERSION = 3
+VERSION = 4
 #: versions this rtseg reads: 1 (descriptor distance only), 2 (window statistics: model
-#: distance), 3 (window posture descriptors, optional)
-READS = (1, 2, 3)
+#: distance), 3 (window posture descriptors, optional), 4 (posture descriptors with the
+#: joints' speeds)
+READS = (1, 2, 3, 4)
 METRICS = ("model", "descriptor")
 #: the distance a library is learned with: "model" (``rtseg.library.distance``); held
 #: out it names more segments right than "descriptor" (mocap6 0.90 against 0.80,
@@ -141,8 +146,10 @@ class Library:
     metric: str = "descriptor"               # "model" (window models) or "descriptor"
     window_stats: list[Any] = field(default_factory=list)   # per window (model metric)
     lag_s: float = LAG_S                     # angular-velocity lag (model metric), s
-    #: per window its posture descriptor (rtseg.core.posture.window_descriptor), or empty
+    #: per window its body descriptor (rtseg.library.posture_distance.body_descriptor), or empty
     posture: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    #: the joint speeds' weight in ``posture`` (0: posture alone, version-3 files)
+    speed_weight: float = 0.0
     #: the rejection rule of the model x posture distance: {"threshold", "ratio", "scale"}
     posture_rule: dict[str, Any] = field(default_factory=dict)
 
@@ -298,7 +305,7 @@ class Library:
             d = self.bank.distances(self.bank.query(W, fr, self.lag_s))
             if P is None or not self.names_by_posture or not len(P):
                 return self.decide(d, scale=scale)
-            dp = self.posture_bank.distances(window_descriptor(P))
+            dp = self.posture_bank.distances(body_descriptor(P, W, fr, self.speed_weight))
             return self.decide(combined(d, dp, self._posture_scale()), posture=True,
                                scale=scale)
         return self.name_descriptor(descriptor(W, fr))
@@ -393,7 +400,12 @@ class Library:
                       window_stats=list(self.window_stats) + list(other.window_stats),
                       lag_s=self.lag_s)
         if self.has_posture and other.has_posture:
-            lib.posture = np.concatenate([self.posture, other.posture])
+            # one weight for both (a version-3 library's descriptors have no joint speeds:
+            # the other's lose theirs)
+            w = min(self.speed_weight, other.speed_weight)
+            lib.posture = np.concatenate([reweighted(self.posture, self.speed_weight, w),
+                                          reweighted(other.posture, other.speed_weight, w)])
+            lib.speed_weight = w
         lib.fit_scale()
         lib.calibrate()
         return lib
@@ -472,7 +484,8 @@ class LibraryBuilder:
             self.sources.append(k)
             self.starts.append(float(s))
             self.stats.append(window_stats(X[s:e], fr))
-            self.posture.append(None if posture is None else window_descriptor(posture[s:e]))
+            self.posture.append(None if posture is None else
+                                body_descriptor(posture[s:e], X[s:e], fr, SPEED_WEIGHT))
         return len(wins)
 
     def build(self, threshold: float | None = None, metric: str = DEFAULT_METRIC) -> Library:
@@ -491,6 +504,7 @@ class LibraryBuilder:
                       window_stats=list(self.stats))
         if metric == "model" and all(p is not None for p in self.posture):
             lib.posture = np.array(self.posture)
+            lib.speed_weight = SPEED_WEIGHT
         lib.fit_scale()
         lib.calibrate()
         if threshold is not None:

@@ -1,9 +1,9 @@
 """A behaviour library file (``rtseg.library.behaviours.Library``): writing (``to_dict``,
 ``save``) and reading (``load``); ``rtseg.library.save`` / ``rtseg.library.load``.
 
-The file is JSON, data only: ``format`` (``rtseg-behaviour-library``), ``version`` (3;
+The file is JSON, data only: ``format`` (``rtseg-behaviour-library``), ``version`` (4;
 version-1 files hold the descriptor distance only and are read as descriptor libraries;
-version-2 files have no posture),
+version-2 files have no posture; version-3 posture descriptors have no joint speeds),
 ``profile`` and ``dims`` (the pose-feature profile and its dims), the window settings,
 ``threshold`` and ``ratio`` (the rejection rule), ``k_nearest`` (a name's distance is the
 mean of its k nearest windows'; a file without it reads as 1, the rule its threshold
@@ -12,9 +12,11 @@ window its ``names`` / ``sources`` (example index) / ``starts`` / ``descriptors`
 distance ``metric`` (``model`` or ``descriptor``) and, for ``model``, ``lag_s`` and per
 window its ``window_stats`` (``rtseg.library.distance.stats_to_json``: frame count, mean and
 upper-triangle scatter of the joints' angular velocities, 3J dims), ``posture`` (per
-window its posture descriptor, ``rtseg.core.posture.window_descriptor``; absent when the
-examples' rest geometry was unknown) with ``posture_rule`` (threshold, ratio and scale of
-the model x posture distance, ``rtseg.library.posture_distance``), and the
+window its body descriptor, ``rtseg.library.posture_distance.body_descriptor``: 2 x 42
+posture values, then J joint speeds when ``posture_speed_weight`` is above 0; absent when
+the examples' rest geometry was unknown) with ``posture_rule`` (threshold, ratio and scale
+of the model x posture distance, ``rtseg.library.posture_distance``) and
+``posture_speed_weight`` (0 or absent: posture alone), and the
 ``examples`` (name, source, frames, person).  Everything is checked on load; any problem
 is one ``LibraryError`` line naming the file.
 """
@@ -51,7 +53,8 @@ def to_dict(lib: Library) -> dict[str, Any]:
                if lib.metric == "model" else {}),
             **({"posture": [[round(float(v), 6) for v in row] for row in lib.posture],
                 "posture_rule": {k: (float(v) if v is not None and math.isfinite(v) else None)
-                                 for k, v in lib.posture_rule.items()}}
+                                 for k, v in lib.posture_rule.items()},
+                "posture_speed_weight": float(lib.speed_weight)}
                if lib.has_posture else {}),
             "examples": lib.examples}
 
@@ -76,7 +79,7 @@ _TYPES = {"profile": "str", "dims": "int", "frame_rate": "num", "window_s": "num
 #: fields that may be absent (files written before them)
 _OPTIONAL_TYPES = {"ratio": "num", "k_nearest": "int", "metric": "str", "lag_s": "num",
                    "starts": "[num]", "calibration": "dict?", "posture": "[[num]]",
-                   "posture_rule": "dict"}
+                   "posture_rule": "dict", "posture_speed_weight": "num"}
 _WHAT = {"str": "a string", "int": "a whole number", "num": "a number", "dict": "an object",
          "[num]": "a list of numbers"}
 
@@ -217,13 +220,17 @@ def load(path: str | Path, profile: str | None = None, dims: int | None = None) 
 
 
 def _load_posture(lib: Library, doc: dict, p: Path) -> None:
-    """The posture descriptors and rule of a version-3 file (LibraryError when malformed)."""
+    """The body descriptors, rule and joint-speed weight of a version-3 or -4 file
+    (LibraryError when malformed)."""
     from rtseg.core.posture import DIM
     P = np.asarray(doc["posture"], dtype=np.float64)
     rule = doc.get("posture_rule") or {}
     t, r, s = rule.get("threshold"), rule.get("ratio"), rule.get("scale")
+    w = float(doc.get("posture_speed_weight", 0.0))
+    width = 2 * DIM + (lib.dims // 4 if w else 0)
     num = lambda v: isinstance(v, (int, float)) and not isinstance(v, bool)   # noqa: E731
-    ok = (lib.metric == "model" and P.shape == (len(lib.names), 2 * DIM)
+    ok = (lib.metric == "model" and P.shape == (len(lib.names), width)
+          and math.isfinite(w) and w >= 0
           and bool(np.all(np.isfinite(P)))
           and (not rule or ((t is None or num(t) and t > 0) and num(r) and 0 < r <= 1
                             and num(s) and s > 0)))
@@ -231,5 +238,6 @@ def _load_posture(lib: Library, doc: dict, p: Path) -> None:
         raise LibraryError(f"behaviour library {p}: malformed (posture descriptors or rule "
                            f"do not agree with its {len(lib.names)} windows)")
     lib.posture = P
+    lib.speed_weight = w
     lib.posture_rule = {} if not rule else {
         "threshold": math.inf if t is None else float(t), "ratio": float(r), "scale": float(s)}

@@ -1,8 +1,10 @@
 """The posture half of a behaviour library's distance (``rtseg.library.behaviours``).
 
-Each library window keeps a posture descriptor (``rtseg.core.posture.window_descriptor``:
-the mean and standard deviation of the posture rows over the window, in leg lengths),
-and a query window's posture distance to it is their Euclidean distance.  When both the
+Each library window keeps a body descriptor (``body_descriptor``): the mean and standard
+deviation of its posture rows (``rtseg.core.posture.window_descriptor``, in leg lengths)
+and, in libraries of file version 4, each joint's median angular speed
+(``rtseg.library.joint_speed``, log(1 + rad/s)) times the library's ``speed_weight``.  A
+query window's posture distance to it is the Euclidean distance of the two descriptors.  When both the
 library and the session have posture (the rig's rest geometry is known), a name is chosen
 by the weighted geometric mean of the two distances,
 
@@ -21,6 +23,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from rtseg.core.posture import DIM, window_descriptor
+from rtseg.library.joint_speed import joint_speeds
 
 #: the posture's share w of the weighted geometric mean (module doc), chosen
 #: leave-one-person-out over hdm05, bandai and cmu_single among 0, 1/3, 1/2, 2/3, 0.8 and 1
@@ -81,3 +86,30 @@ def combined(d_model: np.ndarray, d_posture: np.ndarray, scale: float) -> np.nda
         D = (np.maximum(d_model, 0.0) ** (1.0 - WEIGHT)
              * (np.maximum(d_posture, 0.0) * scale) ** WEIGHT)
     return np.where(np.isfinite(d_model), D, math.inf)
+
+
+def body_descriptor(P: np.ndarray, W: np.ndarray, frame_rate: float,
+                    speed_weight: float) -> np.ndarray:
+    """The descriptor of one window (module doc): posture rows P (frames, ``DIM``) and the
+    same frames' feature rows W (frames, dims) at ``frame_rate`` Hz; the joint speeds are
+    left out when ``speed_weight`` is 0 (libraries of file version 3)."""
+    d = window_descriptor(P)
+    if not speed_weight:
+        return d
+    W = np.asarray(W, dtype=np.float64)
+    speeds = (joint_speeds(W, frame_rate) if len(W) >= 2    # one frame: no turn to measure
+              else np.zeros(W.shape[-1] // 4))
+    return np.concatenate([d, speed_weight * speeds])
+
+
+def reweighted(descriptors: np.ndarray, weight: float, new_weight: float) -> np.ndarray:
+    """Body descriptors (N, k) made with joint-speed ``weight`` as ``new_weight`` would
+    make them (0: posture alone); ``new_weight`` must not exceed a nonzero ``weight``."""
+    D = np.asarray(descriptors, dtype=np.float64)
+    if new_weight == weight:
+        return D
+    if not new_weight:
+        return D[:, :2 * DIM]
+    if not weight:
+        raise ValueError("descriptors without joint speeds cannot be given them")
+    return np.concatenate([D[:, :2 * DIM], D[:, 2 * DIM:] * (new_weight / weight)], axis=1)
