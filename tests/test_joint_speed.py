@@ -95,13 +95,18 @@ def test_a_library_keeps_the_joint_speeds_and_its_file_says_with_what_weight(tmp
     assert names_of(back, new, True) == names_of(lib, new, True)
 
 
-def test_a_version_3_file_names_by_posture_alone(tmp_path, lib):
+def version_3(tmp_path, lib):
+    """``lib`` saved as a version-3 file (posture alone, no joint speeds) and read back."""
     doc = json.loads(save(lib, tmp_path / "lib.json").read_text())
     doc["version"] = 3
     doc["posture"] = [row[:2 * DIM] for row in doc["posture"]]
     del doc["posture_speed_weight"]
     (tmp_path / "v3.json").write_text(json.dumps(doc))
-    old = load(tmp_path / "v3.json")
+    return load(tmp_path / "v3.json")
+
+
+def test_a_version_3_file_names_by_posture_alone(tmp_path, lib):
+    old = version_3(tmp_path, lib)
     assert old.speed_weight == 0.0 and old.names_by_posture
     take = swing(80.0, 3)
     X, P = take_features(take)[:150], take_posture(take)[:150]
@@ -125,12 +130,7 @@ def test_a_malformed_speed_weight_or_width_is_one_clear_error(tmp_path, lib, cha
 
 
 def test_an_old_library_extended_with_new_examples_keeps_one_kind_of_descriptor(tmp_path, lib):
-    doc = json.loads(save(lib, tmp_path / "lib.json").read_text())
-    doc["version"] = 3
-    doc["posture"] = [row[:2 * DIM] for row in doc["posture"]]
-    del doc["posture_speed_weight"]
-    (tmp_path / "v3.json").write_text(json.dumps(doc))
-    old = load(tmp_path / "v3.json")
+    old = version_3(tmp_path, lib)
     b = LibraryBuilder("canonical", 48, FR)
     add(b, swing(0.0, 4), "low", 4)
     add(b, swing(80.0, 4), "high", 4)
