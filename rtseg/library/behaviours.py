@@ -15,8 +15,8 @@ dims), short windows cut from labelled examples, each with its name and the exam
 A model library learned from takes whose rest geometry is known (``rtseg.core.posture``:
 ASF/AMC, BVH) also keeps each window's body descriptor (its posture and, from file version
 4, how fast each joint turns: ``rtseg.library.posture_distance.body_descriptor``); a
-session that has posture too
-is named by a weighted geometric mean of the model and posture distances
+session that has posture too is named by a weighted geometric mean of the model and
+posture distances
 (``rtseg.library.posture_distance``), with a rejection rule calibrated for it
 (``posture_rule``); a session without posture (an IMU suit) by the model distance alone.
 
@@ -146,7 +146,7 @@ class Library:
     metric: str = "descriptor"               # "model" (window models) or "descriptor"
     window_stats: list[Any] = field(default_factory=list)   # per window (model metric)
     lag_s: float = LAG_S                     # angular-velocity lag (model metric), s
-    #: per window its body descriptor (rtseg.library.posture_distance.body_descriptor), or empty
+    #: per window its body descriptor (posture_distance.body_descriptor), or empty
     posture: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     #: the joint speeds' weight in ``posture`` (0: posture alone, version-3 files)
     speed_weight: float = 0.0

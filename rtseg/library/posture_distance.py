@@ -4,9 +4,9 @@ Each library window keeps a body descriptor (``body_descriptor``): the mean and 
 deviation of its posture rows (``rtseg.core.posture.window_descriptor``, in leg lengths)
 and, in libraries of file version 4, each joint's median angular speed
 (``rtseg.library.joint_speed``, log(1 + rad/s)) times the library's ``speed_weight``.  A
-query window's posture distance to it is the Euclidean distance of the two descriptors.  When both the
-library and the session have posture (the rig's rest geometry is known), a name is chosen
-by the weighted geometric mean of the two distances,
+query window's posture distance to it is the Euclidean distance of the two descriptors.
+When both the library and the session have posture (the rig's rest geometry is known), a
+name is chosen by the weighted geometric mean of the two distances,
 
     D = d_model^(1 - w) x (s x d_posture)^w,   w = ``WEIGHT``,
     s = median d_model / median d_posture
