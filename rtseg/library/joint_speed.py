@@ -19,7 +19,7 @@ import numpy as np
 #: the weight of the joint speeds beside the posture's mean and spread in a library
 #: window's descriptor (``rtseg.library.posture_distance``): chosen leave-one-person-out
 #: over the eight scored people of ``benchmarks/library_loto.py --by-person
-#: ../shared/data`` among 0, 0.5, 1 and 2 (docs/identity.md)
+#: ../shared/data`` among 0, 0.5, 0.75, 1, 1.5 and 2 (docs/identity.md)
 SPEED_WEIGHT = 1.0
 
 
