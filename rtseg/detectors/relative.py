@@ -58,10 +58,13 @@ class RelativeFloor:
         self.fraction = float(fraction)
         self.warm = int(warm)
         self._scores: deque[float] = deque(maxlen=int(count))
-        #: maxima refused so far
-        self.refused = 0
         #: (frame, score, floor) of every maximum refused, for plots and benchmarks
         self.refusals: list[tuple[int, float, float]] = []
+
+    @property
+    def refused(self) -> int:
+        """Maxima refused so far."""
+        return len(self.refusals)
 
     @property
     def floor(self) -> float:
@@ -76,7 +79,6 @@ class RelativeFloor:
         floor = self.floor
         if score >= floor or not 1.0 / ENERGY_CHANGE < energy < ENERGY_CHANGE:
             return True
-        self.refused += 1
         self.refusals.append((int(frame), float(score), floor))
         log.info("contrast maximum at frame %d dropped: %.2f is below %.2f (%.2f x the median "
                  "of the last cuts), energy change %.2f (%d dropped so far)", frame,
