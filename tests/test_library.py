@@ -6,6 +6,7 @@ null rejection on synthetic performances (a behaviour the library never saw come
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -851,7 +852,10 @@ def test_one_person_calibration_and_the_thresholds_scale():
     assert not one.one_person_calibration
     names = np.asarray(one.names)
     t = one.threshold
-    d = np.where(names == "walk", 1.5 * t, 10.0 * t)
+    # the other name where the decision's margin term is nil: the threshold alone decides
+    from rtseg.library.calibration import MARGIN_LEVEL, MARGIN_WEIGHT
+    other = 1.5 * t / (one.ratio * math.exp(MARGIN_LEVEL / MARGIN_WEIGHT))
+    d = np.where(names == "walk", 1.5 * t, other)
     assert one.decide(d).name == UNKNOWN and one.decide(d).nearest == "walk"
     assert one.decide(d, scale=2.0).name == "walk"
     assert one.decide(d, scale=1.4).name == UNKNOWN

@@ -20,11 +20,21 @@ posture distances
 (``rtseg.library.posture_distance``), with a rejection rule calibrated for it
 (``posture_rule``); a session without posture (an IMU suit) by the model distance alone.
 
-Decision (``Library.name``): d1, d2 = the distances of the nearest and second-nearest
-*name* (a name's distance: the mean of its ``k_nearest`` nearest windows').  The segment
-gets the nearest name when d1 <= ``threshold`` and d1 / d2 <= ``ratio``, else
-``unknown``.  Both are calibrated INSIDE the library, for either metric
-(``calibrate``, ``separating_rule``): for every window, its known case - the
+Decision (``Library.name``, ``decision_excess``): d1, d2 = the distances of the nearest
+and second-nearest *name* (a name's distance: the mean of its ``k_nearest`` nearest
+windows').  The segment gets the nearest name when
+
+    log(d1 / threshold) + MARGIN_WEIGHT x log((d1 / d2) / ratio) <= MARGIN_LEVEL
+
+and d1 <= ``MARGIN_CAP`` x threshold, else ``unknown`` (without a second name: d1 <=
+``threshold``).  So the threshold moves
+with the margin: a nearest name much nearer than the second may lie somewhat beyond the
+threshold, two names about as near are refused even within it (what a behaviour missing
+from the library mostly looks like: near two names at once).  ``MARGIN_WEIGHT`` and
+``MARGIN_LEVEL`` are constants chosen across people (``rtseg.library.calibration``,
+docs/identity.md); ``threshold`` and
+``ratio`` are calibrated INSIDE the library, for either metric (``calibrate``,
+``separating_rule``: the rule "d1 <= threshold and d1 / d2 <= ratio"): for every window, its known case - the
 nearest same-name window of another example (``same``) against the nearest other name -
 and its unknown case - its own name left out, the nearest two other names (what a
 behaviour missing from the library would see); the rule that accepts the most known and
@@ -64,8 +74,9 @@ from typing import Any
 import numpy as np
 
 from rtseg.config import ConfigError
-from rtseg.library.calibration import (DEFAULT_THRESHOLD, MODEL_ONE_NAME_FACTOR,
-                                       ONE_NAME_FACTOR, k_mean, median_or_none,
+from rtseg.library.calibration import (DEFAULT_THRESHOLD, MARGIN_CAP,  # noqa: F401
+                                       MARGIN_LEVEL, MARGIN_WEIGHT, MODEL_ONE_NAME_FACTOR,
+                                       ONE_NAME_FACTOR, decision_excess, k_mean, median_or_none,
                                        nearest_others, person_spread, separating_rule)
 from rtseg.library.descriptor import (GROUPS, K_NEAREST, SCALE_FLOOR,  # noqa: F401 (re-exported)
                                      descriptor, group_slices)
@@ -254,13 +265,10 @@ class Library:
         second = per[order[1]] if len(order) > 1 else math.inf
         t, r = ((self.posture_rule["threshold"], self.posture_rule["ratio"]) if posture
                 else (self.threshold, self.ratio))
-        t *= scale
-        ratio = dist / second if second > 0 else 1.0
-        if dist <= t and ratio <= r:
-            conf = min(1.0 - dist / t, 1.0 - ratio / r if r > 0 else 0.0)
-            return Naming(best, best, dist, float(min(1.0, max(0.0, conf))))
-        conf = max(1.0 - t / dist if dist > t else 0.0, 1.0 - r / ratio if ratio > r else 0.0)
-        return Naming(UNKNOWN, best, dist, float(min(1.0, max(0.0, conf))))
+        excess = decision_excess(dist, second, t * scale, r)
+        if excess <= 0.0:
+            return Naming(best, best, dist, float(min(1.0, max(0.0, -math.expm1(excess)))))
+        return Naming(UNKNOWN, best, dist, float(min(1.0, max(0.0, -math.expm1(-excess)))))
 
     def name_distances(self, d: np.ndarray) -> dict[str, float]:
         """{name: the mean of its ``k_nearest`` nearest windows' distances} from the

@@ -1,0 +1,85 @@
+"""The library's decision (rtseg.library.calibration.decision_excess, Library.decide): the nearest
+name is given when log(d1 / threshold) + MARGIN_WEIGHT x log((d1 / d2) / ratio) <=
+MARGIN_LEVEL - a name far nearer than the second may lie a little beyond the threshold, two
+names about as near are refused even within it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rtseg.library import calibration as B
+from rtseg.library.behaviours import UNKNOWN, Library
+from rtseg.library.calibration import decision_excess
+
+
+def _library(names: list[str], threshold: float = 2.0, ratio: float = 1.0) -> Library:
+    """A model library of one window per name, decided on given distances only."""
+    lib = Library(profile="test", dims=4, frame_rate=120.0,
+                  descriptors=np.zeros((len(names), 4)), names=list(names),
+                  sources=list(range(len(names))),
+                  examples=[{"name": n, "source": str(k)} for k, n in enumerate(names)],
+                  metric="model")
+    lib.threshold, lib.ratio = threshold, ratio
+    return lib
+
+
+def test_without_a_second_name_the_threshold_alone_decides():
+    assert decision_excess(1.5, math.inf, 2.0, 1.0) == pytest.approx(math.log(0.75))
+    assert decision_excess(2.5, math.inf, 2.0, 1.0) == pytest.approx(math.log(1.25))
+    lib = _library(["walk"])
+    assert lib.decide(np.array([1.9])).name == "walk"
+    assert lib.decide(np.array([2.1])).name == UNKNOWN
+
+
+def test_the_threshold_scales_the_bound_and_the_excess_moves_the_right_way():
+    base = decision_excess(1.8, 2.4, 2.0, 1.0)
+    assert decision_excess(1.8, 2.4, 4.0, 1.0) == pytest.approx(base - math.log(2.0))
+    # farther nearest name: more excess; farther second name: less
+    assert decision_excess(1.9, 2.4, 2.0, 1.0) > base
+    assert decision_excess(1.8, 3.0, 2.0, 1.0) < base
+    # a calibrated ratio below 1 asks for more margin
+    assert decision_excess(1.8, 2.4, 2.0, 0.9) > base
+    assert decision_excess(0.0, 1.0, 2.0, 1.0) == -math.inf
+    assert decision_excess(1.0, 2.0, 0.0, 1.0) == math.inf
+
+
+def test_shipped_margin_refuses_a_tie_and_names_a_clear_nearest():
+    """With the shipped constants (a negative level, a positive weight): two names equally
+    near, both within the threshold, give ``unknown``; a nearest name four times nearer than
+    the second is given a little beyond the threshold.  Confidence is 0 at the bound."""
+    assert B.MARGIN_WEIGHT > 0 and B.MARGIN_LEVEL < 0
+    t = 2.0
+    tie = t * math.exp(B.MARGIN_LEVEL / 2)            # within the threshold
+    lib = _library(["walk", "punch"], threshold=t)
+    got = lib.decide(np.array([tie, tie * 1.0001]))
+    assert got.name == UNKNOWN and got.nearest == "walk"
+    clear = lib.decide(np.array([1.2 * t, 4.8 * t]))
+    assert clear.name == "walk" and 0.0 < clear.confidence < 1.0
+    # exactly at the bound: d2 chosen so the margin term cancels the level
+    d1 = 0.9 * t
+    d2 = d1 / math.exp(B.MARGIN_LEVEL / B.MARGIN_WEIGHT)
+    assert decision_excess(d1, d2, d1, 1.0) == pytest.approx(0.0, abs=1e-12)
+    at = lib.decide(np.array([d1, d2]), scale=d1 / t * (1 + 1e-9))   # a hair within
+    assert at.name == "walk" and at.confidence == pytest.approx(0.0, abs=1e-6)
+    assert lib.decide(np.array([d1, d2]), scale=d1 / t * (1 - 1e-9)).name == UNKNOWN
+
+
+def test_a_farther_second_name_turns_unknown_into_a_name():
+    lib = _library(["walk", "punch", "squat"], threshold=2.0)
+    d = np.array([2.2, 2.4, 9.0])
+    assert lib.decide(d).name == UNKNOWN
+    d[1] = 6.0                                        # punch moved away: walk stands out
+    assert lib.decide(d).name == "walk"
+
+
+def test_no_margin_names_beyond_the_cap():
+    """However far the second name, a nearest name beyond MARGIN_CAP x the threshold is
+    ``unknown``; just within it, the margin decides."""
+    t = 2.0
+    lib = _library(["walk", "punch"], threshold=t)
+    assert lib.decide(np.array([1.05 * B.MARGIN_CAP * t, 1e6])).name == UNKNOWN
+    assert lib.decide(np.array([0.95 * B.MARGIN_CAP * t, 1e6])).name == "walk"
+    assert decision_excess(0.95 * B.MARGIN_CAP * t, 1e6, t, 1.0) == pytest.approx(math.log(0.95))
