@@ -15,13 +15,15 @@ from rtseg.library.behaviours import UNKNOWN, Library
 from rtseg.library.calibration import decision_excess
 
 
-def _library(names: list[str], threshold: float = 2.0, ratio: float = 1.0) -> Library:
-    """A model library of one window per name, decided on given distances only."""
+def _library(names: list[str], threshold: float = 2.0, ratio: float = 1.0,
+             calibrated: bool = True) -> Library:
+    """A model library of one window per name, decided on given distances only; its
+    threshold taken as calibrated (or as the default of one that could not be)."""
     lib = Library(profile="test", dims=4, frame_rate=120.0,
                   descriptors=np.zeros((len(names), 4)), names=list(names),
                   sources=list(range(len(names))),
                   examples=[{"name": n, "source": str(k)} for k, n in enumerate(names)],
-                  metric="model")
+                  metric="model", calibration={"calibrated": calibrated})
     lib.threshold, lib.ratio = threshold, ratio
     return lib
 
@@ -83,3 +85,22 @@ def test_no_margin_names_beyond_the_cap():
     assert lib.decide(np.array([1.05 * B.MARGIN_CAP * t, 1e6])).name == UNKNOWN
     assert lib.decide(np.array([0.95 * B.MARGIN_CAP * t, 1e6])).name == "walk"
     assert decision_excess(0.95 * B.MARGIN_CAP * t, 1e6, t, 1.0) == pytest.approx(math.log(0.95))
+
+
+def test_a_default_or_given_threshold_keeps_the_threshold_and_ratio_rule():
+    """The margin is for calibrated thresholds: an uncalibrated library (the default
+    threshold) and a given one (``--threshold``) name when d1 <= threshold and d1 / d2 <=
+    ratio, whatever the margin."""
+    t = 2.0
+    for lib in (_library(["walk", "punch"], threshold=t, ratio=0.9, calibrated=False),
+                _library(["walk", "punch"], threshold=t, ratio=0.9)):
+        if lib.calibration["calibrated"]:
+            lib.calibration["threshold_given"] = True
+        assert not lib.calibrated_threshold
+        assert lib.decide(np.array([1.2 * t, 10 * t])).name == UNKNOWN      # beyond t
+        assert lib.decide(np.array([0.9 * t, 0.95 * t])).name == UNKNOWN    # ratio 0.95 > 0.9
+        assert lib.decide(np.array([0.9 * t, 1.1 * t])).name == "walk"      # ratio 0.82
+    cal = _library(["walk", "punch"], threshold=t, ratio=0.9)
+    assert cal.calibrated_threshold
+    assert cal.decide(np.array([1.2 * t, 10 * t])).name == "walk"           # the margin
+    assert decision_excess(1.2 * t, 10 * t, t, 0.9, margin=False) == pytest.approx(math.log(1.2))

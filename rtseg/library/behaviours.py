@@ -27,7 +27,8 @@ windows').  The segment gets the nearest name when
     log(d1 / threshold) + MARGIN_WEIGHT x log((d1 / d2) / ratio) <= MARGIN_LEVEL
 
 and d1 <= ``MARGIN_CAP`` x threshold, else ``unknown`` (without a second name: d1 <=
-``threshold``).  So the threshold moves
+``threshold``; a default or given threshold - ``calibrated_threshold`` False - keeps d1 <=
+``threshold`` and d1 / d2 <= ``ratio``).  So the threshold moves
 with the margin: a nearest name much nearer than the second may lie somewhat beyond the
 threshold, two names about as near are refused even within it (what a behaviour missing
 from the library mostly looks like: near two names at once).  ``MARGIN_WEIGHT`` and
@@ -190,6 +191,14 @@ class Library:
         people = {str(e.get("person") or "") for e in self.examples}
         return len(people) == 1 and "" not in people
 
+    @property
+    def calibrated_threshold(self) -> bool:
+        """Whether the threshold is the library's calibration's (not the default of a
+        library that could not be calibrated, not ``--threshold``): the decision's margin
+        applies (module doc, Decision)."""
+        cal = self.calibration or {}
+        return bool(cal.get("calibrated", False)) and not cal.get("threshold_given")
+
     def rule_threshold(self, posture: bool) -> float:
         """The threshold of the rule a naming by posture (or not) is judged by."""
         return float(self.posture_rule["threshold"] if posture and self.names_by_posture
@@ -265,7 +274,7 @@ class Library:
         second = per[order[1]] if len(order) > 1 else math.inf
         t, r = ((self.posture_rule["threshold"], self.posture_rule["ratio"]) if posture
                 else (self.threshold, self.ratio))
-        excess = decision_excess(dist, second, t * scale, r)
+        excess = decision_excess(dist, second, t * scale, r, self.calibrated_threshold)
         if excess <= 0.0:
             return Naming(best, best, dist, float(min(1.0, max(0.0, -math.expm1(excess)))))
         return Naming(UNKNOWN, best, dist, float(min(1.0, max(0.0, -math.expm1(-excess)))))
