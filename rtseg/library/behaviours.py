@@ -20,22 +20,21 @@ posture distances
 (``rtseg.library.posture_distance``), with a rejection rule calibrated for it
 (``posture_rule``); a session without posture (an IMU suit) by the model distance alone.
 
-Decision (``Library.name``, ``decision_excess``): d1, d2 = the distances of the nearest
-and second-nearest *name* (a name's distance: the mean of its ``k_nearest`` nearest
-windows').  The segment gets the nearest name when
+Decision (``Library.name``, ``rtseg.library.calibration.decision_excess``): d1, d2 = the
+distances of the nearest and second-nearest *name* (a name's distance: the mean of its
+``k_nearest`` nearest windows').  The segment gets the nearest name when
 
     log(d1 / threshold) + MARGIN_WEIGHT x log((d1 / d2) / ratio) <= MARGIN_LEVEL
 
 and d1 <= ``MARGIN_CAP`` x threshold, else ``unknown`` (without a second name: d1 <=
-``threshold``; a default or given threshold - ``calibrated_threshold`` False - keeps d1 <=
-``threshold`` and d1 / d2 <= ``ratio``).  So the threshold moves
-with the margin: a nearest name much nearer than the second may lie somewhat beyond the
-threshold, two names about as near are refused even within it (what a behaviour missing
-from the library mostly looks like: near two names at once).  ``MARGIN_WEIGHT`` and
-``MARGIN_LEVEL`` are constants chosen across people (``rtseg.library.calibration``,
-docs/identity.md); ``threshold`` and
-``ratio`` are calibrated INSIDE the library, for either metric (``calibrate``,
-``separating_rule``: the rule "d1 <= threshold and d1 / d2 <= ratio"): for every window, its known case - the
+threshold).  So the threshold moves with the margin: a nearest name much nearer than the
+second may lie somewhat beyond the threshold, two names about as near are refused even
+within it (what a behaviour missing from the library mostly looks like: near two names at
+once).  The three constants (``rtseg.library.calibration``) were chosen across people
+(docs/identity.md).  A default or given threshold (``calibrated_threshold`` False) keeps
+the rule the calibration is made for: d1 <= threshold and d1 / d2 <= ratio.  Threshold and
+ratio are calibrated INSIDE the library, for either metric (``calibrate``,
+``separating_rule``): for every window, its known case - the
 nearest same-name window of another example (``same``) against the nearest other name -
 and its unknown case - its own name left out, the nearest two other names (what a
 behaviour missing from the library would see); the rule that accepts the most known and
@@ -75,10 +74,10 @@ from typing import Any
 import numpy as np
 
 from rtseg.config import ConfigError
-from rtseg.library.calibration import (DEFAULT_THRESHOLD, MARGIN_CAP,  # noqa: F401
-                                       MARGIN_LEVEL, MARGIN_WEIGHT, MODEL_ONE_NAME_FACTOR,
-                                       ONE_NAME_FACTOR, decision_excess, k_mean, median_or_none,
-                                       nearest_others, person_spread, separating_rule)
+from rtseg.library.calibration import (DEFAULT_THRESHOLD, MODEL_ONE_NAME_FACTOR,
+                                       ONE_NAME_FACTOR, decision_excess, k_mean,
+                                       median_or_none, nearest_others, person_spread,
+                                       separating_rule)
 from rtseg.library.descriptor import (GROUPS, K_NEAREST, SCALE_FLOOR,  # noqa: F401 (re-exported)
                                      descriptor, group_slices)
 from rtseg.library.distance import LAG_S, window_stats

@@ -33,16 +33,15 @@ DEFAULT_THRESHOLD = {"model": 2.43, "descriptor": 0.85}
 
 
 #: the decision of a calibrated library (``decision_excess``): a segment is named when
-#: log(d1 / threshold) +
-#: MARGIN_WEIGHT x log((d1 / d2) / ratio) <= MARGIN_LEVEL (d1, d2: nearest and
-#: second-nearest name's distance) and d1 <= MARGIN_CAP x threshold.  0, 0 and 1: the
-#: threshold alone.  A default or given threshold keeps "d1 <= threshold and d1 / d2 <=
-#: ratio": the margin was chosen against calibrated ones, and on the few-shot libraries
-#: of ``library_loto.py fewshot`` (default threshold) it let 9 more of 36 missing
-#: exercises through.  Chosen leave-one-person-out over the eight scored people of
-#: ``benchmarks/library_loto.py --by-person ../shared/data`` (live cuts, splice seeds 0-2;
-#: docs/identity.md, "Parameters"): the most known segments named right while left-out
-#: ``unknown`` >= 0.80 and wrong <= 0.05 on each seed
+#: log(d1 / threshold) + MARGIN_WEIGHT x log((d1 / d2) / ratio) <= MARGIN_LEVEL (d1, d2:
+#: nearest and second-nearest name's distance) and d1 <= MARGIN_CAP x threshold; 0, 0 and
+#: 1 would be the threshold alone.  Chosen leave-one-person-out over the eight scored
+#: people of ``benchmarks/library_loto.py --by-person ../shared/data`` (live cuts, splice
+#: seeds 0-2; docs/identity.md, "Parameters"): the most known segments named right while
+#: left-out ``unknown`` >= 0.80 and wrong <= 0.05 on each seed.  A default or given
+#: threshold keeps "d1 <= threshold and d1 / d2 <= ratio": the margin was chosen against
+#: calibrated ones, and on the few-shot libraries of ``library_loto.py fewshot`` (the
+#: default threshold) it let 9 more of 36 missing exercises through
 MARGIN_WEIGHT = 4.0
 MARGIN_LEVEL = -0.75
 #: ... and never beyond this x the threshold, however large the margin (2: the segments the
