@@ -44,9 +44,9 @@ DEFAULT_THRESHOLD = {"model": 2.43, "descriptor": 0.85}
 #: default threshold) it let 9 more of 36 missing exercises through
 MARGIN_WEIGHT = 4.0
 MARGIN_LEVEL = -0.75
-#: ... and never beyond this x the threshold, however large the margin (2: the segments the
-#: margin named over those seeds lay at most 1.97 x it; 1.5 names 0.01 fewer known segments
-#: right and 0.02 more left-out ones ``unknown``)
+#: ... and never beyond this x the threshold, however large the margin (uncapped, the
+#: segments it named over those seeds lay at most 1.97 x it; 1.5 names 0.01 fewer known
+#: segments right and 0.02 more left-out ones ``unknown``)
 MARGIN_CAP = 1.5
 
 
