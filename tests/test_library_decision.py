@@ -104,3 +104,35 @@ def test_a_default_or_given_threshold_keeps_the_threshold_and_ratio_rule():
     assert cal.calibrated_threshold
     assert cal.decide(np.array([1.2 * t, 10 * t])).name == "walk"           # the margin
     assert decision_excess(1.2 * t, 10 * t, t, 0.9, margin=False) == pytest.approx(math.log(1.2))
+
+
+def _rows(seed: int, freq: float, n: int = 400, fr: float = 60.0) -> np.ndarray:
+    """Feature rows of one joint swinging at ``freq`` Hz (unit quaternions, 4 dims)."""
+    t = np.arange(n) / fr
+    rng = np.random.default_rng(seed)
+    a = 0.4 * np.sin(2 * np.pi * freq * t) + 0.01 * rng.standard_normal(n)
+    return np.c_[np.sin(a / 2), np.zeros(n), np.zeros(n), np.cos(a / 2)]
+
+
+def test_rtseg_learn_says_which_decision_a_library_names_by(tmp_path):
+    """``rtseg learn --show``'s first line: a calibrated threshold is moved by the margin
+    (and capped), a given one is the threshold and ratio rule."""
+    from rtseg.commands.learn import describe
+    from rtseg.library.behaviours import LibraryBuilder
+
+    def build(threshold=None):
+        b = LibraryBuilder("test", 4, 60.0)
+        for seed, who in ((0, "ann"), (1, "bob")):
+            for name, freq in (("slow", 0.5), ("fast", 2.0)):
+                b.add(_rows(seed, freq), name, f"{who}-{name}", info={"person": who})
+        return b.build(threshold=threshold)
+    cal = build()
+    assert cal.calibrated_threshold
+    first = describe(cal, tmp_path / "c.json")[0]
+    assert "moved by the margin" in first and f"at most {B.MARGIN_CAP:g} x" in first
+    assert "(calibrated)" in first
+    given = build(threshold=3.0)
+    assert not given.calibrated_threshold
+    other = describe(given, tmp_path / "g.json")[0]
+    assert "unknown beyond distance 3.000 or ratio" in other and "(given)" in other
+    assert "margin" not in other

@@ -25,6 +25,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from rtseg.library.calibration import MARGIN_CAP
 from rtseg.library.file import save as save_library
 
 
@@ -85,6 +86,14 @@ CONFUSED_SHARE = 0.25
 SPREAD_NOTE = 2.0
 
 
+def _rule_text(lib: Any, threshold: float, ratio: float) -> str:
+    """The decision a library names by (``rtseg.library.calibration.decision_excess``)."""
+    if getattr(lib, "calibrated_threshold", False):
+        return (f"unknown beyond distance {threshold:.3f}, moved by the margin to the next "
+                f"name (ratio {ratio:.2f}; at most {MARGIN_CAP:g} x)")
+    return f"unknown beyond distance {threshold:.3f} or ratio {ratio:.2f} to the next name"
+
+
 def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
     """Lines saying what a library holds: its windows and profile, the rejection rule and
     where it comes from, and per behaviour its example count; with ``sources`` also its
@@ -96,13 +105,11 @@ def describe(lib: Any, path: Path, sources: bool = False) -> list[str]:
         by_name.setdefault(e["name"], []).append(e)
     out = [f"{path}: {len(by_name)} behaviours, {len(lib.examples)} examples, "
            f"{len(lib.names)} windows; profile {lib.profile} ({lib.dims} dims); "
-           f"unknown beyond distance {lib.threshold:.3f} or ratio {lib.ratio:.2f} to the "
-           f"next name"
+           + _rule_text(lib, lib.threshold, lib.ratio)
            + (" (given)" if given else " (calibrated)" if calibrated else " (default)")]
     if getattr(lib, "names_by_posture", False):
-        out.append(f"  with posture (sessions whose rig geometry is known): unknown beyond "
-                   f"{lib.posture_rule['threshold']:.3f} or ratio "
-                   f"{lib.posture_rule['ratio']:.2f}")
+        out.append("  with posture (sessions whose rig geometry is known): "
+                   + _rule_text(lib, lib.posture_rule["threshold"], lib.posture_rule["ratio"]))
     elif getattr(lib, "has_posture", False):
         out.append("  posture kept, not used until a behaviour has a second example")
     spread = lib.calibration.get("people")
