@@ -178,25 +178,23 @@ class Library:
         return self.has_posture and "threshold" in self.posture_rule
 
     @property
-    def one_person_calibration(self) -> bool:
-        """Whether the rejection rule was calibrated on the examples of one person only
-        (every example names the same ``person``; not a given threshold, not the default):
-        its known cases are that person's own other takes (module doc).  Model metric
-        only (version-1 descriptor libraries name as they did)."""
-        cal = self.calibration or {}
-        if (self.metric != "model" or not cal.get("calibrated", False)
-                or cal.get("threshold_given")):
-            return False
-        people = {str(e.get("person") or "") for e in self.examples}
-        return len(people) == 1 and "" not in people
-
-    @property
     def calibrated_threshold(self) -> bool:
         """Whether the threshold is the library's calibration's (not the default of a
         library that could not be calibrated, not ``--threshold``): the decision's margin
         applies (module doc, Decision)."""
         cal = self.calibration or {}
         return bool(cal.get("calibrated", False)) and not cal.get("threshold_given")
+
+    @property
+    def one_person_calibration(self) -> bool:
+        """Whether the rejection rule was calibrated on the examples of one person only
+        (every example names the same ``person``; ``calibrated_threshold``): its known
+        cases are that person's own other takes (module doc).  Model metric only
+        (version-1 descriptor libraries name as they did)."""
+        if self.metric != "model" or not self.calibrated_threshold:
+            return False
+        people = {str(e.get("person") or "") for e in self.examples}
+        return len(people) == 1 and "" not in people
 
     def rule_threshold(self, posture: bool) -> float:
         """The threshold of the rule a naming by posture (or not) is judged by."""
