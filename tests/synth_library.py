@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from rtseg.library.behaviours import LibraryBuilder
+from rtseg.library.builder import LibraryBuilder
 from rtseg.library.examples import label_runs, take_rows
 from rtseg.simulators.synth.motion import synthesize
 

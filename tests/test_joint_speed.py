@@ -15,7 +15,8 @@ import pytest
 from rtseg.core import quat as Q
 from rtseg.core.features import take_features
 from rtseg.core.posture import DIM, take_posture
-from rtseg.library.behaviours import LibraryBuilder, LibraryError
+from rtseg.library.behaviours import LibraryError
+from rtseg.library.builder import LibraryBuilder
 from rtseg.library.file import load, save
 from rtseg.library.joint_speed import SPEED_WEIGHT, joint_speeds
 from rtseg.library.posture_distance import body_descriptor, reweighted

@@ -17,7 +17,8 @@ import pytest
 
 from rtseg.library.file import save as save_library, to_dict as library_dict
 from rtseg.evaluation.identity import run_identity
-from rtseg.library.behaviours import UNKNOWN, Library, LibraryBuilder, LibraryError
+from rtseg.library.behaviours import UNKNOWN, Library, LibraryError
+from rtseg.library.builder import LibraryBuilder
 from rtseg.library.file import load
 from rtseg.library.calibration import separating_rule, separating_threshold
 from rtseg.library.examples import label_runs, take_rows

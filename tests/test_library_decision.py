@@ -118,7 +118,7 @@ def test_rtseg_learn_says_which_decision_a_library_names_by(tmp_path):
     """``rtseg learn --show``'s first line: a calibrated threshold is moved by the margin
     (and capped), a given one is the threshold and ratio rule."""
     from rtseg.commands.learn import describe
-    from rtseg.library.behaviours import LibraryBuilder
+    from rtseg.library.builder import LibraryBuilder
 
     def build(threshold=None):
         b = LibraryBuilder("test", 4, 60.0)

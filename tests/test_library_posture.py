@@ -13,7 +13,8 @@ import pytest
 from rtseg.core import quat as Q
 from rtseg.core.features import take_features
 from rtseg.core.posture import RestPose, take_posture
-from rtseg.library.behaviours import UNKNOWN, LibraryBuilder
+from rtseg.library.behaviours import UNKNOWN
+from rtseg.library.builder import LibraryBuilder
 from rtseg.library.file import load, save
 from rtseg.library.behaviours import LibraryError
 

@@ -171,7 +171,7 @@ def test_real_86_01_walks_share_one_id_and_punches_another(capsys):
 def _synth_library(tmp_path, script="walk:8,punch:8,wave:8", seed=0):
     """A library learned (as rtseg learn does: the live fed rows) from a synthetic take;
     its file path."""
-    from rtseg.library.behaviours import LibraryBuilder
+    from rtseg.library.builder import LibraryBuilder
     from rtseg.library.examples import label_runs, take_rows
     from rtseg.evaluation.online import live_config
     res = synthesize(script, seed=seed)

@@ -1,6 +1,6 @@
 """Named behaviour libraries: learn behaviour names from labelled examples, name segments,
-and say ``unknown`` for a segment unlike every example.  ``behaviours`` holds the library
-and its builder, ``distance`` the model distance, ``posture_distance`` its posture half,
+and say ``unknown`` for a segment unlike every example.  ``behaviours`` holds the library,
+``builder`` its builder, ``distance`` the model distance, ``posture_distance`` its posture half,
 ``descriptor`` the version-1 descriptor distance, ``calibration`` the rejection rule,
 ``file`` the library file, ``examples`` and ``sources`` the labelled examples (from takes
 and from source folders).
@@ -26,11 +26,10 @@ from rtseg.library.behaviours import (
     LibraryError,
     descriptor,
     group_slices,
-    window_bounds,
     Naming,
     Library,
-    LibraryBuilder,
 )
+from rtseg.library.builder import LibraryBuilder, window_bounds
 from rtseg.library.file import load, save
 
 __all__ = [

@@ -29,7 +29,8 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from rtseg.library.behaviours import DEFAULT_METRIC, Library, LibraryBuilder
+from rtseg.library.behaviours import DEFAULT_METRIC, Library
+from rtseg.library.builder import LibraryBuilder
 
 log = logging.getLogger(__name__)
 
