@@ -73,6 +73,10 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "place_radius_s": ((int, float), _nonneg),
         "place_window_s": ((int, float), _pos),
         "place_ridge": ((int, float), _nonneg),
+        "confirm_reach_s": ((int, float), _nonneg),
+        "confirm_after_s": ((int, float), _pos),
+        "confirm_level": ((int, float), _nonneg),
+        "confirm_ratio": ((int, float), (lambda v: 0 < v <= 1, "in (0, 1]")),
     },
     "pca": {
         "window_s": ((int, float), _pos),

@@ -61,6 +61,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from rtseg.detectors.base import Cut, OnlineDetector
+from rtseg.detectors.confirm import ShortConfirmation
 from rtseg.detectors.early import EarlyCut, EarlyCuts
 from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, RingPlacement
 from rtseg.detectors.relative import ENERGY_SPAN, EnergyChanges, RelativeFloor
@@ -102,6 +103,8 @@ class ContrastDetector(OnlineDetector):
                  bound_before: bool = False,
                  place_radius: int = 0, place_window: int = 240,
                  place_ridge: float = 0.01, place_stride: int = 4, place_margin: int = 30,
+                 confirm_reach: int = 0, confirm_shortest: int = 120,
+                 confirm_level: float = 0.0, confirm_ratio: float = 1.0,
                  keep_trace: bool = False) -> None:
         if step < 1:
             raise ValueError(f"step must be >= 1 frame, got {step}")
@@ -143,6 +146,10 @@ class ContrastDetector(OnlineDetector):
         self.place_radius, self.place_window = int(place_radius), int(place_window)
         self.place_ridge, self.place_stride = float(place_ridge), max(1, int(place_stride))
         self.place_margin = max(2, int(place_margin))
+        #: short-look confirmation of the full look's maxima (``rtseg.detectors.confirm``)
+        self.confirm = ShortConfirmation(
+            int(round(confirm_reach / step)) if confirm_reach else 0,
+            max(2, int(round(confirm_shortest / step))), confirm_level, confirm_ratio)
         self.keep_trace = keep_trace
         self.trace: list[tuple[int, float, float]] = []
         #: early-look profile when keep_trace: (position, value, frame that made it known)
@@ -208,7 +215,12 @@ class ContrastDetector(OnlineDetector):
                    place_window=frames(p.get("place_window_s", 2.0), frame_rate),
                    place_ridge=p.get("place_ridge", 0.01),
                    place_stride=frames(PLACE_STRIDE_S, frame_rate),
-                   place_margin=frames(PLACE_MARGIN_S, frame_rate), keep_trace=keep_trace)
+                   place_margin=frames(PLACE_MARGIN_S, frame_rate),
+                   confirm_reach=(frames(p["confirm_reach_s"], frame_rate)
+                                  if p.get("confirm_reach_s") else 0),
+                   confirm_shortest=frames(p.get("confirm_after_s", 1.0), frame_rate),
+                   confirm_level=p.get("confirm_level", 0.0),
+                   confirm_ratio=p.get("confirm_ratio", 1.0), keep_trace=keep_trace)
 
     @property
     def delay_frames(self) -> int:
@@ -392,8 +404,23 @@ class ContrastDetector(OnlineDetector):
         if self.keep_trace:
             self.trace.append((position, value, self.threshold))
         sent = self.peaks.update_full(position, value, self._t - 1)
+        if sent is None and self.confirm.on:
+            sent = self._confirm_short(c)
         if sent is not None:
             self._out.append(sent)
+
+    def _confirm_short(self, c: int) -> EarlyCut | None:
+        """The full look's waiting maximum, sent now when the short looks after it confirm
+        it (``rtseg.detectors.confirm``; c: the newest position with a full value)."""
+        full = self.peaks.full
+        pos = full.candidate
+        if pos is None:
+            return None
+        cb = (pos - self._seg0) // self.step
+        if not self.confirm.confirms(cb, full.candidate_value, self.threshold, c, self._nb,
+                                     self.wb, self._short):
+            return None
+        return self.peaks.confirm_full(self._t - 1)
 
     def _look_early(self, c: int) -> None:
         """The early look at block position c, known now: to the peak picker."""
@@ -494,6 +521,14 @@ class ContrastDetector(OnlineDetector):
         self._energy.look(c, a.stats.trace / a.stats.n, b.stats.trace / b.stats.n,
                           None if last is None else last + 2 * self.wmin)
         f = self.residual.push(a.pca_own)
+        return self._stated(pca_distance(a, b, f) / max(pca_distance(a0, a, f), 1e-300), a)
+
+    def _short(self, c: int, length: int) -> float:
+        """The contrast at block position c with an after window of ``length`` blocks
+        (``rtseg.detectors.confirm``; the residual floor as it stands, no look recorded)."""
+        a0, a = self._before(c)
+        b = self._model(c, c + length, "short")
+        f = self.residual.value
         return self._stated(pca_distance(a, b, f) / max(pca_distance(a0, a, f), 1e-300), a)
 
     def _early(self, c: int) -> float:

@@ -105,6 +105,12 @@ class EarlyCuts:
         peak = self.full.update(position, value, now)
         return self._send(peak, False, peak.value) if peak is not None else None
 
+    def confirm_full(self, now: int) -> EarlyCut | None:
+        """Send the full look's waiting maximum now (``rtseg.detectors.confirm`` vouches
+        for it); None when none waits or a cut lies within ``min_gap`` of it."""
+        peak = self.full.confirm(now)
+        return self._send(peak, False, peak.value) if peak is not None else None
+
     def update_early(self, position: int, value: float, now: int) -> EarlyCut | None:
         """The early look's value at ``position``, known since frame ``now``."""
         if self.early is None:

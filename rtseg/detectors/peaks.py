@@ -6,8 +6,9 @@ returns a ``Peak`` when a maximum is confirmed.  A maximum is a *candidate* when
 reaches ``threshold``, lies at least ``min_gap`` frames after the last event, and exceeds
 every value of the preceding ``min_gap`` frames; a higher value replaces it.  It is
 confirmed (sent, never withdrawn) as soon as the profile falls below ``drop`` x its value,
-or ``hold`` frames of positions after it brought nothing higher — whichever comes first.
-So ``hold`` bounds the extra delay and ``drop`` ends it early on a clean peak.
+or ``hold`` frames of positions after it brought nothing higher — whichever comes first
+(or when ``confirm`` is called: another rule vouches for it).  So ``hold`` bounds the extra
+delay and ``drop`` ends it early on a clean peak.
 """
 
 from __future__ import annotations
@@ -52,6 +53,21 @@ class CausalPeaks:
         ``min_gap`` away (a later maximum must still exceed the values before it)."""
         if self._last == position:
             self._last = None
+
+    @property
+    def candidate_value(self) -> float | None:
+        """The value of the maximum waiting for confirmation, if any."""
+        return None if self._cand is None else self._cand[1]
+
+    def confirm(self, now: int) -> Peak | None:
+        """Confirm the waiting maximum now (another rule vouches for it, e.g.
+        ``rtseg.detectors.confirm``); None when none waits."""
+        cand = self._cand
+        if cand is None:
+            return None
+        self._last = cand[0]
+        self._cand = None
+        return Peak(cand[0], cand[1], now)
 
     def update(self, position: int, value: float, now: int) -> Peak | None:
         """Feed the value at ``position`` (known since frame ``now``); a Peak once confirmed."""
