@@ -7,6 +7,7 @@ data folder, and the parameter choice made that way.
     python3 benchmarks/lopo.py ../shared/data --grid none     # shipped defaults only
     python3 benchmarks/lopo.py ../shared/data --grid fast --max-median 2.0   # sooner cuts
     python3 benchmarks/lopo.py ../shared/data --grid none --params fast      # config/fast.toml
+    python3 benchmarks/lopo.py ../shared/data --grid confirm --max-median 2.0  # short-look confirmation
     python3 benchmarks/lopo.py DIR --per-person 3 --seeds 0 1 --json
 
 DIR is laid out like ``../shared/data``: ``cmu/`` (full labelled performances, one person
@@ -94,6 +95,12 @@ GRIDS = {
         "early_back_s": [0.5, 0.75, 1.0],
         "early_backing": [1.25, 1.5, 2.0],
         "early_parts": [1, 2],
+    },
+    "confirm": {                    # short-look confirmation, with the after window
+        "after_s": [1.875, 2.0],
+        "confirm_reach_s": [0.0, 0.875, 1.0],
+        "confirm_level": [2.0, 3.0, 4.0],
+        "confirm_ratio": [0.9, 1.0],
     },
     "short": {                      # shorter windows and gaps for 2-5 s behaviours
         "threshold": [1.75, 2.0],

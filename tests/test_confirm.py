@@ -1,0 +1,122 @@
+"""Short-look confirmation of the contrast detector's maxima (rtseg.detectors.confirm)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rtseg.core.features import take_features
+from rtseg.detectors import load_params
+from rtseg.detectors.confirm import ShortConfirmation
+from rtseg.detectors.contrast import ContrastDetector
+from rtseg.detectors.peaks import CausalPeaks
+from rtseg.simulators.synth.motion import synthesize
+
+FR = 120.0
+
+
+def _profile(peak: int, width: float = 3.0):
+    """short(c, L): a hump at block ``peak`` whose height grows with L (a longer after
+    window sees more of the change)."""
+    return lambda c, L: (1.0 + L / 16.0) * float(np.exp(-((c - peak) / width) ** 2)) * 10.0
+
+
+def test_a_clean_maximum_is_confirmed_at_its_first_block():
+    rule = ShortConfirmation(reach=8, shortest=8)
+    short = _profile(peak=40)
+    assert rule.first_block(40) == 56
+    # one block too soon: not yet
+    assert not rule.confirms(40, 10.0, 1.25, newest_full=40, newest=55, full_len=16, short=short)
+    assert rule.confirms(40, 10.0, 1.25, newest_full=40, newest=56, full_len=16, short=short)
+    assert rule.sent == 1
+
+
+def test_a_rising_flank_waits_for_the_full_look():
+    """The maximum's full value is known at block 40, but the change lies at 44: scored on
+    the same short lengths, the positions after 40 score higher, so 40 is not sent."""
+    rule = ShortConfirmation(reach=8, shortest=8)
+    short = _profile(peak=44)
+    for newest in range(56, 60):
+        assert not rule.confirms(40, 5.0, 1.25, newest_full=40, newest=newest, full_len=16,
+                                 short=short)
+    assert rule.sent == 0
+
+
+def test_level_ratio_and_off():
+    short = _profile(peak=40)
+    kw = dict(newest_full=40, newest=56, full_len=16, short=short)
+    assert not ShortConfirmation(8, 8, level=4.0).confirms(40, 4.9, 1.25, **kw)  # < 4 x 1.25
+    assert ShortConfirmation(8, 8, level=4.0).confirms(40, 5.1, 1.25, **kw)
+    # a later position at 0.95 of the maximum's short value: below ratio 1, not below 0.9
+    flat = lambda c, L: 10.0 if c == 40 else 9.5   # noqa: E731
+    kw["short"] = flat
+    assert ShortConfirmation(8, 8, ratio=1.0).confirms(40, 10.0, 1.25, **kw)
+    assert not ShortConfirmation(8, 8, ratio=0.9).confirms(40, 10.0, 1.25, **kw)
+    off = ShortConfirmation(0, 8)
+    assert not off.on and not off.confirms(40, 10.0, 1.25, **kw)
+    for bad in (dict(reach=-1, shortest=8), dict(reach=8, shortest=0),
+                dict(reach=8, shortest=8, ratio=0.0), dict(reach=8, shortest=8, ratio=1.5),
+                dict(reach=8, shortest=8, level=-1.0)):
+        with pytest.raises(ValueError):
+            ShortConfirmation(**bad)
+
+
+def test_peaks_confirm_sends_the_waiting_maximum_once():
+    p = CausalPeaks(1.0, hold=100, min_gap=50, drop=0.1)
+    assert p.confirm(5) is None
+    p.update(10, 3.0, 20)
+    assert p.candidate == 10 and p.candidate_value == 3.0
+    peak = p.confirm(25)
+    assert (peak.position, peak.value, peak.confirmed_at) == (10, 3.0, 25)
+    assert p.candidate is None and p.confirm(26) is None
+    assert p.update(40, 5.0, 50) is None and p.candidate is None      # within min_gap
+
+
+@pytest.fixture(scope="module")
+def perf():
+    res = synthesize("idle:5,walk:6,punch:6,squat:6,jumping_jacks:6", seed=4)
+    return res, take_features(res.take)
+
+
+def _run(X, **kw):
+    det = ContrastDetector.from_params(dict(load_params()["contrast"], **kw), FR)
+    return det, det.run(X)
+
+
+def test_the_detector_sends_the_same_changes_sooner(perf):
+    """With the confirmation on, every synthetic change is cut where the defaults cut it
+    (within a step) and sent sooner: at the maximum's own full look, the after window
+    (2 s) plus at most two steps after the cut, where the defaults wait for the contrast to
+    fall."""
+    res, X = perf
+    _, later = _run(X)
+    det, sooner = _run(X, confirm_reach_s=1.0, confirm_after_s=1.0, confirm_level=2.0,
+                       confirm_ratio=0.9)
+    mids = [t.mid for t in res.transitions]
+    assert len(sooner) == len(later) == len(mids)
+    for a, b, m in zip(sooner, later, mids):
+        assert abs(a.frame - m) <= 0.5 * FR and abs(a.frame - b.frame) <= det.step
+        assert a.detected_at <= b.detected_at
+    assert det.confirm.sent >= 2
+    d_sooner = np.median([c.detected_at - c.frame for c in sooner]) / FR
+    d_later = np.median([c.detected_at - c.frame for c in later]) / FR
+    assert d_sooner <= 2.0 + 2 * det.step / FR < d_later, (d_sooner, d_later)
+
+
+def test_off_by_default_and_a_prefix_gives_the_cuts_already_sent(perf):
+    """The shipped defaults leave it off (the same cuts as reach 0); with it on a cut
+    still never depends on frames after the one that sent it."""
+    _, X = perf
+    assert load_params()["contrast"]["confirm_reach_s"] == 0.0
+    kw = dict(confirm_reach_s=1.0, confirm_level=2.0, confirm_ratio=0.9)
+    _, cuts = _run(X, **kw)
+    assert cuts
+    for n in sorted({c.detected_at + 1 for c in cuts}):
+        assert _run(X[:n], **kw)[1] == [c for c in cuts if c.detected_at < n]
+
+
+def test_bad_confirmation_parameters_are_refused():
+    from rtseg.config import ConfigError
+    from rtseg.detectors import validate
+    with pytest.raises(ConfigError, match="confirm_ratio"):
+        validate("contrast", {"confirm_ratio": 1.5}, "test: ")
