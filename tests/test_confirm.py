@@ -120,3 +120,20 @@ def test_bad_confirmation_parameters_are_refused():
     from rtseg.detectors import validate
     with pytest.raises(ConfigError, match="confirm_ratio"):
         validate("contrast", {"confirm_ratio": 1.5}, "test: ")
+
+
+def test_shipped_prompt_parameters_cut_the_same_changes_sooner(perf):
+    """``--params prompt`` (config/prompt.toml) is the defaults with the confirmation on:
+    the same synthetic changes, cut where the defaults cut them, sent sooner."""
+    res, X = perf
+    prompt = load_params("prompt")["contrast"]
+    defaults = load_params()["contrast"]
+    assert prompt["confirm_reach_s"] > 0
+    assert {k: v for k, v in prompt.items() if not k.startswith("confirm_")} == \
+        {k: v for k, v in defaults.items() if not k.startswith("confirm_")}
+    sooner = ContrastDetector.from_params(prompt, FR).run(X)
+    later = ContrastDetector.from_params(defaults, FR).run(X)
+    assert [c.frame for c in sooner] == [c.frame for c in later]
+    assert len(sooner) == len(res.transitions)
+    assert sum(a.detected_at < b.detected_at for a, b in zip(sooner, later)) >= 2
+    assert all(a.detected_at <= b.detected_at for a, b in zip(sooner, later))
