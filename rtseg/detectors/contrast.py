@@ -14,7 +14,10 @@ stream's, or after a gap: ``restart()``) w shrinks to half the frames so far, do
 at least ``threshold``, ``min_gap`` apart, confirmed after at most ``hold`` frames or once
 the profile drops below ``drop`` x the maximum) and each is sent once, as a cut at c.
 So a cut is known ``after`` frames plus its confirmation after c (2 s + at most 1 s at the
-defaults).
+defaults).  With the short-look confirmation on (``confirm_reach_s`` > 0,
+``rtseg.detectors.confirm``; ``config/prompt.toml``) a maximum is also sent as soon as the
+positions after it, scored on after windows cut short at the newest block, score lower
+than it did on the same lengths: at its own full look when it stands clear.
 
 Stages after a maximum, each its own module (all described, with the measurements that
 chose them, in docs/live_detector.md): the relative floor (``relative_floor``,
@@ -520,16 +523,17 @@ class ContrastDetector(OnlineDetector):
         last = self._last_sent          # before windows straddling the last cut left out
         self._energy.look(c, a.stats.trace / a.stats.n, b.stats.trace / b.stats.n,
                           None if last is None else last + 2 * self.wmin)
-        f = self.residual.push(a.pca_own)
+        return self._ratio(a0, a, b, self.residual.push(a.pca_own))
+
+    def _ratio(self, a0: PcaWindow, a: PcaWindow, b: PcaWindow, f: float) -> float:
+        """Dpca(A, B) / Dpca(A0, A) under the residual floor f, stated (module doc)."""
         return self._stated(pca_distance(a, b, f) / max(pca_distance(a0, a, f), 1e-300), a)
 
     def _short(self, c: int, length: int) -> float:
         """The contrast at block position c with an after window of ``length`` blocks
         (``rtseg.detectors.confirm``; the residual floor as it stands, no look recorded)."""
         a0, a = self._before(c)
-        b = self._model(c, c + length, "short")
-        f = self.residual.value
-        return self._stated(pca_distance(a, b, f) / max(pca_distance(a0, a, f), 1e-300), a)
+        return self._ratio(a0, a, self._model(c, c + length, "short"), self.residual.value)
 
     def _early(self, c: int) -> float:
         """The early look at block position c (module docstring): B' = [c, c + we) under
