@@ -137,3 +137,34 @@ def test_shipped_prompt_parameters_cut_the_same_changes_sooner(perf):
     assert len(sooner) == len(res.transitions)
     assert sum(a.detected_at < b.detected_at for a, b in zip(sooner, later)) >= 2
     assert all(a.detected_at <= b.detected_at for a, b in zip(sooner, later))
+
+
+def test_a_waiting_maximum_keeps_its_own_before_windows(perf):
+    """The short looks compare a maximum with itself on shorter after windows: scored on
+    the full after window it gives back its own full value (the models it was looked at
+    with, kept while it waits - the detector's model cache and prefix ring have moved on
+    when it is a second old), for every maximum checked, however old."""
+    _, X = perf
+    # 1 s before windows: the model cache is pruned every 8 looks and the prefix ring
+    # holds 2 x 8 + 16 + 2 blocks, so a maximum a few blocks old has lost both
+    det = ContrastDetector.from_params(dict(load_params()["contrast"], confirm_reach_s=1.0,
+                                            confirm_level=0.0, before_s=1.0,
+                                            min_before_s=1.0), FR, keep_trace=True)
+    checked = []
+    orig = det._confirm_short
+
+    def check(c):
+        pos = det.peaks.full.candidate
+        if pos is not None:
+            cb = (pos - det._seg0) // det.step
+            full = dict((p, v) for p, v, _ in det.trace)[pos]
+            again = det._short(cb, det.wb)
+            checked.append((c - cb, abs(again - full) / full))
+        return orig(c)
+
+    det._confirm_short = check
+    det.run(X)
+    ages = [a for a, _ in checked]
+    assert checked and max(ages) >= 4, ages          # maxima looked at again blocks later
+    assert max(err for _, err in checked) < 0.05, checked
+    assert len(det._befores) <= det.peaks.full.hold // det.step + 2

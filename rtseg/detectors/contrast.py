@@ -269,6 +269,8 @@ class ContrastDetector(OnlineDetector):
         self._fill = 0                       # frames in the block being filled
         self._ref: np.ndarray | None = None  # the segment's first frame (sums are about it)
         self._models: dict[tuple[int, int], PcaWindow] = {}
+        #: the before windows' models of the newest looked-at positions (short looks)
+        self._befores: dict[int, tuple[PcaWindow, PcaWindow]] = {}
         #: the last model of each chain (before / after windows): the next one's warm start
         self._warm: dict[str, PcaWindow] = {}
         self._fits = 0
@@ -515,6 +517,13 @@ class ContrastDetector(OnlineDetector):
     def _contrast(self, c: int) -> float:
         """The contrast at block position c (see the module docstring)."""
         a0, a = self._before(c)
+        if self.confirm.on:
+            # a waiting maximum's before windows, for its short looks: they may be gone from
+            # the models and the prefix ring by then (at most ``hold`` behind the newest)
+            befores = self._befores
+            befores[c] = (a0, a)
+            while len(befores) > self.peaks.full.hold // self.step + 2:
+                del befores[next(iter(befores))]
         b = self._model(c, c + self.wb, "after")
         if c % self.wa == 0:     # models no later position uses (none starts before c - 2w)
             oldest = c + 1 - 2 * self.wa
@@ -532,7 +541,7 @@ class ContrastDetector(OnlineDetector):
     def _short(self, c: int, length: int) -> float:
         """The contrast at block position c with an after window of ``length`` blocks
         (``rtseg.detectors.confirm``; the residual floor as it stands, no look recorded)."""
-        a0, a = self._before(c)
+        a0, a = self._befores.get(c) or self._before(c)
         return self._ratio(a0, a, self._model(c, c + length, "short"), self.residual.value)
 
     def _early(self, c: int) -> float:
