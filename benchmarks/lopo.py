@@ -8,6 +8,7 @@ data folder, and the parameter choice made that way.
     python3 benchmarks/lopo.py ../shared/data --grid fast --max-median 2.0   # sooner cuts
     python3 benchmarks/lopo.py ../shared/data --grid none --params fast      # config/fast.toml
     python3 benchmarks/lopo.py ../shared/data --grid confirm --max-median 2.0  # short-look confirmation
+    python3 benchmarks/lopo.py ../shared/data --params prompt --grid prelook --max-median 2.0  # the pre-look
     python3 benchmarks/lopo.py DIR --per-person 3 --seeds 0 1 --json
 
 DIR is laid out like ``../shared/data``: ``cmu/`` (full labelled performances, one person
@@ -102,12 +103,22 @@ GRIDS = {
         "confirm_level": [2.0, 3.0, 4.0],
         "confirm_ratio": [0.9, 1.0],
     },
+    "prelook": {                    # the pre-look (with --params prompt), at a budget
+        "pre_after_s": [0.0, 1.5, 1.75],
+        "pre_level": [4.0, 6.0, 8.0],
+        "pre_ratio": [0.9, 1.0],
+    },
     "short": {                      # shorter windows and gaps for 2-5 s behaviours
         "threshold": [1.75, 2.0],
         "min_before_s": [1.0, 1.5],
         "min_gap_s": [1.5, 2.0],
     },
 }
+
+#: a key that turns a stage off at 0, and the keys that then change nothing: a set with the
+#: stage off takes the base's values for them, and a set met twice is scored once
+SWITCHES = {"confirm_reach_s": ("confirm_level", "confirm_ratio"),
+            "pre_after_s": ("pre_level", "pre_ratio")}
 
 
 @dataclass
@@ -272,7 +283,15 @@ def candidate_sets(grid: str, base: dict) -> list[dict]:
     if not spec:
         return []
     keys = list(spec)
-    return [{**base, **dict(zip(keys, v))} for v in itertools.product(*spec.values())]
+    out: list[dict] = []
+    for v in itertools.product(*spec.values()):
+        p = {**base, **dict(zip(keys, v))}
+        for switch, inert in SWITCHES.items():
+            if switch in p and not p[switch]:
+                p.update({k: base[k] for k in inert if k in base})
+        if p not in out:
+            out.append(p)
+    return out
 
 
 def mean_f1(rows: list) -> float:

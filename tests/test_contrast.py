@@ -165,11 +165,13 @@ def _quiet_runs(det, X):
 
 @pytest.mark.parametrize("kw", [{}, {"early_after_s": 1.0}, {"gate_threshold": 0.0},
                                 {"gate_threshold": 1e9},
-                                {"confirm_reach_s": 1.0, "confirm_level": 2.0}])
+                                {"confirm_reach_s": 1.0, "confirm_level": 2.0},
+                                {"confirm_reach_s": 1.0, "confirm_level": 2.0,
+                                 "pre_after_s": 1.5, "pre_level": 4.0}])
 def test_quiet_frames_never_hide_a_cut(perf, kw):
     """quiet_frames is a promise the live loop relies on: none of the next that many
     frames sends a cut (with the early look, without the gate, with a gate dropping
-    every cut, with the short-look confirmation).  Most frames are quiet, so the promise is worth having."""
+    every cut, with the short-look confirmation and the pre-look).  Most frames are quiet, so the promise is worth having."""
     _, X = perf
     from rtseg.detectors import load_params
     p = dict(load_params()["contrast"], **kw)

@@ -77,6 +77,9 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "confirm_after_s": ((int, float), _pos),
         "confirm_level": ((int, float), _nonneg),
         "confirm_ratio": ((int, float), (lambda v: 0 < v <= 1, "in (0, 1]")),
+        "pre_after_s": ((int, float), _nonneg),
+        "pre_level": ((int, float), _pos),
+        "pre_ratio": ((int, float), (lambda v: 0 < v <= 1, "in (0, 1]")),
     },
     "pca": {
         "window_s": ((int, float), _pos),

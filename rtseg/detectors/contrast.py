@@ -66,6 +66,7 @@ import numpy as np
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.detectors.confirm import ShortConfirmation
 from rtseg.detectors.early import EarlyCut, EarlyCuts
+from rtseg.detectors.prelook import PreLook
 from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, RingPlacement
 from rtseg.detectors.relative import ENERGY_SPAN, EnergyChanges, RelativeFloor
 from rtseg.detectors.residual import RESIDUAL_LOOKS, ResidualFloor
@@ -108,6 +109,7 @@ class ContrastDetector(OnlineDetector):
                  place_ridge: float = 0.01, place_stride: int = 4, place_margin: int = 30,
                  confirm_reach: int = 0, confirm_shortest: int = 120,
                  confirm_level: float = 0.0, confirm_ratio: float = 1.0,
+                 pre_after: int = 0, pre_level: float = 4.0, pre_ratio: float = 1.0,
                  keep_trace: bool = False) -> None:
         if step < 1:
             raise ValueError(f"step must be >= 1 frame, got {step}")
@@ -153,6 +155,12 @@ class ContrastDetector(OnlineDetector):
         self.confirm = ShortConfirmation(
             int(round(confirm_reach / step)) if confirm_reach else 0,
             max(2, int(round(confirm_shortest / step))), confirm_level, confirm_ratio)
+        if pre_after and not 2 * step <= pre_after < after:
+            raise ValueError(f"pre_after must be 0 (off) or at least two steps and shorter "
+                             f"than after ({after} frames), got {pre_after}")
+        #: the pre-look's sooner sends of strong changes (``rtseg.detectors.prelook``)
+        self.pre = PreLook(int(round(pre_after / step)) if pre_after else 0, pre_level,
+                           pre_ratio, self.confirm.reach, self.confirm.shortest)
         self.keep_trace = keep_trace
         self.trace: list[tuple[int, float, float]] = []
         #: early-look profile when keep_trace: (position, value, frame that made it known)
@@ -223,7 +231,11 @@ class ContrastDetector(OnlineDetector):
                                   if p.get("confirm_reach_s") else 0),
                    confirm_shortest=frames(p.get("confirm_after_s", 1.0), frame_rate),
                    confirm_level=p.get("confirm_level", 0.0),
-                   confirm_ratio=p.get("confirm_ratio", 1.0), keep_trace=keep_trace)
+                   confirm_ratio=p.get("confirm_ratio", 1.0),
+                   pre_after=(frames(p["pre_after_s"], frame_rate)
+                              if p.get("pre_after_s") else 0),
+                   pre_level=p.get("pre_level", 4.0), pre_ratio=p.get("pre_ratio", 1.0),
+                   keep_trace=keep_trace)
 
     @property
     def delay_frames(self) -> int:
@@ -389,6 +401,9 @@ class ContrastDetector(OnlineDetector):
         ce = nb - self.we                            # newest position with a whole B'
         if self.we and ce >= 2 * self.wmin:
             steps.append((self._look_early, (ce,)))
+        cp = nb - self.pre.after                     # newest position the pre-look scores
+        if self.pre.after and cp >= 2 * self.wmin:
+            steps.append((self._look_pre, (cp,)))
 
     def _run_steps(self) -> None:
         """One queued step per frame (more when more than a block's frames of them wait), so
@@ -426,6 +441,15 @@ class ContrastDetector(OnlineDetector):
                                      self.wb, self._short):
             return None
         return self.peaks.confirm_full(self._t - 1)
+
+    def _look_pre(self, c: int) -> None:
+        """The pre-look at block position c (``rtseg.detectors.prelook``): sent now when
+        it stands clear."""
+        value = self.pre.value(c, self.threshold, 2 * self.wmin, self._short)
+        if value is not None:
+            sent = self.peaks.send_now(self._seg0 + c * self.step, value, self._t - 1)
+            if sent is not None:
+                self._out.append(sent)
 
     def _look_early(self, c: int) -> None:
         """The early look at block position c, known now: to the peak picker."""

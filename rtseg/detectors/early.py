@@ -44,7 +44,8 @@ class EarlyCut:
     and its strength on the full look's scale: the full look's own maximum, or for an
     early maximum the highest full-look value that backed it (the early look's one-sided
     ratio runs to hundreds where the full look's reaches tens, so only this value compares
-    across cuts)."""
+    across cuts); for a change ``send_now`` sent, the value it was sent with (the pre-look's:
+    the same two-window ratio on a shorter after window)."""
     peak: Peak
     early: bool
     strength: float
@@ -110,6 +111,16 @@ class EarlyCuts:
         for it); None when none waits or a cut lies within ``min_gap`` of it."""
         peak = self.full.confirm(now)
         return self._send(peak, False, peak.value) if peak is not None else None
+
+    def send_now(self, position: int, value: float, now: int) -> EarlyCut | None:
+        """Send a change another look vouches for (``rtseg.detectors.prelook``) at
+        ``position`` with ``value`` as its strength, found on frame ``now``; None when a cut
+        lies within ``min_gap`` of it.  The full look's waiting maximum near it is dropped
+        and its next one kept ``min_gap`` away."""
+        sent = self._send(Peak(position, value, now), True, value)
+        if sent is not None:
+            self.full.taken(position)
+        return sent
 
     def update_early(self, position: int, value: float, now: int) -> EarlyCut | None:
         """The early look's value at ``position``, known since frame ``now``."""

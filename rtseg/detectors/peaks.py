@@ -69,6 +69,16 @@ class CausalPeaks:
         self._cand = None
         return Peak(cand[0], cand[1], now)
 
+    def taken(self, position: int) -> None:
+        """Another rule sent an event at ``position`` (``EarlyCuts.send_now``): a waiting
+        maximum within ``min_gap`` of it is dropped, and it holds the next one ``min_gap``
+        away as an event of this profile's would."""
+        cand = self._cand
+        if cand is not None and abs(cand[0] - position) < self.min_gap:
+            self._cand = None
+        if self._last is None or position > self._last:
+            self._last = position
+
     def update(self, position: int, value: float, now: int) -> Peak | None:
         """Feed the value at ``position`` (known since frame ``now``); a Peak once confirmed."""
         out = None
