@@ -123,18 +123,21 @@ def test_bad_confirmation_parameters_are_refused():
 
 
 def test_shipped_prompt_parameters_cut_the_same_changes_sooner(perf):
-    """``--params prompt`` (config/prompt.toml) is the defaults with the confirmation on:
-    the same synthetic changes, cut where the defaults cut them, sent sooner."""
+    """``--params prompt`` (config/prompt.toml) is the defaults with the confirmation and
+    the pre-look on: the same synthetic changes, each cut within 0.5 s of its labelled
+    middle, sent no later than the defaults send them and some sooner."""
     res, X = perf
     prompt = load_params("prompt")["contrast"]
     defaults = load_params()["contrast"]
-    assert prompt["confirm_reach_s"] > 0
-    assert {k: v for k, v in prompt.items() if not k.startswith("confirm_")} == \
-        {k: v for k, v in defaults.items() if not k.startswith("confirm_")}
+    assert prompt["confirm_reach_s"] > 0 and prompt["pre_after_s"] > 0
+    changed = ("confirm_", "pre_")
+    assert {k: v for k, v in prompt.items() if not k.startswith(changed)} == \
+        {k: v for k, v in defaults.items() if not k.startswith(changed)}
     sooner = ContrastDetector.from_params(prompt, FR).run(X)
     later = ContrastDetector.from_params(defaults, FR).run(X)
-    assert [c.frame for c in sooner] == [c.frame for c in later]
-    assert len(sooner) == len(res.transitions)
+    assert len(sooner) == len(later) == len(res.transitions)
+    for c, t in zip(sooner, res.transitions):
+        assert abs(c.frame - t.mid) <= 0.5 * FR
     assert sum(a.detected_at < b.detected_at for a, b in zip(sooner, later)) >= 2
     assert all(a.detected_at <= b.detected_at for a, b in zip(sooner, later))
 
