@@ -8,7 +8,7 @@ DATA is a folder laid out like ../shared/data.  Every take goes once through the
 pipeline (``rtseg.evaluation.online.fed_features``: the features ``rtseg live`` computes); the
 default live detector (``contrast``) then runs on them at several delay budgets — its after
 window (how long after a change it looks), hold (how long it may wait to confirm a
-maximum), early look (on, as shipped, or off) and same-behaviour gate (as shipped, and
+maximum) and same-behaviour gate (as shipped, and
 off: each budget both ways), and for the short budgets a finer grid
 step and an earlier confirmation (drop) — with every other parameter at the shipped
 defaults.  For each: F1 at +-0.5 s and
@@ -38,34 +38,26 @@ from rtseg.evaluation.online import fed_features, live_config, to_take_frames
 
 TOL_S = 0.5
 QUICK_S = 1.5                  # the short budget: median delay at most this
-# (after_s, hold_s, step_s, drop, early_after_s); step_s / drop None = the shipped value; a
-# finer grid step and an earlier confirmation (drop 0.75) help the short budgets.
-# early_after_s None = the shipped early look (off where the after window is not longer
-# than it), 0 = off.
-BUDGETS = [(0.75, 0.25, None, None, None), (1.0, 0.25, None, None, None),
-           (1.0, 0.5, None, None, None), (1.25, 0.5, None, None, None),
-           (1.5, 0.5, None, None, None), (1.5, 0.75, None, None, None),
-           (1.75, 0.5, None, None, None), (1.75, 1.0, None, None, None),
-           (2.0, 1.0, None, None, None), (2.5, 1.0, None, None, None),
-           (1.75, 1.0, None, None, 0.0), (2.0, 1.0, None, None, 0.0),
-           (1.25, 0.5, None, None, 0.75), (1.5, 0.5, None, None, 0.75),
-           (1.5, 0.5, None, None, 1.0),
-           (0.75, 0.5, 1 / 12, None, None), (1.0, 0.25, 1 / 12, None, None),
-           (1.0, 0.5, 1 / 12, 0.75, None), (1.25, 0.25, 1 / 12, None, None),
-           (1.25, 0.5, 1 / 12, 0.75, None), (1.25, 0.5, 1 / 12, None, 0.75),
-           (1.5, 0.5, 1 / 12, None, 0.75)]
-KEYS = ("after_s", "hold_s", "step_s", "drop", "early_after_s", "gate_threshold")
+# (after_s, hold_s, step_s, drop); step_s / drop None = the shipped value; a finer grid
+# step and an earlier confirmation (drop 0.75) help the short budgets.
+BUDGETS = [(0.75, 0.25, None, None), (1.0, 0.25, None, None),
+           (1.0, 0.5, None, None), (1.25, 0.5, None, None),
+           (1.5, 0.5, None, None), (1.5, 0.75, None, None),
+           (1.75, 0.5, None, None), (1.75, 1.0, None, None),
+           (2.0, 1.0, None, None), (2.5, 1.0, None, None),
+           (0.75, 0.5, 1 / 12, None), (1.0, 0.25, 1 / 12, None),
+           (1.0, 0.5, 1 / 12, 0.75), (1.25, 0.25, 1 / 12, None),
+           (1.25, 0.5, 1 / 12, 0.75)]
+KEYS = ("after_s", "hold_s", "step_s", "drop", "gate_threshold")
 
 
 def budget_params(base: dict, budget: tuple, gate: float | None = None) -> dict:
     """The shipped parameters with one budget's values (see BUDGETS); ``gate``: the
     same-behaviour gate's threshold (None = shipped, 0 = off: it holds every cut until
     1.5 s of the new segment, which the shortest budgets cannot wait for)."""
-    after, hold, step, drop, early = budget
-    if early is None:
-        early = base["early_after_s"] if base["early_after_s"] < after else 0.0
+    after, hold, step, drop = budget
     return {**base, "after_s": after, "hold_s": hold, "step_s": step or base["step_s"],
-            "drop": drop if drop is not None else base["drop"], "early_after_s": early,
+            "drop": drop if drop is not None else base["drop"],
             "gate_threshold": base["gate_threshold"] if gate is None else gate}
 
 
@@ -160,8 +152,8 @@ def main() -> int:
     print(f"{'detector':<70} {'F1':>6} {'strict':>6} {'median':>7} {'p90':>6}")
     for r in live_rows:
         name = (f"contrast after {r['after_s']:.2f} hold {r['hold_s']:.2f} step "
-                f"1/{round(1 / r['step_s'])} drop {r['drop']} early "
-                f"{r['early_after_s'] or 'off'} gate {r['gate_threshold'] or 'off'}")
+                f"1/{round(1 / r['step_s'])} drop {r['drop']} "
+                f"gate {r['gate_threshold'] or 'off'}")
         print(f"{name + (' *' if r['shipped'] else ''):<70} {r['f1']:>6.3f} {r['strict_f1']:>6.3f} "
               f"{r['delay_median'] or float('nan'):>7.2f} {r['delay_p90'] or float('nan'):>6.2f}")
     for m, r in doc["paper_online"].items():
@@ -175,7 +167,7 @@ def main() -> int:
         print(f"best F1 with median delay <= {QUICK_S} s: {best_quick['f1']:.3f} (strict "
               f"{best_quick['strict_f1']:.3f}; after {best_quick['after_s']} s, hold "
               f"{best_quick['hold_s']} s, step {best_quick['step_s']:.4f} s, drop "
-              f"{best_quick['drop']}, early look {best_quick['early_after_s'] or 'off'}, gate "
+              f"{best_quick['drop']}, gate "
               f"{best_quick['gate_threshold'] or 'off'}; delay {best_quick['delay_median']:.2f}/"
               f"{best_quick['delay_p90']:.2f} s)")
     else:

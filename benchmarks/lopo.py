@@ -3,9 +3,7 @@
 data folder, and the parameter choice made that way.
 
     python3 benchmarks/lopo.py ../shared/data                 # shipped defaults + LOPO grid
-    python3 benchmarks/lopo.py ../shared/data --grid delay    # accuracy against delay
     python3 benchmarks/lopo.py ../shared/data --grid none     # shipped defaults only
-    python3 benchmarks/lopo.py ../shared/data --grid fast --max-median 2.0   # sooner cuts
     python3 benchmarks/lopo.py ../shared/data --grid none --params fast      # config/fast.toml
     python3 benchmarks/lopo.py ../shared/data --grid confirm --max-median 2.0  # short-look confirmation
     python3 benchmarks/lopo.py ../shared/data --params prompt --grid prelook --max-median 2.0  # the pre-look
@@ -82,20 +80,9 @@ GRIDS = {
         "gate_threshold": [3.5, 4.0, 4.5],
         "residual_floor": [0.1, 0.25, 0.4],
     },
-    "looks": {                      # the early look and cut placement
-        "early_threshold": [1.5, 2.0],
+    "placement": {                  # cut placement: off, or its window
         "place_radius_s": [0.0, 1.0],
-    },
-    "delay": {                      # the early look's after window (0 = full look only)
-        "early_after_s": [0.0, 1.0, 1.25],
-    },
-    "fast": {                       # the early look at a delay budget (--max-median 2.0)
-        "early_after_s": [1.5],
-        "early_threshold": [4.0, 5.0, 6.0],
-        "early_hold_s": [0.25],
-        "early_back_s": [0.5, 0.75, 1.0],
-        "early_backing": [1.25, 1.5, 2.0],
-        "early_parts": [1, 2],
+        "place_window_s": [1.5, 2.0],
     },
     "confirm": {                    # short-look confirmation, with the after window
         "after_s": [1.875, 2.0],
@@ -117,7 +104,8 @@ GRIDS = {
 
 #: a key that turns a stage off at 0, and the keys that then change nothing: a set with the
 #: stage off takes the base's values for them, and a set met twice is scored once
-SWITCHES = {"confirm_reach_s": ("confirm_level", "confirm_ratio"),
+SWITCHES = {"place_radius_s": ("place_window_s",),
+            "confirm_reach_s": ("confirm_level", "confirm_ratio"),
             "pre_after_s": ("pre_level", "pre_ratio")}
 
 

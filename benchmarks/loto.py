@@ -6,19 +6,20 @@ sensitivity.
     python3 benchmarks/loto.py ../shared/data --nested --max-median 2.0 --fix step_s=0.125 \
         --fix bound_before=0
     python3 benchmarks/loto.py ../shared/data --max-median 2.0 --fix step_s=0.125 \
-        --fix after_s=2.0 --fix hold_s=1.0 --fix drop=0.5 --fix early_after_s=1.0 \
-        --fix early_hold_s=0.5 --loto-spliced SPLICED_SAME SPLICED_MIXED
+        --fix after_s=2.0 --fix hold_s=1.0 --fix drop=0.5 \
+        --loto-spliced SPLICED_SAME SPLICED_MIXED
                                                       # what chose the shipped set (~16 min)
 
 Every take of DATA (a folder laid out like ../shared/data: its cmu and tsseg4d groups) and
 the synthetic performances (``rtseg.simulators.synth.motion``, the default script, one per seed)
 goes once through the live pipeline (``rtseg.evaluation.online``: the same features as
 ``rtseg live``); the features fed to the detector are kept, and every candidate parameter
-set runs the real ``ContrastDetector`` on them (the full and early profiles are computed
-once per window geometry - step, after window, early window; the cut picker
-``EarlyCuts`` is replayed on them per threshold/hold/drop/early threshold/early hold, and
-the script checks that this gives the same cuts, sent on the same frames, as full detector
-runs of the shipped defaults with and without the early look).  Cut placement
+set runs the real ``ContrastDetector`` on them (the contrast profile is computed once per
+window geometry - step, after window; the cut picker ``CutSender`` is replayed on it per
+threshold/hold/drop, and the script checks that this gives the same cuts, sent on the same
+frames, as full detector runs of the shipped defaults with and without the gate).  The
+short-look confirmation and the pre-look are not in its grid (``benchmarks/lopo.py
+--grid confirm`` / ``prelook`` choose them).  Cut placement
 (``place_radius_s``) is not replayed: every set, the shipped one included, is scored with
 placement off (``benchmarks/lopo.py`` scores the whole detector, placement included).  Sets whose before windows
 are bounded by the last cut sent (``bound_before``) depend on their own cuts: they are
@@ -60,7 +61,7 @@ import numpy as np
 
 from rtseg.detectors import load_params
 from rtseg.detectors.contrast import ContrastDetector
-from rtseg.detectors.early import EarlyCuts
+from rtseg.detectors.sender import CutSender
 from rtseg.evaluation.scoring import pooled_tally, tally
 from rtseg.labels.takes import find_labelled_takes
 from rtseg.evaluation.online import fed_features, live_config, to_take_frames
@@ -70,32 +71,21 @@ TOL_S = 0.5
 OBJECTIVES = ("takes", "pooled", "groups")   # objective() kinds; --nested chooses among them
 MAX_MEDIAN_S, MAX_P90_S = 2.5, 3.5
 GRID = {                       # the candidates: grid step, after window, the peak picker,
-    "step_s": [0.0833333333, 0.125],             # the early look (off when early_after_s = 0)
+    "step_s": [0.0833333333, 0.125],
     "after_s": [1.5, 1.75, 2.0],
     "threshold": [1.5, 2.0, 2.5, 3.0],
     "hold_s": [0.5, 0.75, 1.0],
     "drop": [0.5, 0.75],
-    "early_after_s": [0.0, 1.0],
-    "early_threshold": [1.25, 1.5, 2.0],
-    "early_hold_s": [0.25, 0.5],
     "gate_threshold": [0.0, 3.5, 4.5, 5.5],      # the same-behaviour gate (0: off)
     "bound_before": [0.0, 1.0],                  # before windows bounded by the last cut sent
 }
 
 
 def grid_configs() -> list[dict]:
-    """Every combination of GRID, once: with the early look off its threshold and hold
-    do not matter, so only their first values are kept.  The gate threshold varies
-    fastest (``main`` replays the gate on each cut list)."""
+    """Every combination of GRID, once.  The gate threshold varies fastest (``main``
+    replays the gate on each cut list)."""
     keys = list(GRID)
-    out = []
-    for v in itertools.product(*GRID.values()):
-        c = dict(zip(keys, v))
-        if c["early_after_s"] == 0 and (c["early_threshold"] != GRID["early_threshold"][0]
-                                        or c["early_hold_s"] != GRID["early_hold_s"][0]):
-            continue
-        out.append(c)
-    return out
+    return [dict(zip(keys, v)) for v in itertools.product(*GRID.values())]
 
 
 @dataclass
@@ -149,20 +139,16 @@ def detector(p: dict, fr: float) -> ContrastDetector:
 
 
 def peaks_on_trace(det: ContrastDetector, p: dict, fr: float) -> list[tuple[int, int]]:
-    """(cut frame, detected frame) of the cut picker (``EarlyCuts``) with ``p`` replayed on
-    a run's profiles (clean take: the full look's value at c is known at c + after - 1, the
-    early look's when its trace says; in one block the full look comes first, and a second
-    cut of the same block goes out with the next frame, as in the detector)."""
-    pk: EarlyCuts = detector(p, fr).peaks      # the picker a detector with p would use
+    """(cut frame, detected frame) of the cut picker (``CutSender``) with ``p`` replayed on
+    a run's profile (clean take: the full look's value at c is known at c + after - 1; a
+    second cut of the same frame goes out with the next frame, as in the detector)."""
+    pk: CutSender = detector(p, fr).peaks      # the picker a detector with p would use
     lag = det.wb * det.step - 1
-    events = [(pos + lag, 0, pos, v) for pos, v, _ in det.trace]
-    if pk.early is not None:
-        events += [(now, 1, pos, v) for pos, v, now in det.trace_early]
-    events.sort()
     out = []
     last_now = None
-    for now, early, pos, v in events:
-        sent = (pk.update_early if early else pk.update_full)(pos, v, now)
+    for pos, v, _ in det.trace:
+        now = pos + lag
+        sent = pk.update_full(pos, v, now)
         if sent is not None:
             at = now + 1 if now == last_now else now
             out.append((sent.peak.position, at))
@@ -286,7 +272,7 @@ def main() -> int:
     memo: dict[str, dict] = {}               # case -> the gate's window distances
     for cfgv in configs:
         p = {**base, **cfgv}
-        geo = (p["step_s"], p["after_s"], p["early_after_s"])
+        geo = (p["step_s"], p["after_s"])
         res = {}
         for case in cases + others:
             if case.restarts or p["bound_before"]:   # a gap, or windows that depend on the
@@ -305,14 +291,14 @@ def main() -> int:
             res[case.key] = counts(case, gated(p, case, ungated[case.key][1], memo))
         results[tuple(cfgv[k] for k in keys)] = res
     # the shortcut equals a full detector run for the shipped defaults with unbounded
-    # windows (the same cuts, sent on the same frames), with and without the early look,
-    # with and without the gate (bounded sets are full runs: nothing to check)
+    # windows (the same cuts, sent on the same frames), with and without the gate (bounded
+    # sets are full runs: nothing to check)
     unb = {**base, "bound_before": 0.0}
-    for p in (unb, {**unb, "early_after_s": 0.0}, {**unb, "gate_threshold": 0.0}):
+    for p in (unb, {**unb, "gate_threshold": 0.0}):
         for case in cases + others:
             full = [(c.frame, c.detected_at) for c in detector(p, case.frame_rate).run(case.X)]
             if not case.restarts:
-                geo = (p["step_s"], p["after_s"], p["early_after_s"])
+                geo = (p["step_s"], p["after_s"])
                 if (geo, case.key) not in traces:      # a geometry --fix left out
                     traces[(geo, case.key)] = detector({**p, "gate_threshold": 0.0},
                                                        case.frame_rate)
@@ -413,11 +399,7 @@ def main() -> int:
         rows = []
         for v in GRID[k]:
             cfgk = tuple(v if j == i else shipped[j] for j in range(len(keys)))
-            if dict(zip(keys, cfgk))["early_after_s"] == 0:   # early look off: one set
-                cfgk = tuple(GRID[kk][0] if kk in ("early_threshold", "early_hold_s") else x
-                             for kk, x in zip(keys, cfgk))
-            if cfgk in results and (k not in ("early_threshold", "early_hold_s")
-                                    or shipped[keys.index("early_after_s")] > 0):
+            if cfgk in results:
                 rows.append({"value": v, **{g: pooled_tally([results[cfgk][c.key] for c in cases
                                                         if c.group == g]) for g in groups}})
         report["sensitivity"][k] = rows

@@ -81,15 +81,18 @@ def test_lopo_on_a_folder_of_two_people(tmp_path):
     for s in ("bd", "bk"):
         shutil.copy(src / "amc" / f"{s}.asf", one / "amc")
     (one / "index.tsv").write_text("\n".join(keep) + "\n")
-    r = _run("lopo.py", str(one), "--per-person", "1", "--grid", "looks",
+    r = _run("lopo.py", str(one), "--per-person", "1", "--grid", "placement",
              "--cache", str(tmp_path / "cache"), "--json")
     assert r.returncode == 0, r.stderr[-2000:]
     doc = json.loads(r.stdout)
     assert doc["people"] == ["two:bd", "two:bk"]
     # held-out units: a person with same-person performances, or a mixed performance
     assert len(doc["choices"]) >= 2
+    # placement off once (its window changes nothing then), on with each window
     assert [r["params"] for r in doc["sets"]] == [
-        {"early_threshold": e, "place_radius_s": p} for e in (1.5, 2.0) for p in (0.0, 1.0)]
+        {"place_radius_s": 0.0, "place_window_s": 2.0},
+        {"place_radius_s": 1.0, "place_window_s": 1.5},
+        {"place_radius_s": 1.0, "place_window_s": 2.0}]
     assert all(u.startswith("two:") or u.startswith("two/seed0/mixed") for u in doc["choices"])
     for key in ("held_out", "shipped"):
         assert 0.0 <= doc[key]["pooled"]["f1"] <= 1.0 and doc[key]["pooled"]["transitions"] > 0
@@ -443,11 +446,11 @@ def test_lopo_scores_its_sets_alike_in_one_process_or_several(tmp_path):
                 seconds=8.0)
     docs = []
     for jobs in ("1", "2"):
-        r = _run("lopo.py", str(data), "--per-person", "1", "--grid", "looks", "--jobs", jobs,
+        r = _run("lopo.py", str(data), "--per-person", "1", "--grid", "placement", "--jobs", jobs,
                  "--cache", str(tmp_path / "cache"), "--json")
         assert r.returncode == 0, r.stderr[-2000:]
         docs.append(json.loads(r.stdout))
     one, two = docs
-    assert len(one["sets"]) == 4 and one["sets"] == two["sets"]
+    assert len(one["sets"]) == 3 and one["sets"] == two["sets"]
     assert one["held_out"] == two["held_out"] and one["choices"] == two["choices"]
     assert one["held_out"]["pooled"]["transitions"] > 0

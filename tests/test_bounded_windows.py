@@ -38,8 +38,7 @@ def test_short_behaviours_are_found_with_bounded_windows(seed):
     res = synthesize(SHORT, seed=seed)
     X = take_features(res.take)
     truth = widen(list(res.transitions), int(0.5 * FR))
-    cuts = make_online("contrast", FR, {"bound_before": True, "threshold": 2.0,
-                                        "early_threshold": 2.0}).run(X)
+    cuts = make_online("contrast", FR, {"bound_before": True, "threshold": 2.0}).run(X)
     s = score([c.frame for c in cuts], truth)
     assert (s.tp, s.fp, s.fn) == (len(truth), 0, 0)
 
@@ -49,8 +48,7 @@ def test_unbounded_windows_miss_some_of_the_short_behaviours():
     for seed in (0, 1, 2):
         res = synthesize(SHORT, seed=seed)
         X = take_features(res.take)
-        cuts = make_online("contrast", FR, {"bound_before": False, "threshold": 2.0,
-                                            "early_threshold": 2.0}).run(X)
+        cuts = make_online("contrast", FR, {"bound_before": False, "threshold": 2.0}).run(X)
         found += score([c.frame for c in cuts],
                        widen(list(res.transitions), int(0.5 * FR))).tp
     assert found < 3 * 5
@@ -59,7 +57,7 @@ def test_unbounded_windows_miss_some_of_the_short_behaviours():
 def test_bounded_detector_is_causal_and_a_restart_forgets_the_cut():
     res = synthesize(SHORT, seed=1)
     X = take_features(res.take)
-    p = {"bound_before": True, "threshold": 2.0, "early_threshold": 2.0}
+    p = {"bound_before": True, "threshold": 2.0}
     cuts = make_online("contrast", FR, p).run(X)
     assert len(cuts) >= 4
     for n in sorted({c.detected_at + 1 for c in cuts} | {len(X) - 11}):

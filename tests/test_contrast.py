@@ -163,14 +163,14 @@ def _quiet_runs(det, X):
     return sent, np.array(quiet)
 
 
-@pytest.mark.parametrize("kw", [{}, {"early_after_s": 1.0}, {"gate_threshold": 0.0},
+@pytest.mark.parametrize("kw", [{}, {"gate_threshold": 0.0},
                                 {"gate_threshold": 1e9},
                                 {"confirm_reach_s": 1.0, "confirm_level": 2.0},
                                 {"confirm_reach_s": 1.0, "confirm_level": 2.0,
                                  "pre_after_s": 1.5, "pre_level": 4.0}])
 def test_quiet_frames_never_hide_a_cut(perf, kw):
     """quiet_frames is a promise the live loop relies on: none of the next that many
-    frames sends a cut (with the early look, without the gate, with a gate dropping
+    frames sends a cut (without the gate, with a gate dropping
     every cut, with the short-look confirmation and the pre-look).  Most frames are quiet, so the promise is worth having."""
     _, X = perf
     from rtseg.detectors import load_params
@@ -180,7 +180,7 @@ def test_quiet_frames_never_hide_a_cut(perf, kw):
     for i, q in enumerate(quiet):
         assert not any(i <= c < i + q for c in sent), (i, q, sent)
     assert (quiet > 0).mean() > 0.85          # about one frame in a step may send
-    assert quiet.max() == det.step + (0 if det.we else 1)
+    assert quiet.max() == det.step + 1
     if kw.get("gate_threshold") == 1e9:
         assert not sent and det.gate.dropped > 0     # held cuts were decided on time
     else:
@@ -221,10 +221,10 @@ def test_non_finite_frame_restarts_and_is_counted(perf):
 
 
 def test_frame_rate_scales_the_windows():
-    det = make_online("contrast", 60.0, {"early_after_s": 1.0})
+    det = make_online("contrast", 60.0, {"confirm_reach_s": 1.0, "pre_after_s": 1.5})
     # 0.125 s -> 8 frames (7.5 rounded half to even); 3 s -> 22 blocks; 2 s -> 15 blocks;
-    # the early look's 1 s -> 8 blocks
-    assert (det.step, det.wa, det.wb, det.we) == (8, 22, 15, 8)
+    # the pre-look's 1.5 s -> 11 blocks (90 / 8 = 11.25), the reach's 1 s -> 8
+    assert (det.step, det.wa, det.wb, det.pre.after, det.pre.reach) == (8, 22, 15, 11, 8)
     assert det.delay_frames == 15 * 8 + 60 + 8
 
 
@@ -246,66 +246,11 @@ def test_distances_equal_the_two_distance_functions():
     assert q == pytest.approx(ppca_distance(a, b), rel=1e-12)
 
 
-# ---------------------------------------------------------------- early look
-def test_one_sided_equals_the_two_one_way_functions():
-    from rtseg.detectors.window_models import one_sided
-    rng = np.random.default_rng(11)
-    m = fit(WindowStats.of(rng.normal(size=(200, 6)) @ rng.normal(size=(6, 6))))
-    y = WindowStats.of(rng.normal(size=(90, 6)) + 0.4)
-    p, q = one_sided(y, m)
-    assert p == pytest.approx(pca_error(y, m), rel=1e-12)
-    assert q == pytest.approx(math.sqrt(ppca_msq(y, m)), rel=1e-12)
-
-
-def _early_cuts():
-    from rtseg.detectors.early import EarlyCuts
-    # full look: threshold 2, hold 20; early look: threshold 1.5, hold 10; corroboration
-    # from 30 frames before an early maximum; cuts at least 50 frames apart
-    return EarlyCuts(2.0, hold=20, min_gap=50, drop=0.5, early_threshold=1.5, early_hold=10,
-                     early_after=30)
-
-
-def test_early_maximum_backed_by_the_full_look_is_sent_once():
-    ec = _early_cuts()
-    # the full look (known later) rises past its threshold at 190 while the early look peaks at 200
-    for pos in range(100, 200, 5):
-        assert ec.update_full(pos, 2.5 if pos >= 190 else 1.0, pos + 70) is None
-    sent = None
-    for pos, v in ((195, 1.8), (200, 3.0), (205, 2.0), (210, 1.0)):
-        sent = ec.update_early(pos, v, pos + 40) or sent
-    assert sent is not None and sent.early and sent.peak.position == 200
-    assert sent.peak.confirmed_at == 250              # the drop below half, known at 210 + 40
-    # the full look's own maximum of the same change comes later and is not sent again
-    out = [ec.update_full(pos, v, pos + 70) for pos, v in ((200, 4.0), (205, 1.0), (230, 1.0))]
-    assert out == [None, None, None]
-
-
-def test_early_maximum_without_the_full_look_is_dropped_and_the_full_one_sent():
-    ec = _early_cuts()
-    for pos in range(100, 200, 5):
-        ec.update_full(pos, 1.0, pos + 70)           # the full look sees nothing yet
-    assert [ec.update_early(p, v, p + 40) for p, v in ((200, 3.0), (205, 1.0))] == [None, None]
-    sent = [ec.update_full(p, v, p + 70) for p, v in ((200, 3.0), (205, 3.5), (210, 1.0))]
-    assert sent[:2] == [None, None] and sent[2] is not None
-    assert not sent[2].early and sent[2].peak.position == 205
-
-
-@pytest.mark.parametrize("backing, back, sent", [
-    (1.0, None, True),     # any full-look value >= threshold from 30 frames before
-    (1.25, None, False),   # 2.2 < 1.25 x 2: not backed strongly enough
-    (1.0, 10, False),      # the backing value (at 180) lies 20 frames before: older than back
-    (1.0, 25, True)])
-def test_early_maximum_needs_its_backing_within_back_frames(backing, back, sent):
-    from rtseg.detectors.early import EarlyCuts
-    ec = EarlyCuts(2.0, hold=20, min_gap=50, drop=0.5, early_threshold=1.5, early_hold=10,
-                   early_after=30, back=back, backing=backing)
-    # the full look reaches 2.2 at 180 only; its maximum waits for its hold (1.5 after it
-    # is above half of it)
-    for pos in range(100, 200, 5):
-        assert ec.update_full(pos, 2.2 if pos == 180 else 1.5 if pos > 180 else 1.0,
-                              pos + 70) is None
-    out = [ec.update_early(p, v, p + 40) for p, v in ((200, 3.0), (205, 1.0))]
-    assert (out[1] is not None) == sent and out[0] is None
+# ---------------------------------------------------------------- sending
+def _sender():
+    # full look: threshold 2, hold 20; changes at least 50 frames apart
+    from rtseg.detectors.sender import CutSender
+    return CutSender(2.0, hold=20, min_gap=50, drop=0.5)
 
 
 def assert_same_changes_sooner(res, sooner, later) -> None:
@@ -320,154 +265,44 @@ def assert_same_changes_sooner(res, sooner, later) -> None:
     assert d_sooner < d_later - 0.25 * FR, (d_sooner, d_later)
 
 
-def test_early_backing_must_be_positive():
-    from rtseg.detectors.early import EarlyCuts
-    with pytest.raises(ValueError, match="backing"):
-        EarlyCuts(2.0, hold=20, min_gap=50, drop=0.5, early_threshold=1.5, early_hold=10,
-                  early_after=30, backing=0.0)
-
-
 def test_shipped_fast_parameters_cut_sooner(perf):
     """``--params fast`` (config/fast.toml): the same synthetic changes, each within 0.5 s
     of the labelled middle, sent sooner than with the defaults."""
     from rtseg.detectors import load_params
     res, X = perf
     fast = load_params("fast")["contrast"]
-    assert fast["early_after_s"] > 0 and fast != load_params()["contrast"]
+    assert fast["pre_after_s"] > 0 and fast != load_params()["contrast"]
     assert_same_changes_sooner(res, ContrastDetector.from_params(fast, FR).run(X),
                                ContrastDetector.from_params(load_params()["contrast"], FR).run(X))
 
 
-def test_early_parts_score_only_a_window_new_throughout(perf):
-    """``early_parts = 2``: the early look is the smaller error of its window's two halves.
-    While both detectors are in one state (before the first cut is sent) it is never above
-    the whole window's, and 1 s before the first change - the change in the window's
-    second half - it stays near the no-change level where the whole window scores far
-    above the early threshold."""
-    from rtseg.detectors import load_params
-    res, X = perf
-    p = {**load_params()["contrast"], "early_after_s": 1.5, "early_threshold": 5.0}
-    looks = {}
-    for parts in (1, 2):
-        det = ContrastDetector.from_params({**p, "early_parts": parts}, FR, keep_trace=True)
-        first_sent = det.run(X)[0].detected_at
-        looks[parts] = {pos: v for pos, v, now in det.trace_early if now < first_sent}
-    assert looks[1].keys() == looks[2].keys() and len(looks[1]) > 10
-    assert all(looks[2][q] <= looks[1][q] * (1 + 1e-9) for q in looks[1])
-    m = res.transitions[0].mid
-    before = min(looks[1], key=lambda q: abs(q - (m - FR)))
-    assert looks[1][before] > p["early_threshold"] and looks[2][before] < 1.5, \
-        (looks[1][before], looks[2][before])
-
-
-def test_early_cuts_are_scored_on_the_full_looks_scale(perf):
-    """A cut the early look sends carries the full-look value that backed it as its score
-    (a value of the full look's profile within ``early_back_s`` before it), not the early
-    look's one-sided ratio, which runs to hundreds: the relative floor, which keeps the
-    scores of the cuts sent, would otherwise lie above every later full-look maximum and
-    refuse the changes after an early cut."""
-    from rtseg.detectors import load_params
-    res, X = perf
-    p = {**load_params()["contrast"], "early_after_s": 1.5, "early_threshold": 5.0,
-         "early_back_s": 1.0, "early_backing": 1.5, "early_parts": 2, "gate_threshold": 0}
-    det = ContrastDetector.from_params(p, FR, keep_trace=True)
-    looks, cut = [], det._cut
-    det._cut = lambda sent, at: (looks.append(sent.early), cut(sent, at))[1]
-    cuts = det.run(X)
-    full = {pos: v for pos, v, _ in det.trace}
-    early = {pos: v for pos, v, _ in det.trace_early}
-    assert any(looks), "the early look sent no cut on the synthetic changes"
-    assert len(cuts) == len(res.transitions)
-    for c in cuts:
-        assert c.score in full.values() and c.score < max(early.values()) / 5
-        assert c.confidence == pytest.approx(1 - det.threshold / c.score)
-    assert list(det.relative._scores) == [c.score for c in cuts]
-
-
-@pytest.mark.parametrize("parts", [0, 13])
-def test_early_parts_must_fit_the_early_window(parts):
-    """At least one part, and no more parts than the early window has steps (12 at 1.5 s
-    in steps of 0.125 s)."""
-    with pytest.raises(ValueError, match="early_parts"):
-        ContrastDetector(step=15, early_after=180, early_parts=parts)
-
-
-def test_early_look_off_is_the_full_look_alone():
-    from rtseg.detectors.early import EarlyCuts
-    ec = EarlyCuts(2.0, hold=20, min_gap=50, drop=0.5, early_threshold=None, early_hold=10,
-                   early_after=30)
-    assert ec.update_early(200, 9.0, 240) is None
-    assert ec.update_full(200, 3.0, 270) is None
-    assert ec.update_full(205, 1.0, 275).peak.position == 200
-
-
-def test_early_look_sends_the_same_changes_sooner(perf):
-    """On clean synthetic changes the early look sends every change, each within 0.5 s of
-    the labelled middle, and sooner than the full look alone."""
-    res, X = perf
-    # the gate holds every cut 1.5 s: the looks alone; the early look on (off by default)
-    ungated = {"gate_threshold": 0, "early_after_s": 1.0}
-    with_early = make_online("contrast", FR, ungated).run(X)
-    det = make_online("contrast", FR, ungated)
-    assert det.we > 0
-    alone = ContrastDetector(step=det.step, before=det.wa * det.step, after=det.wb * det.step,
-                             min_before=det.wmin * det.step, threshold=det.threshold,
-                             hold=det.peaks.full.hold, min_gap=det.peaks.min_gap,
-                             drop=det.peaks.full.drop, early_after=0).run(X)
-    assert_same_changes_sooner(res, with_early, alone)
-
-
-@pytest.mark.parametrize("kw", [dict(early_after=15), dict(early_after=210),
-                                dict(early_after=7)])
-def test_bad_early_window_is_refused(kw):
-    with pytest.raises(ValueError):
-        ContrastDetector(**kw)
-
-
 def test_two_cuts_confirmed_on_one_frame_go_out_one_frame_apart(perf):
-    """When both looks send a cut from one block (two changes >= min_gap apart), the
-    detector returns the first on one frame and the second on the next, whose
-    detected_at says so; none is lost."""
-    from rtseg.detectors.early import EarlyCut
+    """When one frame's step sends two changes (>= min_gap apart: the full look's
+    maximum and the pre-look's), the detector returns the first on that frame and the
+    second on the next, whose detected_at says so; none is lost."""
     from rtseg.detectors.peaks import Peak
+    from rtseg.detectors.sender import SentPeak
     _, X = perf
-    det = make_online("contrast", FR, {"gate_threshold": 0, "early_after_s": 1.0})   # the picker alone
+    det = make_online("contrast", FR, {"gate_threshold": 0})   # the looks alone
+    look = det._look_full
+    fired = []
 
-    class BothAtOnce:
-        """Stands in for EarlyCuts: the full look confirms a peak on its first value, the
-        early look on its next value (the same block's steps)."""
-        early = det.peaks.early
-        full = det.peaks.full
+    def both(c):
+        look(c)
+        if not fired and c * det.step > 600:
+            fired.append(det._t - 1)
+            pos = det._seg0 + c * det.step
+            det._out.extend([SentPeak(Peak(pos - 300, 9.0, det._t - 1), False, 9.0),
+                             SentPeak(Peak(pos, 50.0, det._t - 1), True, 3.0)])
 
-        def __init__(self):
-            self.full_at = None
-            self.early_sent = False
-
-        def reset(self):
-            pass
-
-        def update_full(self, position, value, now):
-            if self.full_at is None:
-                self.full_at = now
-                return EarlyCut(Peak(position, 9.0, now), False, 9.0)
-            return None
-
-        def update_early(self, position, value, now):
-            if self.full_at is not None and now >= self.full_at and not self.early_sent:
-                self.early_sent = True
-                return EarlyCut(Peak(position, 50.0, now), True, 3.0)   # backed by 3.0
-            return None
-
-    det.peaks = BothAtOnce()
+    det._look_full = both
     out = [(i, det.update(x)) for i, x in enumerate(X[:1500])]
-    cuts = [(i, c) for i, c in out if c is not None]
-    assert len(cuts) == 2, cuts
-    (i1, c1), (i2, c2) = cuts
-    assert i2 == i1 + 1 and c1.detected_at == i1 and c2.detected_at == i2
-    # the full look's cut first (an earlier position), then the early look's
+    cuts = [(i, c) for i, c in out if c is not None and i >= fired[0]]
+    assert len(cuts) >= 2, cuts
+    (i1, c1), (i2, c2) = cuts[:2]
+    assert i1 == fired[0] and i2 == i1 + 1 and c1.detected_at == i1 and c2.detected_at == i2
     assert c1.frame < c2.frame
     assert c1.confidence == pytest.approx(1 - det.threshold / 9.0)
-    # the early look's cut on the full look's scale: the full-look value that backed it
     assert c2.score == 3.0 and c2.confidence == pytest.approx(1 - det.threshold / 3.0)
 
 
@@ -485,13 +320,13 @@ def test_a_forgotten_peak_keeps_no_later_one_away():
     assert [(p.position, p.value) for p in got] == [(40, 5.0)]   # 3.0 < 4.0 within min_gap
 
 
-def test_early_cuts_forget_a_dropped_cut():
-    ec = _early_cuts()
+def test_the_sender_forgets_a_dropped_cut():
+    ec = _sender()
     for pos, v in ((100, 1.0), (105, 3.0), (110, 1.0)):
         sent = ec.update_full(pos, v, pos + 70)
     assert sent is not None and sent.peak.position == 105
     # a second change 30 frames later (less than min_gap 50) is refused while 105 stands ...
-    kept = _early_cuts()
+    kept = _sender()
     for pos, v in ((100, 1.0), (105, 3.0), (110, 1.0)):
         kept.update_full(pos, v, pos + 70)
     assert [kept.update_full(p, v, p + 70) for p, v in ((130, 4.0), (135, 1.0))][1] is None
@@ -502,7 +337,7 @@ def test_early_cuts_forget_a_dropped_cut():
 
 
 def test_a_cut_the_gate_drops_does_not_hide_the_change_after_it():
-    """A premature early-look cut the gate drops must not keep the true change, under
+    """A premature cut the gate drops must not keep the true change, under
     min_gap later, from being cut (the synthetic performance resampled to 30 fps has one)."""
     from rtseg.core.resample import resample_take
     from rtseg.detectors import load_params

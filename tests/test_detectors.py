@@ -328,15 +328,15 @@ def test_load_params_user_file_overrides(tmp_path):
     ("[gmm]\nn_components = \"four\"\n", "n_components"),
     ("[gmm]\ninit = \"best\"\n", "init"),
     ("[pca]\nk_sigma = true\n", "k_sigma"),
-    ("[contrast]\nearly_after_s = -1.0\n", "early_after_s"),
-    ("[contrast]\nearly_threshold = 0\n", "early_threshold"),
+    ("[contrast]\npre_after_s = -1.0\n", "pre_after_s"),
+    ("[contrast]\npre_level = 0\n", "pre_level"),
+    ("[contrast]\nearly_after_s = 1.0\n", "early look was removed"),
     ("[contrast]\ngate_threshold = -1.0\n", "gate_threshold"),
     ("[contrast]\ngate_threshold = \"on\"\n", "gate_threshold"),
-    ("[contrast]\nearly_backing = inf\n", "early_backing"),      # never sends: refused
-    ("[contrast]\nearly_parts = 0\n", "early_parts"),
-    ("[contrast]\nearly_parts = 1.5\n", "early_parts"),
+    ("[contrast]\npre_ratio = 1.5\n", "pre_ratio"),
+    ("[contrast]\nconfirm_ratio = 0\n", "confirm_ratio"),
     ("[contrast]\nthreshold = inf\n", "threshold"),
-    ("[contrast]\nearly_back_s = -0.5\n", "early_back_s"),
+    ("[contrast]\nconfirm_reach_s = -0.5\n", "confirm_reach_s"),
 ])
 def test_load_params_rejects_bad_keys_naming_them(tmp_path, text, word):
     f = tmp_path / "bad.toml"

@@ -77,7 +77,7 @@ def test_evaluate_online_json(synth_dir, capsys):
     assert sorted(m["delay_s"] for m in take["matched"]) == pytest.approx(expect, abs=1e-4)
     assert p["delay_s"]["median"] == pytest.approx(float(np.median(expect)))
     assert p["delay_s"]["p90"] == pytest.approx(float(np.percentile(expect, 90)))
-    # no cut is known before the early look's 1 s after window has arrived
+    # no cut is known before the 2 s after window has arrived (1.5 s with the pre-look)
     assert 0.5 < p["delay_s"]["median"] < 3.5
 
 

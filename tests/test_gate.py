@@ -126,9 +126,9 @@ def test_session_summary_counts_the_cuts_the_gate_held_back():
 
 def test_a_gap_while_a_cut_is_held_does_not_lose_it():
     """The detector restarts (a gap) while its gate holds a cut: the cut is decided on the
-    frames before the gap and goes out with the next frame, not lost.  With the early look
+    frames before the gap and goes out with the next frame, not lost.  With a 1 s pre-look
     on, whose cuts come before the gate's decision time."""
-    early = {"early_after_s": 1.0}
+    early = {"confirm_reach_s": 1.0, "pre_after_s": 1.0, "pre_level": 2.0}
     res = synthesize("walk:6,punch:6", seed=3)
     X = take_features(res.take)
     full = make_online("contrast", FR, early)
@@ -144,7 +144,9 @@ def test_a_gap_while_a_cut_is_held_does_not_lose_it():
     assert det.run(X[:made + 1]) == []
     det.restart()
     out = det.update(X[made + 1])
-    assert out is not None and out.frame == c.frame and out.detected_at == made + 1
+    # the same change (placement, which reads only the new segment's frames after a
+    # restart, may leave it where the look found it: within its 1 s radius)
+    assert out is not None and abs(out.frame - c.frame) <= FR and out.detected_at == made + 1
 
 
 def test_a_decision_worked_out_ahead_is_the_decision_made_on_the_frame():

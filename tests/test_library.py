@@ -490,9 +490,7 @@ def test_library_leave_one_take_out_report():
     # each exercise also left out of its take's library once: every segment counted again
     assert doc["unknown_segments"] == doc["known_segments"]
     assert 0 <= doc["accuracy"] <= 1 and 0 <= doc["unknown_rate"] <= 1
-    # left-out behaviours sent as unknown: 11 of 18 with the shipped detector (14 of 18 with
-    # its early look on, whose earlier cuts cost the unsupervised ids instead: ARI 0.82
-    # against 0.88 on cmu; docs/live_detector.md).  Measured by `rtseg evaluate
+    # left-out behaviours sent as unknown: 11 of 18 with the shipped detector.  Measured by `rtseg evaluate
     # ../shared/data --online --identity --json` (library.unknown_correct)
     assert doc["unknown_correct"] >= 0.6
     assert doc["accuracy"] + doc["unknown_rate"] <= 1.0 + 1e-9

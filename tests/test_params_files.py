@@ -43,7 +43,7 @@ def test_params_fast_reaches_the_session_configuration():
     args = build_parser().parse_args(["live", "sim://synth", "--params", "fast"])
     p = detector_params(config_from_args(args))["contrast"]
     assert p == load_params("fast")["contrast"]
-    assert p["early_after_s"] == 1.5 and p != load_params()["contrast"]
+    assert p["pre_after_s"] == 1.5 and p != load_params()["contrast"]
 
 
 def test_recording_keeps_its_parameters_and_segment_says_when_they_differ(capsys, tmp_path,
@@ -59,7 +59,7 @@ def test_recording_keeps_its_parameters_and_segment_says_when_they_differ(capsys
     assert meta["detector_params"]["contrast"] == load_params("fast")["contrast"]
     # segmented with the defaults: one warning naming what differs
     rc, out, err = run(capsys, "segment", rec, "--method", "contrast")
-    assert rc == 0 and "contrast early_after_s = 1.5 (now 0.0)" in err
+    assert rc == 0 and "contrast pre_after_s = 1.5 (now 0.0)" in err
     assert "ran its detectors with other parameters" in err
     assert f"give --params {rec} to cut as it did" in err
     # with the session's own, named or read from the recording itself: no warning, one result
@@ -82,12 +82,29 @@ def test_recording_keeps_its_parameters_and_segment_says_when_they_differ(capsys
     assert "does not keep the parameters its detectors ran with" in err
 
 
-def test_early_back_beyond_the_early_window_is_refused(capsys, tmp_path):
+def test_a_pre_look_no_shorter_than_the_full_look_is_refused(capsys, tmp_path):
     p = tmp_path / "p.toml"
-    p.write_text("[contrast]\nearly_after_s = 1.0\nearly_back_s = 1.5\n")
-    rc, _, err = run(capsys, "live", "sim://synth?stop=1", "--params", p, "--no-osc", "--quiet")
-    assert rc == 2 and len(err.strip().splitlines()) == 1
-    assert "early_back_s (1.5) must not exceed early_after_s (1.0)" in err
+    for text, says in (("confirm_reach_s = 1.0\npre_after_s = 2.0\n",
+                        "pre_after_s (2.0) must be shorter than after_s (2.0)"),
+                       ("pre_after_s = 1.5\n", "pre_after_s (1.5) needs confirm_reach_s > 0")):
+        p.write_text("[contrast]\n" + text)
+        rc, _, err = run(capsys, "live", "sim://synth?stop=1", "--params", p, "--no-osc",
+                         "--quiet")
+        assert rc == 2 and len(err.strip().splitlines()) == 1, err
+        assert says in err, err
+
+
+def test_a_file_with_the_removed_early_look_on_is_refused_off_is_read(tmp_path):
+    """Files written before the early look was removed: its keys with it off (every
+    recording of the defaults) still load; with it on, one error naming what replaces it."""
+    from rtseg.config import ConfigError
+    p = tmp_path / "old.toml"
+    p.write_text("[contrast]\nearly_after_s = 0.0\nearly_threshold = 1.5\nthreshold = 1.3\n")
+    assert load_params(p)["contrast"]["threshold"] == 1.3
+    assert "early_after_s" not in load_params(p)["contrast"]
+    p.write_text("[contrast]\nearly_after_s = 1.5\n")
+    with pytest.raises(ConfigError, match="early look was removed.*pre_after_s"):
+        load_params(p)
 
 
 def test_a_folder_named_fast_does_not_hide_the_shipped_file(capsys, tmp_path, monkeypatch):
@@ -99,11 +116,11 @@ def test_a_folder_named_fast_does_not_hide_the_shipped_file(capsys, tmp_path, mo
     monkeypatch.chdir(tmp_path)
     (tmp_path / "fast").mkdir()
     assert find_config("fast") == config_dir() / "fast.toml"
-    assert load_params("fast")["contrast"]["early_after_s"] == 1.5
+    assert load_params("fast")["contrast"]["pre_after_s"] == 1.5
     cfg_file = tmp_path / "show.toml"
     cfg_file.write_text('[detectors]\nparams = "fast"\n')
     cfg = load_session_config(cfg_file)
-    assert detector_params(cfg)["contrast"]["early_after_s"] == 1.5
+    assert detector_params(cfg)["contrast"]["pre_after_s"] == 1.5
     rc, _, err = run(capsys, "live", "sim://synth?stop=0.5&speed=0", "--params", "fast",
                      "--no-osc", "--quiet")
     assert rc == 0, err
@@ -139,17 +156,17 @@ def test_empty_params_is_one_usage_error_everywhere(capsys, tmp_path):
 
 def test_a_flat_file_in_live_says_to_use_a_method_table(capsys, tmp_path):
     """rtseg segment reads a flat parameter file; live and evaluate --online read one table
-    per method and said 'unknown section [early_after_s]' of a flat one.  Now one line
+    per method and said 'unknown section [threshold]' of a flat one.  Now one line
     naming the key and the table to put it in, exit 2, for TOML and JSON."""
-    (tmp_path / "flat.toml").write_text("early_after_s = 1.5\n")
-    (tmp_path / "flat.json").write_text('{"early_after_s": 1.5}')
+    (tmp_path / "flat.toml").write_text("threshold = 1.5\n")
+    (tmp_path / "flat.json").write_text('{"threshold": 1.5}')
     for name in ("flat.toml", "flat.json"):
         for argv in (["live", "sim://synth?stop=0.5&speed=0", "--no-osc", "--quiet"],
                      ["evaluate", tmp_path, "--online"]):
             rc, _, err = run(capsys, *argv, "--params", tmp_path / name)
             lines = err.strip().splitlines()
             assert rc == 2 and len(lines) == 1 and "Traceback" not in err, (argv, err)
-            assert "early_after_s = 1.5 is not in a method table" in lines[0]
+            assert "threshold = 1.5 is not in a method table" in lines[0]
             assert "[contrast]" in lines[0] and "unknown section" not in lines[0]
     take = tmp_path / "t.npz"
     from rtseg.drivers.readers import write_take
@@ -172,7 +189,7 @@ def test_segment_of_several_recordings_says_which_ran_other_parameters(capsys, t
                      "--method", "contrast", "--out", out, "--no-progress")
     assert rc == 0, err
     recs = {r["take"]: r for r in map(json.loads, out.read_text().splitlines())}
-    assert "early_after_s = 1.5 (now 0.0)" in recs["fastrec"]["params_differ"]
+    assert "pre_after_s = 1.5 (now 0.0)" in recs["fastrec"]["params_differ"]
     assert "params_differ" not in recs["plain"]
     assert "1 recorded session(s) ran their detectors with other parameters: fastrec" in err
     # with fast: the session recorded with the defaults is the one named

@@ -37,7 +37,7 @@ def test_detector_cut_placed_nearer_the_change():
     X[:change, :6] = np.sin(2 * np.pi * 1.0 * t[:change, None] + np.arange(6))
     X[change:, 6:] = 0.7 * np.sin(2 * np.pi * 0.4 * t[change:, None] + np.arange(6))
     X += rng.normal(0, 0.02, X.shape)
-    p = dict(load_params()["contrast"], gate_threshold=0.0, early_after_s=0.0)
+    p = dict(load_params()["contrast"], gate_threshold=0.0)
     plain = ContrastDetector.from_params({**p, "place_radius_s": 0.0}, fr).run(X)
     placed = ContrastDetector.from_params({**p, "place_radius_s": 1.0}, fr).run(X)
     assert len(plain) == len(placed) == 1

@@ -8,7 +8,7 @@ import pytest
 from rtseg.core.features import take_features
 from rtseg.detectors import load_params
 from rtseg.detectors.contrast import ContrastDetector
-from rtseg.detectors.early import EarlyCuts
+from rtseg.detectors.sender import CutSender
 from rtseg.detectors.prelook import PreLook
 from rtseg.simulators.synth.motion import synthesize
 
@@ -70,12 +70,11 @@ def test_bad_pre_look_parameters_are_refused():
 
 
 def test_send_now_takes_the_full_looks_waiting_maximum():
-    cuts = EarlyCuts(1.0, hold=100, min_gap=50, drop=0.1, early_threshold=None,
-                     early_hold=0, early_after=0)
+    cuts = CutSender(1.0, hold=100, min_gap=50, drop=0.1)
     assert cuts.update_full(100, 3.0, 110) is None
     assert cuts.full.candidate == 100
     sent = cuts.send_now(120, 8.0, 130)
-    assert sent is not None and sent.peak.position == 120 and sent.strength == 8.0
+    assert sent is not None and sent.peak.position == 120 and sent.strength == 8.0 and sent.prelook
     assert cuts.full.candidate is None                      # dropped: within min_gap
     assert cuts.update_full(140, 9.0, 150) is None          # kept min_gap away
     assert cuts.full.candidate is None

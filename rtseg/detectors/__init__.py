@@ -11,8 +11,9 @@
   (``rtseg.detectors.gmm``).
 - ``contrast`` (online, rtseg's own; the default of ``rtseg live``): cut at a causal maximum
   of the ratio of PCA window distances just after and just before a frame
-  (``rtseg.detectors.contrast``), with its early look (``early``), same-behaviour gate
-  (``gate``) and cut placement (``placement``) beside it; offline it runs unchanged.
+  (``rtseg.detectors.contrast``), with its short-look confirmation (``confirm``), pre-look
+  (``prelook``), same-behaviour gate (``gate``) and cut placement (``placement``) beside
+  it; offline it runs unchanged.
   Window models shared by these and the identity tracker: ``window_models``.
 
 Parameters live in ``config/detectors.toml`` (sections ``[pca]``, ``[ppca]``, ``[gmm]``).
@@ -60,12 +61,6 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "ppca_energy": ((int, float), _unit),
         "noise_floor": ((int, float), _nonneg),
         "reference_dims": ((int,), _posint),
-        "early_after_s": ((int, float), _nonneg),
-        "early_threshold": ((int, float), _pos),
-        "early_hold_s": ((int, float), _nonneg),
-        "early_back_s": ((int, float), _nonneg),
-        "early_backing": ((int, float), _pos),
-        "early_parts": ((int,), _posint),
         "gate_threshold": ((int, float), _nonneg),
         "relative_floor": ((int, float), (lambda v: 0 <= v < 1, "in [0, 1)")),
         "residual_floor": ((int, float), (lambda v: 0 <= v < 1, "in [0, 1)")),
@@ -127,6 +122,16 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
     },
 }
 
+#: keys of a removed stage, with the key that turned it off: files written before (a
+#: recording's ``detector_params``, an old configuration) still load when that key is 0 (the
+#: keys are dropped); with the stage on they are refused, naming what replaces it
+RETIRED: dict[str, dict[str, tuple[str, str]]] = {
+    "contrast": {k: ("early_after_s", "the early look was removed: `pre_after_s` (the "
+                                      "pre-look, config/fast.toml) sends changes sooner")
+                 for k in ("early_after_s", "early_threshold", "early_hold_s", "early_back_s",
+                           "early_backing", "early_parts")},
+}
+
 
 def validate(method: str, params: Mapping[str, Any], where: str = "") -> dict[str, Any]:
     """Check one method's parameters; ConfigError naming the key (and file) on any problem."""
@@ -135,7 +140,13 @@ def validate(method: str, params: Mapping[str, Any], where: str = "") -> dict[st
     if not isinstance(params, Mapping):
         raise ConfigError(f"{where}[{method}] must be a table of parameters")
     out: dict[str, Any] = {}
+    retired = RETIRED.get(method, {})
     for key, value in params.items():
+        if key in retired:
+            switch, why = retired[key]
+            if params.get(switch, 0):
+                raise ConfigError(f"{where}[{method}] {switch} = {params[switch]!r}: {why}")
+            continue
         if key not in SCHEMA[method]:
             raise ConfigError(f"{where}[{method}] unknown key {key!r} "
                               f"(known: {', '.join(SCHEMA[method])})")

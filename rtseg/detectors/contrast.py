@@ -26,14 +26,10 @@ chose them, in docs/live_detector.md): the relative floor (``relative_floor``,
 cut placement (``place_radius``, ``rtseg.detectors.placement``); the residual floor
 (``residual_floor``, ``rtseg.detectors.residual``) bounds every window model's own error,
 the bounded before windows (``bound_before``) keep A0 and A inside the behaviour since the
-last cut sent, and the early look (``early_after`` > 0, ``rtseg.detectors.early``; off by
-default, ``config/fast.toml`` turns it on for cuts sooner) also scores each position
-one-sided once ``early_after`` frames have arrived, ``early(c) = Epca(B'|A) /
-Epca(A|A0)``, and sends its maxima when the full contrast backs them (a full-look value at
-least ``early_backing`` x ``threshold`` at most ``early_back`` before the maximum).  With
-``early_parts`` > 1, B' is cut into that many equal parts and the smallest part's error
-counts: the whole of B' must be new, so a change late in B' does not score the position
-before it (a maximum there would cut up to ``early_after`` too soon).  A cut the gate or
+last cut sent, and the pre-look (``pre_after`` > 0, ``rtseg.detectors.prelook``; off by
+default, on in ``config/prompt.toml`` and ``config/fast.toml``) also scores each position
+with a shorter after window and sends a strong change that stands clear there at once.
+A cut the gate or
 the floor drops is forgotten (it keeps no later maximum away).
 
 Work per frame: each ``step``-frame block's statistics are summed once (one BLAS call),
@@ -47,8 +43,7 @@ never changes a cut, and offline nothing calls it.  Cost: ``benchmarks/speed.py`
 
 Frames are numbered from the detector's creation.  ``Cut.frame`` = c (placed),
 ``detected_at`` = the frame whose arrival confirmed it, ``score`` = the contrast at c (for
-a cut the early look sent, the highest full-look value that backed it: one scale for
-every cut, which the relative floor compares), ``confidence`` = 1 - threshold / score (0
+a cut the pre-look sent, its value on the pre-look's after window), ``confidence`` = 1 - threshold / score (0
 at the threshold, -> 1 far above it).  When both looks send a cut on the same frame (two
 changes at least ``min_gap`` apart), the second goes out with the next frame; a restart
 drops it.
@@ -65,14 +60,14 @@ import numpy as np
 
 from rtseg.detectors.base import Cut, OnlineDetector
 from rtseg.detectors.confirm import ShortConfirmation
-from rtseg.detectors.early import EarlyCut, EarlyCuts
 from rtseg.detectors.prelook import PreLook
 from rtseg.detectors.placement import PLACE_MARGIN_S, PLACE_STRIDE_S, RingPlacement
+from rtseg.detectors.sender import CutSender, SentPeak
 from rtseg.detectors.relative import ENERGY_SPAN, EnergyChanges, RelativeFloor
 from rtseg.detectors.residual import RESIDUAL_LOOKS, ResidualFloor
 from rtseg.detectors.gate import (GATE_DECIDE_S, GATE_MIN_AFTER_S, GATE_SKIP_S, GATE_WINDOW_S,
                                   SameBehaviourGate)
-from rtseg.detectors.window_models import PcaWindow, WindowStats, fit_pca, pca_distance, pca_error
+from rtseg.detectors.window_models import PcaWindow, WindowStats, fit_pca, pca_distance
 
 
 _ndarray, _F8, _add_reduce, _isfinite = np.ndarray, np.dtype(np.float64), np.add.reduce, math.isfinite
@@ -97,10 +92,7 @@ class ContrastDetector(OnlineDetector):
                  min_before: int = 180, threshold: float = 2.0, hold: int = 120,
                  min_gap: int = 240, drop: float = 0.5, pca_energy: float = 0.9,
                  ppca_energy: float = 0.95, noise_floor: float = 1e-6,
-                 reference_dims: int = 48, early_after: int = 0,
-                 early_threshold: float = 1.5, early_hold: int = 60,
-                 early_back: int | None = None, early_backing: float = 1.0,
-                 early_parts: int = 1, gate_threshold: float = 0.0, gate_decide: int = 180,
+                 reference_dims: int = 48, gate_threshold: float = 0.0, gate_decide: int = 180,
                  gate_skip: int = 60,
                  gate_window: int = 360, gate_min_after: int = 120,
                  relative_floor: float = 0.0, residual_floor: float = 0.0,
@@ -130,19 +122,7 @@ class ContrastDetector(OnlineDetector):
         self.reference_dims = int(reference_dims)
         self.fit_args = dict(pca_energy=float(pca_energy), ppca_energy=float(ppca_energy),
                              noise_floor=float(noise_floor))
-        if early_after and not 2 * step <= early_after < after:
-            raise ValueError(f"early_after must be 0 (off) or at least two steps and shorter "
-                             f"than after ({after} frames), got {early_after}")
-        self.we = int(round(early_after / step)) if early_after else 0   # early window, blocks
-        if not 1 <= early_parts <= max(self.we, 1):
-            raise ValueError(f"early_parts must be >= 1 and at most the early window's steps "
-                             f"({max(self.we, 1)}), got {early_parts}")
-        #: the parts of B' the early look scores, as block offsets from its position
-        self._parts = [(self.we * k) // int(early_parts) for k in range(int(early_parts) + 1)]
-        self.peaks = EarlyCuts(threshold, hold=int(hold), min_gap=int(min_gap), drop=drop,
-                               early_threshold=float(early_threshold) if self.we else None,
-                               early_hold=int(early_hold), early_after=self.we * self.step,
-                               back=early_back, backing=float(early_backing))
+        self.peaks = CutSender(threshold, hold=int(hold), min_gap=int(min_gap), drop=drop)
         #: before windows never reach back past the last cut sent (module doc)
         self.bound_before = bool(bound_before)
         #: cut placement (``rtseg.detectors.placement``): radius 0 = off
@@ -163,8 +143,8 @@ class ContrastDetector(OnlineDetector):
                            pre_ratio, self.confirm.reach, self.confirm.shortest)
         self.keep_trace = keep_trace
         self.trace: list[tuple[int, float, float]] = []
-        #: early-look profile when keep_trace: (position, value, frame that made it known)
-        self.trace_early: list[tuple[int, float, int]] = []
+        #: pre-look values when keep_trace: (position, value, frame that made it known)
+        self.trace_pre: list[tuple[int, float, int]] = []
         self.rejected_frames = 0
         #: the floor set by the stream's recent changes (``rtseg.detectors.relative``)
         self.relative = RelativeFloor(relative_floor)
@@ -195,10 +175,13 @@ class ContrastDetector(OnlineDetector):
                     keep_trace: bool = False) -> "ContrastDetector":
         """From ``[contrast]`` parameters in seconds (``config/detectors.toml``)."""
         from rtseg.detectors.base import frames
-        if p["early_after_s"] and p.get("early_back_s", 0.0) > p["early_after_s"]:
-            raise ValueError(f"early_back_s ({p['early_back_s']}) must not exceed "
-                             f"early_after_s ({p['early_after_s']}): the backing full-look "
-                             f"values lie within the early window")
+        pre = p.get("pre_after_s", 0.0)
+        if pre and pre >= p["after_s"]:
+            raise ValueError(f"pre_after_s ({pre}) must be shorter than after_s "
+                             f"({p['after_s']}): the pre-look sends before the full look")
+        if pre and not p.get("confirm_reach_s"):
+            raise ValueError(f"pre_after_s ({pre}) needs confirm_reach_s > 0: the positions "
+                             f"after a pre-look's maximum are checked that far")
         step = frames(p["step_s"], frame_rate)
         return cls(step=step, before=frames(p["before_s"], frame_rate),
                    after=frames(p["after_s"], frame_rate),
@@ -207,13 +190,6 @@ class ContrastDetector(OnlineDetector):
                    min_gap=frames(p["min_gap_s"], frame_rate), drop=p["drop"],
                    pca_energy=p["pca_energy"], ppca_energy=p["ppca_energy"],
                    noise_floor=p["noise_floor"], reference_dims=p["reference_dims"],
-                   early_after=frames(p["early_after_s"], frame_rate) if p["early_after_s"] else 0,
-                   early_threshold=p["early_threshold"],
-                   early_hold=frames(p["early_hold_s"], frame_rate),
-                   early_back=(frames(p["early_back_s"], frame_rate)
-                               if p.get("early_back_s") else None),
-                   early_backing=p.get("early_backing", 1.0),
-                   early_parts=p.get("early_parts", 1),
                    gate_threshold=p["gate_threshold"],
                    gate_decide=frames(GATE_DECIDE_S, frame_rate),
                    gate_skip=frames(GATE_SKIP_S, frame_rate),
@@ -249,15 +225,15 @@ class ContrastDetector(OnlineDetector):
         goes out only on a frame that runs a look at a position, sends a queued cut or
         decides a cut the gate holds.  Each frame runs one queued step (while no more than
         a block's frames of them wait); the frame that completes a block queues a window
-        fit first and runs it, then the after window's fit (without the early look) and
+        fit first and runs it, then the after window's fit and
         the look.  So with no step queued the frames up to the block's completion are
-        quiet, and the one after it too without the early look (at most ``step`` + 1);
+        quiet, and the one after it too (at most ``step`` + 1);
         with steps queued, the frames that run the fits before the first look."""
         if self._out or self._dim is None:
             return 0
         steps = self._steps
         if not steps:
-            q = self.step - self._fill + (0 if self.we else 1)
+            q = self.step - self._fill + 1
         elif len(steps) > self.step:
             return 0
         else:
@@ -291,7 +267,7 @@ class ContrastDetector(OnlineDetector):
         self._last_sent: int | None = None   # block position of the last cut sent
         self._last_placed: int | None = None  # frame of the last cut sent, as placed
         self.peaks.reset()
-        self._out: deque[EarlyCut] = deque()  # cuts to send (a queued one is dropped)
+        self._out: deque[SentPeak] = deque()  # cuts to send (a queued one is dropped)
         #: the energy change of the newest full looks (``relative.EnergyChanges``)
         self._energy = EnergyChanges(ENERGY_SPAN * self.wa, self._energy_len)
         if self._dim is not None:              # the ring restarts at block 0
@@ -398,9 +374,6 @@ class ContrastDetector(OnlineDetector):
         if c >= 2 * self.wmin:
             steps.append((self._model, (c, c + self.wb, "after")))
             steps.append((self._look_full, (c,)))
-        ce = nb - self.we                            # newest position with a whole B'
-        if self.we and ce >= 2 * self.wmin:
-            steps.append((self._look_early, (ce,)))
         cp = nb - self.pre.after                     # newest position the pre-look scores
         if self.pre.after and cp >= 2 * self.wmin:
             steps.append((self._look_pre, (cp,)))
@@ -429,7 +402,7 @@ class ContrastDetector(OnlineDetector):
         if sent is not None:
             self._out.append(sent)
 
-    def _confirm_short(self, c: int) -> EarlyCut | None:
+    def _confirm_short(self, c: int) -> SentPeak | None:
         """The full look's waiting maximum, sent now when the short looks after it confirm
         it (``rtseg.detectors.confirm``; c: the newest position with a full value)."""
         full = self.peaks.full
@@ -445,24 +418,16 @@ class ContrastDetector(OnlineDetector):
     def _look_pre(self, c: int) -> None:
         """The pre-look at block position c (``rtseg.detectors.prelook``): sent now when
         it stands clear."""
+        if self.keep_trace:
+            self.trace_pre.append((self._seg0 + c * self.step, self._short(c, self.pre.after),
+                                   self._t - 1))
         value = self.pre.value(c, self.threshold, 2 * self.wmin, self._short)
         if value is not None:
             sent = self.peaks.send_now(self._seg0 + c * self.step, value, self._t - 1)
             if sent is not None:
                 self._out.append(sent)
 
-    def _look_early(self, c: int) -> None:
-        """The early look at block position c, known now: to the peak picker."""
-        value = self._early(c)
-        position = self._seg0 + c * self.step
-        now = self._t - 1
-        if self.keep_trace:
-            self.trace_early.append((position, value, now))
-        sent = self.peaks.update_early(position, value, now)
-        if sent is not None:
-            self._out.append(sent)
-
-    def _cut(self, sent: EarlyCut, at: int) -> Cut:
+    def _cut(self, sent: SentPeak, at: int) -> Cut:
         """The Cut for a peak sent on frame ``at`` (score and confidence: see the module
         docstring)."""
         v = sent.strength
@@ -567,17 +532,6 @@ class ContrastDetector(OnlineDetector):
         (``rtseg.detectors.confirm``; the residual floor as it stands, no look recorded)."""
         a0, a = self._befores.get(c) or self._before(c)
         return self._ratio(a0, a, self._model(c, c + length, "short"), self.residual.value)
-
-    def _early(self, c: int) -> float:
-        """The early look at block position c (module docstring): B' = [c, c + we) under
-        A's PCA model - the smallest error of its ``early_parts`` parts - over A under
-        A0's (both already fitted)."""
-        a0, a = self._before(c)
-        f = self.residual.value
-        o = self._parts
-        e_b = min(pca_error(self._stats(c + o[k], c + o[k + 1]), a, f)
-                  for k in range(len(o) - 1))
-        return self._stated(e_b / max(pca_error(a.stats, a0, f), 1e-300), a)
 
 
 def segment_contrast(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,

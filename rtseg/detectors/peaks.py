@@ -70,7 +70,7 @@ class CausalPeaks:
         return Peak(cand[0], cand[1], now)
 
     def taken(self, position: int) -> None:
-        """Another rule sent an event at ``position`` (``EarlyCuts.send_now``): a waiting
+        """Another rule sent an event at ``position`` (``CutSender.send_now``): a waiting
         maximum within ``min_gap`` of it is dropped, and it holds the next one ``min_gap``
         away as an event of this profile's would."""
         cand = self._cand

@@ -18,7 +18,7 @@ sends q at once when
   of ``rtseg.detectors.confirm``, whose ``reach`` and ``shortest`` it shares).
 
 Every other change is still found by the full look (and its confirmation); a cut the
-pre-look sent keeps the full look's maxima ``min_gap`` away (``EarlyCuts.send_now``), so a
+pre-look sent keeps the full look's maxima ``min_gap`` away (``CutSender.send_now``), so a
 change is sent once.  All lengths in blocks of the detector (``step`` frames).  This object
 holds the rule and counts what it sent (``sent``); the contrasts come from the detector.
 """

@@ -259,14 +259,6 @@ def distances(a: WindowModel, b: WindowModel) -> tuple[float, float]:
     return math.sqrt(max(pb, 0.0) * max(pa, 0.0)), math.sqrt(max(qb, qa, 0.0))
 
 
-def one_sided(y: WindowStats, m: WindowModel) -> tuple[float, float]:
-    """(``pca_error(y | m)``, root of ``ppca_msq(y | m)``): y's frames under m's models only.
-    Needs no model of y, so a window can be scored before (or without) its own
-    eigen-decomposition."""
-    p, q = _errors(y, m)
-    return max(p, 0.0), math.sqrt(max(q, 0.0))
-
-
 def behaviour_distance(a: WindowModel, b: WindowModel, reference_dims: int = 8) -> float:
     """How far apart two windows' behaviours are: D = sqrt(pca_distance x ppca_distance /
     sqrt(d_eff)), d_eff = the larger number of varying directions (both factors are about

@@ -82,17 +82,16 @@ class MonitorFeed:
             "primary": session.primary, "methods": list(pipe.detectors),
             "source": session._source_arg if isinstance(session._source_arg, str)
             else type(session.source).__name__,
-            "statistic": None, "threshold": None, "early_threshold": None,
+            "statistic": None, "threshold": None, "pre_level": None,
         }
         if det is not None and hasattr(det, "trace") and hasattr(det, "keep_trace"):
             det.keep_trace = True
             self._det = det
             info["statistic"] = f"{session.primary} statistic"
             info["threshold"] = float(det.threshold)
-            peaks = getattr(det, "peaks", None)
-            early = getattr(peaks, "early", None)
-            if getattr(det, "we", 0) and early is not None:
-                info["early_threshold"] = float(early.threshold)
+            pre = getattr(det, "pre", None)
+            if pre is not None and pre.on:       # the pre-look's values and its level
+                info["pre_level"] = float(pre.level * det.threshold)
         self.info = info
         self._session = session
         self._health_t = time.monotonic()
@@ -153,9 +152,9 @@ class MonitorFeed:
             if det.trace:
                 batch["stat"] = [(at(p), round(float(v), 4)) for p, v, _ in det.trace]
                 det.trace.clear()
-            if det.trace_early:
-                batch["early"] = [(at(p), round(float(v), 4)) for p, v, _ in det.trace_early]
-                det.trace_early.clear()
+            if det.trace_pre:
+                batch["pre"] = [(at(p), round(float(v), 4)) for p, v, _ in det.trace_pre]
+                det.trace_pre.clear()
             gate = getattr(det, "gate", None)
             if gate is not None and len(gate.decisions) > self._gate_seen:
                 new = gate.decisions[self._gate_seen:]

@@ -125,7 +125,7 @@ class MonitorServer:
         self._error: BaseException | None = None
         # history (server thread only)
         self._stat: deque = deque()
-        self._early: deque = deque()
+        self._pre: deque = deque()
         self._gated: deque = deque(maxlen=200)
         self._cuts: deque = deque(maxlen=200)
         self._behaviours: dict[int, dict] = {}
@@ -329,10 +329,10 @@ class MonitorServer:
 
     def _merge(self, batches: list[dict]) -> dict[str, Any]:
         """One message from the feed's batches; the history is updated with it."""
-        out: dict[str, Any] = {"type": "batch", "stat": [], "early": [], "gated": [],
+        out: dict[str, Any] = {"type": "batch", "stat": [], "pre": [], "gated": [],
                                "events": []}
         for b in batches:
-            for key in ("stat", "early", "gated", "events"):
+            for key in ("stat", "pre", "gated", "events"):
                 if key in b:
                     out[key].extend(b[key])
             if "health" in b:
@@ -340,10 +340,10 @@ class MonitorServer:
             self._now = b["now"]
         out["now"] = self._now
         self._stat.extend(out["stat"])
-        self._early.extend(out["early"])
+        self._pre.extend(out["pre"])
         self._gated.extend(out["gated"])
         lo = self._now - self.history_s
-        for d in (self._stat, self._early):
+        for d in (self._stat, self._pre):
             while d and d[0][0] < lo:
                 d.popleft()
         for ev in out["events"]:
@@ -382,7 +382,7 @@ class MonitorServer:
     def _hello(self) -> bytes:
         return orjson.dumps({
             "type": "hello", "info": self.feed.info, "now": self._now, "ended": self._ended,
-            "history": {"stat": list(self._stat), "early": list(self._early),
+            "history": {"stat": list(self._stat), "pre": list(self._pre),
                         "gated": list(self._gated), "cuts": list(self._cuts),
                         "behaviours": [self._behaviours[k] for k in sorted(self._behaviours)],
                         "health": self._health}})

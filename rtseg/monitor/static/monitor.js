@@ -5,7 +5,7 @@
   const WINDOW_S = 30;
   const COLOURS = ["#4e79a7", "#f28e2b", "#59a14f", "#e15759", "#76b7b2", "#edc948",
                    "#b07aa1", "#ff9da7", "#9c755f", "#bab0ac"];
-  const st = { info: null, stat: [], early: [], gated: [], cuts: [], behaviours: {},
+  const st = { info: null, stat: [], pre: [], gated: [], cuts: [], behaviours: {},
                health: null, now: 0, nowAt: 0, ended: false, dirty: true };
   const $ = (id) => document.getElementById(id);
   let plot = null;
@@ -34,10 +34,10 @@
              { stroke: "#aaa", grid: { stroke: "#333" } }],
       series: [{ label: "t (s)" },
                { label: info.statistic || "statistic", stroke: "#4fc3f7", width: 2, spanGaps: true },
-               { label: "early look", stroke: "#ba68c8", width: 1, spanGaps: true, show: info.early_threshold != null },
+               { label: "pre-look", stroke: "#ba68c8", width: 1, spanGaps: true, show: info.pre_level != null },
                { label: "threshold", stroke: "#e57373", dash: [6, 4], width: 1, points: { show: false } },
-               { label: "early threshold", stroke: "#ce93d8", dash: [2, 4], width: 1, points: { show: false },
-                 show: info.early_threshold != null }],
+               { label: "pre-look level", stroke: "#ce93d8", dash: [2, 4], width: 1, points: { show: false },
+                 show: info.pre_level != null }],
       legend: { live: false },
       hooks: { draw: [drawCuts] },
     };
@@ -48,9 +48,9 @@
   function data() {
     const pts = [];
     for (const p of st.stat) pts.push([p[0], p[1], null]);
-    for (const p of st.early) pts.push([p[0], null, p[1]]);
+    for (const p of st.pre) pts.push([p[0], null, p[1]]);
     pts.sort((a, b) => a[0] - b[0]);
-    const thr = st.info && st.info.threshold, ethr = st.info && st.info.early_threshold;
+    const thr = st.info && st.info.threshold, ethr = st.info && st.info.pre_level;
     return [pts.map((p) => p[0]), pts.map((p) => p[1]), pts.map((p) => p[2]),
             pts.map(() => thr), pts.map(() => ethr)];
   }
@@ -157,14 +157,14 @@
     if (msg.type === "hello") {
       if (!msg.info.joints) return;            // the session is still starting
       st.info = msg.info; const hist = msg.history;
-      st.stat = hist.stat; st.early = hist.early; st.gated = hist.gated; st.cuts = hist.cuts;
+      st.stat = hist.stat; st.pre = hist.pre; st.gated = hist.gated; st.cuts = hist.cuts;
       st.behaviours = {}; for (const b of hist.behaviours) st.behaviours[b.segment] = b;
       st.health = hist.health; st.ended = msg.ended;
       $("source").textContent = `${msg.info.source} · ${msg.info.joints.length} sensors · ${msg.info.frame_rate} Hz`;
       $("stat-title").textContent = `${msg.info.statistic || "no detector statistic"} (last ${WINDOW_S} s), threshold ${msg.info.threshold}`;
       makePlot();
     } else if (msg.type === "batch") {
-      st.stat.push(...msg.stat); st.early.push(...msg.early); st.gated.push(...msg.gated);
+      st.stat.push(...msg.stat); st.pre.push(...msg.pre); st.gated.push(...msg.gated);
       addEvents(msg.events);
       if (msg.health) st.health = msg.health;
       if (msg.events.length) { renderCuts(); renderTimeline(); }
@@ -178,7 +178,7 @@
   function frame() {
     if (plot) {
       const now = sessionNow(), lo = now - WINDOW_S;
-      trim(st.stat, lo - 5); trim(st.early, lo - 5); trim(st.gated, lo - 5);
+      trim(st.stat, lo - 5); trim(st.pre, lo - 5); trim(st.gated, lo - 5);
       plot.batch(() => { plot.setData(data(), false); plot.setScale("x", { min: lo, max: now }); });
       $("clock").textContent = `t = ${now.toFixed(1)} s`;
     }
