@@ -47,7 +47,7 @@ def add_session_arguments(p: argparse.ArgumentParser, osc_default_note: str = ""
     p.add_argument("--params", type=params_file, metavar="FILE",
                    help="detector parameters, TOML or JSON with one table per method "
                         "([contrast] ...; detectors.params): a file, or a shipped set: "
-                        "'prompt' (cuts about 0.4 s sooner, as accurate held out; "
+                        "'prompt' (cuts about 0.5 s sooner, as accurate held out; "
                         "config/prompt.toml) or 'fast' (sooner still; config/fast.toml)")
     p.add_argument("--duration", type=positive_float, metavar="S",
                    help="stop after S seconds (a number > 0)")
