@@ -40,6 +40,34 @@ def test_window_stats_from_sums_equal_direct():
     np.testing.assert_allclose(s.scatter, Z.T @ Z, atol=1e-10)
 
 
+def test_block_windows_give_each_windows_statistics_and_fit_it_once():
+    """The contrast detector's store (rtseg.detectors.block_windows): windows of whole
+    blocks from the prefix-sum ring equal their rows' statistics (about any reference
+    frame), while their prefixes are in the ring; a model is fitted once, kept until
+    pruned, and a reset starts the blocks again."""
+    from rtseg.detectors.block_windows import BlockWindows
+    rng = np.random.default_rng(5)
+    X = rng.normal(size=(200, 4)) @ rng.normal(size=(4, 4))
+    ref = X[0]
+    bw = BlockWindows(4, step=10, capacity=8, pca_energy=0.9)
+    for k in range(20):
+        bw.add(k, X[10 * k:10 * k + 10] - ref)
+    for lo, hi in ((13, 20), (15, 17), (19, 20)):      # within the last 8 prefixes
+        s, direct = bw.stats(lo, hi), WindowStats.of(X[10 * lo:10 * hi])
+        assert s.n == direct.n
+        np.testing.assert_allclose(s.mean + ref, direct.mean, atol=1e-9)
+        np.testing.assert_allclose(s.scatter, direct.scatter, atol=1e-8)
+    m = bw.model(14, 18)
+    assert bw.model(14, 18) is m and bw.fits == 1
+    bw.prune(15)
+    assert bw.model(14, 18) is not m and bw.fits == 2
+    bw.reset()
+    assert bw.fits == 0 and not bw.models
+    bw.add(0, X[:10] - ref)
+    assert bw.stats(0, 1).n == 10
+    np.testing.assert_allclose(bw.stats(0, 1).mean + ref, X[:10].mean(axis=0), atol=1e-9)
+
+
 def test_pca_error_equals_the_frame_wise_projection_error():
     """From statistics alone, the same number as projecting every frame (pca.py)."""
     rng = np.random.default_rng(1)

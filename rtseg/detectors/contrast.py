@@ -34,7 +34,7 @@ the floor drops is forgotten (it keeps no later maximum away).
 
 Work per frame: each ``step``-frame block's statistics are summed once (one BLAS call),
 windows are differences of prefix sums, each window's PCA model is fitted once
-(``window_models.fit_pca``, warm-started) and reused while in use, and the work a completed
+(``window_models.fit_pca``, warm-started; ``rtseg.detectors.block_windows``) and reused while in use, and the work a completed
 block makes possible is queued and done one step a frame (``_run_steps``), so no frame
 fits more than one window; ``detected_at`` says which frame's arrival produced a cut.
 ``ahead()`` (the live loop, between frames) places the maximum waiting for confirmation and
@@ -67,7 +67,8 @@ from rtseg.detectors.relative import ENERGY_SPAN, EnergyChanges, RelativeFloor
 from rtseg.detectors.residual import RESIDUAL_LOOKS, ResidualFloor
 from rtseg.detectors.gate import (GATE_DECIDE_S, GATE_MIN_AFTER_S, GATE_SKIP_S, GATE_WINDOW_S,
                                   SameBehaviourGate)
-from rtseg.detectors.window_models import PcaWindow, WindowStats, fit_pca, pca_distance
+from rtseg.detectors.block_windows import BlockWindows
+from rtseg.detectors.window_models import PcaWindow, pca_distance
 
 
 _ndarray, _F8, _add_reduce, _isfinite = np.ndarray, np.dtype(np.float64), np.add.reduce, math.isfinite
@@ -75,11 +76,6 @@ try:    # np.vdot without its dispatch layer; unlike ndarray.dot it does not war
     from numpy._core._multiarray_umath import vdot as _vdot
 except ImportError:  # pragma: no cover - numpy < 2
     _vdot = np.vdot
-
-#: every this many window fits the window's varying directions (the input's effective
-#: dimension) are counted afresh (``fit_pca``'s ``recount``); the others carry their
-#: chain's count over
-RECOUNT_EVERY = 24
 
 
 class ContrastDetector(OnlineDetector):
@@ -168,6 +164,8 @@ class ContrastDetector(OnlineDetector):
         self._shared = False                   # the gate reads ``_rows`` (``_alloc``)
         self._dim: int | None = None
         self._buf: np.ndarray | None = None
+        #: the prefix-sum ring and window models (``rtseg.detectors.block_windows``)
+        self._windows: BlockWindows | None = None
         self.restart()
 
     @classmethod
@@ -237,7 +235,7 @@ class ContrastDetector(OnlineDetector):
         elif len(steps) > self.step:
             return 0
         else:
-            model = self._model
+            model = self._windows.model
             q = 0
             for fn, _args in steps:
                 if fn != model:
@@ -256,12 +254,8 @@ class ContrastDetector(OnlineDetector):
         self._nb = 0                         # whole blocks in the segment
         self._fill = 0                       # frames in the block being filled
         self._ref: np.ndarray | None = None  # the segment's first frame (sums are about it)
-        self._models: dict[tuple[int, int], PcaWindow] = {}
         #: the before windows' models of the newest looked-at positions (short looks)
         self._befores: dict[int, tuple[PcaWindow, PcaWindow]] = {}
-        #: the last model of each chain (before / after windows): the next one's warm start
-        self._warm: dict[str, PcaWindow] = {}
-        self._fits = 0
         #: work queued by completed blocks, one step a frame (``_run_steps``)
         self._steps: deque[tuple[Any, tuple]] = deque()
         self._last_sent: int | None = None   # block position of the last cut sent
@@ -270,18 +264,14 @@ class ContrastDetector(OnlineDetector):
         self._out: deque[SentPeak] = deque()  # cuts to send (a queued one is dropped)
         #: the energy change of the newest full looks (``relative.EnergyChanges``)
         self._energy = EnergyChanges(ENERGY_SPAN * self.wa, self._energy_len)
-        if self._dim is not None:              # the ring restarts at block 0
-            self._P1[0] = 0.0
-            self._P2[0] = 0.0
+        if self._windows is not None:          # the ring restarts at block 0
+            self._windows.reset()
         if self.gate is not None:
             self.gate.restart()
 
     def _alloc(self, dim: int) -> None:
         self._dim = dim
         self._buf = np.empty((self.step, dim))  # a completed block, about the segment's start
-        self._BtB = np.empty((dim, dim))        # a block's sum of outer products
-        cap = 2 * self.wa + self.wb + 2
-        self._cap = cap
         # one ring of rows, written once a frame: the block being filled, the rows cut
         # placement may look at (``_place_len``) and, when it holds at least as many, the
         # gate's ring (its own length, so it reads what its own ring would hold)
@@ -298,9 +288,10 @@ class ContrastDetector(OnlineDetector):
             self._placement = RingPlacement(self._rows, self.place_window, self._place_len,
                                             self.place_radius, self.place_stride,
                                             self.place_ridge, self.place_margin)
-        # prefix sums at block boundaries k (blocks < k), ring of cap entries
-        self._P1 = np.zeros((cap, dim))
-        self._P2 = np.zeros((cap, dim, dim))
+        # prefixes back to the oldest window a look reads: A0 of the full look's position,
+        # or of the pre-look's earliest (``pre.after`` + ``pre.reach`` back)
+        cap = 2 * self.wa + max(self.wb, self.pre.after + self.pre.reach) + 2
+        self._windows = BlockWindows(dim, self.step, cap, self.fit_args["pca_energy"])
 
     # ------------------------------------------------------------------ streaming
     def update(self, x: np.ndarray) -> Cut | None:
@@ -361,18 +352,19 @@ class ContrastDetector(OnlineDetector):
         else:                                        # the block wraps round the ring
             np.subtract(rows[lo:], ref, out=B[:-lo])
             np.subtract(rows[:hi], ref, out=B[-lo:])
-        k, cap = self._nb, self._cap
-        np.add(self._P1[k % cap], _add_reduce(B, 0), out=self._P1[(k + 1) % cap])
-        np.add(self._P2[k % cap], np.matmul(B.T, B, out=self._BtB), out=self._P2[(k + 1) % cap])
+        k = self._nb
+        windows = self._windows
+        windows.add(k, B)
+        model = windows.model
         nb = self._nb = k + 1
         steps = self._steps
         # the before window of position nb (used once its after window is complete)
         if nb >= 2 * self.wmin:
             w = self._width(nb)
-            steps.append((self._model, (nb - w, nb)))
+            steps.append((model, (nb - w, nb)))
         c = nb - self.wb                             # newest position with a whole B
         if c >= 2 * self.wmin:
-            steps.append((self._model, (c, c + self.wb, "after")))
+            steps.append((model, (c, c + self.wb, "after")))
             steps.append((self._look_full, (c,)))
         cp = nb - self.pre.after                     # newest position the pre-look scores
         if self.pre.after and cp >= 2 * self.wmin:
@@ -463,26 +455,6 @@ class ContrastDetector(OnlineDetector):
             return True
         return gate is not None and gate.prepare(pos)
 
-    def _stats(self, lo: int, hi: int) -> WindowStats:
-        """Statistics of blocks [lo, hi), from the prefix-sum ring."""
-        cap = self._cap
-        return WindowStats.from_sums((hi - lo) * self.step,
-                                     self._P1[hi % cap] - self._P1[lo % cap],
-                                     self._P2[hi % cap] - self._P2[lo % cap])
-
-    def _model(self, lo: int, hi: int, chain: str = "before") -> PcaWindow:
-        """The PCA model of blocks [lo, hi), fitted once (``window_models.fit_pca``), warm
-        started from the last model of its ``chain`` (the window at the previous grid
-        position; exact when the warm fit's residuals do not vouch for it), its varying
-        directions counted every ``RECOUNT_EVERY`` fits."""
-        m = self._models.get((lo, hi))
-        if m is None:
-            self._fits += 1
-            m = fit_pca(self._stats(lo, hi), self.fit_args["pca_energy"], self._warm.get(chain),
-                        recount=not self._fits % RECOUNT_EVERY)
-            self._models[(lo, hi)] = self._warm[chain] = m
-        return m
-
     def _width(self, c: int) -> int:
         """w (blocks) of the before windows at block position c: ``before``, or half the
         blocks so far near a segment's start; with ``bound_before``, also at most half the
@@ -497,7 +469,8 @@ class ContrastDetector(OnlineDetector):
     def _before(self, c: int) -> tuple[PcaWindow, PcaWindow]:
         """The models of A0 and A at block position c (``_width``)."""
         w = self._width(c)
-        return self._model(c - 2 * w, c - w), self._model(c - w, c)
+        model = self._windows.model
+        return model(c - 2 * w, c - w), model(c - w, c)
 
     def _stated(self, k: float, a: PcaWindow) -> float:
         """A ratio k stated for ``reference_dims`` effective dimensions (module doc)."""
@@ -513,11 +486,9 @@ class ContrastDetector(OnlineDetector):
             befores[c] = (a0, a)
             while len(befores) > self.peaks.full.hold // self.step + 2:
                 del befores[next(iter(befores))]
-        b = self._model(c, c + self.wb, "after")
+        b = self._windows.model(c, c + self.wb, "after")
         if c % self.wa == 0:     # models no later position uses (none starts before c - 2w)
-            oldest = c + 1 - 2 * self.wa
-            for key in [k for k in self._models if k[0] < oldest]:
-                del self._models[key]
+            self._windows.prune(c + 1 - 2 * self.wa)
         last = self._last_sent          # before windows straddling the last cut left out
         self._energy.look(c, a.stats.trace / a.stats.n, b.stats.trace / b.stats.n,
                           None if last is None else last + 2 * self.wmin)
@@ -531,7 +502,8 @@ class ContrastDetector(OnlineDetector):
         """The contrast at block position c with an after window of ``length`` blocks
         (``rtseg.detectors.confirm``; the residual floor as it stands, no look recorded)."""
         a0, a = self._befores.get(c) or self._before(c)
-        return self._ratio(a0, a, self._model(c, c + length, "short"), self.residual.value)
+        return self._ratio(a0, a, self._windows.model(c, c + length, "short"),
+                           self.residual.value)
 
 
 def segment_contrast(X: np.ndarray, p: Mapping[str, Any], frame_rate: float,
