@@ -221,19 +221,23 @@ def test_offline_segment_runs_the_same_core(perf):
     assert [c.frame for c in segment_features(X, "contrast", FR)] == [c.frame for c in live]
 
 
-def test_restart_forgets_the_segment_and_keeps_the_frame_count(perf):
-    """After a restart the cuts are a fresh detector's, counted on.  The residual and
-    relative floors outlive restarts by design (a gap is not a new performer), so they are
-    off here: with them the cuts may differ by what they learnt before the gap."""
+@pytest.mark.parametrize("preset", [None, "prompt"])
+def test_restart_forgets_the_segment_and_keeps_the_frame_count(perf, preset):
+    """After a restart the cuts are a fresh detector's, counted on (with the short-look
+    confirmation and the pre-look too).  The residual and relative floors outlive restarts
+    by design (a gap is not a new performer), so they are off here: with them the cuts may
+    differ by what they learnt before the gap."""
+    from rtseg.detectors import load_params
     _, X = perf
-    no_floors = {"residual_floor": 0.0, "relative_floor": 0.0}
-    det = make_online("contrast", FR, no_floors)
+    p = {**load_params(preset)["contrast"], "residual_floor": 0.0, "relative_floor": 0.0}
+    det = ContrastDetector.from_params(p, FR)
     det.run(X[:1000])
     det.restart()
     cuts = det.run(X[1000:])
-    fresh = make_online("contrast", FR, no_floors).run(X[1000:])
+    fresh = ContrastDetector.from_params(p, FR).run(X[1000:])
     assert len(fresh) >= 3
-    assert [c.frame for c in cuts] == [c.frame + 1000 for c in fresh]
+    assert [(c.frame, c.detected_at) for c in cuts] == \
+        [(c.frame + 1000, c.detected_at + 1000) for c in fresh]
 
 
 def test_non_finite_frame_restarts_and_is_counted(perf):
