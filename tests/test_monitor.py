@@ -33,9 +33,10 @@ SCRIPT = "idle:4,walk:5,punch:5"
 SPEED = 4.0
 
 
-def session_config(max_lag_seconds: float = 0.1):
+def session_config(max_lag_seconds: float = 0.1, params: str = ""):
     return from_dict({"output": {"osc": []}, "status": {"interval": 0.5},
-                      "buffer": {"max_lag_seconds": max_lag_seconds}})
+                      "buffer": {"max_lag_seconds": max_lag_seconds},
+                      "detectors": {"params": params}})
 
 
 class Session:
@@ -43,13 +44,14 @@ class Session:
     run on a thread."""
 
     def __init__(self, script: str = SCRIPT, speed: float = SPEED, max_lag_seconds: float = 0.1,
-                 **server_args) -> None:
+                 params: str = "", **server_args) -> None:
         self.cuts: list[CutEvent] = []
         self.feed = MonitorFeed()
         self.server = MonitorServer(self.feed, "127.0.0.1", 0, **server_args)
         self.url = self.server.start()
         self.session = LiveSession(
-            f"sim://synth?script={script}&speed={speed:g}&seed=3", session_config(max_lag_seconds),
+            f"sim://synth?script={script}&speed={speed:g}&seed=3",
+            session_config(max_lag_seconds, params),
             listeners=[lambda ev: isinstance(ev, CutEvent) and self.cuts.append(ev)],
             handle_signals=False, monitor=self.feed)
         self.summary = None
@@ -119,6 +121,24 @@ def test_page_gets_the_cuts_the_session_made_batched():
     per_second = [np.sum((times >= t) & (times < t + 1.0)) for t in times]
     assert max(per_second) <= 30, max(per_second)
     assert run.summary.frames_processed == run.summary.frames_received
+
+
+def test_the_page_gets_the_pre_look_with_sooner_cuts():
+    """With ``--params fast`` the page also gets the pre-look's values and its level (the
+    pre-look scores every position; its level is pre_level x threshold); without, neither."""
+    from rtseg.detectors import load_params
+    fast = load_params("fast")["contrast"]
+    for params in ("fast", ""):
+        run = Session(params=params)
+        msgs = asyncio.run(read_ws(f"ws://127.0.0.1:{run.port}/ws", 14 / SPEED + 3))
+        run.join()
+        info = [m for _, m in msgs if m["type"] == "hello"][-1]["info"]
+        pre = [p for _, m in msgs if m["type"] == "batch" for p in m.get("pre", [])]
+        if params:
+            assert info["pre_level"] == pytest.approx(fast["pre_level"] * fast["threshold"])
+            assert len(pre) > 20 and all(np.isfinite(v) and v > 0 for _, v in pre)
+        else:
+            assert info["pre_level"] is None and not pre
 
 
 def test_stalled_and_closed_pages_cost_the_session_no_frame():
