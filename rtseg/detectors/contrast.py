@@ -410,10 +410,10 @@ class ContrastDetector(OnlineDetector):
     def _look_pre(self, c: int) -> None:
         """The pre-look at block position c (``rtseg.detectors.prelook``): sent now when
         it stands clear."""
+        v = self._short(c, self.pre.after)
         if self.keep_trace:
-            self.trace_pre.append((self._seg0 + c * self.step, self._short(c, self.pre.after),
-                                   self._t - 1))
-        value = self.pre.value(c, self.threshold, 2 * self.wmin, self._short)
+            self.trace_pre.append((self._seg0 + c * self.step, v, self._t - 1))
+        value = self.pre.value(c, self.threshold, 2 * self.wmin, self._short, v)
         if value is not None:
             sent = self.peaks.send_now(self._seg0 + c * self.step, value, self._t - 1)
             if sent is not None:

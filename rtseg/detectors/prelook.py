@@ -54,12 +54,14 @@ class PreLook:
         return self.after > 0
 
     def value(self, q: int, threshold: float, first: int,
-              short: Callable[[int, int], float]) -> float | None:
+              short: Callable[[int, int], float], v: float | None = None) -> float | None:
         """The pre-look value of block position q when the rule sends it, else None.
         ``first``: the first block position with a value; ``short(c, L)``: the contrast at c
-        with an after window of L blocks (all of whose blocks have arrived)."""
+        with an after window of L blocks (all of whose blocks have arrived); ``v``: q's own
+        value, ``short(q, after)``, when the caller has it already."""
         S = self.after
-        v = short(q, S)
+        if v is None:
+            v = short(q, S)
         if not v >= self.level * threshold:
             return None
         for c in range(max(first, q - self.reach), q):
