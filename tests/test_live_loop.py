@@ -429,6 +429,36 @@ def test_session_duration_and_stop():
     assert 0.25 < summary.duration_s < 2.0
 
 
+def test_frames_received_while_the_session_stops_are_processed():
+    """A frame the reader thread receives after the loop's last step (the session asked
+    to stop meanwhile) is still processed and recorded: none is received and lost."""
+    holder: dict = {}
+
+    class Stopping(FakeSource):
+        def read(self, timeout=None):
+            if self.i == 150:
+                holder["s"].stop("asked")
+                time.sleep(0.1)            # the loop's last step passes meanwhile
+            return super().read(timeout)
+
+    src = Stopping(frames(300, 10**9), pace=0.0005)
+    config = from_dict({"calibration": {"mode": "none"}, "status": {"interval": 0.05}})
+    s = LiveSession(src, config, publishers=FakePublishers(), recorder=FakeRecorder(),
+                    handle_signals=False)
+    holder["s"] = s
+    import rtseg.live.pipeline as pipe_mod
+    orig = pipe_mod.make_detectors
+    pipe_mod.make_detectors = lambda c, r: {"step": StepDetector()}
+    try:
+        summary = s.run()
+    finally:
+        pipe_mod.make_detectors = orig
+    assert summary.stop_reason == "asked"
+    assert summary.frames_received == 151          # the one read while stopping too
+    assert summary.frames_processed == summary.frames_received
+    assert len(s.recorder.frames) == summary.frames_received
+
+
 def test_session_freezes_the_heap_while_it_runs_and_thaws_it_after():
     """The loop keeps the objects alive at its start out of the collector (no full
     collection stalls the reader) and hands them back when it ends, so a process that

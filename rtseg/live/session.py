@@ -96,8 +96,9 @@ input, not of lost frames (``dropped``).
 Shutdown
 --------
 SIGINT / SIGTERM (when ``run()`` is called from the main thread) only set a stop flag; the
-loop then drains nothing further, closes the source, publishers and recorder, sends a final
-status with alive=0 and returns a ``SessionSummary``.  Nothing the source delivers can crash
+loop then reads nothing further, processes the frames already received (``_drain``), closes
+the source, publishers and recorder, sends a final status with alive=0 and returns a
+``SessionSummary``.  Nothing the source delivers can crash
 the loop: malformed frames are counted (``LiveStats.bad_frames``) and logged.
 """
 
@@ -133,6 +134,9 @@ log = logging.getLogger("rtseg.live.session")
 
 #: longest a session goes without a step while other sessions wake the loop, s
 STEP_EVERY_S = 0.05
+#: at the end, rounds of processing what was received (a reader thread that outlived its
+#: join could go on adding frames)
+DRAIN_ROUNDS = 4
 
 
 __all__ = ["DEFAULT_FRAME_RATE", "FloatRing", "LiveSession", "LiveStats", "Pipeline",
@@ -445,7 +449,23 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
         self._stop.set()
         if self._reader_thread is not None:
             self._reader_thread.join(timeout=5.0)
+        self._drain()
         return self._shutdown()
+
+    def _drain(self) -> None:
+        """At the end: the frames received but not yet processed are processed (a reader
+        thread's last frames, or those the loop read between two frames of its last
+        batch), so every frame received is recorded and processed."""
+        if self.pipeline is None or not hasattr(self, "_cursor"):
+            return                                 # setup failed before the loop state
+        try:
+            for _ in range(DRAIN_ROUNDS):
+                backlog = self._cursor.backlog
+                if backlog <= 0:
+                    break
+                self._process_window(self._cursor.read(backlog), time.monotonic())
+        except Exception as exc:  # pragma: no cover - defensive: the shutdown must go on
+            log.warning("processing the last frames failed: %s", exc)
 
     def _monitor_call(self, method: Callable[[Any], None]) -> None:
         try:
