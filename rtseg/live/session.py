@@ -475,7 +475,11 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
             self._warn("monitor", "live monitor failed (%s: %s)", type(exc).__name__, exc)
 
     def _shutdown(self) -> SessionSummary:
+        """Close the source first (its threads stop counting drops), then the final
+        status, the recording's session counters, publishers and recorder: the counts
+        written, sent and returned are the same."""
         now = time.monotonic()
+        self._close("source", self.source)
         # no final status when setup failed before the loop state existed (e.g. the
         # recording folder could not be created after the publishers were built)
         if (self.pipeline is not None and self.publishers is not None
@@ -494,14 +498,18 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
                     self.recorder.note_rest(rest.positions)
             except Exception as exc:  # pragma: no cover - defensive
                 log.warning("session counters or rest geometry not recorded: %s", exc)
-        for name, obj in (("source", self.source), ("publishers", self.publishers),
-                          ("recorder", self.recorder)):
-            if obj is None:
-                continue
-            try:
-                obj.close()
-            except Exception as exc:
-                log.warning("closing %s failed: %s", name, exc)
+        self._close("publishers", self.publishers)
+        self._close("recorder", self.recorder)
         summary = session_summary(self, now)
         log.info("%s", summary.text())
         return summary
+
+    @staticmethod
+    def _close(name: str, obj: Any) -> None:
+        """``obj.close()``; a failure logged, never raised (the shutdown goes on)."""
+        if obj is None:
+            return
+        try:
+            obj.close()
+        except Exception as exc:
+            log.warning("closing %s failed: %s", name, exc)
