@@ -128,15 +128,12 @@ from rtseg.live.rate_check import DeclaredRateCheck, switch_rate
 from rtseg.core.ringbuffer import RingBuffer
 from rtseg.live.config import SessionConfig, load_session_config
 from rtseg.live.stats import FloatRing, LiveStats, SessionSummary
-from rtseg.live.summary import session_summary
+from rtseg.live.shutdown import SessionShutdown
 
 log = logging.getLogger("rtseg.live.session")
 
 #: longest a session goes without a step while other sessions wake the loop, s
 STEP_EVERY_S = 0.05
-#: at the end, rounds of processing what was received (a reader thread that outlived its
-#: join could go on adding frames)
-DRAIN_ROUNDS = 4
 
 
 __all__ = ["DEFAULT_FRAME_RATE", "FloatRing", "LiveSession", "LiveStats", "Pipeline",
@@ -166,7 +163,8 @@ def with_suit(url: str, suit: str) -> str:
     return url + ("&" if parts.query else "?") + f"suit={suit}"
 
 
-class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, SessionHealth):
+class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, SessionHealth,
+                  SessionShutdown):
     """One live segmentation session.
 
     source: a URL for ``rtseg.drivers.open_source`` or an opened ``Source``.
@@ -444,72 +442,9 @@ class LiveSession(SessionInput, SessionProcessing, SessionQuiet, SessionEvents, 
         elif self._reader_error is not None:
             self.stop(f"reader failed: {self._reader_error}")
 
-    def _finish(self) -> SessionSummary:
-        """Stop reading (the reader thread joined), shut everything down; the summary."""
-        self._stop.set()
-        if self._reader_thread is not None:
-            self._reader_thread.join(timeout=5.0)
-        self._drain()
-        return self._shutdown()
-
-    def _drain(self) -> None:
-        """At the end: the frames received but not yet processed are processed (a reader
-        thread's last frames, or those the loop read between two frames of its last
-        batch), so every frame received is recorded and processed."""
-        if self.pipeline is None or not hasattr(self, "_cursor"):
-            return                                 # setup failed before the loop state
-        try:
-            for _ in range(DRAIN_ROUNDS):
-                backlog = self._cursor.backlog
-                if backlog <= 0:
-                    break
-                self._process_window(self._cursor.read(backlog), time.monotonic())
-        except Exception as exc:  # pragma: no cover - defensive: the shutdown must go on
-            log.warning("processing the last frames failed: %s", exc)
-
     def _monitor_call(self, method: Callable[[Any], None]) -> None:
         try:
             method(self)
         except Exception as exc:  # the monitor must never end the session
             self.stats.monitor_errors += 1
             self._warn("monitor", "live monitor failed (%s: %s)", type(exc).__name__, exc)
-
-    def _shutdown(self) -> SessionSummary:
-        """Close the source first (its threads stop counting drops), then the final
-        status, the recording's session counters, publishers and recorder: the counts
-        written, sent and returned are the same."""
-        now = time.monotonic()
-        self._close("source", self.source)
-        # no final status when setup failed before the loop state existed (e.g. the
-        # recording folder could not be created after the publishers were built)
-        if (self.pipeline is not None and self.publishers is not None
-                and hasattr(self, "_status_t")):
-            try:
-                self._emit(self._status(now, alive=0))
-            except Exception as exc:  # pragma: no cover - defensive
-                log.warning("final status failed: %s", exc)
-        if self.recorder is not None and hasattr(self.recorder, "note_session"):
-            try:
-                self.recorder.note_session(self.loss_counts())
-                rest = getattr(self.source, "rest_pose", None)
-                if rest is None and self.pipeline is not None:
-                    rest = self.pipeline.posture.geometry     # the standard T-pose's
-                if rest is not None:
-                    self.recorder.note_rest(rest.positions)
-            except Exception as exc:  # pragma: no cover - defensive
-                log.warning("session counters or rest geometry not recorded: %s", exc)
-        self._close("publishers", self.publishers)
-        self._close("recorder", self.recorder)
-        summary = session_summary(self, now)
-        log.info("%s", summary.text())
-        return summary
-
-    @staticmethod
-    def _close(name: str, obj: Any) -> None:
-        """``obj.close()``; a failure logged, never raised (the shutdown goes on)."""
-        if obj is None:
-            return
-        try:
-            obj.close()
-        except Exception as exc:
-            log.warning("closing %s failed: %s", name, exc)
