@@ -95,6 +95,10 @@ GRIDS = {
         "pre_level": [4.0, 6.0, 8.0],
         "pre_ratio": [0.9, 1.0],
     },
+    "clear": {                      # the confirmation only for maxima that stand clear
+        "confirm_clear": [0.0, 1.5, 2.0, 3.0],  # (with --params prompt), and the pre-look's
+        "pre_level": [6.0, 8.0],                 # level
+    },
     "short": {                      # shorter windows and gaps for 2-5 s behaviours
         "threshold": [1.75, 2.0],
         "min_before_s": [1.0, 1.5],

@@ -61,6 +61,40 @@ def test_level_ratio_and_off():
             ShortConfirmation(**bad)
 
 
+def test_only_a_maximum_that_stands_clear_of_the_profile_before_it_is_sent():
+    """``clear``: the maximum's full value against the full values of [c - span, c - reach);
+    the reach just before it (its own rising flank) is left out, and a profile forgotten
+    at a restart holds nothing back."""
+    short = _profile(peak=40)
+    kw = dict(newest_full=40, newest=56, full_len=16, short=short)
+
+    def rule_with(profile: dict[int, float]) -> ShortConfirmation:
+        rule = ShortConfirmation(reach=8, shortest=8, clear=1.5, span=24)
+        for c in range(10, 41):
+            rule.note(c, profile.get(c, 1.0))
+        return rule
+
+    # a behaviour whose profile rose to 8 two seconds before: 10 is not 1.5 x clear of it
+    rule = rule_with({24: 8.0})
+    assert not rule.confirms(40, 10.0, 1.25, **kw)
+    assert rule.unclear == 1 and rule.sent == 0
+    # 13 is; and the same 8 within the reach (block 33, the flank) or before the span
+    # (block 15) does not count
+    assert rule_with({24: 8.0}).confirms(40, 13.0, 1.25, **kw)
+    assert rule_with({33: 9.9}).confirms(40, 10.0, 1.25, **kw)
+    assert rule_with({15: 9.9}).confirms(40, 10.0, 1.25, **kw)
+    rule = rule_with({24: 8.0})
+    rule.reset()
+    assert rule.confirms(40, 10.0, 1.25, **kw)
+    # off (0) sends it whatever came before
+    off = ShortConfirmation(reach=8, shortest=8, clear=0.0, span=24)
+    off.note(24, 80.0)
+    assert off.confirms(40, 10.0, 1.25, **kw)
+    for bad in (dict(clear=0.5, span=24), dict(clear=1.5, span=8)):
+        with pytest.raises(ValueError):
+            ShortConfirmation(reach=8, shortest=8, **bad)
+
+
 def test_peaks_confirm_sends_the_waiting_maximum_once():
     p = CausalPeaks(1.0, hold=100, min_gap=50, drop=0.1)
     assert p.confirm(5) is None
@@ -120,6 +154,8 @@ def test_bad_confirmation_parameters_are_refused():
     from rtseg.detectors import validate
     with pytest.raises(ConfigError, match="confirm_ratio"):
         validate("contrast", {"confirm_ratio": 1.5}, "test: ")
+    with pytest.raises(ConfigError, match="confirm_clear"):
+        validate("contrast", {"confirm_clear": 0.5}, "test: ")
 
 
 def test_shipped_prompt_parameters_cut_the_same_changes_sooner(perf):

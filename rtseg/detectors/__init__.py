@@ -72,6 +72,7 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
         "confirm_after_s": ((int, float), _pos),
         "confirm_level": ((int, float), _nonneg),
         "confirm_ratio": ((int, float), (lambda v: 0 < v <= 1, "in (0, 1]")),
+        "confirm_clear": ((int, float), (lambda v: v == 0 or v >= 1, "0 (off) or >= 1")),
         "pre_after_s": ((int, float), _nonneg),
         "pre_level": ((int, float), _pos),
         "pre_ratio": ((int, float), (lambda v: 0 < v <= 1, "in (0, 1]")),

@@ -22,20 +22,30 @@ detector's threshold: weaker maxima, more often a rising flank or a behaviour's 
 wait for the full look as before.  With the shipped lengths (after window 2 s, reach 1 s,
 shortest 1 s) the first chance to send is the maximum's own full look, 2 s after it.
 
+With ``clear`` > 0 a maximum is sent this way only when it stands clear of the profile
+before it: its full value at least ``clear`` x the highest full value of the positions
+[c - ``span``, c - ``reach``) (``span``: the detector's before window; the ``reach`` just
+before c, the change's own rising flank, left out).  Inside a behaviour whose motion varies
+(a dribble, a dance) the profile rises and falls at every phase, and a maximum there lies
+not far above the ones before it; it waits for the profile to fall, as without this rule.
+The threshold is the stream's own profile, so nothing here is fitted to a source.
+
 All lengths in blocks of the detector (``step`` frames).  The contrasts come from the
 detector (``short``); this object holds the rule and counts what it sent (``sent``).
 """
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Callable
 
 
 class ShortConfirmation:
-    """The rule of the module docstring.  reach, shortest: blocks (reach 0 = off);
-    level: factor of the detector's threshold; ratio: in (0, 1]."""
+    """The rule of the module docstring.  reach, shortest, span: blocks (reach 0 = off);
+    level: factor of the detector's threshold; ratio: in (0, 1]; clear: 0 (off) or >= 1."""
 
-    def __init__(self, reach: int, shortest: int, level: float = 0.0, ratio: float = 1.0) -> None:
+    def __init__(self, reach: int, shortest: int, level: float = 0.0, ratio: float = 1.0,
+                 clear: float = 0.0, span: int = 0) -> None:
         if reach < 0 or shortest < 1:
             raise ValueError(f"short-look reach must be >= 0 and its shortest window >= 1 "
                              f"block (got {reach}, {shortest})")
@@ -43,10 +53,37 @@ class ShortConfirmation:
             raise ValueError(f"confirm_ratio must be in (0, 1], got {ratio}")
         if not level >= 0.0:
             raise ValueError(f"confirm_level must be >= 0, got {level}")
+        if not (clear == 0.0 or clear >= 1.0):
+            raise ValueError(f"confirm_clear must be 0 (off) or >= 1, got {clear}")
+        if clear and span <= reach:
+            raise ValueError(f"confirm_clear needs a before span longer than the reach "
+                             f"(got {span} and {reach} blocks)")
         self.reach, self.shortest = int(reach), int(shortest)
         self.level, self.ratio = float(level), float(ratio)
-        #: maxima this rule sent
+        self.clear, self.span = float(clear), int(span)
+        #: (block position, full value) of the newest positions, for ``clear``
+        self._profile: deque[tuple[int, float]] = deque(maxlen=max(1, self.span + 1))
+        #: maxima this rule sent; maxima it left to the fall for not standing clear
         self.sent = 0
+        self.unclear = 0
+
+    def reset(self) -> None:
+        """Forget the profile (the detector restarted: block positions start again)."""
+        self._profile.clear()
+
+    def note(self, c: int, value: float) -> None:
+        """The full value at block c (positions in increasing order), for ``clear``."""
+        if self.clear:
+            self._profile.append((c, value))
+
+    def stands_clear(self, c: int, value: float) -> bool:
+        """Whether ``value`` at block c is at least ``clear`` x every full value of
+        [c - span, c - reach) (True when off or none is known)."""
+        if not self.clear:
+            return True
+        lo, hi = c - self.span, c - self.reach
+        before = [v for p, v in self._profile if lo <= p < hi]
+        return not before or value >= self.clear * max(before)
 
     @property
     def on(self) -> bool:
@@ -64,6 +101,9 @@ class ShortConfirmation:
         with a full value, ``full_len`` the full after window (blocks), ``short(c', L)``
         the contrast at c' with an after window of L blocks."""
         if not self.on or value < self.level * threshold or newest < self.first_block(c):
+            return False
+        if not self.stands_clear(c, value):
+            self.unclear += 1
             return False
         ref: dict[int, float] = {}
         for c2 in range(newest_full + 1, c + self.reach + 1):

@@ -97,7 +97,7 @@ class ContrastDetector(OnlineDetector):
                  place_ridge: float = 0.01, place_stride: int = 4, place_margin: int = 30,
                  confirm_reach: int = 0, confirm_shortest: int = 120,
                  confirm_level: float = 0.0, confirm_ratio: float = 1.0,
-                 pre_after: int = 0, pre_level: float = 4.0, pre_ratio: float = 1.0,
+                 confirm_clear: float = 0.0, pre_after: int = 0, pre_level: float = 4.0, pre_ratio: float = 1.0,
                  keep_trace: bool = False) -> None:
         if step < 1:
             raise ValueError(f"step must be >= 1 frame, got {step}")
@@ -130,7 +130,8 @@ class ContrastDetector(OnlineDetector):
         #: short-look confirmation of the full look's maxima (``rtseg.detectors.confirm``)
         self.confirm = ShortConfirmation(
             int(round(confirm_reach / step)) if confirm_reach else 0,
-            max(2, int(round(confirm_shortest / step))), confirm_level, confirm_ratio)
+            max(2, int(round(confirm_shortest / step))), confirm_level, confirm_ratio,
+            confirm_clear, self.wa)
         if pre_after and not 2 * step <= pre_after < after:
             raise ValueError(f"pre_after must be 0 (off) or at least two steps and shorter "
                              f"than after ({after} frames), got {pre_after}")
@@ -206,6 +207,7 @@ class ContrastDetector(OnlineDetector):
                    confirm_shortest=frames(p.get("confirm_after_s", 1.0), frame_rate),
                    confirm_level=p.get("confirm_level", 0.0),
                    confirm_ratio=p.get("confirm_ratio", 1.0),
+                   confirm_clear=p.get("confirm_clear", 0.0),
                    pre_after=(frames(p["pre_after_s"], frame_rate)
                               if p.get("pre_after_s") else 0),
                    pre_level=p.get("pre_level", 4.0), pre_ratio=p.get("pre_ratio", 1.0),
@@ -261,6 +263,7 @@ class ContrastDetector(OnlineDetector):
         self._last_sent: int | None = None   # block position of the last cut sent
         self._last_placed: int | None = None  # frame of the last cut sent, as placed
         self.peaks.reset()
+        self.confirm.reset()
         self._out: deque[SentPeak] = deque()  # cuts to send (a queued one is dropped)
         #: the energy change of the newest full looks (``relative.EnergyChanges``)
         self._energy = EnergyChanges(ENERGY_SPAN * self.wa, self._energy_len)
@@ -388,6 +391,7 @@ class ContrastDetector(OnlineDetector):
         position = self._seg0 + c * self.step
         if self.keep_trace:
             self.trace.append((position, value, self.threshold))
+        self.confirm.note(c, value)
         sent = self.peaks.update_full(position, value, self._t - 1)
         if sent is None and self.confirm.on:
             sent = self._confirm_short(c)
