@@ -97,7 +97,7 @@ GRIDS = {
     },
     "clear": {                      # the confirmation only for maxima that stand clear
         "confirm_clear": [0.0, 1.5, 2.0, 3.0],  # (with --params prompt), and the pre-look's
-        "pre_level": [6.0, 8.0],                 # level
+        "pre_level": [4.0, 6.0, 8.0],            # level
     },
     "short": {                      # shorter windows and gaps for 2-5 s behaviours
         "threshold": [1.75, 2.0],
