@@ -24,8 +24,9 @@ shortest 1 s) the first chance to send is the maximum's own full look, 2 s after
 
 With ``clear`` > 0 a maximum is sent this way only when it stands clear of the profile
 before it: its full value at least ``clear`` x the highest full value of the positions
-[c - ``span``, c - ``reach``) (``span``: the detector's before window; the ``reach`` just
-before c, the change's own rising flank, left out).  Inside a behaviour whose motion varies
+[c_full - ``span``, c - ``reach``) (``span``: the detector's before window, counted back
+from the newest full value, so a maximum asked again later looks at less before it; the
+``reach`` just before c, the change's own rising flank, left out).  Inside a behaviour whose motion varies
 (a dribble, a dance) the profile rises and falls at every phase, and a maximum there lies
 not far above the ones before it; it waits for the profile to fall, as without this rule.
 The threshold is the stream's own profile, so nothing here is fitted to a source.
@@ -61,7 +62,7 @@ class ShortConfirmation:
         self.reach, self.shortest = int(reach), int(shortest)
         self.level, self.ratio = float(level), float(ratio)
         self.clear, self.span = float(clear), int(span)
-        #: (block position, full value) of the newest positions, for ``clear``
+        #: (block position, full value) of the newest ``span`` + 1 positions, for ``clear``
         self._profile: deque[tuple[int, float]] = deque(maxlen=max(1, self.span + 1))
         #: maxima this rule sent; maxima it left to the fall for not standing clear
         self.sent = 0
@@ -76,12 +77,12 @@ class ShortConfirmation:
         if self.clear:
             self._profile.append((c, value))
 
-    def stands_clear(self, c: int, value: float) -> bool:
+    def stands_clear(self, c: int, value: float, newest_full: int) -> bool:
         """Whether ``value`` at block c is at least ``clear`` x every full value of
-        [c - span, c - reach) (True when off or none is known)."""
+        [newest_full - span, c - reach) (True when off or none is known)."""
         if not self.clear:
             return True
-        lo, hi = c - self.span, c - self.reach
+        lo, hi = newest_full - self.span, c - self.reach
         before = [v for p, v in self._profile if lo <= p < hi]
         return not before or value >= self.clear * max(before)
 
@@ -102,7 +103,7 @@ class ShortConfirmation:
         the contrast at c' with an after window of L blocks."""
         if not self.on or value < self.level * threshold or newest < self.first_block(c):
             return False
-        if not self.stands_clear(c, value):
+        if not self.stands_clear(c, value, newest_full):
             self.unclear += 1
             return False
         ref: dict[int, float] = {}

@@ -97,7 +97,8 @@ class ContrastDetector(OnlineDetector):
                  place_ridge: float = 0.01, place_stride: int = 4, place_margin: int = 30,
                  confirm_reach: int = 0, confirm_shortest: int = 120,
                  confirm_level: float = 0.0, confirm_ratio: float = 1.0,
-                 confirm_clear: float = 0.0, pre_after: int = 0, pre_level: float = 4.0, pre_ratio: float = 1.0,
+                 confirm_clear: float = 0.0,
+                 pre_after: int = 0, pre_level: float = 4.0, pre_ratio: float = 1.0,
                  keep_trace: bool = False) -> None:
         if step < 1:
             raise ValueError(f"step must be >= 1 frame, got {step}")

@@ -39,7 +39,6 @@ class CutSender:
     by any rule, ``min_gap`` frames apart (module docstring)."""
 
     def __init__(self, threshold: float, hold: int, min_gap: int, drop: float) -> None:
-        self.threshold = float(threshold)
         self.min_gap = int(min_gap)
         self.full = CausalPeaks(threshold, hold=hold, min_gap=min_gap, drop=drop)
         self.reset()
