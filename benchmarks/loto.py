@@ -70,6 +70,9 @@ from rtseg.simulators.synth.motion import DEFAULT_SCRIPT, synthesize
 TOL_S = 0.5
 OBJECTIVES = ("takes", "pooled", "groups")   # objective() kinds; --nested chooses among them
 MAX_MEDIAN_S, MAX_P90_S = 2.5, 3.5
+#: frames after a block's last frame at which the detector makes the full look of the
+#: position that block completes (its third queued step, ``ContrastDetector._block_done``)
+LOOK_STEP = 2
 GRID = {                       # the candidates: grid step, after window, the peak picker,
     "step_s": [0.0833333333, 0.125],
     "after_s": [1.5, 1.75, 2.0],
@@ -140,10 +143,12 @@ def detector(p: dict, fr: float) -> ContrastDetector:
 
 def peaks_on_trace(det: ContrastDetector, p: dict, fr: float) -> list[tuple[int, int]]:
     """(cut frame, detected frame) of the cut picker (``CutSender``) with ``p`` replayed on
-    a run's profile (clean take: the full look's value at c is known at c + after - 1; a
-    second cut of the same frame goes out with the next frame, as in the detector)."""
+    a run's profile (clean take: the full look's value at c is known at c + after - 1 + 2:
+    the detector queues a completed block's work one step a frame - the next position's
+    before window, c's after window, then the look; a second cut of the same frame goes
+    out with the next frame, as in the detector)."""
     pk: CutSender = detector(p, fr).peaks      # the picker a detector with p would use
-    lag = det.wb * det.step - 1
+    lag = det.wb * det.step - 1 + LOOK_STEP
     out = []
     last_now = None
     for pos, v, _ in det.trace:
