@@ -141,33 +141,6 @@ def test_tally_and_pooled_tally():
     assert p["delay_median"] == pytest.approx(250 / 120)
 
 
-def test_loto_objective_counts_every_take_once():
-    """benchmarks/loto.py's selection rule: ``takes`` averages each take's F1 (a short take
-    counts as much as a long one), ``pooled`` pools the transitions, and a set over the
-    delay budget loses 1."""
-    import sys
-    from pathlib import Path
-    bench = str(Path(__file__).resolve().parents[1] / "benchmarks")
-    sys.path.insert(0, bench)
-    try:
-        import loto
-    finally:
-        sys.path.remove(bench)
-
-    def case(key, group):
-        return loto.Case(key, key, group, 120.0, np.zeros((1, 1)), np.zeros(1, int), [], 0)
-
-    short, long_ = case("a", "cmu"), case("b", "cmu")       # one group: groups == pooled
-    # (tp, cuts, transitions, strict tp, delays s): the short take all right, the long one half
-    res = {"a": (2, 2, 2, 2, [2.0, 2.0]), "b": (5, 10, 10, 5, [2.0] * 5)}
-    assert loto.objective(res, [short, long_], "takes") == pytest.approx((1.0 + 0.5) / 2)
-    assert loto.objective(res, [short, long_], "pooled") == pytest.approx(7 / 12)
-    assert loto.objective(res, [short, long_], "groups") == pytest.approx(7 / 12)
-    slow = {"a": (2, 2, 2, 2, [3.0, 3.0]), "b": (5, 10, 10, 5, [3.0] * 5)}
-    assert loto.objective(slow, [short, long_], "takes") == pytest.approx(0.75 - 1.0)
-    assert loto.person(short) == "a" and loto.person(case("13_29", "cmu")) == "13"
-
-
 def test_recall_by_length_bins_each_transition_by_its_neighbouring_segments(tmp_path, capsys):
     """benchmarks/recall_by_length.py: a transition counts in the bin of the segment before
     it (and, separately, after it); empty bins say None; a missing folder is exit 2."""

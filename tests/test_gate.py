@@ -77,25 +77,6 @@ def test_restart_decides_the_held_cuts_on_the_frames_so_far():
     assert c is not None and c.frame == 1200 and gate.sent == 1
 
 
-@pytest.mark.parametrize("seed", [1, 3])
-def test_replay_equals_feeding_the_frames(seed):
-    """benchmarks/loto.py replays the gate on the ungated detector's cuts: the same cuts,
-    sent on the same frames, as the detector with its gate fed frame by frame - when the
-    before windows do not depend on the cuts sent (``bound_before`` off; bounded sets are
-    full detector runs there) and no cut is placed (placement acts after the gate)."""
-    res = synthesize("walk:6,punch:6,walk:6,squat:6,walk:6", seed=seed)
-    X = take_features(res.take)
-    unbound = {"bound_before": False, "place_radius_s": 0.0}
-    gated = make_online("contrast", FR, unbound)
-    assert gated.gate is not None
-    streamed = [(c.frame, c.detected_at) for c in gated.run(X)]
-    ungated = [(c.frame, c.detected_at)
-               for c in make_online("contrast", FR, {**unbound, "gate_threshold": 0}).run(X)]
-    replayed = make_online("contrast", FR, unbound).gate.replay(X, ungated)
-    assert streamed == replayed
-    assert len(streamed) >= 3
-
-
 def test_the_gated_detector_is_causal():
     """A prefix of the frames gives exactly the gated cuts sent within it."""
     res = synthesize("walk:6,punch:6,walk:6,squat:6", seed=2)

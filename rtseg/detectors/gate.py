@@ -163,7 +163,7 @@ class SameBehaviourGate:
         ahead, ``ContrastDetector.ahead``): a later decision whose window before is the
         same frames uses it instead of fitting it again.  False when there was nothing
         to fit (no rows, too few frames, already fitted)."""
-        if self._rows is None or self._source is not None or b > self._t:
+        if self._rows is None or b > self._t:
             return False
         a = self._windows(b, self._t, self._t)[2]
         if b - a < 2 or self._fitted_before(a, b) is not None:
@@ -176,7 +176,7 @@ class SameBehaviourGate:
         of a cut at ``b`` would find: its windows end before frame t, so they have
         arrived; the decision, if it comes, only compares the distance with the
         threshold.  False when there was nothing to do (no rows, already done)."""
-        if self._rows is None or self._source is not None or t != self._t:
+        if self._rows is None or t != self._t:
             return False
         lo, hi, a = self._windows(b, t, t + 1)
         key = (lo, hi, a, b)
@@ -191,40 +191,10 @@ class SameBehaviourGate:
             self._decide(self._held.popleft(), self._t - 1, end=self._t)
         self._floor = self._t
 
-    def replay(self, X: np.ndarray, cuts: list[tuple[int, int]]) -> list[tuple[int, int]]:
-        """Offline, for benchmarks that try many cut lists on one take: the (frame,
-        sent-at frame) of the cuts that go through, given every row X the detector was fed
-        and its cuts as (frame, detected_at) in the order it made them - the same
-        decisions as feeding the frames one by one, without the per-frame loop (the
-        detector must not have restarted, and its cuts must not depend on the cuts sent:
-        with ``bound_before`` the gate's drops change the windows, so such a detector is
-        run whole).  Use a fresh gate: it keeps the decisions."""
-        self._source = np.asarray(X, dtype=np.float64)
-        out, last, sent_at = [], -1, -1
-        try:
-            for frame, detected in cuts:
-                now = max(detected, frame + self.decide_after, last)
-                if now >= len(X):
-                    break
-                last = now
-                self._decide(Cut(frame, "replay", detected_at=detected), now)
-                while self._out:             # one cut a frame, as poll() sends them
-                    c = self._out.popleft()
-                    sent_at = max(c.detected_at, sent_at + 1)
-                    out.append((c.frame, sent_at))
-        finally:
-            self._source = None
-        return out
-
     # ------------------------------------------------------------------ internals
-    _source: np.ndarray | None = None          # all rows (``replay``), else the ring
     _span: np.ndarray | None = None            # a window's rows gathered from the ring
-    #: window distances by (lo, hi, a, b), shared by replays of one take (benchmarks)
-    memo: dict | None = None
 
     def _stats(self, lo: int, hi: int) -> WindowStats:
-        if self._source is not None:
-            return WindowStats.of(self._source[lo:hi])
         if self._span is None or self._span.shape[1] != self._rows.shape[1]:
             self._span = np.empty((self.max_window, self._rows.shape[1]))
         rows = np.take(self._rows, np.arange(lo, hi) % self.ring, axis=0,
@@ -235,8 +205,7 @@ class SameBehaviourGate:
         """(lo, hi, a): the window after a cut at ``b``, [lo, hi), on the rows before
         frame ``end``, and the start of its window before, [a, b), with ``pushed``
         frames pushed (the ring holds the last ``ring`` of them)."""
-        oldest = self._floor if self._source is not None else max(self._floor,
-                                                                  pushed - self.ring)
+        oldest = max(self._floor, pushed - self.ring)
         lo = b + self.skip if end - (b + self.skip) >= self.min_after else b
         return lo, min(end, lo + self.max_window), max(b - self.max_window, oldest)
 
@@ -244,7 +213,7 @@ class SameBehaviourGate:
         """The distance between the windows [lo, hi) and [a, b) (inf when either holds
         fewer than two frames); the window before's fit made ahead (``prepare``) is
         used when it is of the same frames."""
-        if hi - lo < 2 or b - a < 2 or (self._source is None and self._rows is None):
+        if hi - lo < 2 or b - a < 2 or self._rows is None:
             return math.inf
         after = fit(self._stats(lo, hi), **self.fit_args)
         before = self._fitted_before(a, b)
@@ -268,13 +237,9 @@ class SameBehaviourGate:
             d = self._ready[1]
             self.made_ahead += 1
         else:
-            d = self.memo.get(key) if self.memo is not None else None
-            if d is None:
-                if self._fitted_before(a, b) is not None:
-                    self.made_ahead += 1
-                d = self._distance(lo, hi, a, b)
-                if self.memo is not None:
-                    self.memo[key] = d
+            if self._fitted_before(a, b) is not None:
+                self.made_ahead += 1
+            d = self._distance(lo, hi, a, b)
         same = d <= self.threshold
         self.decisions.append((b, d, not same))
         if same:
