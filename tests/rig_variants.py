@@ -1,7 +1,7 @@
 """One motion written in several rigs: the synthetic 17-bone take re-expressed with other
 rigs' joint names and hierarchies (extra spine, neck, clavicle and hip joints; a rotation
 split across two spine joints; a fixed root above the pelvis), as the families of
-``rtseg.core.skeletons`` name them.  The segments' rotations relative to the segments they hang
+``rtseg.core.skeletons`` name them, and as 3ds Max Biped names them (no family).  The segments' rotations relative to the segments they hang
 from are the same in every variant, so a rig-independent feature gives the same rows."""
 
 from __future__ import annotations
@@ -28,6 +28,10 @@ _LIMBS = {
     "bandai": lambda s: [
         (f"UpperLeg_{s}", "Hips", "{Side}UpperLeg"), (f"LowerLeg_{s}", f"UpperLeg_{s}", "{Side}LowerLeg"),
         (f"Foot_{s}", f"LowerLeg_{s}", "{Side}Foot"), (f"Toes_{s}", f"Foot_{s}", None)],
+    "biped": lambda s: [
+        (f"Bip01 {s} Thigh", "Bip01 Pelvis", "{Side}UpperLeg"),
+        (f"Bip01 {s} Calf", f"Bip01 {s} Thigh", "{Side}LowerLeg"),
+        (f"Bip01 {s} Foot", f"Bip01 {s} Calf", "{Side}Foot"), (f"Bip01 {s} Toe0", f"Bip01 {s} Foot", None)],
 }
 _ARMS = {
     "cmu-asf": lambda s: [
@@ -45,6 +49,11 @@ _ARMS = {
     "bandai": lambda s: [
         (f"Shoulder_{s}", "Chest", None), (f"UpperArm_{s}", f"Shoulder_{s}", "{Side}UpperArm"),
         (f"LowerArm_{s}", f"UpperArm_{s}", "{Side}LowerArm"), (f"Hand_{s}", f"LowerArm_{s}", "{Side}Hand")],
+    "biped": lambda s: [
+        (f"Bip01 {s} Clavicle", "Bip01 Spine2", None),
+        (f"Bip01 {s} UpperArm", f"Bip01 {s} Clavicle", "{Side}UpperArm"),
+        (f"Bip01 {s} Forearm", f"Bip01 {s} UpperArm", "{Side}LowerArm"),
+        (f"Bip01 {s} Hand", f"Bip01 {s} Forearm", "{Side}Hand")],
 }
 _TORSO = {
     "cmu-asf": [("root", "", "Hips"), ("lowerback", "root", "Spine"),
@@ -62,10 +71,17 @@ _TORSO = {
                ("mixamorig:HeadTop_End", "mixamorig:Head", None)],
     "bandai": [("joint_Root", "", None), ("Hips", "joint_Root", "Hips"), ("Spine", "Hips", "Spine"),
                ("Chest", "Spine", "Chest"), ("Neck", "Chest", "Neck"), ("Head", "Neck", "Head")],
+    "biped": [("Bip01", "", None), ("Bip01 Pelvis", "Bip01", "Hips"),
+              ("Bip01 Spine", "Bip01 Pelvis", "Spine"),
+              ("Bip01 Spine1", "Bip01 Spine", ("half1", "Chest")),
+              ("Bip01 Spine2", "Bip01 Spine1", ("half2", "Chest")),
+              ("Bip01 Neck", "Bip01 Spine2", "Neck"), ("Bip01 Head", "Bip01 Neck", "Head")],
 }
 _SIDE_ARG = {"cmu-asf": ("l", "r"), "cmu-bvh": ("Left", "Right"), "mixamo": ("Left", "Right"),
-             "bandai": ("L", "R")}
-RIGS = tuple(_TORSO)
+             "bandai": ("L", "R"), "biped": ("L", "R")}
+#: rigs of named families (``rtseg.core.skeletons``); ``biped`` (3ds Max Biped: names with
+#: spaces, "Bip01 L Thigh") is in no family and is mapped by names and topology
+RIGS = ("cmu-asf", "cmu-bvh", "mixamo", "bandai")
 
 
 def _spec(rig: str) -> list[tuple]:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -90,6 +91,48 @@ def test_unknown_rig_by_names_and_topology():
     assert rig.optional["chest"] == ("spine_02",)
 
 
+def test_side_words_inside_names_and_arms_that_branch_at_the_neck():
+    """3ds Max Biped and Character Creator put the side between separators ("Bip01 L Thigh",
+    "CC_Base_R_Calf"); Biped hangs the clavicles from its neck link, the joint the head hangs
+    from: that joint is then the neck and the one below it the chest."""
+    for sep in (" ", "_"):
+        b = lambda x: f"Bip01{sep}{x}".replace(" ", sep)   # noqa: E731
+        torso = [(b("Pelvis"), ""), (b("Spine"), b("Pelvis")), (b("Spine1"), b("Spine")),
+                 (b("Spine2"), b("Spine1")), (b("Neck"), b("Spine2")), (b("Head"), b("Neck"))]
+        names, parents = _humanoid(
+            torso, [b("{s} Clavicle"), b("{s} UpperArm"), b("{s} Forearm"), b("{s} Hand")],
+            [b("{s} Thigh"), b("{s} Calf"), b("{s} Foot")], b("Neck"), b("Pelvis"), ("L", "R"))
+        rig = map_rig(names, parents)
+        assert rig.family == "topology"
+        assert (rig.joints["chest"], rig.joints["neck"]) == (b("Spine2"), b("Neck"))
+        assert rig.joints["right_lower_leg"] == b("R Calf")
+        assert rig.joints["left_upper_arm"] == b("L UpperArm")
+        assert rig.optional["left_upper_arm"] == (b("Neck"), b("L Clavicle"))
+    names, parents = _humanoid(
+        [("CC_Base_Hip", ""), ("CC_Base_Waist", "CC_Base_Hip"), ("CC_Base_Spine01", "CC_Base_Waist"),
+         ("CC_Base_Spine02", "CC_Base_Spine01"), ("CC_Base_NeckTwist01", "CC_Base_Spine02"),
+         ("CC_Base_Head", "CC_Base_NeckTwist01")],
+        ["CC_Base_{s}_Clavicle", "CC_Base_{s}_Upperarm", "CC_Base_{s}_Forearm", "CC_Base_{s}_Hand"],
+        ["CC_Base_{s}_Thigh", "CC_Base_{s}_Calf", "CC_Base_{s}_Foot"], "CC_Base_Spine02",
+        "CC_Base_Hip", ("L", "R"))
+    rig = map_rig(names, parents)
+    assert rig.joints["left_lower_arm"] == "CC_Base_L_Forearm"
+    assert rig.joints["right_upper_leg"] == "CC_Base_R_Thigh"
+
+
+def test_a_biped_bvh_keeps_the_spaces_in_its_joint_names(performance, tmp_path):
+    """A 3ds Max Biped BVH file ("JOINT Bip01 L Thigh": joint names with spaces) is read with
+    its names whole and mapped by names and topology."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from source_folders import write_bvh
+    biped = in_rig(performance.take, "biped")
+    take = read_take(write_bvh(tmp_path / "biped.bvh", biped))
+    assert sorted(take.joint_names) == sorted(biped.joint_names)
+    assert "Bip01 L Thigh" in take.joint_names and "Bip01 R Forearm" in take.joint_names
+    rig = PoseFeatures.for_take(take).rig
+    assert rig.family == "topology" and rig.joints["left_upper_leg"] == "Bip01 L Thigh"
+
+
 def test_unmappable_rig_is_one_clear_line():
     names, parents = _tree([("Hips", ""), ("Spine", "Hips"), ("Head", "Spine"),
                             ("LeftArm", "Spine"), ("RightArm", "Spine")])
@@ -128,15 +171,16 @@ def _close(a: np.ndarray, b: np.ndarray, tol: float) -> bool:
 
 
 def test_four_rigs_cut_alike(performance, tmp_path):
-    """The same motion in the ASF, cgspeed BVH, Mixamo and Bandai rigs (written to a file
-    and read back) gives the same live and offline cuts."""
+    """The same motion in the ASF, cgspeed BVH, Mixamo and Bandai rigs, and in 3ds Max
+    Biped's, which no family knows (written to a file and read back), gives the same live
+    and offline cuts."""
     ref_live = _live_times(performance.take)
     ref_off = segment_take(performance.take, "contrast").cut_frames
     assert len(ref_live) >= 6
-    for rig in RIGS:
+    for rig in (*RIGS, "biped"):
         path = write_take(tmp_path / f"{rig}.npz", in_rig(performance.take, rig))
         take = read_take(path)
-        assert PoseFeatures.for_take(take).rig.family == rig
+        assert PoseFeatures.for_take(take).rig.family == (rig if rig in RIGS else "topology")
         got = _live_times(take)
         assert _close(got, ref_live, 0.25), (rig, got, ref_live)
         assert segment_take(take, "contrast").cut_frames == ref_off

@@ -2,7 +2,8 @@
 
 Conventions
 -----------
-- Every ``ROOT``/``JOINT`` becomes a take joint (parents before children, file order);
+- Every ``ROOT``/``JOINT`` becomes a take joint (parents before children, file order); its
+  name is the rest of its line up to ``{``, spaces kept (3ds Max Biped: ``Bip01 L Thigh``);
   ``End Site`` blocks are not joints: their offsets go to ``meta["end_sites"]``.
 - Rotation channels may come in any order per joint; the joint's rotation relative to its
   parent is the product of the elementary rotations in channel order:
@@ -104,6 +105,9 @@ def read_bvh(path: str | Path, frame_rate: float | None = None) -> Take:
             name, nln = take_token("a joint name")
             if name in "{}":
                 raise ReaderError(path, f"{tok} without a name", nln)
+            while pos < n_tok and tokens[pos][1] == nln and tokens[pos][0] not in ("{", "}"):
+                name += " " + tokens[pos][0]     # a name with spaces: "Bip01 L Thigh"
+                pos += 1
             if key == "ROOT":
                 if stack:
                     raise ReaderError(path, f"ROOT {name!r} inside another joint", ln)

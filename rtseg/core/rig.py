@@ -157,6 +157,9 @@ _SIDE_PATTERNS = (
     (re.compile(r"[_.\- ](l|left)$", re.I), 0), (re.compile(r"[_.\- ](r|right)$", re.I), 1),
     (re.compile(r"^Left|^left"), 0), (re.compile(r"^Right|^right"), 1),
     (re.compile(r"Left"), 0), (re.compile(r"Right"), 1),
+    # a side word between separators: 3ds Max Biped "Bip01 L Thigh", "CC_Base_L_Calf"
+    (re.compile(r"(?<=[_.\- ])(l|left)(?=[_.\- ])", re.I), 0),
+    (re.compile(r"(?<=[_.\- ])(r|right)(?=[_.\- ])", re.I), 1),
 )
 _PARTS = {   # checked in this order on the side-less, lower-case, alphanumeric name
     "upper_arm": ("upperarm", "uparm", "humerus", "shldr", "bicep"),
@@ -259,6 +262,11 @@ def _torso(limbs: dict[str, int], names: list[str], parents: Sequence[int]
     spine_path = _path_below(pelvis, chest, parents)
     if spine_path is None:
         return out, [f"chest ({names[chest]} is not above the pelvis {names[pelvis]})"]
+    if parents[head] == chest and len(spine_path) >= 3:
+        # the arms branch from the joint the head hangs from (3ds Max Biped's clavicles hang
+        # from its neck link): that joint is the neck, the one below it the chest
+        chest = parents[chest]
+        spine_path = spine_path[:-1]
     if len(spine_path) < 2:
         problems.append(f"spine (no joint between pelvis {names[pelvis]} and chest {names[chest]})")
     neck_path = _path_below(chest, head, parents)
