@@ -11,8 +11,10 @@ performances (cmu takes and spliced ones, cached under ``--cache``) and fed feat
 this uses.  The contrast detector (shipped parameters, or ``--params``) runs on each
 performance's rows, keeping its profile, its gate's decisions and its relative floor's
 refusals; ``rtseg.evaluation.errors.attribute`` names the cause of each miss (gate
-dropped, floor refused, below threshold, cut outside, no maximum sent) and sorts each
-false cut as near a transition or inside a segment.  Printed: per source the counts by
+dropped, floor refused, below threshold, cut outside, no maximum sent; for a cut outside,
+whether the motion between it and the range moves like the behaviour labelled there or
+like the other side of the cut, ``span_resemblance``) and sorts each false cut as near a
+transition or inside a segment.  Printed: per source the counts by
 cause and kind, the behaviour pairs missed most and the behaviours holding the false cuts
 inside segments; ``--json``: the same and every miss and false cut of every performance.
 Exit status 2 on a missing folder (one line on stderr).
@@ -31,7 +33,7 @@ if __name__ == "__main__":
 
 
 import lopo
-from rtseg.evaluation.errors import Errors, attribute, tally_errors
+from rtseg.evaluation.errors import Errors, attribute, span_resemblance, tally_errors
 from rtseg.evaluation.online import to_take_frames
 from rtseg.evaluation.scoring import pooled_tally, tally
 
@@ -47,7 +49,8 @@ def performance_errors(case: lopo.Case, params: dict) -> tuple[Errors, tuple]:
         [c for c, _ in pairs], case.transitions, case.frame_rate, lopo.TOL_S,
         threshold=det.threshold, contrast=[(take(p), v) for p, v, _ in det.trace],
         gate_drops=[take(b) for b, _, sent in (det.gate.decisions if det.gate else ()) if not sent],
-        refusals=[take(f) for f, _, _ in det.relative.refusals])
+        refusals=[take(f) for f, _, _ in det.relative.refusals],
+        span_like=span_resemblance(case.X, case.index, case.frame_rate))
     return errs, tally(pairs, case.transitions, case.frame_rate, lopo.TOL_S)
 
 
@@ -72,6 +75,10 @@ def _text(doc: dict) -> str:
         kinds = ", ".join(f"{k} {v}" for k, v in g["false_kinds"].items())
         lines.append(f"{name}: {g['transitions']} transitions, {g['cuts']} cuts, F1 {g['f1']:.4f}")
         lines.append(f"  missed {g['misses']}: {causes}")
+        span = g["outside_span"]
+        if any(span.values()):
+            lines.append(f"  cut outside, the span to the range moves like: its labelled "
+                         f"behaviour {span['labelled']}, the other side {span['other']}")
         lines.append(f"  false cuts {g['false_cuts']}: {kinds}")
         pairs = list(g["missed_pairs"].items())[:6]
         if pairs:

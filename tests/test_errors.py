@@ -3,9 +3,11 @@ place, on hand-made cuts and profiles (take frames at 100 Hz, tolerance 0.5 s = 
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
-from rtseg.evaluation.errors import FALSE_KINDS, MISS_CAUSES, attribute, tally_errors
+from rtseg.evaluation.errors import (FALSE_KINDS, MISS_CAUSES, SPANS, attribute,
+                                     span_resemblance, tally_errors)
 from rtseg.labels.types import Transition
 
 FR = 100.0
@@ -84,3 +86,39 @@ def test_tally_counts_every_cause_and_kind():
 def test_bad_frame_rate_is_an_error():
     with pytest.raises(ValueError, match="frame_rate"):
         attribute([], T, 0.0)
+
+
+def _two_motions(change: int, n: int = 4000, dims: int = 6, seed: int = 0) -> np.ndarray:
+    """Rows of one random motion before frame ``change`` and of another, on other
+    directions and ten times larger, from it on."""
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(n, dims)) * 0.1
+    X[:change, :3] += rng.normal(size=(change, 3))
+    X[change:, 3:] += 10 * rng.normal(size=(n - change, 3))
+    return X
+
+
+def test_a_cut_outside_says_what_the_span_to_the_range_moves_like():
+    """The motion changes at frame 850, before the labelled range (1000-1100): a cut there
+    is 'other' (the span to the range already moves like the next behaviour); with the
+    motion changing at 1050, inside the range, a cut at 850 lies inside the labelled
+    behaviour: 'labelled'.  A cut after the range is judged from the other side."""
+    t = [T[0]]
+    idx = np.arange(4000) + 7            # the take frame of each row (rows start later)
+    early = span_resemblance(_two_motions(850 - 7), idx, FR)
+    e = attribute([850], t, FR, threshold=1.0, contrast=FLAT_HIGH, span_like=early)
+    assert [(m.cause, m.span) for m in e.misses] == [("cut outside", "other")]
+    assert e.misses[0].offset_s == pytest.approx(-1.0)
+    on_time = span_resemblance(_two_motions(1050 - 7), idx, FR)
+    e = attribute([850], t, FR, threshold=1.0, contrast=FLAT_HIGH, span_like=on_time)
+    assert e.misses[0].span == "labelled"
+    late = span_resemblance(_two_motions(1250 - 7), idx, FR)      # cut at 1250, motion too
+    assert attribute([1250], t, FR, threshold=1.0, contrast=FLAT_HIGH,
+                     span_like=late).misses[0].span == "other"
+    assert attribute([1250], t, FR, threshold=1.0, contrast=FLAT_HIGH,
+                     span_like=on_time).misses[0].span == "labelled"
+    counts = tally_errors([e])["outside_span"]
+    assert list(counts) == list(SPANS) and counts == {"labelled": 1, "other": 0}
+    # a span under 0.25 s is not judged; without span_like nothing is
+    assert early(1000 - 10, 1000, 1100) is None
+    assert attribute([850], t, FR, threshold=1.0, contrast=FLAT_HIGH).misses[0].span is None
