@@ -34,7 +34,9 @@ that person's performances; the held-out cuts are pooled per source and over all
 shipped defaults (``config/detectors.toml``) are scored beside it, and every set of the
 grid on everyone (``sets``: the grid's accuracy against delay, not a held-out figure) with the
 set the same rule chooses on everyone (``chosen_on_everyone``: what to ship).  The same numbers at
-the strict tolerance (cut inside the labelled range) and delay median / p90 are given.
+the strict tolerance (cut inside the labelled range) and delay median / p90 are given, and
+each pooled F1's 95 % interval (``f1_ci95``: the held-out units resampled with
+replacement, ``BOOTSTRAP_N`` times).
 The sets are scored in ``--jobs`` processes (default: one per core), each with one BLAS
 thread; the figures do not depend on it.
 """
@@ -298,12 +300,38 @@ def summary(rows: list) -> dict:
             "delay_p90_s": None if t["delay_p90"] is None else round(t["delay_p90"], 3)}
 
 
-def report(cases: list[Case], rows: dict[str, tuple]) -> dict:
-    by_source: dict[str, list] = {}
+#: resamples behind each pooled F1's 95 % interval (``f1_interval``)
+BOOTSTRAP_N = 2000
+
+
+def f1_interval(cases: list[Case], rows: dict[str, tuple], n: int = BOOTSTRAP_N,
+                seed: int = 0) -> list[float] | None:
+    """95 % percentile interval of the pooled F1 of ``rows`` over ``cases``, from ``n``
+    resamples with replacement of the held-out units (a person's performances go
+    together: they are not independent of each other); None with fewer than two units.
+    The same ``seed`` gives the same interval."""
+    units: dict[str, np.ndarray] = {}
     for c in cases:
-        by_source.setdefault(c.source, []).append(rows[c.name])
-    return {"pooled": summary(list(rows.values())),
-            "sources": {s: summary(r) for s, r in sorted(by_source.items())}}
+        r = rows[c.name]
+        units.setdefault(c.person, np.zeros(3))[:] += (r[0], r[1], r[2])   # tp, cuts, transitions
+    if len(units) < 2:
+        return None
+    counts = np.array(list(units.values()))
+    pick = np.random.default_rng(seed).integers(0, len(counts), (n, len(counts)))
+    tp, cuts, trans = counts[pick].sum(axis=1).T
+    denom = cuts + trans
+    f1 = np.where(denom > 0, 2 * tp / np.maximum(denom, 1), 1.0)
+    return [round(float(v), 4) for v in np.percentile(f1, [2.5, 97.5])]
+
+
+def report(cases: list[Case], rows: dict[str, tuple]) -> dict:
+    by_source: dict[str, list[Case]] = {}
+    for c in cases:
+        by_source.setdefault(c.source, []).append(c)
+
+    def part(group: list[Case]) -> dict:
+        return {**summary([rows[c.name] for c in group]), "f1_ci95": f1_interval(group, rows)}
+    return {"pooled": part(cases), "sources": {s: part(g) for s, g in sorted(by_source.items())}}
 
 
 def add_performance_arguments(p: argparse.ArgumentParser) -> None:
@@ -398,10 +426,11 @@ def main(argv: list[str] | None = None) -> int:
         if label not in out:
             continue
         r = out[label]
-        print(f"{label}: pooled F1 {r['pooled']['f1']:.3f} (strict {r['pooled']['strict_f1']:.3f}), "
+        print(f"{label}: pooled F1 {r['pooled']['f1']:.3f}{_ci(r['pooled'])} (strict "
+              f"{r['pooled']['strict_f1']:.3f}), "
               f"delay {r['pooled']['delay_median_s']} / {r['pooled']['delay_p90_s']} s")
         for s, v in r["sources"].items():
-            print(f"  {s:12s} F1 {v['f1']:.3f} (strict {v['strict_f1']:.3f})  "
+            print(f"  {s:12s} F1 {v['f1']:.3f}{_ci(v)} (strict {v['strict_f1']:.3f})  "
                   f"{v['cuts']} cuts / {v['transitions']} transitions  "
                   f"delay {v['delay_median_s']} / {v['delay_p90_s']} s")
     for row in out.get("sets", []):
@@ -411,6 +440,11 @@ def main(argv: list[str] | None = None) -> int:
     if "chosen_on_everyone" in out:
         print(f"chosen on everyone: {out['chosen_on_everyone']}")
     return 0
+
+
+def _ci(part: dict) -> str:
+    ci = part.get("f1_ci95")
+    return f" [95 % {ci[0]:.3f}-{ci[1]:.3f}]" if ci else ""
 
 
 if __name__ == "__main__":

@@ -420,6 +420,34 @@ def test_lopo_training_shares_no_subject_with_the_held_out_unit_in_any_source():
                                  "cmu_single/s0/same_000"]
 
 
+def test_lopo_f1_interval_resamples_whole_units():
+    """benchmarks/lopo.py's 95 % interval of a pooled F1: the held-out units (a person's
+    performances together) are resampled, so it brackets the pooled F1, is a point when
+    every unit scores alike, is reproducible, and needs two units."""
+    import numpy as np
+    sys.path.insert(0, str(BENCH))
+    try:
+        import lopo
+    finally:
+        sys.path.remove(str(BENCH))
+
+    def case(name, unit):
+        return lopo.Case(name, unit, frozenset([unit]), "s", 120.0, np.zeros((1, 1)),
+                         np.zeros(1, int), [])
+    cases = [case("a1", "p"), case("a2", "p"), case("b", "q"), case("c", "r")]
+    # (right, cuts, transitions, strict right, delays): p right 9 of 10, q 3 of 10, r 8 of 10
+    rows = {"a1": (4, 5, 5, 4, []), "a2": (5, 5, 5, 5, []), "b": (3, 10, 10, 3, []),
+            "c": (8, 10, 10, 8, [])}
+    lo, hi = lopo.f1_interval(cases, rows)
+    assert lo < 20 / 30 < hi and 0.3 <= lo and hi <= 0.9
+    assert lopo.f1_interval(cases, rows) == [lo, hi]
+    same = {n: (5, 10, 10, 5, []) for n in rows}
+    assert lopo.f1_interval(cases, same) == [0.5, 0.5]
+    assert lopo.f1_interval(cases[:2], rows) is None          # one unit: p
+    part = lopo.report(cases, rows)
+    assert part["pooled"]["f1_ci95"] == [lo, hi] and part["sources"]["s"]["f1_ci95"] == [lo, hi]
+
+
 def test_library_loto_by_person_says_when_nobody_can_be_scored(tmp_path):
     """library_loto.py --by-person on a source of one person (a one-actor folder laid out
     like bandai): nobody has a library of others, so one stderr line names the source and
