@@ -36,7 +36,9 @@ grid on everyone (``sets``: the grid's accuracy against delay, not a held-out fi
 set the same rule chooses on everyone (``chosen_on_everyone``: what to ship).  The same numbers at
 the strict tolerance (cut inside the labelled range) and delay median / p90 are given, and
 each pooled F1's 95 % interval (``f1_ci95``: the held-out units resampled with
-replacement, ``BOOTSTRAP_N`` times).
+replacement, ``BOOTSTRAP_N`` times).  ``--versus FILE`` also scores another parameter set
+on everyone (``versus``) with the paired difference of the two sets' pooled F1 on the same
+resamples (``shipped_minus_versus``).
 The sets are scored in ``--jobs`` processes (default: one per core), each with one BLAS
 thread; the figures do not depend on it.
 """
@@ -310,18 +312,45 @@ def f1_interval(cases: list[Case], rows: dict[str, tuple], n: int = BOOTSTRAP_N,
     resamples with replacement of the held-out units (a person's performances go
     together: they are not independent of each other); None with fewer than two units.
     The same ``seed`` gives the same interval."""
-    units: dict[str, np.ndarray] = {}
-    for c in cases:
-        r = rows[c.name]
-        units.setdefault(c.person, np.zeros(3))[:] += (r[0], r[1], r[2])   # tp, cuts, transitions
-    if len(units) < 2:
+    counts = _unit_counts(cases, rows)
+    if len(counts) < 2:
         return None
-    counts = np.array(list(units.values()))
-    pick = np.random.default_rng(seed).integers(0, len(counts), (n, len(counts)))
+    f1 = _resampled_f1(counts, _resamples(len(counts), n, seed))
+    return [round(float(v), 4) for v in np.percentile(f1, [2.5, 97.5])]
+
+
+def f1_difference(cases: list[Case], a: dict[str, tuple], b: dict[str, tuple],
+                  n: int = BOOTSTRAP_N, seed: int = 0) -> dict | None:
+    """Pooled F1 of ``a`` minus that of ``b`` (two sets' tally rows on the same
+    performances) and its 95 % interval, both sets scored on the same resamples of the
+    units (a paired comparison); None with fewer than two units."""
+    ca, cb = _unit_counts(cases, a), _unit_counts(cases, b)
+    if len(ca) < 2:
+        return None
+    pick = _resamples(len(ca), n, seed)
+    d = _resampled_f1(ca, pick) - _resampled_f1(cb, pick)
+    point = _resampled_f1(ca, np.arange(len(ca))[None]) - _resampled_f1(cb, np.arange(len(cb))[None])
+    return {"f1": round(float(point[0]), 4),
+            "ci95": [round(float(v), 4) for v in np.percentile(d, [2.5, 97.5])]}
+
+
+def _unit_counts(cases: list[Case], rows: dict[str, tuple]) -> np.ndarray:
+    """(units, 3): right cuts, cuts and transitions of each held-out unit, in a fixed order."""
+    units: dict[str, np.ndarray] = {}
+    for c in sorted(cases, key=lambda c: (c.person, c.name)):
+        r = rows[c.name]
+        units.setdefault(c.person, np.zeros(3))[:] += (r[0], r[1], r[2])
+    return np.array(list(units.values())).reshape(-1, 3)
+
+
+def _resamples(units: int, n: int, seed: int) -> np.ndarray:
+    return np.random.default_rng(seed).integers(0, units, (n, units))
+
+
+def _resampled_f1(counts: np.ndarray, pick: np.ndarray) -> np.ndarray:
     tp, cuts, trans = counts[pick].sum(axis=1).T
     denom = cuts + trans
-    f1 = np.where(denom > 0, 2 * tp / np.maximum(denom, 1), 1.0)
-    return [round(float(v), 4) for v in np.percentile(f1, [2.5, 97.5])]
+    return np.where(denom > 0, 2 * tp / np.maximum(denom, 1), 1.0)
 
 
 def report(cases: list[Case], rows: dict[str, tuple]) -> dict:
@@ -365,6 +394,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--params", metavar="FILE",
                    help="detector parameters scored as 'shipped' and filling the grid's "
                         "other keys (default config/detectors.toml; 'fast': config/fast.toml)")
+    p.add_argument("--versus", metavar="FILE",
+                   help="also score these parameters on everyone (a file, or a shipped name "
+                        "such as prompt), beside --params, with the paired difference of "
+                        "their pooled F1 and its 95 %% interval")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                    help="parameter sets scored at once, in that many processes (default: "
                         "the machine's cores; 1: in this process)")
@@ -373,6 +406,13 @@ def main(argv: list[str] | None = None) -> int:
     base = checked_params(args, "lopo")     # a bad file: before minutes of reading
     if base is None:
         return 2
+    versus_base = None
+    if args.versus is not None:
+        try:
+            versus_base = load_params(args.versus)["contrast"]
+        except (OSError, ValueError) as exc:
+            print(f"lopo: --versus: {exc}", file=sys.stderr)
+            return 2
     t0 = time.perf_counter()
     try:
         cases = load_cases(args.data, args.cache, args.per_person, args.seeds)
@@ -388,6 +428,10 @@ def main(argv: list[str] | None = None) -> int:
           f"({time.perf_counter() - t0:.0f} s to read)", file=sys.stderr)
     shipped = {c.name: run(c, base) for c in cases}
     out: dict = {"people": people, "performances": len(cases), "shipped": report(cases, shipped)}
+    if versus_base is not None:
+        versus = {c.name: run(c, versus_base) for c in cases}
+        out["versus"] = {"params": args.versus, **report(cases, versus),
+                         "shipped_minus_versus": f1_difference(cases, shipped, versus)}
     sets = candidate_sets(args.grid, base)
     if sets:
         results = score_sets(cases, sets, args.jobs, lambda k: print(
@@ -422,7 +466,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         print(json.dumps(out, indent=2))
         return 0
-    for label in ("held_out", "shipped", "chosen_on_everyone_fit"):
+    for label in ("held_out", "shipped", "versus", "chosen_on_everyone_fit"):
         if label not in out:
             continue
         r = out[label]
@@ -439,6 +483,10 @@ def main(argv: list[str] | None = None) -> int:
               f"delay {r['delay_median_s']} / {r['delay_p90_s']} s")
     if "chosen_on_everyone" in out:
         print(f"chosen on everyone: {out['chosen_on_everyone']}")
+    diff = out.get("versus", {}).get("shipped_minus_versus")
+    if diff:
+        print(f"shipped minus versus ({args.versus}): pooled F1 {diff['f1']:+.3f} "
+              f"[95 % {diff['ci95'][0]:+.3f} to {diff['ci95'][1]:+.3f}]")
     return 0
 
 

@@ -113,11 +113,21 @@ def test_lopo_leaves_a_spliced_folder_of_the_data_folder_alone(tmp_path):
     (data / "spliced" / "index.tsv").write_text(
         "performance\tkind\tformat\tframes\tsegment\tbehaviour\tsubject\tstart\n")
     r = _run("lopo.py", str(data), "--per-person", "1", "--grid", "none",
-             "--cache", str(tmp_path / "cache"), "--json")
+             "--cache", str(tmp_path / "cache"), "--versus", "prompt", "--json")
     assert r.returncode == 0, r.stderr[-2000:]
     doc = json.loads(r.stdout)
     assert doc["people"] == ["synth:p1", "synth:p2"]
     assert set(doc["shipped"]["sources"]) == {"synth"}
+    # --versus: the other set on everyone, and the paired difference of the pooled F1
+    v = doc["versus"]
+    assert v["params"] == "prompt" and set(v["sources"]) == {"synth"}
+    diff = v["shipped_minus_versus"]
+    assert diff["f1"] == pytest.approx(doc["shipped"]["pooled"]["f1"] - v["pooled"]["f1"],
+                                       abs=1e-3)
+    assert diff["ci95"][0] <= diff["f1"] <= diff["ci95"][1]
+    bad = _run("lopo.py", str(data), "--grid", "none", "--cache", str(tmp_path / "cache"),
+               "--versus", "nosuch")
+    assert bad.returncode == 2 and "--versus" in bad.stderr and "Traceback" not in bad.stderr
 
 
 def test_errors_accounts_for_every_miss_and_false_cut(tmp_path):
@@ -446,6 +456,13 @@ def test_lopo_f1_interval_resamples_whole_units():
     assert lopo.f1_interval(cases[:2], rows) is None          # one unit: p
     part = lopo.report(cases, rows)
     assert part["pooled"]["f1_ci95"] == [lo, hi] and part["sources"]["s"]["f1_ci95"] == [lo, hi]
+    # the paired difference: zero against itself; one unit better by 2 right cuts, above 0
+    assert lopo.f1_difference(cases, rows, rows) == {"f1": 0.0, "ci95": [0.0, 0.0]}
+    better = {**rows, "b": (5, 10, 10, 5, [])}
+    d = lopo.f1_difference(cases, better, rows)
+    assert d["f1"] == pytest.approx(22 / 30 - 20 / 30, abs=1e-4)
+    assert 0.0 <= d["ci95"][0] <= d["f1"] <= d["ci95"][1]
+    assert lopo.f1_difference(cases[:2], rows, rows) is None
 
 
 def test_library_loto_by_person_says_when_nobody_can_be_scored(tmp_path):
