@@ -119,6 +119,7 @@ class SuitStream:
         self.decoder = codec.decoder_for(self.fmt, suit.sensor_ids)
         self._dec_seen = {k: 0 for k in STAT_MAP}
         self._skipped_before = 0  # bytes skipped by a decoder replaced (format auto)
+        self._skipped_seen = 0    # the decoder's skipped_bytes when its counts were last taken
         # binary input since the last intact message: bytes, the last of them, whether a
         # zero byte was among them, when to warn next, when auto-detection last looked
         self._unframed = 0
@@ -176,8 +177,10 @@ class SuitStream:
     @property
     def skipped_bytes(self) -> int:
         """Bytes dropped outside messages: before the first delimiter, runs too long for a
-        message, a text line cut short at a switch to text, text lines too long."""
-        return self._skipped_before + self.decoder.stats.skipped_bytes
+        message, a text line cut short at a switch to text, text lines too long.  Taken
+        with the decoder's other counts (after each read), so it agrees with the
+        ``corrupt`` they add to the source's stats at any moment."""
+        return self._skipped_before + self._skipped_seen
 
     def restart(self, now: float) -> None:
         """The port was (re)opened: a half-received message is dropped."""
@@ -296,6 +299,7 @@ class SuitStream:
         self.fmt = "text"
         self.decoder = codec.decoder_for("text", self.suit.sensor_ids)
         self._dec_seen = {k: 0 for k in STAT_MAP}
+        self._skipped_seen = 0
         self._recent.clear()
         self._unframed = self._sniffed_at = 0
         log.warning("serial %s: text lines detected; reading format=text (write format=text "
@@ -317,6 +321,7 @@ class SuitStream:
                 self._dec_seen[k] = v
                 self._count(field, d)
                 self._log(k, "serial %s: %d %s (total %d)", self.name, d, k.replace("_", " "), v)
+        self._skipped_seen = st.skipped_bytes     # after the counts it goes with
 
     def _handle(self, messages: list[codec.DecodedFrame], now: float) -> None:
         # the decoder's counts of this read first: a reader that takes a frame of it sees
