@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,6 +22,7 @@ from rtseg.simulators.synth.motion import synthesize
 
 from conftest import DATA_DIR
 from rig_variants import RIGS, in_rig
+from source_folders import write_bvh
 
 
 def _tree(spec: list[tuple[str, str]]) -> tuple[list[str], list[int]]:
@@ -123,8 +123,6 @@ def test_side_words_inside_names_and_arms_that_branch_at_the_neck():
 def test_a_biped_bvh_keeps_the_spaces_in_its_joint_names(performance, tmp_path):
     """A 3ds Max Biped BVH file ("JOINT Bip01 L Thigh": joint names with spaces) is read with
     its names whole and mapped by names and topology."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from source_folders import write_bvh
     biped = in_rig(performance.take, "biped")
     take = read_take(write_bvh(tmp_path / "biped.bvh", biped))
     assert sorted(take.joint_names) == sorted(biped.joint_names)
