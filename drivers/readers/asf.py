@@ -88,10 +88,14 @@ def _floats(path: Path, lineno: int, tokens: list[str], n: int, what: str) -> np
     if len(tokens) < n:
         raise ReaderError(path, f"{what} needs {n} numbers, got {len(tokens)}", lineno)
     try:
-        return np.array([float(t) for t in tokens[:n]])
+        values = np.array([float(t) for t in tokens[:n]])
     except ValueError:
         bad = next(t for t in tokens[:n] if not is_number(t))
         raise ReaderError(path, f"{what}: {bad!r} is not a number", lineno) from None
+    if not np.all(np.isfinite(values)):
+        bad = tokens[int(np.argmin(np.isfinite(values)))]
+        raise ReaderError(path, f"{what}: {bad!r} is not a finite number", lineno)
+    return values
 
 
 def angle_to_deg(values: np.ndarray, unit: str) -> np.ndarray:

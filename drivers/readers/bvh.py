@@ -28,6 +28,7 @@ declared, or a bad line before the last stays an error.
 from __future__ import annotations
 
 import logging
+import math
 import re
 from pathlib import Path
 
@@ -139,6 +140,8 @@ def read_bvh(path: str | Path, frame_rate: float | None = None) -> Take:
                     vals.append(float(v))
                 except ValueError:
                     raise ReaderError(path, f"OFFSET value {v!r} is not a number", vln) from None
+                if not math.isfinite(vals[-1]):
+                    raise ReaderError(path, f"OFFSET value {v!r} is not a finite number", vln)
             if not stack:
                 raise ReaderError(path, "OFFSET outside a joint", ln)
             if stack[-1] == "end":
@@ -210,11 +213,13 @@ def read_bvh(path: str | Path, frame_rate: float | None = None) -> Take:
         raise ReaderError(path, f"Frames: {n_frames} is negative", int(header["frames_line"]))
     if frame_rate is not None:
         rate = float(frame_rate)
-        if not rate > 0:
+        if not (rate > 0 and math.isfinite(rate)):
             raise ReaderError(path, f"frame rate must be positive, got {frame_rate}")
     else:
-        if not frame_time > 0:
-            raise ReaderError(path, f"Frame Time {frame_time} must be positive", int(header["time_line"]))
+        if not (frame_time > 0 and math.isfinite(frame_time)
+                and math.isfinite(1.0 / frame_time)):
+            raise ReaderError(path, f"Frame Time {header['time']} must be a positive number "
+                                    "of seconds", int(header["time_line"]))
         rate = 1.0 / frame_time
         if abs(rate - round(rate)) < RATE_SNAP_HZ:   # 0.0333333 s is 30 Hz, not 30.00003
             rate = float(round(rate))
