@@ -80,8 +80,15 @@ def main(argv: list[str] | None = None) -> int:
                          "delay after the labelled transitions of the real training takes "
                          "is at most S seconds (default 2.0)")
     ap.add_argument("--synth-seeds", type=int, nargs="*", default=[0, 1, 2, 3, 4, 5])
+    ap.add_argument("--params", default=None, metavar="NAME|FILE",
+                    help="the detector's parameter set whose cuts the ids follow (`prompt`, "
+                         "`fast` or a TOML file, as `rtseg live --params`; default: shipped)")
     args = ap.parse_args(argv)
-    cfg, method = live_config()
+    try:
+        cfg, method = live_config(None, None, args.params)
+    except (OSError, ValueError) as exc:      # a bad parameter file: one line
+        print(f"identity_loto: --params: {exc}", file=sys.stderr)
+        return 2
     das = ([float(v) for v in args.decide_after.split(",")] if args.decide_after
            else [float(cfg["identity.decide_after_s"])])
     grid = [(float(v), da) for da in das for v in args.grid.split(",")]

@@ -100,6 +100,15 @@ def test_lopo_on_a_folder_of_two_people(tmp_path):
     assert _run("lopo.py", str(tmp_path / "nowhere")).returncode == 2
 
 
+def test_identity_loto_refuses_a_missing_parameter_set_in_one_line(tmp_path):
+    """benchmarks/identity_loto.py --params NAME: the cuts the ids follow come from that
+    parameter set; one that does not exist is one line and exit 2, before any take is read."""
+    r = _run("identity_loto.py", str(tmp_path), "--params", "nosuch")
+    assert r.returncode == 2, r.stderr[-2000:]
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--params" in lines[0] and "nosuch" in lines[0], r.stderr
+
+
 def test_lopo_leaves_a_spliced_folder_of_the_data_folder_alone(tmp_path):
     """A data folder holding ``spliced/`` (performances written by benchmarks/splice.py,
     read by ``rtseg evaluate``) beside a source folder: lopo splices and scores the source
