@@ -628,6 +628,8 @@ def test_csv_hand_written_and_errors(tmp_path):
         ("1,2,x,4,0\n", "angle 'x' is not a number", 1),
         ("1,2,3,4,0\n1,2,3,4,1.5\n", "label '1.5' is not an integer", 2),
         ("1,2,3,4,walk\n", "label 'walk' is not an integer", 1),
+        ("1,2,3,4,0\n1,2,3,4,1e308\n", "label '1e308' is not an integer of 64 bits", 2),
+        ("1,2,3,4,inf\n", "label 'inf' is not an integer", 1),
         ("1,inf,3,4,0\n", "non-finite angle", 1),
     ]:
         bad = _write(tmp_path, "bad.csv", text)

@@ -56,8 +56,8 @@ def read_csv_channels(path: str | Path, frame_rate: float | None = None) -> Take
             lab = float(fields[4])
         except ValueError:
             raise ReaderError(path, f"label {fields[4]!r} is not an integer", lineno) from None
-        if not lab.is_integer():
-            raise ReaderError(path, f"label {fields[4]!r} is not an integer", lineno)
+        if not lab.is_integer() or abs(lab) >= 2.0 ** 63:
+            raise ReaderError(path, f"label {fields[4]!r} is not an integer of 64 bits", lineno)
         angles.append(vals)
         labels.append(int(lab))
     if not angles:
