@@ -154,8 +154,10 @@ def test_each_kind_of_damage_is_counted():
     assert dec.feed(b"\x00\x30\x01\x02\x00") == []
     assert dec.stats.bad_cobs == 1
     assert dec.stats.corrupt == 5
-    # unknown message type with a valid CRC is not corrupt, just refused
-    assert dec.feed(codec.pack_message(b"\x01\x09" + good[2:])) == []
+    # unknown message type with a valid CRC is not corrupt, just refused: only its number
+    # is passed on (it counts in the sequence), with no sensors
+    (unknown,) = dec.feed(codec.pack_message(b"\x01\x09" + good[2:]))
+    assert (unknown.msg_type, unknown.seq, len(unknown.ids)) == (9, 1, 0)
     assert dec.stats.bad_messages == 1 and dec.stats.corrupt == 5
     # overlong run without any delimiter: discarded, decoder resynchronises
     assert dec.feed(b"\x01" * (codec.MAX_WIRE_BYTES + 10)) == []

@@ -66,7 +66,9 @@ What the receiver does with each message (counters in :class:`DecoderStats`):
 - CRC mismatch -> ``bad_crc``
 - version other than 1 -> ``bad_version``
 - all of the above also add to ``corrupt`` and the message is dropped; nothing raises.
-- unknown message type -> ``bad_messages``, dropped.
+- unknown message type -> ``bad_messages``, dropped; its sequence number is passed on
+  (an empty message of that type), since the sender numbers every message, so it is no
+  gap.
 - a sensor whose status says valid but whose quaternion norm differs from 1 by more than
   :data:`NORM_TOLERANCE` (0.03; Q14 rounding moves the norm by < 1.5e-4) -> that sensor
   is marked not valid and counted in ``bad_values``; the rest of the frame is kept.
@@ -277,9 +279,11 @@ class SerialFrameDecoder:
                 order.append(len(others))
                 others.append(_empty_frame(MSG_INFO, seq, time_us, parse_info(text)))
                 self._corrupt_at_good = stats.corrupt
-            else:
+            else:    # its number still counts: the sequence numbers every message
                 stats.bad_messages += 1
-                continue
+                order.append(len(others))
+                others.append(_empty_frame(mtype, seq, time_us))
+                self._corrupt_at_good = stats.corrupt
         if not order:
             return []
         frames = self._convert(heads, blocks) if heads else []

@@ -15,7 +15,9 @@ first value).
   clock tracking start afresh (logged, counted in ``restarts``, not as a gap), and
   ``source_time`` continues from its previous value plus one frame period.  A frame
   repeating the previous frame's sequence number is dropped (``bad_messages``); a
-  status/info message may share a frame's number.
+  status/info message may share a frame's number.  A frame's ``seq`` is its wire number
+  less the numbers status, info and unknown messages took, so only lost messages make
+  holes in it.
 - Sensors: one with no valid value for more than ``stale`` seconds is *lost*; the first
   valid value afterwards *restores* it.  The clock starts at the first frame: a port that
   is open but silent is not a dropout of every sensor.  Each change is a
@@ -141,6 +143,10 @@ class SuitStream:
         self._streaming = False   # set by the first frame: staleness counts from there
         self._last_seq: int | None = None
         self._last_was_frame = False
+        # numbers taken by status / info / unknown messages since the device's numbering
+        # began: a frame's seq is its wire number less these, so only frames number frames
+        self._other_numbers = 0
+        self._other_took = False   # the last message was another message with a new number
         self._last_time_raw: int | None = None
         self._time_acc = 0
         self._last_data = 0.0
@@ -364,6 +370,7 @@ class SuitStream:
                           self.name)
                 self._time_acc += int(round(1e6 / self.frame_rate))
                 self._last_seq = None
+                self._other_numbers, self._other_took = 0, False
             else:
                 self._time_acc += dt
             self._last_time_raw = time_us
@@ -371,6 +378,9 @@ class SuitStream:
             d = (seq - self._last_seq) & 0xFFFF
             is_frame = msg_type == codec.MSG_FRAME
             if d == 0 and not (is_frame and self._last_was_frame):
+                if is_frame and self._other_took:   # it shared this frame's number
+                    self._other_numbers -= 1
+                self._other_took = False
                 self._last_was_frame = is_frame
                 return True
             if d == 0:
@@ -382,9 +392,17 @@ class SuitStream:
                 self._count("dropped", d - 1)
                 self._log("gap", "serial %s: %d messages missing before seq %d",
                           self.name, d - 1, seq)
+            self._other_took = not is_frame and 0 < d < 0x8000
+            self._other_numbers += self._other_took
         self._last_seq = seq
         self._last_was_frame = msg_type == codec.MSG_FRAME
         return True
+
+    def _frame_seq(self, seq: int | None) -> int | None:
+        """A frame's ``seq`` for the pipeline: its wire number less the numbers other
+        messages took (16 bits, wrapping like the wire's), so a status message between two
+        frames is no missing frame there; None for text lines (no numbers)."""
+        return None if seq is None else (seq - self._other_numbers) & 0xFFFF
 
     def _frame(self, m: codec.DecodedFrame, now: float) -> None:
         src_time = self._time_acc / 1e6 if m.time_us is not None else None
@@ -399,7 +417,7 @@ class SuitStream:
             np.copyto(self._state, m.quats)
             self._frames_put += 1
             self._put(Frame(recv_time=now, quats=m.quats, valid=m.valid,
-                            source_time=src_time, seq=m.seq))
+                            source_time=src_time, seq=self._frame_seq(m.seq)))
             return
         self._oldest_valid = None
         rows = self._lut[m.ids]
@@ -419,7 +437,7 @@ class SuitStream:
                     self._restore(back, now)
         self._frames_put += 1
         self._put(Frame(recv_time=now, quats=self._state.copy(), valid=valid,
-                        source_time=src_time, seq=m.seq))
+                        source_time=src_time, seq=self._frame_seq(m.seq)))
 
     def _restore(self, back: np.ndarray, now: float) -> None:
         """Sensors ``back`` (rows) have a valid value again after being lost."""
