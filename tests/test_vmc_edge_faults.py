@@ -190,6 +190,57 @@ def test_clock_jump_ahead_starts_a_new_segment():
     assert asm.stats.clock_restarts == 1 and asm.stats.dropped == 0
 
 
+def _feed_times(times, recv_step=0.005, silence_before=None):
+    """Frames of T ``times`` fed to one assembler, ``recv_step`` s apart on the receive
+    clock (plus ``silence_before`` = (index, seconds)); the frames out and the assembler."""
+    take = make_take(len(times), seed=5)
+    asm = VmcAssembler(SUIT)
+    out, now = [], 0.0
+    for i, t in enumerate(times):
+        if silence_before and i == silence_before[0]:
+            now += silence_before[1]
+        out += asm.feed(encode_frame(take.quats[i], SUIT, time=t, max_datagram=60000)[0], now)
+        now += recv_step
+    out += asm.flush(now + 1.0, force=True)
+    return out, asm
+
+
+def test_a_late_or_repeated_frame_is_dropped_and_the_clock_goes_on():
+    """UDP reorders and repeats datagrams: a frame whose T lies behind the last one's (up to
+    LATE_WINDOW) and that arrives promptly is dropped and counted in bad_messages.  It is no
+    clock restart and makes no gap: the frames after it go on from the newest T."""
+    p = 1 / 60
+    ts = [1.0 + k * p for k in range(20)]
+    late = ts[:15] + [ts[5]] + ts[15:]                 # frame 5 again, 10 frames late
+    out, asm = _feed_times(late)
+    assert [f.source_time for f in out] == pytest.approx(ts, abs=1e-6)
+    assert [f.seq for f in out] == list(range(20))
+    st = asm.stats
+    assert (st.bad_messages, st.clock_restarts, st.gaps, st.dropped) == (1, 0, 0, 0)
+    swapped = ts[:10] + [ts[11], ts[10]] + ts[12:]     # two frames swapped on the way
+    out, asm = _feed_times(swapped)
+    assert [f.source_time for f in out] == pytest.approx(ts[:10] + ts[11:], abs=1e-6)
+    assert [f.seq for f in out] == list(range(10)) + list(range(11, 20))   # 10's slot lost
+    st = asm.stats
+    assert (st.bad_messages, st.clock_restarts, st.gaps, st.dropped) == (1, 0, 1, 1)
+
+
+def test_a_step_back_after_a_silence_or_beyond_the_late_window_restarts_the_clock():
+    """T going back after LATE_SILENCE without frames, or by more than LATE_WINDOW, is the
+    sender's clock restarting: every frame is delivered, the reported times go on."""
+    from rtseg.drivers.osc.vmc.frames import LATE_SILENCE, LATE_WINDOW
+    p = 1 / 60
+    run = [0.5 + k * p for k in range(10)]
+    again = [k * p for k in range(10)]                 # back by 0.5 s < LATE_WINDOW
+    out, asm = _feed_times(run + again, silence_before=(10, LATE_SILENCE + 0.05))
+    times = [f.source_time for f in out]
+    assert len(out) == 20 and all(b > a for a, b in zip(times, times[1:]))
+    assert asm.stats.clock_restarts == 1 and asm.stats.bad_messages == 0
+    far = [k * p for k in range(10)]
+    out, asm = _feed_times([LATE_WINDOW + 1.0 + t for t in far] + far)   # no silence
+    assert len(out) == 20 and asm.stats.clock_restarts == 1 and asm.stats.bad_messages == 0
+
+
 def _rmem_max() -> int | None:
     try:
         with open("/proc/sys/net/core/rmem_max") as fh:

@@ -291,6 +291,7 @@ class OscUdpSource(QueuedSource):
             if self.sender is not None:
                 for frame in self._asm.flush(now, force=True):
                     self._put(frame)
+                self._asm.new_sender()
                 log.warning("OSC port %d: now following sender %s:%s (was %s:%s)", self.port,
                             sender[0], sender[1], self.sender[0], self.sender[1])
             self.sender = sender

@@ -126,6 +126,10 @@ class VrchatAssembler:
                 self._close()
         return out
 
+    def new_sender(self) -> None:
+        """The source now follows another sender (nothing to forget: VRChat OSC carries no
+        sender clock)."""
+
     def flush(self, now: float, force: bool = False) -> list[Frame]:
         """Close the open frame after ``quiet`` seconds without datagrams (or ``force``)."""
         self._out = out = []

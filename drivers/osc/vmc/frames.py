@@ -28,6 +28,13 @@ log = logging.getLogger("rtseg.drivers.vmc")
 #: A step of ``/VMC/Ext/T`` larger than this (s), or any step back, is a clock restart:
 #: reported times continue from the last one instead of following T.
 MAX_CLOCK_JUMP = 3.0
+#: A frame whose ``/VMC/Ext/T`` lies at most this far (s) behind the last frame's, and
+#: that arrives within ``LATE_SILENCE`` (s, receive clock) of the last frame, arrived late
+#: (reordered or repeated on the way): it is dropped, counted in ``bad_messages``, and the
+#: clock goes on.  A step back by more, after a silence, or from a sender the source has
+#: just switched to (``new_sender``) is a clock restart.
+LATE_WINDOW = 1.0
+LATE_SILENCE = 0.25
 #: ``/VMC/Ext/T`` beyond this (s, about 115 days) is no sender's clock but a damaged value:
 #: refused (``bad_values``) like a non-finite one.  Taken as a clock it would restart the
 #: reported clock at a magnitude where float64 no longer holds milliseconds.
@@ -98,6 +105,8 @@ class VmcFrameRules:
         self._last_activity = -math.inf
         self._seq = 0
         self._prev_t: float | None = None      # T of the last frame closed with one
+        self._closed_at = -math.inf            # arrival time of the last frame closed
+        self._new_clock = False                # the next T is another sender's clock
         self._period: float | None = None      # sender frame period estimated from T, s
         self._t_offset = 0.0                   # reported time = T + offset (clock segments)
         self._last_reported: float | None = None
@@ -129,6 +138,11 @@ class VmcFrameRules:
                 self._t = None
                 self._root = None
         return out
+
+    def new_sender(self) -> None:
+        """The source now follows another sender: the next frame's ``/VMC/Ext/T`` is that
+        sender's clock, so a step back is a clock restart, not a late frame."""
+        self._new_clock = True
 
     @property
     def pending(self) -> bool:
@@ -334,6 +348,14 @@ class VmcFrameRules:
         return self._period
 
     def _close(self) -> None:
+        t = self._t
+        if t is not None and self._prev_t is not None and not self._new_clock and \
+                -LATE_WINDOW <= t - self._prev_t < 0.0 and \
+                self._now - self._closed_at < LATE_SILENCE:
+            self._late(t)
+            return
+        self._new_clock = False
+        self._closed_at = self._now
         if self.offsets.capturing:
             self.offsets.frame_closed()
         J = self.n_bones
@@ -349,7 +371,6 @@ class VmcFrameRules:
                 rp = np.array(pos, dtype=np.float64)
         elif self._root_bone_pos is not None:
             rp = np.array(self._root_bone_pos, dtype=np.float64)
-        t = self._t
         if t is not None:
             if self._prev_t is not None:
                 dt = t - self._prev_t
@@ -364,6 +385,18 @@ class VmcFrameRules:
                                source_time=t, seq=self._seq, root_position=rp))
         self._seq += 1
         self._last_closed_t = t
+        self._clear()
+
+    def _late(self, t: float) -> None:
+        """The open frame's T lies behind the last frame's, within ``LATE_WINDOW``: a frame
+        reordered or repeated on the way, whose time has passed.  Dropped and counted; the
+        clock, the sequence and the frame period are left as they were."""
+        self._bad_message(f"a frame of /VMC/Ext/T {t:.3f} s arrived after one of "
+                          f"{self._prev_t:.3f} s (late or repeated on the way): dropped")
+        self._clear()
+
+    def _clear(self) -> None:
+        """Forget the open frame (closed or dropped)."""
         self._got[:] = self._all_false   # in place: _bundle holds a reference
         self._n_got = 0
         self._t = None
