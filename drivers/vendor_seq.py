@@ -21,7 +21,7 @@ since the last trusted value.  A forward jump skipping ``k`` frames is
   stream goes on from it;
 - a **suspect** value beyond that, as is a jump backwards by more than ``MIN_SLACK`` (one
   at most ``MIN_SLACK`` back, or a repeat, is a frame that arrived late: it changes
-  nothing and is delivered as it is).  A suspect value is a counter jump (1 in ``jumps``)
+  nothing, and the source drops it, counted in ``bad_messages``: ``SeqStep.late``).  A suspect value is a counter jump (1 in ``jumps``)
   and never a count of lost frames.
 
 A frame with a probable-gap or suspect value is delivered - its payload is whole, only its
@@ -71,10 +71,13 @@ class SeqStep(NamedTuple):
     """What one counter value means: ``missing`` frames lost just before it (0 or more),
     ``seq`` to deliver (the value, or for a suspect one the last trusted value + the frames
     waiting since), ``jumps``: counter values now taken as damaged or restarted counters (0-2;
-    count them)."""
+    count them), ``late``: the value repeats the last one or lies at most ``MIN_SLACK``
+    behind it - a frame repeated or reordered on the way, whose time has passed: drop it
+    (count it in ``bad_messages``), its ``seq`` would go back."""
     missing: int
     seq: int
     jumps: int = 0
+    late: bool = False
 
 
 class SeqGaps:
@@ -139,7 +142,7 @@ class SeqGaps:
             self._accept(seq, now, 1)
             return SeqStep(0, seq)
         if d == 0 or self._mask + 1 - d <= MIN_SLACK:  # repeated, or a few frames late
-            return SeqStep(0, seq)
+            return SeqStep(0, seq, 0, True)
         sure, probable = self.bounds(_elapsed(now, self._t_last))
         k = d - 1 - self._held                          # waiting frames filled some slots
         from_last = d < self._half and k <= probable

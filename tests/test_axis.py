@@ -629,6 +629,23 @@ def test_binary_datagrams_fed_together_give_the_frames_fed_one_by_one():
             assert np.array_equal(g.root_position, r.root_position)
 
 
+def test_a_repeated_or_late_binary_frame_is_dropped_and_counted():
+    """UDP repeats and reorders datagrams: a frame whose index repeats the last one or lies
+    a few behind it is dropped and counted in bad_messages - delivered, its seq would go
+    back, which the live loop takes for a restarted stream - one by one and in a batch."""
+    rng = np.random.default_rng(5)
+    v = rng.uniform(-90, 90, (8, 354))
+    d = [A.encode_binary(v[k], frame_index=k) for k in range(8)]
+    datagrams = d[:6] + [d[5], d[3]] + d[6:]          # 5 repeated, 3 late
+    for feed in ("one", "many"):
+        c = Counter()
+        adapter = _BinaryAdapter(AxisFrames(c))
+        got = ([f for g in datagrams for f in adapter.feed(g, 0.5)] if feed == "one"
+               else adapter.feed_many(datagrams, 0.5))
+        assert [f.seq for f in got] == list(range(8)), feed
+        assert c.counts == {"bad_messages": 2}, feed
+
+
 def test_binary_source_takes_pending_datagrams_as_one_batch():
     """Datagrams sent faster than the reader decodes them wait in the socket buffer; the
     source takes them together (batches of more than one datagram), and every frame still

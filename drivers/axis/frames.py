@@ -72,16 +72,22 @@ class AxisFrames:
         self._count(exc.kind)
         self.warn(exc.kind, now, "Axis: frame dropped (%s): %s", exc.kind, exc)
 
-    def _seq(self, f: AxisFrame, now: float) -> int:
+    def _seq(self, f: AxisFrame, now: float) -> int | None:
         """The frame's ``seq``: the binary frame index (a forward jump adds 1 to ``gaps``
         and the frames skipped to ``dropped``; an index the receive clock cannot explain,
         or backwards, is a damaged or restarted counter: 1 in ``counter_jumps``, the last
         trusted index + 1 returned; :class:`rtseg.drivers.vendor_seq.SeqGaps`), or for text
-        the count of frames so far."""
+        the count of frames so far.  None for a frame repeated or reordered on the way (an
+        index repeating the last one or a few behind it): dropped, 1 in ``bad_messages``."""
         self.received += 1
         if f.frame_index is None:
             return self.received - 1
         step = self._gaps.step(f.frame_index, now)
+        if step.late:
+            self._count("bad_messages")
+            self.warn("late", now, "Axis: frame index %d repeated or late (after %s): "
+                      "dropped", f.frame_index, self._gaps.last)
+            return None
         if step.jumps:                             # damaged or restarted (SeqGaps logs)
             self._count("counter_jumps", step.jumps)
         if step.missing:
@@ -118,18 +124,20 @@ class AxisFrames:
         self.rest = rest_pose(f.values, f.with_ref, self.unit_scale)
         self.no_geometry = self.rest is None and self._rest_tries >= REST_TRIES
 
-    def _convert(self, f: AxisFrame, now: float) -> Frame:
+    def _convert(self, f: AxisFrame, now: float) -> Frame | None:
+        seq = self._seq(f, now)
+        if seq is None:                       # repeated or late: dropped, counted
+            return None
         self._note_rest(f)
         if not (f.finite or (f.finite is None and np.isfinite(f.values).all())):
-            return self._convert_bad(f, now)
+            return self._convert_bad(f, now, seq)
         q, self._last, pos = poses(f.values, f.with_disp, f.with_ref, self.order,
                                    self.unit_scale, self.space)
-        seq = self._seq(f, now)
         return Frame(recv_time=now, quats=q, valid=_ALL_VALID.copy(),
                      source_time=None if f.frame_index is None else seq / self.rate,
                      seq=seq, root_position=pos)
 
-    def _convert_bad(self, f: AxisFrame, now: float) -> Frame:
+    def _convert_bad(self, f: AxisFrame, now: float, seq: int) -> Frame:
         """A frame with non-finite values: those joints invalid (their last good local
         rotation kept; in global space their descendants invalid too), counted."""
         q, valid, pos = to_pose(f, self.order, self.unit_scale)   # fresh arrays
@@ -145,7 +153,6 @@ class AxisFrames:
                 for j, p in enumerate(PARENTS):
                     if p >= 0 and not valid[p]:
                         valid[j] = False
-        seq = self._seq(f, now)
         return Frame(recv_time=now, quats=q, valid=valid,
                      source_time=None if f.frame_index is None else seq / self.rate,
                      seq=seq, root_position=pos)
@@ -174,12 +181,12 @@ class AxisFrames:
         return out
 
     def _run(self, run: list[AxisFrame], now: float, out: list[Frame]) -> None:
-        if len(run) == 1:
-            out.append(self._convert(run[0], now))
-            return
-        values = np.array([f.values for f in run])      # (np.stack costs 5x more)
-        if not (all(f.finite for f in run) or np.isfinite(values).all()):
-            out.extend(self._convert(f, now) for f in run)   # some non-finite values
+        values = None if len(run) == 1 else np.array([f.values for f in run])  # (not np.stack: 5x)
+        if values is None or not (all(f.finite for f in run) or np.isfinite(values).all()):
+            for f in run:                                    # one, or non-finite values
+                frame = self._convert(f, now)
+                if frame is not None:                        # None: repeated or late
+                    out.append(frame)
             return
         f0 = run[0]
         self._note_rest(f0)
@@ -188,6 +195,8 @@ class AxisFrames:
         self._last = local[-1]
         for k, f in enumerate(run):
             seq = self._seq(f, now)
+            if seq is None:                              # repeated or late: dropped
+                continue
             out.append(Frame(recv_time=now, quats=q[k], valid=_ALL_VALID.copy(),
                              source_time=None if f.frame_index is None
                              else seq / self.rate, seq=seq,

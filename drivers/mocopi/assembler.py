@@ -87,7 +87,7 @@ class MocopiAssembler:
         lay = self._layout
         if lay is not None and lay.matches(data):
             self.fast_frames += 1
-            return [self._frame(lay.decode(data), now)]
+            return self._frame(lay.decode(data), now)
         try:
             pkt = parse_packet(data)
             if self.fast and pkt.frame is not None and pkt.ftyp in (None, FTYP):
@@ -104,15 +104,20 @@ class MocopiAssembler:
         if pkt.frame is None:
             self._count("bad_messages", 1, "datagram with neither fram nor skdf")
             return []
-        return [self._frame(pkt.frame, now)]
+        return self._frame(pkt.frame, now)
 
     def flush(self, now: float, force: bool = False) -> list[Frame]:
         """Nothing to flush: each datagram is a whole frame."""
         return []
 
-    def _frame(self, fr: MocopiFrame, now: float) -> Frame:
+    def _frame(self, fr: MocopiFrame, now: float) -> list[Frame]:
+        """[the frame of ``fr``], or [] for a frame repeated or reordered on the way."""
         self.last_frame = fr
         step = self._gaps.step(fr.fnum, now)
+        if step.late:
+            self._count("bad_messages", 1, f"frame fnum {fr.fnum} repeated or late (after "
+                        f"fnum {self._gaps.last}): dropped")
+            return []
         if step.jumps:                                # damaged or restarted (SeqGaps logs)
             self.stats.counter_jumps += step.jumps
         missing = step.missing
@@ -123,7 +128,7 @@ class MocopiAssembler:
         seq = step.seq
         fast = self._frame_fast(fr, now, seq)
         if fast is not None:
-            return fast
+            return [fast]
         ids = fr.bone_ids
         ok = (ids >= 0) & (ids < len(self._lut))
         rows = np.full(len(ids), -1, dtype=np.int64)
@@ -159,8 +164,8 @@ class MocopiAssembler:
             if np.isfinite(pos).all():
                 root = pos.copy()
         st = fr.uttm if fr.uttm is not None and math.isfinite(fr.uttm) else None
-        return Frame(recv_time=now, quats=q, valid=valid, source_time=st, seq=seq,
-                     root_position=root)
+        return [Frame(recv_time=now, quats=q, valid=valid, source_time=st, seq=seq,
+                      root_position=root)]
 
     def _frame_fast(self, fr: MocopiFrame, now: float, seq: int) -> Frame | None:
         """Exactly the suit's bones in suit order, all finite and unit: few numpy

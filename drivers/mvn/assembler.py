@@ -52,7 +52,8 @@ class MvnAssembler:
     emitted with what it holds: missing segments ``valid`` False), or by :meth:`flush`
     ``quiet`` seconds after its first datagram.  A datagram of a sample at most
     ``LATE_WINDOW`` (64) samples older than the newest seen, or of the sample last emitted, is
-    late: counted in ``dropped`` and discarded; one further back is taken as the sender
+    late: counted in ``bad_messages`` (nothing is lost: its sample was emitted, whole or
+    with that datagram's segments invalid) and discarded; one further back is taken as the sender
     restarting its counter and starts a new frame.
 
     Per frame: ``quats`` (J, 4) rtseg frame, global; segments not received hold their last
@@ -165,8 +166,8 @@ class MvnAssembler:
         newest = p.sample if p is not None else last
         if newest is not None and (_older(hdr.sample, newest) or
                                    (p is None and hdr.sample == last)):
-            self._count("dropped", f"datagram of sample {hdr.sample} arrived after sample "
-                        f"{newest} (late or repeated); dropped")
+            self._count("bad_messages", f"datagram of sample {hdr.sample} arrived after "
+                        f"sample {newest} (late or repeated); dropped")
             return
         if p is not None and p.sample != hdr.sample:      # a newer sample: close the open one
             self._open = None
