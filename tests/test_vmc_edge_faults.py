@@ -225,6 +225,29 @@ def test_a_late_or_repeated_frame_is_dropped_and_the_clock_goes_on():
     assert (st.bad_messages, st.clock_restarts, st.gaps, st.dropped) == (1, 0, 1, 1)
 
 
+def test_late_and_reordered_frames_over_udp_cost_the_live_loop_no_restart(source):
+    """Over real UDP: one frame sent again 15 frames late, and two frames swapped.  The
+    source drops the two late ones (bad_messages), counts the swapped pair's lost slot
+    once, restarts no clock, and the frames' seq never goes back - so the live loop's gap
+    accounting (``rtseg.live.input_gaps``) sees one missing frame and no restart."""
+    from rtseg.live.input_gaps import InputGaps
+    take = make_take(60, seed=6)
+    order = list(range(30)) + [15] + list(range(30, 40)) + [41, 40] + list(range(42, 60))
+    addr = ("127.0.0.1", source.port)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
+        for i in order:
+            out.sendto(encode_frame(take.quats[i], SUIT, time=1.0 + i / 60.0,
+                                    max_datagram=60000)[0], addr)
+            time.sleep(0.002)
+    frames = read_all(source)
+    assert len(frames) == 59
+    st = source.stats
+    assert (st.bad_messages, st.clock_restarts, st.gaps, st.dropped) == (2, 0, 1, 1)
+    gaps = InputGaps(max_gap_frames=12)
+    missing = [gaps.step(f.seq, f.recv_time, f.source_time)[0] for f in frames]
+    assert sum(missing) == 1 and max(missing) == 1          # the swapped pair's slot
+
+
 def test_a_step_back_after_a_silence_or_beyond_the_late_window_restarts_the_clock():
     """T going back after LATE_SILENCE without frames, or by more than LATE_WINDOW, is the
     sender's clock restarting: every frame is delivered, the reported times go on."""
