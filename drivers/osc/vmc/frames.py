@@ -25,8 +25,9 @@ from rtseg.core.frame import Frame
 
 log = logging.getLogger("rtseg.drivers.vmc")
 
-#: A step of ``/VMC/Ext/T`` larger than this (s), or any step back, is a clock restart:
-#: reported times continue from the last one instead of following T.
+#: A step of ``/VMC/Ext/T`` larger than this (s), or a step back (but for a late frame,
+#: below), is a clock restart: reported times continue from the last one instead of
+#: following T.
 MAX_CLOCK_JUMP = 3.0
 #: A frame whose ``/VMC/Ext/T`` lies at most this far (s) behind the last frame's, and
 #: that arrives within ``LATE_SILENCE`` (s, receive clock) of the last frame, arrived late
