@@ -87,9 +87,9 @@ class SessionClock:
                 ds, dr = src - a_src, max(0.0, recv - a_recv)
                 why = ""
                 if ds < 0.0:
-                    why = f"the source clock went back {-ds:.3f} s"
+                    why = f"the source clock went back {-ds:.6g} s"
                 elif ds > MAX_SPEEDUP * dr + 1.0:
-                    why = f"the source clock jumped {ds:.3f} s in {dr:.3f} s"
+                    why = f"the source clock jumped {ds:.6g} s in {dr:.3f} s"
                 if why:
                     self.segments += 1
                     self.last_break = why

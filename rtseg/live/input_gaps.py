@@ -7,6 +7,10 @@ from __future__ import annotations
 
 import math
 
+#: a source-clock step longer than this (s) is no run of lost frames but a clock that jumped
+#: (a damaged or reset timestamp): it counts no missing frames and teaches no period
+MAX_STEP_S = 86400.0
+
 
 class InputGaps:
     """The previous frame's sequence number, receive time and source time, and the source
@@ -62,15 +66,15 @@ class InputGaps:
 
         The frame period is learned from the source's own time steps (running mean of the
         steps that are not gaps, after 16 steps), so it does not depend on the nominal
-        rate.  Returns 0 until then, for steps backwards (clock reset) and for steps below
-        2.5 periods; after 8 long steps in a row the source is taken to have slowed down
+        rate.  Returns 0 until then, for steps backwards (clock reset), for steps longer
+        than ``MAX_STEP_S`` (a clock jump) and for steps below 2.5 periods; after 8 long steps in a row the source is taken to have slowed down
         and the period is learned again.  A step over frames the caller knows are lost
         (``known_lost`` > 0: dropped by the live loop) is measured but not learned from."""
         prev = self._prev_src
         if source_time is None or prev is None or not math.isfinite(source_time):
             return 0
         d = source_time - prev
-        if d <= 0:
+        if not 0 < d <= MAX_STEP_S:      # back, repeated, or a jump (even past float range)
             return 0
         p = self._src_period
         if known_lost > 0:
