@@ -743,6 +743,33 @@ def test_text_over_tcp_connects_late_and_reconnects_after_the_server_drops():
         src.close()
 
 
+def test_text_frame_cut_by_a_closed_connection_counts_as_dropped():
+    """Axis Neuron's server writes 10 text frames and half of the 11th, then closes; after
+    rtseg reconnects it writes 10 more.  The half frame is a frame lost: 1 in ``dropped``
+    (text frames carry no number that would show it), none counted corrupt."""
+    from rtseg.drivers.axis.text import encode_text
+    frames = [encode_text(np.zeros(354, np.float32) + k) for k in range(21)]
+    with socket.socket() as srv:
+        srv.bind(("127.0.0.1", 0))
+        srv.listen(2)
+        srv.settimeout(5)
+        src = open_source(f"axis://127.0.0.1:{srv.getsockname()[1]}?format=text&backoff=0.01")
+        try:
+            c, _ = srv.accept()
+            c.sendall(b"".join(frames[:10]) + frames[10][:1000])
+            time.sleep(0.2)
+            c.close()
+            c, _ = srv.accept()
+            with c:
+                c.sendall(b"".join(frames[11:]))
+                got = [f for f in iter(lambda: src.read(timeout=0.5), None)]
+            assert len(got) == 20
+            st = src.stats
+            assert (st.dropped, st.corrupt, st.reconnects) == (1, 0, 1)
+        finally:
+            src.close()
+
+
 @pytest.mark.parametrize("fmt", ["binary", "text"])
 def test_simulator_through_live_session_gives_valid_joints_and_cuts(fmt):
     """A synthetic take with 3 behaviour changes, sent x4 (UDP binary, or TCP text from the

@@ -220,8 +220,13 @@ class TextStream:
             self.frames.error(AxisError("corrupt", "no '||' within 64 KiB; discarded"), now)
         return self.frames.many(decode_texts(chunks), now) if chunks else []
 
-    def reset(self) -> None:
-        """Forget a partial frame (after a reconnect)."""
+    def reset(self, now: float = 0.0) -> None:
+        """Forget a partial frame (the connection closed): a frame cut short by the close
+        is a frame lost, 1 in ``dropped`` (text frames carry no number that would show
+        it)."""
+        if self.splitter.partial:
+            self.frames.error(AxisError("dropped", "frame cut short by the connection "
+                                                   "closing"), now)
         self.splitter.reset()
 
 

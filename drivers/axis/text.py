@@ -338,6 +338,12 @@ class TextSplitter:
             self.overflows += 1
         return [f for f in frames if f and not f.isspace()]
 
+    @property
+    def partial(self) -> bool:
+        """Whether the bytes kept since the last ``||`` hold a frame's start (not only
+        white space)."""
+        return any(p.strip() for p in self._parts)
+
     def reset(self) -> None:
         """Forget a partial frame (after a reconnect)."""
         self._parts = []
