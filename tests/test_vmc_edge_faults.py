@@ -225,6 +225,19 @@ def test_a_late_or_repeated_frame_is_dropped_and_the_clock_goes_on():
     assert (st.bad_messages, st.clock_restarts, st.gaps, st.dropped) == (1, 0, 1, 1)
 
 
+def test_a_damaged_time_ahead_costs_one_frame_and_one_clock_restart():
+    """A T damaged a little ahead (still a time): the frames after it lie behind it.  The
+    first is dropped as late; the next goes on from that one, not from the damaged frame,
+    so the damaged T was the odd one: a clock restart there, and the rest is delivered
+    (reported times still increasing) - not every frame up to the damaged time dropped."""
+    p = 1 / 60
+    ts = [1.0 + k * p for k in range(30)]
+    out, asm = _feed_times(ts[:10] + [ts[10] + 0.5] + ts[11:])
+    times = [f.source_time for f in out]
+    assert len(out) == 29 and all(b > a for a, b in zip(times, times[1:]))
+    assert asm.stats.bad_messages == 1 and asm.stats.clock_restarts == 1
+
+
 def test_late_and_reordered_frames_over_udp_cost_the_live_loop_no_restart(source):
     """Over real UDP: one frame sent again 15 frames late, and two frames swapped.  The
     source drops the two late ones (bad_messages), counts the swapped pair's lost slot

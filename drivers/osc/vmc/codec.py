@@ -128,7 +128,9 @@ class VmcAssembler(VmcFrameRules):
     period after the last reported time (warned, counted in ``stats.clock_restarts``) -
     except a frame whose T lies at most ``LATE_WINDOW`` s behind the last one's and that
     arrives within ``LATE_SILENCE`` s of it (reordered or repeated on the way): that frame is
-    dropped (``stats.bad_messages``) and the clock goes on; ``seq`` counts frames from 0,
+    dropped (``stats.bad_messages``) and the clock goes on (when the next frame goes on from
+    the dropped one, the frame before them had a damaged T: a clock restart there);
+    ``seq`` counts frames from 0,
     advancing by the number of sender frames elapsed when T jumps by more than 1.75 of the
     sender's frame period (estimated from T), so frames lost on the network show up as
     sequence gaps (and in ``stats.gaps`` / ``stats.dropped``); ``root_position`` = Root/Pos position + root rotation applied to the root bone's

@@ -32,8 +32,10 @@ MAX_CLOCK_JUMP = 3.0
 #: A frame whose ``/VMC/Ext/T`` lies at most this far (s) behind the last frame's, and
 #: that arrives within ``LATE_SILENCE`` (s, receive clock) of the last frame, arrived late
 #: (reordered or repeated on the way): it is dropped, counted in ``bad_messages``, and the
-#: clock goes on.  A step back by more, after a silence, or from a sender the source has
-#: just switched to (``new_sender``) is a clock restart.
+#: clock goes on.  When the next frame goes on from it instead (later than it, still behind
+#: the last frame), the last frame's T was the odd one (damaged ahead): that next frame is
+#: a clock restart.  So is a step back by more, after a silence, or from a sender the
+#: source has just switched to (``new_sender``).
 LATE_WINDOW = 1.0
 LATE_SILENCE = 0.25
 #: ``/VMC/Ext/T`` beyond this (s, about 115 days) is no sender's clock but a damaged value:
@@ -107,6 +109,7 @@ class VmcFrameRules:
         self._seq = 0
         self._prev_t: float | None = None      # T of the last frame closed with one
         self._closed_at = -math.inf            # arrival time of the last frame closed
+        self._late_t: float | None = None      # T of the frame just dropped as late
         self._new_clock = False                # the next T is another sender's clock
         self._period: float | None = None      # sender frame period estimated from T, s
         self._t_offset = 0.0                   # reported time = T + offset (clock segments)
@@ -353,8 +356,14 @@ class VmcFrameRules:
         if t is not None and self._prev_t is not None and not self._new_clock and \
                 -LATE_WINDOW <= t - self._prev_t < 0.0 and \
                 self._now - self._closed_at < LATE_SILENCE:
-            self._late(t)
-            return
+            lt = self._late_t
+            if lt is None or not 0.0 < t - lt <= LATE_WINDOW:
+                self._late_t = t
+                self._late(t)
+                return
+            # it goes on from the frame dropped as late: the frame before them was the odd
+            # one (a damaged T ahead): a clock restart here, below
+        self._late_t = None
         self._new_clock = False
         self._closed_at = self._now
         if self.offsets.capturing:
