@@ -199,8 +199,17 @@ def run_serial(b: Bench, faults: str, speed: float) -> dict:
                                          lambda: suit.wait_done(0), b.take.n_frames / RATE / speed + 60)
     finally:
         suit.stop()
-    by_index = {m.index: m for m in suit.sent_log}
-    # unwrap the u16 sequence numbers: message index = unwrapped seq - start seq
+    # a frame's seq is its message index less the numbers taken by the info messages the
+    # source received after its first message (rtseg.drivers.serial.stream: frames number
+    # frames; the first message starts the numbering whatever its type)
+    by_frame_seq, others, seen = {}, 0, False
+    for m in suit.sent_log:
+        if m.frame < 0:
+            others += m.fate == "intact" and seen
+        else:
+            by_frame_seq[m.index - others] = m
+        seen = seen or m.fate == "intact"
+    # unwrap the u16 sequence numbers
     frames, received = [], set()
     prev, base = None, 0
     for s in probe.seq:
@@ -210,9 +219,10 @@ def run_serial(b: Bench, faults: str, speed: float) -> dict:
         if prev is not None and s < prev and prev - s > 32768:
             base += 65536
         prev = s
-        m = by_index.get(base + s)
+        m = by_frame_seq.get(base + s)
         frames.append(m.frame if m is not None else -1)
-        received.add(base + s)
+        if m is not None:
+            received.add(m.index)
     intact = [m.index for m in suit.sent_log if m.frame >= 0 and m.fate == "intact"]
     overflow = sum(1 for m in suit.sent_log if m.fate == "overflow")
     lost = sum(1 for i in intact if i not in received) + overflow + session.stats.overruns

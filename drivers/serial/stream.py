@@ -143,8 +143,9 @@ class SuitStream:
         self._streaming = False   # set by the first frame: staleness counts from there
         self._last_seq: int | None = None
         self._last_was_frame = False
-        # numbers taken by status / info / unknown messages since the device's numbering
-        # began: a frame's seq is its wire number less these, so only frames number frames
+        # numbers taken by status / info / unknown messages after the first message of the
+        # device's numbering: a frame's seq is its wire number less these, so only frames
+        # number frames
         self._other_numbers = 0
         self._other_took = False   # the last message was another message with a new number
         self._last_time_raw: int | None = None
