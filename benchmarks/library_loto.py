@@ -8,6 +8,7 @@
     python3 benchmarks/library_loto.py fewshot [DATA_DIR] [--seconds S]  # short examples
     python3 benchmarks/library_loto.py --by-person DIR [--n N] [--seed K] [--no-hide] [--truth-cuts]
     (options: --no-reject, --metric model|descriptor, --step S, --name-after S, --claim-margin M,
+    --decide-after S, --id-threshold D,
     --params FILE: the live detectors' parameters, e.g. fast)
 
 --by-person DIR: DIR a source folder laid out like ../shared/data/cmu_single, hdm05 or
@@ -50,6 +51,8 @@ take alone (``one_name``: that exercise's segments must get its name, every othe
 ``--metric descriptor``: libraries of the earlier descriptor distance (default: model).
 ``--step S``: example windows every S seconds (default ``rtseg.library.behaviours.DEFAULT_STEP_S``);
 ``--name-after S``: the tracker's ``name_after_s`` (default: config/live.toml's);
+``--decide-after S``, ``--id-threshold D``: its ``decide_after_s`` and ``threshold`` (the
+ids, and when a segment is named; defaults: config/live.toml's);
 ``--claim-margin M``: its ``claim_margin`` (0-1; 0 = exclusive names without claims).
 Prints one JSON document; parameters are the library's own (calibrated inside it).
 ``held_out``: the held-out takes' segments (``unknown_correct`` over those whose behaviour
@@ -102,9 +105,14 @@ def _pop_number(argv: list[str], flag: str, kind: type, what: str,
 
 
 def _identity_options(cfg, opts: dict) -> None:
-    """``--name-after`` and ``--claim-margin`` into the session configuration ``cfg``."""
+    """``--name-after``, ``--decide-after``, ``--id-threshold`` and ``--claim-margin`` into
+    the session configuration ``cfg``."""
     if "--name-after" in opts:
         cfg["identity.name_after_s"] = opts["--name-after"]
+    if "--decide-after" in opts:
+        cfg["identity.decide_after_s"] = opts["--decide-after"]
+    if "--id-threshold" in opts:
+        cfg["identity.threshold"] = opts["--id-threshold"]
     if "--claim-margin" in opts:
         cfg["identity.claim_margin"] = opts["--claim-margin"]
 
@@ -255,6 +263,8 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
                       "seconds": round(time.perf_counter() - t0, 1),
                       "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
                       "name_after_s": cfg["identity.name_after_s"],
+                      "decide_after_s": cfg["identity.decide_after_s"],
+                      "identity_threshold": cfg["identity.threshold"],
                       "claim_margin": cfg["identity.claim_margin"], "performances": kw["n"],
                       "seed": kw["seed"], "hidden_names": hide, "cuts": kw["cuts"],
                       "threshold_scale": kw.get("threshold_scale", 1.0), **doc}, indent=1, default=str))
@@ -284,10 +294,13 @@ def main(argv: list[str] | None = None) -> int:
         params = _pop_number(argv, "--params", str, "a detector parameter file (or 'fast')")
         if params is not None:
             opts["--params"] = params
-        for flag in ("--step", "--name-after", "--seconds"):
+        for flag in ("--step", "--name-after", "--seconds", "--decide-after"):
             value = _pop_number(argv, flag, float, "seconds, a number", "seconds, > 0")
             if value is not None:
                 opts[flag] = value
+        value = _pop_number(argv, "--id-threshold", float, "a distance, a number", "> 0")
+        if value is not None:
+            opts["--id-threshold"] = value
         margin = _pop_number(argv, "--claim-margin", float, "a number from 0 to 1")
         if margin is not None:
             if not 0.0 <= margin <= 1.0:
@@ -347,6 +360,8 @@ def main(argv: list[str] | None = None) -> int:
            "seconds": round(time.perf_counter() - t0, 1),
            "step_s": opts.get("--step", DEFAULT_STEP_S),
            "name_after_s": cfg["identity.name_after_s"],
+           "decide_after_s": cfg["identity.decide_after_s"],
+           "identity_threshold": cfg["identity.threshold"],
            "claim_margin": cfg["identity.claim_margin"], **doc}
     print(json.dumps(doc, indent=1, default=str))
     return 0

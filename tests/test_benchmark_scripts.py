@@ -227,6 +227,18 @@ def test_library_loto_by_person_over_a_source_folder(tmp_path):
     assert all(s["known"] for s in segs)            # every behaviour is in the others' library
     delays = [s["delay_s"] for s in segs if s["delay_s"] is not None]
     assert delays and all(1.3 <= d <= 1.9 for d in delays), delays
+    # --decide-after / --id-threshold set the tracker's: named 2.5 s after the change
+    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
+             "--truth-cuts", "--no-hide", "--segments", "--decide-after", "2.5",
+             "--id-threshold", "5")
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    assert (doc["decide_after_s"], doc["identity_threshold"]) == (2.5, 5.0)
+    delays = [s["delay_s"] for s in doc["sources"]["synth"]["segments"]
+              if s["delay_s"] is not None]
+    assert delays and all(2.3 <= d <= 2.6 for d in delays), delays
+    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--id-threshold", "0")
+    assert r.returncode == 2 and r.stderr.strip() == "--id-threshold: > 0"
     r = _run("library_loto.py", "--by-person", str(tmp_path / "nowhere"))
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
     assert "no source folder" in r.stderr
