@@ -188,15 +188,18 @@ class AxisFrames:
                 if frame is not None:                        # None: repeated or late
                     out.append(frame)
             return
+        seqs = [self._seq(f, now) for f in run]          # None: repeated or late, dropped
+        if None in seqs:                                 # (before any pose is worked out)
+            keep = [k for k, seq in enumerate(seqs) if seq is not None]
+            if not keep:
+                return
+            run, values, seqs = [run[k] for k in keep], values[keep], [seqs[k] for k in keep]
         f0 = run[0]
         self._note_rest(f0)
         q, local, root = poses(values, f0.with_disp, f0.with_ref, self.order,
                                self.unit_scale, self.space)
         self._last = local[-1]
-        for k, f in enumerate(run):
-            seq = self._seq(f, now)
-            if seq is None:                              # repeated or late: dropped
-                continue
+        for k, (f, seq) in enumerate(zip(run, seqs)):
             out.append(Frame(recv_time=now, quats=q[k], valid=_ALL_VALID.copy(),
                              source_time=None if f.frame_index is None
                              else seq / self.rate, seq=seq,

@@ -251,7 +251,6 @@ class AxisTextSource(_AvatarFrames, QueuedSource):
             log.info("Axis: connected to tcp %s:%d", self.host, self.port)
             self.connected.set()
             delay = self.backoff
-            stream.reset(time.monotonic())   # (nothing left over, unless a read failed)
             self._read(sock, stream)
             stream.reset(time.monotonic())   # a frame cut short by the close: counted
             self.connected.clear()

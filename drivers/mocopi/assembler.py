@@ -112,12 +112,12 @@ class MocopiAssembler:
 
     def _frame(self, fr: MocopiFrame, now: float) -> list[Frame]:
         """[the frame of ``fr``], or [] for a frame repeated or reordered on the way."""
-        self.last_frame = fr
         step = self._gaps.step(fr.fnum, now)
         if step.late:
             self._count("bad_messages", 1, f"frame fnum {fr.fnum} repeated or late (after "
                         f"fnum {self._gaps.last}): dropped")
             return []
+        self.last_frame = fr
         if step.jumps:                                # damaged or restarted (SeqGaps logs)
             self.stats.counter_jumps += step.jumps
         missing = step.missing
