@@ -6,7 +6,7 @@ is run on them at every threshold of ``--grid``.  For each take *name* (86_01 is
 groups and is held out from both), the threshold with the best pooled ARI over all the
 other takes is chosen and the held-out take scored with it.  With ``--decide-after`` the
 decision time is chosen with it, among the pairs whose median decision delay after the
-labelled transitions (real training takes) is at most ``--max-decision`` (2.0 s).  Prints the ARI pooled per
+labelled transitions (real training takes) is at most ``--max-decision`` (2.5 s).  Prints the ARI pooled per
 group at every threshold, the LOTO choices and the LOTO-pooled ARI/NMI per group (each
 take scored with a threshold chosen without it).
 
@@ -75,13 +75,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--decide-after", default=None, metavar="S,S,...",
                     help="also choose decide_after_s among these (default: the configured "
                          "value only)")
-    ap.add_argument("--max-decision", type=float, default=2.0, metavar="S",
+    ap.add_argument("--max-decision", type=float, default=2.5, metavar="S",
                     help="a (threshold, decide_after_s) counts only when the median decision "
                          "delay after the labelled transitions of the real training takes "
-                         "is at most S seconds (default 2.0)")
+                         "is at most S seconds (default 2.5)")
     ap.add_argument("--synth-seeds", type=int, nargs="*", default=[0, 1, 2, 3, 4, 5])
     ap.add_argument("--params", default=None, metavar="NAME|FILE",
-                    help="the detector's parameter set whose cuts the ids follow (`prompt`, "
+                    help="the detector's parameter set whose cuts the ids follow (`full`, "
                          "`fast` or a TOML file, as `rtseg live --params`; default: shipped)")
     args = ap.parse_args(argv)
     try:

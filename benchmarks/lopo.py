@@ -5,8 +5,9 @@ data folder, and the parameter choice made that way.
     python3 benchmarks/lopo.py ../shared/data                 # shipped defaults + LOPO grid
     python3 benchmarks/lopo.py ../shared/data --grid none     # shipped defaults only
     python3 benchmarks/lopo.py ../shared/data --grid none --params fast      # config/fast.toml
-    python3 benchmarks/lopo.py ../shared/data --grid confirm --max-median 2.0  # short-look confirmation
-    python3 benchmarks/lopo.py ../shared/data --params prompt --grid prelook --max-median 2.0  # the pre-look
+    python3 benchmarks/lopo.py ../shared/data --params full --grid confirm --max-median 2.2  # short-look confirmation
+    python3 benchmarks/lopo.py ../shared/data --grid prelook --max-median 2.0  # the pre-look
+    python3 benchmarks/lopo.py ../shared/data --grid clear --max-median 2.0  # the shipped set's last choice
     python3 benchmarks/lopo.py DIR --per-person 3 --seeds 0 1 --json
 
 DIR is laid out like ``../shared/data``: ``cmu/`` (full labelled performances, one person
@@ -88,19 +89,19 @@ GRIDS = {
         "place_radius_s": [0.0, 1.0],
         "place_window_s": [1.5, 2.0],
     },
-    "confirm": {                    # short-look confirmation, with the after window
+    "confirm": {                    # short-look confirmation (--params full), with the after window
         "after_s": [1.875, 2.0],
         "confirm_reach_s": [0.0, 0.875, 1.0],
         "confirm_level": [2.0, 3.0, 4.0],
         "confirm_ratio": [0.9, 1.0],
     },
-    "prelook": {                    # the pre-look (with --params prompt), at a budget
+    "prelook": {                    # the pre-look, at a budget
         "pre_after_s": [0.0, 1.5, 1.75],
         "pre_level": [4.0, 6.0, 8.0],
         "pre_ratio": [0.9, 1.0],
     },
     "clear": {                      # the confirmation only for maxima that stand clear
-        "confirm_clear": [0.0, 1.5, 2.0, 3.0],  # (with --params prompt), and the pre-look's
+        "confirm_clear": [0.0, 1.5, 2.0, 3.0],  # and the pre-look's
         "pre_level": [4.0, 6.0, 8.0],            # level
     },
     "short": {                      # shorter windows and gaps for 2-5 s behaviours
@@ -396,7 +397,7 @@ def main(argv: list[str] | None = None) -> int:
                         "other keys (default config/detectors.toml; 'fast': config/fast.toml)")
     p.add_argument("--versus", metavar="FILE",
                    help="also score these parameters on everyone (a file, or a shipped name "
-                        "such as prompt), beside --params, with the paired difference of "
+                        "such as full), beside --params, with the paired difference of "
                         "their pooled F1 and its 95 %% interval")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
                    help="parameter sets scored at once, in that many processes (default: "

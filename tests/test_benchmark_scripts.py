@@ -122,14 +122,14 @@ def test_lopo_leaves_a_spliced_folder_of_the_data_folder_alone(tmp_path):
     (data / "spliced" / "index.tsv").write_text(
         "performance\tkind\tformat\tframes\tsegment\tbehaviour\tsubject\tstart\n")
     r = _run("lopo.py", str(data), "--per-person", "1", "--grid", "none",
-             "--cache", str(tmp_path / "cache"), "--versus", "prompt", "--json")
+             "--cache", str(tmp_path / "cache"), "--versus", "full", "--json")
     assert r.returncode == 0, r.stderr[-2000:]
     doc = json.loads(r.stdout)
     assert doc["people"] == ["synth:p1", "synth:p2"]
     assert set(doc["shipped"]["sources"]) == {"synth"}
     # --versus: the other set on everyone, and the paired difference of the pooled F1
     v = doc["versus"]
-    assert v["params"] == "prompt" and set(v["sources"]) == {"synth"}
+    assert v["params"] == "full" and set(v["sources"]) == {"synth"}
     diff = v["shipped_minus_versus"]
     assert diff["f1"] == pytest.approx(doc["shipped"]["pooled"]["f1"] - v["pooled"]["f1"],
                                        abs=1e-3)
@@ -216,7 +216,7 @@ def test_library_loto_by_person_over_a_source_folder(tmp_path):
     assert {(lib["unit"], lib["without"]) for lib in src["libraries"]} >= {("p1", None), ("p2", "walk")}
     assert doc["pooled"]["known"]["segments"] == k["segments"]
     assert "segments" not in src
-    # with --truth-cuts the segments are the labelled ones, named 1.5-1.75 s after the change
+    # with --truth-cuts the segments are the labelled ones, named 2.5 s after the change
     # (the tracker decides on 10-frame blocks: up to one block, 1/6 s at 60 Hz, sooner)
     r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
              "--truth-cuts", "--no-hide", "--segments")
@@ -226,17 +226,19 @@ def test_library_loto_by_person_over_a_source_folder(tmp_path):
     segs = doc["sources"]["synth"]["segments"]
     assert all(s["known"] for s in segs)            # every behaviour is in the others' library
     delays = [s["delay_s"] for s in segs if s["delay_s"] is not None]
-    assert delays and all(1.3 <= d <= 1.9 for d in delays), delays
-    # --decide-after / --id-threshold set the tracker's: named 2.5 s after the change
+    assert (doc["decide_after_s"], doc["identity_threshold"]) == (2.5, 5.0)
+    assert delays and all(2.3 <= d <= 2.6 for d in delays), delays
+    # --decide-after / --name-after / --id-threshold set the tracker's: named 1.5-1.75 s
+    # after the change
     r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
-             "--truth-cuts", "--no-hide", "--segments", "--decide-after", "2.5",
-             "--id-threshold", "5")
+             "--truth-cuts", "--no-hide", "--segments", "--decide-after", "1.5",
+             "--name-after", "1.75", "--id-threshold", "4")
     assert r.returncode == 0, r.stderr[-2000:]
     doc = json.loads(r.stdout)
-    assert (doc["decide_after_s"], doc["identity_threshold"]) == (2.5, 5.0)
+    assert (doc["decide_after_s"], doc["identity_threshold"]) == (1.5, 4.0)
     delays = [s["delay_s"] for s in doc["sources"]["synth"]["segments"]
               if s["delay_s"] is not None]
-    assert delays and all(2.3 <= d <= 2.6 for d in delays), delays
+    assert delays and all(1.3 <= d <= 1.9 for d in delays), delays
     r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--id-threshold", "0")
     assert r.returncode == 2 and r.stderr.strip() == "--id-threshold: > 0"
     r = _run("library_loto.py", "--by-person", str(tmp_path / "nowhere"))

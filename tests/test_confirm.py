@@ -113,15 +113,16 @@ def perf():
 
 
 def _run(X, **kw):
-    det = ContrastDetector.from_params(dict(load_params()["contrast"], **kw), FR)
+    """The full look (``--params full``: confirmation and pre-look off) with ``kw``."""
+    det = ContrastDetector.from_params(dict(load_params("full")["contrast"], **kw), FR)
     return det, det.run(X)
 
 
 def test_the_detector_sends_the_same_changes_sooner(perf):
-    """With the confirmation on, every synthetic change is cut where the defaults cut it
+    """With the confirmation on, every synthetic change is cut where the full look cuts it
     (within a step) and sent sooner: at the maximum's own full look, the after window
-    (2 s) plus at most two steps after the cut, where the defaults wait for the contrast to
-    fall."""
+    (2 s) plus at most two steps after the cut, where the full look waits for the contrast
+    to fall."""
     res, X = perf
     _, later = _run(X)
     det, sooner = _run(X, confirm_reach_s=1.0, confirm_after_s=1.0, confirm_level=2.0,
@@ -137,11 +138,12 @@ def test_the_detector_sends_the_same_changes_sooner(perf):
     assert d_sooner <= 2.0 + 2 * det.step / FR < d_later, (d_sooner, d_later)
 
 
-def test_off_by_default_and_a_prefix_gives_the_cuts_already_sent(perf):
-    """The shipped defaults leave it off (the same cuts as reach 0); with it on a cut
-    still never depends on frames after the one that sent it."""
+def test_on_by_default_and_a_prefix_gives_the_cuts_already_sent(perf):
+    """The shipped defaults turn it on and ``--params full`` off; with it on a cut still
+    never depends on frames after the one that sent it."""
     _, X = perf
-    assert load_params()["contrast"]["confirm_reach_s"] == 0.0
+    assert load_params()["contrast"]["confirm_reach_s"] > 0
+    assert load_params("full")["contrast"]["confirm_reach_s"] == 0.0
     kw = dict(confirm_reach_s=1.0, confirm_level=2.0, confirm_ratio=0.9)
     _, cuts = _run(X, **kw)
     assert cuts
@@ -158,19 +160,20 @@ def test_bad_confirmation_parameters_are_refused():
         validate("contrast", {"confirm_clear": 0.5}, "test: ")
 
 
-def test_shipped_prompt_parameters_cut_the_same_changes_sooner(perf):
-    """``--params prompt`` (config/prompt.toml) is the defaults with the confirmation and
-    the pre-look on: the same synthetic changes, each cut within 0.5 s of its labelled
-    middle, sent no later than the defaults send them and some sooner."""
+def test_shipped_defaults_cut_the_same_changes_sooner_than_the_full_look(perf):
+    """The defaults are ``--params full`` (config/full.toml) with the confirmation and the
+    pre-look on: the same synthetic changes, each cut within 0.5 s of its labelled middle,
+    sent no later than the full look sends them and some sooner."""
     res, X = perf
-    prompt = load_params("prompt")["contrast"]
-    defaults = load_params()["contrast"]
+    prompt = load_params()["contrast"]
+    full = load_params("full")["contrast"]
     assert prompt["confirm_reach_s"] > 0 and prompt["pre_after_s"] > 0
+    assert full["confirm_reach_s"] == 0 and full["pre_after_s"] == 0
     changed = ("confirm_", "pre_")
     assert {k: v for k, v in prompt.items() if not k.startswith(changed)} == \
-        {k: v for k, v in defaults.items() if not k.startswith(changed)}
+        {k: v for k, v in full.items() if not k.startswith(changed)}
     sooner = ContrastDetector.from_params(prompt, FR).run(X)
-    later = ContrastDetector.from_params(defaults, FR).run(X)
+    later = ContrastDetector.from_params(full, FR).run(X)
     assert len(sooner) == len(later) == len(res.transitions)
     for c, t in zip(sooner, res.transitions):
         assert abs(c.frame - t.mid) <= 0.5 * FR
@@ -186,8 +189,8 @@ def test_a_waiting_maximum_keeps_its_own_before_windows(perf):
     _, X = perf
     # 1 s before windows: the model cache is pruned every 8 looks and the prefix ring
     # holds 2 x 8 + 16 + 2 blocks, so a maximum a few blocks old has lost both
-    det = ContrastDetector.from_params(dict(load_params()["contrast"], confirm_reach_s=1.0,
-                                            confirm_level=0.0, before_s=1.0,
+    det = ContrastDetector.from_params(dict(load_params("full")["contrast"], confirm_reach_s=1.0,
+                                            confirm_level=0.0, confirm_clear=0.0, before_s=1.0,
                                             min_before_s=1.0), FR, keep_trace=True)
     checked = []
     orig = det._confirm_short

@@ -221,10 +221,10 @@ def test_offline_segment_runs_the_same_core(perf):
     assert [c.frame for c in segment_features(X, "contrast", FR)] == [c.frame for c in live]
 
 
-@pytest.mark.parametrize("preset", [None, "prompt"])
+@pytest.mark.parametrize("preset", [None, "full"])
 def test_restart_forgets_the_segment_and_keeps_the_frame_count(perf, preset):
     """After a restart the cuts are a fresh detector's, counted on (with the short-look
-    confirmation and the pre-look too).  The residual and relative floors outlive restarts
+    confirmation and the pre-look, the defaults, and without them, ``full``).  The residual and relative floors outlive restarts
     by design (a gap is not a new performer), so they are off here: with them the cuts may
     differ by what they learnt before the gap."""
     from rtseg.detectors import load_params
@@ -299,13 +299,19 @@ def assert_same_changes_sooner(res, sooner, later) -> None:
 
 def test_shipped_fast_parameters_cut_sooner(perf):
     """``--params fast`` (config/fast.toml): the same synthetic changes, each within 0.5 s
-    of the labelled middle, sent sooner than with the defaults."""
+    of the labelled middle, sent sooner than with the full look (``--params full``) and
+    none later than with the defaults."""
     from rtseg.detectors import load_params
     res, X = perf
     fast = load_params("fast")["contrast"]
     assert fast["pre_after_s"] > 0 and fast != load_params()["contrast"]
-    assert_same_changes_sooner(res, ContrastDetector.from_params(fast, FR).run(X),
-                               ContrastDetector.from_params(load_params()["contrast"], FR).run(X))
+    cuts = ContrastDetector.from_params(fast, FR).run(X)
+    assert_same_changes_sooner(res, cuts,
+                               ContrastDetector.from_params(load_params("full")["contrast"],
+                                                            FR).run(X))
+    defaults = ContrastDetector.from_params(load_params()["contrast"], FR).run(X)
+    assert len(defaults) == len(cuts)
+    assert all(a.detected_at <= b.detected_at for a, b in zip(cuts, defaults))
 
 
 def test_two_cuts_confirmed_on_one_frame_go_out_one_frame_apart(perf):

@@ -81,20 +81,23 @@ def test_evaluate_online_json(synth_dir, capsys):
     assert 0.5 < p["delay_s"]["median"] < 3.5
 
 
-def test_evaluate_online_with_the_shipped_fast_parameters(synth_dir, capsys):
-    """``--online --params fast`` runs the live loop with config/fast.toml: the same
-    changes found, each sent sooner than with the defaults."""
+def test_evaluate_online_with_the_shipped_parameter_sets(synth_dir, capsys):
+    """``--online --params full`` / ``fast`` run the live loop with config/full.toml /
+    config/fast.toml: the same changes found, each sent sooner by the defaults than by
+    the full look, and by ``fast`` no later than by the defaults."""
     root, _ = synth_dir
     doc = {}
-    for name, extra in (("default", []), ("fast", ["--params", "fast"])):
+    for name, extra in (("default", []), ("full", ["--params", "full"]),
+                        ("fast", ["--params", "fast"])):
         assert main(["evaluate", str(root), "--online", "--json", "--no-progress",
                      "--method", "contrast", *extra]) == 0
         r = json.loads(capsys.readouterr().out)["contrast"]
         assert r.get("params_file") == (extra[1] if extra else None)   # which file, if any
         doc[name] = r["takes"]["92_01"]
-    assert doc["fast"]["f1"] == doc["default"]["f1"] == 1.0
+    assert doc["fast"]["f1"] == doc["default"]["f1"] == doc["full"]["f1"] == 1.0
     d = {k: sorted(m["delay_s"] for m in v["matched"]) for k, v in doc.items()}
-    assert all(f < g for f, g in zip(d["fast"], d["default"])), d
+    assert all(f < g for f, g in zip(d["default"], d["full"])), d
+    assert all(f <= g for f, g in zip(d["fast"], d["default"])), d
 
 
 def test_evaluate_tolerance_zero_equals_strict(synth_dir, capsys):

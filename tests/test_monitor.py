@@ -124,17 +124,18 @@ def test_page_gets_the_cuts_the_session_made_batched():
 
 
 def test_the_page_gets_the_pre_look_with_sooner_cuts():
-    """With ``--params fast`` the page also gets the pre-look's values and its level (the
-    pre-look scores every position; its level is pre_level x threshold); without, neither."""
+    """With the pre-look on (``--params fast``) the page also gets its values and its level
+    (the pre-look scores every position; its level is pre_level x threshold); with it off
+    (``--params full``), neither."""
     from rtseg.detectors import load_params
     fast = load_params("fast")["contrast"]
-    for params in ("fast", ""):
+    for params in ("fast", "full"):
         run = Session(params=params)
         msgs = asyncio.run(read_ws(f"ws://127.0.0.1:{run.port}/ws", 14 / SPEED + 3))
         run.join()
         info = [m for _, m in msgs if m["type"] == "hello"][-1]["info"]
         pre = [p for _, m in msgs if m["type"] == "batch" for p in m.get("pre", [])]
-        if params:
+        if params == "fast":
             assert info["pre_level"] == pytest.approx(fast["pre_level"] * fast["threshold"])
             assert len(pre) > 20 and all(np.isfinite(v) and v > 0 for _, v in pre)
         else:

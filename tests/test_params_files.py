@@ -59,7 +59,7 @@ def test_recording_keeps_its_parameters_and_segment_says_when_they_differ(capsys
     assert meta["detector_params"]["contrast"] == load_params("fast")["contrast"]
     # segmented with the defaults: one warning naming what differs
     rc, out, err = run(capsys, "segment", rec, "--method", "contrast")
-    assert rc == 0 and "contrast pre_after_s = 1.5 (now 0.0)" in err
+    assert rc == 0 and "contrast pre_level = 4.0 (now 6.0)" in err
     assert "ran its detectors with other parameters" in err
     assert f"give --params {rec} to cut as it did" in err
     # with the session's own, named or read from the recording itself: no warning, one result
@@ -86,7 +86,8 @@ def test_a_pre_look_no_shorter_than_the_full_look_is_refused(capsys, tmp_path):
     p = tmp_path / "p.toml"
     for text, says in (("confirm_reach_s = 1.0\npre_after_s = 2.0\n",
                         "pre_after_s (2.0) must be shorter than after_s (2.0)"),
-                       ("pre_after_s = 1.5\n", "pre_after_s (1.5) needs confirm_reach_s > 0")):
+                       ("confirm_reach_s = 0.0\npre_after_s = 1.5\n",
+                        "pre_after_s (1.5) needs confirm_reach_s > 0")):
         p.write_text("[contrast]\n" + text)
         rc, _, err = run(capsys, "live", "sim://synth?stop=1", "--params", p, "--no-osc",
                          "--quiet")
@@ -189,7 +190,7 @@ def test_segment_of_several_recordings_says_which_ran_other_parameters(capsys, t
                      "--method", "contrast", "--out", out, "--no-progress")
     assert rc == 0, err
     recs = {r["take"]: r for r in map(json.loads, out.read_text().splitlines())}
-    assert "pre_after_s = 1.5 (now 0.0)" in recs["fastrec"]["params_differ"]
+    assert "pre_level = 4.0 (now 6.0)" in recs["fastrec"]["params_differ"]
     assert "params_differ" not in recs["plain"]
     assert "1 recorded session(s) ran their detectors with other parameters: fastrec" in err
     # with fast: the session recorded with the defaults is the one named
@@ -216,8 +217,8 @@ def test_lopo_checks_its_params_before_reading_the_data(tmp_path):
 
 def test_replay_session_cuts_with_the_parameters_the_session_ran_with(capsys, tmp_path):
     """``rtseg.live.replay.replay_session`` of a recording made with ``--params fast``
-    gives the cuts the session sent (boundary and detecting frame), not the defaults'
-    (whose full look detects later); a configuration given still wins."""
+    gives the cuts the session sent (boundary and detecting frame), not those of the
+    full look (``--params full``, which detects later); a configuration given still wins."""
     from rtseg.evaluation.online import live_config
     from rtseg.live.replay import replay_session
     from rtseg.recording import read_session
@@ -229,5 +230,6 @@ def test_replay_session_cuts_with_the_parameters_the_session_ran_with(capsys, tm
             if c.wire and c.method == "contrast"]
     assert len(sent) >= 3
     assert [(c.boundary, c.detected) for c in replay_session(str(rec))] == sent
-    defaults = [(c.boundary, c.detected) for c in replay_session(str(rec), live_config()[0])]
-    assert defaults != sent
+    full = [(c.boundary, c.detected)
+            for c in replay_session(str(rec), live_config(None, None, "full")[0])]
+    assert full != sent

@@ -90,11 +90,12 @@ def perf():
 
 
 ON = dict(confirm_reach_s=1.0, confirm_after_s=1.0, confirm_level=2.0, confirm_ratio=1.0,
-          pre_after_s=1.5, pre_level=4.0, pre_ratio=0.9)
+          confirm_clear=0.0, pre_after_s=1.5, pre_level=4.0, pre_ratio=0.9)
 
 
 def _run(X, **kw):
-    det = ContrastDetector.from_params(dict(load_params()["contrast"], **kw), FR)
+    """The full look (``--params full``: confirmation and pre-look off) with ``kw``."""
+    det = ContrastDetector.from_params(dict(load_params("full")["contrast"], **kw), FR)
     return det, det.run(X)
 
 
@@ -114,9 +115,10 @@ def test_the_detector_sends_strong_changes_before_the_full_look(perf):
     assert all(a.detected_at <= b.detected_at for a, b in zip(pre, full))
 
 
-def test_off_by_default_and_a_prefix_gives_the_cuts_already_sent(perf):
+def test_on_by_default_and_a_prefix_gives_the_cuts_already_sent(perf):
     _, X = perf
-    assert load_params()["contrast"]["pre_after_s"] == 0.0
+    assert load_params()["contrast"]["pre_after_s"] > 0
+    assert load_params("full")["contrast"]["pre_after_s"] == 0.0
     _, cuts = _run(X, **ON)
     assert cuts
     for n in sorted({c.detected_at + 1 for c in cuts}):

@@ -22,7 +22,7 @@ from rtseg.live.session import LiveSession
 from rtseg.simulators.synth.motion import synthesize
 
 SCRIPT = "idle:3,walk:5,punch:5,squat:5,wave:4"
-CMU_86_01 = [452, 1151, 1933, 2506, 3271, 4052]     # rtseg segment --method contrast
+CMU_86_01 = [452, 1143, 1933, 2494, 3271, 4052]     # rtseg segment --method contrast
 
 
 @pytest.fixture(scope="module")

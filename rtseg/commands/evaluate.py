@@ -322,7 +322,7 @@ def add_evaluate_arguments(p: argparse.ArgumentParser) -> None:
                    help="detector parameters, TOML or JSON: flat, or one table per method "
                         "(with --online: one table per method, the live configuration's "
                         "detectors.params); "
-                        "'prompt' and 'fast' are the shipped config/prompt.toml and "
+                        "'full' and 'fast' are the shipped config/full.toml and "
                         "config/fast.toml")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.add_argument("--tolerance", type=tolerance_seconds, default=0.5, metavar="S",

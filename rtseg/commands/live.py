@@ -47,8 +47,8 @@ def add_session_arguments(p: argparse.ArgumentParser, osc_default_note: str = ""
     p.add_argument("--params", type=params_file, metavar="FILE",
                    help="detector parameters, TOML or JSON with one table per method "
                         "([contrast] ...; detectors.params): a file, or a shipped set: "
-                        "'prompt' (cuts about 0.5 s sooner, as accurate held out; "
-                        "config/prompt.toml) or 'fast' (sooner still; config/fast.toml)")
+                        "'full' (each change waits for the contrast to fall: about 0.5 s "
+                        "later; config/full.toml) or 'fast' (sooner; config/fast.toml)")
     p.add_argument("--duration", type=positive_float, metavar="S",
                    help="stop after S seconds (a number > 0)")
     p.add_argument("--max-lag", type=float, metavar="S",

@@ -128,7 +128,7 @@ SCHEMA: dict[str, dict[str, tuple[tuple[type, ...], tuple[Any, str]]]] = {
 #: keys are dropped); with the stage on they are refused, naming what replaces it
 RETIRED: dict[str, dict[str, tuple[str, str]]] = {
     "contrast": {k: ("early_after_s", "the early look was removed: `pre_after_s` (the "
-                                      "pre-look, config/fast.toml) sends changes sooner")
+                                      "pre-look, on by default) sends changes sooner")
                  for k in ("early_after_s", "early_threshold", "early_hold_s", "early_back_s",
                            "early_backing", "early_parts")},
 }

@@ -13,9 +13,9 @@ stream's, or after a gap: ``restart()``) w shrinks to half the frames so far, do
 ``min_before``.  The profile's maxima are picked causally (``rtseg.detectors.peaks``:
 at least ``threshold``, ``min_gap`` apart, confirmed after at most ``hold`` frames or once
 the profile drops below ``drop`` x the maximum) and each is sent once, as a cut at c.
-So a cut is known ``after`` frames plus its confirmation after c (2 s + at most 1 s at the
-defaults).  With the short-look confirmation on (``confirm_reach_s`` > 0,
-``rtseg.detectors.confirm``; ``config/prompt.toml``) a maximum is also sent as soon as the
+So a cut is known ``after`` frames plus its confirmation after c (2 s + at most 1 s).
+With the short-look confirmation on (``confirm_reach_s`` > 0, ``rtseg.detectors.confirm``;
+on by default, off in ``config/full.toml``) a maximum is also sent as soon as the
 positions after it, scored on after windows cut short at the newest block, score lower
 than it did on the same lengths: at its own full look when it stands clear.
 
@@ -26,8 +26,8 @@ chose them, in docs/live_detector.md): the relative floor (``relative_floor``,
 cut placement (``place_radius``, ``rtseg.detectors.placement``); the residual floor
 (``residual_floor``, ``rtseg.detectors.residual``) bounds every window model's own error,
 the bounded before windows (``bound_before``) keep A0 and A inside the behaviour since the
-last cut sent, and the pre-look (``pre_after`` > 0, ``rtseg.detectors.prelook``; off by
-default, on in ``config/prompt.toml`` and ``config/fast.toml``) also scores each position
+last cut sent, and the pre-look (``pre_after`` > 0, ``rtseg.detectors.prelook``; on by
+default and in ``config/fast.toml``, off in ``config/full.toml``) also scores each position
 with a shorter after window and sends a strong change that stands clear there at once.
 A cut the gate or
 the floor drops is forgotten (it keeps no later maximum away).

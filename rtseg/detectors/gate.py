@@ -43,15 +43,16 @@ from typing import Callable
 import numpy as np
 
 from rtseg.detectors.base import Cut
-from rtseg.detectors.window_models import (DEFAULT_DECIDE_AFTER_S, DEFAULT_ID_SKIP_S,
-                                          DEFAULT_MAX_WINDOW_S, MIN_WINDOW_S, WindowModel,
-                                          WindowStats, behaviour_distance, fit)
+from rtseg.detectors.window_models import (DEFAULT_ID_SKIP_S, DEFAULT_MAX_WINDOW_S,
+                                          MIN_WINDOW_S, WindowModel, WindowStats,
+                                          behaviour_distance, fit)
 
 log = logging.getLogger("rtseg.detectors")
 
-#: the identity tracker's decision time, skipped start, longest window and the least that
-#: must remain after the skip (rtseg.identity.tracker), s
-GATE_DECIDE_S, GATE_SKIP_S = DEFAULT_DECIDE_AFTER_S, DEFAULT_ID_SKIP_S
+#: the gate's decision time (1.5 s of the new segment: sooner than the identity tracker's
+#: ids, rtseg.identity.tracker, which wait 2.5 s by default), and the tracker's skipped
+#: start, longest window and the least that must remain after the skip, s
+GATE_DECIDE_S, GATE_SKIP_S = 1.5, DEFAULT_ID_SKIP_S
 GATE_WINDOW_S, GATE_MIN_AFTER_S = DEFAULT_MAX_WINDOW_S, MIN_WINDOW_S
 #: the shipped ``[contrast] gate_threshold`` (config/detectors.toml; chosen in
 #: benchmarks/lopo.py's grid, docs/live_detector.md)

@@ -33,11 +33,11 @@ from rtseg.detectors.pca.distance import pca_rank
 
 
 #: The identity decision window (``rtseg.identity.tracker``; the same-behaviour gate,
-#: ``rtseg.detectors.gate``, asks the same question of a cut): decided this long after a
-#: cut, s, its first ``DEFAULT_ID_SKIP_S`` skipped (transition frames), at most
-#: ``DEFAULT_MAX_WINDOW_S`` long, and at least ``MIN_WINDOW_S`` left after the skip.
-#: ``decide_after_s`` is also an ``[identity]`` key of ``config/live.toml``.
-DEFAULT_DECIDE_AFTER_S = 1.5
+#: ``rtseg.detectors.gate``, asks the same question of a cut), s: its first
+#: ``DEFAULT_ID_SKIP_S`` after the cut skipped (transition frames), at most
+#: ``DEFAULT_MAX_WINDOW_S`` long, and at least ``MIN_WINDOW_S`` left after the skip.  How
+#: long after the cut each decides is their own (``identity.tracker.DEFAULT_DECIDE_AFTER_S``,
+#: ``gate.GATE_DECIDE_S``).
 DEFAULT_ID_SKIP_S = 0.5
 DEFAULT_MAX_WINDOW_S = 3.0
 MIN_WINDOW_S = 1.0

@@ -34,9 +34,10 @@ segments pooled) by
 (both factors are about 1 for two windows of one motion; d_eff = the larger number of
 varying directions of the two), stated for ``reference_dims`` (8) effective dimensions:
 1 + (D - 1) x sqrt(reference_dims / d_eff), so that one threshold serves the 4-channel
-(d_eff 8) and the 14-joint (d_eff 48) features.  The default threshold, 4.0 (with
-``decide_after_s`` 1.5), was chosen by leave-one-take-out over the labelled cmu and tsseg4d
-takes and synthetic performances (docs/identity.md).  The nearest behaviour is taken when
+(d_eff 8) and the 14-joint (d_eff 48) features.  The default threshold, 5.0 (with
+``decide_after_s`` 2.5), was chosen on the default detector's cuts by leave-one-take-out
+over the labelled cmu and tsseg4d takes and synthetic performances, the decision at most
+2.5 s into the segment (``benchmarks/identity_loto.py``, docs/identity.md).  The nearest behaviour is taken when
 D <= ``threshold``,
 else a new id is made.  The first segment of the session (before any cut) gets id 1 after
 ``decide_after_s`` seconds of frames.
@@ -74,19 +75,22 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from rtseg.detectors.window_models import (DEFAULT_DECIDE_AFTER_S, DEFAULT_ID_SKIP_S,
-                                          DEFAULT_MAX_WINDOW_S, MIN_WINDOW_S, WindowModel,
-                                          WindowStats, behaviour_distance, fit)
+from rtseg.detectors.window_models import (DEFAULT_ID_SKIP_S, DEFAULT_MAX_WINDOW_S,
+                                          MIN_WINDOW_S, WindowModel, WindowStats,
+                                          behaviour_distance, fit)
 from rtseg.identity.block_sums import BlockSums
 from rtseg.identity.messages import IdentityDecision, IdentityStats
 from rtseg.identity.names import CLAIM_MARGIN, NameHolders, SegmentNamer
 from rtseg.library.behaviours import UNKNOWN
 
 #: defaults (also the ``[identity]`` keys of ``config/live.toml``; the decision window's
-#: ``DEFAULT_DECIDE_AFTER_S``, ``DEFAULT_ID_SKIP_S``, ``DEFAULT_MAX_WINDOW_S`` and
-#: ``MIN_WINDOW_S`` are ``rtseg.detectors.window_models``', shared with the gate)
-DEFAULT_NAME_AFTER_S = 1.75
-DEFAULT_THRESHOLD = 4.0
+#: ``DEFAULT_ID_SKIP_S``, ``DEFAULT_MAX_WINDOW_S`` and ``MIN_WINDOW_S`` are
+#: ``rtseg.detectors.window_models``', shared with the same-behaviour gate, which decides
+#: sooner: ``GATE_DECIDE_S``): seconds of a segment summed before its id is decided, the
+#: longer wait of a segment a library cannot name by then, and the distance threshold
+DEFAULT_DECIDE_AFTER_S = 2.5
+DEFAULT_NAME_AFTER_S = 2.5
+DEFAULT_THRESHOLD = 5.0
 
 
 @dataclass
