@@ -63,12 +63,24 @@ def find_config(name_or_path: str | Path, what: str = "configuration file") -> P
     return p
 
 
+#: shipped parameter sets no longer shipped, and what replaces each (a bare ``--params``
+#: name that is no file here)
+RETIRED_PARAMS = {
+    "prompt": "the defaults (config/detectors.toml) are that set now; 'full' is the "
+              "former defaults (each change waits for the contrast to fall)",
+}
+
+
 def params_path(name_or_path: str | Path) -> Path:
     """A detector parameter file's path: a recording's folder gives its ``session.json``
-    (whose ``meta.detector_params`` ``params_of`` reads), anything else ``find_config``'s."""
+    (whose ``meta.detector_params`` ``params_of`` reads), anything else ``find_config``'s.
+    ConfigError for a retired shipped name (``RETIRED_PARAMS``)."""
     p = Path(name_or_path)
     if p.is_dir() and (p / "session.json").is_file():
         return p / "session.json"
+    if isinstance(name_or_path, str) and name_or_path in RETIRED_PARAMS and not p.exists():
+        raise ParamsFileNotFound(f"parameter set '{name_or_path}' is no longer shipped: "
+                                 f"{RETIRED_PARAMS[name_or_path]}")
     return find_config(name_or_path, "parameter file")
 
 

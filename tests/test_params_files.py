@@ -39,6 +39,19 @@ def test_params_names_a_missing_file_or_shipped_name(capsys):
     assert "no shipped nosuch.toml" in lines[0]
 
 
+def test_params_prompt_says_the_defaults_are_that_set(capsys):
+    """``prompt`` was a shipped set until the defaults became it: one line saying so, for
+    the live loop and offline; the replacing ``full`` is shipped."""
+    for argv in (["live", "sim://synth", "--duration", "1", "--no-osc", "--quiet"],
+                 ["segment", "sim://synth"]):
+        rc, _, err = run(capsys, *argv, "--params", "prompt")
+        lines = err.strip().splitlines()
+        assert rc == 2 and len(lines) == 1 and "Traceback" not in err, err
+        assert "'prompt' is no longer shipped" in lines[0] and "'full'" in lines[0]
+    full = load_params("full")["contrast"]
+    assert full["confirm_reach_s"] == 0 and full["pre_after_s"] == 0
+
+
 def test_params_fast_reaches_the_session_configuration():
     args = build_parser().parse_args(["live", "sim://synth", "--params", "fast"])
     p = detector_params(config_from_args(args))["contrast"]
