@@ -115,6 +115,7 @@ sys.path.insert(0, str(REPO))
 
 from rtseg.live.session import LiveSession  # noqa: E402
 from rtseg.live.config import from_dict  # noqa: E402
+from rtseg.live.detector_setup import detector_params  # noqa: E402
 
 sys.path.insert(0, str(REPO / "benchmarks"))
 from soak_meter import GcPauses, Meter  # noqa: E402
@@ -299,7 +300,7 @@ def _score_cuts(probe: CutProbe, truth_info, info_idx: list[int], result: dict,
 
 # ============================================================================ measuring
 def soak(hours: float, speed: float, faults: str, log, mode: str = "hostile",
-         clean: bool = True) -> dict:
+         clean: bool = True, params: str = "") -> dict:
     n_frames = int(round(hours * FRAMES_PER_HOUR))
     window_frames = max(1, min(FRAMES_PER_HOUR, n_frames // 4))
     n_windows = max(1, n_frames // window_frames)
@@ -338,7 +339,10 @@ def soak(hours: float, speed: float, faults: str, log, mode: str = "hostile",
                           "status": {"interval": 1.0}}
         if mode == "cuts":
             settings["identity"] = {"enabled": True}
+        if params:
+            settings["detectors"] = {"params": params}
         cfg = from_dict(settings, origin="soak")
+        contrast_params = detector_params(cfg).get("contrast")
         probe = CutProbe() if mode == "cuts" else None
 
         class SoakSession(LiveSession):
@@ -430,6 +434,7 @@ def soak(hours: float, speed: float, faults: str, log, mode: str = "hostile",
         sent = sum(fates.values())
         result = {
             "hours": hours, "speed": speed, "faults": faults,
+            "params": params or None, "contrast_params": contrast_params,
             "frames": sent, "frames_received": session.stats.frames_received,
             "frames_processed": meter.processed, "wall_s": round(wall, 1),
             "crashes": crashes,
@@ -469,7 +474,7 @@ def soak(hours: float, speed: float, faults: str, log, mode: str = "hostile",
         if probe is not None:
             result.update(_score_cuts(probe, truth_info, info_idx, result, session))
             if clean:
-                result["clean_offline"] = clean_f1(RATE)
+                result["clean_offline"] = clean_f1(RATE, params)
             f1s = [f for f in result["f1_by_hour"] if f is not None]
             result["pass"] = bool(result["pass"] and result["frames_accounted"] and f1s
                                   and min(f1s) >= 0.95 and abs(f1s[-1] - f1s[0]) <= 0.02)
@@ -509,8 +514,18 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-clean", action="store_true",
                    help="cuts mode: skip clean_offline (the performance's F1 offline, about "
                         "15 s of CPU after the run)")
+    p.add_argument("--params", default="", metavar="NAME|FILE",
+                   help="detector parameters of the session (a file, or a shipped name such "
+                        "as full; default config/detectors.toml)")
     p.add_argument("--json", action="store_true", help="print only the JSON result")
     args = p.parse_args(argv)
+    if args.params:
+        from rtseg.config import ConfigError
+        from rtseg.detectors import load_params
+        try:
+            load_params(args.params)
+        except (ConfigError, OSError, ValueError) as exc:
+            p.error(f"--params: {exc}")
     if not (args.hours > 0 and math.isfinite(args.hours)):
         p.error("--hours must be a number > 0")
     if args.speed is None:
@@ -526,7 +541,8 @@ def main(argv: list[str] | None = None) -> int:
         CUTS_FAULTS if args.mode == "cuts" else DEFAULT_FAULTS)
     log(f"soak ({args.mode}): {args.hours:g} session hours ({int(args.hours * FRAMES_PER_HOUR)} frames) at "
         f"{args.speed:g}x 120 Hz, faults {faults}")
-    r = soak(args.hours, args.speed, faults, log, args.mode, clean=not args.no_clean)
+    r = soak(args.hours, args.speed, faults, log, args.mode, clean=not args.no_clean,
+             params=args.params)
     if args.json:
         print(json.dumps(r, indent=2))
     else:

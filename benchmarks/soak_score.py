@@ -191,11 +191,12 @@ def ari_by_hour(cut_frames: np.ndarray, ids: np.ndarray, starts: np.ndarray,
 __all__ = ["CutProbe", "ari_by_hour", "score_by_hour", "soak_script", "to_frames", "truth"]
 
 
-def clean_f1(rate: float = 120.0) -> dict:
+def clean_f1(rate: float = 120.0, params: str = "") -> dict:
     """The live pipeline's F1 (+/- 0.5 s and strict) on one loop of the soak performance,
     offline: every frame of the clean take, no faults, no pty, no loop (``replay_frames``
-    with the shipped configuration).  The per-hour figures of a soak cannot beat it: what
-    the soak loses against it is what the faults and the machine cost."""
+    with the shipped configuration, or the detector parameters ``params``: a file or a
+    shipped name).  The per-hour figures of a soak cannot beat it: what the soak loses
+    against it is what the faults and the machine cost."""
     from rtseg.evaluation.scoring import pooled_tally, tally
     from rtseg.live.config import load_session_config
     from rtseg.live.replay import replay_frames
@@ -203,6 +204,8 @@ def clean_f1(rate: float = 120.0) -> dict:
     r = synthesize(soak_script(), frame_rate=rate, seed=0)
     tk = r.take
     cfg = load_session_config()
+    if params:
+        cfg["detectors.params"] = params
     valid = np.ones(tk.quats.shape[1], dtype=bool)
     frames = ((tk.quats[i], valid, i, i / rate, i / rate) for i in range(tk.n_frames))
     cuts = replay_frames(frames, tk.joint_names, tk.parents, tk.space, rate, cfg)

@@ -305,11 +305,16 @@ def test_soak_cuts_mode_scores_a_short_run():
 
 
 def test_soak_hostile_mode_still_runs():
-    r = _run("soak.py", "--mode", "hostile", "--hours", "0.005", "--json")
+    """Also with another detector set (``--params full``: the session's contrast detector
+    runs it); a parameter set that does not exist is one line, exit 2."""
+    r = _run("soak.py", "--mode", "hostile", "--hours", "0.005", "--json", "--params", "full")
     assert r.returncode in (0, 1), r.stderr[-2000:]
     doc = json.loads(r.stdout)
     assert doc["crashes"] == 0 and "f1_by_hour" not in doc
     assert doc["destroyed_by_faults"] > 0.5 * doc["frames"]
+    assert doc["params"] == "full" and doc["contrast_params"]["pre_after_s"] == 0.0
+    r = _run("soak.py", "--hours", "0.005", "--params", "nosuch")
+    assert r.returncode == 2 and "--params: parameter file not found: nosuch" in r.stderr
 
 
 def test_wakeup_cost_measures_an_empty_and_a_working_wakeup():

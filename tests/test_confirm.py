@@ -165,14 +165,14 @@ def test_shipped_defaults_cut_the_same_changes_sooner_than_the_full_look(perf):
     pre-look on: the same synthetic changes, each cut within 0.5 s of its labelled middle,
     sent no later than the full look sends them and some sooner."""
     res, X = perf
-    prompt = load_params()["contrast"]
+    defaults = load_params()["contrast"]
     full = load_params("full")["contrast"]
-    assert prompt["confirm_reach_s"] > 0 and prompt["pre_after_s"] > 0
+    assert defaults["confirm_reach_s"] > 0 and defaults["pre_after_s"] > 0
     assert full["confirm_reach_s"] == 0 and full["pre_after_s"] == 0
     changed = ("confirm_", "pre_")
-    assert {k: v for k, v in prompt.items() if not k.startswith(changed)} == \
+    assert {k: v for k, v in defaults.items() if not k.startswith(changed)} == \
         {k: v for k, v in full.items() if not k.startswith(changed)}
-    sooner = ContrastDetector.from_params(prompt, FR).run(X)
+    sooner = ContrastDetector.from_params(defaults, FR).run(X)
     later = ContrastDetector.from_params(full, FR).run(X)
     assert len(sooner) == len(later) == len(res.transitions)
     for c, t in zip(sooner, res.transitions):
