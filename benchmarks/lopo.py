@@ -6,7 +6,7 @@ data folder, and the parameter choice made that way.
     python3 benchmarks/lopo.py ../shared/data --grid none     # shipped defaults only
     python3 benchmarks/lopo.py ../shared/data --grid none --params fast      # config/fast.toml
     python3 benchmarks/lopo.py ../shared/data --params full --grid confirm --max-median 2.2  # short-look confirmation
-    python3 benchmarks/lopo.py ../shared/data --grid prelook --max-median 2.0  # the pre-look
+    python3 benchmarks/lopo.py ../shared/data --params fast --grid prelook --max-median 2.0  # the pre-look
     python3 benchmarks/lopo.py ../shared/data --grid clear --max-median 2.0  # the shipped set's last choice
     python3 benchmarks/lopo.py DIR --per-person 3 --seeds 0 1 --json
 
