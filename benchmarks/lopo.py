@@ -104,6 +104,10 @@ GRIDS = {
         "confirm_clear": [0.0, 1.5, 2.0, 3.0],  # and the pre-look's
         "pre_level": [4.0, 6.0, 8.0],            # level
     },
+    "hold": {                       # how long a maximum that is not sent sooner waits
+        "hold_s": [1.0, 1.5, 2.0, 2.5, 3.0],  # for the contrast to fall, and how far
+        "drop": [0.3, 0.4, 0.5],                # it must fall
+    },
     "short": {                      # shorter windows and gaps for 2-5 s behaviours
         "threshold": [1.75, 2.0],
         "min_before_s": [1.0, 1.5],
