@@ -104,6 +104,14 @@ def _pop_number(argv: list[str], flag: str, kind: type, what: str,
     return value
 
 
+def _identity_settings(cfg) -> dict:
+    """The identity tracker's settings a run used, as its JSON document states them."""
+    return {"name_after_s": cfg["identity.name_after_s"],
+            "decide_after_s": cfg["identity.decide_after_s"],
+            "identity_threshold": cfg["identity.threshold"],
+            "claim_margin": cfg["identity.claim_margin"]}
+
+
 def _identity_options(cfg, opts: dict) -> None:
     """``--name-after``, ``--decide-after``, ``--id-threshold`` and ``--claim-margin`` into
     the session configuration ``cfg``."""
@@ -262,10 +270,7 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
     print(json.dumps({"protocol": "leave-one-person-out over source folders",
                       "seconds": round(time.perf_counter() - t0, 1),
                       "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
-                      "name_after_s": cfg["identity.name_after_s"],
-                      "decide_after_s": cfg["identity.decide_after_s"],
-                      "identity_threshold": cfg["identity.threshold"],
-                      "claim_margin": cfg["identity.claim_margin"], "performances": kw["n"],
+                      **_identity_settings(cfg), "performances": kw["n"],
                       "seed": kw["seed"], "hidden_names": hide, "cuts": kw["cuts"],
                       "threshold_scale": kw.get("threshold_scale", 1.0), **doc}, indent=1, default=str))
     return 0 if any(d["people"] for d in doc["sources"].values()) else 1
@@ -359,10 +364,7 @@ def main(argv: list[str] | None = None) -> int:
     doc = {"protocol": argv[0] + (" by person" if by_person else ""),
            "seconds": round(time.perf_counter() - t0, 1),
            "step_s": opts.get("--step", DEFAULT_STEP_S),
-           "name_after_s": cfg["identity.name_after_s"],
-           "decide_after_s": cfg["identity.decide_after_s"],
-           "identity_threshold": cfg["identity.threshold"],
-           "claim_margin": cfg["identity.claim_margin"], **doc}
+           **_identity_settings(cfg), **doc}
     print(json.dumps(doc, indent=1, default=str))
     return 0
 
