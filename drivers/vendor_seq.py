@@ -21,8 +21,8 @@ since the last trusted value.  A forward jump skipping ``k`` frames is
   stream goes on from it;
 - a **suspect** value beyond that, as is a jump backwards by more than ``MIN_SLACK`` (one
   at most ``MIN_SLACK`` back, or a repeat, is a frame that arrived late: it changes
-  nothing, and the source drops it, counted in ``bad_messages``: ``SeqStep.late``).  A suspect value is a counter jump (1 in ``jumps``)
-  and never a count of lost frames.
+  nothing, and the source drops it, counted in ``bad_messages``: ``SeqStep.late``).  A
+  suspect value is a counter jump (1 in ``jumps``) and never a count of lost frames.
 
 A frame with a probable-gap or suspect value is delivered - its payload is whole, only its
 number is doubtful - with ``seq`` = its value for a probable gap (most likely true), the

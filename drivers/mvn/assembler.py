@@ -53,8 +53,8 @@ class MvnAssembler:
     ``quiet`` seconds after its first datagram.  A datagram of a sample at most
     ``LATE_WINDOW`` (64) samples older than the newest seen, or of the sample last emitted, is
     late: counted in ``bad_messages`` (nothing is lost: its sample was emitted, whole or
-    with that datagram's segments invalid) and discarded; one further back is taken as the sender
-    restarting its counter and starts a new frame.
+    with that datagram's segments invalid) and discarded; one further back is taken as the
+    sender restarting its counter and starts a new frame.
 
     Per frame: ``quats`` (J, 4) rtseg frame, global; segments not received hold their last
     value with ``valid`` False (a sample counter that jumps forward adds 1 to

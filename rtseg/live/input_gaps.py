@@ -67,8 +67,9 @@ class InputGaps:
         The frame period is learned from the source's own time steps (running mean of the
         steps that are not gaps, after 16 steps), so it does not depend on the nominal
         rate.  Returns 0 until then, for steps backwards (clock reset), for steps longer
-        than ``MAX_STEP_S`` (a clock jump) and for steps below 2.5 periods; after 8 long steps in a row the source is taken to have slowed down
-        and the period is learned again.  A step over frames the caller knows are lost
+        than ``MAX_STEP_S`` (a clock jump) and for steps below 2.5 periods; after 8 long
+        steps in a row the source is taken to have slowed down and the period is learned
+        again.  A step over frames the caller knows are lost
         (``known_lost`` > 0: dropped by the live loop) is measured but not learned from."""
         prev = self._prev_src
         if source_time is None or prev is None or not math.isfinite(source_time):
