@@ -255,9 +255,9 @@ def test_non_finite_frame_restarts_and_is_counted(perf):
 def test_frame_rate_scales_the_windows():
     det = make_online("contrast", 60.0, {"confirm_reach_s": 1.0, "pre_after_s": 1.5})
     # 0.125 s -> 8 frames (7.5 rounded half to even); 3 s -> 22 blocks; 2 s -> 15 blocks;
-    # the pre-look's 1.5 s -> 11 blocks (90 / 8 = 11.25), the reach's 1 s -> 8
+    # the pre-look's 1.5 s -> 11 blocks (90 / 8 = 11.25), the reach's 1 s -> 8; hold 2 s -> 120
     assert (det.step, det.wa, det.wb, det.pre.after, det.pre.reach) == (8, 22, 15, 11, 8)
-    assert det.delay_frames == 15 * 8 + 60 + 8
+    assert det.delay_frames == 15 * 8 + 120 + 8
 
 
 @pytest.mark.parametrize("kw", [dict(step=0), dict(before=10), dict(after=5),
