@@ -162,8 +162,8 @@ def test_bad_confirmation_parameters_are_refused():
 
 def test_shipped_defaults_cut_the_same_changes_sooner_than_the_full_look(perf):
     """The defaults are ``--params full`` (config/full.toml) with the confirmation and the
-    pre-look on, and a longer wait for the fall of a maximum neither sends (2 s and 0.4
-    against 1 s and 0.5): the same synthetic changes, each cut within 0.5 s of its labelled
+    pre-look on, a longer wait for the fall of a maximum neither sends (2 s and 0.4
+    against 1 s and 0.5) and a lower gate (3.5 against 4): the same synthetic changes, each cut within 0.5 s of its labelled
     middle, most of them sent sooner than the full look sends them; one the short looks do
     not send waits up to the 1 s longer hold."""
     res, X = perf
@@ -172,8 +172,9 @@ def test_shipped_defaults_cut_the_same_changes_sooner_than_the_full_look(perf):
     assert defaults["confirm_reach_s"] > 0 and defaults["pre_after_s"] > 0
     assert full["confirm_reach_s"] == 0 and full["pre_after_s"] == 0
     assert (defaults["hold_s"], defaults["drop"]) == (2.0, 0.4)
-    assert (full["hold_s"], full["drop"]) == (1.0, 0.5)
-    changed = ("confirm_", "pre_", "hold_s", "drop")
+    assert (full["hold_s"], full["drop"], full["gate_threshold"]) == (1.0, 0.5, 4.0)
+    assert defaults["gate_threshold"] == 3.5
+    changed = ("confirm_", "pre_", "hold_s", "drop", "gate_threshold")
     assert {k: v for k, v in defaults.items() if not k.startswith(changed)} == \
         {k: v for k, v in full.items() if not k.startswith(changed)}
     sooner = ContrastDetector.from_params(defaults, FR).run(X)

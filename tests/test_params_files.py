@@ -72,7 +72,8 @@ def test_recording_keeps_its_parameters_and_segment_says_when_they_differ(capsys
     assert meta["detector_params"]["contrast"] == load_params("fast")["contrast"]
     # segmented with the defaults: one warning naming what differs
     rc, out, err = run(capsys, "segment", rec, "--method", "contrast")
-    assert rc == 0 and "contrast pre_level = 4.0 (now 6.0)" in err
+    assert rc == 0 and "contrast gate_threshold = 4.0 (now 3.5)" in err
+    assert "contrast hold_s = 1.0 (now 2.0)" in err and "and 1 more" in err   # pre_level
     assert "ran its detectors with other parameters" in err
     assert f"give --params {rec} to cut as it did" in err
     # with the session's own, named or read from the recording itself: no warning, one result
