@@ -163,9 +163,9 @@ def test_bad_confirmation_parameters_are_refused():
 def test_shipped_defaults_cut_the_same_changes_sooner_than_the_full_look(perf):
     """The defaults are ``--params full`` (config/full.toml) with the confirmation and the
     pre-look on, a longer wait for the fall of a maximum neither sends (2 s and 0.4
-    against 1 s and 0.5) and a lower gate (3.5 against 4): the same synthetic changes, each cut within 0.5 s of its labelled
-    middle, most of them sent sooner than the full look sends them; one the short looks do
-    not send waits up to the 1 s longer hold."""
+    against 1 s and 0.5) and a lower gate (3.5 against 4): the same synthetic changes,
+    each cut within 0.5 s of its labelled middle, most of them sent sooner than the full
+    look sends them; one the short looks do not send waits up to the 1 s longer hold."""
     res, X = perf
     defaults = load_params()["contrast"]
     full = load_params("full")["contrast"]

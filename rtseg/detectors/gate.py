@@ -24,9 +24,9 @@ that question of every cut before it goes out:
 The windows and decision time are the identity tracker's own (decision after 1.5 s, 0.5 s
 skipped, windows of at most 3 s); the threshold is the detector's ``gate_threshold``
 (3.5, ``GATE_THRESHOLD``, chosen leave-one-person-out in ``benchmarks/lopo.py``'s grid;
-``--params full`` and ``fast`` keep 4.0; the tracker's own ids threshold is 5.0).  A dropped cut is handed to ``on_drop`` (the detector
-forgets it).  Cost: one row
-copy per frame into a ring of ``ring`` frames (none of its own when it reads the contrast
+``--params full`` and ``fast`` keep 4.0; the tracker's own ids threshold is 5.0).  A
+dropped cut is handed to ``on_drop`` (the detector forgets it).  Cost: one row copy per
+frame into a ring of ``ring`` frames (none of its own when it reads the contrast
 detector's ring, ``share``); per held cut two window statistics and two
 model fits (about 0.5 ms, once per cut).  A restart (gap) decides the held cuts on the
 frames that arrived before it.

@@ -38,8 +38,8 @@ varying directions of the two), stated for ``reference_dims`` (8) effective dime
 ``decide_after_s`` 2.5), was chosen on the default detector's cuts by leave-one-take-out
 over the labelled cmu and tsseg4d takes and synthetic performances, the decision at most
 2.5 s into the segment (``benchmarks/identity_loto.py``, docs/identity.md).  The nearest
-behaviour is taken when D <= ``threshold``, else a new id is made.  The first segment of the session (before any cut) gets id 1 after
-``decide_after_s`` seconds of frames.
+behaviour is taken when D <= ``threshold``, else a new id is made.  The first segment of
+the session (before any cut) gets id 1 after ``decide_after_s`` seconds of frames.
 
 Correction
 ----------
