@@ -4,7 +4,7 @@
     python3 benchmarks/library_loto.py mocap6 [DATA_DIR]          # leave-one-take-out
     python3 benchmarks/library_loto.py mocap6 --by-person [DATA_DIR] # leave-one-person-out
     python3 benchmarks/library_loto.py single [DATA_DIR/cmu_single] # leave-one-person-out
-    python3 benchmarks/library_loto.py spliced SPLICED_DIR [DATA_DIR/cmu_single]
+    python3 benchmarks/library_loto.py spliced SPLICED_DIR [SOURCE_DIR]   # cmu_single
     python3 benchmarks/library_loto.py fewshot [DATA_DIR] [--seconds S]  # short examples
     python3 benchmarks/library_loto.py --by-person DIR [--n N] [--seed K] [--no-hide] [--truth-cuts]
     (options: --no-reject, --metric model|descriptor, --step S, --name-after S, --claim-margin M,
@@ -39,7 +39,11 @@ skeleton has neither): for each person, a library from the other people's takes 
 profile names the live segments of the person's takes.  Behaviours only this person
 performs are not in the library: they must come out ``unknown``.
 spliced: spliced performances (benchmarks/splice.py) named by a library learned from the
-cmu_single takes of the people NOT in the performance.
+takes of SOURCE_DIR (a source folder laid out like ../shared/data/cmu_single, hdm05 or
+bandai; default cmu_single) of the people NOT in the performance.  Performances of people
+SOURCE_DIR does not hold (``benchmarks/splice.py OTHER PERF --kind same``, OTHER another
+folder laid out like it) are named by a library of all its people: how names carry to
+people the project does not have (docs/identity.md).
 fewshot: what ``rtseg learn LIB --take FILE --label NAME --frames A:B`` builds from a few
 seconds of each behaviour.  Each mocap6 take is named by a library learned from ONE other
 take, each exercise's example cut to its middle ``--seconds`` S (default 4; longer ones

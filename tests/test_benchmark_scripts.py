@@ -527,3 +527,37 @@ def test_lopo_scores_its_sets_alike_in_one_process_or_several(tmp_path):
     assert len(one["sets"]) == 3 and one["sets"] == two["sets"]
     assert one["held_out"] == two["held_out"] and one["choices"] == two["choices"]
     assert one["held_out"]["pooled"]["transitions"] > 0
+
+
+def test_library_loto_names_people_the_source_does_not_hold(tmp_path):
+    """#33's measurement on people the project does not have: benchmarks/splice.py on
+    another folder laid out like the source, then ``library_loto.py spliced PERF SOURCE``
+    names those performances with a library of every person of SOURCE (none of them is
+    in the performances) and reports the names' delay after each change; a person of
+    SOURCE in the performances is left out of its library."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from source_folders import make_source
+    behaviours = ["walk", "squat", "wave"]
+    make_source(tmp_path / "source", ["p1", "p2"], behaviours, rate=60.0, seconds=10.0)
+    make_source(tmp_path / "other", ["p9"], behaviours, rate=60.0, seconds=10.0, seed0=9)
+    r = _run("splice.py", str(tmp_path / "other"), str(tmp_path / "perf"), "--kind", "same",
+             "--n", "1")
+    assert r.returncode == 0, r.stderr[-2000:]
+    r = _run("library_loto.py", "spliced", str(tmp_path / "perf"), str(tmp_path / "source"))
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    (lib,) = doc["libraries"]
+    assert lib["examples"] == 2 * len(behaviours) and lib["names"] == len(behaviours)
+    h = doc["held_out"]
+    assert h["known_segments"] >= 4 and h["unknown_segments"] == 0
+    assert h["accuracy"] + h["unknown_rate"] <= 1.0 + 1e-9
+    named = [s for s in doc["segments"] if s["known"] and s["delay_s"] is not None]
+    assert named and all(1.5 <= s["delay_s"] <= 4.0 for s in named), named
+    # performances of a person the source holds: that person's takes leave the library
+    r = _run("splice.py", str(tmp_path / "source"), str(tmp_path / "perf_p1"), "--kind",
+             "same", "--n", "1")
+    assert r.returncode == 0, r.stderr[-2000:]
+    r = _run("library_loto.py", "spliced", str(tmp_path / "perf_p1"), str(tmp_path / "source"))
+    assert r.returncode == 0, r.stderr[-2000:]
+    (lib,) = json.loads(r.stdout)["libraries"]
+    assert lib["examples"] == len(behaviours)
