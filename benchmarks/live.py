@@ -89,7 +89,7 @@ RATES = (500, 1000, 2000, 3000, 4000, 6000, 8000, 10000, 12000, 16000)
 
 
 def _pcts_text(p: dict[str, float | None]) -> str:
-    """``_pcts`` in words ("-" for none)."""
+    """``live_chain.pcts`` in words ("-" for none)."""
     return ", ".join(f"{k} " + ("-" if p[k] is None else f"{p[k]:.3f} ms")
                      for k in ("p50", "p99", "max"))
 
