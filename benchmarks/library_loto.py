@@ -18,7 +18,8 @@ performances of the held-out person (rtseg.evaluation.names_lopo; seed K, defaul
 with each of their behaviours left out of the library in turn (not with --no-hide).  Per
 source and pooled: ``known`` (segments of behaviours the library holds: ``accuracy``
 named right, ``unknown_rate``, ``wrong_rate``, ``decision_delay_s`` after the change) and
-``left_out`` (segments of behaviours missing from the library: ``unknown_rate``).
+``left_out`` (segments of behaviours missing from the library: ``unknown_rate``); per
+source also ``by_person``, the same figures of each held-out person.
 ``--segments``: every segment in the JSON too.  ``--threshold-scale F``: every fold
 library's calibrated threshold times F (rejection rules to compare).  ``--truth-cuts``:
 the segments are the labelled ones - a cut at every labelled change, delivered at that

@@ -215,6 +215,13 @@ def test_library_loto_by_person_over_a_source_folder(tmp_path):
     assert len(src["libraries"]) == 3 * 4
     assert {(lib["unit"], lib["without"]) for lib in src["libraries"]} >= {("p1", None), ("p2", "walk")}
     assert doc["pooled"]["known"]["segments"] == k["segments"]
+    # each held-out person's own figures, adding up to the source's
+    per = src["by_person"]
+    assert sorted(per) == ["p1", "p2", "p3"]
+    assert sum(v["known"]["segments"] for v in per.values()) == k["segments"]
+    assert sum(v["left_out"]["segments"] for v in per.values()) == left["segments"]
+    assert sum(v["known"]["accuracy"] * v["known"]["segments"]
+               for v in per.values()) == pytest.approx(k["accuracy"] * k["segments"], abs=0.01)
     assert "segments" not in src
     # with --truth-cuts the segments are the labelled ones, named 2.5 s after the change
     # (the tracker decides on 10-frame blocks: up to one block, 1/6 s at 60 Hz, sooner)

@@ -25,8 +25,9 @@ sooner) after its change: the library's naming, apart from where the detector cu
 Per source (and pooled over sources): ``known`` (``rtseg.evaluation.library.named_summary``:
 segments of behaviours the library holds named right / unknown / wrong, decision delay
 after the change), ``left_out`` (segments of behaviours missing from their library - P's
-own behaviours nobody else performs, and the hidden ones: ``unknown_rate``), the people
-scored and skipped, and each fold's library (``library_summary``).
+own behaviours nobody else performs, and the hidden ones: ``unknown_rate``), the same for
+each scored person apart (``by_person``: what a rule chosen leave-one-person-out is scored
+on), the people scored and skipped, and each fold's library (``library_summary``).
 """
 
 from __future__ import annotations
@@ -113,6 +114,7 @@ def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: b
     left: list[Named] = []
     libraries: list[dict[str, Any]] = []
     scored, skipped = [], {}
+    by_person: dict[str, dict[str, Any]] = {}       # person -> summarise() of their segments
 
     def fold(use: Sequence[Example]) -> Any:
         import rtseg.evaluation.library as le
@@ -139,6 +141,7 @@ def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: b
         libraries.append(library_summary(lib, p))
         scored.append(p)
         truths = {perf.name: _truth(perf) for perf in perfs}
+        n_known, n_left = len(known), len(left)
         for perf in perfs:
             if progress is not None:
                 progress(f"{Path(src).name} {p}: {perf.name}")
@@ -146,25 +149,25 @@ def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: b
                                   truths[perf.name], lib, perf.name)
             known += [r for r in rows if r.known]
             left += [r for r in rows if not r.known]
-        if not hide:
-            continue
-        names = sorted({str(v) for t in truths.values() for v in np.unique(t)} & set(lib.names))
-        for nm in names:
-            use = [e for e in others if e.name != nm]
-            if not use:
-                continue
-            lib_h = fold(use)
-            libraries.append(library_summary(lib_h, p, nm))
-            for perf in perfs:
-                if nm not in truths[perf.name]:
+        if hide:
+            names = sorted({str(v) for t in truths.values() for v in np.unique(t)} & set(lib.names))
+            for nm in names:
+                use = [e for e in others if e.name != nm]
+                if not use:
                     continue
-                if progress is not None:
-                    progress(f"{Path(src).name} {p}: {perf.name} without {nm}")
-                rows = named_segments(run(perf, truths[perf.name], lib_h), perf.take,
-                                      truths[perf.name], lib_h, perf.name)
-                left += [r for r in rows if r.truth == nm]
+                lib_h = fold(use)
+                libraries.append(library_summary(lib_h, p, nm))
+                for perf in perfs:
+                    if nm not in truths[perf.name]:
+                        continue
+                    if progress is not None:
+                        progress(f"{Path(src).name} {p}: {perf.name} without {nm}")
+                    rows = named_segments(run(perf, truths[perf.name], lib_h), perf.take,
+                                          truths[perf.name], lib_h, perf.name)
+                    left += [r for r in rows if r.truth == nm]
+        by_person[p] = summarise(known[n_known:], left[n_left:])
     return {"source": str(src), "cuts": cuts, "people": scored, "skipped": skipped,
-            **summarise(known, left), "libraries": libraries,
+            **summarise(known, left), "by_person": by_person, "libraries": libraries,
             "segments": [vars(s) for s in known + left]}
 
 
