@@ -8,7 +8,7 @@
     python3 benchmarks/library_loto.py fewshot [DATA_DIR] [--seconds S]  # short examples
     python3 benchmarks/library_loto.py --by-person DIR [--n N] [--seed K] [--no-hide] [--truth-cuts]
     (options: --no-reject, --metric model|descriptor, --step S, --name-after S, --claim-margin M,
-    --decide-after S, --id-threshold D,
+    --decide-after S, --id-threshold D, --threshold-scale F,
     --params FILE: the live detectors' parameters, e.g. fast)
 
 --by-person DIR: DIR a source folder laid out like ../shared/data/cmu_single, hdm05 or
@@ -20,8 +20,7 @@ source and pooled: ``known`` (segments of behaviours the library holds: ``accura
 named right, ``unknown_rate``, ``wrong_rate``, ``decision_delay_s`` after the change) and
 ``left_out`` (segments of behaviours missing from the library: ``unknown_rate``); per
 source also ``by_person``, the same figures of each held-out person.
-``--segments``: every segment in the JSON too.  ``--threshold-scale F``: every fold
-library's calibrated threshold times F (rejection rules to compare).  ``--truth-cuts``:
+``--segments``: every segment in the JSON too.  ``--truth-cuts``:
 the segments are the labelled ones - a cut at every labelled change, delivered at that
 frame, instead of the live detector's cuts - so the naming is measured apart from where
 the detector cuts (names decided ``decide_after_s``, or ``name_after_s``, after the
@@ -58,7 +57,9 @@ take alone (``one_name``: that exercise's segments must get its name, every othe
 ``--name-after S``: the tracker's ``name_after_s`` (default: config/live.toml's);
 ``--decide-after S``, ``--id-threshold D``: its ``decide_after_s`` and ``threshold`` (the
 ids, and when a segment is named; defaults: config/live.toml's);
-``--claim-margin M``: its ``claim_margin`` (0-1; 0 = exclusive names without claims).
+``--claim-margin M``: its ``claim_margin`` (0-1; 0 = exclusive names without claims);
+``--threshold-scale F``: its ``name_threshold_scale``, every library's threshold times F
+(how strict the names are, docs/identity.md).
 Prints one JSON document; parameters are the library's own (calibrated inside it).
 ``held_out``: the held-out takes' segments (``unknown_correct`` over those whose behaviour
 the library lacks); ``hidden_names``: the segments of each name left out in turn;
@@ -114,12 +115,13 @@ def _identity_settings(cfg) -> dict:
     return {"name_after_s": cfg["identity.name_after_s"],
             "decide_after_s": cfg["identity.decide_after_s"],
             "identity_threshold": cfg["identity.threshold"],
-            "claim_margin": cfg["identity.claim_margin"]}
+            "claim_margin": cfg["identity.claim_margin"],
+            "name_threshold_scale": cfg["identity.name_threshold_scale"]}
 
 
 def _identity_options(cfg, opts: dict) -> None:
-    """``--name-after``, ``--decide-after``, ``--id-threshold`` and ``--claim-margin`` into
-    the session configuration ``cfg``."""
+    """``--name-after``, ``--decide-after``, ``--id-threshold``, ``--claim-margin`` and
+    ``--threshold-scale`` into the session configuration ``cfg``."""
     if "--name-after" in opts:
         cfg["identity.name_after_s"] = opts["--name-after"]
     if "--decide-after" in opts:
@@ -128,6 +130,8 @@ def _identity_options(cfg, opts: dict) -> None:
         cfg["identity.threshold"] = opts["--id-threshold"]
     if "--claim-margin" in opts:
         cfg["identity.claim_margin"] = opts["--claim-margin"]
+    if "--threshold-scale" in opts:
+        cfg["identity.name_threshold_scale"] = opts["--threshold-scale"]
 
 
 def _progress(msg: str) -> None:
@@ -241,12 +245,9 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
                 kw[key] = value
         if kw["n"] < 1:
             raise _Usage("--n: at least 1 performance per person")
-        scale = _pop_number(argv, "--threshold-scale", float, "a number", "> 0")
     except _Usage as exc:
         print(exc, file=sys.stderr)
         return 2
-    if scale is not None:
-        kw["threshold_scale"] = scale
     hide = "--no-hide" not in argv
     segments = "--segments" in argv
     kw["cuts"] = "truth" if "--truth-cuts" in argv else "live"
@@ -277,7 +278,7 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
                       "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
                       **_identity_settings(cfg), "performances": kw["n"],
                       "seed": kw["seed"], "hidden_names": hide, "cuts": kw["cuts"],
-                      "threshold_scale": kw.get("threshold_scale", 1.0), **doc}, indent=1, default=str))
+                      **doc}, indent=1, default=str))
     return 0 if any(d["people"] for d in doc["sources"].values()) else 1
 
 
@@ -311,6 +312,9 @@ def main(argv: list[str] | None = None) -> int:
         value = _pop_number(argv, "--id-threshold", float, "a distance, a number", "> 0")
         if value is not None:
             opts["--id-threshold"] = value
+        value = _pop_number(argv, "--threshold-scale", float, "a number", "> 0")
+        if value is not None:
+            opts["--threshold-scale"] = value
         margin = _pop_number(argv, "--claim-margin", float, "a number from 0 to 1")
         if margin is not None:
             if not 0.0 <= margin <= 1.0:

@@ -246,6 +246,13 @@ def test_library_loto_by_person_over_a_source_folder(tmp_path):
     delays = [s["delay_s"] for s in doc["sources"]["synth"]["segments"]
               if s["delay_s"] is not None]
     assert delays and all(1.3 <= d <= 1.9 for d in delays), delays
+    # --threshold-scale sets [identity] name_threshold_scale: far below 1, nothing named
+    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
+             "--truth-cuts", "--no-hide", "--threshold-scale", "0.01")
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    assert doc["name_threshold_scale"] == 0.01
+    assert doc["sources"]["synth"]["known"]["unknown_rate"] == 1.0
     r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--id-threshold", "0")
     assert r.returncode == 2 and r.stderr.strip() == "--id-threshold: > 0"
     r = _run("library_loto.py", "--by-person", str(tmp_path / "nowhere"))

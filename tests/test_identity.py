@@ -449,6 +449,24 @@ def test_the_claim_margin_is_read_from_the_configuration_and_checked():
         from_dict({"identity": {"claim_margin": 1.5}}, origin="test")
 
 
+def test_the_name_threshold_scale_is_read_from_the_configuration_and_checked():
+    """``[identity] name_threshold_scale`` reaches the tracker's namer; 0 or a negative
+    factor is refused with one line naming the key."""
+    from rtseg.config import ConfigError
+    from rtseg.identity.tracker import IdentityTracker, tracker_options
+    from rtseg.live.config import from_dict
+    assert tracker_options(_config())["name_threshold_scale"] == 1.0
+    opts = tracker_options(_config(name_threshold_scale=1.5))
+    tr = IdentityTracker(120.0, "contrast", library=_TwoDistanceLibrary(4, np.zeros((1, 3)), 0.5),
+                         **opts)
+    assert tr.namer.threshold_scale == 1.5
+    for bad in (0.0, -1.0, 11.0):
+        with pytest.raises(ConfigError, match="name_threshold_scale"):
+            from_dict({"identity": {"name_threshold_scale": bad}}, origin="test")
+    with pytest.raises(ValueError, match="name_threshold_scale"):
+        IdentityTracker(120.0, "contrast", name_threshold_scale=0.0)
+
+
 def test_a_correction_to_the_id_that_holds_the_name_gives_the_name_back():
     """Segment 1 starts with one of A's three directions turned a right angle (its own id;
     the library's ``walk`` is held by A's id, so it goes out ``unknown``), then is A for

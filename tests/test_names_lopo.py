@@ -73,3 +73,26 @@ def test_a_one_person_library_names_more_of_another_style_with_the_performers_sc
     assert 1.0 - scaled["unknown_rate"] > 1.0 - fixed["unknown_rate"]
     assert scaled["accuracy"] >= max(0.4, fixed["accuracy"])
     assert scaled["wrong_rate"] <= 0.15
+
+
+def test_the_operators_threshold_scale_trades_names_for_unknowns():
+    """``[identity] name_threshold_scale`` multiplies the library's threshold for every
+    segment: far below 1 every segment is ``unknown``; at 0.5 the three known behaviours are
+    named right and kick, missing from the library, is ``unknown``; at 1 kick is named too,
+    wrongly, and the others keep their names (exclusive names off: they would refuse kick
+    the name another id holds)."""
+    cfg = _config()
+    cfg["identity.exclusive_names"] = False
+    lib = _library(cfg)
+    res = synthesize(PERFORMANCE, seed=2)
+    truth = np.asarray(res.frame_names(), dtype=str)
+
+    def names(scale: float) -> list[str]:
+        cfg["identity.name_threshold_scale"] = scale
+        run = truth_cut_run(res.take, truth, cfg, lib)
+        return [r.name for r in named_segments(run, res.take, truth, lib, "synth2")]
+
+    assert names(0.01) == ["unknown"] * 4
+    assert names(0.5) == ["walk", "punch", "unknown", "squat"]
+    loose = names(1.0)
+    assert loose[2] in set(lib.names) and loose[:2] + loose[3:] == ["walk", "punch", "squat"]

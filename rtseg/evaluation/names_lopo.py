@@ -95,10 +95,10 @@ def truth_cut_run(take: Any, truth: np.ndarray, config: Any, library: Any) -> Tr
 def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: bool = True,
                 progress: Callable[[str], None] | None = None,
                 windows: dict[str, float] | None = None, metric: str | None = None,
-                threshold_scale: float = 1.0, cuts: str = "live") -> dict[str, Any]:
-    """Leave-one-person-out over one source folder (module doc); ``threshold_scale``: each
-    fold library's calibrated threshold is multiplied by it (a rejection rule to try);
-    ``cuts``: ``"live"`` or ``"truth"`` (module doc, Cuts)."""
+                cuts: str = "live") -> dict[str, Any]:
+    """Leave-one-person-out over one source folder (module doc); ``cuts``: ``"live"`` or
+    ``"truth"`` (module doc, Cuts).  The session configuration's ``[identity]`` options
+    apply, ``name_threshold_scale`` among them."""
     from rtseg.evaluation.identity import run_identity
     if cuts not in CUTS:
         raise ValueError(f"cuts {cuts!r}: expected one of {', '.join(CUTS)}")
@@ -123,9 +123,6 @@ def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: b
             lib.threshold, lib.ratio = float("inf"), 1.0
             if lib.names_by_posture:
                 lib.posture_rule.update(threshold=float("inf"), ratio=1.0)
-        lib.threshold *= threshold_scale
-        if lib.names_by_posture:
-            lib.posture_rule["threshold"] *= threshold_scale
         return lib
 
     for p in people:

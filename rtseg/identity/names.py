@@ -41,6 +41,12 @@ it was judged by, and names each later segment with the threshold times the medi
 those ratios when it is above 1 (``scale``): statistics of this session's own segments, no
 parameter.  Libraries of several people (calibrated across people), given thresholds and
 uncalibrated libraries are named as they are.
+
+The operator's scale (``threshold_scale``, ``[identity] name_threshold_scale``): the
+library's threshold times this factor, for every segment of the session - above 1 more
+segments get a name and more of them a wrong one, below 1 more are ``unknown``
+(docs/identity.md, "How strict the names are").  The performer's scale works on top of it,
+as on a library whose threshold were that much larger.
 """
 
 from __future__ import annotations
@@ -66,13 +72,17 @@ class SegmentNamer:
     library: a ``rtseg.library.behaviours.Library``.  frame_rate: Hz.  skip_s: seconds after the
     boundary left out of the named window.  max_window_s: longest named window, s.
     min_window_s: the skip is kept only when at least this much remains, s.  block: extra
-    rows of slack in the ring (the tracker's block length, frames).
+    rows of slack in the ring (the tracker's block length, frames).  threshold_scale: the
+    operator's factor on the library's threshold (module doc), > 0.
     """
 
     def __init__(self, library: Any, frame_rate: float, *, skip_s: float = 0.5,
                  max_window_s: float = 3.0, min_window_s: float = 1.0,
-                 block: int = 10) -> None:
+                 block: int = 10, threshold_scale: float = 1.0) -> None:
+        if not threshold_scale > 0:
+            raise ValueError(f"threshold_scale must be > 0, got {threshold_scale}")
         self.library = library
+        self.threshold_scale = float(threshold_scale)
         self.frame_rate = float(frame_rate)
         self.skip = max(0, int(round(skip_s * frame_rate)))
         self._max_window = int(round(max_window_s * frame_rate))
@@ -87,7 +97,7 @@ class SegmentNamer:
         self._has_pose = np.zeros(self._R, dtype=bool)
         #: whether the last ``name`` call compared posture too
         self.last_by_posture = False
-        #: the threshold factor the last ``name`` call used (``scale``)
+        #: the performer's scale the last ``name`` call used (``scale``)
         self.last_scale = 1.0
         self._ratios: list[float] = []     # per decided segment: its distance / threshold
         self._scaled_told = False           # the log said the scale is in use
@@ -107,6 +117,9 @@ class SegmentNamer:
                         "have %d: segments are not named", self.library.dims, d)
             return False
         self._rows = np.zeros((self._R, d))
+        if self.threshold_scale != 1.0:
+            log.info("segments are named with the behaviour library's threshold x %.3g "
+                     "([identity] name_threshold_scale)", self.threshold_scale)
         return True
 
     def update(self, index: int, x: np.ndarray, pose: np.ndarray | None = None) -> None:
@@ -168,17 +181,19 @@ class SegmentNamer:
                      "examples are of one person)", s)
         W = self._rows[pos]
         args = (W, self.frame_rate) if P is None else (W, self.frame_rate, P)
-        nm = self.library.name(*args) if s == 1.0 else self.library.name(*args, scale=s)
+        f = s * self.threshold_scale
+        nm = self.library.name(*args) if f == 1.0 else self.library.name(*args, scale=f)
         return nm.name, nm.distance
 
     def decided(self, distance: float) -> None:
         """The tracker decided a segment whose nearest name lay at ``distance`` (the last
-        ``name`` call's): its ratio to the threshold it was judged by joins the
-        performer's scale (inf, no name: left out)."""
+        ``name`` call's): its ratio to the threshold it was judged by (the operator's
+        scale in, the performer's not) joins the performer's scale (inf, no name: left
+        out)."""
         lib = self.library
         if not math.isfinite(distance) or not getattr(lib, "one_person_calibration", False):
             return
-        t = lib.rule_threshold(self.last_by_posture)
+        t = lib.rule_threshold(self.last_by_posture) * self.threshold_scale
         if t > 0 and math.isfinite(t):
             self._ratios.append(distance / t)
 

@@ -129,6 +129,8 @@ class IdentityTracker:
         sent as ``unknown`` (module doc, Names).
     claim_margin: ... unless the segment's library distance is below this x every
         holder's (``rtseg.identity.names.CLAIM_MARGIN``; 0 = never).
+    name_threshold_scale: the library's threshold times this (> 0; the operator's scale,
+        ``rtseg.identity.names``).
     """
 
     def __init__(self, frame_rate: float, method: str = "", *,
@@ -139,7 +141,8 @@ class IdentityTracker:
                  library: Any = None, name_skip_s: float = 0.5,
                  name_after_s: float = DEFAULT_NAME_AFTER_S,
                  id_skip_s: float = DEFAULT_ID_SKIP_S, exclusive_names: bool = True,
-                 claim_margin: float = CLAIM_MARGIN) -> None:
+                 claim_margin: float = CLAIM_MARGIN,
+                 name_threshold_scale: float = 1.0) -> None:
         if not frame_rate > 0:
             raise ValueError(f"frame_rate must be positive, got {frame_rate}")
         if not decide_after_s > 0:
@@ -148,6 +151,8 @@ class IdentityTracker:
             raise ValueError(f"threshold must be positive, got {threshold}")
         if correction_margin < 1:
             raise ValueError(f"correction_margin must be >= 1, got {correction_margin}")
+        if not name_threshold_scale > 0:
+            raise ValueError(f"name_threshold_scale must be positive, got {name_threshold_scale}")
         self.frame_rate = float(frame_rate)
         self.reference_dims = int(reference_dims)
         self.method = method
@@ -167,7 +172,8 @@ class IdentityTracker:
         self._next_seg = 0
         self._holders = NameHolders(exclusive_names, claim_margin)
         self._namer_kw = {"skip_s": name_skip_s, "max_window_s": max_window_s,
-                          "min_window_s": MIN_WINDOW_S, "block": step}
+                          "min_window_s": MIN_WINDOW_S, "block": step,
+                          "threshold_scale": float(name_threshold_scale)}
         self._posture: Any = None     # the session rig's posture (set_posture)
         self.library = library
         self._skip_blocks = max(0, int(round(id_skip_s * frame_rate / step)))
@@ -478,12 +484,13 @@ class IdentityTracker:
 def tracker_options(config: Any) -> dict[str, Any]:
     """The ``IdentityTracker`` keyword arguments a session configuration's ``[identity]``
     section sets (decision time, threshold, naming wait, exclusive names and their claim
-    margin)."""
+    margin, the operator's factor on the library's threshold)."""
     return {"decide_after_s": float(config["identity.decide_after_s"]),
             "threshold": float(config["identity.threshold"]),
             "name_after_s": float(config["identity.name_after_s"]),
             "exclusive_names": bool(config["identity.exclusive_names"]),
-            "claim_margin": float(config["identity.claim_margin"])}
+            "claim_margin": float(config["identity.claim_margin"]),
+            "name_threshold_scale": float(config["identity.name_threshold_scale"])}
 
 
 def tracker_from_config(config: Any, frame_rate: float, method: str,

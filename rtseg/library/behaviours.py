@@ -222,11 +222,12 @@ class Library:
         g = [z2[:, s].mean(axis=1) for s in group_slices(self.dims)]
         return np.sqrt(np.mean(g, axis=0))
 
-    def name_descriptor(self, q: np.ndarray) -> Naming:
-        """Name a descriptor (module doc, Decision; descriptor metric)."""
+    def name_descriptor(self, q: np.ndarray, scale: float = 1.0) -> Naming:
+        """Name a descriptor (module doc, Decision; descriptor metric; ``scale``: the
+        threshold's factor, as ``decide``'s)."""
         if not len(self.names):
             return Naming(UNKNOWN, "", math.inf, 0.0)
-        return self.decide(self.distances(q))
+        return self.decide(self.distances(q), scale=scale)
 
     @property
     def bank(self) -> Any:
@@ -310,7 +311,7 @@ class Library:
             dp = self.posture_bank.distances(body_descriptor(P, W, fr, self.speed_weight))
             return self.decide(combined(d, dp, self._posture_scale()), posture=True,
                                scale=scale)
-        return self.name_descriptor(descriptor(W, fr))
+        return self.name_descriptor(descriptor(W, fr), scale)
 
     # ------------------------------------------------------------------ calibration
     def calibrate(self) -> float:

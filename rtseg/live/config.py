@@ -223,6 +223,10 @@ SCHEMA: dict[str, dict[str, Key]] = {
         "claim_margin": Key("float", CLAIM_MARGIN, _range(0.0, 1.0),
                             doc="with exclusive names: a segment whose library distance is "
                                 "below this x every holder's gets the name too (0 = never)"),
+        "name_threshold_scale": Key("float", 1.0, _range(0.0, 10.0, strict_lo=True),
+                                    doc="with a library: its rejection threshold times this "
+                                        "(> 1 names more segments, and more wrongly; < 1 "
+                                        "leaves more 'unknown')"),
     },
     "buffer": {
         "capacity": Key("int", 4096, _range(16, MAX_CAPACITY), doc="ring buffer frames"),
