@@ -7,6 +7,7 @@
     python3 benchmarks/library_loto.py spliced SPLICED_DIR [SOURCE_DIR]   # cmu_single
     python3 benchmarks/library_loto.py fewshot [DATA_DIR] [--seconds S]  # short examples
     python3 benchmarks/library_loto.py --by-person DIR [--n N] [--seed K] [--no-hide] [--truth-cuts]
+        [--one-person]
     (options: --no-reject, --metric model|descriptor, --step S, --name-after S, --claim-margin M,
     --decide-after S, --id-threshold D, --threshold-scale F,
     --params FILE: the live detectors' parameters, e.g. fast)
@@ -20,6 +21,8 @@ source and pooled: ``known`` (segments of behaviours the library holds: ``accura
 named right, ``unknown_rate``, ``wrong_rate``, ``decision_delay_s`` after the change) and
 ``left_out`` (segments of behaviours missing from the library: ``unknown_rate``); per
 source also ``by_person``, the same figures of each held-out person.
+``--one-person``: each held-out person named by each other person's library alone (every
+ordered pair a fold, keyed "P by O"; rtseg.evaluation.names_lopo, One-person libraries).
 ``--segments``: every segment in the JSON too.  ``--truth-cuts``:
 the segments are the labelled ones - a cut at every labelled change, delivered at that
 frame, instead of the live detector's cuts - so the naming is measured apart from where
@@ -234,7 +237,8 @@ def spliced(folder: Path, src: Path, cfg) -> dict:
 
 
 def by_person_sources(argv: list[str], opts: dict) -> int:
-    """``--by-person DIR [--n N] [--seed K] [--no-hide] [--segments]`` (module doc)."""
+    """``--by-person DIR [--n N] [--seed K] [--no-hide] [--segments] [--one-person]`` (module
+    doc)."""
     import rtseg.evaluation.library as le
     from rtseg.evaluation.names_lopo import lopo_sources
     kw = {"n": 4, "seed": 0}
@@ -251,7 +255,9 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
     hide = "--no-hide" not in argv
     segments = "--segments" in argv
     kw["cuts"] = "truth" if "--truth-cuts" in argv else "live"
-    argv = [a for a in argv if a not in ("--no-hide", "--segments", "--truth-cuts")]
+    kw["one_person"] = "--one-person" in argv
+    argv = [a for a in argv if a not in ("--no-hide", "--segments", "--truth-cuts",
+                                         "--one-person")]
     if len(argv) != 1:
         print(__doc__, file=sys.stderr)
         return 2
@@ -273,7 +279,8 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
             why = "; ".join(f"{p}: {r}" for p, r in sorted(d["skipped"].items())) or "nobody in it"
             print(f"library_loto.py --by-person: {name}: nobody scored ({why})", file=sys.stderr)
     from rtseg.library.behaviours import DEFAULT_STEP_S
-    print(json.dumps({"protocol": "leave-one-person-out over source folders",
+    print(json.dumps({"protocol": "leave-one-person-out over source folders"
+                      + (", one-person libraries" if kw["one_person"] else ""),
                       "seconds": round(time.perf_counter() - t0, 1),
                       "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
                       **_identity_settings(cfg), "performances": kw["n"],

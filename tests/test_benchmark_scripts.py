@@ -253,6 +253,18 @@ def test_library_loto_by_person_over_a_source_folder(tmp_path):
     doc = json.loads(r.stdout)
     assert doc["name_threshold_scale"] == 0.01
     assert doc["sources"]["synth"]["known"]["unknown_rate"] == 1.0
+    # --one-person: each person named by each other person's library alone, six pairs
+    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
+             "--no-hide", "--one-person")
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    src = doc["sources"]["synth"]
+    pairs = [f"{a} by {b}" for a in ("p1", "p2", "p3") for b in ("p1", "p2", "p3") if a != b]
+    assert src["people"] == pairs and sorted(src["by_person"]) == sorted(pairs)
+    assert [lib["unit"] for lib in src["libraries"]] == pairs
+    assert all(v["known"]["segments"] >= 4 for v in src["by_person"].values())
+    assert src["known"]["segments"] == sum(v["known"]["segments"]
+                                           for v in src["by_person"].values())
     r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--id-threshold", "0")
     assert r.returncode == 2 and r.stderr.strip() == "--id-threshold: > 0"
     r = _run("library_loto.py", "--by-person", str(tmp_path / "nowhere"))

@@ -28,6 +28,14 @@ after the change), ``left_out`` (segments of behaviours missing from their libra
 own behaviours nobody else performs, and the hidden ones: ``unknown_rate``), the same for
 each scored person apart (``by_person``: what a rule chosen leave-one-person-out is scored
 on), the people scored and skipped, and each fold's library (``library_summary``).
+
+One-person libraries (``one_person``): each held-out person P is named by the library of
+each other person O alone, every ordered pair a fold (``by_person`` and ``people`` keyed
+"P by O"; a pair whose library holds none of P's performed behaviours is skipped, with
+that reason).  A library of one person is calibrated on that person's own takes and
+names another person through the performer's scale (``rtseg.identity.names``): this is
+how a rule for such libraries is checked beyond bandai, whose libraries are one actor
+each anyway.
 """
 
 from __future__ import annotations
@@ -95,10 +103,11 @@ def truth_cut_run(take: Any, truth: np.ndarray, config: Any, library: Any) -> Tr
 def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: bool = True,
                 progress: Callable[[str], None] | None = None,
                 windows: dict[str, float] | None = None, metric: str | None = None,
-                cuts: str = "live") -> dict[str, Any]:
+                cuts: str = "live", one_person: bool = False) -> dict[str, Any]:
     """Leave-one-person-out over one source folder (module doc); ``cuts``: ``"live"`` or
-    ``"truth"`` (module doc, Cuts).  The session configuration's ``[identity]`` options
-    apply, ``name_threshold_scale`` among them."""
+    ``"truth"`` (module doc, Cuts); ``one_person``: each held-out person named by the
+    library of each other person alone (module doc, One-person libraries).  The session
+    configuration's ``[identity]`` options apply, ``name_threshold_scale`` among them."""
     from rtseg.evaluation.identity import run_identity
     if cuts not in CUTS:
         raise ValueError(f"cuts {cuts!r}: expected one of {', '.join(CUTS)}")
@@ -114,7 +123,7 @@ def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: b
     left: list[Named] = []
     libraries: list[dict[str, Any]] = []
     scored, skipped = [], {}
-    by_person: dict[str, dict[str, Any]] = {}       # person -> summarise() of their segments
+    by_person: dict[str, dict[str, Any]] = {}       # person (or pair) -> summarise()
 
     def fold(use: Sequence[Example]) -> Any:
         import rtseg.evaluation.library as le
@@ -125,44 +134,58 @@ def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: b
                 lib.posture_rule.update(threshold=float("inf"), ratio=1.0)
         return lib
 
-    for p in people:
-        others = [e for e in examples if e.person != p]
-        if not others:
-            skipped[p] = "no other person in this source"
-            continue
+    def score(p: str, others: Sequence[Example], key: str) -> None:
+        """Name ``p``'s performances with the library of ``others`` (and each behaviour of
+        them left out in turn); the figures go under ``key`` of ``by_person``."""
+        nonlocal known, left
         perfs = person_performances(src, p, n, seed)
         if not perfs:
-            skipped[p] = "fewer than two behaviours with material for a performance"
-            continue
-        lib = fold(others)
-        libraries.append(library_summary(lib, p))
-        scored.append(p)
+            skipped[key] = "fewer than two behaviours with material for a performance"
+            return
         truths = {perf.name: _truth(perf) for perf in perfs}
+        shown = {str(v) for t in truths.values() for v in np.unique(t)}
+        if one_person and not shown & {e.name for e in others}:
+            skipped[key] = "the library holds none of the performed behaviours"
+            return
+        lib = fold(others)
+        libraries.append(library_summary(lib, key))
+        scored.append(key)
         n_known, n_left = len(known), len(left)
         for perf in perfs:
             if progress is not None:
-                progress(f"{Path(src).name} {p}: {perf.name}")
+                progress(f"{Path(src).name} {key}: {perf.name}")
             rows = named_segments(run(perf, truths[perf.name], lib), perf.take,
                                   truths[perf.name], lib, perf.name)
             known += [r for r in rows if r.known]
             left += [r for r in rows if not r.known]
         if hide:
-            names = sorted({str(v) for t in truths.values() for v in np.unique(t)} & set(lib.names))
-            for nm in names:
+            for nm in sorted(shown & set(lib.names)):
                 use = [e for e in others if e.name != nm]
                 if not use:
                     continue
                 lib_h = fold(use)
-                libraries.append(library_summary(lib_h, p, nm))
+                libraries.append(library_summary(lib_h, key, nm))
                 for perf in perfs:
                     if nm not in truths[perf.name]:
                         continue
                     if progress is not None:
-                        progress(f"{Path(src).name} {p}: {perf.name} without {nm}")
+                        progress(f"{Path(src).name} {key}: {perf.name} without {nm}")
                     rows = named_segments(run(perf, truths[perf.name], lib_h), perf.take,
                                           truths[perf.name], lib_h, perf.name)
                     left += [r for r in rows if r.truth == nm]
-        by_person[p] = summarise(known[n_known:], left[n_left:])
+        by_person[key] = summarise(known[n_known:], left[n_left:])
+
+    for p in people:
+        others = [e for e in examples if e.person != p]
+        if not others:
+            skipped[p] = "no other person in this source"
+            continue
+        if not one_person:
+            score(p, others, p)
+            continue
+        for o in people:
+            if o != p:
+                score(p, [e for e in others if e.person == o], f"{p} by {o}")
     return {"source": str(src), "cuts": cuts, "people": scored, "skipped": skipped,
             **summarise(known, left), "by_person": by_person, "libraries": libraries,
             "segments": [vars(s) for s in known + left]}
