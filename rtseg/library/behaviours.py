@@ -296,8 +296,8 @@ class Library:
              P: np.ndarray | None = None, scale: float = 1.0) -> Naming:
         """Name a window of feature rows (frames, dims) of this library's profile; ``P``:
         the same frames' posture rows (``rtseg.core.posture``), used when the library has
-        posture too (module doc); ``scale``: the threshold's factor (``decide``; model
-        metric only)."""
+        posture too (module doc); ``scale``: the threshold's factor (``decide``: the
+        performer's times the operator's, ``rtseg.identity.names``)."""
         W = np.asarray(W, dtype=np.float64)
         if W.ndim != 2 or W.shape[1] != self.dims:
             raise ValueError(f"library wants {self.dims} feature dims, got {W.shape}")
