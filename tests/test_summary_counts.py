@@ -71,3 +71,6 @@ def test_the_identity_summary_says_how_many_names_the_performers_scale_judged():
     text = identity_text(counts)
     assert "3 named, 3 unknown" in text
     assert "4 with the performer's scale (the threshold up to x 2.40)" in text
+    assert "name_threshold_scale" not in text
+    counts.update(name_threshold_scale=1.5)
+    assert "the library's threshold x 1.5 ([identity] name_threshold_scale)" in identity_text(counts)

@@ -53,3 +53,4 @@ class IdentityStats:
     posture_namings: int = 0          # decisions whose naming compared posture too
     names_scaled: int = 0             # namings whose threshold the performer's scale raised
     largest_scale: float = 1.0        # ... the largest such factor
+    name_threshold_scale: float = 1.0  # the operator's factor on the library's threshold

@@ -163,7 +163,7 @@ class IdentityTracker:
         self._named_blocks = max(self._id_blocks, int(math.ceil(name_after_s * frame_rate / step)))
         self.max_blocks = max(self._named_blocks, int(round(max_window_s * frame_rate / step)))
         self.H = max(self.max_blocks + 4, int(math.ceil(history_s * frame_rate / step)))
-        self.stats = IdentityStats()
+        self.stats = IdentityStats(name_threshold_scale=float(name_threshold_scale))
         self.events: list[IdentityDecision] = []
         self.history: list[IdentityDecision] = []   # every message, in order
         self._d = 0
