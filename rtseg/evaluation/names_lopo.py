@@ -134,15 +134,11 @@ def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: b
                 lib.posture_rule.update(threshold=float("inf"), ratio=1.0)
         return lib
 
-    def score(p: str, others: Sequence[Example], key: str) -> None:
-        """Name ``p``'s performances with the library of ``others`` (and each behaviour of
-        them left out in turn); the figures go under ``key`` of ``by_person``."""
-        nonlocal known, left
-        perfs = person_performances(src, p, n, seed)
-        if not perfs:
-            skipped[key] = "fewer than two behaviours with material for a performance"
-            return
-        truths = {perf.name: _truth(perf) for perf in perfs}
+    def score(perfs: Sequence[Any], truths: dict[str, np.ndarray],
+              others: Sequence[Example], key: str) -> None:
+        """Name the performances ``perfs`` (labels ``truths``) with the library of
+        ``others`` (and each behaviour of them left out in turn); the figures go under
+        ``key`` of ``by_person``."""
         shown = {str(v) for t in truths.values() for v in np.unique(t)}
         if one_person and not shown & {e.name for e in others}:
             skipped[key] = "the library holds none of the performed behaviours"
@@ -156,8 +152,8 @@ def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: b
                 progress(f"{Path(src).name} {key}: {perf.name}")
             rows = named_segments(run(perf, truths[perf.name], lib), perf.take,
                                   truths[perf.name], lib, perf.name)
-            known += [r for r in rows if r.known]
-            left += [r for r in rows if not r.known]
+            known.extend(r for r in rows if r.known)
+            left.extend(r for r in rows if not r.known)
         if hide:
             for nm in sorted(shown & set(lib.names)):
                 use = [e for e in others if e.name != nm]
@@ -172,7 +168,7 @@ def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: b
                         progress(f"{Path(src).name} {key}: {perf.name} without {nm}")
                     rows = named_segments(run(perf, truths[perf.name], lib_h), perf.take,
                                           truths[perf.name], lib_h, perf.name)
-                    left += [r for r in rows if r.truth == nm]
+                    left.extend(r for r in rows if r.truth == nm)
         by_person[key] = summarise(known[n_known:], left[n_left:])
 
     for p in people:
@@ -180,12 +176,17 @@ def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: b
         if not others:
             skipped[p] = "no other person in this source"
             continue
-        if not one_person:
-            score(p, others, p)
+        folds = ([(p, others)] if not one_person else
+                 [(f"{p} by {o}", [e for e in others if e.person == o])
+                  for o in people if o != p])
+        perfs = person_performances(src, p, n, seed)       # once per person, every fold
+        if not perfs:
+            for key, _ in folds:
+                skipped[key] = "fewer than two behaviours with material for a performance"
             continue
-        for o in people:
-            if o != p:
-                score(p, [e for e in others if e.person == o], f"{p} by {o}")
+        truths = {perf.name: _truth(perf) for perf in perfs}
+        for key, use in folds:
+            score(perfs, truths, use, key)
     return {"source": str(src), "cuts": cuts, "people": scored, "skipped": skipped,
             **summarise(known, left), "by_person": by_person, "libraries": libraries,
             "segments": [vars(s) for s in known + left]}
