@@ -9,7 +9,7 @@
     python3 benchmarks/library_loto.py --by-person DIR [--n N] [--seed K] [--no-hide] [--truth-cuts]
         [--one-person]
     (options: --no-reject, --metric model|descriptor, --step S, --name-after S, --claim-margin M,
-    --decide-after S, --id-threshold D, --threshold-scale F,
+    --decide-after S, --id-threshold D, --threshold-scale F, --rule W,L,C,
     --params FILE: the live detectors' parameters, e.g. fast)
 
 --by-person DIR: DIR a source folder laid out like ../shared/data/cmu_single, hdm05 or
@@ -63,6 +63,9 @@ ids, and when a segment is named; defaults: config/live.toml's);
 ``--claim-margin M``: its ``claim_margin`` (0-1; 0 = exclusive names without claims);
 ``--threshold-scale F``: its ``name_threshold_scale``, every library's threshold times F
 (how strict the names are, docs/identity.md).
+``--rule W,L,C``: the decision's margin (``rtseg.library.calibration.decision_excess``:
+``MARGIN_WEIGHT``, ``MARGIN_LEVEL``, ``MARGIN_CAP``; ``0,0,1`` the threshold alone) for
+this run - what ``benchmarks/names_rule_lopo.py`` chooses among.
 Prints one JSON document; parameters are the library's own (calibrated inside it).
 ``held_out``: the held-out takes' segments (``unknown_correct`` over those whose behaviour
 the library lacks); ``hidden_names``: the segments of each name left out in turn;
@@ -135,6 +138,27 @@ def _identity_options(cfg, opts: dict) -> None:
         cfg["identity.claim_margin"] = opts["--claim-margin"]
     if "--threshold-scale" in opts:
         cfg["identity.name_threshold_scale"] = opts["--threshold-scale"]
+
+
+def _set_rule(text: str) -> None:
+    """``--rule WEIGHT,LEVEL,CAP``: the decision's margin (``rtseg.library.calibration``'s
+    ``MARGIN_WEIGHT``, ``MARGIN_LEVEL``, ``MARGIN_CAP``) for this run; ``0,0,1`` is the
+    threshold alone.  ``_Usage`` when it is not three numbers, the weight below 0 or the
+    cap below 1."""
+    import rtseg.library.calibration as cal
+    try:
+        weight, level, cap = (float(v) for v in text.split(","))
+    except ValueError:
+        raise _Usage("--rule: WEIGHT,LEVEL,CAP (three numbers)") from None
+    if not weight >= 0 or not cap >= 1:
+        raise _Usage("--rule: the weight must be at least 0 and the cap at least 1")
+    cal.MARGIN_WEIGHT, cal.MARGIN_LEVEL, cal.MARGIN_CAP = weight, level, cap
+
+
+def _rule() -> dict:
+    """The decision's margin a run used (``--rule``; else the shipped constants)."""
+    import rtseg.library.calibration as cal
+    return {"weight": cal.MARGIN_WEIGHT, "level": cal.MARGIN_LEVEL, "cap": cal.MARGIN_CAP}
 
 
 def _progress(msg: str) -> None:
@@ -283,7 +307,8 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
                       + (", one-person libraries" if kw["one_person"] else ""),
                       "seconds": round(time.perf_counter() - t0, 1),
                       "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
-                      **_identity_settings(cfg), "performances": kw["n"],
+                      **_identity_settings(cfg), "decision_rule": _rule(),
+                      "performances": kw["n"],
                       "seed": kw["seed"], "hidden_names": hide, "cuts": kw["cuts"],
                       **doc}, indent=1, default=str))
     return 0 if any(d["people"] for d in doc["sources"].values()) else 1
@@ -309,6 +334,9 @@ def main(argv: list[str] | None = None) -> int:
         del argv[k:k + 2]
     opts = {}
     try:
+        rule = _pop_number(argv, "--rule", str, "WEIGHT,LEVEL,CAP (three numbers)")
+        if rule is not None:
+            _set_rule(rule)
         params = _pop_number(argv, "--params", str, "a detector parameter file (or 'fast')")
         if params is not None:
             opts["--params"] = params
@@ -380,7 +408,7 @@ def main(argv: list[str] | None = None) -> int:
     doc = {"protocol": argv[0] + (" by person" if by_person else ""),
            "seconds": round(time.perf_counter() - t0, 1),
            "step_s": opts.get("--step", DEFAULT_STEP_S),
-           **_identity_settings(cfg), **doc}
+           **_identity_settings(cfg), "decision_rule": _rule(), **doc}
     print(json.dumps(doc, indent=1, default=str))
     return 0
 

@@ -587,3 +587,76 @@ def test_library_loto_names_people_the_source_does_not_hold(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     (lib,) = json.loads(r.stdout)["libraries"]
     assert lib["examples"] == len(behaviours)
+
+
+def _by_person_run(path: Path, people: dict[str, tuple[int, int, int, int, int]]) -> None:
+    """A ``library_loto.py --by-person`` JSON at ``path`` whose ``by_person`` holds, per
+    ``source/person``, (known, right, unknown, left out, left out sent unknown)."""
+    sources: dict[str, dict] = {}
+    for key, (n, right, unk, m, m_unk) in people.items():
+        src, person = key.split("/")
+        sources.setdefault(src, {"by_person": {}})["by_person"][person] = {
+            "known": {"segments": n, "accuracy": right / n, "unknown_rate": unk / n,
+                      "wrong_rate": (n - right - unk) / n},
+            "left_out": {"segments": m, "unknown_rate": m_unk / m}}
+    path.write_text(json.dumps({"sources": sources}))
+
+
+def test_names_rule_lopo_chooses_each_persons_rule_without_them(tmp_path):
+    """benchmarks/names_rule_lopo.py: the rule naming the most known segments right over the
+    other people, among those meeting left-out ``unknown`` >= 0.80 and wrong <= 0.05 there,
+    scores each person; the held-out pool adds up each person's own counts under their
+    rule (runs already in --out are read, not run again)."""
+    out = tmp_path / "runs"
+    out.mkdir()
+    # rule "loose" names more but lets the left-out behaviours of a and b through;
+    # without c (whose left-out segments are all unknown) it looks good enough
+    loose = {"s/a": (10, 9, 0, 10, 7), "s/b": (10, 9, 0, 10, 7), "s/c": (10, 10, 0, 40, 40)}
+    tight = {"s/a": (10, 7, 3, 10, 9), "s/b": (10, 7, 3, 10, 9), "s/c": (10, 8, 2, 40, 40)}
+    _by_person_run(out / "rule_1_0_1_seed0.json", loose)
+    _by_person_run(out / "rule_4_-1_1.5_seed0.json", tight)
+    r = _run("names_rule_lopo.py", str(tmp_path), "--out", str(out), "--seeds", "0",
+             "--rules", "1,0,1;4,-1,1.5")
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    assert list(doc)[0] == "held_out"
+    # without a: b + c left out 47 / 50 unknown under loose -> loose; without c: a + b
+    # 14 / 20 -> only tight qualifies
+    assert {p: v["rule"] for p, v in doc["chosen"].items()} == {
+        "s/a": "1,0,1", "s/b": "1,0,1", "s/c": "4,-1,1.5"}
+    assert all(v["qualified"] for v in doc["chosen"].values())
+    h = doc["held_out"]
+    assert (h["known_segments"], h["left_out_segments"]) == (30, 60)
+    assert h["named_right"] == pytest.approx((9 + 9 + 8) / 30, abs=1e-4)
+    assert h["left_out_unknown"] == pytest.approx((7 + 7 + 40) / 60, abs=1e-4)
+    assert doc["everyone"]["1,0,1"]["named_right"] == pytest.approx(28 / 30, abs=1e-4)
+    # nothing qualifies: the largest smallest left-out share, flagged
+    r = _run("names_rule_lopo.py", str(tmp_path), "--out", str(out), "--seeds", "0",
+             "--rules", "1,0,1;4,-1,1.5", "--min-left", "0.99")
+    doc = json.loads(r.stdout)
+    assert {v["rule"] for v in doc["chosen"].values()} == {"4,-1,1.5"}
+    assert not any(v["qualified"] for v in doc["chosen"].values())
+    r = _run("names_rule_lopo.py", str(tmp_path / "nowhere"))
+    assert r.returncode == 2 and "no such folder" in r.stderr
+
+
+def test_names_rule_lopo_runs_library_loto_with_each_rule(tmp_path):
+    """End to end on a synthetic source folder: each rule is one library_loto.py run with
+    --rule, whose JSON states the rule it used; the threshold alone (0,0,1) and the shipped
+    margin are both scored; a malformed --rule is refused in one line."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from source_folders import make_source
+    make_source(tmp_path / "data" / "synth", ["p1", "p2", "p3"], ["walk", "squat", "wave"],
+                rate=60.0, seconds=12.0)
+    out = tmp_path / "runs"
+    r = _run("names_rule_lopo.py", str(tmp_path / "data"), "--out", str(out), "--seeds", "0",
+             "--n", "1", "--rules", "0,0,1;4,-0.75,1.5")
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    assert sorted(doc["chosen"]) == ["synth/p1", "synth/p2", "synth/p3"]
+    assert doc["held_out"]["known_segments"] >= 3 * 4
+    run = json.loads((out / "rule_0_0_1_seed0_n1.json").read_text())
+    assert run["decision_rule"] == {"weight": 0.0, "level": 0.0, "cap": 1.0}
+    assert run["performances"] == 1
+    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--rule", "4,-0.75")
+    assert r.returncode == 2 and r.stderr.strip() == "--rule: WEIGHT,LEVEL,CAP (three numbers)"
