@@ -37,8 +37,9 @@ from typing import Any
 
 HERE = Path(__file__).resolve().parent
 DATA = HERE.parents[1] / "shared" / "data"
-#: the rules tried by default: the shipped (4, -0.75, 1.5), its level, weight and cap
-#: moved each way, a gentler margin and the threshold alone
+#: the rules tried by default: weights 2-6 with levels along the ridge where named right
+#: trades one for one against left-out ``unknown`` (docs/history.md, 2026-12-06), caps
+#: 1.25-2, and the threshold alone (0, 0, 1)
 RULES = ("4,-0.75,1.5;4,-0.65,1.5;4,-0.85,1.5;3,-0.6,1.5;3,-0.75,1.5;5,-0.85,1.5;"
          "5,-1.0,1.5;4,-0.75,1.25;4,-0.75,2;2,-0.45,1.5;2,-0.3,1.5;6,-1.0,1.5;0,0,1")
 
@@ -205,14 +206,16 @@ def main(argv: list[str] | None = None) -> int:
         runs[r].append(read_run(p))
     people = sorted({p for rs in runs.values() for run in rs for p in run.people})
     chosen: dict[str, dict[str, Any]] = {}
-    held, by_source = Counts(), {}
+    held, by_source = Counts(), {}          # by_source: source name -> Counts
     for person in people:
         rule, ok = choose(runs, person, opts["--min-left"], opts["--max-wrong"])
         mine = Counts()
         for run in runs[rule]:
             mine += run.people.get(person, Counts())
         held += mine
-        by_source.setdefault(person.split("/")[0], Counts()).__iadd__(mine)
+        src = person.split("/")[0]
+        by_source[src] = by_source.get(src, Counts())
+        by_source[src] += mine
         chosen[person] = {"rule": rule, "qualified": ok, **mine.shares()}
     everyone = {}
     for r, rs in runs.items():
