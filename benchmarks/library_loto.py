@@ -10,6 +10,7 @@
         [--one-person]
     (options: --no-reject, --metric model|descriptor, --step S, --name-after S, --claim-margin M,
     --decide-after S, --id-threshold D, --threshold-scale F, --rule W,L,C,
+    --posture-weight W, --speed-weight S,
     --params FILE: the live detectors' parameters, e.g. fast)
 
 --by-person DIR: DIR a source folder laid out like ../shared/data/cmu_single, hdm05 or
@@ -65,7 +66,10 @@ ids, and when a segment is named; defaults: config/live.toml's);
 (how strict the names are, docs/identity.md).
 ``--rule W,L,C``: the decision's margin (``rtseg.library.calibration.decision_excess``:
 ``MARGIN_WEIGHT``, ``MARGIN_LEVEL``, ``MARGIN_CAP``; ``0,0,1`` the threshold alone) for
-this run - what ``benchmarks/names_rule_lopo.py`` chooses among.
+this run - what ``benchmarks/names_rule_lopo.py`` chooses among.  ``--posture-weight W``:
+the posture distance's weight in the names' distance (``rtseg.library.posture_distance
+.WEIGHT``, 2/3); ``--speed-weight S``: the joint speeds' weight in the body descriptors of
+the libraries this run learns (``rtseg.library.joint_speed.SPEED_WEIGHT``, 1).
 Prints one JSON document; parameters are the library's own (calibrated inside it).
 ``held_out``: the held-out takes' segments (``unknown_correct`` over those whose behaviour
 the library lacks); ``hidden_names``: the segments of each name left out in turn;
@@ -155,10 +159,34 @@ def _set_rule(text: str) -> None:
     cal.MARGIN_WEIGHT, cal.MARGIN_LEVEL, cal.MARGIN_CAP = weight, level, cap
 
 
+def _set_weights(posture: float | None, speed: float | None) -> None:
+    """``--posture-weight W`` (``rtseg.library.posture_distance.WEIGHT``, the posture
+    distance's weight in the names' distance) and ``--speed-weight S`` (the joint speeds'
+    weight in the body descriptors of the libraries learned in this run,
+    ``rtseg.library.joint_speed.SPEED_WEIGHT``); None leaves one as shipped."""
+    import rtseg.library.builder as builder
+    import rtseg.library.posture_distance as pd
+    if posture is not None:
+        if not 0.0 < posture <= 1.0:
+            raise _Usage("--posture-weight: a number above 0, at most 1")
+        pd.WEIGHT = posture
+    if speed is not None:
+        if not speed >= 0.0:
+            raise _Usage("--speed-weight: a number, at least 0")
+        builder.SPEED_WEIGHT = speed
+
+
 def _rule() -> dict:
     """The decision's margin a run used (``--rule``; else the shipped constants)."""
     import rtseg.library.calibration as cal
     return {"weight": cal.MARGIN_WEIGHT, "level": cal.MARGIN_LEVEL, "cap": cal.MARGIN_CAP}
+
+
+def _weights() -> dict:
+    """The names' distance weights a run used (``--posture-weight``, ``--speed-weight``)."""
+    import rtseg.library.builder as builder
+    import rtseg.library.posture_distance as pd
+    return {"posture_weight": round(pd.WEIGHT, 6), "speed_weight": builder.SPEED_WEIGHT}
 
 
 def _progress(msg: str) -> None:
@@ -307,7 +335,7 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
                       + (", one-person libraries" if kw["one_person"] else ""),
                       "seconds": round(time.perf_counter() - t0, 1),
                       "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
-                      **_identity_settings(cfg), "decision_rule": _rule(),
+                      **_identity_settings(cfg), "decision_rule": _rule(), **_weights(),
                       "performances": kw["n"],
                       "seed": kw["seed"], "hidden_names": hide, "cuts": kw["cuts"],
                       **doc}, indent=1, default=str))
@@ -337,6 +365,8 @@ def main(argv: list[str] | None = None) -> int:
         rule = _pop_number(argv, "--rule", str, "WEIGHT,LEVEL,CAP (three numbers)")
         if rule is not None:
             _set_rule(rule)
+        _set_weights(_pop_number(argv, "--posture-weight", float, "a number above 0, at most 1"),
+                     _pop_number(argv, "--speed-weight", float, "a number, at least 0"))
         params = _pop_number(argv, "--params", str, "a detector parameter file (or 'fast')")
         if params is not None:
             opts["--params"] = params
@@ -408,7 +438,7 @@ def main(argv: list[str] | None = None) -> int:
     doc = {"protocol": argv[0] + (" by person" if by_person else ""),
            "seconds": round(time.perf_counter() - t0, 1),
            "step_s": opts.get("--step", DEFAULT_STEP_S),
-           **_identity_settings(cfg), "decision_rule": _rule(), **doc}
+           **_identity_settings(cfg), "decision_rule": _rule(), **_weights(), **doc}
     print(json.dumps(doc, indent=1, default=str))
     return 0
 

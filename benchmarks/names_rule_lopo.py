@@ -1,7 +1,8 @@
 """The naming decision's margin chosen leave-one-person-out, and its held-out figures.
 
     python3 benchmarks/names_rule_lopo.py [DATA_DIR] [--seeds 0 1 2] [--rules "W,L,C;..."]
-        [--out DIR] [--jobs J] [--n N] [--min-left 0.80] [--max-wrong 0.05]
+        [--sets "OPTIONS;..."] [--out DIR] [--jobs J] [--n N] [--min-left 0.80]
+        [--max-wrong 0.05]
 
 A library names a segment when log(d1 / t) + W x log((d1 / d2) / r) <= L and d1 <= C x t
 (``rtseg.library.calibration.decision_excess``; ``0,0,1`` is the threshold alone).  For
@@ -11,6 +12,10 @@ configuration otherwise: live cuts, names decided ``decide_after_s`` into their 
 about 1.5 minutes a run over ``../shared/data``), ``--jobs`` runs at a time (default 2),
 each run's JSON kept in ``--out`` (default ``out/names_rule`` of the checkout, not
 versioned) and reused when it is there.
+
+``--sets`` chooses among other settings the same way: each set is options of
+``library_loto.py`` for one run (e.g. ``--sets "--posture-weight 0.5 --speed-weight 1;
+--posture-weight 0.8 --speed-weight 1"``), scored as a rule is.
 
 Then, for each scored person P (``by_person`` of every source): the rule chosen without P
 is the one naming the most known segments right over the other people, among the rules
@@ -28,6 +33,7 @@ behaviours missing from the library), with their counts.
 from __future__ import annotations
 
 import json
+import shlex
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -104,10 +110,18 @@ def read_run(path: Path) -> Run:
     return run
 
 
+def set_options(rule: str) -> list[str]:
+    """The ``library_loto.py`` options of one rule or set: "W,L,C" is ``--rule W,L,C``,
+    anything starting with "--" is options as written."""
+    return shlex.split(rule) if rule.startswith("--") else ["--rule", rule]
+
+
 def run_file(out: Path, rule: str, seed: int, n: int | None = None) -> Path:
-    """Where the JSON of ``rule`` on ``seed`` (``n`` performances a person) is kept."""
+    """Where the JSON of ``rule`` (or set) on ``seed`` (``n`` performances a person) is
+    kept: named by its options (flags without their dashes, commas as "_")."""
+    key = "_".join(a[2:] if a.startswith("--") else a for a in set_options(rule))
     tail = "" if n is None else f"_n{n}"
-    return out / f"rule_{rule.replace(',', '_')}_seed{seed}{tail}.json"
+    return out / f"{key.replace(',', '_').replace('/', '_')}_seed{seed}{tail}.json"
 
 
 def ensure_run(data: Path, out: Path, rule: str, seed: int, n: int | None = None) -> Path:
@@ -116,7 +130,7 @@ def ensure_run(data: Path, out: Path, rule: str, seed: int, n: int | None = None
     if path.exists():
         return path
     cmd = [sys.executable, str(HERE / "library_loto.py"), "--by-person", str(data),
-           "--seed", str(seed), "--rule", rule] + ([] if n is None else ["--n", str(n)])
+           "--seed", str(seed), *set_options(rule)] + ([] if n is None else ["--n", str(n)])
     print(f"names_rule_lopo: {' '.join(cmd[1:])}", file=sys.stderr, flush=True)
     done = subprocess.run(cmd, capture_output=True, text=True)
     if done.returncode != 0 or not done.stdout.strip():
@@ -169,10 +183,11 @@ def main(argv: list[str] | None = None) -> int:
                     raise ValueError("--seeds: at least one seed")
                 i = j
                 continue
-            if a in ("--rules", "--out", "--jobs", "--n", "--min-left", "--max-wrong"):
+            if a in ("--rules", "--sets", "--out", "--jobs", "--n", "--min-left",
+                     "--max-wrong"):
                 if i + 1 >= len(argv):
                     raise ValueError(f"{a}: a value")
-                kind = {"--rules": str, "--out": Path, "--jobs": int, "--n": int,
+                kind = {"--rules": str, "--sets": str, "--out": Path, "--jobs": int, "--n": int,
                         "--min-left": float, "--max-wrong": float}[a]
                 opts[a] = kind(argv[i + 1])
                 i += 2
@@ -190,7 +205,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"names_rule_lopo: {data}: no such folder (a folder laid out like "
               f"../shared/data or one of its source folders)", file=sys.stderr)
         return 2
-    rules = [r.strip() for r in opts["--rules"].split(";") if r.strip()]
+    rules = [r.strip() for r in opts.get("--sets", opts["--rules"]).split(";") if r.strip()]
     out: Path = opts["--out"]
     out.mkdir(parents=True, exist_ok=True)
     jobs = [(r, s) for r in rules for s in opts["--seeds"]]

@@ -636,6 +636,15 @@ def test_names_rule_lopo_chooses_each_persons_rule_without_them(tmp_path):
     doc = json.loads(r.stdout)
     assert {v["rule"] for v in doc["chosen"].values()} == {"4,-1,1.5"}
     assert not any(v["qualified"] for v in doc["chosen"].values())
+    # --sets: any library_loto.py options per run, each kept under a name made of them
+    _by_person_run(out / "posture-weight_0.5_speed-weight_1_seed0.json", tight)
+    _by_person_run(out / "speed-weight_1_seed0.json", loose)
+    r = _run("names_rule_lopo.py", str(tmp_path), "--out", str(out), "--seeds", "0",
+             "--sets", "--posture-weight 0.5 --speed-weight 1;--speed-weight 1")
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    assert doc["chosen"]["s/c"]["rule"] == "--posture-weight 0.5 --speed-weight 1"
+    assert doc["chosen"]["s/a"]["rule"] == "--speed-weight 1"
     r = _run("names_rule_lopo.py", str(tmp_path / "nowhere"))
     assert r.returncode == 2 and "no such folder" in r.stderr
 
@@ -660,3 +669,11 @@ def test_names_rule_lopo_runs_library_loto_with_each_rule(tmp_path):
     assert run["performances"] == 1
     r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--rule", "4,-0.75")
     assert r.returncode == 2 and r.stderr.strip() == "--rule: WEIGHT,LEVEL,CAP (three numbers)"
+    # the names' distance weights for one run, stated in its JSON; out of range refused
+    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1", "--no-hide",
+             "--truth-cuts", "--posture-weight", "0.5", "--speed-weight", "0")
+    assert r.returncode == 0, r.stderr[-2000:]
+    doc = json.loads(r.stdout)
+    assert (doc["posture_weight"], doc["speed_weight"]) == (0.5, 0.0)
+    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--posture-weight", "0")
+    assert r.returncode == 2 and r.stderr.strip() == "--posture-weight: a number above 0, at most 1"
