@@ -615,10 +615,13 @@ def test_names_rule_lopo_chooses_each_persons_rule_without_them(tmp_path):
     tight = {"s/a": (10, 7, 3, 10, 9), "s/b": (10, 7, 3, 10, 9), "s/c": (10, 8, 2, 40, 40)}
     _by_person_run(out / "rule_1_0_1_seed0.json", loose)
     _by_person_run(out / "rule_4_-1_1.5_seed0.json", tight)
-    r = _run("names_rule_lopo.py", str(tmp_path), "--out", str(out), "--seeds", "0",
-             "--rules", "1,0,1;4,-1,1.5")
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+
+    def chosen_by(*options: str) -> dict:
+        r = _run("names_rule_lopo.py", str(tmp_path), "--out", str(out), "--seeds", "0",
+                 *options)
+        assert r.returncode == 0, r.stderr[-2000:]
+        return json.loads(r.stdout)
+    doc = chosen_by("--rules", "1,0,1;4,-1,1.5")
     assert list(doc)[0] == "held_out"
     # without a: b + c left out 47 / 50 unknown under loose -> loose; without c: a + b
     # 14 / 20 -> only tight qualifies
@@ -631,18 +634,13 @@ def test_names_rule_lopo_chooses_each_persons_rule_without_them(tmp_path):
     assert h["left_out_unknown"] == pytest.approx((7 + 7 + 40) / 60, abs=1e-4)
     assert doc["everyone"]["1,0,1"]["named_right"] == pytest.approx(28 / 30, abs=1e-4)
     # nothing qualifies: the largest smallest left-out share, flagged
-    r = _run("names_rule_lopo.py", str(tmp_path), "--out", str(out), "--seeds", "0",
-             "--rules", "1,0,1;4,-1,1.5", "--min-left", "0.99")
-    doc = json.loads(r.stdout)
+    doc = chosen_by("--rules", "1,0,1;4,-1,1.5", "--min-left", "0.99")
     assert {v["rule"] for v in doc["chosen"].values()} == {"4,-1,1.5"}
     assert not any(v["qualified"] for v in doc["chosen"].values())
     # --sets: any library_loto.py options per run, each kept under a name made of them
     _by_person_run(out / "posture-weight_0.5_speed-weight_1_seed0.json", tight)
     _by_person_run(out / "speed-weight_1_seed0.json", loose)
-    r = _run("names_rule_lopo.py", str(tmp_path), "--out", str(out), "--seeds", "0",
-             "--sets", "--posture-weight 0.5 --speed-weight 1;--speed-weight 1")
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    doc = chosen_by("--sets", "--posture-weight 0.5 --speed-weight 1;--speed-weight 1")
     assert doc["chosen"]["s/c"]["rule"] == "--posture-weight 0.5 --speed-weight 1"
     assert doc["chosen"]["s/a"]["rule"] == "--speed-weight 1"
     r = _run("names_rule_lopo.py", str(tmp_path / "nowhere"))
