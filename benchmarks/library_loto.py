@@ -176,17 +176,15 @@ def _set_weights(posture: float | None, speed: float | None) -> None:
         builder.SPEED_WEIGHT = speed
 
 
-def _rule() -> dict:
-    """The decision's margin a run used (``--rule``; else the shipped constants)."""
-    import rtseg.library.calibration as cal
-    return {"weight": cal.MARGIN_WEIGHT, "level": cal.MARGIN_LEVEL, "cap": cal.MARGIN_CAP}
-
-
-def _weights() -> dict:
-    """The names' distance weights a run used (``--posture-weight``, ``--speed-weight``)."""
+def _naming_settings() -> dict:
+    """The decision's margin (``--rule``) and the names' distance weights
+    (``--posture-weight``, ``--speed-weight``) a run used, as its JSON states them."""
     import rtseg.library.builder as builder
+    import rtseg.library.calibration as cal
     import rtseg.library.posture_distance as pd
-    return {"posture_weight": round(pd.WEIGHT, 6), "speed_weight": builder.SPEED_WEIGHT}
+    return {"decision_rule": {"weight": cal.MARGIN_WEIGHT, "level": cal.MARGIN_LEVEL,
+                              "cap": cal.MARGIN_CAP},
+            "posture_weight": round(pd.WEIGHT, 6), "speed_weight": builder.SPEED_WEIGHT}
 
 
 def _progress(msg: str) -> None:
@@ -335,7 +333,7 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
                       + (", one-person libraries" if kw["one_person"] else ""),
                       "seconds": round(time.perf_counter() - t0, 1),
                       "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
-                      **_identity_settings(cfg), "decision_rule": _rule(), **_weights(),
+                      **_identity_settings(cfg), **_naming_settings(),
                       "performances": kw["n"],
                       "seed": kw["seed"], "hidden_names": hide, "cuts": kw["cuts"],
                       **doc}, indent=1, default=str))
@@ -438,7 +436,7 @@ def main(argv: list[str] | None = None) -> int:
     doc = {"protocol": argv[0] + (" by person" if by_person else ""),
            "seconds": round(time.perf_counter() - t0, 1),
            "step_s": opts.get("--step", DEFAULT_STEP_S),
-           **_identity_settings(cfg), "decision_rule": _rule(), **_weights(), **doc}
+           **_identity_settings(cfg), **_naming_settings(), **doc}
     print(json.dumps(doc, indent=1, default=str))
     return 0
 

@@ -32,6 +32,7 @@ behaviours missing from the library), with their counts.
 
 from __future__ import annotations
 
+import argparse
 import json
 import shlex
 import subprocess
@@ -161,58 +162,40 @@ def choose(runs: dict[str, list[Run]], person: str, min_left: float,
     return best, bool(best_key and best_key[0])
 
 
+def parse(argv: list[str]) -> argparse.Namespace:
+    """The command line (module doc); argparse's usage error (exit 2) when it is not one."""
+    p = argparse.ArgumentParser(prog="names_rule_lopo.py", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("data", nargs="?", type=Path, default=DATA)
+    p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    which = p.add_mutually_exclusive_group()
+    which.add_argument("--rules", default=RULES)
+    which.add_argument("--sets")
+    p.add_argument("--out", type=Path, default=HERE.parent / "out" / "names_rule")
+    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--n", type=int)
+    p.add_argument("--min-left", type=float, default=0.80)
+    p.add_argument("--max-wrong", type=float, default=0.05)
+    args = p.parse_args(argv)
+    if args.jobs < 1 or (args.n is not None and args.n < 1):
+        p.error("--jobs and --n: at least 1")
+    return args
+
+
 def main(argv: list[str] | None = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    if argv and argv[0] in ("-h", "--help"):
-        print(__doc__)
-        return 0
-    opts: dict[str, Any] = {"--seeds": [0, 1, 2], "--rules": RULES, "--jobs": 2,
-                            "--out": HERE.parent / "out" / "names_rule", "--min-left": 0.80,
-                            "--max-wrong": 0.05}
-    rest: list[str] = []
-    i = 0
-    try:
-        while i < len(argv):
-            a = argv[i]
-            if a == "--seeds":
-                j = i + 1
-                while j < len(argv) and argv[j].isdigit():
-                    j += 1
-                opts[a] = [int(v) for v in argv[i + 1:j]]
-                if not opts[a]:
-                    raise ValueError("--seeds: at least one seed")
-                i = j
-                continue
-            if a in ("--rules", "--sets", "--out", "--jobs", "--n", "--min-left",
-                     "--max-wrong"):
-                if i + 1 >= len(argv):
-                    raise ValueError(f"{a}: a value")
-                kind = {"--rules": str, "--sets": str, "--out": Path, "--jobs": int, "--n": int,
-                        "--min-left": float, "--max-wrong": float}[a]
-                opts[a] = kind(argv[i + 1])
-                i += 2
-                continue
-            rest.append(a)
-            i += 1
-    except ValueError as exc:
-        print(f"names_rule_lopo: {exc}", file=sys.stderr)
-        return 2
-    if len(rest) > 1 or opts["--jobs"] < 1 or opts.get("--n", 1) < 1:
-        print(__doc__, file=sys.stderr)
-        return 2
-    data = Path(rest[0]) if rest else DATA
+    args = parse(list(sys.argv[1:] if argv is None else argv))
+    data = args.data
     if not data.is_dir():
         print(f"names_rule_lopo: {data}: no such folder (a folder laid out like "
               f"../shared/data or one of its source folders)", file=sys.stderr)
         return 2
-    rules = [r.strip() for r in opts.get("--sets", opts["--rules"]).split(";") if r.strip()]
-    out: Path = opts["--out"]
+    rules = [r.strip() for r in (args.sets or args.rules).split(";") if r.strip()]
+    out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
-    jobs = [(r, s) for r in rules for s in opts["--seeds"]]
+    jobs = [(r, s) for r in rules for s in args.seeds]
     try:
-        with ThreadPoolExecutor(max_workers=opts["--jobs"]) as pool:
-            paths = list(pool.map(lambda rs: ensure_run(data, out, *rs, opts.get("--n")),
-                                  jobs))
+        with ThreadPoolExecutor(max_workers=args.jobs) as pool:
+            paths = list(pool.map(lambda rs: ensure_run(data, out, *rs, args.n), jobs))
     except RuntimeError as exc:
         print(f"names_rule_lopo: {exc}", file=sys.stderr)
         return 1
@@ -223,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
     chosen: dict[str, dict[str, Any]] = {}
     held, by_source = Counts(), {}          # by_source: source name -> Counts
     for person in people:
-        rule, ok = choose(runs, person, opts["--min-left"], opts["--max-wrong"])
+        rule, ok = choose(runs, person, args.min_left, args.max_wrong)
         mine = Counts()
         for run in runs[rule]:
             mine += run.people.get(person, Counts())
@@ -240,9 +223,9 @@ def main(argv: list[str] | None = None) -> int:
         everyone[r] = c.shares()
     print(json.dumps({"held_out": {**held.shares(),
                                    "by_source": {s: c.shares() for s, c in by_source.items()}},
-                      "criterion": {"min_left_out_unknown": opts["--min-left"],
-                                    "max_wrong": opts["--max-wrong"], "per_seed": True},
-                      "seeds": opts["--seeds"], "data": str(data),
+                      "criterion": {"min_left_out_unknown": args.min_left,
+                                    "max_wrong": args.max_wrong, "per_seed": True},
+                      "seeds": args.seeds, "data": str(data),
                       "chosen": chosen, "everyone": everyone}, indent=1))
     return 0
 
