@@ -675,3 +675,10 @@ def test_names_rule_lopo_runs_library_loto_with_each_rule(tmp_path):
     assert (doc["posture_weight"], doc["speed_weight"]) == (0.5, 0.0)
     r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--posture-weight", "0")
     assert r.returncode == 2 and r.stderr.strip() == "--posture-weight: a number above 0, at most 1"
+    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--speed-weight", "-1")
+    assert r.returncode == 2 and r.stderr.strip() == "--speed-weight: a number, at least 0"
+    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--rule", "4,-0.75,0.5")
+    assert r.returncode == 2
+    assert r.stderr.strip() == "--rule: the weight must be at least 0 and the cap at least 1"
+    r = _run("names_rule_lopo.py", str(tmp_path / "data"), "--jobs", "0")
+    assert r.returncode == 2 and "--jobs and --n: at least 1" in r.stderr
