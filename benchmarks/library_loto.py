@@ -8,7 +8,8 @@
     python3 benchmarks/library_loto.py fewshot [DATA_DIR] [--seconds S]  # short examples
     python3 benchmarks/library_loto.py --by-person DIR [--n N] [--seed K] [--no-hide] [--truth-cuts]
         [--one-person]
-    (options: --no-reject, --metric model|descriptor, --step S, --name-after S, --claim-margin M,
+    (options: --no-reject, --metric model|descriptor, --step S, --window S, --name-after S,
+    --claim-margin M,
     --decide-after S, --id-threshold D, --threshold-scale F, --rule W,L,C,
     --posture-weight W, --speed-weight S,
     --params FILE: the live detectors' parameters, e.g. fast)
@@ -58,6 +59,7 @@ take alone (``one_name``: that exercise's segments must get its name, every othe
 ``--no-reject``: no null rejection (every segment its nearest name), the ceiling.
 ``--metric descriptor``: libraries of the earlier descriptor distance (default: model).
 ``--step S``: example windows every S seconds (default ``rtseg.library.behaviours.DEFAULT_STEP_S``);
+``--window S``: example windows S seconds long (default the builder's, 2 s);
 ``--name-after S``: the tracker's ``name_after_s`` (default: config/live.toml's);
 ``--decide-after S``, ``--id-threshold D``: its ``decide_after_s`` and ``threshold`` (the
 ids, and when a segment is named; defaults: config/live.toml's);
@@ -328,11 +330,12 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
         if not d["people"]:
             why = "; ".join(f"{p}: {r}" for p, r in sorted(d["skipped"].items())) or "nobody in it"
             print(f"library_loto.py --by-person: {name}: nobody scored ({why})", file=sys.stderr)
-    from rtseg.library.behaviours import DEFAULT_STEP_S
+    from rtseg.library.behaviours import DEFAULT_STEP_S, DEFAULT_WINDOW_S
     print(json.dumps({"protocol": "leave-one-person-out over source folders"
                       + (", one-person libraries" if kw["one_person"] else ""),
                       "seconds": round(time.perf_counter() - t0, 1),
                       "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
+                      "window_s": le.WINDOWS.get("window_s", DEFAULT_WINDOW_S),
                       **_identity_settings(cfg), **_naming_settings(),
                       "performances": kw["n"],
                       "seed": kw["seed"], "hidden_names": hide, "cuts": kw["cuts"],
@@ -368,7 +371,7 @@ def main(argv: list[str] | None = None) -> int:
         params = _pop_number(argv, "--params", str, "a detector parameter file (or 'fast')")
         if params is not None:
             opts["--params"] = params
-        for flag in ("--step", "--name-after", "--seconds", "--decide-after"):
+        for flag in ("--step", "--window", "--name-after", "--seconds", "--decide-after"):
             value = _pop_number(argv, flag, float, "seconds, a number", "seconds, > 0")
             if value is not None:
                 opts[flag] = value
@@ -386,9 +389,11 @@ def main(argv: list[str] | None = None) -> int:
     except _Usage as exc:
         print(exc, file=sys.stderr)
         return 2
+    import rtseg.evaluation.library as le
     if "--step" in opts:
-        import rtseg.evaluation.library as le
         le.WINDOWS["step_s"] = opts["--step"]
+    if "--window" in opts:
+        le.WINDOWS["window_s"] = opts["--window"]
     by_person = "--by-person" in argv
     if by_person:
         argv.remove("--by-person")
@@ -432,10 +437,11 @@ def main(argv: list[str] | None = None) -> int:
     except (FileNotFoundError, ValueError) as exc:
         print(f"library_loto.py {argv[0]}: {exc}", file=sys.stderr)
         return 2
-    from rtseg.library.behaviours import DEFAULT_STEP_S
+    from rtseg.library.behaviours import DEFAULT_STEP_S, DEFAULT_WINDOW_S
     doc = {"protocol": argv[0] + (" by person" if by_person else ""),
            "seconds": round(time.perf_counter() - t0, 1),
            "step_s": opts.get("--step", DEFAULT_STEP_S),
+           "window_s": opts.get("--window", DEFAULT_WINDOW_S),
            **_identity_settings(cfg), **_naming_settings(), **doc}
     print(json.dumps(doc, indent=1, default=str))
     return 0

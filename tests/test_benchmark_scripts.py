@@ -675,6 +675,21 @@ def test_names_rule_lopo_runs_library_loto_with_each_rule(tmp_path):
     assert (doc["posture_weight"], doc["speed_weight"]) == (0.5, 0.0)
     r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--posture-weight", "0")
     assert r.returncode == 2 and r.stderr.strip() == "--posture-weight: a number above 0, at most 1"
+    # the example windows' length and step for one run: longer windows further apart, fewer
+    # of them in each fold's library; stated in the JSON
+    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1", "--no-hide",
+             "--truth-cuts", "--window", "3", "--step", "1")
+    assert r.returncode == 0, r.stderr[-2000:]
+    longer = json.loads(r.stdout)
+    assert (longer["window_s"], longer["step_s"]) == (3.0, 1.0)
+    assert doc["window_s"] == 2.0 and doc["step_s"] == 0.5
+    few = {lib["unit"]: lib for lib in longer["sources"]["synth"]["libraries"]}
+    for lib in doc["sources"]["synth"]["libraries"]:
+        assert few[lib["unit"]]["window_s"] == 3.0 and lib["window_s"] == 2.0
+        assert few[lib["unit"]]["examples"] == lib["examples"]
+        assert 0 < few[lib["unit"]]["windows"] < 0.6 * lib["windows"]
+    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--window", "0")
+    assert r.returncode == 2 and r.stderr.strip() == "--window: seconds, > 0"
     r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--speed-weight", "-1")
     assert r.returncode == 2 and r.stderr.strip() == "--speed-weight: a number, at least 0"
     r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--rule", "4,-0.75,0.5")

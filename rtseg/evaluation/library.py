@@ -186,10 +186,12 @@ def run_folds(examples: Sequence[Example], units: dict[str, Callable[[Example], 
 
 
 def library_summary(lib: Library, unit: str, without: str | None = None) -> dict[str, Any]:
-    """What a fold's library holds and the rule it calibrated (``calibrated`` False: no
-    behaviour had a second example, the threshold is the metric's default)."""
+    """What a fold's library holds (names, examples, example windows and their length in
+    seconds) and the rule it calibrated (``calibrated`` False: no behaviour had a second
+    example, the threshold is the metric's default)."""
     return {"unit": unit, "without": without, "names": len(lib.behaviour_names),
-            "examples": len(lib.examples),
+            "examples": len(lib.examples), "windows": len(lib.names),
+            "window_s": float(lib.window_s),
             "threshold": round(float(lib.threshold), 4) if np.isfinite(lib.threshold) else None,
             "ratio": round(float(lib.ratio), 4),
             "calibrated": bool(lib.calibration.get("calibrated", True)),

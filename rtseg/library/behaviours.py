@@ -103,6 +103,9 @@ UNKNOWN = "unknown"
 #: example windows start every this many seconds: the nearest window is then likely to
 #: meet a query's phase of the movement (held-out figures: docs/identity.md)
 DEFAULT_STEP_S = 0.5
+#: example windows are this many seconds long: the rows a live segment is named on (its
+#: first ``decide_after_s`` less the 0.5 s left out after the boundary)
+DEFAULT_WINDOW_S = 2.0
 
 
 class LibraryError(ConfigError):
@@ -135,7 +138,7 @@ class Library:
     scale: np.ndarray = field(default_factory=lambda: np.zeros(0))
     threshold: float = math.inf
     ratio: float = 1.0                       # named only when d1 / d2 <= ratio
-    window_s: float = 2.0
+    window_s: float = DEFAULT_WINDOW_S
     step_s: float = DEFAULT_STEP_S
     edge_s: float = 0.5
     min_s: float = 1.0

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from rtseg.library.behaviours import (DEFAULT_METRIC, DEFAULT_STEP_S, METRICS,
+from rtseg.library.behaviours import (DEFAULT_METRIC, DEFAULT_STEP_S, DEFAULT_WINDOW_S, METRICS,
                                       MODEL_K_NEAREST, UNKNOWN, Library)
 from rtseg.library.descriptor import K_NEAREST, descriptor
 from rtseg.library.distance import window_stats
@@ -41,7 +41,8 @@ class LibraryBuilder:
     profile/dims: the feature profile of every example (``add`` refuses other dims).
     """
 
-    def __init__(self, profile: str, dims: int, frame_rate: float, *, window_s: float = 2.0,
+    def __init__(self, profile: str, dims: int, frame_rate: float, *,
+                 window_s: float = DEFAULT_WINDOW_S,
                  step_s: float = DEFAULT_STEP_S, edge_s: float = 0.5, min_s: float = 1.0) -> None:
         if not frame_rate > 0:
             raise ValueError(f"frame_rate must be positive, got {frame_rate}")
