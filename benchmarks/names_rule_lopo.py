@@ -1,7 +1,7 @@
 """The naming decision's margin chosen leave-one-person-out, and its held-out figures.
 
-    python3 benchmarks/names_rule_lopo.py [DATA_DIR] [--seeds 0 1 2] [--rules "W,L,C;..."]
-        [--sets "OPTIONS;..."] [--out DIR] [--jobs J] [--n N] [--min-left 0.80]
+    python3 benchmarks/names_rule_lopo.py [DATA_DIR] [--seeds 0 1 2] [--rules "W,L,C;..."
+        | --sets "OPTIONS;..." | --every] [--out DIR] [--jobs J] [--n N] [--min-left 0.80]
         [--max-wrong 0.05]
 
 A library names a segment when log(d1 / t) + W x log((d1 / d2) / r) <= L and d1 <= C x t
@@ -15,7 +15,11 @@ versioned) and reused when it is there.
 
 ``--sets`` chooses among other settings the same way: each set is options of
 ``library_loto.py`` for one run (e.g. ``--sets "--posture-weight 0.5 --speed-weight 1;
---posture-weight 0.8 --speed-weight 1"``), scored as a rule is.
+--posture-weight 0.8 --speed-weight 1"``), scored as a rule is.  ``--every``: every
+naming choice at once - the 13 rules of the decision's margin, the claim margins 0, 0.6,
+0.8 and 1 and the example windows 1.5, 2.5 and 3 s long or every 0.25 and 1 s, each one
+change from the shipped configuration (``EVERY``; 22 sets, 66 runs over seeds 0-2) - so
+that each person is scored with the whole configuration chosen without them.
 
 Then, for each scored person P (``by_person`` of every source): the rule chosen without P
 is the one naming the most known segments right over the other people, among the rules
@@ -49,6 +53,11 @@ DATA = HERE.parents[1] / "shared" / "data"
 #: 1.25-2, and the threshold alone (0, 0, 1)
 RULES = ("4,-0.75,1.5;4,-0.65,1.5;4,-0.85,1.5;3,-0.6,1.5;3,-0.75,1.5;5,-0.85,1.5;"
          "5,-1.0,1.5;4,-0.75,1.25;4,-0.75,2;2,-0.45,1.5;2,-0.3,1.5;6,-1.0,1.5;0,0,1")
+#: ``--every``: the margin's rules, then the other naming choices, each one change from
+#: the shipped configuration (claim margin 0.9, 2 s example windows every 0.5 s)
+EVERY = (";".join(f"--rule {r}" for r in RULES.split(";"))
+         + ";--claim-margin 0;--claim-margin 0.6;--claim-margin 0.8;--claim-margin 1"
+         + ";--window 1.5;--window 2.5;--window 3;--step 0.25;--step 1")
 
 
 @dataclass
@@ -171,6 +180,7 @@ def parse(argv: list[str]) -> argparse.Namespace:
     which = p.add_mutually_exclusive_group()
     which.add_argument("--rules", default=RULES)
     which.add_argument("--sets")
+    which.add_argument("--every", action="store_const", const=EVERY, dest="sets")
     p.add_argument("--out", type=Path, default=HERE.parent / "out" / "names_rule")
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--n", type=int)
