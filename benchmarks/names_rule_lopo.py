@@ -17,8 +17,9 @@ versioned) and reused when it is there.
 ``library_loto.py`` for one run (e.g. ``--sets "--posture-weight 0.5 --speed-weight 1;
 --posture-weight 0.8 --speed-weight 1"``), scored as a rule is.  ``--every``: every
 naming choice at once - the 13 rules of the decision's margin, the claim margins 0, 0.6,
-0.8 and 1 and the example windows 1.5, 2.5 and 3 s long or every 0.25 and 1 s, each one
-change from the shipped configuration (``EVERY``; 22 sets, 66 runs over seeds 0-2) - so
+0.8 and 1, the example windows 1.5, 2.5 and 3 s long or every 0.25 and 1 s, and the
+names' distance weights (posture 1/2, 2/3, 0.8 x joint speeds 0.5, 1, 1.5), each one
+change from the shipped configuration (``EVERY``; 30 sets, 90 runs over seeds 0-2) - so
 that each person is scored with the whole configuration chosen without them.
 
 Then, for each scored person P (``by_person`` of every source): the rule chosen without P
@@ -54,10 +55,15 @@ DATA = HERE.parents[1] / "shared" / "data"
 RULES = ("4,-0.75,1.5;4,-0.65,1.5;4,-0.85,1.5;3,-0.6,1.5;3,-0.75,1.5;5,-0.85,1.5;"
          "5,-1.0,1.5;4,-0.75,1.25;4,-0.75,2;2,-0.45,1.5;2,-0.3,1.5;6,-1.0,1.5;0,0,1")
 #: ``--every``: the margin's rules, then the other naming choices, each one change from
-#: the shipped configuration (claim margin 0.9, 2 s example windows every 0.5 s)
+#: the shipped configuration (claim margin 0.9, 2 s example windows every 0.5 s, posture
+#: weight 2/3, joint-speed weight 1)
 EVERY = (";".join(f"--rule {r}" for r in RULES.split(";"))
          + ";--claim-margin 0;--claim-margin 0.6;--claim-margin 0.8;--claim-margin 1"
-         + ";--window 1.5;--window 2.5;--window 3;--step 0.25;--step 1")
+         + ";--window 1.5;--window 2.5;--window 3;--step 0.25;--step 1"
+         + ";--posture-weight 0.5 --speed-weight 0.5;--posture-weight 0.5 --speed-weight 1"
+         + ";--posture-weight 0.5 --speed-weight 1.5;--speed-weight 0.5;--speed-weight 1.5"
+         + ";--posture-weight 0.8 --speed-weight 0.5;--posture-weight 0.8 --speed-weight 1"
+         + ";--posture-weight 0.8 --speed-weight 1.5")
 
 
 @dataclass

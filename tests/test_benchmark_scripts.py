@@ -649,12 +649,12 @@ def test_names_rule_lopo_chooses_each_persons_rule_without_them(tmp_path):
 
 def test_names_rule_lopo_every_choice_at_once(tmp_path):
     """--every: the margin's rules and the other naming choices (claim margin, example
-    windows) in one choice, each run kept under the file name its own flag would give; a
+    windows, distance weights) in one choice, each run kept under the file name its own flag would give; a
     person is scored with whichever of them is chosen without them."""
     sys.path.insert(0, str(BENCH))
     import names_rule_lopo as nrl
     sets = nrl.EVERY.split(";")
-    assert len(sets) == len(set(sets)) == 22
+    assert len(sets) == len(set(sets)) == 30
     assert sets[:13] == [f"--rule {r}" for r in nrl.RULES.split(";")]
     # a rule's run under --every is the file --rules would read
     assert nrl.run_file(tmp_path, "--rule 4,-0.75,1.5", 0) == nrl.run_file(tmp_path, "4,-0.75,1.5", 0)
@@ -667,7 +667,7 @@ def test_names_rule_lopo_every_choice_at_once(tmp_path):
     r = _run("names_rule_lopo.py", str(tmp_path), "--out", str(out), "--seeds", "0", "--every")
     assert r.returncode == 0, r.stderr[-2000:]
     doc = json.loads(r.stdout)
-    assert len(doc["everyone"]) == 22
+    assert len(doc["everyone"]) == 30
     assert {v["rule"] for v in doc["chosen"].values()} == {"--window 2.5"}
     assert doc["held_out"]["named_right"] == pytest.approx(27 / 30, abs=1e-4)
     r = _run("names_rule_lopo.py", str(tmp_path), "--every", "--rules", "0,0,1")
