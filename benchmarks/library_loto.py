@@ -440,8 +440,8 @@ def main(argv: list[str] | None = None) -> int:
     from rtseg.library.behaviours import DEFAULT_STEP_S, DEFAULT_WINDOW_S
     doc = {"protocol": argv[0] + (" by person" if by_person else ""),
            "seconds": round(time.perf_counter() - t0, 1),
-           "step_s": opts.get("--step", DEFAULT_STEP_S),
-           "window_s": opts.get("--window", DEFAULT_WINDOW_S),
+           "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
+           "window_s": le.WINDOWS.get("window_s", DEFAULT_WINDOW_S),
            **_identity_settings(cfg), **_naming_settings(), **doc}
     print(json.dumps(doc, indent=1, default=str))
     return 0

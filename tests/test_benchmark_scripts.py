@@ -17,10 +17,15 @@ def _run(script: str, *args: str) -> subprocess.CompletedProcess:
                           text=True, timeout=300)
 
 
-def test_every_decoder_survives_hostile_input():
-    r = _run("fuzz_decoders.py", "--n", "3000", "--json", "--seed", "7")
+def _run_json(script: str, *args: str) -> dict:
+    """The JSON document a benchmark prints, after checking that it exited 0."""
+    r = _run(script, *args)
     assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    return json.loads(r.stdout)
+
+
+def test_every_decoder_survives_hostile_input():
+    doc = _run_json("fuzz_decoders.py", "--n", "3000", "--json", "--seed", "7")
     assert set(doc) == {"serial", "vmc", "vrchat", "mvn", "mocopi", "mvn_tcp", "rokoko",
                         "axis", "axis_text"}
     for fmt, res in doc.items():
@@ -38,10 +43,8 @@ def test_fuzzer_refuses_an_unknown_format():
 
 def test_decode_throughput_rows_decode_every_frame():
     # _time_feed raises when a codec decodes fewer frames than were encoded
-    r = _run("decode.py", "--frames", "40", "--repeat", "1", "--json", "--only",
-             "mvn,axis,rokoko,serial")
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    doc = _run_json("decode.py", "--frames", "40", "--repeat", "1", "--json", "--only",
+                    "mvn,axis,rokoko,serial")
     for row in ("mvn", "mvn_tcp", "rokoko", "rokoko_lz4", "axis_binary", "axis_text_global",
                 "serial", "serial_one_frame"):
         assert doc[row]["frames_per_s"] > 0, row
@@ -50,9 +53,7 @@ def test_decode_throughput_rows_decode_every_frame():
 
 def test_axis_steps_match_the_text_source():
     # the step-by-step frames are checked bit for bit against TextStream's (else it raises)
-    r = _run("axis_steps.py", "--frames", "20", "--repeat", "1", "--json")
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    doc = _run_json("axis_steps.py", "--frames", "20", "--repeat", "1", "--json")
     assert set(doc) == {"4k_local", "4k_global", "64k_local", "64k_global"}
     assert all(row["total"] > 0 for row in doc.values())
 
@@ -81,10 +82,8 @@ def test_lopo_on_a_folder_of_two_people(tmp_path):
     for s in ("bd", "bk"):
         shutil.copy(src / "amc" / f"{s}.asf", one / "amc")
     (one / "index.tsv").write_text("\n".join(keep) + "\n")
-    r = _run("lopo.py", str(one), "--per-person", "1", "--grid", "placement",
-             "--cache", str(tmp_path / "cache"), "--json")
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    doc = _run_json("lopo.py", str(one), "--per-person", "1", "--grid", "placement",
+                    "--cache", str(tmp_path / "cache"), "--json")
     assert doc["people"] == ["two:bd", "two:bk"]
     # held-out units: a person with same-person performances, or a mixed performance
     assert len(doc["choices"]) >= 2
@@ -121,10 +120,8 @@ def test_lopo_leaves_a_spliced_folder_of_the_data_folder_alone(tmp_path):
     (data / "spliced").mkdir()
     (data / "spliced" / "index.tsv").write_text(
         "performance\tkind\tformat\tframes\tsegment\tbehaviour\tsubject\tstart\n")
-    r = _run("lopo.py", str(data), "--per-person", "1", "--grid", "none",
-             "--cache", str(tmp_path / "cache"), "--versus", "full", "--json")
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    doc = _run_json("lopo.py", str(data), "--per-person", "1", "--grid", "none",
+                    "--cache", str(tmp_path / "cache"), "--versus", "full", "--json")
     assert doc["people"] == ["synth:p1", "synth:p2"]
     assert set(doc["shipped"]["sources"]) == {"synth"}
     # --versus: the other set on everyone, and the paired difference of the pooled F1
@@ -199,9 +196,7 @@ def test_library_loto_by_person_over_a_source_folder(tmp_path):
     from source_folders import make_source
     make_source(tmp_path / "data" / "synth", ["p1", "p2", "p3"], ["walk", "squat", "wave"],
                 rate=60.0, seconds=12.0)
-    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1")
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    doc = _run_json("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1")
     assert doc["performances"] == 1 and doc["hidden_names"] is True
     src = doc["sources"]["synth"]
     assert src["people"] == ["p1", "p2", "p3"] and src["skipped"] == {}
@@ -225,10 +220,8 @@ def test_library_loto_by_person_over_a_source_folder(tmp_path):
     assert "segments" not in src
     # with --truth-cuts the segments are the labelled ones, named 2.5 s after the change
     # (the tracker decides on 10-frame blocks: up to one block, 1/6 s at 60 Hz, sooner)
-    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
-             "--truth-cuts", "--no-hide", "--segments")
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    doc = _run_json("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
+                    "--truth-cuts", "--no-hide", "--segments")
     assert doc["cuts"] == "truth" and doc["sources"]["synth"]["cuts"] == "truth"
     segs = doc["sources"]["synth"]["segments"]
     assert all(s["known"] for s in segs)            # every behaviour is in the others' library
@@ -237,27 +230,21 @@ def test_library_loto_by_person_over_a_source_folder(tmp_path):
     assert delays and all(2.3 <= d <= 2.6 for d in delays), delays
     # --decide-after / --name-after / --id-threshold set the tracker's: named 1.5-1.75 s
     # after the change
-    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
-             "--truth-cuts", "--no-hide", "--segments", "--decide-after", "1.5",
-             "--name-after", "1.75", "--id-threshold", "4")
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    doc = _run_json("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
+                    "--truth-cuts", "--no-hide", "--segments", "--decide-after", "1.5",
+                    "--name-after", "1.75", "--id-threshold", "4")
     assert (doc["decide_after_s"], doc["identity_threshold"]) == (1.5, 4.0)
     delays = [s["delay_s"] for s in doc["sources"]["synth"]["segments"]
               if s["delay_s"] is not None]
     assert delays and all(1.3 <= d <= 1.9 for d in delays), delays
     # --threshold-scale sets [identity] name_threshold_scale: far below 1, nothing named
-    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
-             "--truth-cuts", "--no-hide", "--threshold-scale", "0.01")
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    doc = _run_json("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
+                    "--truth-cuts", "--no-hide", "--threshold-scale", "0.01")
     assert doc["name_threshold_scale"] == 0.01
     assert doc["sources"]["synth"]["known"]["unknown_rate"] == 1.0
     # --one-person: each person named by each other person's library alone, six pairs
-    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
-             "--no-hide", "--one-person")
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    doc = _run_json("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
+                    "--no-hide", "--one-person")
     src = doc["sources"]["synth"]
     pairs = [f"{a} by {b}" for a in ("p1", "p2", "p3") for b in ("p1", "p2", "p3") if a != b]
     assert src["people"] == pairs and sorted(src["by_person"]) == sorted(pairs)
@@ -344,9 +331,7 @@ def test_soak_hostile_mode_still_runs():
 
 
 def test_wakeup_cost_measures_an_empty_and_a_working_wakeup():
-    r = _run("wakeup.py", "--seconds", "1", "--json")
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    doc = _run_json("wakeup.py", "--seconds", "1", "--json")
     assert doc["rate_hz"] == 120.0
     # about 60 wake-ups each way: the CPU shares are per wake-up, never zero
     assert doc["empty_wakeup_us"] > 0 and 0 < doc["empty_cpu_fraction"] < 1
@@ -376,9 +361,7 @@ def test_live_benchmark_vmc_mode_compares_batched_and_unbatched():
     """``--vmc``: a VMC performer in another process over real UDP into one session, with
     the quiet frames batched (the VMC source holds frames once they close by content) and
     read as they arrive."""
-    r = _run("live.py", "--vmc", "--seconds", "4", "--json")
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    doc = _run_json("live.py", "--vmc", "--seconds", "4", "--json")
     on, off = doc["batched"], doc["unbatched"]
     for run in (on, off):
         assert run["frames"] >= 0.9 * 4 * 120 and run["dropped"] == 0
@@ -432,10 +415,8 @@ def test_names_over_vmc_compares_a_live_vmc_session_with_the_file_replay(tmp_pat
     perf.mkdir()
     write_take(perf / "synth_3.npz", synthesize("walk:6,squat:6,wave:6", seed=3).take)
     for extra, by_posture in (((), True), (("--no-positions",), False)):
-        r = _run("names_over_vmc.py", str(perf), str(tmp_path / "lib.json"), "--speed", "4",
-                 "--json", *extra)
-        assert r.returncode == 0, r.stderr[-2000:]
-        doc = json.loads(r.stdout)
+        doc = _run_json("names_over_vmc.py", str(perf), str(tmp_path / "lib.json"),
+                        "--speed", "4", "--json", *extra)
         (s,) = doc["sessions"]
         assert s["frames_received"] == s["frames_sent"] and s["decisions"] >= 1
         if by_posture:
@@ -569,9 +550,7 @@ def test_library_loto_names_people_the_source_does_not_hold(tmp_path):
     r = _run("splice.py", str(tmp_path / "other"), str(tmp_path / "perf"), "--kind", "same",
              "--n", "1")
     assert r.returncode == 0, r.stderr[-2000:]
-    r = _run("library_loto.py", "spliced", str(tmp_path / "perf"), str(tmp_path / "source"))
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    doc = _run_json("library_loto.py", "spliced", str(tmp_path / "perf"), str(tmp_path / "source"))
     (lib,) = doc["libraries"]
     assert lib["examples"] == 2 * len(behaviours) and lib["names"] == len(behaviours)
     h = doc["held_out"]
@@ -649,24 +628,24 @@ def test_names_rule_lopo_chooses_each_persons_rule_without_them(tmp_path):
 
 def test_names_rule_lopo_every_choice_at_once(tmp_path):
     """--every: the margin's rules and the other naming choices (claim margin, example
-    windows, distance weights) in one choice, each run kept under the file name its own flag would give; a
-    person is scored with whichever of them is chosen without them."""
+    windows, distance weights) in one choice, each run kept under the file name its own
+    flag would give; a person is scored with whichever of them is chosen without them."""
     sys.path.insert(0, str(BENCH))
     import names_rule_lopo as nrl
     sets = nrl.EVERY.split(";")
     assert len(sets) == len(set(sets)) == 30
     assert sets[:13] == [f"--rule {r}" for r in nrl.RULES.split(";")]
     # a rule's run under --every is the file --rules would read
-    assert nrl.run_file(tmp_path, "--rule 4,-0.75,1.5", 0) == nrl.run_file(tmp_path, "4,-0.75,1.5", 0)
+    assert (nrl.run_file(tmp_path, "--rule 4,-0.75,1.5", 0)
+            == nrl.run_file(tmp_path, "4,-0.75,1.5", 0))
     out = tmp_path / "runs"
     out.mkdir()
     ok = {"s/a": (10, 7, 3, 10, 9), "s/b": (10, 7, 3, 10, 9), "s/c": (10, 7, 3, 40, 40)}
     better = {"s/a": (10, 9, 1, 10, 9), "s/b": (10, 9, 1, 10, 9), "s/c": (10, 9, 1, 40, 40)}
     for opts in sets:
         _by_person_run(nrl.run_file(out, opts, 0), better if opts == "--window 2.5" else ok)
-    r = _run("names_rule_lopo.py", str(tmp_path), "--out", str(out), "--seeds", "0", "--every")
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    doc = _run_json("names_rule_lopo.py", str(tmp_path), "--out", str(out), "--seeds", "0",
+                    "--every")
     assert len(doc["everyone"]) == 30
     assert {v["rule"] for v in doc["chosen"].values()} == {"--window 2.5"}
     assert doc["held_out"]["named_right"] == pytest.approx(27 / 30, abs=1e-4)
@@ -683,10 +662,8 @@ def test_names_rule_lopo_runs_library_loto_with_each_rule(tmp_path):
     make_source(tmp_path / "data" / "synth", ["p1", "p2", "p3"], ["walk", "squat", "wave"],
                 rate=60.0, seconds=12.0)
     out = tmp_path / "runs"
-    r = _run("names_rule_lopo.py", str(tmp_path / "data"), "--out", str(out), "--seeds", "0",
-             "--n", "1", "--rules", "0,0,1;4,-0.75,1.5")
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    doc = _run_json("names_rule_lopo.py", str(tmp_path / "data"), "--out", str(out),
+                    "--seeds", "0", "--n", "1", "--rules", "0,0,1;4,-0.75,1.5")
     assert sorted(doc["chosen"]) == ["synth/p1", "synth/p2", "synth/p3"]
     assert doc["held_out"]["known_segments"] >= 3 * 4
     run = json.loads((out / "rule_0_0_1_seed0_n1.json").read_text())
@@ -695,19 +672,15 @@ def test_names_rule_lopo_runs_library_loto_with_each_rule(tmp_path):
     r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--rule", "4,-0.75")
     assert r.returncode == 2 and r.stderr.strip() == "--rule: WEIGHT,LEVEL,CAP (three numbers)"
     # the names' distance weights for one run, stated in its JSON; out of range refused
-    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1", "--no-hide",
-             "--truth-cuts", "--posture-weight", "0.5", "--speed-weight", "0")
-    assert r.returncode == 0, r.stderr[-2000:]
-    doc = json.loads(r.stdout)
+    doc = _run_json("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
+                    "--no-hide", "--truth-cuts", "--posture-weight", "0.5", "--speed-weight", "0")
     assert (doc["posture_weight"], doc["speed_weight"]) == (0.5, 0.0)
     r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--posture-weight", "0")
     assert r.returncode == 2 and r.stderr.strip() == "--posture-weight: a number above 0, at most 1"
     # the example windows' length and step for one run: longer windows further apart, fewer
     # of them in each fold's library; stated in the JSON
-    r = _run("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1", "--no-hide",
-             "--truth-cuts", "--window", "3", "--step", "1")
-    assert r.returncode == 0, r.stderr[-2000:]
-    longer = json.loads(r.stdout)
+    longer = _run_json("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
+                       "--no-hide", "--truth-cuts", "--window", "3", "--step", "1")
     assert (longer["window_s"], longer["step_s"]) == (3.0, 1.0)
     assert doc["window_s"] == 2.0 and doc["step_s"] == 0.5
     few = {lib["unit"]: lib for lib in longer["sources"]["synth"]["libraries"]}
