@@ -146,6 +146,26 @@ def _identity_options(cfg, opts: dict) -> None:
         cfg["identity.name_threshold_scale"] = opts["--threshold-scale"]
 
 
+def _session_config(opts: dict):
+    """The live session configuration a run names with: the shipped one, or ``--params``'
+    detector parameters (``fast``: config/fast.toml), identity on, the identity options."""
+    cfg, _ = live_config(params=opts.get("--params"))
+    cfg["identity.enabled"] = True
+    _identity_options(cfg, opts)
+    return cfg
+
+
+def _run_header(protocol: str, t0: float, cfg) -> dict:
+    """What every run's JSON document states first: the protocol, its wall time (s), the
+    example windows, the identity tracker's and the naming decision's settings."""
+    import rtseg.evaluation.library as le
+    from rtseg.library.behaviours import DEFAULT_STEP_S, DEFAULT_WINDOW_S
+    return {"protocol": protocol, "seconds": round(time.perf_counter() - t0, 1),
+            "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
+            "window_s": le.WINDOWS.get("window_s", DEFAULT_WINDOW_S),
+            **_identity_settings(cfg), **_naming_settings()}
+
+
 def _set_rule(text: str) -> None:
     """``--rule WEIGHT,LEVEL,CAP``: the decision's margin (``rtseg.library.calibration``'s
     ``MARGIN_WEIGHT``, ``MARGIN_LEVEL``, ``MARGIN_CAP``) for this run; ``0,0,1`` is the
@@ -313,9 +333,7 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
     if len(argv) != 1:
         print(__doc__, file=sys.stderr)
         return 2
-    cfg, _ = live_config(params=opts.get("--params"))   # fast: config/fast.toml
-    cfg["identity.enabled"] = True
-    _identity_options(cfg, opts)
+    cfg = _session_config(opts)
     t0 = time.perf_counter()
     try:
         doc = lopo_sources(Path(argv[0]), cfg, hide=hide, progress=_progress,
@@ -330,14 +348,9 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
         if not d["people"]:
             why = "; ".join(f"{p}: {r}" for p, r in sorted(d["skipped"].items())) or "nobody in it"
             print(f"library_loto.py --by-person: {name}: nobody scored ({why})", file=sys.stderr)
-    from rtseg.library.behaviours import DEFAULT_STEP_S, DEFAULT_WINDOW_S
-    print(json.dumps({"protocol": "leave-one-person-out over source folders"
-                      + (", one-person libraries" if kw["one_person"] else ""),
-                      "seconds": round(time.perf_counter() - t0, 1),
-                      "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
-                      "window_s": le.WINDOWS.get("window_s", DEFAULT_WINDOW_S),
-                      **_identity_settings(cfg), **_naming_settings(),
-                      "performances": kw["n"],
+    protocol = "leave-one-person-out over source folders" + (
+        ", one-person libraries" if kw["one_person"] else "")
+    print(json.dumps({**_run_header(protocol, t0, cfg), "performances": kw["n"],
                       "seed": kw["seed"], "hidden_names": hide, "cuts": kw["cuts"],
                       **doc}, indent=1, default=str))
     return 0 if any(d["people"] for d in doc["sources"].values()) else 1
@@ -402,9 +415,7 @@ def main(argv: list[str] | None = None) -> int:
     if not argv or argv[0] not in ("mocap6", "single", "spliced", "fewshot"):
         print(__doc__, file=sys.stderr)
         return 2
-    cfg, _ = live_config(params=opts.get("--params"))   # fast: config/fast.toml
-    cfg["identity.enabled"] = True
-    _identity_options(cfg, opts)
+    cfg = _session_config(opts)
     t0 = time.perf_counter()
     if argv[0] in ("mocap6", "fewshot"):
         data = Path(argv[1]) if len(argv) > 1 else DATA
@@ -437,12 +448,7 @@ def main(argv: list[str] | None = None) -> int:
     except (FileNotFoundError, ValueError) as exc:
         print(f"library_loto.py {argv[0]}: {exc}", file=sys.stderr)
         return 2
-    from rtseg.library.behaviours import DEFAULT_STEP_S, DEFAULT_WINDOW_S
-    doc = {"protocol": argv[0] + (" by person" if by_person else ""),
-           "seconds": round(time.perf_counter() - t0, 1),
-           "step_s": le.WINDOWS.get("step_s", DEFAULT_STEP_S),
-           "window_s": le.WINDOWS.get("window_s", DEFAULT_WINDOW_S),
-           **_identity_settings(cfg), **_naming_settings(), **doc}
+    doc = {**_run_header(argv[0] + (" by person" if by_person else ""), t0, cfg), **doc}
     print(json.dumps(doc, indent=1, default=str))
     return 0
 
