@@ -7,7 +7,7 @@
     python3 benchmarks/library_loto.py spliced SPLICED_DIR [SOURCE_DIR]   # cmu_single
     python3 benchmarks/library_loto.py fewshot [DATA_DIR] [--seconds S]  # short examples
     python3 benchmarks/library_loto.py --by-person DIR [--n N] [--seed K] [--no-hide] [--truth-cuts]
-        [--one-person]
+        [--one-person] [--no-posture]
     (options: --no-reject, --metric model|descriptor, --step S, --window S, --name-after S,
     --claim-margin M,
     --decide-after S, --id-threshold D, --threshold-scale F, --rule W,L,C,
@@ -23,6 +23,9 @@ source and pooled: ``known`` (segments of behaviours the library holds: ``accura
 named right, ``unknown_rate``, ``wrong_rate``, ``decision_delay_s`` after the change) and
 ``left_out`` (segments of behaviours missing from the library: ``unknown_rate``); per
 source also ``by_person``, the same figures of each held-out person.
+``--no-posture``: the performances' sessions are not told their rig's rest geometry, as
+IMU suits whose geometry is unknown: names by the model distance alone (what ``rtseg learn
+LIB --check`` estimates as "sessions without posture").
 ``--one-person``: each held-out person named by each other person's library alone (every
 ordered pair a fold, keyed "P by O"; rtseg.evaluation.names_lopo, One-person libraries).
 ``--segments``: every segment in the JSON too.  ``--truth-cuts``:
@@ -309,8 +312,8 @@ def spliced(folder: Path, src: Path, cfg) -> dict:
 
 
 def by_person_sources(argv: list[str], opts: dict) -> int:
-    """``--by-person DIR [--n N] [--seed K] [--no-hide] [--segments] [--one-person]`` (module
-    doc)."""
+    """``--by-person DIR [--n N] [--seed K] [--no-hide] [--segments] [--one-person]
+    [--no-posture]`` (module doc)."""
     import rtseg.evaluation.library as le
     from rtseg.evaluation.names_lopo import lopo_sources
     kw = {"n": 4, "seed": 0}
@@ -328,8 +331,9 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
     segments = "--segments" in argv
     kw["cuts"] = "truth" if "--truth-cuts" in argv else "live"
     kw["one_person"] = "--one-person" in argv
+    kw["posture"] = "--no-posture" not in argv
     argv = [a for a in argv if a not in ("--no-hide", "--segments", "--truth-cuts",
-                                         "--one-person")]
+                                         "--one-person", "--no-posture")]
     if len(argv) != 1:
         print(__doc__, file=sys.stderr)
         return 2
@@ -352,6 +356,7 @@ def by_person_sources(argv: list[str], opts: dict) -> int:
         ", one-person libraries" if kw["one_person"] else "")
     print(json.dumps({**_run_header(protocol, t0, cfg), "performances": kw["n"],
                       "seed": kw["seed"], "hidden_names": hide, "cuts": kw["cuts"],
+                      "posture": kw["posture"],
                       **doc}, indent=1, default=str))
     return 0 if any(d["people"] for d in doc["sources"].values()) else 1
 

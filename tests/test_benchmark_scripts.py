@@ -240,8 +240,12 @@ def test_library_loto_by_person_over_a_source_folder(tmp_path):
     # --threshold-scale sets [identity] name_threshold_scale: far below 1, nothing named
     doc = _run_json("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
                     "--truth-cuts", "--no-hide", "--threshold-scale", "0.01")
-    assert doc["name_threshold_scale"] == 0.01
+    assert doc["name_threshold_scale"] == 0.01 and doc["posture"] is True
     assert doc["sources"]["synth"]["known"]["unknown_rate"] == 1.0
+    # --no-posture: the sessions without their rig's rest geometry (as IMU suits)
+    doc = _run_json("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
+                    "--truth-cuts", "--no-hide", "--no-posture")
+    assert doc["posture"] is False and doc["sources"]["synth"]["known"]["segments"] >= 3
     # --one-person: each person named by each other person's library alone, six pairs
     doc = _run_json("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
                     "--no-hide", "--one-person")

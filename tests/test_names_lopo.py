@@ -96,3 +96,24 @@ def test_the_operators_threshold_scale_trades_names_for_unknowns():
     assert names(0.5) == ["walk", "punch", "unknown", "squat"]
     loose = names(1.0)
     assert loose[2] in set(lib.names) and loose[:2] + loose[3:] == ["walk", "punch", "squat"]
+
+
+def test_without_posture_the_segments_are_named_by_the_model_distance_alone():
+    """A library learned with posture names a session that knows its rig's rest geometry
+    by posture; ``posture=False`` (``library_loto.py --by-person --no-posture``) runs the
+    same take as an IMU suit whose geometry is unknown: no naming by posture, and the
+    names still the library's."""
+    from rtseg.evaluation.identity import run_identity
+    from rtseg.library.examples import learn, synthetic_examples
+    cfg = _config()
+    lib, _ = learn(synthetic_examples(["walk", "punch", "squat"], [0, 4], cfg))
+    assert lib.names_by_posture
+    res = synthesize(PERFORMANCE, seed=2)
+    truth = np.asarray(res.frame_names(), dtype=str)
+    for run in (lambda p: truth_cut_run(res.take, truth, cfg, lib, posture=p),
+                lambda p: run_identity(res.take, cfg, lib, posture=p)):
+        with_p, without = run(True).tracker, run(False).tracker
+        assert with_p.stats.posture_namings >= 3
+        assert without.stats.posture_namings == 0
+        named = [m.name for m in without.history if getattr(m, "name", None)]
+        assert named and set(named) <= set(lib.names) | {"unknown"}

@@ -33,10 +33,13 @@ class IdentityRun:
     cut_frames: list[int]
 
 
-def run_identity(take: Any, config: Any, library: Any = None) -> IdentityRun:
+def run_identity(take: Any, config: Any, library: Any = None,
+                 posture: bool = True) -> IdentityRun:
     """Replay ``take`` through the live pipeline (as ``rtseg.evaluation.online.live_cuts``) with
     identity on; the ids sent per frame.  ``library``: a ``rtseg.library.behaviours.Library`` naming
-    the segments (``tracker.history`` carries the names)."""
+    the segments (``tracker.history`` carries the names).  ``posture`` False: the session
+    is not told the take's rest geometry, as an IMU suit whose geometry is unknown (names
+    by the model distance alone)."""
     from rtseg.live.pipeline import Pipeline
     cfg = config
     if not cfg["identity.enabled"]:
@@ -46,7 +49,7 @@ def run_identity(take: Any, config: Any, library: Any = None) -> IdentityRun:
     n, fr = take.n_frames, float(take.frame_rate)
     from rtseg.core.posture import RestPose
     pipe = Pipeline(take.joint_names, take.parents, take.space, fr, cfg,
-                    rest=RestPose.find(take))
+                    rest=RestPose.find(take) if posture else None)
     tracker = pipe.identity
     if library is not None:
         tracker.library = library

@@ -81,15 +81,17 @@ class TruthCutRun:
     tracker: Any
 
 
-def truth_cut_run(take: Any, truth: np.ndarray, config: Any, library: Any) -> TruthCutRun:
+def truth_cut_run(take: Any, truth: np.ndarray, config: Any, library: Any,
+                  posture: bool = True) -> TruthCutRun:
     """The identity tracker (the session configuration's options, ``library`` naming)
     fed the live rows of ``take`` (``rtseg.library.examples.take_rows``) with a cut at every
-    change of the per-frame ``truth``, delivered at that frame (module doc, Cuts)."""
+    change of the per-frame ``truth``, delivered at that frame (module doc, Cuts);
+    ``posture`` False: without the take's rest geometry (``run_identity``)."""
     from rtseg.identity.segments import feed_take, take_posture_of
     from rtseg.identity.tracker import IdentityTracker, tracker_options
     from rtseg.library.examples import take_rows
     X, index, _ = take_rows(take, config)
-    posture = take_posture_of(take, library)
+    posture = take_posture_of(take, library) if posture else None
     t = np.asarray(truth, dtype=str)
     changes = np.flatnonzero(t[1:] != t[:-1]) + 1
     tracker = IdentityTracker(float(take.frame_rate), library=library,
@@ -103,10 +105,13 @@ def truth_cut_run(take: Any, truth: np.ndarray, config: Any, library: Any) -> Tr
 def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: bool = True,
                 progress: Callable[[str], None] | None = None,
                 windows: dict[str, float] | None = None, metric: str | None = None,
-                cuts: str = "live", one_person: bool = False) -> dict[str, Any]:
+                cuts: str = "live", one_person: bool = False,
+                posture: bool = True) -> dict[str, Any]:
     """Leave-one-person-out over one source folder (module doc); ``cuts``: ``"live"`` or
     ``"truth"`` (module doc, Cuts); ``one_person``: each held-out person named by the
-    library of each other person alone (module doc, One-person libraries).  The session
+    library of each other person alone (module doc, One-person libraries); ``posture``
+    False: the performances' sessions are not told their rig's rest geometry, as IMU suits
+    of unknown geometry, and are named by the model distance alone.  The session
     configuration's ``[identity]`` options apply, ``name_threshold_scale`` among them."""
     from rtseg.evaluation.identity import run_identity
     if cuts not in CUTS:
@@ -114,8 +119,8 @@ def lopo_source(src: str | Path, config: Any, n: int = 4, seed: int = 0, hide: b
 
     def run(perf: Any, truth: np.ndarray, lib: Any) -> Any:
         if cuts == "truth":
-            return truth_cut_run(perf.take, truth, config, lib)
-        return run_identity(perf.take, config, lib)
+            return truth_cut_run(perf.take, truth, config, lib, posture)
+        return run_identity(perf.take, config, lib, posture)
     from rtseg.library.sources import examples_from_source
     examples = examples_from_source(src, config)
     people = sorted({e.person for e in examples})
