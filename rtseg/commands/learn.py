@@ -4,6 +4,7 @@
     rtseg learn LIB --take SESSION_DIR --segment K --label NAME ...   # a recorded segment
     rtseg learn LIB --from DATA_DIR [--person S ...] [--exclude-person S ...]
     rtseg learn LIB --show                      # what LIB holds; nothing learned
+    rtseg learn LIB --check [--json]            # how it would name a performer it lacks
     (options: --step S, --profile NAME, --threshold D, --new, --config FILE)
 
 Learning an example the library already holds (the same motion: its content key,
@@ -12,7 +13,9 @@ nothing is new (examples too short to give a window are noted, not new) the file
 as it was and the command succeeds.  ``--take`` starts an example; the ``--label``, ``--frames`` (take frames [A, B), 0-based)
 or ``--segment`` (of a session recording, ``rtseg live --record DIR``: segment K as the
 session numbered it) and ``--skeleton`` after it belong to it.  ``--from``: every labelled take of a folder
-(``rtseg.library.examples.examples_from_dir``).  An existing LIB is extended (its examples
+(``rtseg.library.examples.examples_from_dir``).  ``--check``: each person of LIB named by a
+library of its other people (``rtseg.library.self_check``): what a performer the library
+has never seen can expect, with posture and without; nothing learned.  An existing LIB is extended (its examples
 kept, and its window step) unless ``--new``.  ``--step``: example windows start every S
 seconds (default ``rtseg.library.behaviours.DEFAULT_STEP_S``, 0.5).  The library is JSON (``rtseg.library.behaviours``); ``rtseg live
 --behaviours LIB`` names segments with it.  Exit 2 with one line on bad input.
@@ -185,6 +188,21 @@ def grouped_notes(notes: list[str], show: int = 4) -> list[str]:
     return lines
 
 
+def check_library(lib: Any, path: Path, as_json: bool) -> int:
+    """``rtseg learn LIB --check``: each person named by a library of the others
+    (``rtseg.library.self_check.check``), by the distance of sessions with posture when the
+    library names by it and by the model distance alone; lines, or one JSON document."""
+    import json
+    from rtseg.library.self_check import check_lines, checks
+    results = checks(lib, (True, False) if lib.names_by_posture else (False,))
+    if as_json:
+        print(json.dumps({"library": str(path), "window_s": lib.window_s,
+                          "checks": [r.as_dict() for r in results]}, indent=1))
+    else:
+        print("\n".join([f"{path}:"] + check_lines(lib, results)))
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from rtseg.library.behaviours import DEFAULT_STEP_S
     from rtseg.library.file import load
@@ -192,11 +210,18 @@ def run(args: argparse.Namespace) -> int:
     from rtseg.library.sources import examples_from_dir
     from rtseg.evaluation.online import live_config
     takes = getattr(args, "takes", None) or []
-    if args.show:
-        if takes or args.from_dir or args.new:
-            raise ValueError("--show only reads LIB: give no --take, --from or --new with it")
-        print("\n".join(describe(load(args.library), Path(args.library), sources=True)))
-        return 0
+    if args.show or args.check:
+        flag = "--show" if args.show else "--check"
+        if takes or args.from_dir or args.new or (args.show and args.check):
+            raise ValueError(f"{flag} only reads LIB: give no --take, --from, --new"
+                             + (" or --check" if args.show else "") + " with it")
+        lib = load(args.library)
+        if args.show:
+            print("\n".join(describe(lib, Path(args.library), sources=True)))
+            return 0
+        return check_library(lib, Path(args.library), args.json)
+    if args.json:
+        raise ValueError("--json goes with --check")
     if not takes and not args.from_dir:
         raise ValueError("nothing to learn from: give --take FILE --label NAME or --from DATA_DIR")
     cfg, _ = live_config(args.config)
@@ -333,6 +358,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--show", action="store_true",
                    help="print what LIB holds (behaviours, examples and where they came "
                         "from, the rejection rule) and learn nothing")
+    p.add_argument("--check", action="store_true",
+                   help="name each person of LIB by a library of its other people: what a "
+                        "performer it has never seen can expect (known behaviours named "
+                        "right / unknown / wrong, missing ones unknown); learn nothing")
+    p.add_argument("--json", action="store_true", help="with --check: one JSON document")
     p.add_argument("--config", metavar="FILE", help="session configuration (features, "
                    "calibration; default config/live.toml)")
     p.set_defaults(func=run, takes=None)

@@ -3,7 +3,8 @@ and say ``unknown`` for a segment unlike every example.  ``behaviours`` holds th
 ``builder`` its builder, ``distance`` the model distance, ``posture_distance`` its posture half,
 ``descriptor`` the version-1 descriptor distance, ``calibration`` the rejection rule,
 ``file`` the library file, ``examples`` and ``sources`` the labelled examples (from takes
-and from source folders).
+and from source folders), ``self_check`` how a library would name a performer it lacks
+(``rtseg learn LIB --check``).
 
 May import ``rtseg.core``, ``rtseg.config``, ``rtseg.labels``, ``rtseg.detectors`` and
 ``rtseg.drivers.readers``; building examples (``examples``, ``sources``) also imports,

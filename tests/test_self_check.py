@@ -1,0 +1,156 @@
+"""``rtseg learn LIB --check`` (rtseg.library.self_check): each person of a library named by a
+library of its other people - the sub-libraries are the ones learning those examples
+alone would build, behaviours only one person performs and each shared behaviour left
+out count as missing, a one-person sub-library names through simulated sessions (the
+performer's scale), and a library of one person is refused in one line."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from rtseg.evaluation.online import live_config
+from rtseg.library.examples import learn, synthetic_examples
+from rtseg.library.file import save
+from rtseg.library.self_check import (SESSION_ORDERS, CheckError, _named, check, check_lines,
+                                      subset, window_people)
+
+SHARED = ["walk", "punch", "squat"]
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return live_config()[0]
+
+
+def performer(examples, person):
+    """``examples`` as performed by ``person`` (two synthetic seeds standing for two takes of
+    one performer, so that a library of theirs alone can be calibrated)."""
+    return [type(e)(**{**vars(e), "person": person}) for e in examples]
+
+
+@pytest.fixture(scope="module")
+def examples(cfg):
+    """Two performers, two takes each of walk, punch and squat; ann also kicks."""
+    return (performer(synthetic_examples(SHARED, [0, 1], cfg), "ann")
+            + performer(synthetic_examples(SHARED, [4, 5], cfg), "bob")
+            + performer(synthetic_examples(["kick"], [0], cfg), "ann"))
+
+
+@pytest.fixture(scope="module")
+def library(examples):
+    lib, notes = learn(examples)
+    assert not notes and lib.names_by_posture
+    return lib
+
+
+def test_each_person_named_by_the_others(library):
+    """Known: each person's examples of the three shared behaviours (two takes each);
+    missing: the kick only ann performs, and each shared behaviour left out in turn."""
+    for posture in (True, False):
+        r = check(library, posture)
+        assert r.people == ["ann", "bob"] and r.posture is posture
+        s0, s4 = (r.by_person[p].summary() for p in r.people)
+        assert s0["known"]["examples"] == 6 and s4["known"]["examples"] == 6
+        assert s0["left_out"]["examples"] == 7 and s4["left_out"]["examples"] == 6
+        for s in (s0, s4):
+            k = s["known"]
+            assert k["named_right"] + k["unknown"] + k["wrong"] == pytest.approx(1.0, abs=2e-3)
+            # the synthetic behaviours are far apart: the other performer's examples name them
+            assert k["named_right"] >= 2 / 3
+        pooled = r.as_dict()["pooled"]
+        assert pooled["known"]["examples"] == 12 and pooled["left_out"]["examples"] == 13
+
+
+def test_wrong_labels_in_the_others_examples_come_out_wrong(cfg, examples):
+    """bob's walk and punch labelled the other way round: ann's walks are nearest to
+    bob's walking, labelled punch - the check counts them wrong, not right."""
+    swapped = []
+    for e in examples:
+        if e.person == "bob" and e.name in ("walk", "punch"):
+            e = type(e)(**{**vars(e), "name": "punch" if e.name == "walk" else "walk"})
+        swapped.append(e)
+    lib, _ = learn(swapped)
+    s0 = check(lib, True).by_person["ann"].summary()["known"]
+    assert s0["wrong"] >= 1 / 3 and s0["named_right"] <= 2 / 3
+
+
+def test_subset_is_the_library_of_those_examples_alone(examples, library):
+    """The sub-library of ann's examples: the windows, threshold and posture rule that
+    learning ann's examples alone gives."""
+    keep = np.array([e.get("person") == "ann" for e in library.examples])
+    sub = subset(library, keep)
+    alone, _ = learn([e for e in examples if e.person == "ann"])
+    assert sub.names == alone.names and len(sub.window_stats) == len(alone.window_stats)
+    assert sub.threshold == pytest.approx(alone.threshold)
+    assert sub.ratio == pytest.approx(alone.ratio)
+    assert sub.posture_rule["threshold"] == pytest.approx(alone.posture_rule["threshold"])
+    assert set(window_people(sub)) == {"ann"} and sub.one_person_calibration
+
+
+def test_one_person_libraries_name_through_simulated_sessions(cfg, examples, library):
+    """A one-person sub-library gives each example a name per simulated session order (the
+    performer's scale builds up from the examples before it); a sub-library of two people
+    one name."""
+    who = window_people(library)
+    keep = np.array([e.get("person") != "ann" for e in library.examples])
+    mine = np.flatnonzero(who == "ann")
+    got = _named(library, keep, subset(library, keep), mine[:3], mine, True)
+    assert [len(g) for g in got] == [SESSION_ORDERS] * 3
+    three, _ = learn(examples + performer(synthetic_examples(SHARED, [7, 8], cfg), "cy"))
+    who3 = window_people(three)
+    keep3 = np.array([e.get("person") != "ann" for e in three.examples])
+    mine3 = np.flatnonzero(who3 == "ann")
+    assert [len(g) for g in _named(three, keep3, subset(three, keep3), mine3[:3], mine3, True)] == [1, 1, 1]
+
+
+def test_a_library_of_one_person_is_refused(examples):
+    lib, _ = learn([e for e in examples if e.person == "bob"])
+    with pytest.raises(CheckError, match="at least two people"):
+        check(lib)
+
+
+def test_check_lines(library):
+    lines = check_lines(library, [check(library, True), check(library, False)])
+    assert lines[0].startswith("a new performer, sessions with posture")
+    assert "named right 1.00" in lines[1] or "named right 0." in lines[1]
+    assert any(line.startswith("  ann: ") for line in lines)
+    assert any("sessions without posture" in line for line in lines)
+
+
+def test_learn_check_command(tmp_path, examples, library):
+    lib = tmp_path / "lib.json"
+    save(library, lib)
+    one = tmp_path / "one.json"
+    save(learn([e for e in examples if e.person == "ann"])[0], one)
+    run = lambda *a: subprocess.run([sys.executable, "-m", "rtseg.cli", "learn", *map(str, a)],
+                                    capture_output=True, text=True, timeout=120)
+    p = run(lib, "--check")
+    assert p.returncode == 0, p.stderr
+    assert "behaviours the library holds: named right" in p.stdout
+    assert "sessions without posture" in p.stdout
+    p = run(lib, "--check", "--json")
+    assert p.returncode == 0, p.stderr
+    doc = json.loads(p.stdout)
+    assert [c["posture"] for c in doc["checks"]] == [True, False]
+    assert doc["checks"][0]["pooled"]["known"]["examples"] == 12
+    for args, says in (((one, "--check"), "at least two people"),
+                       ((lib, "--json"), "--json goes with --check"),
+                       ((lib, "--check", "--new"), "--check only reads LIB"),
+                       ((lib, "--check", "--show"), "--show only reads LIB")):
+        p = run(*args)
+        assert p.returncode == 2 and says in p.stderr, (args, p.stderr)
+        assert len(p.stderr.strip().splitlines()) == 1
+
+
+def test_both_distances_at_once_are_the_two_checks(library):
+    """``checks`` makes each sub-library once for both distances: the same figures as
+    the two checks apart."""
+    from rtseg.library.self_check import checks
+    both = checks(library, (True, False))
+    assert [r.as_dict() for r in both] == [check(library, True).as_dict(),
+                                           check(library, False).as_dict()]
