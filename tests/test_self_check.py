@@ -154,3 +154,16 @@ def test_both_distances_at_once_are_the_two_checks(library):
     both = checks(library, (True, False))
     assert [r.as_dict() for r in both] == [check(library, True).as_dict(),
                                            check(library, False).as_dict()]
+
+
+def test_a_library_whose_people_share_no_behaviour_says_so(examples):
+    """ann's kick and bob's walk only: nobody else performs either, so there is no known
+    case - the lines say so, and both examples are counted missing."""
+    kick = [e for e in examples if (e.person, e.name) == ("ann", "kick")]
+    walk = [e for e in examples if (e.person, e.name) == ("bob", "walk")]
+    lib, _ = learn(kick[:1] + walk[:1])
+    r = check(lib)
+    assert r.pooled.summary()["known"]["examples"] == 0
+    assert r.pooled.summary()["left_out"]["examples"] == 2
+    assert any("no behaviour is performed by two of its people" in line
+               for line in check_lines(lib, [r]))

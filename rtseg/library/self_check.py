@@ -276,9 +276,14 @@ def check_lines(lib: Library, results: list[CheckResult]) -> list[str]:
                "sessions without posture (IMU suits: the model distance)")
         out.append(f"a new performer, {how}; each of the {len(r.people)} people named by a "
                    f"library of the others, each example on its first {lib.window_s:g} s:")
-        out.append(f"  behaviours the library holds: named right {_pct(k['named_right'])}, "
-                   f"unknown {_pct(k['unknown'])}, wrong {_pct(k['wrong'])} (of "
-                   f"{k['examples']} examples)")
+        if k["examples"]:
+            out.append(f"  behaviours the library holds: named right {_pct(k['named_right'])}, "
+                       f"unknown {_pct(k['unknown'])}, wrong {_pct(k['wrong'])} (of "
+                       f"{k['examples']} examples)")
+        else:
+            out.append("  no behaviour is performed by two of its people: nothing tells how a "
+                       "known behaviour of a new performer is named; add another person's "
+                       "examples of a behaviour")
         out.append(f"  behaviours missing from it: unknown {_pct(u['unknown'])} (of "
                    f"{u['examples']} examples: behaviours the others do not perform, and "
                    f"each one they do left out of the library in turn)")
