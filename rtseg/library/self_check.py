@@ -2,32 +2,33 @@
 people (``rtseg learn LIB --check``).
 
 For each person P among the library's examples (their ``person``), the library of the
-OTHER people's examples - the same windows, scale and calibration worked out again, as
-``rtseg learn`` would build it from them (``subset``) - names every example window of P
-(``window_s`` long, every ``step_s``, from ``edge_s`` inside each example: the rows a live
-segment is named on, ``decide_after_s`` less the 0.5 s after its boundary):
+OTHER people's examples - the same windows, with the scale and rejection rule worked out
+again, as ``rtseg learn`` would build it from them (``subset``) - names each example of P
+on its first window (``named_windows``: ``window_s`` from ``edge_s`` after the example's
+start, the rows a live segment is named on - ``decide_after_s`` less the 0.5 s after its
+boundary):
 
-- ``known``: P's windows of behaviours the others' library holds, named right, ``unknown``
-  or wrong (another name) - shares of those windows;
-- ``left_out``: P's windows of behaviours the others do not perform, and of each behaviour
-  they do once more, that behaviour's examples left out of the others' library
-  (recalibrated): the share that comes out ``unknown``, as a behaviour missing from the
-  library should.
+- ``known``: P's examples of behaviours the others' library holds: shares named right,
+  ``unknown`` and wrong (another name);
+- ``left_out``: P's examples of behaviours the others do not perform, and of each one they
+  do once more, that behaviour's examples left out of the others' library (recalibrated):
+  the share that comes out ``unknown``, as a behaviour missing from the library should.
 
-A library of one person (the others' library of each person P would hold nobody) cannot
-be checked: ``CheckError``.  The decision is ``Library.decide``'s with the distance a session
-with posture is named by (``posture=True``: the model x posture distance, when the library
-names by posture) or the model distance alone (an IMU suit whose rig geometry is unknown);
-the others' library of one person names P with the performer's scale a session settles on
-(``rtseg.identity.names.SegmentNamer.scale``: the median of P's windows' nearest-name
-distance over the threshold, when above 1).
+The decision is ``Library.decide``'s, by the distance a session with posture is named by
+(``posture``: the model x posture distance, when that library names by posture) or by the
+model distance alone (an IMU suit whose rig geometry is unknown).  A library of the others
+that holds one person names through the performer's scale
+(``rtseg.identity.names.SegmentNamer.scale``) as a session builds it: P's examples in
+``SESSION_ORDERS`` random orders, in sessions of ``SESSION_EXAMPLES``, each example's scale
+the median of the nearest-name distance over the threshold of those before it in its
+session (when above 1), each order's name counted as a share.  A library of one person
+cannot be checked (nobody to name it by): ``CheckError``, one line.
 
-What this leaves out, so that a live session's figures run lower (docs/identity.md,
-"Checking a library"): where the live cuts fall (a named window that reaches into the
-behaviour before), the tracker's ids (exclusive names), and the windows' overlap - P's
-windows are 2 s every 0.5 s of whole examples, each counted once.  Distances are the
-library's own pairwise ones (``bank.pairwise``, ``posture_bank.pairwise``): nothing is
-read but the library file.
+What this leaves out, so that a live session's figures differ (docs/identity.md, "Checking
+a library"): where the live cuts fall (a named window that reaches into the behaviour
+before), the tracker's ids (exclusive names), and a library of k people is checked
+through libraries of k - 1.  Distances are the library's own pairwise ones
+(``bank.pairwise``, ``posture_bank.pairwise``): nothing is read but the library file.
 """
 
 from __future__ import annotations
