@@ -167,3 +167,20 @@ def test_a_library_whose_people_share_no_behaviour_says_so(examples):
     assert r.pooled.summary()["left_out"]["examples"] == 2
     assert any("no behaviour is performed by two of its people" in line
                for line in check_lines(lib, [r]))
+
+
+def test_learning_a_library_of_several_people_points_to_the_check(tmp_path):
+    """``rtseg learn LIB --from DIR`` of two people's takes ends with a note naming the
+    check; the check then runs on the file it wrote."""
+    from source_folders import make_source
+    src = make_source(tmp_path / "synth", ["p1", "p2"], ["walk", "squat"], rate=30.0,
+                      seconds=6.0)
+    lib = tmp_path / "lib.json"
+    run = lambda *a: subprocess.run([sys.executable, "-m", "rtseg.cli", "learn", *map(str, a)],
+                                    capture_output=True, text=True, timeout=120)
+    p = run(lib, "--from", src)
+    assert p.returncode == 0, p.stderr
+    assert f"rtseg learn {lib} --check" in p.stderr
+    p = run(lib, "--check", "--json")
+    assert p.returncode == 0, p.stderr
+    assert json.loads(p.stdout)["checks"][0]["people"] == ["p1", "p2"]

@@ -305,6 +305,9 @@ def run(args: argparse.Namespace) -> int:
               "--threshold D", file=sys.stderr)
     elif not given:
         people = {str(e.get("person") or "") for e in lib.examples}
+        if len(people - {""}) > 1:
+            print(f"rtseg learn: note: how it would name a performer it has never seen: "
+                  f"rtseg learn {path} --check", file=sys.stderr)
         if len(people) == 1 and "" not in people:
             print(f"rtseg learn: note: every example is of one person ({people.pop()}): "
                   "the threshold is calibrated on that person's other takes, which lie "
