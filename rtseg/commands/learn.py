@@ -305,7 +305,7 @@ def run(args: argparse.Namespace) -> int:
               "--threshold D", file=sys.stderr)
     elif not given:
         people = {str(e.get("person") or "") for e in lib.examples}
-        if len(people - {""}) > 1:
+        if len(people) > 1 and "" not in people:     # what --check needs
             print(f"rtseg learn: note: how it would name a performer it has never seen: "
                   f"rtseg learn {path} --check", file=sys.stderr)
         if len(people) == 1 and "" not in people:
