@@ -223,6 +223,7 @@ def test_library_loto_by_person_over_a_source_folder(tmp_path):
     doc = _run_json("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
                     "--truth-cuts", "--no-hide", "--segments")
     assert doc["cuts"] == "truth" and doc["sources"]["synth"]["cuts"] == "truth"
+    assert doc["posture"] is True
     segs = doc["sources"]["synth"]["segments"]
     assert all(s["known"] for s in segs)            # every behaviour is in the others' library
     delays = [s["delay_s"] for s in segs if s["delay_s"] is not None]
@@ -237,15 +238,12 @@ def test_library_loto_by_person_over_a_source_folder(tmp_path):
     delays = [s["delay_s"] for s in doc["sources"]["synth"]["segments"]
               if s["delay_s"] is not None]
     assert delays and all(1.3 <= d <= 1.9 for d in delays), delays
-    # --threshold-scale sets [identity] name_threshold_scale: far below 1, nothing named
+    # --threshold-scale sets [identity] name_threshold_scale: far below 1, nothing named;
+    # --no-posture runs the sessions without their rig's rest geometry (as IMU suits)
     doc = _run_json("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
-                    "--truth-cuts", "--no-hide", "--threshold-scale", "0.01")
-    assert doc["name_threshold_scale"] == 0.01 and doc["posture"] is True
+                    "--truth-cuts", "--no-hide", "--threshold-scale", "0.01", "--no-posture")
+    assert doc["name_threshold_scale"] == 0.01 and doc["posture"] is False
     assert doc["sources"]["synth"]["known"]["unknown_rate"] == 1.0
-    # --no-posture: the sessions without their rig's rest geometry (as IMU suits)
-    doc = _run_json("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
-                    "--truth-cuts", "--no-hide", "--no-posture")
-    assert doc["posture"] is False and doc["sources"]["synth"]["known"]["segments"] >= 3
     # --one-person: each person named by each other person's library alone, six pairs
     doc = _run_json("library_loto.py", "--by-person", str(tmp_path / "data"), "--n", "1",
                     "--no-hide", "--one-person")
