@@ -64,6 +64,18 @@ def test_each_person_named_by_the_others(library):
             assert k["named_right"] >= 2 / 3
         pooled = r.as_dict()["pooled"]
         assert pooled["known"]["examples"] == 12 and pooled["left_out"]["examples"] == 13
+        # per behaviour: two takes of each shared one by each person; the kick only ann's
+        per = r.as_dict()["by_behaviour"]
+        assert sorted(per) == ["kick", "punch", "squat", "walk"]
+        assert [per[b]["known"]["examples"] for b in SHARED] == [4, 4, 4]
+        assert [per[b]["left_out"]["examples"] for b in SHARED] == [4, 4, 4]
+        assert per["kick"]["known"]["examples"] == 0 and per["kick"]["left_out"]["examples"] == 1
+        assert sum(v["known"]["examples"] for v in per.values()) == 12
+        # a missing example is `unknown` or named something else: the shares add up
+        for v in list(per.values()) + [s0, s4]:
+            u = v["left_out"]
+            assert u["unknown"] + sum(u["named_as"].values()) == pytest.approx(1.0, abs=5e-3)
+            assert all(n in library.names for n in u["named_as"])
 
 
 def test_wrong_labels_in_the_others_examples_come_out_wrong(cfg, examples):
@@ -118,7 +130,9 @@ def test_check_lines(library):
     lines = check_lines(library, [check(library, True), check(library, False)])
     assert lines[0].startswith("a new performer, sessions with posture")
     assert "named right 1.00" in lines[1] or "named right 0." in lines[1]
-    assert any(line.startswith("  ann: ") for line in lines)
+    assert any(line.startswith("    ann: ") for line in lines)
+    assert any(line.startswith("    kick: performed by one person only") for line in lines)
+    assert any(line.startswith("    walk: 1.00 / 0.00 / 0.00 of 4") for line in lines)
     assert any("sessions without posture" in line for line in lines)
 
 

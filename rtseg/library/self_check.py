@@ -57,6 +57,8 @@ class Tally:
     wrong: float = 0.0
     left_out: int = 0
     left_out_unknown: float = 0.0
+    #: the names missing behaviours' examples got instead of ``unknown``: shares summed
+    named_as: dict[str, float] = field(default_factory=dict)
 
     def named(self, got: list[list[str]], truth: Any) -> None:
         """Examples of behaviours the library holds: ``got`` their names, ``truth`` theirs."""
@@ -71,10 +73,17 @@ class Tally:
         for g in got:
             self.left_out += 1
             self.left_out_unknown += sum(n == UNKNOWN for n in g) / len(g)
+            for n in g:
+                if n != UNKNOWN:
+                    self.named_as[n] = self.named_as.get(n, 0.0) + 1.0 / len(g)
 
     def add(self, other: "Tally") -> None:
-        for k in vars(self):
-            setattr(self, k, getattr(self, k) + getattr(other, k))
+        for k, v in vars(other).items():
+            if k == "named_as":
+                for n, c in v.items():
+                    self.named_as[n] = self.named_as.get(n, 0.0) + c
+            else:
+                setattr(self, k, getattr(self, k) + v)
 
     def summary(self) -> dict[str, Any]:
         """``{"known": {examples, named_right, unknown, wrong}, "left_out": {examples,
@@ -85,7 +94,10 @@ class Tally:
                           "unknown": share(self.unknown, self.known),
                           "wrong": share(self.wrong, self.known)},
                 "left_out": {"examples": self.left_out,
-                             "unknown": share(self.left_out_unknown, self.left_out)}}
+                             "unknown": share(self.left_out_unknown, self.left_out),
+                             "named_as": {n: share(c, self.left_out) for n, c in
+                                          sorted(self.named_as.items(),
+                                                 key=lambda kv: (-kv[1], kv[0]))}}}
 
 
 @dataclass
@@ -94,6 +106,21 @@ class CheckResult:
     posture: bool
     people: list[str]
     by_person: dict[str, Tally] = field(default_factory=dict)
+    #: the same per behaviour, over every person's examples of it
+    by_behaviour: dict[str, Tally] = field(default_factory=dict)
+
+    def named(self, person: Tally, got: list[list[str]], truth: Any) -> None:
+        """Examples of known behaviours (``Tally.named``) into ``person``'s tally and their
+        behaviours'."""
+        person.named(got, truth)
+        for g, t in zip(got, truth):
+            self.by_behaviour.setdefault(str(t), Tally()).named([g], [t])
+
+    def missing(self, person: Tally, got: list[list[str]], truth: Any) -> None:
+        """Examples of missing behaviours (``Tally.missing``), the same way."""
+        person.missing(got)
+        for g, t in zip(got, truth):
+            self.by_behaviour.setdefault(str(t), Tally()).missing([g])
 
     @property
     def pooled(self) -> Tally:
@@ -105,7 +132,8 @@ class CheckResult:
     def as_dict(self) -> dict[str, Any]:
         return {"posture": self.posture, "people": self.people,
                 "pooled": self.pooled.summary(),
-                "by_person": {p: t.summary() for p, t in self.by_person.items()}}
+                "by_person": {p: t.summary() for p, t in self.by_person.items()},
+                "by_behaviour": {b: t.summary() for b, t in sorted(self.by_behaviour.items())}}
 
 
 def window_people(lib: Library) -> np.ndarray:
@@ -234,18 +262,20 @@ def checks(lib: Library, postures: tuple[bool, ...]) -> list[CheckResult]:
         unshared = session[~np.isin(names[session], list(held))]
         if len(mine) or (len(unshared) and held):
             sub = subset(lib, others)
-            for t, posture in zip(tallies, postures):
+            for r, t, posture in zip(results, tallies, postures):
                 if len(mine):
-                    t.named(_named(lib, others, sub, mine, session, posture), names[mine])
+                    r.named(t, _named(lib, others, sub, mine, session, posture), names[mine])
                 if len(unshared) and held:   # behaviours nobody else performs: missing
-                    t.missing(_named(lib, others, sub, unshared, session, posture))
+                    r.missing(t, _named(lib, others, sub, unshared, session, posture),
+                              names[unshared])
         for nm in sorted({str(v) for v in names[mine]}):
             keep = others & (ex_name != nm)
             if not keep.any():
                 continue
             sub = subset(lib, keep)
-            for t, posture in zip(tallies, postures):
-                t.missing(_named(lib, keep, sub, mine[names[mine] == nm], session, posture))
+            q = mine[names[mine] == nm]
+            for r, t, posture in zip(results, tallies, postures):
+                r.missing(t, _named(lib, keep, sub, q, session, posture), names[q])
         for r, t in zip(results, tallies):
             r.by_person[p] = t
     return results
@@ -288,16 +318,38 @@ def check_lines(lib: Library, results: list[CheckResult]) -> list[str]:
         out.append(f"  behaviours missing from it: unknown {_pct(u['unknown'])} (of "
                    f"{u['examples']} examples: behaviours the others do not perform, and "
                    f"each one they do left out of the library in turn)")
+        out.append("  per person (named right / unknown / wrong of their known examples; "
+                   "missing, unknown):")
         for p, t in r.by_person.items():
             s = t.summary()
             if not s["known"]["examples"]:
-                out.append(f"  {p}: none of their behaviours is performed by the others")
+                out.append(f"    {p}: none of their behaviours is performed by the others")
                 continue
-            out.append(f"  {p}: {_pct(s['known']['named_right'])} / "
-                       f"{_pct(s['known']['unknown'])} / {_pct(s['known']['wrong'])} of "
-                       f"{s['known']['examples']}; missing, unknown "
-                       f"{_pct(s['left_out']['unknown'])} of {s['left_out']['examples']}")
+            out.append(f"    {p}: {_figures(s)}")
+        out.append("  per behaviour:")
+        for b, t in sorted(r.by_behaviour.items()):
+            s = t.summary()
+            out.append(f"    {b}: " + (_figures(s, True) if s["known"]["examples"] else
+                                       f"performed by one person only; missing, unknown "
+                                       f"{_pct(s['left_out']['unknown'])} of "
+                                       f"{s['left_out']['examples']}"
+                                       + _else(s)))
     return out
+
+
+def _figures(s: dict[str, Any], named_as: bool = False) -> str:
+    """Named right / unknown / wrong of the known examples; the missing ones' share
+    ``unknown`` and, with ``named_as``, the names they got instead."""
+    k, u = s["known"], s["left_out"]
+    out = (f"{_pct(k['named_right'])} / {_pct(k['unknown'])} / {_pct(k['wrong'])} of "
+           f"{k['examples']}; missing, unknown {_pct(u['unknown'])} of {u['examples']}")
+    return out + (_else(s) if named_as else "")
+
+
+def _else(s: dict[str, Any]) -> str:
+    named = s["left_out"]["named_as"]
+    return (" (else " + ", ".join(f"{n} {_pct(v)}" for n, v in named.items()) + ")"
+            if named else "")
 
 
 def _pct(v: float | None) -> str:
