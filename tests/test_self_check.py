@@ -154,6 +154,7 @@ def test_learn_check_command(tmp_path, examples, library):
     assert doc["checks"][0]["pooled"]["known"]["examples"] == 12
     for args, says in (((one, "--check"), "at least two people"),
                        ((lib, "--json"), "--json goes with --check"),
+                       ((lib, "--show", "--json"), "--json goes with --check"),
                        ((lib, "--check", "--new"), "--check only reads LIB"),
                        ((lib, "--check", "--show"), "--show only reads LIB")):
         p = run(*args)

@@ -210,6 +210,8 @@ def run(args: argparse.Namespace) -> int:
     from rtseg.library.sources import examples_from_dir
     from rtseg.evaluation.online import live_config
     takes = getattr(args, "takes", None) or []
+    if args.json and not args.check:
+        raise ValueError("--json goes with --check")
     if args.show or args.check:
         flag = "--show" if args.show else "--check"
         if takes or args.from_dir or args.new or (args.show and args.check):
@@ -220,8 +222,6 @@ def run(args: argparse.Namespace) -> int:
             print("\n".join(describe(lib, Path(args.library), sources=True)))
             return 0
         return check_library(lib, Path(args.library), args.json)
-    if args.json:
-        raise ValueError("--json goes with --check")
     if not takes and not args.from_dir:
         raise ValueError("nothing to learn from: give --take FILE --label NAME or --from DATA_DIR")
     cfg, _ = live_config(args.config)

@@ -200,21 +200,23 @@ def _named(lib: Library, keep: np.ndarray, sub: Library, queries: np.ndarray,
     ``SESSION_ORDERS`` random orders of sessions of ``SESSION_EXAMPLES``, one name per
     order; otherwise one name.  ``sub``: ``subset(lib, keep)``."""
     posture = posture and sub.names_by_posture
-    D = _distances(lib, keep, sub, queries, posture)
     if not sub.one_person_calibration:
+        D = _distances(lib, keep, sub, queries, posture)
         return [[sub.decide(row, posture=posture).name] for row in D]
     t = sub.rule_threshold(posture)
-    S = _distances(lib, keep, sub, session, posture)
+    S = _distances(lib, keep, sub, session, posture)      # the queries' rows among them
     ratio = np.array([min(sub.name_distances(row).values(), default=np.inf) for row in S]) / t
     where = {int(w): k for k, w in enumerate(session)}
+    at = [where[int(q)] for q in queries]
     rng = np.random.default_rng(0)
     out: list[list[str]] = [[] for _ in queries]
     for _ in range(SESSION_ORDERS):
         order = rng.permutation(len(session))
         pos = np.empty(len(session), dtype=int)
         pos[order] = np.arange(len(session))
-        for j, (q, row) in enumerate(zip(queries, D)):
-            k = pos[where[int(q)]]
+        for j, i in enumerate(at):
+            row = S[i]
+            k = pos[i]
             before = order[k - k % SESSION_EXAMPLES:k]        # earlier in its session
             r = ratio[before]
             r = r[np.isfinite(r)]
@@ -258,16 +260,15 @@ def checks(lib: Library, postures: tuple[bool, ...]) -> list[CheckResult]:
         others = ex_person != p
         session = np.flatnonzero((who == p) & first)
         held = {lib.names[i] for i in example_windows(lib, others)}
-        mine = session[np.isin(names[session], list(held))]
-        unshared = session[~np.isin(names[session], list(held))]
-        if len(mine) or (len(unshared) and held):
+        known = np.isin(names[session], list(held))
+        mine = session[known]
+        if held and len(session):
+            # every example of P at once; those of behaviours nobody else performs missing
             sub = subset(lib, others)
             for r, t, posture in zip(results, tallies, postures):
-                if len(mine):
-                    r.named(t, _named(lib, others, sub, mine, session, posture), names[mine])
-                if len(unshared) and held:   # behaviours nobody else performs: missing
-                    r.missing(t, _named(lib, others, sub, unshared, session, posture),
-                              names[unshared])
+                got = _named(lib, others, sub, session, session, posture)
+                r.named(t, [g for g, k in zip(got, known) if k], names[mine])
+                r.missing(t, [g for g, k in zip(got, known) if not k], names[session[~known]])
         for nm in sorted({str(v) for v in names[mine]}):
             keep = others & (ex_name != nm)
             if not keep.any():
