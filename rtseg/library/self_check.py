@@ -33,6 +33,7 @@ through libraries of k - 1.  Distances are the library's own pairwise ones
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -154,16 +155,15 @@ def subset(lib: Library, keep: np.ndarray) -> Library:
     keep = np.asarray(keep, dtype=bool)
     new_index = np.cumsum(keep) - 1
     rows = example_windows(lib, keep)
-    sub = Library(lib.profile, lib.dims, lib.frame_rate, lib.descriptors[rows],
-                  [lib.names[i] for i in rows], [int(new_index[lib.sources[i]]) for i in rows],
-                  [e for e, k in zip(lib.examples, keep) if k], window_s=lib.window_s,
-                  step_s=lib.step_s, edge_s=lib.edge_s, min_s=lib.min_s,
-                  starts=[lib.starts[i] for i in rows] if lib.starts else [],
-                  k_nearest=lib.k_nearest, metric=lib.metric,
-                  window_stats=[lib.window_stats[i] for i in rows], lag_s=lib.lag_s)
-    if lib.has_posture:
-        sub.posture = lib.posture[rows]
-        sub.speed_weight = lib.speed_weight
+    # every other field (profile, windows, metric, weights, ...) as ``lib``'s
+    sub = dataclasses.replace(
+        lib, descriptors=lib.descriptors[rows], names=[lib.names[i] for i in rows],
+        sources=[int(new_index[lib.sources[i]]) for i in rows],
+        examples=[e for e, k in zip(lib.examples, keep) if k],
+        starts=[lib.starts[i] for i in rows] if lib.starts else [],
+        window_stats=[lib.window_stats[i] for i in rows],
+        posture=lib.posture[rows] if lib.has_posture else np.zeros((0, 0)),
+        calibration={}, posture_rule={})
     sub.fit_scale()
     sub.calibrate()
     return sub
