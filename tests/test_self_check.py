@@ -22,6 +22,12 @@ from rtseg.library.self_check import (SESSION_ORDERS, CheckError, _named, check,
 SHARED = ["walk", "punch", "squat"]
 
 
+def learn_cli(*args) -> subprocess.CompletedProcess:
+    """``rtseg learn ARGS...`` in a subprocess."""
+    return subprocess.run([sys.executable, "-m", "rtseg.cli", "learn", *map(str, args)],
+                          capture_output=True, text=True, timeout=120)
+
+
 @pytest.fixture(scope="module")
 def cfg():
     return live_config()[0]
@@ -141,13 +147,11 @@ def test_learn_check_command(tmp_path, examples, library):
     save(library, lib)
     one = tmp_path / "one.json"
     save(learn([e for e in examples if e.person == "ann"])[0], one)
-    run = lambda *a: subprocess.run([sys.executable, "-m", "rtseg.cli", "learn", *map(str, a)],
-                                    capture_output=True, text=True, timeout=120)
-    p = run(lib, "--check")
+    p = learn_cli(lib, "--check")
     assert p.returncode == 0, p.stderr
     assert "behaviours the library holds: named right" in p.stdout
     assert "sessions without posture" in p.stdout
-    p = run(lib, "--check", "--json")
+    p = learn_cli(lib, "--check", "--json")
     assert p.returncode == 0, p.stderr
     doc = json.loads(p.stdout)
     assert [c["posture"] for c in doc["checks"]] == [True, False]
@@ -157,7 +161,7 @@ def test_learn_check_command(tmp_path, examples, library):
                        ((lib, "--show", "--json"), "--json goes with --check"),
                        ((lib, "--check", "--new"), "--check only reads LIB"),
                        ((lib, "--check", "--show"), "--show only reads LIB")):
-        p = run(*args)
+        p = learn_cli(*args)
         assert p.returncode == 2 and says in p.stderr, (args, p.stderr)
         assert len(p.stderr.strip().splitlines()) == 1
 
@@ -191,11 +195,9 @@ def test_learning_a_library_of_several_people_points_to_the_check(tmp_path):
     src = make_source(tmp_path / "synth", ["p1", "p2"], ["walk", "squat"], rate=30.0,
                       seconds=6.0)
     lib = tmp_path / "lib.json"
-    run = lambda *a: subprocess.run([sys.executable, "-m", "rtseg.cli", "learn", *map(str, a)],
-                                    capture_output=True, text=True, timeout=120)
-    p = run(lib, "--from", src)
+    p = learn_cli(lib, "--from", src)
     assert p.returncode == 0, p.stderr
     assert f"rtseg learn {lib} --check" in p.stderr
-    p = run(lib, "--check", "--json")
+    p = learn_cli(lib, "--check", "--json")
     assert p.returncode == 0, p.stderr
     assert json.loads(p.stdout)["checks"][0]["people"] == ["p1", "p2"]
