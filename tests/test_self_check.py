@@ -201,3 +201,11 @@ def test_learning_a_library_of_several_people_points_to_the_check(tmp_path):
     p = learn_cli(lib, "--check", "--json")
     assert p.returncode == 0, p.stderr
     assert json.loads(p.stdout)["checks"][0]["people"] == ["p1", "p2"]
+
+
+def test_a_descriptor_library_is_refused(examples):
+    """A library of the version-1 descriptor distance has no window models to compare by:
+    one line, learn it again."""
+    lib, _ = learn(examples, metric="descriptor")
+    with pytest.raises(CheckError, match="model distance: learn it again with --new"):
+        check(lib)
