@@ -68,7 +68,7 @@ File: JSON (data only), ``{"format": "rtseg-behaviour-library", "version": 4, "p
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -395,23 +395,36 @@ class Library:
                                f"distance to a library of the {self.metric!r} distance (a "
                                f"file of an earlier rtseg): learn it again with --new")
         k = len(self.examples)
-        lib = Library(self.profile, self.dims, self.frame_rate,
-                      np.concatenate([self.descriptors, other.descriptors]),
-                      self.names + other.names, self.sources + [s + k for s in other.sources],
-                      self.examples + other.examples, window_s=self.window_s,
-                      step_s=self.step_s, edge_s=self.edge_s, min_s=self.min_s,
-                      starts=(self.starts or [0.0] * len(self.names))
-                      + (other.starts or [0.0] * len(other.names)),
-                      k_nearest=self.k_nearest, metric=self.metric,
-                      window_stats=list(self.window_stats) + list(other.window_stats),
-                      lag_s=self.lag_s)
+        posture, w = np.zeros((0, 0)), 0.0
         if self.has_posture and other.has_posture:
             # one weight for both (a version-3 library's descriptors have no joint speeds:
             # the other's lose theirs)
             w = min(self.speed_weight, other.speed_weight)
-            lib.posture = np.concatenate([reweighted(self.posture, self.speed_weight, w),
-                                          reweighted(other.posture, other.speed_weight, w)])
-            lib.speed_weight = w
+            posture = np.concatenate([reweighted(self.posture, self.speed_weight, w),
+                                      reweighted(other.posture, other.speed_weight, w)])
+        return self.relearned(
+            descriptors=np.concatenate([self.descriptors, other.descriptors]),
+            names=self.names + other.names,
+            sources=self.sources + [s + k for s in other.sources],
+            examples=self.examples + other.examples,
+            starts=((self.starts or [0.0] * len(self.names))
+                    + (other.starts or [0.0] * len(other.names))),
+            window_stats=list(self.window_stats) + list(other.window_stats),
+            posture=posture, speed_weight=w)
+
+    def relearned(self, *, descriptors: np.ndarray, names: list[str], sources: list[int],
+                  examples: list[dict[str, Any]], starts: list[float],
+                  window_stats: list[Any], posture: np.ndarray,
+                  speed_weight: float) -> "Library":
+        """The library of these windows (per window: descriptor, name, source example,
+        start, statistics, body descriptor; ``examples`` the ones ``sources`` index), with
+        every other field (profile, window lengths, metric, lag, ...) this one's, its scale
+        refitted and its rejection rule calibrated again: what learning those windows'
+        examples alone gives."""
+        lib = replace(self, descriptors=descriptors, names=names, sources=sources,
+                      examples=examples, starts=starts, window_stats=window_stats,
+                      posture=posture, speed_weight=speed_weight, calibration={},
+                      posture_rule={})
         lib.fit_scale()
         lib.calibrate()
         return lib

@@ -33,7 +33,6 @@ through libraries of k - 1.  Distances are the library's own pairwise ones
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -155,18 +154,14 @@ def subset(lib: Library, keep: np.ndarray) -> Library:
     keep = np.asarray(keep, dtype=bool)
     new_index = np.cumsum(keep) - 1
     rows = example_windows(lib, keep)
-    # every other field (profile, windows, metric, weights, ...) as ``lib``'s
-    sub = dataclasses.replace(
-        lib, descriptors=lib.descriptors[rows], names=[lib.names[i] for i in rows],
+    return lib.relearned(
+        descriptors=lib.descriptors[rows], names=[lib.names[i] for i in rows],
         sources=[int(new_index[lib.sources[i]]) for i in rows],
         examples=[e for e, k in zip(lib.examples, keep) if k],
         starts=[lib.starts[i] for i in rows] if lib.starts else [],
         window_stats=[lib.window_stats[i] for i in rows],
         posture=lib.posture[rows] if lib.has_posture else np.zeros((0, 0)),
-        calibration={}, posture_rule={})
-    sub.fit_scale()
-    sub.calibrate()
-    return sub
+        speed_weight=lib.speed_weight)
 
 
 def _distances(lib: Library, keep: np.ndarray, sub: Library, queries: np.ndarray,
