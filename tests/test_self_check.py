@@ -117,13 +117,14 @@ def test_one_person_libraries_name_through_simulated_sessions(cfg, examples, lib
     who = window_people(library)
     keep = np.array([e.get("person") != "ann" for e in library.examples])
     mine = np.flatnonzero(who == "ann")
-    got = _named(library, keep, subset(library, keep), mine[:3], mine, True)
+    got = _named(library, keep, subset(library, keep), mine[:3], mine, True)[0]
     assert [len(g) for g in got] == [SESSION_ORDERS] * 3
     three, _ = learn(examples + performer(synthetic_examples(SHARED, [7, 8], cfg), "cy"))
     who3 = window_people(three)
     keep3 = np.array([e.get("person") != "ann" for e in three.examples])
     mine3 = np.flatnonzero(who3 == "ann")
-    assert [len(g) for g in _named(three, keep3, subset(three, keep3), mine3[:3], mine3, True)] == [1, 1, 1]
+    assert [len(g) for g in _named(three, keep3, subset(three, keep3), mine3[:3], mine3,
+                                   True)[0]] == [1, 1, 1]
 
 
 def test_a_library_of_one_person_is_refused(examples):
@@ -209,3 +210,46 @@ def test_a_descriptor_library_is_refused(examples):
     lib, _ = learn(examples, metric="descriptor")
     with pytest.raises(CheckError, match="model distance: learn it again with --new"):
         check(lib)
+
+
+@pytest.mark.parametrize("three_people", [False, True])
+def test_the_operators_scale_curve(cfg, examples, library, three_people):
+    """Pooled figures at other factors of the threshold: at 1 the check's own; a smaller
+    factor sends at least as many examples `unknown`, a larger one at most as many; at a
+    factor no distance reaches, nothing is `unknown`.  Both through one-person
+    sub-libraries (the performer's scale on top) and through libraries of two people."""
+    from rtseg.library.self_check import checks
+    lib = library
+    if three_people:
+        lib, _ = learn(examples + performer(synthetic_examples(SHARED, [7, 8], cfg), "cy"))
+    for r in checks(lib, (True, False), (0.25, 1.0, 4.0, 1e9)):
+        pooled = r.pooled.summary()
+        assert r.curve[1.0].summary() == pooled
+        at = {f: t.summary() for f, t in r.curve.items()}
+        unknown = [at[f]["known"]["unknown"] for f in (0.25, 1.0, 4.0, 1e9)]
+        missing = [at[f]["left_out"]["unknown"] for f in (0.25, 1.0, 4.0, 1e9)]
+        assert unknown == sorted(unknown, reverse=True) and unknown[-1] == 0.0
+        assert missing == sorted(missing, reverse=True) and missing[-1] == 0.0
+        assert missing[0] > 0.0         # a quarter of the threshold refuses a missing one
+        assert all(at[f]["known"]["examples"] == pooled["known"]["examples"] for f in at)
+        # the per-person and per-behaviour figures stay the check's at 1
+        assert r.as_dict()["by_behaviour"] == check(lib, r.posture).as_dict()["by_behaviour"]
+
+
+def test_learn_check_threshold_scales_command(tmp_path, library):
+    lib = tmp_path / "lib.json"
+    save(library, lib)
+    p = learn_cli(lib, "--check", "--threshold-scales", "0.5,2")
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.splitlines()
+    at = [i for i, line in enumerate(lines) if line.startswith("  at the operator's scale")]
+    assert len(at) == 2                       # with posture and without
+    assert [lines[at[0] + k].split(":")[0].strip() for k in (1, 2, 3)] == ["0.5", "1", "2"]
+    p = learn_cli(lib, "--check", "--threshold-scales", "0.5,2", "--json")
+    doc = json.loads(p.stdout)
+    assert [c["scale"] for c in doc["checks"][0]["threshold_scales"]] == [0.5, 1.0, 2.0]
+    for args, says in (((lib, "--threshold-scales", "2"), "--threshold-scales goes with --check"),
+                       ((lib, "--check", "--threshold-scales", "0,2"), "positive numbers"),
+                       ((lib, "--check", "--threshold-scales", "x"), "positive numbers")):
+        p = learn_cli(*args)
+        assert p.returncode == 2 and says in p.stderr, (args, p.stderr)

@@ -24,6 +24,7 @@ seconds (default ``rtseg.library.behaviours.DEFAULT_STEP_S``, 0.5).  The library
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -188,13 +189,27 @@ def grouped_notes(notes: list[str], show: int = 4) -> list[str]:
     return lines
 
 
-def check_library(lib: Any, path: Path, as_json: bool) -> int:
+def _scales(text: str) -> list[float]:
+    """``--threshold-scales F,F,...``: positive numbers (argparse's error otherwise)."""
+    try:
+        out = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        out = []
+    if not out or not all(math.isfinite(f) and f > 0 for f in out):
+        raise argparse.ArgumentTypeError(f"positive numbers separated by commas, got {text!r}")
+    return out
+
+
+def check_library(lib: Any, path: Path, as_json: bool,
+                  threshold_scales: tuple[float, ...] = ()) -> int:
     """``rtseg learn LIB --check``: each person named by a library of the others
     (``rtseg.library.self_check.check``), by the distance of sessions with posture when the
-    library names by it and by the model distance alone; lines, or one JSON document."""
+    library names by it and by the model distance alone, and at each operator's scale of
+    ``threshold_scales`` besides 1; lines, or one JSON document."""
     import json
     from rtseg.library.self_check import check_lines, checks
-    results = checks(lib, (True, False) if lib.names_by_posture else (False,))
+    results = checks(lib, (True, False) if lib.names_by_posture else (False,),
+                     threshold_scales)
     if as_json:
         print(json.dumps({"library": str(path), "window_s": lib.window_s,
                           "checks": [r.as_dict() for r in results]}, indent=1))
@@ -212,6 +227,8 @@ def run(args: argparse.Namespace) -> int:
     takes = getattr(args, "takes", None) or []
     if args.json and not args.check:
         raise ValueError("--json goes with --check")
+    if args.threshold_scales and not args.check:
+        raise ValueError("--threshold-scales goes with --check")
     if args.show or args.check:
         flag = "--show" if args.show else "--check"
         if takes or args.from_dir or args.new or (args.show and args.check):
@@ -221,7 +238,8 @@ def run(args: argparse.Namespace) -> int:
         if args.show:
             print("\n".join(describe(lib, Path(args.library), sources=True)))
             return 0
-        return check_library(lib, Path(args.library), args.json)
+        return check_library(lib, Path(args.library), args.json,
+                             tuple(args.threshold_scales or ()))
     if not takes and not args.from_dir:
         raise ValueError("nothing to learn from: give --take FILE --label NAME or --from DATA_DIR")
     cfg, _ = live_config(args.config)
@@ -365,6 +383,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="name each person of LIB by a library of its other people: what a "
                         "performer it has never seen can expect (known behaviours named "
                         "right / unknown / wrong, missing ones unknown); learn nothing")
+    p.add_argument("--threshold-scales", type=_scales, metavar="F,F,...",
+                   help="with --check: the pooled figures also at these factors of the "
+                        "threshold ([identity] name_threshold_scale; above 1 more names, "
+                        "more of them wrong), e.g. 0.8,1.25,1.5,2")
     p.add_argument("--json", action="store_true", help="with --check: one JSON document")
     p.add_argument("--config", metavar="FILE", help="session configuration (features, "
                    "calibration; default config/live.toml)")

@@ -33,6 +33,7 @@ through libraries of k - 1.  Distances are the library's own pairwise ones
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -108,18 +109,23 @@ class CheckResult:
     by_person: dict[str, Tally] = field(default_factory=dict)
     #: the same per behaviour, over every person's examples of it
     by_behaviour: dict[str, Tally] = field(default_factory=dict)
+    #: pooled over the people, at each operator's scale asked for (``checks``'s
+    #: ``threshold_scales``; the figures above are at 1)
+    curve: dict[float, Tally] = field(default_factory=dict)
 
-    def named(self, person: Tally, got: list[list[str]], truth: Any) -> None:
-        """Examples of known behaviours (``Tally.named``) into ``person``'s tally and their
-        behaviours'."""
+    def named(self, person: Tally, got: list[list[str]], truth: Any,
+              behaviours: bool = True) -> None:
+        """Examples of known behaviours (``Tally.named``) into ``person``'s tally and (with
+        ``behaviours``) their behaviours'."""
         person.named(got, truth)
-        for g, t in zip(got, truth):
+        for g, t in zip(got, truth) if behaviours else ():
             self.by_behaviour.setdefault(str(t), Tally()).named([g], [t])
 
-    def missing(self, person: Tally, got: list[list[str]], truth: Any) -> None:
+    def missing(self, person: Tally, got: list[list[str]], truth: Any,
+                behaviours: bool = True) -> None:
         """Examples of missing behaviours (``Tally.missing``), the same way."""
         person.missing(got)
-        for g, t in zip(got, truth):
+        for g, t in zip(got, truth) if behaviours else ():
             self.by_behaviour.setdefault(str(t), Tally()).missing([g])
 
     @property
@@ -130,10 +136,14 @@ class CheckResult:
         return t
 
     def as_dict(self) -> dict[str, Any]:
-        return {"posture": self.posture, "people": self.people,
-                "pooled": self.pooled.summary(),
-                "by_person": {p: t.summary() for p, t in self.by_person.items()},
-                "by_behaviour": {b: t.summary() for b, t in sorted(self.by_behaviour.items())}}
+        out = {"posture": self.posture, "people": self.people,
+               "pooled": self.pooled.summary(),
+               "by_person": {p: t.summary() for p, t in self.by_person.items()},
+               "by_behaviour": {b: t.summary() for b, t in sorted(self.by_behaviour.items())}}
+        if self.curve:
+            out["threshold_scales"] = [{"scale": f, **t.summary()} for f, t in
+                                       sorted({1.0: self.pooled, **self.curve}.items())]
+        return out
 
 
 def window_people(lib: Library) -> np.ndarray:
@@ -186,25 +196,30 @@ SESSION_ORDERS = 8
 
 
 def _named(lib: Library, keep: np.ndarray, sub: Library, queries: np.ndarray,
-           session: np.ndarray, posture: bool) -> list[list[str]]:
-    """Per window of ``queries`` (of ``lib``), the names the library of the examples
-    ``keep`` (``sub``) gives it: by posture when asked and that library names by it (as a session
-    does, ``rtseg.identity.names``).  A library of one person names with the performer's
-    scale, which a session builds from the segments before (``SegmentNamer.scale``): the
-    windows ``session`` (the held-out person's, ``queries`` among them) in
-    ``SESSION_ORDERS`` random orders of sessions of ``SESSION_EXAMPLES``, one name per
-    order; otherwise one name.  ``sub``: ``subset(lib, keep)``."""
+           session: np.ndarray, posture: bool,
+           scales: tuple[float, ...] = (1.0,)) -> list[list[list[str]]]:
+    """Per operator's scale of ``scales`` (``[identity] name_threshold_scale``: the
+    threshold's factor), per window of ``queries`` (of ``lib``), the names the library of
+    the examples ``keep`` (``sub``) gives it: by posture when asked and that library names
+    by it (as a session does, ``rtseg.identity.names``).  A library of one person names
+    with the performer's scale on top, which a session builds from the segments before
+    (``SegmentNamer.scale``: the factor is the larger of the operator's and the median
+    ratio of their nearest-name distances to the threshold): the windows ``session`` (the
+    held-out person's, ``queries`` among them) in ``SESSION_ORDERS`` random orders of
+    sessions of ``SESSION_EXAMPLES``, one name per order; otherwise one name.  ``sub``:
+    ``subset(lib, keep)``."""
     posture = posture and sub.names_by_posture
     if not sub.one_person_calibration:
         D = _distances(lib, keep, sub, queries, posture)
-        return [[sub.decide(row, posture=posture).name] for row in D]
+        return [[[sub.decide(row, posture=posture, scale=f).name] for row in D]
+                for f in scales]
     t = sub.rule_threshold(posture)
     S = _distances(lib, keep, sub, session, posture)      # the queries' rows among them
     ratio = np.array([min(sub.name_distances(row).values(), default=np.inf) for row in S]) / t
     where = {int(w): k for k, w in enumerate(session)}
     at = [where[int(q)] for q in queries]
     rng = np.random.default_rng(0)
-    out: list[list[str]] = [[] for _ in queries]
+    out: list[list[list[str]]] = [[[] for _ in queries] for _ in scales]
     for _ in range(SESSION_ORDERS):
         order = rng.permutation(len(session))
         pos = np.empty(len(session), dtype=int)
@@ -215,8 +230,9 @@ def _named(lib: Library, keep: np.ndarray, sub: Library, queries: np.ndarray,
             before = order[k - k % SESSION_EXAMPLES:k]        # earlier in its session
             r = ratio[before]
             r = r[np.isfinite(r)]
-            scale = max(1.0, float(np.median(r))) if len(r) else 1.0
-            out[j].append(sub.decide(row, posture=posture, scale=scale).name)
+            m = float(np.median(r)) if len(r) else 0.0
+            for names, f in zip(out, scales):
+                names[j].append(sub.decide(row, posture=posture, scale=max(f, m)).name)
     return out
 
 
@@ -229,16 +245,21 @@ def check(lib: Library, posture: bool | None = None) -> CheckResult:
     return checks(lib, (use,))[0]
 
 
-def checks(lib: Library, postures: tuple[bool, ...]) -> list[CheckResult]:
+def checks(lib: Library, postures: tuple[bool, ...],
+           threshold_scales: tuple[float, ...] = ()) -> list[CheckResult]:
     """``check`` by each distance of ``postures`` (True: model x posture) at once: each
     sub-library - most of the cost - made once for all of them, and dropped after its
     person (a sub-library holds its windows' models: a large library's would not all fit
-    in memory)."""
+    in memory).  Each result's ``curve`` holds the pooled figures at every operator's
+    scale of ``threshold_scales`` (> 0)."""
     if lib.metric != "model" or not lib.window_stats:
         raise CheckError("the check needs a library of the model distance: learn it again "
                          "with --new")
     if any(postures) and not lib.has_posture:
         raise CheckError("the library holds no posture to check with")
+    if not all(f > 0 and math.isfinite(f) for f in threshold_scales):
+        raise CheckError(f"threshold scales must be positive numbers, got "
+                         f"{', '.join(f'{f:g}' for f in threshold_scales)}")
     who = window_people(lib)
     people = sorted({str(p) for p in who if p})
     if len(people) < 2 or "" in set(who):
@@ -250,6 +271,9 @@ def checks(lib: Library, postures: tuple[bool, ...]) -> list[CheckResult]:
     names = np.array(lib.names, dtype=object)
     first = named_windows(lib)
     results = [CheckResult(bool(p), people) for p in postures]
+    scales = (1.0,) + tuple(float(f) for f in threshold_scales)
+    for r in results:
+        r.curve = {f: Tally() for f in scales[1:]}
     for p in people:
         tallies = [Tally() for _ in postures]
         others = ex_person != p
@@ -261,9 +285,12 @@ def checks(lib: Library, postures: tuple[bool, ...]) -> list[CheckResult]:
             # every example of P at once; those of behaviours nobody else performs missing
             sub = subset(lib, others)
             for r, t, posture in zip(results, tallies, postures):
-                got = _named(lib, others, sub, session, session, posture)
-                r.named(t, [g for g, k in zip(got, known) if k], names[mine])
-                r.missing(t, [g for g, k in zip(got, known) if not k], names[session[~known]])
+                at = _named(lib, others, sub, session, session, posture, scales)
+                for got, tally in zip(at, [t] + list(r.curve.values())):
+                    r.named(tally, [g for g, k in zip(got, known) if k], names[mine],
+                            behaviours=tally is t)
+                    r.missing(tally, [g for g, k in zip(got, known) if not k],
+                              names[session[~known]], behaviours=tally is t)
         for nm in sorted({str(v) for v in names[mine]}):
             keep = others & (ex_name != nm)
             if not keep.any():
@@ -271,7 +298,9 @@ def checks(lib: Library, postures: tuple[bool, ...]) -> list[CheckResult]:
             sub = subset(lib, keep)
             q = mine[names[mine] == nm]
             for r, t, posture in zip(results, tallies, postures):
-                r.missing(t, _named(lib, keep, sub, q, session, posture), names[q])
+                at = _named(lib, keep, sub, q, session, posture, scales)
+                for got, tally in zip(at, [t] + list(r.curve.values())):
+                    r.missing(tally, got, names[q], behaviours=tally is t)
         for r, t in zip(results, tallies):
             r.by_person[p] = t
     return results
@@ -322,6 +351,13 @@ def check_lines(lib: Library, results: list[CheckResult]) -> list[str]:
                 out.append(f"    {p}: none of their behaviours is performed by the others")
                 continue
             out.append(f"    {p}: {_figures(s)}")
+        if r.curve:
+            out.append("  at the operator's scale ([identity] name_threshold_scale: the "
+                       "threshold's factor), pooled: named right / unknown / wrong; "
+                       "missing, unknown")
+            for f, t in sorted({1.0: r.pooled, **r.curve}.items()):
+                s = t.summary()
+                out.append(f"    {f:g}: {_figures(s)}")
         out.append("  per behaviour:")
         for b, t in sorted(r.by_behaviour.items()):
             s = t.summary()
