@@ -5,6 +5,7 @@
     rtseg learn LIB --from DATA_DIR [--person S ...] [--exclude-person S ...]
     rtseg learn LIB --show                      # what LIB holds; nothing learned
     rtseg learn LIB --check [--json]            # how it would name a performer it lacks
+    rtseg learn LIB --check --threshold-scales 0.8,1.5   # ... at other strictnesses
     (options: --step S, --profile NAME, --threshold D, --new, --config FILE)
 
 Learning an example the library already holds (the same motion: its content key,
