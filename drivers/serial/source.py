@@ -212,15 +212,19 @@ class SerialSource(QueuedSource):
         """Stop the reader thread and close the port.  Safe to call twice."""
         self._stop.set()
         self._queue.close()
+        self._cancel_read()
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(timeout=2.0)
+        self._close_port()
+
+    def _cancel_read(self) -> None:
+        """Wake the reader thread from a blocking read of the open port, if any."""
         ser = self._ser
         if ser is not None:
             try:
                 ser.cancel_read()
             except Exception:  # not all pyserial backends support it
                 pass
-        if self._thread.is_alive() and threading.current_thread() is not self._thread:
-            self._thread.join(timeout=2.0)
-        self._close_port()
 
     # ------------------------------------------------------------------ port handling
 
@@ -349,12 +353,7 @@ class SerialSource(QueuedSource):
         if "://" in self.path or not self._thread.is_alive():
             return False
         self._polled = True
-        ser = self._ser
-        if ser is not None:
-            try:
-                ser.cancel_read()
-            except Exception:  # not all pyserial backends support it
-                pass
+        self._cancel_read()
         self._thread.join(timeout=2.0)
         if self._thread.is_alive():          # pragma: no cover - a wedged read
             self._polled = False
