@@ -11,6 +11,7 @@
     (options: --no-reject, --metric model|descriptor, --step S, --window S, --name-after S,
     --claim-margin M,
     --decide-after S, --id-threshold D, --threshold-scale F, --rule W,L,C,
+    --first-name S,K, --library-threshold D,
     --posture-weight W, --speed-weight S,
     --params FILE: the live detectors' parameters, e.g. fast)
 
@@ -69,6 +70,9 @@ ids, and when a segment is named; defaults: config/live.toml's);
 ``--claim-margin M``: its ``claim_margin`` (0-1; 0 = exclusive names without claims);
 ``--threshold-scale F``: its ``name_threshold_scale``, every library's threshold times F
 (how strict the names are, docs/identity.md).
+``--first-name S,K``: its ``first_name_after_s`` and ``first_name_scale`` (a segment the
+library names by K x its threshold S seconds in is decided then); ``--library-threshold
+D``: its ``library_threshold`` (the ids' threshold with a library).
 ``--rule W,L,C``: the decision's margin (``rtseg.library.calibration.decision_excess``:
 ``MARGIN_WEIGHT``, ``MARGIN_LEVEL``, ``MARGIN_CAP``; ``0,0,1`` the threshold alone) for
 this run - what ``benchmarks/names_rule_lopo.py`` chooses among.  ``--posture-weight W``:
@@ -131,12 +135,16 @@ def _identity_settings(cfg) -> dict:
             "decide_after_s": cfg["identity.decide_after_s"],
             "identity_threshold": cfg["identity.threshold"],
             "claim_margin": cfg["identity.claim_margin"],
-            "name_threshold_scale": cfg["identity.name_threshold_scale"]}
+            "name_threshold_scale": cfg["identity.name_threshold_scale"],
+            "first_name_after_s": cfg["identity.first_name_after_s"],
+            "first_name_scale": cfg["identity.first_name_scale"],
+            "library_threshold": cfg["identity.library_threshold"]}
 
 
 def _identity_options(cfg, opts: dict) -> None:
-    """``--name-after``, ``--decide-after``, ``--id-threshold``, ``--claim-margin`` and
-    ``--threshold-scale`` into the session configuration ``cfg``."""
+    """``--name-after``, ``--decide-after``, ``--id-threshold``, ``--claim-margin``,
+    ``--threshold-scale``, ``--first-name`` and ``--library-threshold`` into the session
+    configuration ``cfg``."""
     if "--name-after" in opts:
         cfg["identity.name_after_s"] = opts["--name-after"]
     if "--decide-after" in opts:
@@ -147,6 +155,10 @@ def _identity_options(cfg, opts: dict) -> None:
         cfg["identity.claim_margin"] = opts["--claim-margin"]
     if "--threshold-scale" in opts:
         cfg["identity.name_threshold_scale"] = opts["--threshold-scale"]
+    if "--first-name" in opts:
+        cfg["identity.first_name_after_s"], cfg["identity.first_name_scale"] = opts["--first-name"]
+    if "--library-threshold" in opts:
+        cfg["identity.library_threshold"] = opts["--library-threshold"]
 
 
 def _session_config(opts: dict):
@@ -399,6 +411,18 @@ def main(argv: list[str] | None = None) -> int:
         value = _pop_number(argv, "--threshold-scale", float, "a number", "> 0")
         if value is not None:
             opts["--threshold-scale"] = value
+        value = _pop_number(argv, "--library-threshold", float, "a distance, a number", "> 0")
+        if value is not None:
+            opts["--library-threshold"] = value
+        first = _pop_number(argv, "--first-name", str, "S,K: seconds and a factor")
+        if first is not None:
+            try:
+                after, scale = (float(v) for v in first.split(","))
+            except ValueError:
+                raise _Usage("--first-name: S,K - seconds and a factor, e.g. 1.5,0.9") from None
+            if not (after >= 0 and 0 < scale <= 1):
+                raise _Usage("--first-name: S,K with S >= 0 seconds and K in (0, 1]")
+            opts["--first-name"] = (after, scale)
         margin = _pop_number(argv, "--claim-margin", float, "a number from 0 to 1")
         if margin is not None:
             if not 0.0 <= margin <= 1.0:

@@ -356,6 +356,81 @@ def test_a_library_decision_waits_only_for_segments_it_cannot_name_yet(rows, dec
     assert tr.stats.name_waits == waits
 
 
+class _StrictnessLibrary:
+    """Stands in for a behaviour library: names every window ``walk`` when its threshold's
+    factor (``scale``) is at least ``need``, else ``unknown`` - a segment that lies at
+    ``need`` x the threshold."""
+
+    def __init__(self, dims: int, need: float) -> None:
+        self.dims, self.need = dims, need
+        self.scales: list[float] = []
+
+    def name(self, W, frame_rate=None, scale: float = 1.0):
+        from rtseg.library.behaviours import UNKNOWN, Naming
+        self.scales.append(scale)
+        nm = "walk" if scale >= self.need else UNKNOWN
+        return Naming(nm, "walk", self.need, 0.5)
+
+
+@pytest.mark.parametrize("need, decided_after, name, first_names", [
+    (0.5, 180, "walk", 1),      # within 0.8 x the threshold: named at the first look, 1.5 s
+    (0.9, 300, "walk", 0),      # named by the threshold only: decided at 2.5 s, as without
+    (2.0, 300, "unknown", 0),   # beyond it: decided at 2.5 s, unknown
+])
+def test_a_first_look_decides_a_segment_named_well_within_the_threshold(need, decided_after,
+                                                                         name, first_names):
+    """``first_name_after_s`` 1.5 s with ``first_name_scale`` 0.8: a segment the library
+    names within 0.8 x its threshold 1.5 s in is decided then (id and name); any other
+    waits for ``decide_after_s`` (2.5 s) and the library's own threshold."""
+    fr, d = 120.0, 8
+    lib = _StrictnessLibrary(d, need)
+    tr = IdentityTracker(fr, library=lib, decide_after_s=2.5, name_after_s=2.5,
+                         first_name_after_s=1.5, first_name_scale=0.8)
+    rng = np.random.default_rng(0)
+    boundary = 1200
+    for i in range(boundary + 400):
+        tr.update(i, rng.normal(size=d))
+        if i == boundary + 60:                      # the cut is revealed 0.5 s late
+            tr.on_cut(boundary, i)
+    seg1 = [m for m in tr.history if m.segment == 1]
+    assert len(seg1) == 1 and seg1[0].name == name
+    assert seg1[0].decided_frame - boundary == decided_after - 1
+    assert set(lib.scales) <= {0.8, 1.0} and 0.8 in lib.scales
+    # segment 0 and segment 1 alike
+    assert tr.stats.first_look_names == 2 * first_names
+    assert tr.stats.first_look_waits == 2 * (1 - first_names)
+    # without a library there is no first look: the id is decided at decide_after_s
+    plain = IdentityTracker(fr, decide_after_s=2.5, first_name_after_s=1.5)
+    for i in range(boundary + 400):
+        plain.update(i, rng.normal(size=d))
+        if i == boundary + 60:
+            plain.on_cut(boundary, i)
+    seg1 = [m for m in plain.history if m.segment == 1]
+    assert seg1[0].decided_frame - boundary == 300 - 1
+
+
+def test_the_first_look_and_the_library_threshold_are_read_from_the_configuration():
+    """``[identity] first_name_after_s``, ``first_name_scale`` and ``library_threshold``
+    reach the tracker; the ids' threshold is ``library_threshold`` only with a library
+    (0: ``threshold``); bad values are refused with one line naming the key."""
+    from rtseg.config import ConfigError
+    from rtseg.identity.tracker import tracker_options
+    opts = tracker_options(_config())
+    assert (opts["first_name_after_s"], opts["first_name_scale"], opts["library_threshold"]) \
+        == (0.0, 1.0, None)
+    opts = tracker_options(_config(first_name_after_s=1.5, first_name_scale=0.9,
+                                   library_threshold=4.0, threshold=5.0))
+    with_lib = IdentityTracker(120.0, "contrast", library=_StrictnessLibrary(4, 1.0), **opts)
+    assert with_lib.threshold == 4.0 and with_lib.first_name_scale == 0.9
+    assert IdentityTracker(120.0, "contrast", **opts).threshold == 5.0
+    for key, bad in (("first_name_scale", 1.5), ("first_name_scale", 0.0),
+                     ("first_name_after_s", -1.0), ("library_threshold", -2.0)):
+        with pytest.raises(ConfigError, match=key):
+            from_dict({"identity": {key: bad}}, origin="test")
+    with pytest.raises(ValueError, match="first_name_scale"):
+        IdentityTracker(120.0, first_name_after_s=1.5, first_name_scale=2.0)
+
+
 class _OneNameLibrary(_LengthLibrary):
     """A stand-in library that names every window ``walk``, whatever it holds."""
 

@@ -45,6 +45,8 @@ class IdentityStats:
     new_behaviours: int = 0
     clamped: int = 0                  # boundaries older than the history (window shortened)
     name_waits: int = 0               # decisions put off to name_after_s: `unknown` sooner
+    first_look_names: int = 0         # decisions made at the first look (first_name_after_s)
+    first_look_waits: int = 0         # segments the first look left for decide_after_s
     named: int = 0                    # decisions sent with a library name
     names_unknown: int = 0            # decisions sent as `unknown` (with a library)
     names_contested: int = 0          # of those, names held by other ids only

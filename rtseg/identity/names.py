@@ -164,9 +164,11 @@ class SegmentNamer:
             return 1.0
         return max(1.0, float(np.median(self._ratios)))
 
-    def name(self, boundary: int, frame: int) -> tuple[str, float]:
+    def name(self, boundary: int, frame: int, strictness: float = 1.0) -> tuple[str, float]:
         """(name, library distance) of the segment starting at ``boundary`` when decided
-        at ``frame``; (``unknown``, inf) with fewer than 2 rows."""
+        at ``frame``; (``unknown``, inf) with fewer than 2 rows.  ``strictness``: a further
+        factor (<= 1) on the threshold for this naming only (a name decided before
+        ``decide_after_s``, ``rtseg.identity.tracker``)."""
         pos = self._positions(boundary, frame)
         if len(pos) < 2:
             from rtseg.library.behaviours import UNKNOWN
@@ -183,7 +185,7 @@ class SegmentNamer:
                      "examples are of one person)", s)
         W = self._rows[pos]
         args = (W, self.frame_rate) if P is None else (W, self.frame_rate, P)
-        f = s * self.threshold_scale
+        f = s * self.threshold_scale * strictness
         nm = self.library.name(*args) if f == 1.0 else self.library.name(*args, scale=f)
         return nm.name, nm.distance
 

@@ -90,6 +90,11 @@ from rtseg.library.behaviours import UNKNOWN
 DEFAULT_DECIDE_AFTER_S = 2.5
 DEFAULT_NAME_AFTER_S = 2.5
 DEFAULT_THRESHOLD = 5.0
+#: with a library: the first look (seconds; 0 = none), its factor on the library's
+#: threshold, and the id threshold (None: ``DEFAULT_THRESHOLD``) - docs/identity.md
+DEFAULT_FIRST_NAME_AFTER_S = 0.0
+DEFAULT_FIRST_NAME_SCALE = 1.0
+DEFAULT_LIBRARY_THRESHOLD: float | None = None
 
 
 @dataclass
@@ -131,6 +136,12 @@ class IdentityTracker:
         holder's (``rtseg.identity.names.CLAIM_MARGIN``; 0 = never).
     name_threshold_scale: the library's threshold times this (> 0; the operator's scale,
         ``rtseg.identity.names``).
+    first_name_after_s: with a library, a segment is decided once this many seconds of it
+        are summed when the library names it by its threshold times ``first_name_scale``
+        (a stricter look, <= 1); otherwise it waits for ``decide_after_s`` as without
+        (0: off).  Module doc, Names.
+    library_threshold: the id threshold when a library names the segments (None: the
+        ``threshold``).
     """
 
     def __init__(self, frame_rate: float, method: str = "", *,
@@ -142,7 +153,10 @@ class IdentityTracker:
                  name_after_s: float = DEFAULT_NAME_AFTER_S,
                  id_skip_s: float = DEFAULT_ID_SKIP_S, exclusive_names: bool = True,
                  claim_margin: float = CLAIM_MARGIN,
-                 name_threshold_scale: float = 1.0) -> None:
+                 name_threshold_scale: float = 1.0,
+                 first_name_after_s: float = DEFAULT_FIRST_NAME_AFTER_S,
+                 first_name_scale: float = DEFAULT_FIRST_NAME_SCALE,
+                 library_threshold: float | None = DEFAULT_LIBRARY_THRESHOLD) -> None:
         if not frame_rate > 0:
             raise ValueError(f"frame_rate must be positive, got {frame_rate}")
         if not decide_after_s > 0:
@@ -153,14 +167,24 @@ class IdentityTracker:
             raise ValueError(f"correction_margin must be >= 1, got {correction_margin}")
         if not name_threshold_scale > 0:
             raise ValueError(f"name_threshold_scale must be positive, got {name_threshold_scale}")
+        if first_name_after_s < 0 or not 0 < first_name_scale <= 1:
+            raise ValueError(f"first_name_after_s must be >= 0 and first_name_scale in (0, 1], "
+                             f"got {first_name_after_s}, {first_name_scale}")
+        if library_threshold is not None and not library_threshold > 0:
+            raise ValueError(f"library_threshold must be positive, got {library_threshold}")
         self.frame_rate = float(frame_rate)
         self.reference_dims = int(reference_dims)
         self.method = method
         self.block = int(step)
+        self._thresholds = (float(threshold), float(library_threshold or threshold))
         self.threshold = float(threshold)
         self.margin = float(correction_margin)
         self._id_blocks = max(2, int(math.ceil(decide_after_s * frame_rate / step)))
         self._named_blocks = max(self._id_blocks, int(math.ceil(name_after_s * frame_rate / step)))
+        self._first_blocks = (min(self._id_blocks,
+                                  max(2, int(math.ceil(first_name_after_s * frame_rate / step))))
+                              if first_name_after_s > 0 else self._id_blocks)
+        self.first_name_scale = float(first_name_scale)
         self.max_blocks = max(self._named_blocks, int(round(max_window_s * frame_rate / step)))
         self.H = max(self.max_blocks + 4, int(math.ceil(history_s * frame_rate / step)))
         self.stats = IdentityStats(name_threshold_scale=float(name_threshold_scale))
@@ -190,13 +214,15 @@ class IdentityTracker:
             raise RuntimeError("the library is set before the first fed row")
         self.namer = None if library is None else SegmentNamer(
             library, self.frame_rate, **self._namer_kw)
+        self.threshold = self._thresholds[library is not None]
         if self.namer is not None:
             self.namer.posture = self._posture
 
     @property
     def decide_blocks(self) -> int:
-        """Blocks of a new segment summed before its first decision attempt."""
-        return self._id_blocks
+        """Blocks of a new segment summed before its first decision attempt (with a library,
+        the first look's: ``first_name_after_s``)."""
+        return self._id_blocks if self.namer is None else self._first_blocks
 
     @property
     def quiet_frames(self) -> int:
@@ -350,15 +376,22 @@ class IdentityTracker:
     def _attempt(self, seg: _Segment, end: int, frame: int) -> None:
         """Decide ``seg`` at block ``end`` - unless a library would call it ``unknown``
         before ``name_after_s`` of it are summed: then the decision waits for them (a
-        longer window names more segments; a name given sooner stands)."""
+        longer window names more segments; a name given sooner stands).  Before
+        ``decide_after_s`` (the first look, ``first_name_after_s``) only a name within the
+        threshold times ``first_name_scale`` decides it; else it waits for
+        ``decide_after_s``."""
         if self.namer is None or end - seg.block >= self._named_blocks:
             self._decide(seg, end, frame)
             return
-        naming = self.namer.name(seg.boundary, frame)
+        first = end - seg.block < self._id_blocks
+        naming = self.namer.name(seg.boundary, frame,
+                                 self.first_name_scale if first else 1.0)
         if naming[0] == UNKNOWN:
-            seg.decide_block = seg.block + self._named_blocks
-            self.stats.name_waits += 1
+            seg.decide_block = seg.block + (self._id_blocks if first else self._named_blocks)
+            self.stats.name_waits += int(not first)
+            self.stats.first_look_waits += int(first)
             return
+        self.stats.first_look_names += int(first)
         self._decide(seg, end, frame, naming)
 
     def _decide(self, seg: _Segment, end: int, frame: int,
@@ -490,7 +523,10 @@ def tracker_options(config: Any) -> dict[str, Any]:
             "name_after_s": float(config["identity.name_after_s"]),
             "exclusive_names": bool(config["identity.exclusive_names"]),
             "claim_margin": float(config["identity.claim_margin"]),
-            "name_threshold_scale": float(config["identity.name_threshold_scale"])}
+            "name_threshold_scale": float(config["identity.name_threshold_scale"]),
+            "first_name_after_s": float(config["identity.first_name_after_s"]),
+            "first_name_scale": float(config["identity.first_name_scale"]),
+            "library_threshold": float(config["identity.library_threshold"]) or None}
 
 
 def tracker_from_config(config: Any, frame_rate: float, method: str,

@@ -21,7 +21,9 @@ from typing import Any, Callable
 from rtseg.config import ConfigError, config_dir, load_toml
 from rtseg.detectors import ONLINE_METHODS as KNOWN_METHODS
 from rtseg.identity.names import CLAIM_MARGIN
-from rtseg.identity.tracker import DEFAULT_DECIDE_AFTER_S, DEFAULT_NAME_AFTER_S, DEFAULT_THRESHOLD
+from rtseg.identity.tracker import (DEFAULT_DECIDE_AFTER_S, DEFAULT_FIRST_NAME_AFTER_S,
+                                    DEFAULT_FIRST_NAME_SCALE, DEFAULT_LIBRARY_THRESHOLD,
+                                    DEFAULT_NAME_AFTER_S, DEFAULT_THRESHOLD)
 
 CALIBRATION_MODES = ("auto", "first", "average", "none")
 #: largest ring buffer: 2^20 frames (2.4 h at 120 Hz; 570 MB for 17 joints of 4 float64)
@@ -227,6 +229,17 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                     doc="with a library: its rejection threshold times this "
                                         "(> 1 names more segments, and more wrongly; < 1 "
                                         "leaves more 'unknown')"),
+        "first_name_after_s": Key("float", DEFAULT_FIRST_NAME_AFTER_S, _range(0.0, 60.0),
+                                  doc="with a library: a segment it names by "
+                                      "first_name_scale x its threshold this many seconds "
+                                      "in is decided then (0 = no first look)"),
+        "first_name_scale": Key("float", DEFAULT_FIRST_NAME_SCALE,
+                                _range(0.0, 1.0, strict_lo=True),
+                                doc="with a library: the first look's factor on its "
+                                    "threshold (<= 1: stricter than the later decision)"),
+        "library_threshold": Key("float", DEFAULT_LIBRARY_THRESHOLD or 0.0, _range(0.0, 100.0),
+                                 doc="with a library: the ids' distance threshold (0 = "
+                                     "threshold)"),
     },
     "buffer": {
         "capacity": Key("int", 4096, _range(16, MAX_CAPACITY), doc="ring buffer frames"),
