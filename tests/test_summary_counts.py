@@ -74,3 +74,12 @@ def test_the_identity_summary_says_how_many_names_the_performers_scale_judged():
     assert "name_threshold_scale" not in text
     counts.update(name_threshold_scale=1.5)
     assert "the library's threshold x 1.5 ([identity] name_threshold_scale)" in identity_text(counts)
+
+
+def test_the_identity_summary_says_how_many_decisions_the_first_look_made():
+    from rtseg.identity.messages import IdentityStats
+    from rtseg.live.stats import identity_text
+    counts = asdict(IdentityStats(decisions=6, new_behaviours=4, named=3, names_unknown=3))
+    assert "first look" not in identity_text(counts)
+    counts.update(first_look_names=2, first_look_waits=4)
+    assert "2 decided at the first look ([identity] first_name_after_s)" in identity_text(counts)

@@ -265,6 +265,9 @@ def identity_text(counts: dict[str, float]) -> str:
         if counts.get("names_scaled", 0):
             out += (f"; {counts['names_scaled']} with the performer's scale (the threshold "
                     f"up to x {counts.get('largest_scale', 1.0):.2f})")
+        if counts.get("first_look_names", 0):
+            out += (f"; {counts['first_look_names']} decided at the first look "
+                    f"([identity] first_name_after_s)")
         if counts.get("name_threshold_scale", 1.0) != 1.0:
             out += (f"; the library's threshold x {counts['name_threshold_scale']:g} "
                     f"([identity] name_threshold_scale)")
