@@ -329,6 +329,16 @@ class _LengthLibrary:
         return Naming(nm, self.label, 1.0, 0.5)
 
 
+def _segment1_after_a_late_cut(tr, d: int, rng, boundary: int = 1200) -> list:
+    """Random rows of ``d`` dims into tracker ``tr`` for ``boundary`` + 400 frames, a cut
+    at ``boundary`` revealed 0.5 s (60 frames) late; the messages of segment 1."""
+    for i in range(boundary + 400):
+        tr.update(i, rng.normal(size=d))
+        if i == boundary + 60:
+            tr.on_cut(boundary, i)
+    return [m for m in tr.history if m.segment == 1]
+
+
 @pytest.mark.parametrize("rows, decided_after, name, waits", [
     (60, 180, "walk", 0),       # named at the first attempt: 1.5 s of the segment
     (150, 240, "walk", 2),      # unknown at 1.5 s, named at 2.0 s: the decision waited
@@ -342,13 +352,8 @@ def test_a_library_decision_waits_only_for_segments_it_cannot_name_yet(rows, dec
     fr, d = 120.0, 8
     lib = _LengthLibrary(d, rows)
     tr = IdentityTracker(fr, library=lib, decide_after_s=1.5, name_after_s=2.0)
-    rng = np.random.default_rng(0)
     boundary = 1200
-    for i in range(boundary + 400):
-        tr.update(i, rng.normal(size=d))
-        if i == boundary + 60:                      # the cut is revealed 0.5 s late
-            tr.on_cut(boundary, i)
-    seg1 = [m for m in tr.history if m.segment == 1]
+    seg1 = _segment1_after_a_late_cut(tr, d, np.random.default_rng(0), boundary)
     assert len(seg1) == 1
     assert seg1[0].decided_frame - boundary == decided_after - 1
     assert seg1[0].name == name
@@ -388,11 +393,7 @@ def test_a_first_look_decides_a_segment_named_well_within_the_threshold(need, de
                          first_name_after_s=1.5, first_name_scale=0.8)
     rng = np.random.default_rng(0)
     boundary = 1200
-    for i in range(boundary + 400):
-        tr.update(i, rng.normal(size=d))
-        if i == boundary + 60:                      # the cut is revealed 0.5 s late
-            tr.on_cut(boundary, i)
-    seg1 = [m for m in tr.history if m.segment == 1]
+    seg1 = _segment1_after_a_late_cut(tr, d, rng, boundary)
     assert len(seg1) == 1 and seg1[0].name == name
     assert seg1[0].decided_frame - boundary == decided_after - 1
     assert set(lib.scales) <= {0.8, 1.0} and 0.8 in lib.scales
@@ -401,11 +402,7 @@ def test_a_first_look_decides_a_segment_named_well_within_the_threshold(need, de
     assert tr.stats.first_look_waits == 2 * (1 - first_names)
     # without a library there is no first look: the id is decided at decide_after_s
     plain = IdentityTracker(fr, decide_after_s=2.5, first_name_after_s=1.5)
-    for i in range(boundary + 400):
-        plain.update(i, rng.normal(size=d))
-        if i == boundary + 60:
-            plain.on_cut(boundary, i)
-    seg1 = [m for m in plain.history if m.segment == 1]
+    seg1 = _segment1_after_a_late_cut(plain, d, rng, boundary)
     assert seg1[0].decided_frame - boundary == 300 - 1
 
 

@@ -61,6 +61,13 @@ only earlier segments of other ids hold is sent as ``unknown`` (``names_conteste
 were (``names_claimed``); a correction to an id that holds it gives it back
 (``names_restored``).
 
+A first look (``first_name_after_s`` > 0, off by default): with a library, a segment the
+library names that many seconds in by its threshold times ``first_name_scale`` (<= 1) is
+decided then, id and name, sooner than ``decide_after_s``; any other waits for
+``decide_after_s`` and the library's own threshold (``first_look_names``,
+``first_look_waits``).  ``library_threshold`` replaces ``threshold`` for the ids of a
+session with a library.
+
 Cost: per frame one row copy into the block buffer; per block one (step x d)^T (step x d)
 product; per decision one eigen-decomposition per changed model (a few per cut).
 ``benchmarks/identity_speed.py`` measures it.
