@@ -222,3 +222,24 @@ def test_behaviours_refusals(tmp_path, capsys):
     assert len(err) == 1 and "'cmu14' (56 dims)" in err[0]
     assert main(["segment", path, "--identify", "--behaviours", str(tmp_path / "none.json")]) == 2
     assert "cannot read" in capsys.readouterr().err
+
+
+def test_offline_names_are_held_by_the_ids_reported(tmp_path):
+    """``name_take`` names with the ids ``identify_take`` reports (its tracker's threshold,
+    not a session's ``[identity] library_threshold``): a library threshold that would give
+    every segment its own id leaves the names as they are (with it the second walk and
+    punch would be held by the first ones' ids and sent ``unknown``)."""
+    from rtseg.drivers.readers import read_take
+    from rtseg.evaluation.online import live_config
+    from rtseg.identity.segments import identify_take, name_take
+    from rtseg.library.file import load
+    _, path = _take(tmp_path, 0)
+    take = read_take(path)
+    lib = load(_synth_library(tmp_path))
+    params = {"contrast": dict(SYNTH_DETECTOR)}
+    results = identify_take(take, ["contrast"], params, threshold=SYNTH_THRESHOLD)
+    cfg = live_config()[0]
+    want = name_take(take, results, lib, cfg, threshold=SYNTH_THRESHOLD)["contrast"]
+    assert want == ["walk", "punch", "walk", "punch", "unknown"]
+    cfg["identity.library_threshold"] = 1.0
+    assert name_take(take, results, lib, cfg, threshold=SYNTH_THRESHOLD)["contrast"] == want

@@ -141,6 +141,7 @@ def name_take(take: Any, results: dict[str, SegmentationResult], library: Any,
     options = tracker_options(config)
     if threshold is not None:
         options["threshold"] = float(threshold)
+    options["library_threshold"] = None     # the ids of identify_take, which has no library
     posture = take_posture_of(take, library)
     out: dict[str, list[str]] = {}
     for m, r in results.items():
