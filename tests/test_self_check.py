@@ -253,3 +253,15 @@ def test_learn_check_threshold_scales_command(tmp_path, library):
                        ((lib, "--check", "--threshold-scales", "x"), "positive numbers")):
         p = learn_cli(*args)
         assert p.returncode == 2 and says in p.stderr, (args, p.stderr)
+
+
+def test_a_factor_given_twice_is_checked_once(library):
+    """``--threshold-scales 2,2,0.5``: each factor's figures are its own (a repeated factor
+    once), the same as ``2,0.5``."""
+    from rtseg.library.self_check import checks
+    twice = checks(library, (True,), (2.0, 2.0, 0.5))[0]
+    once = checks(library, (True,), (2.0, 0.5))[0]
+    assert list(twice.curve) == [2.0, 0.5]
+    assert {f: t.summary() for f, t in twice.curve.items()} == \
+        {f: t.summary() for f, t in once.curve.items()}
+    assert twice.curve[0.5].summary() != twice.curve[2.0].summary()

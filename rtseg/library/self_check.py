@@ -271,9 +271,10 @@ def checks(lib: Library, postures: tuple[bool, ...],
     names = np.array(lib.names, dtype=object)
     first = named_windows(lib)
     results = [CheckResult(bool(p), people) for p in postures]
-    scales = (1.0,) + tuple(float(f) for f in threshold_scales)
+    extra = tuple(dict.fromkeys(float(f) for f in threshold_scales))     # each factor once
+    scales = (1.0,) + extra
     for r in results:
-        r.curve = {f: Tally() for f in scales[1:]}
+        r.curve = {f: Tally() for f in extra}
     for p in people:
         tallies = [Tally() for _ in postures]
         others = ex_person != p
@@ -286,7 +287,7 @@ def checks(lib: Library, postures: tuple[bool, ...],
             sub = subset(lib, others)
             for r, t, posture in zip(results, tallies, postures):
                 at = _named(lib, others, sub, session, session, posture, scales)
-                for got, tally in zip(at, [t] + list(r.curve.values())):
+                for got, tally in zip(at, [t] + [r.curve[f] for f in extra]):
                     r.named(tally, [g for g, k in zip(got, known) if k], names[mine],
                             behaviours=tally is t)
                     r.missing(tally, [g for g, k in zip(got, known) if not k],
@@ -299,7 +300,7 @@ def checks(lib: Library, postures: tuple[bool, ...],
             q = mine[names[mine] == nm]
             for r, t, posture in zip(results, tallies, postures):
                 at = _named(lib, keep, sub, q, session, posture, scales)
-                for got, tally in zip(at, [t] + list(r.curve.values())):
+                for got, tally in zip(at, [t] + [r.curve[f] for f in extra]):
                     r.missing(tally, got, names[q], behaviours=tally is t)
         for r, t in zip(results, tallies):
             r.by_person[p] = t
