@@ -97,11 +97,10 @@ from rtseg.library.behaviours import UNKNOWN
 DEFAULT_DECIDE_AFTER_S = 2.5
 DEFAULT_NAME_AFTER_S = 2.5
 DEFAULT_THRESHOLD = 5.0
-#: with a library: the first look (seconds; 0 = none), its factor on the library's
-#: threshold, and the id threshold (None: ``DEFAULT_THRESHOLD``) - docs/identity.md
+#: with a library: the first look (seconds; 0 = none) and its factor on the library's
+#: threshold - docs/identity.md
 DEFAULT_FIRST_NAME_AFTER_S = 0.0
 DEFAULT_FIRST_NAME_SCALE = 1.0
-DEFAULT_LIBRARY_THRESHOLD: float | None = None
 
 
 @dataclass
@@ -163,7 +162,7 @@ class IdentityTracker:
                  name_threshold_scale: float = 1.0,
                  first_name_after_s: float = DEFAULT_FIRST_NAME_AFTER_S,
                  first_name_scale: float = DEFAULT_FIRST_NAME_SCALE,
-                 library_threshold: float | None = DEFAULT_LIBRARY_THRESHOLD) -> None:
+                 library_threshold: float | None = None) -> None:
         if not frame_rate > 0:
             raise ValueError(f"frame_rate must be positive, got {frame_rate}")
         if not decide_after_s > 0:
@@ -183,8 +182,9 @@ class IdentityTracker:
         self.reference_dims = int(reference_dims)
         self.method = method
         self.block = int(step)
+        # the ids' threshold without and with a library (``self.threshold``, set with the
+        # library below)
         self._thresholds = (float(threshold), float(library_threshold or threshold))
-        self.threshold = float(threshold)
         self.margin = float(correction_margin)
         self._id_blocks = max(2, int(math.ceil(decide_after_s * frame_rate / step)))
         self._named_blocks = max(self._id_blocks, int(math.ceil(name_after_s * frame_rate / step)))

@@ -22,8 +22,8 @@ from rtseg.config import ConfigError, config_dir, load_toml
 from rtseg.detectors import ONLINE_METHODS as KNOWN_METHODS
 from rtseg.identity.names import CLAIM_MARGIN
 from rtseg.identity.tracker import (DEFAULT_DECIDE_AFTER_S, DEFAULT_FIRST_NAME_AFTER_S,
-                                    DEFAULT_FIRST_NAME_SCALE, DEFAULT_LIBRARY_THRESHOLD,
-                                    DEFAULT_NAME_AFTER_S, DEFAULT_THRESHOLD)
+                                    DEFAULT_FIRST_NAME_SCALE, DEFAULT_NAME_AFTER_S,
+                                    DEFAULT_THRESHOLD)
 
 CALIBRATION_MODES = ("auto", "first", "average", "none")
 #: largest ring buffer: 2^20 frames (2.4 h at 120 Hz; 570 MB for 17 joints of 4 float64)
@@ -237,7 +237,7 @@ SCHEMA: dict[str, dict[str, Key]] = {
                                 _range(0.0, 1.0, strict_lo=True),
                                 doc="with a library: the first look's factor on its "
                                     "threshold (<= 1: stricter than the later decision)"),
-        "library_threshold": Key("float", DEFAULT_LIBRARY_THRESHOLD or 0.0, _range(0.0, 100.0),
+        "library_threshold": Key("float", 0.0, _range(0.0, 100.0),
                                  doc="with a library: the ids' distance threshold (0 = "
                                      "threshold)"),
     },
