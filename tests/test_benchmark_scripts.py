@@ -699,3 +699,10 @@ def test_names_rule_lopo_runs_library_loto_with_each_rule(tmp_path):
     assert r.stderr.strip() == "--rule: the weight must be at least 0 and the cap at least 1"
     r = _run("names_rule_lopo.py", str(tmp_path / "data"), "--jobs", "0")
     assert r.returncode == 2 and "--jobs and --n: at least 1" in r.stderr
+
+
+@pytest.mark.parametrize("value, says", [("x", "S,K - seconds and a factor"),
+                                         ("1.5,2", "K in (0, 1]"), ("-1,0.8", "S >= 0")])
+def test_library_loto_refuses_a_first_name_that_is_not_seconds_and_a_factor(value, says):
+    r = _run("library_loto.py", "--by-person", "../shared/data", "--first-name", value)
+    assert r.returncode == 2 and says in r.stderr and "Traceback" not in r.stderr, r.stderr
